@@ -1,0 +1,209 @@
+"""Wire contract v1: key expressions and msgpack payloads (docs/wire-contract.md).
+
+Decoders validate everything and raise :class:`DecodeError` with a short reason that
+the runtime counts per reason; they never raise anything else on bad bytes.
+Encoders add ``v: 1`` (the wire version) to every map they write; decoders accept maps
+without it (v1 senders that predate the field) and ignore fields they do not know, so
+the contract can be extended without breaking readers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+WIRE_VERSION = 1
+DEFAULT_ROBOT = "edan"
+
+
+class DecodeError(ValueError):
+    """A malformed message; ``reason`` is a short tag for the drop counters."""
+
+    def __init__(self, reason: str, detail: str = ""):
+        self.reason = reason
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+
+
+@dataclass(frozen=True)
+class Keys:
+    """The key expressions of one robot (``sctd/<robot>/...``)."""
+
+    robot: str = DEFAULT_ROBOT
+
+    def __post_init__(self) -> None:
+        if not self.robot or any(c in self.robot for c in "/*$?#"):
+            raise ValueError(f"robot name {self.robot!r} must be a single key chunk")
+
+    @property
+    def prefix(self) -> str:
+        return f"sctd/{self.robot}"
+
+    def input(self, device: str = "*") -> str:
+        return f"{self.prefix}/input/{device}"
+
+    @property
+    def state(self) -> str:
+        return f"{self.prefix}/state"
+
+    def objects(self, name: str = "*") -> str:
+        return f"{self.prefix}/objects/{name}"
+
+    @property
+    def target(self) -> str:
+        return f"{self.prefix}/target"
+
+    @property
+    def status(self) -> str:
+        return f"{self.prefix}/status"
+
+    @property
+    def skill(self) -> str:
+        return f"{self.prefix}/skill"
+
+    @property
+    def scene(self) -> str:
+        return f"{self.prefix}/scene"
+
+
+def pack(msg: dict[str, Any]) -> bytes:
+    """msgpack-encode a message map, adding the wire version."""
+    msg.setdefault("v", WIRE_VERSION)
+    return msgpack.packb(msg, use_bin_type=True)
+
+
+def unpack_map(data: bytes) -> dict[str, Any]:
+    """Decode bytes to a msgpack map or raise DecodeError('not_msgpack' / 'not_map')."""
+    try:
+        obj = msgpack.unpackb(data, raw=False, strict_map_key=False)
+    except Exception:  # msgpack raises ExtraData, FormatError, ValueError, ...
+        raise DecodeError("not_msgpack") from None
+    if not isinstance(obj, dict):
+        raise DecodeError("not_map")
+    v = obj.get("v", WIRE_VERSION)
+    if not isinstance(v, int) or v < 1:
+        raise DecodeError("bad_version", repr(v))
+    return obj
+
+
+def _int(obj: dict, key: str) -> int:
+    x = obj.get(key)
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise DecodeError(f"bad_{key}", repr(x)[:40])
+    return x
+
+
+def _stamp(obj: dict) -> float:
+    x = obj.get("stamp")
+    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        raise DecodeError("bad_stamp", repr(x)[:40])
+    return float(x)
+
+
+def _floats(obj: dict, key: str, sizes: tuple[int, ...]) -> list[float]:
+    x = obj.get(key)
+    if not isinstance(x, list | tuple) or len(x) not in sizes:
+        raise DecodeError(f"bad_{key}", f"expected {' or '.join(map(str, sizes))} numbers")
+    out = []
+    for e in x:
+        if isinstance(e, bool) or not isinstance(e, int | float):
+            raise DecodeError(f"bad_{key}", "non-numeric element")
+        out.append(float(e))
+    return out
+
+
+def _pose(obj: dict, key: str = "pose") -> list[float]:
+    p = _floats(obj, key, (7,))
+    if not all(math.isfinite(e) for e in p):
+        raise DecodeError(f"nonfinite_{key}")
+    n = math.sqrt(p[3] ** 2 + p[4] ** 2 + p[5] ** 2 + p[6] ** 2)
+    if abs(n - 1.0) > 1e-2:
+        raise DecodeError(f"bad_{key}", f"quaternion norm {n:.4f}")
+    return p
+
+
+@dataclass(frozen=True)
+class InputMsg:
+    seq: int
+    stamp: float
+    u: tuple[float, ...]  # may hold non-finite values: the runtime treats those as zero
+
+
+@dataclass(frozen=True)
+class StateMsg:
+    seq: int
+    stamp: float
+    pose: list[float]
+    wrench: list[float] | None
+    q: list[float] | None = None
+    dq: list[float] | None = None
+
+
+@dataclass(frozen=True)
+class ObjectMsg:
+    seq: int
+    stamp: float
+    pose: list[float]
+
+
+def decode_input(data: bytes) -> InputMsg:
+    """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers)."""
+    obj = unpack_map(data)
+    u = _floats(obj, "u", (3, 6))
+    return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u))
+
+
+def decode_state(data: bytes) -> StateMsg:
+    """``sctd/<robot>/state``: seq, stamp, pose [7], optional q, dq, wrench [6]."""
+    obj = unpack_map(data)
+    wrench = None
+    if obj.get("wrench") is not None:
+        wrench = _floats(obj, "wrench", (6,))
+        if not all(math.isfinite(e) for e in wrench):
+            wrench = None  # a bad wrench must not cost the pose; force guards just see none
+    q = obj.get("q")
+    dq = obj.get("dq")
+    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench,
+                    q if isinstance(q, list) else None, dq if isinstance(dq, list) else None)
+
+
+def decode_object(data: bytes) -> ObjectMsg:
+    """``sctd/<robot>/objects/<name>``: seq, stamp, pose [7]."""
+    obj = unpack_map(data)
+    return ObjectMsg(_int(obj, "seq"), _stamp(obj), _pose(obj))
+
+
+def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...]) -> bytes:
+    return pack({"seq": seq, "stamp": stamp, "u": [float(x) for x in u]})
+
+
+def encode_state(seq: int, stamp: float, pose: list[float], *, q: list[float] | None = None,
+                 dq: list[float] | None = None, wrench: list[float] | None = None) -> bytes:
+    msg: dict[str, Any] = {"seq": seq, "stamp": stamp, "pose": [float(x) for x in pose]}
+    if q is not None:
+        msg["q"] = [float(x) for x in q]
+    if dq is not None:
+        msg["dq"] = [float(x) for x in dq]
+    if wrench is not None:
+        msg["wrench"] = [float(x) for x in wrench]
+    return pack(msg)
+
+
+def encode_object(seq: int, stamp: float, pose: list[float]) -> bytes:
+    return pack({"seq": seq, "stamp": stamp, "pose": [float(x) for x in pose]})
+
+
+def encode_target(seq: int, stamp: float, pose: list[float], state: str, skill: str,
+                  in_seq: int) -> bytes:
+    return pack({"seq": seq, "stamp": stamp, "pose": pose, "state": state, "skill": skill,
+                 "in_seq": in_seq})
+
+
+def decode_target(data: bytes) -> dict[str, Any]:
+    obj = unpack_map(data)
+    _int(obj, "seq")
+    _stamp(obj)
+    _pose(obj)
+    return obj

@@ -1,0 +1,220 @@
+"""The pure part of the runtime tick (DESIGN §7 steps 1-6): no I/O, no clocks.
+
+:class:`Controller` turns the newest input, state and object samples into the next
+target pose, applying the skill (transitions, mappings, constraints) and the safety
+limits. The daemon (:mod:`sctd.runtime.daemon`) feeds it from Zenoh and publishes what
+it returns; tests drive it directly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import se3
+from ..skill import Skill, SkillEngine
+from .safety import is_finite_transform, limit_offset, limit_step, sanitize_input
+
+Array = NDArray[np.float64]
+
+
+@dataclass
+class RuntimeConfig:
+    """Daemon settings; defaults are the safe ones (SI units)."""
+
+    rate: float = 1000.0  # Hz
+    robot: str = "edan"
+    device: str = "*"  # which input/<device> to follow; '*' = newest of any
+    input_timeout: float = 0.1  # s (MoveIt Servo's default)
+    state_timeout: float = 0.1  # s
+    object_timeout: float = 1.0  # s
+    stamp_check: bool = True  # also reject input whose sender stamp is older than the timeout
+    deadband: float = 0.02  # per input axis
+    max_linear_speed: float = 0.25  # m/s (ISO 10218 reduced speed)
+    max_angular_speed: float = 1.0  # rad/s
+    max_offset: float = 0.05  # m, target vs measured
+    max_offset_rotation: float = 0.35  # rad
+    status_rate: float = 20.0  # Hz
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate
+
+
+@dataclass
+class Sample:
+    """A decoded message and its arrival time on the receiver's monotonic clock."""
+
+    seq: int
+    stamp: float
+    received: float
+    T: Array | None = None  # pose as a 4x4 transform (state, objects)
+    u: tuple[float, ...] = ()
+    wrench: list[float] | None = None
+
+
+@dataclass
+class TickResult:
+    mode: str  # waiting | hold | stopped | running
+    T_world_target: Array | None
+    state: str
+    in_seq: int
+    state_changed: bool = False
+    input_ok: bool = False
+
+
+@dataclass
+class Counters:
+    nonfinite_input: int = 0
+    stale_input: int = 0
+    nonfinite_output: int = 0
+    offset_limited: int = 0
+    transitions: int = 0
+    swaps: int = 0
+    drops: dict[str, int] = field(default_factory=dict)
+
+    def drop(self, reason: str) -> None:
+        self.drops[reason] = self.drops.get(reason, 0) + 1
+
+
+class Controller:
+    """Skill + safety, one tick at a time.
+
+    Parameters
+    ----------
+    skill : Skill
+    config : RuntimeConfig
+    """
+
+    def __init__(self, skill: Skill, config: RuntimeConfig):
+        self.config = config
+        self.counters = Counters()
+        self.T_world_target: Array | None = None
+        self.mode = "waiting"
+        self.last_in_seq = -1
+        self._install(skill, now=0.0, keep_state=False)
+
+    def _install(self, skill: Skill, now: float, keep_state: bool) -> None:
+        old = getattr(self, "engine", None)
+        self.engine = SkillEngine(skill)
+        self.skill = skill
+        names = [s.name for s in skill.states]
+        if keep_state and old is not None and old.state in names:
+            self.engine.reset(now, old.state)
+        else:
+            self.engine.reset(now)
+        lim = skill.limits
+        self.v_max = min(lim.max_linear_speed, self.config.max_linear_speed)
+        self.w_max = min(lim.max_angular_speed, self.config.max_angular_speed)
+
+    def swap(self, engine_skill: Skill, now: float) -> None:
+        """Replace the skill between two ticks; keep the active state if the new skill
+        has one of the same name, else start from its start state."""
+        self._install(engine_skill, now, keep_state=True)
+        self.counters.swaps += 1
+
+    def tick(self, now: float, wall: float, inp: Sample | None, state: Sample | None,
+             obj: Sample | None) -> TickResult:
+        """One control step.
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time (s) of this tick; arrival times of samples are on this clock.
+        wall : float
+            Unix time (s), for the sender-stamp check of the input watchdog.
+        inp, state, obj : Sample or None
+            Newest input, robot state (ee pose in world) and task-object pose (in world).
+        """
+        cfg = self.config
+        dt = cfg.period
+        u, input_ok = self._command(now, wall, inp)
+        in_seq = inp.seq if inp is not None else -1
+        state_ok = state is not None and now - state.received <= cfg.state_timeout
+        obj_ok = obj is not None and now - obj.received <= cfg.object_timeout
+
+        if self.T_world_target is None:
+            if not (state_ok and obj_ok):
+                self.mode = "waiting"
+                return TickResult("waiting", None, self.engine.state, in_seq)
+            assert state is not None and state.T is not None
+            self.T_world_target = state.T.copy()
+            self.engine.reset(now, self.engine.state)
+        if not (state_ok and obj_ok):
+            self.mode = "hold"  # stale robot state or object pose: hold the last target
+            return TickResult("hold", self.T_world_target, self.engine.state, in_seq)
+
+        assert state is not None and obj is not None and state.T is not None and obj.T is not None
+        T_world_obj = obj.T
+        T_obj_world = se3.invert_transform(T_world_obj)
+        T_obj_meas = T_obj_world @ state.T
+        force = None
+        if state.wrench is not None:
+            force = T_obj_world[:3, :3] @ np.asarray(state.wrench[:3])
+        changed = self.engine.update(T_obj_meas, now, force)
+        if changed:
+            self.counters.transitions += 1
+
+        mag = float(np.max(np.abs(u))) if len(u) else 0.0
+        T_target = self.T_world_target
+        if mag > 0.0:
+            T_obj_prev = T_obj_world @ T_target
+            T_obj_new = self.engine.command(T_obj_prev, u, dt)
+            T_obj_new = limit_step(T_obj_prev, T_obj_new, mag * self.v_max * dt,
+                                   mag * self.w_max * dt)
+            T_new = T_world_obj @ T_obj_new
+            if is_finite_transform(T_new):
+                T_target = T_new
+            else:
+                self.counters.nonfinite_output += 1
+        limited = limit_offset(T_target, state.T, cfg.max_offset, cfg.max_offset_rotation)
+        if limited is not T_target:
+            self.counters.offset_limited += 1
+            T_target = limited
+        if not is_finite_transform(T_target):  # cannot happen from finite inputs; never publish it
+            self.counters.nonfinite_output += 1
+            T_target = self.T_world_target
+        self.T_world_target = T_target
+        self.mode = "running" if input_ok else "stopped"
+        return TickResult(self.mode, T_target, self.engine.state, in_seq, changed, input_ok)
+
+    def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[Array, bool]:
+        """The user command this tick: zero when missing, stale or not finite."""
+        cfg = self.config
+        if inp is None:
+            return np.zeros(3), False
+        stale = now - inp.received > cfg.input_timeout or (
+            cfg.stamp_check and abs(wall - inp.stamp) > cfg.input_timeout
+        )
+        if stale:
+            if inp.seq != self.last_in_seq:
+                self.counters.stale_input += 1
+                self.last_in_seq = inp.seq
+            return np.zeros(len(inp.u)), False
+        u, ok = sanitize_input(inp.u, cfg.deadband)
+        if not ok and inp.seq != self.last_in_seq:
+            self.counters.nonfinite_input += 1
+        self.last_in_seq = inp.seq
+        return u, ok
+
+
+def pose_list(T: Array) -> list[float]:
+    """4x4 transform -> [x, y, z, qx, qy, qz, qw] as Python floats (for msgpack)."""
+    p = se3.pose_from_transform(T)
+    return [float(x) for x in p]
+
+
+def transform_from_pose_fast(p: list[float]) -> Array:
+    """Pose list (validated unit quaternion) -> 4x4, in scalar math (hot path)."""
+    x, y, z, qx, qy, qz, qw = p
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    return np.array([
+        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy), x],
+        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx), y],
+        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy), z],
+        [0.0, 0.0, 0.0, 1.0],
+    ])

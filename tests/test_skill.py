@@ -1,0 +1,310 @@
+"""Skill loading, validation errors, and the engine's mappings, constraints and FSM."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sctd import se3
+from sctd.skill import (
+    Bundle,
+    SkillEngine,
+    SkillError,
+    bundle_from_file,
+    load_skill,
+    skill_from_bundle,
+    skill_summary,
+    vector_field_model_to_bytes,
+)
+from sctd.skill.fields import sigmoid
+from sctd.skill.model import Field, VectorFieldModel
+
+ROOT = Path(__file__).resolve().parents[1]
+POUR = ROOT / "skills" / "pour.yaml"
+
+
+def skill_text(**overrides) -> str:
+    doc = yaml.safe_load(POUR.read_text())
+    for path, value in overrides.items():
+        node = doc
+        keys = path.split("__")
+        for k in keys[:-1]:
+            node = node[int(k)] if isinstance(node, list) else node[k]
+        last = keys[-1]
+        if isinstance(node, list):
+            node[int(last)] = value
+        elif value is ...:
+            del node[last]
+        else:
+            node[last] = value
+    return yaml.safe_dump(doc)
+
+
+def load_text(text: str, files=None):
+    return skill_from_bundle(Bundle("t.yaml", text, files or {}))
+
+
+def test_shipped_skills_load():
+    for name in ("pour.yaml", "drawer.yaml"):
+        s = load_skill(ROOT / "skills" / name)
+        assert s.id == bundle_from_file(ROOT / "skills" / name).id
+        assert s.start in [x.name for x in s.states]
+
+
+def test_bundle_round_trip_keeps_id():
+    b = bundle_from_file(POUR)
+    b2 = Bundle.unpack(b.pack())
+    assert b2.id == b.id and skill_from_bundle(b2).id == b.id
+
+
+@pytest.mark.parametrize(
+    "overrides, where, what",
+    [
+        ({"sctd_skill": 2}, "sctd_skill", "format version"),
+        ({"object": ...}, "object", "non-empty string"),
+        ({"states__carry__input_mapping__0__axes": ["tx", "tq", "tz"]}, "input_mapping[0].axes[1]", "tq"),
+        ({"states__carry__input_mapping__0__frame": "nose"}, "input_mapping[0].frame", "unknown frame"),
+        ({"fsm__start": "nowhere"}, "fsm.start", "expected one of"),
+        ({"frames__tip__pose": [0, 0, 0.1, 0, 0, 0, 2]}, "frames.tip.pose", "unit"),
+        ({"states__carry__active_constraints__1__upper": 0.0}, "active_constraints[1].upper", ">= lower"),
+        ({"fsm__transitions__0__below": float("nan")}, "transitions[0].below", "finite"),
+        ({"limits__max_linear_speed": 5.0}, "limits.max_linear_speed", "<= 1.0"),
+        ({"states__carry__colour": "red"}, "states.carry.colour", "unknown field"),
+    ],
+)
+def test_validation_names_file_field_and_problem(overrides, where, what):
+    with pytest.raises(SkillError) as e:
+        load_text(skill_text(**overrides))
+    msg = str(e.value)
+    assert msg.startswith("t.yaml: ") and where in msg and what in msg, msg
+
+
+def test_unreachable_state_is_refused():
+    doc = yaml.safe_load(POUR.read_text())
+    doc["fsm"]["transitions"] = [t for t in doc["fsm"]["transitions"] if t["to"] != "pour"]
+    with pytest.raises(SkillError, match="not reachable"):
+        load_text(yaml.safe_dump(doc))
+
+
+def test_invalid_yaml_names_line():
+    with pytest.raises(SkillError, match=r"t.yaml: line \d+: invalid YAML"):
+        load_text("sctd_skill: 1\nstates: [\n")
+
+
+def test_missing_and_escaping_model_files(tmp_path):
+    doc = vf_skill_doc()
+    with pytest.raises(SkillError, match="missing"):
+        load_text(yaml.safe_dump(doc))
+    doc["states"]["go"]["input_mapping"][0]["model"] = "../evil.json"
+    with pytest.raises(SkillError, match="relative"):
+        load_text(yaml.safe_dump(doc))
+
+
+def test_pickled_npz_is_refused():
+    import io
+    buf = io.BytesIO()
+    np.savez(buf, fields=np.array([{"type": "sphere"}], dtype=object), points=np.zeros((1, 3)))
+    with pytest.raises(SkillError, match="pickle-free"):
+        load_text(yaml.safe_dump(vf_skill_doc("m.npz")), {"m.npz": buf.getvalue()})
+
+
+# --- engine: linear mappings ----------------------------------------------------------
+
+
+def engine_for(doc) -> SkillEngine:
+    return SkillEngine(load_text(yaml.safe_dump(doc)))
+
+
+def one_state(mapping, constraints=(), frames=None, limits=None):
+    return {
+        "sctd_skill": 1, "name": "t", "object": "obj",
+        "limits": limits or {"max_linear_speed": 0.1, "max_angular_speed": 0.5},
+        "frames": frames or {"tip": {"parent": "ee", "pose": [0, 0, 0.12, 0, 0, 0, 1]}},
+        "fsm": {"start": "s", "end": "s", "transitions": []},
+        "states": {"s": {"input_mapping": [mapping], "active_constraints": list(constraints)}},
+    }
+
+
+@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+       st.sampled_from([["tx", "ty", "tz"], ["rx", "ry", "rz"], ["tx", "ry", "rz"], ["ty", "tz", "rx"]]),
+       st.sampled_from(["ee", "tip"]))
+@settings(max_examples=60, deadline=None)
+def test_linear_mapping_reproduces_identified_displacement(u, axes, frame):
+    """Applying an IM is the displacement M u of its frame (DESIGN §4 round trip), and
+    the least-squares command recovers u from that displacement (eq. 4.6)."""
+    eng = engine_for(one_state({"type": "linear", "frame": frame, "axes": axes}))
+    T = se3.transform_from_pose([0.1, -0.2, 0.3, *se3.quaternion_from_rotvec([0.3, -0.2, 0.5])])
+    dt = 0.01
+    T2 = eng.command(T, np.array(u), dt)
+    T_ee_f = eng.T_ee_frame.get(frame, np.eye(4))
+    d6 = se3.displacement_from_transforms(T @ T_ee_f, T2 @ T_ee_f)
+    M = eng.skill.states[0].input_mappings[0].matrix * np.array([0.1] * 3 + [0.5] * 3)[:, None] * dt
+    assert np.allclose(d6, M @ u, atol=1e-12)
+    assert np.allclose(np.linalg.pinv(M) @ d6, u, atol=1e-9)
+
+
+def test_rotation_about_tip_keeps_tip_fixed():
+    eng = engine_for(one_state({"type": "linear", "frame": "tip", "axes": ["rx", "ry", "rz"]}))
+    T = np.eye(4)
+    T2 = eng.command(T, np.array([1.0, 0.5, -0.3]), 0.1)
+    tip = eng.T_ee_frame["tip"]
+    assert np.allclose((T @ tip)[:3, 3], (T2 @ tip)[:3, 3], atol=1e-12)
+    assert not np.allclose(T2[:3, 3], T[:3, 3])
+
+
+def test_zero_input_is_identity():
+    eng = engine_for(one_state({"type": "linear", "frame": "tip", "axes": ["tx", "ry", "rz"]}))
+    T = se3.transform_from_pose([0.1, 0.2, 0.3, 0, 0, 0, 1])
+    assert np.array_equal(eng.command(T, np.zeros(3), 0.001), T)
+
+
+# --- engine: constraints --------------------------------------------------------------
+
+
+@given(st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.floats(0.05, 2.5))
+@settings(max_examples=80, deadline=None)
+def test_tilt_cone_projection_satisfies_and_is_idempotent(w, max_angle):
+    doc = one_state({"type": "linear", "frame": "tip", "axes": ["tx"]},
+                    [{"type": "tilt_cone", "frame": "tip", "axis": [0, 0, 1], "max_angle": max_angle}])
+    eng = engine_for(doc)
+    c = eng.skill.states[0].active_constraints[0]
+    T = se3.transform_from_rt(se3.matrix_from_rotvec(w), [0.1, 0.0, 0.2])
+    P = eng.project(T, c)
+    assert eng.violation(P, c) < 1e-9
+    assert np.allclose(eng.project(P, c), P)
+    tip = eng.T_ee_frame["tip"]
+    assert np.allclose((P @ tip)[:3, 3], (T @ tip)[:3, 3], atol=1e-9)  # rotates about the tip
+    if eng.violation(T, c) == 0:
+        assert np.array_equal(P, T)
+
+
+@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+def test_box_and_band_projection(p):
+    doc = one_state({"type": "linear", "frame": "ee", "axes": ["tx"]},
+                    [{"type": "box", "frame": "tip", "lower": [-0.1, -0.1, 0.0], "upper": [0.1, 0.2, 0.3]},
+                     {"type": "band", "frame": "ee", "normal": [0, 0, 1], "lower": 0.05, "upper": 0.1}])
+    eng = engine_for(doc)
+    T = se3.transform_from_rt(np.eye(3), p)
+    for c in eng.skill.states[0].active_constraints:
+        P = eng.project(T, c)
+        assert eng.violation(P, c) < 1e-12
+        assert np.allclose(P[:3, :3], T[:3, :3])
+
+
+# --- vector fields --------------------------------------------------------------------
+
+
+def vf_skill_doc(model="m.json", mode="scale"):
+    return {
+        "sctd_skill": 1, "name": "vf", "object": "obj",
+        "limits": {"max_linear_speed": 0.1, "max_angular_speed": 0.5},
+        "fsm": {"start": "go", "end": "go"},
+        "states": {"go": {
+            "input_mapping": [{"type": "vector_field", "model": model, "mode": mode,
+                               "min_v": 0.1, "k_s": 0.5, "max_d": 0.2}],
+            "active_constraints": [{"type": "neighbour_orientation", "model": model}]}},
+    }
+
+
+def x_field_model() -> VectorFieldModel:
+    pts = np.stack([np.linspace(-0.3, 0.3, 61), np.zeros(61), np.zeros(61)], axis=1)
+    q = np.tile(se3.quaternion_from_rotvec([0.0, 0.0, 0.4]), (61, 1))
+    return VectorFieldModel((Field("translation", direction=np.array([1.0, 0, 0]), weight=1.0),),
+                            pts, q, np.ones((61, 1)))
+
+
+@pytest.mark.parametrize("fmt", ["m.json", "m.npz"])
+def test_vector_field_scaling(fmt):
+    files = {fmt: vector_field_model_to_bytes(x_field_model(), fmt)}
+    eng = SkillEngine(load_text(yaml.safe_dump(vf_skill_doc(fmt)), files))
+    T = np.eye(4)
+    dt = 0.01
+    along = eng.command(T, np.array([1.0, 0, 0]), dt)[:3, 3]
+    across = eng.command(T, np.array([0, 1.0, 0]), dt)[:3, 3]
+    against = eng.command(T, np.array([-1.0, 0, 0]), dt)[:3, 3]
+    assert np.allclose(along, [0.1 * dt, 0, 0])             # aligned: scale 1 (eq. 4.34)
+    assert np.allclose(across, [0, 0.1 * 0.1 * dt, 0])      # orthogonal: clipped to min_v
+    assert np.allclose(against, [-0.1 * 0.1 * dt, 0, 0])
+    assert np.array_equal(eng.command(T, np.zeros(3), dt)[:3, 3], T[:3, 3])
+    # Orientation pulled to the neighbours' (rz 0.4) by the constraint.
+    R = eng.command(T, np.array([1.0, 0, 0]), dt)[:3, :3]
+    assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.4], atol=1e-9)
+
+
+@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+@settings(deadline=None)
+def test_blend_bends_but_keeps_magnitude_and_zero_stays_zero(u):
+    files = {"m.json": vector_field_model_to_bytes(x_field_model(), "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(vf_skill_doc("m.json", "blend")), files))
+    T = np.eye(4)
+    step = eng.command(T, np.array(u), 1.0)[:3, 3]
+    mag = min(1.0, float(np.linalg.norm(u)))
+    assert np.isclose(np.linalg.norm(step), 0.1 * mag, atol=1e-9)
+    if mag > 1e-6:
+        unit = np.asarray(u) / np.linalg.norm(u)
+        assert step[0] / 0.1 >= unit[0] * mag - 1e-9  # bent towards +x, never away
+
+
+def test_sigmoid_known_values():
+    """Eq. 4.33: identity at k = 0, f(+-1) = +-1, stricter for k > 0."""
+    x = np.linspace(-1, 1, 11)
+    assert np.allclose(sigmoid(x, 0.0), x)
+    assert np.isclose(sigmoid(1.0, 0.5), 1.0) and np.isclose(sigmoid(-1.0, 0.7), -1.0)
+    assert np.isclose(sigmoid(0.5, 0.5), 0.25)
+    assert np.all(np.abs(sigmoid(x, 0.5)) <= np.abs(x) + 1e-12)
+
+
+# --- FSM ------------------------------------------------------------------------------
+
+
+def at(x, y, z):
+    return se3.transform_from_rt(np.eye(3), [x, y, z - 0.12])  # tip (0.12 up the ee z) at (x,y,z)
+
+
+def test_fsm_hysteresis_and_dwell():
+    eng = SkillEngine(load_skill(POUR))
+    t = 0.0
+    eng.reset(t)
+    assert eng.state == "carry"
+    # carry -> approach below 0.15 - 0.01 from (0, 0, 0.08)
+    assert not eng.update(at(0.145, 0, 0.08), t := t + 1)  # inside 0.15 but within the margin
+    assert eng.update(at(0.13, 0, 0.08), t := t + 1) and eng.state == "approach"
+    # No chatter on the boundary: between 0.15 and 0.18 nothing fires.
+    for x in (0.16, 0.15, 0.17, 0.179, 0.14):
+        assert not eng.update(at(x, 0, 0.08), t := t + 1)
+    assert eng.update(at(0.19, 0, 0.08), t := t + 1) and eng.state == "carry"
+    assert eng.update(at(0.0, 0, 0.08), t := t + 1) and eng.state == "approach"
+    assert not eng.update(at(0.0, 0, 0.06), t + 0.01)  # within min_dwell of entering
+    assert eng.update(at(0.0, 0, 0.06), t + 0.2) and eng.state == "pour" and eng.finished
+
+
+def test_hyperplane_timeout_force_transitions():
+    doc = one_state({"type": "linear", "frame": "ee", "axes": ["tx"]})
+    doc["states"]["b"] = {"input_mapping": [{"type": "linear", "axes": ["ty"]}]}
+    doc["states"]["c"] = {}
+    doc["fsm"] = {"start": "s", "end": "c", "min_dwell": 0.0, "transitions": [
+        {"from": "s", "to": "b", "type": "hyperplane", "normal": [2, 0, 0], "offset": -0.2, "margin": 0.01},
+        {"from": "b", "to": "c", "type": "force", "above": 5.0, "axis": [0, 0, -1], "margin": 1.0},
+        {"from": "b", "to": "s", "type": "timeout", "after": 3.0}]}
+    eng = engine_for(doc)
+    assert not eng.update(at(0.105, 0, 0), 0.0)  # plane x = 0.1, margin 1 cm
+    assert eng.update(at(0.111, 0, 0.12), 0.0) and eng.state == "b"
+    assert not eng.update(at(0, 0, 0), 1.0, np.array([0, 0, -5.5]))
+    assert not eng.update(at(0, 0, 0), 1.0, None)
+    assert eng.update(at(0, 0, 0), 3.5) and eng.state == "s"
+    eng.reset(0.0, "b")
+    assert eng.update(at(0, 0, 0), 0.1, np.array([0, 0, -6.5])) and eng.state == "c"
+
+
+def test_summary_is_json_and_has_matrix():
+    s = skill_summary(load_skill(POUR))
+    text = json.dumps(s)
+    assert json.loads(text)["object"] == "mug"
+    carry = s["states"][0]["input_mappings"][0]
+    assert np.allclose(carry["matrix"], np.vstack([np.eye(3), np.zeros((3, 3))]))
+    assert s["transitions"][0]["below"] == 0.15 and math.isclose(s["transitions"][0]["margin"], 0.01)
