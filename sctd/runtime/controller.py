@@ -8,7 +8,6 @@ it returns; tests drive it directly.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,6 +63,7 @@ class TickResult:
     in_seq: int
     state_changed: bool = False
     input_ok: bool = False
+    pose: list[float] | None = None  # T_world_target as [x, y, z, qx, qy, qz, qw]
 
 
 @dataclass
@@ -95,11 +95,13 @@ class Controller:
         self.T_world_target: Array | None = None
         self.mode = "waiting"
         self.last_in_seq = -1
+        self._pose: list[float] | None = None
         self._install(skill, now=0.0, keep_state=False)
 
-    def _install(self, skill: Skill, now: float, keep_state: bool) -> None:
+    def _install(self, skill: Skill, now: float, keep_state: bool,
+                 engine: SkillEngine | None = None) -> None:
         old = getattr(self, "engine", None)
-        self.engine = SkillEngine(skill)
+        self.engine = engine if engine is not None else SkillEngine(skill)
         self.skill = skill
         names = [s.name for s in skill.states]
         if keep_state and old is not None and old.state in names:
@@ -110,10 +112,11 @@ class Controller:
         self.v_max = min(lim.max_linear_speed, self.config.max_linear_speed)
         self.w_max = min(lim.max_angular_speed, self.config.max_angular_speed)
 
-    def swap(self, engine_skill: Skill, now: float) -> None:
+    def swap(self, skill: Skill, now: float, engine: SkillEngine | None = None) -> None:
         """Replace the skill between two ticks; keep the active state if the new skill
-        has one of the same name, else start from its start state."""
-        self._install(engine_skill, now, keep_state=True)
+        has one of the same name, else start from its start state. Pass an ``engine``
+        built off the tick thread (KD-trees take time to build)."""
+        self._install(skill, now, keep_state=True, engine=engine)
         self.counters.swaps += 1
 
     def tick(self, now: float, wall: float, inp: Sample | None, state: Sample | None,
@@ -142,14 +145,15 @@ class Controller:
                 return TickResult("waiting", None, self.engine.state, in_seq)
             assert state is not None and state.T is not None
             self.T_world_target = state.T.copy()
+            self._pose = se3.pose_from_matrix4(self.T_world_target)
             self.engine.reset(now, self.engine.state)
         if not (state_ok and obj_ok):
             self.mode = "hold"  # stale robot state or object pose: hold the last target
-            return TickResult("hold", self.T_world_target, self.engine.state, in_seq)
+            return TickResult("hold", self.T_world_target, self.engine.state, in_seq, pose=self._pose)
 
         assert state is not None and obj is not None and state.T is not None and obj.T is not None
         T_world_obj = obj.T
-        T_obj_world = se3.invert_transform(T_world_obj)
+        T_obj_world = se3.invert4(T_world_obj)
         T_obj_meas = T_obj_world @ state.T
         force = None
         if state.wrench is not None:
@@ -158,28 +162,31 @@ class Controller:
         if changed:
             self.counters.transitions += 1
 
-        mag = float(np.max(np.abs(u))) if len(u) else 0.0
+        mag = max(abs(x) for x in u.tolist()) if len(u) else 0.0
         T_target = self.T_world_target
         if mag > 0.0:
             T_obj_prev = T_obj_world @ T_target
             T_obj_new = self.engine.command(T_obj_prev, u, dt)
             T_obj_new = limit_step(T_obj_prev, T_obj_new, mag * self.v_max * dt,
                                    mag * self.w_max * dt)
-            T_new = T_world_obj @ T_obj_new
-            if is_finite_transform(T_new):
-                T_target = T_new
-            else:
-                self.counters.nonfinite_output += 1
+            T_target = T_world_obj @ T_obj_new
         limited = limit_offset(T_target, state.T, cfg.max_offset, cfg.max_offset_rotation)
         if limited is not T_target:
             self.counters.offset_limited += 1
             T_target = limited
-        if not is_finite_transform(T_target):  # cannot happen from finite inputs; never publish it
-            self.counters.nonfinite_output += 1
-            T_target = self.T_world_target
+        if T_target is not self.T_world_target:
+            if is_finite_transform(T_target):
+                # Re-orthonormalise through the quaternion so that millions of composed
+                # steps cannot drift off SO(3); the published pose is this one.
+                self._pose = se3.pose_from_matrix4(T_target)
+                T_target = se3.matrix4_from_pose(self._pose)
+            else:  # never publish a non-finite target: keep the last one
+                self.counters.nonfinite_output += 1
+                T_target = self.T_world_target
         self.T_world_target = T_target
         self.mode = "running" if input_ok else "stopped"
-        return TickResult(self.mode, T_target, self.engine.state, in_seq, changed, input_ok)
+        return TickResult(self.mode, T_target, self.engine.state, in_seq, changed, input_ok,
+                          self._pose)
 
     def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[Array, bool]:
         """The user command this tick: zero when missing, stale or not finite."""
@@ -203,18 +210,7 @@ class Controller:
 
 def pose_list(T: Array) -> list[float]:
     """4x4 transform -> [x, y, z, qx, qy, qz, qw] as Python floats (for msgpack)."""
-    p = se3.pose_from_transform(T)
-    return [float(x) for x in p]
+    return se3.pose_from_matrix4(T)
 
 
-def transform_from_pose_fast(p: list[float]) -> Array:
-    """Pose list (validated unit quaternion) -> 4x4, in scalar math (hot path)."""
-    x, y, z, qx, qy, qz, qw = p
-    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
-    return np.array([
-        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy), x],
-        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx), y],
-        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy), z],
-        [0.0, 0.0, 0.0, 1.0],
-    ])
+transform_from_pose_fast = se3.matrix4_from_pose

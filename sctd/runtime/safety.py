@@ -18,14 +18,8 @@ Array = NDArray[np.float64]
 
 
 def rotation_angle_between(R_a: Array, R_b: Array) -> float:
-    """Angle (rad) of the rotation ``R_a^T R_b``; cheap and clamped."""
-    c = (float(np.sum(R_a * R_b)) - 1.0) * 0.5  # trace(R_a^T R_b) = sum of elementwise products
-    if c > 0.99999:
-        # Small angles: the trace loses precision; use the skew part instead.
-        S = R_a.T @ R_b
-        s = 0.5 * math.sqrt((S[2, 1] - S[1, 2]) ** 2 + (S[0, 2] - S[2, 0]) ** 2 + (S[1, 0] - S[0, 1]) ** 2)
-        return math.asin(min(1.0, s))
-    return math.acos(max(-1.0, c))
+    """Angle (rad) of the rotation ``R_a^T R_b``."""
+    return se3.angle_between3(R_a, R_b)
 
 
 def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
@@ -33,8 +27,8 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     rotation along the geodesic about the frame's own origin)."""
     out = T_a.copy()
     out[:3, 3] = T_a[:3, 3] + s * (T_b[:3, 3] - T_a[:3, 3])
-    w = se3.rotvec_from_matrix(T_a[:3, :3].T @ T_b[:3, :3])
-    out[:3, :3] = T_a[:3, :3] @ se3.matrix_from_rotvec(s * w)
+    w0, w1, w2 = se3.rotvec_from_matrix3(T_a[:3, :3].T @ T_b[:3, :3])
+    out[:3, :3] = T_a[:3, :3] @ se3.matrix3_from_rotvec(s * w0, s * w1, s * w2)
     return out
 
 
@@ -45,7 +39,8 @@ def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation
     Scaling both parts by one factor keeps the direction of motion (an orbit about a
     feature frame stays an orbit), where clipping each separately would bend it.
     """
-    dt = float(np.linalg.norm(T_new[:3, 3] - T_prev[:3, 3]))
+    dx, dy, dz = (T_new[:3, 3] - T_prev[:3, 3]).tolist()
+    dt = math.sqrt(dx * dx + dy * dy + dz * dz)
     dr = rotation_angle_between(T_prev[:3, :3], T_new[:3, :3])
     s = 1.0
     if dt > max_translation:
@@ -64,7 +59,8 @@ def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
     """Keep the target within ``max_translation`` (m) and ``max_rotation`` (rad) of the
     measured pose, so a blocked or lagging arm never winds up an unbounded target."""
     d = T_target[:3, 3] - T_measured[:3, 3]
-    n = float(np.linalg.norm(d))
+    dx, dy, dz = d.tolist()
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
     ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
     if n <= max_translation and ang <= max_rotation:
         return T_target
@@ -72,25 +68,25 @@ def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
     if n > max_translation:
         out[:3, 3] = T_measured[:3, 3] + d * (max_translation / n)
     if ang > max_rotation:
-        w = se3.rotvec_from_matrix(T_measured[:3, :3].T @ T_target[:3, :3])
-        out[:3, :3] = T_measured[:3, :3] @ se3.matrix_from_rotvec(w * (max_rotation / ang))
+        w0, w1, w2 = se3.rotvec_from_matrix3(T_measured[:3, :3].T @ T_target[:3, :3])
+        k = max_rotation / ang
+        out[:3, :3] = T_measured[:3, :3] @ se3.matrix3_from_rotvec(k * w0, k * w1, k * w2)
     return out
 
 
 def is_finite_transform(T: Array) -> bool:
-    """True when every entry is finite and the rotation part is orthonormal."""
-    if not np.all(np.isfinite(T)):
-        return False
-    R = T[:3, :3]
-    return bool(np.allclose(R.T @ R, np.eye(3), atol=1e-6))
+    """True when every entry is finite (NaN and inf propagate through the sum).
+
+    Orthonormality is not checked here: the controller re-orthonormalises every new
+    target through its unit quaternion before publishing it.
+    """
+    return math.isfinite(float(T.sum()))
 
 
 def sanitize_input(u: tuple[float, ...] | list[float], deadband: float) -> tuple[Array, bool]:
     """User input -> (clipped command, ok). Non-finite input is a zero command (not ok);
     each axis is clipped to [-1, 1] and zeroed inside the dead band."""
-    a = np.array(u, dtype=float)
-    if not np.all(np.isfinite(a)):
-        return np.zeros(len(a)), False
-    np.clip(a, -1.0, 1.0, out=a)
-    a[np.abs(a) < deadband] = 0.0
-    return a, True
+    if not all(math.isfinite(x) for x in u):
+        return np.zeros(len(u)), False
+    return np.array([0.0 if abs(x) < deadband else (1.0 if x > 1.0 else -1.0 if x < -1.0 else x)
+                     for x in u]), True

@@ -7,6 +7,15 @@ transforms are 4x4 homogeneous matrices; frames live in variable names
 shared by the runtime and the learner.
 """
 
+from ._fast import (
+    angle_between3,
+    invert4,
+    matrix3_from_rotvec,
+    matrix4_from_pose,
+    pose_from_matrix4,
+    quaternion_from_matrix3,
+    rotvec_from_matrix3,
+)
 from ._rotations import (
     average_quaternion,
     euler_xyz_from_matrix,
@@ -40,6 +49,13 @@ from ._transforms import (
 )
 
 __all__ = [
+    "angle_between3",
+    "invert4",
+    "matrix3_from_rotvec",
+    "matrix4_from_pose",
+    "pose_from_matrix4",
+    "quaternion_from_matrix3",
+    "rotvec_from_matrix3",
     "apply_displacement",
     "average_quaternion",
     "displacement_from_transforms",

@@ -32,21 +32,6 @@ from .model import (
 Array = NDArray[np.float64]
 
 
-def _rot(w0: float, w1: float, w2: float) -> Array:
-    """Rotation matrix of a rotation vector; scalar math, cheaper than numpy at 3x3."""
-    th2 = w0 * w0 + w1 * w1 + w2 * w2
-    if th2 < 1e-16:
-        return np.array([[1.0, -w2, w1], [w2, 1.0, -w0], [-w1, w0, 1.0]])
-    th = math.sqrt(th2)
-    a = math.sin(th) / th
-    b = (1.0 - math.cos(th)) / th2
-    return np.array([
-        [1.0 - b * (w1 * w1 + w2 * w2), -a * w2 + b * w0 * w1, a * w1 + b * w0 * w2],
-        [a * w2 + b * w0 * w1, 1.0 - b * (w0 * w0 + w2 * w2), -a * w0 + b * w1 * w2],
-        [-a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1)],
-    ])
-
-
 class _Neighbours:
     """KD-tree over a vector-field model's demonstration points (Ch. 4.2.5)."""
 
@@ -164,7 +149,8 @@ class SkillEngine:
             assert t.normal is not None
             return float(np.dot(t.normal, p)) + t.offset > t.margin
         assert t.point is not None
-        d = float(np.linalg.norm(p - t.point))
+        dx, dy, dz = (p - t.point).tolist()
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
         if t.direction == "below":
             return d < t.threshold - t.margin
         return d > t.threshold + t.margin
@@ -219,10 +205,10 @@ class SkillEngine:
         if m.translation == "frame":
             d = T_f[:3, :3] @ d
         out = T.copy()
-        if r[0] or r[1] or r[2]:
+        if r.any():
             # Rotate about the frame's origin and axes: T_f Rot(r) T_f^-1 T.
             R_f = T_f[:3, :3]
-            R_w = R_f @ _rot(float(r[0]), float(r[1]), float(r[2])) @ R_f.T
+            R_w = R_f @ se3.matrix3_from_rotvec(float(r[0]), float(r[1]), float(r[2])) @ R_f.T
             out[:3, :3] = R_w @ T[:3, :3]
             out[:3, 3] = R_w @ (T[:3, 3] - T_f[:3, 3]) + T_f[:3, 3]
         out[:3, 3] += d

@@ -1,0 +1,1 @@
+"""The ``sctd`` command line."""

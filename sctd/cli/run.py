@@ -1,0 +1,180 @@
+"""``sctd run``, ``sctd inspect`` and ``sctd swap``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+
+from ..runtime.zsession import add_zenoh_arguments
+
+
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    from ..runtime.controller import RuntimeConfig
+
+    d = RuntimeConfig()
+    p.add_argument("--skill", required=True, help="skill YAML file")
+    p.add_argument("--rate", type=float, default=d.rate, help="tick rate, Hz (default %(default)s)")
+    p.add_argument("--robot", default=d.robot, help="robot name in the key prefix sctd/<robot>")
+    p.add_argument("--device", default=d.device, help="input device to follow ('*': newest of any)")
+    p.add_argument("--input-timeout", type=float, default=d.input_timeout, help="s (default %(default)s)")
+    p.add_argument("--state-timeout", type=float, default=d.state_timeout, help="s (default %(default)s)")
+    p.add_argument("--object-timeout", type=float, default=d.object_timeout, help="s (default %(default)s)")
+    p.add_argument("--no-stamp-check", action="store_true",
+                   help="judge input age by arrival time only (senders with unsynchronised clocks)")
+    p.add_argument("--deadband", type=float, default=d.deadband, help="per input axis (default %(default)s)")
+    p.add_argument("--max-linear-speed", type=float, default=d.max_linear_speed, help="m/s (default %(default)s)")
+    p.add_argument("--max-angular-speed", type=float, default=d.max_angular_speed,
+                   help="rad/s (default %(default)s)")
+    p.add_argument("--max-offset", type=float, default=d.max_offset,
+                   help="m between target and measured pose (default %(default)s)")
+    p.add_argument("--max-offset-rotation", type=float, default=d.max_offset_rotation,
+                   help="rad between target and measured pose (default %(default)s)")
+    p.add_argument("--status-rate", type=float, default=d.status_rate, help="Hz (default %(default)s)")
+    p.add_argument("--spin-us", type=float, default=100.0,
+                   help="us before each deadline spent spinning instead of sleeping (default %(default)s)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--stats-json", action="store_true", help="print final statistics as JSON on exit")
+    add_zenoh_arguments(p)
+
+
+def main_run(args: argparse.Namespace) -> int:
+    from ..runtime.controller import RuntimeConfig
+    from ..runtime.daemon import Daemon
+    from ..runtime.zsession import session_from_args
+    from ..skill import SkillError, load_skill
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
+    try:
+        skill = load_skill(args.skill)
+    except SkillError as e:
+        print(f"sctd run: {e}", file=sys.stderr)
+        return 2
+    for name in ("rate", "input_timeout", "state_timeout", "object_timeout", "max_linear_speed",
+                 "max_angular_speed", "max_offset", "max_offset_rotation", "status_rate"):
+        if not getattr(args, name) > 0:
+            print(f"sctd run: --{name.replace('_', '-')} must be > 0", file=sys.stderr)
+            return 2
+    config = RuntimeConfig(
+        rate=args.rate, robot=args.robot, device=args.device, input_timeout=args.input_timeout,
+        state_timeout=args.state_timeout, object_timeout=args.object_timeout,
+        stamp_check=not args.no_stamp_check, deadband=args.deadband,
+        max_linear_speed=args.max_linear_speed, max_angular_speed=args.max_angular_speed,
+        max_offset=args.max_offset, max_offset_rotation=args.max_offset_rotation,
+        status_rate=args.status_rate,
+    )
+    try:
+        session = session_from_args(args)
+    except (ValueError, Exception) as e:  # zenoh raises ZError on bad configs
+        print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
+        return 2
+    with session:
+        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6)
+
+        def on_signal(signum, frame):
+            daemon.stop()
+
+        signal.signal(signal.SIGINT, on_signal)
+        signal.signal(signal.SIGTERM, on_signal)
+        stats = daemon.run(args.duration)
+    if args.stats_json:
+        print(json.dumps(stats))
+    return 0
+
+
+def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("skill", help="skill YAML file")
+    p.add_argument("--json", action="store_true", help="machine-readable output")
+
+
+def main_inspect(args: argparse.Namespace) -> int:
+    from ..skill import SkillError, load_skill, skill_summary
+
+    try:
+        s = skill_summary(load_skill(args.skill))
+    except SkillError as e:
+        print(f"sctd inspect: {e}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    print(f"skill {s['name']} (id {s['id']}), object {s['object']}: {s['description']}")
+    print(f"  limits: {s['limits']['max_linear_speed']} m/s, {s['limits']['max_angular_speed']} rad/s")
+    for name, f in s["frames"].items():
+        print(f"  frame {name}: parent {f['parent']}, pose {f['pose']}")
+    for st in s["states"]:
+        mark = " (start)" if st["name"] == s["start"] else ""
+        mark += " (end)" if st["name"] == s["end"] else ""
+        print(f"  state {st['name']}{mark}")
+        for m in st["input_mappings"]:
+            if m["type"] == "linear":
+                print(f"    IM linear on {m['frame']}: {_describe_matrix(m['matrix'])}")
+            else:
+                print(f"    IM vector_field on {m['frame']}: {m['fields']} fields, mode {m['mode']}")
+        for c in st["active_constraints"]:
+            extra = {k: v for k, v in c.items() if k not in ("type", "frame")}
+            print(f"    AC {c['type']} on {c['frame']}: {extra}")
+    for t in s["transitions"]:
+        extra = {k: v for k, v in t.items() if k not in ("from", "to", "type")}
+        print(f"  {t['from']} -> {t['to']} ({t['type']}): {extra}")
+    for f in s["fields"]:
+        print(f"  field {f}")
+    for c in s["candidate_frames"]:
+        print(f"  candidate frame {c}")
+    return 0
+
+
+def _describe_matrix(m: list[list[float]]) -> str:
+    names = ("tx", "ty", "tz", "rx", "ry", "rz")
+    cols = []
+    for j in range(len(m[0])):
+        terms = [f"{m[i][j]:+g}{names[i]}" for i in range(6) if m[i][j] != 0]
+        cols.append(f"u{j}->" + ("".join(terms) if terms else "none"))
+    return ", ".join(cols)
+
+
+def add_swap_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("skill", help="skill YAML file to send to the running daemon")
+    p.add_argument("--robot", default="edan")
+    p.add_argument("--timeout", type=float, default=10.0, help="s to wait for the daemon's reply")
+    add_zenoh_arguments(p)
+
+
+def main_swap(args: argparse.Namespace) -> int:
+    import msgpack
+
+    from ..runtime.codec import Keys
+    from ..runtime.zsession import session_from_args
+    from ..skill import SkillError, bundle_from_file, skill_from_bundle
+
+    try:
+        bundle = bundle_from_file(args.skill)
+        skill_from_bundle(bundle)  # refuse locally what the daemon would refuse
+    except SkillError as e:
+        print(f"sctd swap: {e}", file=sys.stderr)
+        return 2
+    with session_from_args(args) as session:
+        replies = session.get(Keys(args.robot).skill, payload=bundle.pack(), timeout=args.timeout)
+        for reply in replies:
+            if reply.ok is not None:
+                body = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
+                print(body.get("id"))
+                return 0
+            body = _err_body(reply.err.payload.to_bytes())
+            print(f"sctd swap: refused by the daemon: {body}", file=sys.stderr)
+            return 1
+    print(f"sctd swap: no daemon answered on {Keys(args.robot).skill} within {args.timeout} s",
+          file=sys.stderr)
+    return 1
+
+
+def _err_body(data: bytes) -> str:
+    import msgpack
+
+    try:
+        body = msgpack.unpackb(data, raw=False)
+        return body.get("error", str(body)) if isinstance(body, dict) else str(body)
+    except Exception:
+        return data.decode(errors="replace")

@@ -1,0 +1,333 @@
+"""Demonstrations: CSV reading with validation, preprocessing, DTW (Ch. 4.1.1, 5.1).
+
+A demonstration is a CSV file with the header ``t,x,y,z,qx,qy,qz,qw`` (other columns
+are ignored): the end-effector pose over time in the task object's frame
+(``T_obj_ee``). :func:`read_demos` reads a folder of them and either returns every
+demonstration or raises :class:`DemoError` naming the file, the row and the reason;
+nothing is half-loaded.
+
+Preprocessing (pure functions on arrays): :func:`spike_mask` drops isolated gross
+outliers (a Hampel filter; the thesis has none, Ch. 6), :func:`smooth_poses` averages
+out sensor noise over a few samples, :func:`subsample_by_distance` keeps samples a
+fixed tf-norm apart (Ch. 4.1.1), :func:`dtw` aligns two demonstrations with the
+tf-norm (Ch. 5.1).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import uniform_filter1d
+
+from .. import se3
+
+Array = NDArray[np.float64]
+
+COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
+QUAT_TOLERANCE = 1e-3
+MIN_SAMPLES = 10
+
+
+class DemoError(ValueError):
+    """A demonstration file is malformed: ``file: row N (line L): reason``."""
+
+    def __init__(self, file: str, row: int | None, reason: str):
+        self.file = file
+        self.row = row
+        self.reason = reason
+        where = file if row is None else f"{file}: row {row} (line {row + 1})"
+        super().__init__(f"{where}: {reason}")
+
+
+@dataclass(frozen=True)
+class Demo:
+    """One demonstration: times (n,) and end-effector poses (n, 7) in the object frame.
+
+    Quaternions are normalised to the canonical hemisphere (qw >= 0).
+    """
+
+    name: str
+    t: Array
+    poses: Array
+
+    @property
+    def T(self) -> Array:
+        """Homogeneous ``T_obj_ee`` (n, 4, 4)."""
+        return se3.transform_from_pose(self.poses)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
+                  quat_tolerance: float = QUAT_TOLERANCE) -> Demo:
+    """Read and validate one demonstration CSV.
+
+    Rows are counted from 1 for the first data row (the header is line 1, so row N
+    is line N + 1).
+
+    Raises
+    ------
+    DemoError
+        Missing columns, a non-numeric or non-finite value, a quaternion whose norm is
+        off 1 by more than ``quat_tolerance``, times not strictly increasing, or fewer
+        than ``min_samples`` rows.
+    """
+    path = Path(path)
+    name = str(path)
+    try:
+        fh = path.open(newline="")
+    except OSError as exc:
+        raise DemoError(name, None, f"cannot read ({exc.strerror})") from None
+    with fh:
+        reader = csv.reader(fh)
+        try:
+            header = next(reader)
+        except StopIteration:
+            raise DemoError(name, None, "empty file (expected the header "
+                            f"{','.join(COLUMNS)})") from None
+        header = [h.strip() for h in header]
+        missing = [c for c in COLUMNS if c not in header]
+        if missing:
+            raise DemoError(name, None, f"missing column(s) {', '.join(missing)} "
+                            f"(header must contain {','.join(COLUMNS)})")
+        cols = [header.index(c) for c in COLUMNS]
+        rows: list[list[float]] = []
+        for k, rec in enumerate(reader, start=1):
+            if not rec or all(not x.strip() for x in rec):
+                continue
+            if len(rec) < len(header):
+                raise DemoError(name, k, f"expected {len(header)} values, got {len(rec)}")
+            vals = []
+            for c, j in zip(COLUMNS, cols, strict=True):
+                s = rec[j].strip()
+                try:
+                    v = float(s)
+                except ValueError:
+                    raise DemoError(name, k, f"column {c}: not a number: {s!r}") from None
+                if not math.isfinite(v):
+                    raise DemoError(name, k, f"column {c}: not finite ({s})")
+                vals.append(v)
+            qn = math.sqrt(sum(x * x for x in vals[4:]))
+            if abs(qn - 1.0) > quat_tolerance:
+                raise DemoError(name, k, f"quaternion (qx, qy, qz, qw) has norm {qn:.6f}, "
+                                f"not unit (tolerance {quat_tolerance})")
+            if rows and vals[0] <= rows[-1][0]:
+                raise DemoError(name, k, f"time {vals[0]} does not increase "
+                                f"(previous row has {rows[-1][0]})")
+            rows.append(vals)
+    if len(rows) < min_samples:
+        raise DemoError(name, len(rows) or None,
+                        f"too few samples: {len(rows)} rows, need at least {min_samples}")
+    a = np.array(rows)
+    return Demo(name=path.name, t=a[:, 0], poses=np.concatenate(
+        [a[:, 1:4], se3.quaternion_normalize(a[:, 4:8])], axis=1))
+
+
+def read_demos(directory: str | Path, min_samples: int = MIN_SAMPLES,
+               pattern: str = "*.csv") -> list[Demo]:
+    """Read every ``*.csv`` in ``directory`` (sorted by name); all or nothing.
+
+    Raises
+    ------
+    DemoError
+        The first malformed file (see :func:`read_demo_csv`), or no CSV files.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise DemoError(str(directory), None, "not a directory")
+    files = sorted(directory.glob(pattern))
+    if not files:
+        raise DemoError(str(directory), None, f"no demonstration files ({pattern})")
+    return [read_demo_csv(f, min_samples=min_samples) for f in files]
+
+
+def write_demo_csv(path: str | Path, t: ArrayLike, poses: ArrayLike, digits: int = 6) -> None:
+    """Write a demonstration CSV (``t,x,y,z,qx,qy,qz,qw``)."""
+    t = np.asarray(t, dtype=float)
+    poses = np.asarray(poses, dtype=float)
+    with Path(path).open("w", newline="") as fh:
+        fh.write(",".join(COLUMNS) + "\n")
+        fmt = ",".join([f"%.{digits}f"] * 8)
+        for ti, p in zip(t, poses, strict=True):
+            fh.write(fmt % (ti, *p) + "\n")
+
+
+# --- distances ------------------------------------------------------------------------
+
+
+def tf_distance(poses_a: ArrayLike, poses_b: ArrayLike, alpha: float = 0.4) -> Array:
+    """tf-norm (eq. 4.9) of the relative pose between poses, broadcasting (..., 7).
+
+    ``||t_a - t_b|| + alpha * angle(q_a, q_b)``.
+    """
+    a = np.asarray(poses_a, dtype=float)
+    b = np.asarray(poses_b, dtype=float)
+    return (np.linalg.norm(a[..., :3] - b[..., :3], axis=-1)
+            + alpha * se3.quaternion_angle(a[..., 3:], b[..., 3:]))
+
+
+# --- preprocessing --------------------------------------------------------------------
+
+
+def spike_mask(poses: ArrayLike, half_window: int = 3, n_sigma: float = 5.0,
+               min_jump: float = 0.005, min_angle: float = 0.05) -> NDArray[np.bool_]:
+    """Hampel filter: True for samples that are *not* isolated gross outliers.
+
+    A sample is an outlier when its position is farther than
+    ``max(n_sigma * 1.4826 * MAD, min_jump)`` from the component-wise median of the
+    ``2 * half_window + 1`` samples around it, or its orientation more than
+    ``max(n_sigma * MAD, min_angle)`` rad from their (sign-aligned, normalised) median.
+
+    Parameters
+    ----------
+    poses : array-like, shape (n, 7)
+
+    Returns
+    -------
+    ndarray, shape (n,) of bool
+    """
+    P = np.asarray(poses, dtype=float)
+    n = len(P)
+    if n < 2 * half_window + 1:
+        return np.ones(n, dtype=bool)
+    w = 2 * half_window + 1
+    pos = np.pad(P[:, :3], ((half_window, half_window), (0, 0)), mode="reflect")
+    med = np.median(sliding_window_view(pos, w, axis=0), axis=-1)
+    r = np.linalg.norm(P[:, :3] - med, axis=1)
+    mad = np.median(np.abs(r - np.median(r)))
+    bad = r > max(n_sigma * 1.4826 * mad, min_jump)
+    q = P[:, 3:].copy()
+    q *= np.where(np.sum(q * q[0], axis=1) < 0, -1.0, 1.0)[:, None]
+    qp = np.pad(q, ((half_window, half_window), (0, 0)), mode="reflect")
+    qm = np.median(sliding_window_view(qp, w, axis=0), axis=-1)
+    qm /= np.maximum(np.linalg.norm(qm, axis=1, keepdims=True), 1e-12)
+    ang = se3.quaternion_angle(q, qm)
+    amad = np.median(np.abs(ang - np.median(ang)))
+    bad |= ang > max(n_sigma * 1.4826 * amad, min_angle)
+    return ~bad
+
+
+def smooth_poses(poses: ArrayLike, window: int = 5) -> Array:
+    """Moving average over ``window`` samples: positions component-wise, orientations as
+    the normalised mean of sign-aligned quaternions (accurate for small windows).
+
+    Parameters
+    ----------
+    poses : array-like, shape (n, 7)
+
+    Returns
+    -------
+    ndarray, shape (n, 7)
+    """
+    P = np.array(poses, dtype=float)
+    if window <= 1 or len(P) < 3:
+        return P
+    P[:, :3] = uniform_filter1d(P[:, :3], window, axis=0, mode="nearest")
+    q = P[:, 3:]
+    # Align each quaternion's sign with its predecessor before averaging.
+    flips = np.sum(q[1:] * q[:-1], axis=1) < 0
+    sign = np.concatenate([[1.0], np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)])
+    q = uniform_filter1d(q * sign[:, None], window, axis=0, mode="nearest")
+    P[:, 3:] = se3.quaternion_normalize(q)
+    return P
+
+
+def subsample_by_distance(poses: ArrayLike, spacing: float, alpha: float = 0.4,
+                          translation_only: bool = False) -> NDArray[np.int64]:
+    """Indices of samples kept at least ``spacing`` apart (Ch. 4.1.1).
+
+    Greedy: starting at sample 0, keep the first sample whose tf-norm distance (eq. 4.9;
+    the Euclidean distance when ``translation_only``) from the last kept one reaches
+    ``spacing``. The last sample is kept too when it is at least ``spacing / 2`` away.
+
+    Parameters
+    ----------
+    poses : array-like, shape (n, 7)
+    spacing : float
+        Metres (tf-norm with ``alpha`` metres per radian).
+
+    Returns
+    -------
+    ndarray, shape (k,) of int, increasing
+    """
+    P = np.asarray(poses, dtype=float)
+    a = 0.0 if translation_only else alpha
+    keep = [0]
+    i = 0
+    n = len(P)
+    chunk = 64
+    while i < n - 1:
+        j0 = i + 1
+        found = -1
+        while j0 < n:
+            j1 = min(n, j0 + chunk)
+            d = tf_distance(P[j0:j1], P[i], a)
+            hit = np.flatnonzero(d >= spacing)
+            if len(hit):
+                found = j0 + int(hit[0])
+                break
+            j0 = j1
+        if found < 0:
+            if float(tf_distance(P[-1], P[i], a)) >= 0.5 * spacing and keep[-1] != n - 1:
+                keep.append(n - 1)
+            break
+        keep.append(found)
+        i = found
+    return np.asarray(keep, dtype=np.int64)
+
+
+# --- DTW ------------------------------------------------------------------------------
+
+
+def dtw(a: ArrayLike, b: ArrayLike, alpha: float = 0.4) -> tuple[float, NDArray[np.int64]]:
+    """Dynamic time warping of two pose sequences with the tf-norm (Ch. 5.1).
+
+    The local cost of matching ``a[i]`` with ``b[j]`` is the tf-norm of their relative
+    pose (eq. 4.9); the DTW cost is the sum of local costs along the optimal monotone
+    path (steps (1, 0), (0, 1), (1, 1)). The table is filled one anti-diagonal at a
+    time, vectorised.
+
+    Parameters
+    ----------
+    a : array-like, shape (n, 7)
+    b : array-like, shape (m, 7)
+    alpha : float
+        Metres per radian in the tf-norm.
+
+    Returns
+    -------
+    cost : float
+    path : ndarray, shape (k, 2) of int
+        Matched index pairs (i, j), from (0, 0) to (n - 1, m - 1).
+    """
+    A = np.asarray(a, dtype=float)
+    B = np.asarray(b, dtype=float)
+    if A.ndim == 3:
+        A = se3.pose_from_transform(A)
+    if B.ndim == 3:
+        B = se3.pose_from_transform(B)
+    n, m = len(A), len(B)
+    if n == 0 or m == 0:
+        raise ValueError("dtw needs two non-empty sequences")
+    C = tf_distance(A[:, None, :], B[None, :, :], alpha)
+    D = np.full((n + 1, m + 1), np.inf)
+    D[0, 0] = 0.0
+    for k in range(2, n + m + 1):
+        i = np.arange(max(1, k - m), min(n, k - 1) + 1)
+        j = k - i
+        D[i, j] = C[i - 1, j - 1] + np.minimum(np.minimum(D[i - 1, j - 1], D[i - 1, j]),
+                                               D[i, j - 1])
+    path = [(n - 1, m - 1)]
+    i, j = n, m
+    while i > 1 or j > 1:
+        steps = ((i - 1, j - 1), (i - 1, j), (i, j - 1))
+        i, j = min(steps, key=lambda s: D[s])
+        path.append((i - 1, j - 1))
+    return float(D[n, m]), np.asarray(path[::-1], dtype=np.int64)

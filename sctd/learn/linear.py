@@ -1,0 +1,526 @@
+"""Linear input mappings from demonstrations (Ch. 4.1, Algorithm 1).
+
+Pipeline (:class:`LinearIMLearner`):
+
+1. Displacements of every candidate feature frame between consecutive (subsampled)
+   samples, with the displacement convention of :mod:`sctd.se3`
+   (``T_next = Trans(d) T Rot(exp(r))``: ``d`` in the object's axes, ``r`` about the
+   frame's own axes) -- exactly what the runtime's linear mapping applies.
+2. The label set: the 41 axis-selection matrices (6 one-DoF, 15 two-DoF, 20 three-DoF)
+   seen from every frame. A translation-only selection moves every ee-attached frame
+   identically, so it is kept once (for ``ee``): ties between frames would otherwise
+   make the labelling arbitrary.
+3. Cost of each label per displacement (eqs. 4.5-4.14): the least-squares command
+   ``u = M^+ d6`` (eq. 4.6), residual ``M u - d6`` (eq. 4.8) measured by the tf-norm
+   (eq. 4.9) plus ``beta * DoF``.
+4. Segmentation minimising E(f) (eqs. 4.13-4.16) by alpha-beta swap (or expansion) on
+   a neighbourhood of temporal successors and spatial neighbours.
+5. States (improving on Ch. 6): runs shorter than ``min_segment`` are absorbed, the
+   per-demonstration run sequences are merged into one temporal sequence of states
+   (the most common number of runs), each state's IM is the majority frame with the
+   union of the axes the demonstrations used there, and every demonstration is then
+   assigned to those states monotonically by dynamic programming -- so the FSM is one
+   chain every demonstration follows.
+6. Transitions (Ch. 4.1.5): a linear SVM on positions in the object frame separates
+   each pair of consecutive states; the frame whose positions separate best *and*
+   which the source state's IM can move across the plane is chosen. Reverse
+   transitions share the plane with opposite sign; the margin is the hysteresis.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from .. import se3
+from .graphcut import alpha_beta_swap, alpha_expansion, energy
+
+Array = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+SELECTIONS: tuple[tuple[int, ...], ...] = tuple(
+    c for k in (1, 2, 3) for c in itertools.combinations(range(6), k)
+)
+"""The 41 axis selections (6 + 15 + 20), as tuples of motion-axis indices."""
+
+
+def selection_matrix(axes: tuple[int, ...]) -> Array:
+    """The 6 x k selection matrix M (eq. 4.1) whose column j drives motion axis axes[j]."""
+    M = np.zeros((6, len(axes)))
+    M[list(axes), np.arange(len(axes))] = 1.0
+    return M
+
+
+def selection_matrices() -> list[Array]:
+    """All 41 selection matrices, 1-DoF first (Ch. 4.1)."""
+    return [selection_matrix(a) for a in SELECTIONS]
+
+
+@dataclass(frozen=True)
+class IMLabel:
+    """One label: a selection of motion axes seen from one feature frame."""
+
+    frame: str
+    axes: tuple[int, ...]
+
+    @property
+    def dof(self) -> int:
+        return len(self.axes)
+
+    @property
+    def matrix(self) -> Array:
+        return selection_matrix(self.axes)
+
+    @property
+    def rotates(self) -> bool:
+        return any(a >= 3 for a in self.axes)
+
+    @property
+    def name(self) -> str:
+        return f"{self.frame}:" + "".join(AXIS_NAMES[a] for a in self.axes)
+
+
+def label_set(frame_names: list[str]) -> list[IMLabel]:
+    """Labels for frames ``frame_names`` (the first is ``ee``): 41 + 34 per extra frame."""
+    labels = [IMLabel(frame_names[0], a) for a in SELECTIONS]
+    for name in frame_names[1:]:
+        labels.extend(IMLabel(name, a) for a in SELECTIONS if any(x >= 3 for x in a))
+    return labels
+
+
+def frame_displacements(T_obj_ee: ArrayLike, T_ee_frame: ArrayLike) -> Array:
+    """Displacements [d, r] (n - 1, 6) of a feature frame between consecutive poses.
+
+    Parameters
+    ----------
+    T_obj_ee : array-like, shape (n, 4, 4)
+        End-effector poses in the object frame.
+    T_ee_frame : array-like, shape (4, 4)
+        The feature frame's fixed offset from the end-effector.
+    """
+    T = np.asarray(T_obj_ee, dtype=float) @ np.asarray(T_ee_frame, dtype=float)
+    return se3.displacement_from_transforms(T[:-1], T[1:])
+
+
+def least_squares_command(M: ArrayLike, d6: ArrayLike) -> tuple[Array, Array]:
+    """Command ``u = M^+ d6`` (eqs. 4.6-4.7) and residual ``M u - d6`` (eq. 4.8).
+
+    Parameters
+    ----------
+    M : array-like, shape (6, k)
+    d6 : array-like, shape (..., 6)
+
+    Returns
+    -------
+    u : ndarray, shape (..., k)
+    residual : ndarray, shape (..., 6)
+    """
+    M = np.asarray(M, dtype=float)
+    d6 = np.asarray(d6, dtype=float)
+    u = d6 @ np.linalg.pinv(M).T
+    return u, u @ M.T - d6
+
+
+def im_costs(d6_by_frame: ArrayLike, labels: list[IMLabel], frame_names: list[str],
+             alpha: float = 0.4, beta: float = 0.01) -> Array:
+    """Cost of every label for every displacement (eq. 4.14), vectorised.
+
+    For a selection matrix the least-squares residual is the unselected part of the
+    displacement, so the cost is ``tf_norm(d6 * (1 - mask)) + beta * DoF``.
+
+    Parameters
+    ----------
+    d6_by_frame : array-like, shape (F, m, 6)
+        Displacements of each frame (order of ``frame_names``).
+    labels : list of IMLabel, length L
+    frame_names : list of str, length F
+
+    Returns
+    -------
+    ndarray, shape (m, L)
+    """
+    D = np.asarray(d6_by_frame, dtype=float)
+    fidx = np.array([frame_names.index(lab.frame) for lab in labels])
+    keep = np.ones((len(labels), 6))
+    for j, lab in enumerate(labels):
+        keep[j, list(lab.axes)] = 0.0
+    res = D[fidx].transpose(1, 0, 2) * keep[None]  # (m, L, 6)
+    dof = np.array([lab.dof for lab in labels], dtype=float)
+    return se3.tf_norm_of_displacement(res, alpha) + beta * dof[None, :]
+
+
+def neighbour_graph(poses: ArrayLike, demo_index: ArrayLike, radius: float = 0.04,
+                    max_n: int = 10, alpha: float = 0.4) -> tuple[IntArray, Array]:
+    """Neighbourhood of displacements (eq. 4.16): temporal successors plus up to
+    ``max_n`` spatial neighbours within ``radius`` (m), weights ``exp(-tf-norm)``.
+
+    Parameters
+    ----------
+    poses : array-like, shape (m, 7)
+        Pose (ee, object frame) at the start of each displacement.
+    demo_index : array-like, shape (m,)
+        Which demonstration each displacement belongs to (consecutive within a demo).
+
+    Returns
+    -------
+    edges : ndarray, shape (e, 2) of int, each pair once (i < j)
+    weights : ndarray, shape (e,)
+    """
+    P = np.asarray(poses, dtype=float)
+    demo = np.asarray(demo_index)
+    m = len(P)
+    same = demo[1:] == demo[:-1]
+    i0 = np.flatnonzero(same)
+    pairs = [np.stack([i0, i0 + 1], axis=1)]
+    if m > 1 and max_n > 0:
+        k = min(max_n + 1, m)
+        dist, idx = cKDTree(P[:, :3]).query(P[:, :3], k=k, distance_upper_bound=radius)
+        rows = np.repeat(np.arange(m), k)
+        cols = idx.reshape(-1)
+        ok = (cols < m) & (cols != rows)
+        a, b = rows[ok], cols[ok]
+        pairs.append(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1))
+    E = np.unique(np.concatenate(pairs).astype(np.int64), axis=0) if m > 1 else np.zeros((0, 2), int)
+    w = np.exp(-_tf_dist(P[E[:, 0]], P[E[:, 1]], alpha)) if len(E) else np.zeros(0)
+    return E, w
+
+
+def _tf_dist(a: Array, b: Array, alpha: float) -> Array:
+    return (np.linalg.norm(a[:, :3] - b[:, :3], axis=1)
+            + alpha * se3.quaternion_angle(a[:, 3:], b[:, 3:]))
+
+
+@dataclass
+class Hyperplane:
+    """A learned transition ``source -> target``: fires when
+    ``(normal . p + offset) / |normal| > margin`` for the position p of ``frame``."""
+
+    source: int
+    target: int
+    frame: str
+    normal: Array
+    offset: float
+    margin: float
+    accuracy: float
+    reachable: bool
+    candidates: dict = field(default_factory=dict)
+
+
+@dataclass
+class StateIM:
+    """One FSM state: its input mapping (a selection seen from a frame)."""
+
+    label: IMLabel
+    support: dict = field(default_factory=dict)  # axis name -> fraction of displacements
+
+
+def _runs(labels: IntArray) -> list[list[int]]:
+    """[start, end (exclusive), label] of each run of equal labels."""
+    out: list[list[int]] = []
+    for i, lab in enumerate(labels):
+        if out and out[-1][2] == lab:
+            out[-1][1] = i + 1
+        else:
+            out.append([i, i + 1, int(lab)])
+    return out
+
+
+def _absorb_short_runs(labels: IntArray, cost: Array, min_len: int) -> IntArray:
+    f = labels.copy()
+    while True:
+        runs = _runs(f)
+        if len(runs) <= 1:
+            return f
+        lengths = [r[1] - r[0] for r in runs]
+        k = int(np.argmin(lengths))
+        if lengths[k] >= min_len:
+            return f
+        s, e, _ = runs[k]
+        options = [runs[j][2] for j in (k - 1, k + 1) if 0 <= j < len(runs)]
+        best = min(options, key=lambda lab: cost[s:e, lab].sum())
+        f[s:e] = best
+
+
+def _monotone_assignment(cost: Array, switch_penalty: float) -> IntArray:
+    """Non-decreasing state sequence minimising sum cost[i, s_i] + penalty per switch.
+
+    Parameters
+    ----------
+    cost : ndarray, shape (m, K)
+    """
+    m, K = cost.shape
+    acc = cost[0].copy()
+    back = np.zeros((m, K), dtype=np.int64)
+    for i in range(1, m):
+        # Best predecessor state j <= k: stay (j == k) or switch (j < k, + penalty).
+        cm = np.minimum.accumulate(acc)
+        arg = np.array([int(np.argmin(acc[: k + 1])) for k in range(K)])
+        switch = cm + switch_penalty
+        stay = acc
+        use_stay = stay <= switch
+        back[i] = np.where(use_stay, np.arange(K), arg)
+        acc = np.where(use_stay, stay, switch) + cost[i]
+    s = np.empty(m, dtype=np.int64)
+    s[-1] = int(np.argmin(acc))
+    for i in range(m - 1, 0, -1):
+        s[i - 1] = back[i, s[i]]
+    return s
+
+
+class LinearIMLearner:
+    """Learn an FSM of linear input mappings from demonstrations (Algorithm 1).
+
+    Parameters
+    ----------
+    alpha : float
+        Metres per radian in the tf-norm (eq. 4.9); thesis 0.3-0.5.
+    beta : float
+        Cost per controlled DoF (eq. 4.14); thesis ~0.01.
+    smoothness : float
+        lambda of eq. 4.16; thesis 0-0.007.
+    radius : float
+        Spatial neighbour radius (m); thesis ~0.04.
+    max_n : int
+        Spatial neighbours per displacement; thesis 10.
+    C : float
+        SVM penalty (eq. 4.17); thesis 1000.
+    method : {"swap", "expansion"}
+        Graph-cut move (Appendix A.3).
+    min_segment : int
+        Runs shorter than this many displacements are absorbed by a neighbour run.
+    axis_support : float
+        Fraction of a state's displacements whose label must use an axis for the
+        state's IM to include it.
+    margin : float
+        Hysteresis margin of the hyperplane transitions (m).
+    random_state : int or None
+        Seed for the SVM solver.
+
+    Attributes
+    ----------
+    frame_names_ : list of str
+    labels_ : list of IMLabel
+    costs_ : list of ndarray, (m_i, L) per demonstration
+    graph_labels_ : list of ndarray, (m_i,) graph-cut label per displacement
+    energy_ : float
+        E(f) of the graph-cut labelling.
+    states_ : list of StateIM
+    state_labels_ : list of ndarray, (m_i,) state index per displacement
+    transitions_ : list of Hyperplane (forward transitions k -> k + 1)
+    timings_ : dict
+    """
+
+    def __init__(self, alpha: float = 0.4, beta: float = 0.01, smoothness: float = 0.005,
+                 radius: float = 0.04, max_n: int = 10, C: float = 1000.0, method: str = "swap",
+                 min_segment: int = 3, axis_support: float = 0.1, margin: float = 0.005,
+                 random_state: int | None = None):
+        self.alpha = alpha
+        self.beta = beta
+        self.smoothness = smoothness
+        self.radius = radius
+        self.max_n = max_n
+        self.C = C
+        self.method = method
+        self.min_segment = min_segment
+        self.axis_support = axis_support
+        self.margin = margin
+        self.random_state = random_state
+
+    def fit(self, T_obj_ee: list[ArrayLike], frames: dict[str, ArrayLike] | None = None,
+            progress=None) -> LinearIMLearner:
+        """Fit on demonstrations.
+
+        Parameters
+        ----------
+        T_obj_ee : list of array-like, each (n_i, 4, 4)
+            Subsampled end-effector poses in the object frame, one array per demo.
+        frames : dict of str -> (4, 4), optional
+            Candidate feature frames as offsets ``T_ee_frame`` (``ee`` is always a
+            candidate and must not be given).
+        progress : callable(str), optional
+            Called with a short description at each stage.
+        """
+        if self.method not in ("swap", "expansion"):
+            raise ValueError(f"method must be 'swap' or 'expansion', got {self.method!r}")
+        demos = [np.asarray(T, dtype=float) for T in T_obj_ee]
+        if not demos or any(len(T) < 2 for T in demos):
+            raise ValueError("every demonstration needs at least 2 poses")
+        frames = dict(frames or {})
+        if "ee" in frames:
+            raise ValueError("'ee' is always a candidate frame; do not pass it")
+        self.frame_names_ = ["ee", *frames]
+        offsets = [np.eye(4)] + [np.asarray(frames[n], dtype=float) for n in frames]
+        self.frame_offsets_ = dict(zip(self.frame_names_, offsets, strict=True))
+        self.labels_ = label_set(self.frame_names_)
+        tick = time.perf_counter()
+        timings: dict[str, float] = {}
+
+        def lap(name: str) -> None:
+            nonlocal tick
+            now = time.perf_counter()
+            timings[name] = now - tick
+            tick = now
+            if progress is not None:
+                progress(name)
+
+        # 1-3: displacements and costs.
+        self.costs_ = []
+        self.d6_ = []
+        for T in demos:
+            D = np.stack([frame_displacements(T, off) for off in offsets])
+            self.d6_.append(D)
+            self.costs_.append(im_costs(D, self.labels_, self.frame_names_, self.alpha, self.beta))
+        lap("costs")
+
+        # 4: graph-cut segmentation of all demonstrations jointly.
+        unary = np.concatenate(self.costs_)
+        demo_index = np.concatenate([np.full(len(c), k) for k, c in enumerate(self.costs_)])
+        start_poses = np.concatenate([se3.pose_from_transform(T[:-1]) for T in demos])
+        edges, weights = neighbour_graph(start_poses, demo_index, self.radius, self.max_n,
+                                         self.alpha)
+        solve = alpha_beta_swap if self.method == "swap" else alpha_expansion
+        f = solve(unary, edges, weights, self.smoothness)
+        self.edges_, self.weights_ = edges, weights
+        self.energy_ = energy(unary, edges, weights, self.smoothness, f)
+        self.energy_initial_ = energy(unary, edges, weights, self.smoothness,
+                                      np.argmin(unary, axis=1))
+        splits = np.cumsum([len(c) for c in self.costs_])[:-1]
+        self.graph_labels_ = np.split(f, splits)
+        lap("segmentation")
+
+        # 5: states.
+        self._build_states(demos)
+        lap("states")
+        # 6: transitions.
+        self._fit_transitions(demos)
+        lap("transitions")
+        self.timings_ = timings
+        return self
+
+    # --- states -----------------------------------------------------------------------
+
+    def _build_states(self, demos: list[Array]) -> None:
+        cleaned = [_absorb_short_runs(f, c, self.min_segment)
+                   for f, c in zip(self.graph_labels_, self.costs_, strict=True)]
+        self.cleaned_labels_ = cleaned
+        runs = [_runs(f) for f in cleaned]
+        counts = np.array([len(r) for r in runs])
+        values, freq = np.unique(counts, return_counts=True)
+        K = int(values[np.flatnonzero(freq == freq.max())].min())
+        ref = [r for r in runs if len(r) == K]
+        ref_demos = [k for k, r in enumerate(runs) if len(r) == K]
+        states: list[StateIM] = []
+        for s in range(K):
+            used: dict[int, int] = {}
+            for k, r in zip(ref_demos, ref, strict=True):
+                start, end, _ = r[s]
+                for lab in cleaned[k][start:end]:
+                    used[int(lab)] = used.get(int(lab), 0) + 1
+            states.append(self._state_from_labels(used))
+        # Consecutive states with the same IM are one state.
+        merged = [states[0]]
+        for st in states[1:]:
+            if st.label != merged[-1].label:
+                merged.append(st)
+        self.states_ = merged
+        L = {lab: j for j, lab in enumerate(self.labels_)}
+        cols = [L.get(st.label) for st in merged]
+        self.state_labels_ = []
+        for D, c in zip(self.d6_, self.costs_, strict=True):
+            sc = np.stack([c[:, j] if j is not None else self._cost_of(st.label, D)
+                           for j, st in zip(cols, merged, strict=True)], axis=1)
+            self.state_labels_.append(_monotone_assignment(sc, self.smoothness * 10))
+
+    def _cost_of(self, label: IMLabel, D: Array) -> Array:
+        return im_costs(D, [label], self.frame_names_, self.alpha, self.beta)[:, 0]
+
+    def _state_from_labels(self, used: dict[int, int]) -> StateIM:
+        total = sum(used.values())
+        by_frame: dict[str, int] = {}
+        for j, n in used.items():
+            lab = self.labels_[j]
+            # Translation-only labels do not care about the frame.
+            if lab.rotates:
+                by_frame[lab.frame] = by_frame.get(lab.frame, 0) + n
+        frame = max(by_frame, key=lambda k: by_frame[k]) if by_frame else "ee"
+        support = np.zeros(6)
+        for j, n in used.items():
+            lab = self.labels_[j]
+            if lab.frame == frame or not lab.rotates:
+                support[list(lab.axes)] += n
+        support /= max(total, 1)
+        axes = [a for a in np.argsort(-support, kind="stable") if support[a] >= self.axis_support]
+        axes = sorted(axes[:3]) or [int(np.argmax(support))]
+        if not any(a >= 3 for a in axes):
+            frame = "ee"
+        return StateIM(IMLabel(frame, tuple(int(a) for a in axes)),
+                       {AXIS_NAMES[a]: float(support[a]) for a in range(6) if support[a] > 0})
+
+    # --- transitions ------------------------------------------------------------------
+
+    def frame_positions(self, T_obj_ee: Array, frame: str) -> Array:
+        """Positions (n, 3) in the object frame of an ee-attached frame."""
+        off = self.frame_offsets_[frame]
+        return T_obj_ee[:, :3, :3] @ off[:3, 3] + T_obj_ee[:, :3, 3]
+
+    def _reachable(self, state: StateIM, frame: str, normal: Array, poses: Array) -> bool:
+        """Can the state's IM move ``frame``'s position along ``normal``?"""
+        n = normal / np.linalg.norm(normal)
+        p_h = self.frame_positions(poses, frame)
+        T_f = poses @ self.frame_offsets_[state.label.frame]
+        best = 0.0
+        for a in state.label.axes:
+            if a < 3:
+                best = max(best, abs(n[a]))
+            else:
+                w = T_f[:, :3, a - 3]
+                dp = np.cross(w, p_h - T_f[:, :3, 3]).mean(axis=0)
+                norm = float(np.linalg.norm(dp))
+                if norm >= 0.01:
+                    best = max(best, abs(float(n @ dp)) / norm)
+        return best >= 0.2
+
+    def _fit_transitions(self, demos: list[Array]) -> None:
+        from sklearn.svm import SVC
+
+        self.transitions_ = []
+        starts = [T[:-1] for T in demos]
+        for k in range(len(self.states_) - 1):
+            sel = [(T, s) for T, s in zip(starts, self.state_labels_, strict=True)]
+            A = np.concatenate([T[s == k] for T, s in sel])
+            B = np.concatenate([T[s == k + 1] for T, s in sel])
+            if len(A) == 0 or len(B) == 0:
+                continue
+            # Poses near the end of state k, where the IM must reach the plane.
+            tail = np.concatenate([T[s == k][-max(1, (s == k).sum() // 3):] for T, s in sel
+                                   if np.any(s == k)])
+            best = None
+            cands = {}
+            for frame in self.frame_names_:
+                X = np.concatenate([self.frame_positions(A, frame), self.frame_positions(B, frame)])
+                y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])
+                scale = 10.0  # decimetres: a better-conditioned SVM problem
+                svm = SVC(kernel="linear", C=self.C, class_weight="balanced", max_iter=200000,
+                          random_state=self.random_state)
+                svm.fit(X * scale, y)
+                w = svm.coef_[0] * scale
+                b = float(svm.intercept_[0])
+                pred = np.sign(X @ w + b)
+                acc = 0.5 * (np.mean(pred[y < 0] < 0) + np.mean(pred[y > 0] > 0))
+                reach = self._reachable(self.states_[k], frame, w, tail)
+                norm = float(np.linalg.norm(w))
+                cands[frame] = {"accuracy": float(acc), "reachable": bool(reach)}
+                key = (reach, round(acc, 3), -norm)
+                if best is None or key > best[0]:
+                    best = (key, frame, w / norm, b / norm, acc, reach)
+            assert best is not None
+            _, frame, n, o, acc, reach = best
+            self.transitions_.append(Hyperplane(k, k + 1, frame, n, float(o), self.margin,
+                                                float(acc), bool(reach), cands))

@@ -1,0 +1,242 @@
+"""``sctd run``: the fixed-rate daemon (DESIGN §7) wired to Zenoh.
+
+Threads: the tick runs on the main thread; Zenoh delivers input and state into
+newest-value ring channels (read with ``try_recv``, never blocking) and objects and
+skill queries through callbacks on Zenoh's threads. A hot-swap bundle is decoded,
+validated and compiled on the query's thread, handed over through a one-slot mailbox,
+and installed between two ticks; the query is answered after the swap.
+"""
+
+from __future__ import annotations
+
+import gc
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+import zenoh
+
+from ..skill import Bundle, Skill, SkillEngine, SkillError, skill_from_bundle, skill_summary
+from . import codec
+from .controller import Controller, RuntimeConfig, Sample, transform_from_pose_fast
+from .timing import Histogram, Ticker, set_timer_slack
+
+log = logging.getLogger("sctd.run")
+
+
+@dataclass
+class _Pending:
+    skill: Skill
+    engine: SkillEngine
+    done: threading.Event
+    state: str = ""
+
+
+class Daemon:
+    """The runtime daemon: one skill, one robot, one Zenoh session.
+
+    Parameters
+    ----------
+    skill : Skill
+        The skill to start with.
+    session : zenoh.Session
+        An open session (the caller owns and closes it).
+    config : RuntimeConfig
+    spin : float
+        Seconds before each deadline to stop sleeping and spin.
+    """
+
+    def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
+                 spin: float = 1e-4):
+        self.config = config
+        self.session = session
+        self.keys = codec.Keys(config.robot)
+        self.controller = Controller(skill, config)
+        self.spin = spin
+        self.stop_event = threading.Event()
+        self.lateness = Histogram()
+        self.compute = Histogram()
+        self._objects: dict[str, Sample] = {}
+        self._object_drops = 0
+        self._pending: _Pending | None = None
+        self._lock = threading.Lock()
+        self.target_seq = 0
+        self._input: Sample | None = None
+        self._state: Sample | None = None
+        self._window_targets = 0
+        self._window_compute_max = 0.0
+
+    # --- Zenoh edges (callbacks run on Zenoh's threads) ---------------------------------
+
+    def _on_object(self, sample: zenoh.Sample) -> None:
+        name = str(sample.key_expr).rsplit("/", 1)[-1]
+        try:
+            m = codec.decode_object(sample.payload.to_bytes())
+        except codec.DecodeError as e:
+            with self._lock:
+                self.controller.counters.drop(f"object_{e.reason}")
+            return
+        self._objects[name] = Sample(m.seq, m.stamp, time.monotonic(), T=transform_from_pose_fast(m.pose))
+
+    def _on_skill_query(self, query: zenoh.Query) -> None:
+        payload = query.payload
+        if payload is None or len(payload.to_bytes()) == 0:
+            summary = skill_summary(self.controller.skill)
+            summary["state"] = self.controller.engine.state
+            query.reply(self.keys.skill, msgpack.packb(summary, use_bin_type=True))
+            return
+        try:
+            bundle = Bundle.unpack(payload.to_bytes())
+            skill = skill_from_bundle(bundle)
+            engine = SkillEngine(skill)
+        except SkillError as e:
+            log.warning("refused skill: %s", e)
+            query.reply_err(msgpack.packb({"error": str(e)}, use_bin_type=True))
+            return
+        pending = _Pending(skill, engine, threading.Event())
+        with self._lock:
+            self._pending = pending
+        if not pending.done.wait(timeout=5.0):
+            query.reply_err(msgpack.packb({"error": "daemon did not reach a tick boundary in 5 s"}))
+            return
+        log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
+        query.reply(self.keys.skill, msgpack.packb(
+            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state},
+            use_bin_type=True))
+
+    # --- the loop ------------------------------------------------------------------------
+
+    def _drain_input(self, sub: Any, now: float) -> None:
+        s = sub.try_recv()
+        if s is None:
+            return
+        try:
+            m = codec.decode_input(s.payload.to_bytes())
+        except codec.DecodeError as e:
+            self.controller.counters.drop(f"input_{e.reason}")
+            return
+        self._input = Sample(m.seq, m.stamp, now, u=m.u)
+
+    def _drain_state(self, sub: Any, now: float) -> None:
+        s = sub.try_recv()
+        if s is None:
+            return
+        try:
+            m = codec.decode_state(s.payload.to_bytes())
+        except codec.DecodeError as e:
+            self.controller.counters.drop(f"state_{e.reason}")
+            return
+        self._state = Sample(m.seq, m.stamp, now, T=transform_from_pose_fast(m.pose), wrench=m.wrench)
+
+    def run(self, duration: float | None = None) -> dict[str, Any]:
+        """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics."""
+        cfg = self.config
+        keys = self.keys
+        s = self.session
+        sub_in = s.declare_subscriber(keys.input(cfg.device), zenoh.handlers.RingChannel(1))
+        sub_state = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(1))
+        sub_obj = s.declare_subscriber(keys.objects(), self._on_object)
+        pub_target = s.declare_publisher(keys.target, express=True,
+                                         congestion_control=zenoh.CongestionControl.DROP)
+        pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
+        queryable = s.declare_queryable(keys.skill, self._on_skill_query)
+        set_timer_slack(1)
+        gc.collect()
+        gc.freeze()  # long-lived objects out of the collector's way; ticks allocate little
+        ticker = Ticker(cfg.period, spin=self.spin)
+        status_period = 1.0 / cfg.status_rate
+        next_status = time.monotonic()
+        window_start = time.monotonic()
+        end = None if duration is None else time.monotonic() + duration
+        last_state = self.controller.engine.state
+        log.info("running skill %s@%s for robot %s at %.0f Hz", self.controller.skill.name,
+                 self.controller.skill.id, cfg.robot, cfg.rate)
+        try:
+            while not self.stop_event.is_set():
+                now, lateness = ticker.wait()
+                if end is not None and now >= end:
+                    break
+                wall = time.time()
+                pending = self._pending
+                if pending is not None:
+                    with self._lock:
+                        self._pending = None
+                    self.controller.swap(pending.skill, now, pending.engine)
+                    pending.state = self.controller.engine.state
+                    pending.done.set()
+                self._drain_input(sub_in, now)
+                self._drain_state(sub_state, now)
+                ctl = self.controller
+                res = ctl.tick(now, wall, self._input, self._state,
+                               self._objects.get(ctl.skill.object))
+                if res.pose is not None:
+                    self.target_seq += 1
+                    pub_target.put(codec.encode_target(
+                        self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
+                    self._window_targets += 1
+                done = time.monotonic()
+                compute = done - now
+                self.lateness.add(lateness)
+                self.compute.add(compute)
+                if compute > self._window_compute_max:
+                    self._window_compute_max = compute
+                if res.state != last_state:
+                    log.info("state %s -> %s", last_state, res.state)
+                    last_state = res.state
+                if done >= next_status:
+                    pub_status.put(codec.pack(self.status(ticker, done, done - window_start)))
+                    window_start = done
+                    self._window_targets = 0
+                    self._window_compute_max = 0.0
+                    next_status = done + status_period
+        finally:
+            gc.unfreeze()
+            for d in (queryable, sub_in, sub_state, sub_obj, pub_target, pub_status):
+                d.undeclare()
+        return self.status(ticker, time.monotonic(), 0.0)
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+    def status(self, ticker: Ticker, now: float, window: float) -> dict[str, Any]:
+        ctl = self.controller
+        c = ctl.counters
+        obj = self._objects.get(ctl.skill.object)
+
+        def age(sample: Sample | None) -> float | None:
+            return None if sample is None else round(now - sample.received, 6)
+
+        return {
+            "stamp": time.time(),
+            "skill": ctl.skill.id,
+            "skill_name": ctl.skill.name,
+            "state": ctl.engine.state,
+            "finished": ctl.engine.finished,
+            "mode": ctl.mode,
+            "rate": ctl.config.rate,
+            "ticks": ticker.ticks,
+            "late_ticks": ticker.late,
+            "skipped_ticks": ticker.skipped,
+            "targets": self.target_seq,
+            "target_rate": round(self._window_targets / window, 1) if window > 0 else None,
+            "lateness_ms": self.lateness.summary_ms(),
+            "compute_ms": self.compute.summary_ms(),
+            "compute_max_window_ms": round(self._window_compute_max * 1e3, 4),
+            "input_age": age(self._input),
+            "state_age": age(self._state),
+            "object_age": age(obj),
+            "in_seq": self._input.seq if self._input is not None else -1,
+            "vf_scale": ctl.engine.last_scale,
+            "dropped": dict(c.drops),
+            "counters": {
+                "nonfinite_input": c.nonfinite_input,
+                "stale_input": c.stale_input,
+                "nonfinite_output": c.nonfinite_output,
+                "offset_limited": c.offset_limited,
+                "transitions": c.transitions,
+                "swaps": c.swaps,
+            },
+        }

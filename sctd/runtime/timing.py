@@ -1,0 +1,114 @@
+"""Fixed-rate scheduling on absolute deadlines, and cheap latency statistics.
+
+The loop sleeps to shortly before each deadline and spins the rest, with the thread's
+timer slack set to 1 ns (Linux defaults to 50 us, which alone would miss a 0.2 ms p99).
+Deadlines advance by ``due += period`` (as python-can's periodic sender), so timing
+error never accumulates; a tick that starts more than half a period late is counted
+late, and when the loop falls more than ``max_behind`` periods behind it resynchronises
+instead of bursting, counting the skipped ticks.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import time
+
+PR_SET_TIMERSLACK = 29
+
+
+def set_timer_slack(ns: int = 1) -> bool:
+    """Set this thread's timer slack (Linux); returns False where unsupported."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+class Histogram:
+    """Fixed-bin histogram of durations (s) for percentiles without storing samples.
+
+    Bins are 5 us wide up to 50 ms; anything longer lands in the last bin, whose
+    percentile is reported as the largest value seen.
+    """
+
+    BIN = 5e-6
+    N = 10_000
+
+    def __init__(self) -> None:
+        self.counts = [0] * self.N
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, x: float) -> None:
+        i = int(x / self.BIN) if x > 0 else 0
+        self.counts[i if i < self.N else self.N - 1] += 1
+        self.n += 1
+        if x > self.max:
+            self.max = x
+
+    def percentile(self, p: float) -> float:
+        """Upper edge of the bin holding the p-th percentile (s); 0 when empty."""
+        if self.n == 0:
+            return 0.0
+        rank = math.ceil(p / 100.0 * self.n)
+        acc = 0
+        for i, c in enumerate(self.counts):
+            acc += c
+            if acc >= rank:
+                return min((i + 1) * self.BIN, self.max) if i < self.N - 1 else self.max
+        return self.max
+
+    def summary_ms(self) -> dict[str, float]:
+        return {
+            "p50": round(self.percentile(50) * 1e3, 4),
+            "p99": round(self.percentile(99) * 1e3, 4),
+            "p999": round(self.percentile(99.9) * 1e3, 4),
+            "max": round(self.max * 1e3, 4),
+            "n": self.n,
+        }
+
+
+class Ticker:
+    """Absolute-deadline ticker on the monotonic clock.
+
+    Parameters
+    ----------
+    period : float
+        Tick period (s).
+    spin : float
+        How long before each deadline to stop sleeping and spin (s).
+    max_behind : int
+        Periods behind schedule after which the ticker resynchronises.
+    """
+
+    def __init__(self, period: float, spin: float = 1e-4, max_behind: int = 5):
+        self.period = period
+        self.spin = spin
+        self.max_behind = max_behind
+        self.due = time.monotonic() + period
+        self.ticks = 0
+        self.late = 0
+        self.skipped = 0
+
+    def wait(self) -> tuple[float, float]:
+        """Block until the next deadline; return (wake time, lateness) in seconds."""
+        due = self.due
+        remaining = due - time.monotonic()
+        if remaining > self.spin:
+            time.sleep(remaining - self.spin)
+        now = time.monotonic()
+        while now < due:
+            now = time.monotonic()
+        lateness = now - due
+        self.ticks += 1
+        if lateness > 0.5 * self.period:
+            self.late += 1
+        self.due = due + self.period
+        behind = now - self.due
+        if behind > self.max_behind * self.period:
+            missed = int(behind / self.period)
+            self.skipped += missed
+            self.due += missed * self.period
+        return now, lateness

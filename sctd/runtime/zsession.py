@@ -1,0 +1,88 @@
+"""Zenoh sessions with sctd's defaults: TCP on 127.0.0.1 only, no multicast scouting.
+
+Without flags every sctd program is an identical peer that
+- tries to hold ``tcp/127.0.0.1:7447`` (retrying in the background while another
+  program has it, so when that one exits a survivor takes the port over),
+- listens on an ephemeral loopback port that gossip scouting advertises to the others,
+- connects to ``tcp/127.0.0.1:7447`` and retries forever.
+So programs started in any order find each other, a plain Zenoh client that connects to
+``tcp/127.0.0.1:7447`` reaches them, and they reconnect after any of them restarts.
+``--listen`` / ``--connect`` replace the respective endpoint lists (tests use free
+ports); ``--zenoh-config FILE`` replaces all of this for multi-host use.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import zenoh
+
+HUB = "tcp/127.0.0.1:7447"
+_RETRY = '{"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}'
+
+
+def check_loopback(endpoint: str) -> None:
+    """Refuse endpoints that are not TCP on a loopback address (safety of defaults)."""
+    proto, _, rest = endpoint.partition("/")
+    host = rest.rsplit(":", 1)[0]
+    if proto != "tcp" or not (host.startswith("127.") or host in ("localhost", "[::1]")):
+        raise ValueError(
+            f"endpoint {endpoint!r}: only tcp on loopback without --zenoh-config "
+            "(use a Zenoh config file for other hosts)"
+        )
+
+
+def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
+                config_file: str | Path | None = None) -> zenoh.Config:
+    """Build the session config (see module doc)."""
+    if config_file is not None:
+        conf = zenoh.Config.from_file(str(config_file))
+        for key, eps in (("listen", listen), ("connect", connect)):
+            if eps:
+                conf.insert_json5(f"{key}/endpoints", json.dumps(list(eps)))
+        return conf
+    for ep in [*(listen or []), *(connect or [])]:
+        check_loopback(ep)
+    if listen is None and connect is None:
+        listen_eps, connect_eps = [HUB, "tcp/127.0.0.1:0"], [HUB]
+    else:
+        listen_eps = list(listen) if listen else ["tcp/127.0.0.1:0"]
+        connect_eps = list(connect or [])
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "true")
+    conf.insert_json5("transport/link/protocols", '["tcp"]')
+    conf.insert_json5("listen/endpoints", json.dumps(listen_eps))
+    conf.insert_json5("listen/timeout_ms", "-1")
+    conf.insert_json5("listen/exit_on_failure", "false")
+    conf.insert_json5("listen/retry", _RETRY)
+    conf.insert_json5("connect/endpoints", json.dumps(connect_eps))
+    conf.insert_json5("connect/timeout_ms", "-1")
+    conf.insert_json5("connect/exit_on_failure", "false")
+    conf.insert_json5("connect/retry", _RETRY)
+    return conf
+
+
+def open_session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
+                 config_file: str | Path | None = None) -> zenoh.Session:
+    """Open a Zenoh session with :func:`make_config` (close it, or use it as a
+    context manager)."""
+    return zenoh.open(make_config(listen, connect, config_file))
+
+
+def add_zenoh_arguments(parser) -> None:
+    """The common ``--listen/--connect/--zenoh-config`` flags of every sctd program."""
+    g = parser.add_argument_group("zenoh")
+    g.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help="listen endpoint (repeatable), e.g. tcp/127.0.0.1:7447")
+    g.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="connect endpoint (repeatable), e.g. tcp/127.0.0.1:7447")
+    g.add_argument("--zenoh-config", metavar="FILE",
+                   help="Zenoh json5 config file replacing the loopback defaults")
+
+
+def session_from_args(args) -> zenoh.Session:
+    return open_session(args.listen, args.connect, args.zenoh_config)

@@ -1,0 +1,105 @@
+"""Single-transform fast paths for the real-time tick.
+
+numpy's per-call overhead dominates on 3x3 and 4x4 arrays, so the per-tick functions
+here use scalar ``math`` and build at most one small array each. They compute the same
+as their vectorised counterparts (tests check the agreement); use those everywhere
+outside hot loops.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+def quaternion_from_matrix3(R: Array) -> tuple[float, float, float, float]:
+    """(qx, qy, qz, qw), qw >= 0, of one rotation matrix (Shepperd's method)."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = R.tolist()
+    tr = m00 + m11 + m22
+    if tr >= m00 and tr >= m11 and tr >= m22:
+        s = 2.0 * math.sqrt(1.0 + tr)
+        x, y, z, w = (m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, 0.25 * s
+    elif m00 >= m11 and m00 >= m22:
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        x, y, z, w = 0.25 * s, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s
+    elif m11 >= m22:
+        s = 2.0 * math.sqrt(1.0 + m11 - m00 - m22)
+        x, y, z, w = (m01 + m10) / s, 0.25 * s, (m12 + m21) / s, (m02 - m20) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m22 - m00 - m11)
+        x, y, z, w = (m02 + m20) / s, (m12 + m21) / s, 0.25 * s, (m10 - m01) / s
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        n = -n
+    return x / n, y / n, z / n, w / n
+
+
+def rotvec_from_matrix3(R: Array) -> tuple[float, float, float]:
+    """Rotation vector of one rotation matrix, angle in [0, pi]."""
+    x, y, z, w = quaternion_from_matrix3(R)
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12:
+        k = 2.0 / w
+    else:
+        k = 2.0 * math.atan2(s, w) / s
+    return x * k, y * k, z * k
+
+
+def matrix3_from_rotvec(w0: float, w1: float, w2: float) -> Array:
+    """Rotation matrix of one rotation vector (Rodrigues)."""
+    th2 = w0 * w0 + w1 * w1 + w2 * w2
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a = math.sin(th) / th
+        b = (1.0 - math.cos(th)) / th2
+    return np.array([
+        [1.0 - b * (w1 * w1 + w2 * w2), -a * w2 + b * w0 * w1, a * w1 + b * w0 * w2],
+        [a * w2 + b * w0 * w1, 1.0 - b * (w0 * w0 + w2 * w2), -a * w0 + b * w1 * w2],
+        [-a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1)],
+    ])
+
+
+def matrix4_from_pose(p) -> Array:
+    """4x4 transform from [x, y, z, qx, qy, qz, qw] (quaternion normalised here)."""
+    x, y, z, qx, qy, qz, qw = p
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    return np.array([
+        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy), x],
+        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx), y],
+        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy), z],
+        [0.0, 0.0, 0.0, 1.0],
+    ])
+
+
+def pose_from_matrix4(T: Array) -> list[float]:
+    """[x, y, z, qx, qy, qz, qw] (Python floats) of a 4x4 transform."""
+    q = quaternion_from_matrix3(T[:3, :3])
+    t = T[:3, 3].tolist()
+    return [t[0], t[1], t[2], q[0], q[1], q[2], q[3]]
+
+
+def invert4(T: Array) -> Array:
+    """Inverse of one rigid transform."""
+    out = np.empty((4, 4))
+    Rt = T[:3, :3].T
+    out[:3, :3] = Rt
+    out[:3, 3] = -(Rt @ T[:3, 3])
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+def angle_between3(R_a: Array, R_b: Array) -> float:
+    """Angle (rad) of R_a^T R_b, accurate for small and large angles."""
+    return 2.0 * math.asin(min(1.0, _half_sin(R_a.T @ R_b)))
+
+
+def _half_sin(R: Array) -> float:
+    x, y, z, _ = quaternion_from_matrix3(R)
+    return math.sqrt(x * x + y * y + z * z)

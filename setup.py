@@ -1,0 +1,17 @@
+"""Package discovery: ``sim/`` installs as ``sctd_sim`` and ``services/`` as
+``sctd_services`` (DESIGN §3 wants non-generic import names); metadata is in
+pyproject.toml."""
+
+from setuptools import find_packages, setup
+
+MAPPED = {"sctd_sim": "sim", "sctd_services": "services"}
+
+packages = find_packages(include=["sctd", "sctd.*"])
+for name, folder in MAPPED.items():
+    packages += [name] + [f"{name}.{p}" for p in find_packages(folder)]
+
+setup(
+    packages=packages,
+    package_dir=MAPPED,
+    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"]},
+)

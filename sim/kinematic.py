@@ -1,0 +1,152 @@
+"""A kinematic stand-in robot: follows ``target`` with a first-order lag and publishes
+``state`` and the scene's ``objects``. No dynamics; the Pinocchio simulator replaces it
+where dynamics matter. Useful for runtime tests and benchmarks, where it keeps the
+robot side cheap and deterministic.
+
+    python -m sctd_sim.kinematic --scene pour --connect tcp/127.0.0.1:7447
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import zenoh
+
+from sctd import se3
+from sctd.runtime import codec
+from sctd.runtime.safety import interpolate
+from sctd.runtime.timing import Ticker, set_timer_slack
+from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+
+
+@dataclass
+class KinematicScene:
+    """World poses of the task objects and the arm's start pose."""
+
+    name: str
+    objects: dict[str, np.ndarray]
+    T_world_ee0: np.ndarray
+    attached: dict[str, np.ndarray] = field(default_factory=dict)  # name -> T_ee_object
+
+
+def kinematic_scene(name: str) -> KinematicScene:
+    """The pour and drawer scenes of the hand-written skills (see skills/*.yaml)."""
+    if name == "pour":
+        return KinematicScene(
+            "pour",
+            {"mug": se3.transform_from_pose([0.60, 0.0, 0.78, 0, 0, 0, 1])},
+            se3.transform_from_pose([0.35, 0.25, 0.90, 0, 0, 0, 1]),
+            attached={"bottle_tip": se3.transform_from_pose([0, 0, 0.12, 0, 0, 0, 1])},
+        )
+    if name == "drawer":
+        # Handle x axis points out of the drawer, towards the robot (world -x).
+        q = se3.quaternion_from_rotvec([0, 0, math.pi])
+        return KinematicScene(
+            "drawer",
+            {"drawer_handle": se3.transform_from_pose([0.70, 0.0, 0.80, *q])},
+            se3.transform_from_pose([0.50, 0.15, 0.90, 0, 0, 0, 1]),
+        )
+    raise ValueError(f"unknown scene {name!r} (pour, drawer)")
+
+
+class KinematicRobot:
+    """Per-cycle model: the ee pose relaxes towards the target with time constant tau.
+
+    In the drawer scene the handle is grasped once the ee is within ``grasp_radius``;
+    from then on the drawer slides along the handle's x axis with the ee (0 to 0.4 m).
+    """
+
+    def __init__(self, scene: KinematicScene, tau: float = 0.02, grasp_radius: float = 0.02):
+        self.scene = scene
+        self.tau = tau
+        self.grasp_radius = grasp_radius
+        self.T_world_ee = scene.T_world_ee0.copy()
+        self.T_world_target: np.ndarray | None = None
+        self.grasped = False
+        self.drawer_open = 0.0
+        self._handle0 = scene.objects.get("drawer_handle")
+
+    def step(self, dt: float) -> None:
+        if self.T_world_target is not None:
+            a = 1.0 - math.exp(-dt / self.tau)
+            self.T_world_ee = interpolate(self.T_world_ee, self.T_world_target, a)
+        if self._handle0 is not None:
+            T_h = self.scene.objects["drawer_handle"]
+            d = self.T_world_ee[:3, 3] - T_h[:3, 3]
+            if not self.grasped and np.linalg.norm(d) < self.grasp_radius:
+                self.grasped = True
+            if self.grasped:
+                axis = self._handle0[:3, 0]
+                ee_along = float(np.dot(self.T_world_ee[:3, 3] - self._handle0[:3, 3], axis))
+                self.drawer_open = min(0.4, max(0.0, ee_along))
+                T_h = self._handle0.copy()
+                T_h[:3, 3] += self.drawer_open * axis
+                self.scene.objects["drawer_handle"] = T_h
+
+    def objects(self) -> dict[str, np.ndarray]:
+        out = dict(self.scene.objects)
+        for name, T_ee_o in self.scene.attached.items():
+            out[name] = self.T_world_ee @ T_ee_o
+        return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="sctd-kinematic", description=__doc__.split("\n\n")[0])
+    p.add_argument("--scene", default="pour", choices=("pour", "drawer"))
+    p.add_argument("--robot", default="edan")
+    p.add_argument("--rate", type=float, default=1000.0, help="state rate, Hz")
+    p.add_argument("--object-rate", type=float, default=50.0, help="objects rate, Hz")
+    p.add_argument("--tau", type=float, default=0.02, help="tracking time constant, s")
+    p.add_argument("--duration", type=float, default=None)
+    add_zenoh_arguments(p)
+    args = p.parse_args(argv)
+
+    keys = codec.Keys(args.robot)
+    robot = KinematicRobot(kinematic_scene(args.scene), tau=args.tau)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    with session_from_args(args) as session:
+        sub = session.declare_subscriber(keys.target, zenoh.handlers.RingChannel(1))
+        pub_state = session.declare_publisher(keys.state, express=True,
+                                              congestion_control=zenoh.CongestionControl.DROP)
+        pubs = {n: session.declare_publisher(keys.objects(n)) for n in robot.objects()}
+        set_timer_slack(1)
+        period = 1.0 / args.rate
+        every = max(1, round(args.rate / args.object_rate))
+        ticker = Ticker(period, spin=5e-5)
+        end = None if args.duration is None else time.monotonic() + args.duration
+        seq = 0
+        while not stop.is_set():
+            now, _ = ticker.wait()
+            if end is not None and now > end:
+                break
+            s = sub.try_recv()
+            if s is not None:
+                try:
+                    msg = codec.decode_target(s.payload.to_bytes())
+                    robot.T_world_target = se3.transform_from_pose(msg["pose"])
+                except codec.DecodeError:
+                    pass
+            robot.step(period)
+            wall = time.time()
+            pose = se3.pose_from_transform(robot.T_world_ee).tolist()
+            pub_state.put(codec.encode_state(seq, wall, pose, wrench=[0.0] * 6))
+            if seq % every == 0:
+                for name, T in robot.objects().items():
+                    pubs[name].put(codec.encode_object(seq, wall, se3.pose_from_transform(T).tolist()))
+            seq += 1
+        for d in (sub, pub_state, *pubs.values()):
+            d.undeclare()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
