@@ -25,6 +25,7 @@ from .controller import Controller, RuntimeConfig, Sample, transform_from_pose_f
 from .timing import Histogram, Ticker, set_timer_slack
 
 log = logging.getLogger("sctd.run")
+RING = 16
 
 
 @dataclass
@@ -110,34 +111,35 @@ class Daemon:
     # --- the loop ------------------------------------------------------------------------
 
     def _drain_input(self, sub: Any, now: float) -> None:
-        s = sub.try_recv()
-        if s is None:
-            return
-        try:
-            m = codec.decode_input(s.payload.to_bytes())
-        except codec.DecodeError as e:
-            self.controller.counters.drop(f"input_{e.reason}")
-            return
-        self._input = Sample(m.seq, m.stamp, now, u=m.u)
+        """Decode everything that arrived since the last tick (so that every malformed
+        message is counted) and keep the newest valid sample."""
+        while (s := sub.try_recv()) is not None:
+            try:
+                m = codec.decode_input(s.payload.to_bytes())
+            except codec.DecodeError as e:
+                self.controller.counters.drop(f"input_{e.reason}")
+                continue
+            self._input = Sample(m.seq, m.stamp, now, u=m.u)
 
     def _drain_state(self, sub: Any, now: float) -> None:
-        s = sub.try_recv()
-        if s is None:
-            return
-        try:
-            m = codec.decode_state(s.payload.to_bytes())
-        except codec.DecodeError as e:
-            self.controller.counters.drop(f"state_{e.reason}")
-            return
-        self._state = Sample(m.seq, m.stamp, now, T=transform_from_pose_fast(m.pose), wrench=m.wrench)
+        while (s := sub.try_recv()) is not None:
+            try:
+                m = codec.decode_state(s.payload.to_bytes())
+            except codec.DecodeError as e:
+                self.controller.counters.drop(f"state_{e.reason}")
+                continue
+            self._state = Sample(m.seq, m.stamp, now, T=transform_from_pose_fast(m.pose),
+                                 wrench=m.wrench)
 
     def run(self, duration: float | None = None) -> dict[str, Any]:
         """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics."""
         cfg = self.config
         keys = self.keys
         s = self.session
-        sub_in = s.declare_subscriber(keys.input(cfg.device), zenoh.handlers.RingChannel(1))
-        sub_state = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(1))
+        # Small rings drained every tick: newest valid sample wins, nothing blocks, and a
+        # burst larger than the ring between two ticks loses only its oldest messages.
+        sub_in = s.declare_subscriber(keys.input(cfg.device), zenoh.handlers.RingChannel(RING))
+        sub_state = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(RING))
         sub_obj = s.declare_subscriber(keys.objects(), self._on_object)
         pub_target = s.declare_publisher(keys.target, express=True,
                                          congestion_control=zenoh.CongestionControl.DROP)

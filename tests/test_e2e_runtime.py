@@ -1,0 +1,224 @@
+"""End to end: `sctd run` as a real process on a free loopback port, driven over Zenoh.
+
+A fake robot in the test follows each target exactly and publishes state and the mug;
+the test publishes input and reads target/status. Timing assertions are loose
+(behaviour, not speed: the benchmarks measure speed).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+
+from sctd import se3
+from sctd.runtime import codec
+from sctd.runtime.zsession import open_session
+from sctd.skill import bundle_from_file
+from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
+
+KEYS = codec.Keys("edan")
+T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
+START = [0.35, 0.25, 0.90, 0, 0, 0, 1]
+
+
+class Rig:
+    """Test side: a perfect-follower robot, an input publisher, target/status capture."""
+
+    def __init__(self, port: int):
+        self.session = open_session(connect=[f"tcp/127.0.0.1:{port}"])
+        self.targets: list[tuple[float, dict]] = []
+        self.status: list[dict] = []
+        self.lock = threading.Lock()
+        self.pose = list(START)
+        self.stop = threading.Event()
+        s = self.session
+        self.subs = [s.declare_subscriber(KEYS.target, self._on_target),
+                     s.declare_subscriber(KEYS.status, self._on_status)]
+        self.pub_state = s.declare_publisher(KEYS.state)
+        self.pub_obj = s.declare_publisher(KEYS.objects("mug"))
+        self.pub_in = s.declare_publisher(KEYS.input("test"))
+        self.seq = 0
+        self.thread = threading.Thread(target=self._robot, daemon=True)
+        self.thread.start()
+
+    def _on_target(self, sample: zenoh.Sample) -> None:
+        msg = codec.decode_target(sample.payload.to_bytes())
+        with self.lock:
+            self.targets.append((time.monotonic(), msg))
+            self.pose = msg["pose"]
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        with self.lock:
+            self.status.append(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
+
+    def _robot(self) -> None:
+        k = 0
+        while not self.stop.is_set():
+            with self.lock:
+                pose = list(self.pose)
+            self.pub_state.put(codec.encode_state(k, time.time(), pose))
+            if k % 10 == 0:
+                self.pub_obj.put(codec.encode_object(k, time.time(), T_WORLD_MUG))
+            k += 1
+            time.sleep(0.002)
+
+    def send(self, u, raw: bytes | None = None) -> None:
+        self.seq += 1
+        self.pub_in.put(raw if raw is not None else codec.encode_input(self.seq, time.time(), u))
+
+    def drive(self, u, seconds: float, rate: float = 200.0) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.send(u)
+            time.sleep(1.0 / rate)
+
+    def last(self) -> dict:
+        with self.lock:
+            return self.targets[-1][1]
+
+    def targets_since(self, t: float) -> list[dict]:
+        with self.lock:
+            return [m for (ts, m) in self.targets if ts >= t]
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        for d in (*self.subs, self.pub_state, self.pub_obj, self.pub_in):
+            d.undeclare()
+        self.session.close()
+
+
+@pytest.fixture
+def daemon(tmp_path):
+    port = free_port()
+    proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen",
+                f"tcp/127.0.0.1:{port}", "--rate", "1000", log=tmp_path / "daemon.log")
+    rig = Rig(port)
+    try:
+        assert wait_for(lambda: len(rig.targets) > 50, 20), proc.output()
+        yield proc, rig, port
+    finally:
+        rig.close()
+        proc.stop()
+
+
+def test_targets_at_rate_and_zero_input_holds(daemon):
+    proc, rig, _ = daemon
+    t0 = time.monotonic()
+    time.sleep(2.0)
+    got = rig.targets_since(t0)
+    assert len(got) > 0.5 * 2000, f"{len(got)} targets in 2 s at 1 kHz"
+    seqs = [m["seq"] for m in got]
+    assert seqs == sorted(seqs)
+    poses = np.array([m["pose"] for m in got])
+    assert np.allclose(poses, START, atol=1e-9), "no input: the target must not move"
+    assert {m["state"] for m in got} == {"carry"}
+    status = rig.status[-1]
+    assert status["mode"] == "stopped" and status["skill_name"] == "pour"
+    assert status["ticks"] > 0 and "p99" in status["lateness_ms"] and "p99" in status["compute_ms"]
+
+
+def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
+    proc, rig, _ = daemon
+    x0 = rig.last()["pose"][0]
+    t0 = time.monotonic()
+    rig.drive([1.0, 0.0, 0.0], 1.0)
+    moving = rig.targets_since(t0)
+    x1 = rig.last()["pose"][0]
+    assert 0.05 < x1 - x0 <= 0.1 * (time.monotonic() - t0) + 1e-6  # pour skill: 0.1 m/s
+    # Per-target step bound: consecutive targets (by seq) move at most v_max * dt.
+    by_seq = {m["seq"]: np.array(m["pose"][:3]) for m in moving}
+    steps = [np.linalg.norm(by_seq[s] - by_seq[s - 1]) for s in by_seq if s - 1 in by_seq]
+    assert steps and max(steps) <= 0.1 * 0.001 + 1e-9
+    # Watchdog: input stops; within the 0.1 s timeout (plus transport) the target freezes.
+    time.sleep(0.3)
+    frozen = rig.last()["pose"]
+    t1 = time.monotonic()
+    time.sleep(0.5)
+    after = rig.targets_since(t1)
+    assert len(after) > 100 and all(m["pose"] == frozen for m in after)
+
+
+def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
+    proc, rig, _ = daemon
+    before = rig.last()["pose"]
+    bad = [
+        b"\xc1garbage", msgpack.packb([1, 2, 3]), msgpack.packb({"seq": 1, "stamp": 0.0}),
+        msgpack.packb({"seq": "x", "stamp": time.time(), "u": [1, 0, 0]}),
+        msgpack.packb({"seq": 1, "stamp": time.time(), "u": [1, 0]}),
+        msgpack.packb({"seq": 1, "stamp": time.time(), "u": ["a", 0, 0]}),
+    ]
+    for _ in range(20):
+        for raw in bad:
+            rig.send(None, raw=raw)
+        rig.send([float("nan"), 1.0, 1.0])
+        rig.send([float("inf"), 0.0, 0.0])
+        time.sleep(0.01)
+    time.sleep(0.3)
+    assert rig.last()["pose"] == before
+    assert proc.p.poll() is None, "a malformed message must never be fatal"
+    st = rig.status[-1]
+    assert sum(v for k, v in st["dropped"].items() if k.startswith("input_")) > 0
+    assert st["counters"]["nonfinite_input"] > 0
+    # Still responsive afterwards.
+    rig.drive([0.0, 1.0, 0.0], 0.3)
+    assert rig.last()["pose"][1] > before[1]
+
+
+def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
+    proc, rig, port = daemon
+    old_id = rig.last()["skill"]
+    session = rig.session
+    # Garbage and an invalid skill: error replies, old skill keeps running.
+    bad_yaml = bundle_from_file(ROOT / "skills" / "pour.yaml")
+    bad = type(bad_yaml)(bad_yaml.name, bad_yaml.yaml_text.replace("max_angle: 0.10", "max_angle: -1"), {})
+    for payload in (b"not a bundle", bad.pack()):
+        replies = list(session.get(KEYS.skill, payload=payload, timeout=5.0))
+        assert len(replies) == 1 and replies[0].err is not None
+        err = msgpack.unpackb(replies[0].err.payload.to_bytes(), raw=False)["error"]
+        assert err
+    assert "max_angle" in err and ">= 0.0" in err
+    time.sleep(0.1)
+    assert rig.last()["skill"] == old_id
+    # The summary query.
+    summary = msgpack.unpackb(list(session.get(KEYS.skill, timeout=5.0))[0].ok.payload.to_bytes(), raw=False)
+    assert summary["id"] == old_id and summary["state"] == "carry"
+    # A good swap through the CLI.
+    swap = sctd("swap", str(ROOT / "skills" / "drawer.yaml"), "--connect", f"tcp/127.0.0.1:{port}",
+                log=tmp_path / "swap.log")
+    assert swap.p.wait(30) == 0, swap.output()
+    new_id = swap.output().strip().splitlines()[-1]
+    assert new_id == bundle_from_file(ROOT / "skills" / "drawer.yaml").id
+    assert wait_for(lambda: rig.last()["skill"] == new_id, 5)
+    assert rig.last()["state"] == "reach"
+
+
+def test_swap_cli_refuses_invalid_file_locally(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((ROOT / "skills" / "pour.yaml").read_text().replace("object: mug", "object: ''"))
+    p = sctd("swap", str(bad), "--connect", f"tcp/127.0.0.1:{free_port()}", log=tmp_path / "s.log")
+    assert p.p.wait(30) == 2
+    assert "bad.yaml: object: expected a non-empty string" in p.output()
+
+
+def test_sigterm_stops_cleanly_and_frees_the_port(tmp_path):
+    port = free_port()
+    proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen",
+                f"tcp/127.0.0.1:{port}", log=tmp_path / "d.log")
+    assert wait_for(lambda: not port_is_free(port), 20), proc.output()
+    assert proc.stop(timeout=10) == 0, proc.output()
+    assert port_is_free(port)
+
+
+def test_bad_skill_file_is_refused_at_start(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("sctd_skill: 1\nname: x\n")
+    proc = sctd("run", "--skill", str(bad), "--listen", f"tcp/127.0.0.1:{free_port()}",
+                log=tmp_path / "d.log")
+    assert proc.p.wait(30) == 2
+    assert "bad.yaml: object: expected a non-empty string" in proc.output()
