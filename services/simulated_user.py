@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--task", default="pour", choices=sorted(GOALS))
     p.add_argument("--robot", default="edan")
     p.add_argument("--device", default="simuser")
-    p.add_argument("--rate", type=float, default=1000.0, help="input rate, Hz")
+    p.add_argument("--rate", type=float, default=250.0, help="input rate, Hz (default %(default)s)")
     p.add_argument("--duration", type=float, default=10.0)
     p.add_argument("--warmup", type=float, default=0.5, help="s of latency samples to discard")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -162,19 +162,20 @@ def main(argv: list[str] | None = None) -> int:
             if summary_holder.get("object") != name:
                 return
             try:
-                info["T_world_obj"] = se3.transform_from_pose(codec.decode_object(sample.payload.to_bytes()).pose)
+                pose = codec.decode_object(sample.payload.to_bytes()).pose
+                info["T_world_obj"] = se3.transform_from_pose(pose)
             except codec.DecodeError:
                 pass
 
         sub_o = session.declare_subscriber(keys.objects(), on_object)
         pub = session.declare_publisher(keys.input(args.device), express=True)
         set_timer_slack(1)
-        ticker = Ticker(1.0 / args.rate, spin=5e-5)
+        ticker = Ticker(1.0 / args.rate, spin=0.0)
         end = time.monotonic() + args.duration
         seq = 0
         skill_id = None
         while not stop.is_set() and time.monotonic() < end:
-            now, _ = ticker.wait()
+            _now, _ = ticker.wait()
             if policy is None or (info["skill"] is not None and info["skill"] != skill_id):
                 summary = fetch_summary(session, keys, timeout=0.5)
                 if summary is None:
@@ -182,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                 summary_holder.update(summary)
                 policy = Policy(summary, args.task)
                 skill_id = summary["id"]
-                ticker = Ticker(1.0 / args.rate, spin=5e-5)
+                ticker = Ticker(1.0 / args.rate, spin=0.0)
                 continue
             u = np.zeros(3)
             T_ee, T_obj = info["T_world_ee"], info["T_world_obj"]

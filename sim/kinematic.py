@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         set_timer_slack(1)
         period = 1.0 / args.rate
         every = max(1, round(args.rate / args.object_rate))
-        ticker = Ticker(period, spin=5e-5)
+        ticker = Ticker(period, spin=0.0)
         end = None if args.duration is None else time.monotonic() + args.duration
         seq = 0
         while not stop.is_set():

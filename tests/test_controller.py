@@ -38,7 +38,9 @@ def run(c, us, T_meas=None, dt=0.001, t0=0.0):
     t = t0
     out = []
     for k, u in enumerate(us):
-        meas = T_meas if T_meas is not None else (c.T_world_target if c.T_world_target is not None else T_START)
+        meas = T_meas
+        if meas is None:
+            meas = c.T_world_target if c.T_world_target is not None else T_START
         r = c.tick(t, t, inp(u, t, seq=k), state(meas, t), obj(t))
         out.append(r)
         t += dt

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 import zenoh
 
-from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.zsession import open_session
 from sctd.skill import bundle_from_file
@@ -108,7 +107,7 @@ def daemon(tmp_path):
 
 
 def test_targets_at_rate_and_zero_input_holds(daemon):
-    proc, rig, _ = daemon
+    _proc, rig, _ = daemon
     t0 = time.monotonic()
     time.sleep(2.0)
     got = rig.targets_since(t0)
@@ -124,7 +123,7 @@ def test_targets_at_rate_and_zero_input_holds(daemon):
 
 
 def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
-    proc, rig, _ = daemon
+    _proc, rig, _ = daemon
     x0 = rig.last()["pose"][0]
     t0 = time.monotonic()
     rig.drive([1.0, 0.0, 0.0], 1.0)
@@ -171,7 +170,7 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
 
 
 def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
-    proc, rig, port = daemon
+    _proc, rig, port = daemon
     old_id = rig.last()["skill"]
     session = rig.session
     # Garbage and an invalid skill: error replies, old skill keeps running.
@@ -186,7 +185,8 @@ def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
     time.sleep(0.1)
     assert rig.last()["skill"] == old_id
     # The summary query.
-    summary = msgpack.unpackb(list(session.get(KEYS.skill, timeout=5.0))[0].ok.payload.to_bytes(), raw=False)
+    reply = next(iter(session.get(KEYS.skill, timeout=5.0)))
+    summary = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
     assert summary["id"] == old_id and summary["state"] == "carry"
     # A good swap through the CLI.
     swap = sctd("swap", str(ROOT / "skills" / "drawer.yaml"), "--connect", f"tcp/127.0.0.1:{port}",

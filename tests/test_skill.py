@@ -268,17 +268,22 @@ def at(x, y, z):
 
 def test_fsm_hysteresis_and_dwell():
     eng = SkillEngine(load_skill(POUR))
-    t = 0.0
-    eng.reset(t)
+    eng.reset(0.0)
+    clock = iter(range(1, 100))
+
+    def step(x, z):
+        return eng.update(at(x, 0, z), float(next(clock)))
+
     assert eng.state == "carry"
     # carry -> approach below 0.15 - 0.01 from (0, 0, 0.08)
-    assert not eng.update(at(0.145, 0, 0.08), t := t + 1)  # inside 0.15 but within the margin
-    assert eng.update(at(0.13, 0, 0.08), t := t + 1) and eng.state == "approach"
-    # No chatter on the boundary: between 0.15 and 0.18 nothing fires.
+    assert not step(0.145, 0.08)  # inside 0.15 but within the margin
+    assert step(0.13, 0.08) and eng.state == "approach"
+    # No chatter on the boundary: between 0.14 and 0.18 nothing fires.
     for x in (0.16, 0.15, 0.17, 0.179, 0.14):
-        assert not eng.update(at(x, 0, 0.08), t := t + 1)
-    assert eng.update(at(0.19, 0, 0.08), t := t + 1) and eng.state == "carry"
-    assert eng.update(at(0.0, 0, 0.08), t := t + 1) and eng.state == "approach"
+        assert not step(x, 0.08)
+    assert step(0.19, 0.08) and eng.state == "carry"
+    assert step(0.0, 0.08) and eng.state == "approach"
+    t = eng.entered
     assert not eng.update(at(0.0, 0, 0.06), t + 0.01)  # within min_dwell of entering
     assert eng.update(at(0.0, 0, 0.06), t + 0.2) and eng.state == "pour" and eng.finished
 

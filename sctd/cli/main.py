@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import demo as demo_cmd
 from . import run as run_cmd
 
 
@@ -23,6 +24,18 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("swap", help="hot-swap a skill into the running daemon")
     run_cmd.add_swap_arguments(p)
     p.set_defaults(func=run_cmd.main_swap)
+
+    p = sub.add_parser("demo", help="run a skill end to end on this machine (daemon, robot, user)")
+    demo_cmd.add_demo_arguments(p)
+    p.set_defaults(func=demo_cmd.main_demo)
+
+    bench = sub.add_parser("bench", help="benchmarks that print figures")
+    bsub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    from ..runtime import bench as runtime_bench
+
+    p = bsub.add_parser("latency", help="daemon tick timing and input->target latency vs a Zenoh echo")
+    runtime_bench.add_latency_arguments(p)
+    p.set_defaults(func=runtime_bench.main_latency)
     return parser
 
 

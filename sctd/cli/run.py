@@ -25,7 +25,8 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-stamp-check", action="store_true",
                    help="judge input age by arrival time only (senders with unsynchronised clocks)")
     p.add_argument("--deadband", type=float, default=d.deadband, help="per input axis (default %(default)s)")
-    p.add_argument("--max-linear-speed", type=float, default=d.max_linear_speed, help="m/s (default %(default)s)")
+    p.add_argument("--max-linear-speed", type=float, default=d.max_linear_speed,
+                   help="m/s (default %(default)s)")
     p.add_argument("--max-angular-speed", type=float, default=d.max_angular_speed,
                    help="rad/s (default %(default)s)")
     p.add_argument("--max-offset", type=float, default=d.max_offset,
@@ -35,6 +36,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--status-rate", type=float, default=d.status_rate, help="Hz (default %(default)s)")
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="us before each deadline spent spinning instead of sleeping (default %(default)s)")
+    p.add_argument("--rt-priority", type=int, default=10,
+                   help="SCHED_FIFO priority of the tick thread, 0 for none; falls back to normal "
+                        "priority when not permitted (default %(default)s)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--stats-json", action="store_true", help="print final statistics as JSON on exit")
     add_zenoh_arguments(p)
@@ -71,7 +75,7 @@ def main_run(args: argparse.Namespace) -> int:
         print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
         return 2
     with session:
-        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6)
+        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority)
 
         def on_signal(signum, frame):
             daemon.stop()

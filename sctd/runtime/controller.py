@@ -8,6 +8,7 @@ it returns; tests drive it directly.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,6 +97,8 @@ class Controller:
         self.mode = "waiting"
         self.last_in_seq = -1
         self._pose: list[float] | None = None
+        self._obj_T: Array | None = None
+        self._obj_T_inv: Array = np.eye(4)
         self._install(skill, now=0.0, keep_state=False)
 
     def _install(self, skill: Skill, now: float, keep_state: bool,
@@ -153,7 +156,9 @@ class Controller:
 
         assert state is not None and obj is not None and state.T is not None and obj.T is not None
         T_world_obj = obj.T
-        T_obj_world = se3.invert4(T_world_obj)
+        if T_world_obj is not self._obj_T:  # a new object sample: invert once
+            self._obj_T, self._obj_T_inv = T_world_obj, se3.invert4(T_world_obj)
+        T_obj_world = self._obj_T_inv
         T_obj_meas = T_obj_world @ state.T
         force = None
         if state.wrench is not None:
@@ -162,7 +167,9 @@ class Controller:
         if changed:
             self.counters.transitions += 1
 
-        mag = max(abs(x) for x in u.tolist()) if len(u) else 0.0
+        # How far the user pushes: the input's norm, clipped to 1 (a diagonal push of a
+        # 3-axis stick is one push, not two); steps are bounded by mag * speed * dt.
+        mag = min(1.0, math.sqrt(sum(x * x for x in u.tolist())))
         T_target = self.T_world_target
         if mag > 0.0:
             T_obj_prev = T_obj_world @ T_target

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import queue
 import threading
 import time
 from dataclasses import dataclass
@@ -22,10 +23,36 @@ import zenoh
 from ..skill import Bundle, Skill, SkillEngine, SkillError, skill_from_bundle, skill_summary
 from . import codec
 from .controller import Controller, RuntimeConfig, Sample, transform_from_pose_fast
-from .timing import Histogram, Ticker, set_timer_slack
+from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 
 log = logging.getLogger("sctd.run")
 RING = 16
+
+
+class _Publisher(threading.Thread):
+    """Publishes targets off the tick thread: a Zenoh put that reaches a remote
+    subscriber writes to the socket (tens of us, with a long tail), which would
+    otherwise count against every tick. Runs at one FIFO priority below the tick."""
+
+    def __init__(self, publisher: Any, rt_priority: int):
+        super().__init__(name="sctd-target-publisher", daemon=True)
+        self.publisher = publisher
+        self.rt_priority = rt_priority
+        self.queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+        self.put_time = Histogram()
+
+    def run(self) -> None:
+        set_timer_slack(1)
+        set_realtime(max(0, self.rt_priority - 1))
+        q = self.queue
+        while (payload := q.get()) is not None:
+            t0 = time.monotonic()
+            self.publisher.put(payload)
+            self.put_time.add(time.monotonic() - t0)
+
+    def close(self) -> None:
+        self.queue.put(None)
+        self.join(timeout=5.0)
 
 
 @dataclass
@@ -51,12 +78,14 @@ class Daemon:
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
-                 spin: float = 1e-4):
+                 spin: float = 1e-4, rt_priority: int = 0):
         self.config = config
         self.session = session
         self.keys = codec.Keys(config.robot)
         self.controller = Controller(skill, config)
         self.spin = spin
+        self.rt_priority = rt_priority
+        self.realtime = False
         self.stop_event = threading.Event()
         self.lateness = Histogram()
         self.compute = Histogram()
@@ -69,6 +98,7 @@ class Daemon:
         self._state: Sample | None = None
         self._window_targets = 0
         self._window_compute_max = 0.0
+        self._publisher: _Publisher | None = None
 
     # --- Zenoh edges (callbacks run on Zenoh's threads) ---------------------------------
 
@@ -145,7 +175,15 @@ class Daemon:
                                          congestion_control=zenoh.CongestionControl.DROP)
         pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
         queryable = s.declare_queryable(keys.skill, self._on_skill_query)
+        publisher = _Publisher(pub_target, self.rt_priority)
+        publisher.start()
+        self._publisher = publisher
+        send = publisher.queue.put
         set_timer_slack(1)
+        self.realtime = set_realtime(self.rt_priority)
+        if self.rt_priority and not self.realtime:
+            log.warning("could not get SCHED_FIFO priority %d (needs CAP_SYS_NICE or an rtprio "
+                        "limit); ticking at normal priority", self.rt_priority)
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way; ticks allocate little
         ticker = Ticker(cfg.period, spin=self.spin)
@@ -176,7 +214,7 @@ class Daemon:
                                self._objects.get(ctl.skill.object))
                 if res.pose is not None:
                     self.target_seq += 1
-                    pub_target.put(codec.encode_target(
+                    send(codec.encode_target(
                         self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
                     self._window_targets += 1
                 done = time.monotonic()
@@ -195,6 +233,7 @@ class Daemon:
                     self._window_compute_max = 0.0
                     next_status = done + status_period
         finally:
+            publisher.close()
             gc.unfreeze()
             for d in (queryable, sub_in, sub_state, sub_obj, pub_target, pub_status):
                 d.undeclare()
@@ -219,6 +258,7 @@ class Daemon:
             "finished": ctl.engine.finished,
             "mode": ctl.mode,
             "rate": ctl.config.rate,
+            "realtime": self.realtime,
             "ticks": ticker.ticks,
             "late_ticks": ticker.late,
             "skipped_ticks": ticker.skipped,
@@ -226,6 +266,7 @@ class Daemon:
             "target_rate": round(self._window_targets / window, 1) if window > 0 else None,
             "lateness_ms": self.lateness.summary_ms(),
             "compute_ms": self.compute.summary_ms(),
+            "publish_ms": self._publisher.put_time.summary_ms() if self._publisher else None,
             "compute_max_window_ms": round(self._window_compute_max * 1e3, 4),
             "input_age": age(self._input),
             "state_age": age(self._state),

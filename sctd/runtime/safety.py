@@ -32,6 +32,12 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     return out
 
 
+def _within_angle(R_a: Array, R_b: Array, max_angle: float) -> bool:
+    """Whether the rotation R_a^T R_b is at most ``max_angle``: a trace test
+    (cos angle = (trace - 1) / 2), two numpy calls instead of an exact angle."""
+    return (float((R_a * R_b).sum()) - 1.0) * 0.5 >= math.cos(max_angle)
+
+
 def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation: float) -> Array:
     """Scale the step T_prev -> T_new uniformly so that the translation is at most
     ``max_translation`` (m) and the rotation at most ``max_rotation`` (rad).
@@ -41,6 +47,11 @@ def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation
     """
     dx, dy, dz = (T_new[:3, 3] - T_prev[:3, 3]).tolist()
     dt = math.sqrt(dx * dx + dy * dy + dz * dz)
+    # A mapped step that equals the bound exactly must not lose to it by an ulp.
+    if dt <= max_translation * (1.0 + 1e-9) and _within_angle(
+        T_prev[:3, :3], T_new[:3, :3], max_rotation * (1.0 + 1e-9)
+    ):
+        return T_new
     dr = rotation_angle_between(T_prev[:3, :3], T_new[:3, :3])
     s = 1.0
     if dt > max_translation:
@@ -61,9 +72,9 @@ def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
     d = T_target[:3, 3] - T_measured[:3, 3]
     dx, dy, dz = d.tolist()
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
-    if n <= max_translation and ang <= max_rotation:
+    if n <= max_translation and _within_angle(T_measured[:3, :3], T_target[:3, :3], max_rotation):
         return T_target
+    ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
     out = T_target.copy()
     if n > max_translation:
         out[:3, 3] = T_measured[:3, 3] + d * (max_translation / n)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 import time
 
 PR_SET_TIMERSLACK = 29
@@ -22,6 +23,18 @@ def set_timer_slack(ns: int = 1) -> bool:
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         return libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def set_realtime(priority: int) -> bool:
+    """Put the calling thread in SCHED_FIFO at ``priority`` (1-99); False when the OS
+    refuses (no CAP_SYS_NICE / rtprio limit) or ``priority`` is 0."""
+    if priority <= 0:
+        return False
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        return True
     except (OSError, AttributeError):
         return False
 

@@ -61,7 +61,7 @@ def matrix_from_quaternion(q: ArrayLike) -> Array:
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    R = np.empty(q.shape[:-1] + (3, 3))
+    R = np.empty((*q.shape[:-1], 3, 3))
     R[..., 0, 0] = 1.0 - 2.0 * (yy + zz)
     R[..., 0, 1] = 2.0 * (xy - wz)
     R[..., 0, 2] = 2.0 * (xz + wy)
@@ -139,7 +139,7 @@ def quaternion_from_matrix(R: ArrayLike) -> Array:
             )
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     q = np.where(q[:, 3:4] < 0.0, -q, q)
-    return q.reshape(shape + (4,))
+    return q.reshape((*shape, 4))
 
 
 def matrix_from_rotvec(w: ArrayLike) -> Array:
@@ -209,7 +209,7 @@ def quaternion_angle(q1: ArrayLike, q2: ArrayLike) -> Array:
 def hat(w: ArrayLike) -> Array:
     """Skew-symmetric matrix (..., 3, 3) with ``hat(w) @ v == cross(w, v)``."""
     w = np.asarray(w, dtype=float)
-    K = np.zeros(w.shape[:-1] + (3, 3))
+    K = np.zeros((*w.shape[:-1], 3, 3))
     K[..., 0, 1] = -w[..., 2]
     K[..., 0, 2] = w[..., 1]
     K[..., 1, 0] = w[..., 2]
@@ -224,7 +224,7 @@ def matrix_from_euler_xyz(e: ArrayLike) -> Array:
     e = np.asarray(e, dtype=float)
     cx, cy, cz = np.cos(e[..., 0]), np.cos(e[..., 1]), np.cos(e[..., 2])
     sx, sy, sz = np.sin(e[..., 0]), np.sin(e[..., 1]), np.sin(e[..., 2])
-    R = np.empty(e.shape[:-1] + (3, 3))
+    R = np.empty((*e.shape[:-1], 3, 3))
     R[..., 0, 0] = cz * cy
     R[..., 0, 1] = cz * sy * sx - sz * cx
     R[..., 0, 2] = cz * sy * cx + sz * sx

@@ -44,7 +44,7 @@ def transform_from_pose(pose: ArrayLike) -> Array:
     n = np.linalg.norm(q, axis=-1, keepdims=True)
     if np.any(n < 1e-12):
         raise ValueError("pose quaternion of zero norm")
-    T = np.zeros(pose.shape[:-1] + (4, 4))
+    T = np.zeros((*pose.shape[:-1], 4, 4))
     T[..., :3, :3] = matrix_from_quaternion(q / n)
     T[..., :3, 3] = pose[..., :3]
     T[..., 3, 3] = 1.0

@@ -92,6 +92,7 @@ class SkillEngine:
         self.entered = 0.0
         self.last_scale = 1.0  # the vector-field scaling of the last command, for status
         self.last_membership: Array | None = None
+        self._last_frame_pose: Array | None = None
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -183,8 +184,16 @@ class SkillEngine:
                 T = self._linear(T, m, u, dt)
             else:
                 T = self._vector_field(T, m, u, dt)
+        T_f = None  # pose of the last constraint's frame, reused while T is unchanged
+        frame = None
         for c in state.active_constraints:
-            T = self.project(T, c)
+            if c.frame != frame:
+                T_f, frame = None, c.frame
+            T_next = self.project(T, c, T_f)
+            if T_next is T:
+                T_f = self._last_frame_pose
+            else:
+                T, T_f = T_next, None
         return T
 
     def _linear(self, T: Array, m: LinearMapping, u: Array, dt: float) -> Array:
@@ -256,10 +265,16 @@ class SkillEngine:
 
     # --- constraints -------------------------------------------------------------------
 
-    def project(self, T: Array, c) -> Array:
-        """Project pose T onto constraint c (moving the constrained frame minimally)."""
-        T_ee_f = self.T_ee_frame.get(c.frame)
-        T_f = T if T_ee_f is None else T @ T_ee_f
+    def project(self, T: Array, c, T_f: Array | None = None) -> Array:
+        """Project pose T onto constraint c (moving the constrained frame minimally).
+
+        Returns T itself (the same object) when it already satisfies c. ``T_f``, the
+        constrained frame's pose for this T, may be passed in to save recomputing it.
+        """
+        if T_f is None:
+            T_ee_f = self.T_ee_frame.get(c.frame)
+            T_f = T if T_ee_f is None else T @ T_ee_f
+        self._last_frame_pose = T_f
         if isinstance(c, Band):
             s = float(np.dot(c.normal, T_f[:3, 3] - c.point))
             delta = (c.lower - s) if s < c.lower else (c.upper - s) if s > c.upper else 0.0

@@ -1,0 +1,242 @@
+"""``sctd bench latency``: the daemon's timing next to a bare Zenoh echo, in one run.
+
+Processes, all on one free loopback port:
+- ``sctd run`` (the daemon under test), with the pour skill by default;
+- the kinematic stand-in robot (state at 1 kHz, objects at 50 Hz);
+- an echo process that republishes ``sctd/bench/ping`` on ``sctd/bench/pong``;
+- the probe (``python -m sctd.runtime.bench probe``): first measures the echo round
+  trip, then publishes input and measures input -> target latency (send time of input
+  ``seq`` to the arrival of the first target whose ``in_seq`` is ``seq``).
+Both probe measurements use the same kind of Zenoh callback, so they are comparable.
+The daemon reports tick lateness, per-tick compute and publish times on exit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from . import codec
+from .procs import Child, free_port
+from .timing import Histogram, Ticker, set_timer_slack
+from .zsession import add_zenoh_arguments, open_session, session_from_args
+
+PING = "sctd/bench/ping"
+PONG = "sctd/bench/pong"
+
+
+def echo_main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="sctd-bench-echo")
+    add_zenoh_arguments(p)
+    args = p.parse_args(argv)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    with session_from_args(args) as s:
+        pub = s.declare_publisher(PONG, express=True)
+        sub = s.declare_subscriber(PING, lambda sample: pub.put(sample.payload.to_bytes()))
+        stop.wait()
+        sub.undeclare()
+        pub.undeclare()
+    return 0
+
+
+def probe_main(argv: list[str]) -> int:
+    p = argparse.ArgumentParser(prog="sctd-bench-probe")
+    p.add_argument("--rate", type=float, default=500.0)
+    p.add_argument("--echo-seconds", type=float, default=3.0)
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--warmup", type=float, default=1.0)
+    p.add_argument("--robot", default="edan")
+    add_zenoh_arguments(p)
+    args = p.parse_args(argv)
+    keys = codec.Keys(args.robot)
+    set_timer_slack(1)
+    rtt, latency = Histogram(), Histogram()
+    sent: dict[int, float] = {}
+    lock = threading.Lock()
+    counting = threading.Event()
+    got = {"pongs": 0, "targets": 0}
+
+    def on_pong(sample: zenoh.Sample) -> None:
+        now = time.monotonic()
+        seq = int(sample.payload.to_bytes())
+        with lock:
+            t = sent.pop(seq, None)
+            got["pongs"] += 1
+        if t is not None and counting.is_set():
+            rtt.add(now - t)
+
+    def on_target(sample: zenoh.Sample) -> None:
+        now = time.monotonic()
+        try:
+            msg = codec.decode_target(sample.payload.to_bytes())
+        except codec.DecodeError:
+            return
+        with lock:
+            t = sent.pop(msg["in_seq"], None)
+            got["targets"] += 1
+        if t is not None and counting.is_set():
+            latency.add(now - t)
+
+    with session_from_args(args) as s:
+        subs = [s.declare_subscriber(PONG, on_pong), s.declare_subscriber(keys.target, on_target)]
+        pub_ping = s.declare_publisher(PING, express=True)
+        pub_in = s.declare_publisher(keys.input("bench"), express=True)
+
+        def phase(seconds: float, send) -> None:
+            ticker = Ticker(1.0 / args.rate, spin=0.0)
+            start = time.monotonic()
+            seq = 0
+            while (now := time.monotonic()) < start + seconds:
+                ticker.wait()
+                if now - start > args.warmup:
+                    counting.set()
+                with lock:
+                    sent[seq] = time.monotonic()
+                send(seq)
+                seq += 1
+            counting.clear()
+            time.sleep(0.2)
+            with lock:
+                sent.clear()
+
+        phase(args.echo_seconds + args.warmup, lambda k: pub_ping.put(str(k).encode()))
+
+        def send_input(k: int) -> None:
+            # A slow sweep, so the target really moves (and the skill does real work).
+            u = [0.6 * math.sin(k * 0.002), 0.6 * math.cos(k * 0.0013), 0.3 * math.sin(k * 0.0007)]
+            pub_in.put(codec.encode_input(k, time.time(), u))
+
+        phase(args.seconds + args.warmup, send_input)
+        for d in (*subs, pub_ping, pub_in):
+            d.undeclare()
+    print(json.dumps({"echo_rtt_ms": rtt.summary_ms(), "latency_ms": latency.summary_ms(),
+                      "pongs": got["pongs"], "targets": got["targets"]}))
+    return 0
+
+
+def _last_json(text: str) -> dict | None:
+    for line in reversed(text.splitlines()):
+        if line.strip().startswith("{"):
+            try:
+                return json.loads(line)
+            except ValueError:
+                continue
+    return None
+
+
+def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float,
+                      rt_priority: int, logdir: Path) -> dict:
+    """Run the processes described in the module doc; return all figures."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    total = seconds + 3.0 + 2.0 + 2.0  # latency + echo + two warm-ups
+    with Child("sctd.cli.main", "run", "--skill", skill, "--listen", ep, "--rate", str(rate),
+               "--rt-priority", str(rt_priority), "--stats-json", log=logdir / "daemon.log") as daemon, \
+         Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd.runtime.bench", "echo", "--connect", ep, log=logdir / "echo.log"):
+        with open_session(connect=[ep]) as s:  # wait until the daemon publishes targets
+            sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
+            end = time.monotonic() + 30
+            while sub.try_recv() is None:
+                if time.monotonic() > end or not daemon.running():
+                    raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
+                time.sleep(0.05)
+            sub.undeclare()
+        probe = Child("sctd.runtime.bench", "probe", "--connect", ep, "--rate", str(input_rate),
+                      "--seconds", str(seconds))
+        figures = _last_json(probe.communicate(timeout=total + 60))
+        probe.stop()
+        daemon.stop()
+    stats = _last_json(daemon.output())
+    if figures is None or stats is None:
+        raise RuntimeError(f"benchmark processes did not report; see {logdir}")
+    period_ms = 1e3 / rate
+    bound = period_ms + 2 * figures["echo_rtt_ms"]["p99"]
+    return {
+        "rate_hz": rate,
+        "skill": skill,
+        "seconds": seconds,
+        "input_rate_hz": input_rate,
+        "realtime": stats.get("realtime"),
+        "ticks": stats["ticks"],
+        "late_ticks": stats["late_ticks"],
+        "skipped_ticks": stats["skipped_ticks"],
+        "lateness_ms": stats["lateness_ms"],
+        "compute_ms": stats["compute_ms"],
+        "publish_ms": stats.get("publish_ms"),
+        "echo_rtt_ms": figures["echo_rtt_ms"],
+        "latency_ms": figures["latency_ms"],
+        "criteria": {
+            "lateness_p99_le_0.2ms": stats["lateness_ms"]["p99"] <= 0.2,
+            "compute_p99_le_0.15ms": stats["compute_ms"]["p99"] <= 0.15,
+            "latency_p99_le_period_plus_2_echo_p99": figures["latency_ms"]["p99"] <= bound,
+            "latency_bound_ms": round(bound, 4),
+        },
+    }
+
+
+def print_report(r: dict) -> None:
+    def row(name: str, h: dict) -> str:
+        return (f"  {name:24s} p50 {h['p50']:8.3f}   p99 {h['p99']:8.3f}   p99.9 {h['p999']:8.3f}"
+                f"   max {h['max']:8.3f}   (n={h['n']})")
+
+    print(f"sctd bench latency: {r['skill']} at {r['rate_hz']:.0f} Hz for {r['seconds']:.0f} s, "
+          f"input at {r['input_rate_hz']:.0f} Hz, SCHED_FIFO {'on' if r['realtime'] else 'off'}")
+    print(f"  ticks {r['ticks']}, late (> half a period) {r['late_ticks']}, skipped {r['skipped_ticks']}")
+    print("  all figures in ms")
+    print(row("tick lateness", r["lateness_ms"]))
+    print(row("tick compute", r["compute_ms"]))
+    if r.get("publish_ms"):
+        print(row("target put (off-tick)", r["publish_ms"]))
+    print(row("input -> target", r["latency_ms"]))
+    print(row("bare Zenoh echo RTT", r["echo_rtt_ms"]))
+    c = r["criteria"]
+    mark = {True: "met", False: "NOT met"}
+    print(f"  lateness p99 <= 0.2 ms: {mark[c['lateness_p99_le_0.2ms']]}; "
+          f"compute p99 <= 0.15 ms: {mark[c['compute_p99_le_0.15ms']]}; "
+          f"latency p99 <= period + 2 x echo p99 = {c['latency_bound_ms']:.3f} ms: "
+          f"{mark[c['latency_p99_le_period_plus_2_echo_p99']]}")
+
+
+def add_latency_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
+    p.add_argument("--seconds", type=float, default=10.0, help="latency measurement length")
+    p.add_argument("--input-rate", type=float, default=500.0, help="probe input rate, Hz")
+    p.add_argument("--skill", default="skills/pour.yaml")
+    p.add_argument("--rt-priority", type=int, default=10, help="daemon SCHED_FIFO priority (0: off)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def main_latency(args: argparse.Namespace) -> int:
+    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
+    logdir.mkdir(parents=True, exist_ok=True)
+    try:
+        r = run_latency_bench(args.skill, args.rate, args.seconds, args.input_rate,
+                              args.rt_priority, logdir)
+    except RuntimeError as e:
+        print(f"sctd bench latency: {e}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print_report(r)
+    return 0
+
+
+if __name__ == "__main__":
+    commands = {"echo": echo_main, "probe": probe_main}
+    if len(sys.argv) < 2 or sys.argv[1] not in commands:
+        print("usage: python -m sctd.runtime.bench {echo,probe} ...", file=sys.stderr)
+        sys.exit(2)
+    sys.exit(commands[sys.argv[1]](sys.argv[2:]))

@@ -1,0 +1,96 @@
+"""Child processes and loopback ports for the commands that orchestrate several sctd
+programs (``sctd demo``, ``sctd bench``) and for the tests.
+
+Every child runs in its own session and is stopped with SIGTERM (then SIGKILL after a
+grace period) when its context exits, so nothing is left running.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+from typing import IO
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def port_is_free(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+            return True
+        except OSError:
+            return False
+
+
+class Child:
+    """``python -m MODULE ARGS`` as a child process; a context manager that reaps it.
+
+    Parameters
+    ----------
+    module : str
+        Module to run with ``python -m``.
+    args : str
+        Its arguments.
+    log : Path, optional
+        File receiving stdout and stderr; default: stderr passes through and stdout
+        is captured (read it with :meth:`communicate`).
+    """
+
+    def __init__(self, module: str, *args: str, log: Path | None = None, cwd: Path | None = None):
+        self.log_path = log
+        self._log: IO[bytes] | None = open(log, "wb") if log is not None else None
+        self.p = subprocess.Popen(
+            [sys.executable, "-m", module, *args],
+            stdout=self._log if self._log is not None else subprocess.PIPE,
+            stderr=subprocess.STDOUT if self._log is not None else None,
+            cwd=cwd, start_new_session=True,
+        )
+
+    def __enter__(self) -> Child:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def running(self) -> bool:
+        return self.p.poll() is None
+
+    def communicate(self, timeout: float) -> str:
+        """Wait for exit and return captured stdout (kills the child after timeout)."""
+        try:
+            out, _ = self.p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.stop()
+            out = b""
+        return (out or b"").decode(errors="replace")
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGTERM, wait up to ``timeout`` s, then SIGKILL the child's process group."""
+        if self.p.poll() is None:
+            self.p.send_signal(signal.SIGTERM)
+            try:
+                self.p.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.p.pid, signal.SIGKILL)
+                self.p.wait()
+        if self.p.stdout is not None:
+            self.p.stdout.close()
+        if self._log is not None:
+            self._log.close()
+        return self.p.returncode
+
+    def output(self) -> str:
+        if self._log is not None and not self._log.closed:
+            self._log.flush()
+        return self.log_path.read_text(errors="replace") if self.log_path else ""
