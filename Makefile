@@ -1,0 +1,34 @@
+# Two commands on a fresh machine: `make demo` runs the main job, `make test` the tests.
+# The virtualenv is created once in .venv and reused (pin, for the simulator, is a
+# ~700 MB wheel set); `make setup` re-installs when pyproject.toml or setup.py change.
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: setup demo test lint bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml setup.py
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[learn,sim,dev]'
+	touch $(STAMP)
+
+demo: setup
+	$(BIN)/sctd demo --skill skills/pour.yaml --seconds 10
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+lint: setup
+	$(BIN)/ruff check .
+	$(BIN)/mypy sctd
+
+bench: setup
+	$(BIN)/sctd bench latency
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache .hypothesis
