@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import msgpack
 import numpy as np
@@ -121,9 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     sent: dict[int, float] = {}
     latency = Histogram()
     lock = threading.Lock()
-    first_target = {"t": None}
-    info = {"state": None, "skill": None, "targets": 0, "changes": [], "T_world_ee": None,
-            "T_world_obj": None}
+    first_target: dict[str, float | None] = {"t": None}
+    info: dict[str, Any] = {"state": None, "skill": None, "targets": 0, "changes": [],
+                            "T_world_ee": None, "T_world_obj": None}
     t_start = time.monotonic()
 
     def on_target(sample: zenoh.Sample) -> None:

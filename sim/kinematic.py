@@ -143,8 +143,10 @@ def main(argv: list[str] | None = None) -> int:
                 for name, T in robot.objects().items():
                     pubs[name].put(codec.encode_object(seq, wall, se3.pose_from_transform(T).tolist()))
             seq += 1
-        for d in (sub, pub_state, *pubs.values()):
-            d.undeclare()
+        sub.undeclare()
+        pub_state.undeclare()
+        for pub in pubs.values():
+            pub.undeclare()
     return 0
 
 

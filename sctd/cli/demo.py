@@ -81,6 +81,7 @@ def main_demo(args: argparse.Namespace) -> int:
                 seen["state"] = msg["state"]
 
     ok = True
+    report: dict | None = None
     with Child("sctd.cli.main", "run", "--skill", args.skill, "--listen", ep, "--rate", str(args.rate),
                "--stats-json", log=logdir / "daemon.log") as daemon, \
          Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
@@ -108,7 +109,7 @@ def main_demo(args: argparse.Namespace) -> int:
     if rc != 0 or stats is None:
         print(f"sctd demo: the daemon exited with {rc}; see {logdir / 'daemon.log'}", file=sys.stderr)
         return 1
-    if not ok:
+    if not ok or report is None:
         return 1
     lat = report["latency_ms"]
     print(f"final state: {report['final_state']} (end state {skill.end}"

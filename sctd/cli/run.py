@@ -166,7 +166,7 @@ def main_swap(args: argparse.Namespace) -> int:
                 body = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
                 print(body.get("id"))
                 return 0
-            body = _err_body(reply.err.payload.to_bytes())
+            body = _err_body(reply.err.payload.to_bytes()) if reply.err is not None else "no reply"
             print(f"sctd swap: refused by the daemon: {body}", file=sys.stderr)
             return 1
     print(f"sctd swap: no daemon answered on {Keys(args.robot).skill} within {args.timeout} s",

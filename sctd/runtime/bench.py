@@ -118,8 +118,10 @@ def probe_main(argv: list[str]) -> int:
             pub_in.put(codec.encode_input(k, time.time(), u))
 
         phase(args.seconds + args.warmup, send_input)
-        for d in (*subs, pub_ping, pub_in):
-            d.undeclare()
+        for sub in subs:
+            sub.undeclare()
+        pub_ping.undeclare()
+        pub_in.undeclare()
     print(json.dumps({"echo_rtt_ms": rtt.summary_ms(), "latency_ms": latency.summary_ms(),
                       "pongs": got["pongs"], "targets": got["targets"]}))
     return 0

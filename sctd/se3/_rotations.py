@@ -22,12 +22,12 @@ def quaternion_normalize(q: ArrayLike) -> Array:
     q : array-like, shape (..., 4)
         Quaternions x, y, z, w, not necessarily unit.
     """
-    q = np.asarray(q, dtype=float)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    qa = np.asarray(q, dtype=float)
+    n = np.linalg.norm(qa, axis=-1, keepdims=True)
     if np.any(n < _EPS):
         raise ValueError("quaternion of zero norm")
-    q = q / n
-    return np.where(q[..., 3:4] < 0.0, -q, q)
+    qa = qa / n
+    return np.where(qa[..., 3:4] < 0.0, -qa, qa)
 
 
 def quaternion_multiply(q1: ArrayLike, q2: ArrayLike) -> Array:
@@ -253,17 +253,17 @@ def euler_xyz_from_matrix(R: ArrayLike) -> Array:
 
 def rotation_between(a: ArrayLike, b: ArrayLike) -> Array:
     """Smallest rotation matrix taking unit direction ``a`` onto unit direction ``b``."""
-    a = np.asarray(a, float) / np.linalg.norm(a)
-    b = np.asarray(b, float) / np.linalg.norm(b)
-    c = float(np.dot(a, b))
-    axis = np.cross(a, b)
+    va = np.asarray(a, float) / np.linalg.norm(a)
+    vb = np.asarray(b, float) / np.linalg.norm(b)
+    c = float(np.dot(va, vb))
+    axis = np.cross(va, vb)
     s = float(np.linalg.norm(axis))
     if s < 1e-12:
         if c > 0.0:
             return np.eye(3)
         # Antiparallel: any axis orthogonal to a.
-        helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        axis = np.cross(a, helper)
+        helper = np.array([1.0, 0.0, 0.0]) if abs(va[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis = np.cross(va, helper)
         axis /= np.linalg.norm(axis)
         return matrix_from_rotvec(axis * np.pi)
     return matrix_from_rotvec(axis / s * np.arctan2(s, c))

@@ -146,7 +146,7 @@ def _parse_yaml(file: str, text: str) -> Any:
 
 def _model_references(doc: Any) -> list[tuple[str, str]]:
     """(field path, relative file) for every ``model:`` under states."""
-    refs = []
+    refs: list[tuple[str, str]] = []
     states = doc.get("states") if isinstance(doc, dict) else None
     if not isinstance(states, dict):
         return refs
@@ -451,12 +451,12 @@ class _Parser:
             )
         if kind == "box":
             self.known_keys(cd, path, {"type", "frame", "lower", "upper"})
-            lower = self.vector(cd.get("lower"), f"{path}.lower", 3)
-            upper = self.vector(cd.get("upper"), f"{path}.upper", 3)
-            if np.any(upper < lower):
+            box_lo = self.vector(cd.get("lower"), f"{path}.lower", 3)
+            box_hi = self.vector(cd.get("upper"), f"{path}.upper", 3)
+            if np.any(box_hi < box_lo):
                 raise self.fail(f"{path}.upper", "every upper bound must be >= its lower bound")
             return Box(frame=self.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame", frames),
-                       lower=lower, upper=upper)
+                       lower=box_lo, upper=box_hi)
         self.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d"})
         model_file = self.string(cd.get("model"), f"{path}.model")
         return NeighbourOrientation(
@@ -601,16 +601,15 @@ def _field(fd: Any, path: str, where: str) -> Field:
             raise SkillError(where, f"{path}.{key}", f"expected a finite number >= 0, got {v!r}")
         return float(v)
 
-    common = dict(weight=num("weight", 1.0), sigma=num("sigma", 0.3),
-                  inliers=int(num("inliers", 0)))
+    weight, sigma, inliers = num("weight", 1.0), num("sigma", 0.3), int(num("inliers", 0))
     if kind == "translation":
-        return Field("translation", direction=vec("direction", unit=True), **common)  # type: ignore[arg-type]
+        return Field("translation", weight, sigma, inliers, direction=vec("direction", unit=True))
     if kind == "cylinder":
-        return Field("cylinder", point=vec("point"), axis=vec("axis", unit=True), **common)  # type: ignore[arg-type]
+        return Field("cylinder", weight, sigma, inliers, point=vec("point"), axis=vec("axis", unit=True))
     if kind == "sphere":
         radius = fd.get("radius")
-        return Field("sphere", centre=vec("centre"),  # type: ignore[arg-type]
-                     radius=None if radius is None else num("radius", 0.0), **common)
+        return Field("sphere", weight, sigma, inliers, centre=vec("centre"),
+                     radius=None if radius is None else num("radius", 0.0))
     raise SkillError(where, f"{path}.type", f"expected translation, cylinder or sphere, got {kind!r}")
 
 

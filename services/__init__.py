@@ -1,0 +1,1 @@
+"""sctd services: learner, recorder, input clients."""

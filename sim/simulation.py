@@ -1,0 +1,179 @@
+"""The simulator as a service sees it: scene + arm + bus, plain-data in and out.
+
+A service (``sctd sim``) drives it at its rate::
+
+    with Simulation(scene="pour", rate=1000) as sim:
+        while running:
+            sim.set_target(pose7_world, stamp)      # when a target arrives
+            sim.step()
+            publish(sim.state_message(), sim.objects(), sim.scene_outcome())
+
+Everything returned is plain Python (lists, floats, bools), ready for msgpack.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import can
+import numpy as np
+
+from sctd import se3
+
+from .arm import SimArm, ee_transform
+from .canbus import FaultConfig
+from .controller import ImpedanceGains
+from .robot import FORWARD_POSTURE, UP_POSTURE, ArmModel, inverse_kinematics, load_arm_model
+from .scenes import Scene, make_scene
+
+
+class Simulation:
+    """Arm and scene stepped together.
+
+    Parameters
+    ----------
+    scene : str or Scene, optional
+        ``"pour"``, ``"drawer"``, ``"empty"`` or a scene object.
+    rate : float, optional
+        Cycle rate, Hz.
+    q0 : array_like, shape (7,), optional
+        Initial posture; default the inverse kinematics of the scene's start pose.
+    gains : ImpedanceGains, optional
+    channel : str, optional
+        Virtual CAN channel of the joint bus (default: unique per instance).
+    bus_factory : callable, optional
+        See :class:`~sctd_sim.arm.SimArm`.
+    faults : FaultConfig, optional
+        Bus faults (on the controller's end).
+    drive_timeout : float, optional
+        Drive command timeout, s.
+    arm : ArmModel, optional
+
+    Attributes
+    ----------
+    arm : SimArm
+    scene : Scene
+    """
+
+    def __init__(
+        self,
+        scene: str | Scene = "pour",
+        rate: float = 1000.0,
+        *,
+        q0: np.ndarray | None = None,
+        gains: ImpedanceGains | None = None,
+        channel: str | None = None,
+        bus_factory: Callable[[str], can.BusABC] | None = None,
+        faults: FaultConfig | None = None,
+        drive_timeout: float = 0.01,
+        arm: ArmModel | None = None,
+    ) -> None:
+        self.scene: Scene = make_scene(scene) if isinstance(scene, str) else scene
+        model = arm or load_arm_model()
+        if q0 is None:
+            q0 = start_posture(model, self.scene.start_pose())
+        self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
+                          bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
+        self._wrench = np.zeros(6)
+
+    @property
+    def t(self) -> float:
+        """Simulated time, s."""
+        return self.arm.t
+
+    @property
+    def dt(self) -> float:
+        """Cycle period, s."""
+        return self.arm.dt
+
+    @property
+    def channel(self) -> str:
+        """Virtual CAN channel of the joint bus."""
+        return self.arm.channel
+
+    def step(self) -> None:
+        """One cycle: scene interaction at the current state, then the arm's cycle."""
+        dyn = self.arm.dynamics
+        self._wrench = self.scene.step(dyn.ee_transform(), dyn.ee_velocity(), self.arm.dt)
+        self.arm.set_external_wrench(self._wrench)
+        self.arm.step()
+
+    def run(self, seconds: float) -> None:
+        """Run ``round(seconds * rate)`` cycles."""
+        for _ in range(round(seconds * self.arm.rate)):
+            self.step()
+
+    def set_target(self, pose: Any, stamp: float | None = None) -> None:
+        """Follow a new ee target ``pose`` (``[x, y, z, qx, qy, qz, qw]``, world).
+
+        ``stamp`` is the sender's time (s); only differences of stamps are used, for
+        the target-velocity feed-forward. Non-finite poses are ignored.
+        """
+        p = np.asarray(pose, dtype=float)
+        if p.shape != (7,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[3:]) < 1e-6:
+            return
+        self.arm.set_target(se3.transform_from_pose(p), stamp)
+
+    def state_message(self) -> dict[str, list[float]]:
+        """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).
+
+        ``q`` and ``dq`` are what the controller decoded from the joint bus (as a real
+        arm reports its encoders), ``pose`` their forward kinematics; ``wrench`` is the
+        external wrench acting on the ee (world axes, at the ee origin). The service
+        adds ``seq`` and ``stamp``.
+        """
+        m = self.arm.master
+        T = ee_transform(self.arm.arm, m.q)
+        return {
+            "pose": se3.pose_from_transform(T).tolist(),
+            "q": m.q.tolist(),
+            "dq": m.dq.tolist(),
+            "wrench": self._wrench.tolist(),
+        }
+
+    def objects(self) -> dict[str, list[float]]:
+        """Scene object poses in world, ``{name: [x, y, z, qx, qy, qz, qw]}``."""
+        T_world_ee = self.arm.dynamics.ee_transform()
+        return {name: se3.pose_from_transform(T).tolist()
+                for name, T in self.scene.objects(T_world_ee).items()}
+
+    def scene_outcome(self) -> dict[str, Any]:
+        """Task outcome (see the scene), plus ``t`` and the controller's ``holding``."""
+        out = dict(self.scene.outcome())
+        out["t"] = self.arm.t
+        out["holding"] = self.arm.controller.holding
+        return out
+
+    def link_stats(self) -> dict[str, Any]:
+        """Joint-bus counters (see :meth:`SimArm.link_stats`)."""
+        return self.arm.link_stats()
+
+    def close(self) -> None:
+        """Release the bus endpoints."""
+        self.arm.close()
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def start_posture(arm: ArmModel, T_world_ee: np.ndarray) -> np.ndarray:
+    """Joint positions reaching ``T_world_ee``: IK from the up, rest and forward
+    postures, then from fixed pseudo-random seeds.
+
+    Raises
+    ------
+    RuntimeError
+        If the pose is out of reach from both seeds.
+    """
+    rng = np.random.default_rng(0)  # fixed: the same start posture every run
+    seeds = [UP_POSTURE, arm.rest, FORWARD_POSTURE]
+    seeds += [rng.uniform(0.8 * arm.q_lower, 0.8 * arm.q_upper) for _ in range(30)]
+    for seed in seeds:
+        q, ok = inverse_kinematics(arm, T_world_ee, q_init=seed, max_iter=300)
+        if ok:
+            return q
+    raise RuntimeError(f"start pose out of reach: {se3.pose_from_transform(T_world_ee)}")

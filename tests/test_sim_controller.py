@@ -1,0 +1,109 @@
+"""Cartesian impedance controller, through the whole bus path, in simulated time."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from sctd_sim.arm import SimArm, ee_transform
+from sctd_sim.bench import step_response
+from sctd_sim.controller import CartesianImpedanceController
+from sctd_sim.robot import load_arm_model
+
+
+@pytest.fixture(scope="module")
+def arm():
+    return load_arm_model()
+
+
+def rot_z(angle):
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_converges_from_several_postures(arm, seed):
+    rng = np.random.default_rng(100 + seed)
+    q0 = arm.rest + rng.uniform(-0.5, 0.5, 7)
+    T0 = ee_transform(arm, q0)
+    T_target = T0.copy()
+    offset = rng.normal(size=3)
+    T_target[:3, 3] += 0.04 * offset / np.linalg.norm(offset)
+    T_target[:3, :3] = rot_z(0.15) @ T0[:3, :3]
+    with SimArm(arm, q0) as sim:
+        sim.set_target(T_target)
+        for _ in range(1500):
+            sim.set_target(T_target, stamp=sim.t)
+            sim.step()
+        T = sim.T_world_ee
+        assert np.linalg.norm(T[:3, 3] - T_target[:3, 3]) < 1e-3
+        assert np.linalg.norm(pin.log3(T_target[:3, :3] @ T[:3, :3].T)) < 5e-3
+        assert np.abs(sim.dq).max() < 5e-3
+
+
+def test_five_cm_step_settles_fast_without_overshoot():
+    r = step_response(axis=0, size=0.05, duration=1.2)
+    assert r["settling_time_s"] < 1.0
+    assert r["overshoot_m"] < 2e-3
+    assert r["final_error_m"] < 1e-3
+
+
+def test_stale_target_holds_the_measured_pose(arm):
+    with SimArm(arm) as sim:
+        T = sim.T_world_ee
+        T[:3, 3] += [0.0, 0.3, 0.0]  # far away: the arm is still moving at the timeout
+        sim.set_target(T)
+        sim.run(0.05)
+        assert not sim.controller.holding
+        timeout = sim.controller.gains.target_timeout
+        sim.run(timeout)
+        assert sim.controller.holding
+        held = sim.controller.T_world_target[:3, 3].copy()
+        assert np.linalg.norm(held - T[:3, 3]) > 0.05  # did not go on to the old target
+        sim.run(1.0)
+        assert np.linalg.norm(sim.T_world_ee[:3, 3] - held) < 0.02
+        assert np.abs(sim.dq).max() < 1e-2
+        # a fresh target ends the hold
+        sim.set_target(sim.T_world_ee)
+        sim.step()
+        assert not sim.controller.holding
+
+
+def test_target_velocity_feedforward_and_steps(arm):
+    c = CartesianImpedanceController(arm)
+    c.update(arm.rest, np.zeros(7), 0.0)
+    T = c.T_world_ee.copy()
+    for k in range(5):
+        T_k = T.copy()
+        T_k[1, 3] += 0.25 * k * 1e-3
+        c.set_target(T_k, stamp=k * 1e-3)
+    np.testing.assert_allclose(c.v_target, [0, 0.25, 0, 0, 0, 0], atol=1e-9)
+    T_jump = T_k.copy()
+    T_jump[0, 3] += 0.05  # 50 m/s: a step, not a velocity
+    c.set_target(T_jump, stamp=5e-3)
+    np.testing.assert_array_equal(c.v_target, np.zeros(6))
+
+
+def test_torque_stays_finite_at_a_singularity(arm):
+    c = CartesianImpedanceController(arm)
+    q = np.zeros(7)  # stretched upright: shoulder, elbow and wrist aligned
+    c.update(q, np.zeros(7), 0.0)
+    T = c.T_world_ee.copy()
+    T[:3, 3] += [0.0, 0.0, 0.3]  # out of reach along the singular direction
+    c.set_target(T)
+    for k in range(10):
+        tau = c.update(q, np.full(7, 0.01), 1e-3 * (k + 1))
+        assert np.all(np.isfinite(tau))
+    assert np.abs(tau).max() < 1e3
+
+
+def test_arm_near_a_singularity_stays_bounded(arm):
+    q0 = np.array([0.0, 0.05, 0.0, -0.05, 0.0, 0.05, 0.0])
+    with SimArm(arm, q0) as sim:
+        T = sim.T_world_ee
+        T[:3, 3] += [0.05, 0.0, 0.05]
+        for _ in range(500):
+            sim.set_target(T, stamp=sim.t)
+            sim.step()
+        assert np.all(np.isfinite(sim.q))
+        assert np.all(np.abs(sim.dq) <= arm.dq_max + 1e-9)

@@ -1,0 +1,249 @@
+"""Task scenes (pure outcome logic) and the Simulation facade a service drives."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from can.interfaces import virtual as can_virtual
+from sctd_sim.scenes import (
+    DrawerParams,
+    DrawerScene,
+    PourParams,
+    PourScene,
+    drawer_force,
+    make_scene,
+    pour_flow,
+    pour_geometry,
+)
+from sctd_sim.simulation import Simulation
+
+from sctd import se3
+
+DT = 1e-3
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_buses():
+    before = set(can_virtual.channels)
+    yield
+    assert set(can_virtual.channels) == before
+
+
+def rot_about(axis, angle):
+    return se3.matrix_from_rotvec(np.asarray(axis, dtype=float) * angle)
+
+
+def ee_for_tip(scene, p_tip, tilt, tilt_axis=(1.0, 0.0, 0.0)):
+    """ee pose that puts the bottle opening at p_tip, bottle tilted by tilt."""
+    R_world_tip = rot_about(tilt_axis, tilt)
+    T_world_tip = se3.transform_from_rt(R_world_tip, p_tip)
+    return T_world_tip @ se3.invert_transform(scene.params.T_ee_tip)
+
+
+# -- pour -----------------------------------------------------------------------------
+def mug_opening(params, above=0.03, radial=(0.0, 0.0)):
+    return params.T_world_mug[:3, 3] + np.array([radial[0], radial[1], above])
+
+
+def test_start_pose_holds_the_bottle_upright():
+    scene = PourScene()
+    T_tip = scene.tip_transform(scene.start_pose())
+    g = pour_geometry(T_tip, scene.params)
+    assert g.tilt == pytest.approx(0.0, abs=1e-9)
+    assert T_tip[2, 3] > scene.start_pose()[2, 3]  # the opening is above the hand
+
+
+def test_geometry_over_the_opening_and_beside_it():
+    P = PourParams()
+    upright = se3.transform_from_rt(np.eye(3), mug_opening(P))
+    g = pour_geometry(upright, P)
+    assert g.over_opening and g.radial == pytest.approx(0.0) and g.tilt == pytest.approx(0.0)
+    assert g.tip_above_rim == pytest.approx(0.03)
+    beside = se3.transform_from_rt(np.eye(3), mug_opening(P, radial=(0.05, 0.0)))
+    assert not pour_geometry(beside, P).over_opening
+    too_high = se3.transform_from_rt(np.eye(3), mug_opening(P, above=0.5))
+    assert not pour_geometry(too_high, P).over_opening
+    below_rim = se3.transform_from_rt(np.eye(3), mug_opening(P, above=-0.02))
+    assert not pour_geometry(below_rim, P).over_opening
+
+
+def test_flow_only_past_the_pouring_angle():
+    P = PourParams()
+    assert pour_flow(P.pour_angle - 0.01, P) == 0.0
+    assert pour_flow(P.pour_angle + 0.3, P) > pour_flow(P.pour_angle + 0.1, P) > 0.0
+    assert pour_flow(math.pi, P) <= P.flow_rate
+
+
+def test_pouring_over_the_mug_fills_it_without_spilling():
+    scene = PourScene()
+    T_ee = ee_for_tip(scene, mug_opening(scene.params), math.radians(110))
+    for _ in range(3000):
+        scene.step(T_ee, np.zeros(6), DT)
+    out = scene.outcome()
+    assert out["over_opening"] and out["tilt"] == pytest.approx(math.radians(110))
+    assert out["poured"] > scene.params.fill_target
+    assert not out["spilled"] and out["success"]
+    assert out["poured"] + out["remaining"] == pytest.approx(1.0)
+
+
+def test_tilting_beside_the_mug_spills():
+    scene = PourScene()
+    T_ee = ee_for_tip(scene, mug_opening(scene.params, radial=(0.1, 0.0)), math.radians(100))
+    scene.step(T_ee, np.zeros(6), DT)
+    out = scene.outcome()
+    assert out["spilled"] and out["pouring"] and not out["success"]
+    assert out["poured"] == 0.0
+
+
+def test_tilting_below_the_pouring_angle_does_nothing():
+    scene = PourScene()
+    T_ee = ee_for_tip(scene, mug_opening(scene.params, radial=(0.2, 0.0)), math.radians(60))
+    for _ in range(1000):
+        scene.step(T_ee, np.zeros(6), DT)
+    out = scene.outcome()
+    assert not out["spilled"] and out["remaining"] == 1.0 and not out["pouring"]
+
+
+def test_an_empty_bottle_stops_pouring_and_gets_lighter():
+    scene = PourScene()
+    T_ee = ee_for_tip(scene, mug_opening(scene.params), math.radians(170))
+    w_full = scene.step(T_ee, np.zeros(6), DT)
+    for _ in range(200):
+        w = scene.step(T_ee, np.zeros(6), 0.1)
+    assert scene.remaining == pytest.approx(0.0, abs=1e-12) and scene.remaining >= 0.0
+    assert scene.poured == pytest.approx(1.0)
+    assert w[2] == pytest.approx(-scene.params.bottle_mass_empty * 9.81)
+    assert w_full[2] < w[2] < 0.0
+
+
+def test_pour_objects():
+    scene = PourScene()
+    T_ee = scene.start_pose()
+    objs = scene.objects(T_ee)
+    assert set(objs) == {"mug", "bottle_tip"}
+    np.testing.assert_allclose(objs["bottle_tip"], T_ee @ scene.params.T_ee_tip)
+    assert scene.task_object == "mug"
+
+
+# -- drawer ---------------------------------------------------------------------------
+def ee_at(p):
+    return se3.transform_from_rt(np.eye(3), p)
+
+
+def test_drawer_is_grasped_only_within_the_grasp_radius():
+    scene = DrawerScene()
+    p_handle = scene.handle_transform()[:3, 3]
+    w = scene.step(ee_at(p_handle + np.array([0, 0, 0.05])), np.zeros(6), DT)
+    assert not scene.attached and not w.any()
+    scene.step(ee_at(p_handle + np.array([0, 0, 0.01])), np.zeros(6), DT)
+    assert scene.attached and scene.outcome()["grasps"] == 1
+
+
+def test_pulling_the_handle_opens_the_drawer_against_its_resistance():
+    scene = DrawerScene()
+    P = scene.params
+    axis = scene.axis
+    p = scene.handle_transform()[:3, 3].copy()
+    v = 0.1 * axis
+    forces = []
+    for _ in range(2200):  # pull at 0.1 m/s for 2.2 s
+        p = p + v * DT
+        w = scene.step(ee_at(p), np.concatenate([v, np.zeros(3)]), DT)
+        forces.append(w[:3] @ axis)
+    out = scene.outcome()
+    assert out["attached"]
+    assert out["opening"] == pytest.approx(0.22, abs=0.01)
+    assert out["success"]
+    # the drawer pulls back on the hand: spring + damping + friction
+    expected = drawer_force(scene.opening, 0.1, P)
+    assert forces[-1] == pytest.approx(expected, rel=0.1)
+    assert all(f <= 0.0 for f in forces[100:])
+
+
+def test_drawer_stops_at_its_end_and_the_grasp_slips_if_pulled_further():
+    scene = DrawerScene(DrawerParams(max_opening=0.1))
+    axis = scene.axis
+    p = scene.handle_transform()[:3, 3].copy()
+    for _ in range(3000):
+        p = p + 0.1 * axis * DT
+        scene.step(ee_at(p), np.concatenate([0.1 * axis, np.zeros(3)]), DT)
+    assert not scene.attached
+    assert scene.outcome()["max_opening"] == pytest.approx(0.1)
+    assert scene.opening < 0.1  # released: the soft-close spring pulls it back
+
+
+def test_released_drawer_closes_by_its_soft_close_spring():
+    scene = DrawerScene()
+    scene.opening = 0.1
+    for _ in range(5000):
+        scene.step(ee_at([0.0, 0.0, 0.0]), np.zeros(6), DT)
+    assert scene.opening < 0.1
+    assert scene.opening >= 0.0
+
+
+def test_make_scene():
+    assert make_scene("pour").task_object == "mug"
+    assert make_scene("drawer").task_object == "drawer_handle"
+    with pytest.raises(ValueError, match="unknown"):
+        make_scene("juggle")
+
+
+# -- the Simulation facade ------------------------------------------------------------
+def test_simulation_messages_are_plain_data():
+    with Simulation("pour") as sim:
+        sim.run(0.02)
+        msg = sim.state_message()
+        assert set(msg) == {"pose", "q", "dq", "wrench"}
+        assert [len(msg[k]) for k in ("pose", "q", "dq", "wrench")] == [7, 7, 7, 6]
+        assert all(isinstance(x, float) for x in msg["pose"])
+        # bus-decoded measurement agrees with the physics to the frame resolution
+        np.testing.assert_allclose(msg["pose"][:3], sim.arm.ee_pose[:3], atol=1e-4)
+        objs = sim.objects()
+        assert set(objs) == {"mug", "bottle_tip"} and all(len(p) == 7 for p in objs.values())
+        T_world_tip = se3.transform_from_pose(objs["bottle_tip"])
+        T_world_ee = se3.transform_from_pose(msg["pose"])
+        np.testing.assert_allclose(se3.invert_transform(T_world_ee) @ T_world_tip,
+                                   sim.scene.params.T_ee_tip, atol=1e-3)
+        out = sim.scene_outcome()
+        assert out["scene"] == "pour" and out["t"] == pytest.approx(0.02)
+        assert not out["spilled"]
+        assert msg["wrench"][2] < 0.0  # the bottle's weight
+
+
+def test_simulation_ignores_invalid_targets():
+    with Simulation("empty") as sim:
+        sim.step()
+        sim.set_target([float("nan")] * 7)
+        sim.set_target([0.0] * 7)
+        sim.set_target([1.0, 2.0])
+        assert sim.arm.controller.holding
+
+
+def test_simulation_follows_targets_and_opens_the_drawer():
+    with Simulation("drawer") as sim:
+        p0 = np.array(sim.state_message()["pose"])
+        handle = np.array(sim.objects()["drawer_handle"])
+        T_handle_ee = (se3.invert_transform(se3.transform_from_pose(handle))
+                       @ se3.transform_from_pose(p0))
+        np.testing.assert_allclose(T_handle_ee[:3, :3], np.eye(3), atol=1e-3)
+        axis = sim.scene.axis
+        for k in range(700):  # reach for the handle
+            a = min(1.0, k / 500)
+            target = p0.copy()
+            target[:3] = (1 - a) * p0[:3] + a * handle[:3]
+            sim.set_target(target, stamp=sim.t)
+            sim.step()
+        assert sim.scene_outcome()["attached"]
+        for k in range(1500):  # pull 0.25 m in 1.2 s
+            a = min(1.0, k / 1200)
+            target = p0.copy()
+            target[:3] = handle[:3] + a * 0.25 * axis
+            sim.set_target(target, stamp=sim.t)
+            sim.step()
+        out = sim.scene_outcome()
+        assert out["success"] and out["opening"] > 0.2
+        assert np.array(sim.state_message()["wrench"])[:3] @ axis < 0.0
+        # the published handle frame stays at the closed position (as in the demos)
+        np.testing.assert_allclose(sim.objects()["drawer_handle"], handle)
