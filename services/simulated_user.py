@@ -35,7 +35,8 @@ from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
 @dataclass(frozen=True)
 class Goal:
-    """Where the user wants ``frame`` (object frame): position and tilt about x."""
+    """Where the user wants ``frame`` (object frame): position, and a tilt about the
+    frame's own y axis (z towards x: pouring forwards) at its current heading."""
 
     frame: str
     position: tuple[float, float, float]
@@ -52,7 +53,7 @@ GOALS: dict[str, dict[str, Goal]] = {
     },
     "drawer": {
         "reach": Goal("ee", (0.0, 0.0, 0.0)),
-        "pull": Goal("ee", (0.08, 0.0, 0.0)),  # always a little ahead of the handle: pull
+        "pull": Goal("ee", (0.30, 0.0, 0.0)),  # pull the drawer 0.3 m open
         "*": Goal("ee", (0.0, 0.0, 0.0)),
     },
 }
@@ -76,7 +77,8 @@ class Policy:
         T_ee_f = self.frames.get(goal.frame, np.eye(4))
         T_f = T_obj_ee @ T_ee_f
         dp = np.asarray(goal.position) - T_f[:3, 3]
-        R_goal = se3.matrix_from_rotvec([goal.tilt, 0.0, 0.0])
+        heading = math.atan2(T_f[1, 0], T_f[0, 0])
+        R_goal = se3.matrix_from_rotvec([0.0, 0.0, heading]) @ se3.matrix_from_rotvec([0.0, goal.tilt, 0.0])
         dr = se3.rotvec_from_matrix(T_f[:3, :3].T @ R_goal)
         # Saturating P-control: full input beyond gain_distance / gain_angle of error.
         want = np.concatenate([dp / self.gain_distance, dr / self.gain_angle]) * self.speeds

@@ -37,20 +37,25 @@ class KinematicScene:
 
 
 def kinematic_scene(name: str) -> KinematicScene:
-    """The pour and drawer scenes of the hand-written skills (see skills/*.yaml)."""
+    """The pour and drawer scenes of the shipped skills (see skills/*.yaml).
+
+    Task-object frames have z up and x pointing towards the robot (the generated
+    demonstrations and the Pinocchio scenes use the same convention); the hand starts
+    with its x axis towards the object.
+    """
+    yaw180 = se3.quaternion_from_rotvec([0, 0, math.pi])
     if name == "pour":
         return KinematicScene(
             "pour",
-            {"mug": se3.transform_from_pose([0.60, 0.0, 0.78, 0, 0, 0, 1])},
-            se3.transform_from_pose([0.35, 0.25, 0.90, 0, 0, 0, 1]),
+            {"mug": se3.transform_from_pose([0.60, 0.0, 0.78, *yaw180])},
+            se3.transform_from_pose([0.35, 0.10, 0.90, 0, 0, 0, 1]),
             attached={"bottle_tip": se3.transform_from_pose([0, 0, 0.12, 0, 0, 0, 1])},
         )
     if name == "drawer":
         # Handle x axis points out of the drawer, towards the robot (world -x).
-        q = se3.quaternion_from_rotvec([0, 0, math.pi])
         return KinematicScene(
             "drawer",
-            {"drawer_handle": se3.transform_from_pose([0.70, 0.0, 0.80, *q])},
+            {"drawer_handle": se3.transform_from_pose([0.70, 0.0, 0.80, *yaw180])},
             se3.transform_from_pose([0.50, 0.15, 0.90, 0, 0, 0, 1]),
         )
     raise ValueError(f"unknown scene {name!r} (pour, drawer)")
@@ -61,6 +66,8 @@ class KinematicRobot:
 
     In the drawer scene the handle is grasped once the ee is within ``grasp_radius``;
     from then on the drawer slides along the handle's x axis with the ee (0 to 0.4 m).
+    ``drawer_handle`` is the handle's pose with the drawer closed (it does not move, as
+    in the Pinocchio scene and the demonstrations); ``drawer_open`` tells how far it is.
     """
 
     def __init__(self, scene: KinematicScene, tau: float = 0.02, grasp_radius: float = 0.02):
@@ -78,17 +85,13 @@ class KinematicRobot:
             a = 1.0 - math.exp(-dt / self.tau)
             self.T_world_ee = interpolate(self.T_world_ee, self.T_world_target, a)
         if self._handle0 is not None:
-            T_h = self.scene.objects["drawer_handle"]
-            d = self.T_world_ee[:3, 3] - T_h[:3, 3]
+            d = self.T_world_ee[:3, 3] - self._handle0[:3, 3]
             if not self.grasped and np.linalg.norm(d) < self.grasp_radius:
                 self.grasped = True
             if self.grasped:
                 axis = self._handle0[:3, 0]
                 ee_along = float(np.dot(self.T_world_ee[:3, 3] - self._handle0[:3, 3], axis))
                 self.drawer_open = min(0.4, max(0.0, ee_along))
-                T_h = self._handle0.copy()
-                T_h[:3, 3] += self.drawer_open * axis
-                self.scene.objects["drawer_handle"] = T_h
 
     def objects(self) -> dict[str, np.ndarray]:
         out = dict(self.scene.objects)

@@ -8,6 +8,7 @@ import pytest
 from can.interfaces import virtual as can_virtual
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from sctd_sim.arm import SimArm
 from sctd_sim.canbus import (
     CMD_BASE_ID,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+
 from sctd_sim.arm import SimArm, ee_transform
 from sctd_sim.bench import step_response
 from sctd_sim.controller import CartesianImpedanceController

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+
 from sctd_sim.arm import SimArm
 from sctd_sim.dynamics import ArmDynamics
 from sctd_sim.robot import load_arm_model

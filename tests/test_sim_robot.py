@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+
 from sctd_sim.arm import ee_transform
 from sctd_sim.robot import URDF_PATH, inverse_kinematics, load_arm_model
 

@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 from can.interfaces import virtual as can_virtual
+
+from sctd import se3
 from sctd_sim.scenes import (
     DrawerParams,
     DrawerScene,
@@ -18,8 +20,6 @@ from sctd_sim.scenes import (
     pour_geometry,
 )
 from sctd_sim.simulation import Simulation
-
-from sctd import se3
 
 DT = 1e-3
 

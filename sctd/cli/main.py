@@ -29,6 +29,16 @@ def build_parser() -> argparse.ArgumentParser:
     demo_cmd.add_demo_arguments(p)
     p.set_defaults(func=demo_cmd.main_demo)
 
+    from ..learn import cli as learn_cli
+
+    p = sub.add_parser("learn", help="learn a skill from a folder of demonstrations")
+    learn_cli.add_learn_arguments(p)
+    p.set_defaults(func=learn_cli.main_learn)
+
+    p = sub.add_parser("dtw", help="dynamic time warping distance between two demonstrations")
+    learn_cli.add_dtw_arguments(p)
+    p.set_defaults(func=learn_cli.main_dtw)
+
     bench = sub.add_parser("bench", help="benchmarks that print figures")
     bsub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     from ..runtime import bench as runtime_bench
@@ -36,7 +46,21 @@ def build_parser() -> argparse.ArgumentParser:
     p = bsub.add_parser("latency", help="daemon tick timing and input->target latency vs a Zenoh echo")
     runtime_bench.add_latency_arguments(p)
     p.set_defaults(func=runtime_bench.main_latency)
+
+    p = bsub.add_parser("learn", help="learning figures on generated demonstrations (accuracy, "
+                        "centre error, directions, time, graph-cut energy)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--n-demos", type=int, default=10)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_bench_learn)
     return parser
+
+
+def _bench_learn(args: argparse.Namespace) -> int:
+    from ..learn.bench import main
+
+    argv = ["--seed", str(args.seed), "--n-demos", str(args.n_demos)]
+    return main([*argv, "--json"] if args.json else argv)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -170,7 +170,15 @@ def tf_distance(poses_a: ArrayLike, poses_b: ArrayLike, alpha: float = 0.4) -> A
     a = np.asarray(poses_a, dtype=float)
     b = np.asarray(poses_b, dtype=float)
     return (np.linalg.norm(a[..., :3] - b[..., :3], axis=-1)
-            + alpha * se3.quaternion_angle(a[..., 3:], b[..., 3:]))
+            + alpha * _quaternion_angle(a[..., 3:], b[..., 3:]))
+
+
+def _quaternion_angle(qa: Array, qb: Array) -> Array:
+    """Rotation angle between unit quaternions, accurate near zero (unlike arccos):
+    the 4-vectors are phi = 2 atan2(|a - b|, |a + b|) apart, the rotation 2 phi."""
+    dm = np.linalg.norm(qa - qb, axis=-1)
+    dp = np.linalg.norm(qa + qb, axis=-1)
+    return 4.0 * np.arctan2(np.minimum(dm, dp), np.maximum(dm, dp))
 
 
 # --- preprocessing --------------------------------------------------------------------
@@ -320,10 +328,10 @@ def dtw(a: ArrayLike, b: ArrayLike, alpha: float = 0.4) -> tuple[float, NDArray[
     D = np.full((n + 1, m + 1), np.inf)
     D[0, 0] = 0.0
     for k in range(2, n + m + 1):
-        i = np.arange(max(1, k - m), min(n, k - 1) + 1)
-        j = k - i
-        D[i, j] = C[i - 1, j - 1] + np.minimum(np.minimum(D[i - 1, j - 1], D[i - 1, j]),
-                                               D[i, j - 1])
+        ii = np.arange(max(1, k - m), min(n, k - 1) + 1)
+        jj = k - ii
+        D[ii, jj] = C[ii - 1, jj - 1] + np.minimum(np.minimum(D[ii - 1, jj - 1], D[ii - 1, jj]),
+                                                   D[ii, jj - 1])
     path = [(n - 1, m - 1)]
     i, j = n, m
     while i > 1 or j > 1:

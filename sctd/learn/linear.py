@@ -181,7 +181,7 @@ def neighbour_graph(poses: ArrayLike, demo_index: ArrayLike, radius: float = 0.0
     pairs = [np.stack([i0, i0 + 1], axis=1)]
     if m > 1 and max_n > 0:
         k = min(max_n + 1, m)
-        dist, idx = cKDTree(P[:, :3]).query(P[:, :3], k=k, distance_upper_bound=radius)
+        _dist, idx = cKDTree(P[:, :3]).query(P[:, :3], k=k, distance_upper_bound=radius)
         rows = np.repeat(np.arange(m), k)
         cols = idx.reshape(-1)
         ok = (cols < m) & (cols != rows)
@@ -319,7 +319,7 @@ class LinearIMLearner:
 
     def __init__(self, alpha: float = 0.4, beta: float = 0.01, smoothness: float = 0.005,
                  radius: float = 0.04, max_n: int = 10, C: float = 1000.0, method: str = "swap",
-                 min_segment: int = 3, axis_support: float = 0.1, margin: float = 0.005,
+                 min_segment: int = 3, axis_support: float = 0.08, margin: float = 0.005,
                  random_state: int | None = None):
         self.alpha = alpha
         self.beta = beta
@@ -419,49 +419,88 @@ class LinearIMLearner:
         states: list[StateIM] = []
         for s in range(K):
             used: dict[int, int] = {}
+            motion: list[list[Array]] = [[] for _ in self.frame_names_]
             for k, r in zip(ref_demos, ref, strict=True):
                 start, end, _ = r[s]
                 for lab in cleaned[k][start:end]:
                     used[int(lab)] = used.get(int(lab), 0) + 1
-            states.append(self._state_from_labels(used))
+                for fi in range(len(self.frame_names_)):
+                    # The run's interior: smoothing blurs the corners between phases.
+                    trim = min(2, (end - start) // 4)
+                    motion[fi].append(self.d6_[k][fi, start + trim:end - trim].sum(axis=0))
+            states.append(self._state_from_labels(used, motion))
         # Consecutive states with the same IM are one state.
         merged = [states[0]]
         for st in states[1:]:
             if st.label != merged[-1].label:
                 merged.append(st)
         self.states_ = merged
-        L = {lab: j for j, lab in enumerate(self.labels_)}
-        cols = [L.get(st.label) for st in merged]
-        self.state_labels_ = []
-        for D, c in zip(self.d6_, self.costs_, strict=True):
-            sc = np.stack([c[:, j] if j is not None else self._cost_of(st.label, D)
-                           for j, st in zip(cols, merged, strict=True)], axis=1)
-            self.state_labels_.append(_monotone_assignment(sc, self.smoothness * 10))
+        # Monotone assignment by how well each state's IM explains each displacement:
+        # the residual alone (beta * DoF is a constant per state here and, at small
+        # sample spacings, as large as the displacement itself).
+        self.state_labels_ = self._assign(merged)
+        # One refinement: the assignment's boundaries are sharper than the graph cut's
+        # (spatial neighbours pull a few displacements across a phase change), so the
+        # states' axes are re-derived from the motion within the assigned runs.
+        refined = []
+        for k in range(len(merged)):
+            used_k: dict[int, int] = {}
+            nets: list[list[Array]] = [[] for _ in self.frame_names_]
+            for gl, sl, D in zip(self.graph_labels_, self.state_labels_, self.d6_, strict=True):
+                idx = np.flatnonzero(sl == k)
+                if len(idx) == 0:
+                    continue
+                for lab in gl[idx]:
+                    used_k[int(lab)] = used_k.get(int(lab), 0) + 1
+                cut = min(2, len(idx) // 4)
+                inner = idx[cut:len(idx) - cut]
+                for fi in range(len(self.frame_names_)):
+                    nets[fi].append(D[fi, inner].sum(axis=0))
+            refined.append(self._state_from_labels(used_k, nets) if used_k else merged[k])
+        if [st.label for st in refined] != [st.label for st in merged]:
+            dedup = [refined[0]]
+            for st in refined[1:]:
+                if st.label != dedup[-1].label:
+                    dedup.append(st)
+            self.states_ = dedup
+            self.state_labels_ = self._assign(dedup)
+        else:
+            self.states_ = refined
 
-    def _cost_of(self, label: IMLabel, D: Array) -> Array:
-        return im_costs(D, [label], self.frame_names_, self.alpha, self.beta)[:, 0]
+    def _assign(self, states: list[StateIM]) -> list[IntArray]:
+        out = []
+        for D in self.d6_:
+            sc = np.stack([self._residual_of(st.label, D) for st in states], axis=1)
+            out.append(_monotone_assignment(sc, self.smoothness))
+        return out
 
-    def _state_from_labels(self, used: dict[int, int]) -> StateIM:
-        total = sum(used.values())
+    def _residual_of(self, label: IMLabel, D: Array) -> Array:
+        return im_costs(D, [label], self.frame_names_, self.alpha, 0.0)[:, 0]
+
+    def _state_from_labels(self, used: dict[int, int], motion: list[list[Array]]) -> StateIM:
+        """The state's IM: the frame most of its rotating labels use, and the axes that
+        carry at least ``axis_support`` of the demonstrated net motion seen from that
+        frame (per demonstration ``|sum of d6|``, rotations times alpha: noise cancels
+        in the sum, deliberate motion adds up), at most three."""
         by_frame: dict[str, int] = {}
         for j, n in used.items():
             lab = self.labels_[j]
             # Translation-only labels do not care about the frame.
             if lab.rotates:
                 by_frame[lab.frame] = by_frame.get(lab.frame, 0) + n
-        frame = max(by_frame, key=lambda k: by_frame[k]) if by_frame else "ee"
-        support = np.zeros(6)
-        for j, n in used.items():
-            lab = self.labels_[j]
-            if lab.frame == frame or not lab.rotates:
-                support[list(lab.axes)] += n
-        support /= max(total, 1)
-        axes = [a for a in np.argsort(-support, kind="stable") if support[a] >= self.axis_support]
+        n_rot = sum(by_frame.values())
+        frame = "ee"
+        if by_frame and n_rot >= 0.5 * sum(used.values()):
+            frame = max(by_frame, key=lambda k: by_frame[k])
+        D = np.array(motion[self.frame_names_.index(frame)])
+        mag = np.abs(D).sum(axis=0) * np.array([1, 1, 1, self.alpha, self.alpha, self.alpha])
+        support = mag / max(float(mag.sum()), 1e-12)
+        axes = [int(a) for a in np.argsort(-support, kind="stable") if support[a] >= self.axis_support]
         axes = sorted(axes[:3]) or [int(np.argmax(support))]
         if not any(a >= 3 for a in axes):
             frame = "ee"
-        return StateIM(IMLabel(frame, tuple(int(a) for a in axes)),
-                       {AXIS_NAMES[a]: float(support[a]) for a in range(6) if support[a] > 0})
+        return StateIM(IMLabel(frame, tuple(axes)),
+                       {AXIS_NAMES[a]: round(float(support[a]), 4) for a in range(6)})
 
     # --- transitions ------------------------------------------------------------------
 
@@ -506,11 +545,11 @@ class LinearIMLearner:
             for frame in self.frame_names_:
                 X = np.concatenate([self.frame_positions(A, frame), self.frame_positions(B, frame)])
                 y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])
-                scale = 10.0  # decimetres: a better-conditioned SVM problem
-                svm = SVC(kernel="linear", C=self.C, class_weight="balanced", max_iter=200000,
+                # Metres, as the thesis' C = 1000 assumes (eq. 4.17).
+                svm = SVC(kernel="linear", C=self.C, class_weight="balanced", max_iter=1_000_000,
                           random_state=self.random_state)
-                svm.fit(X * scale, y)
-                w = svm.coef_[0] * scale
+                svm.fit(X, y)
+                w = svm.coef_[0]
                 b = float(svm.intercept_[0])
                 pred = np.sign(X @ w + b)
                 acc = 0.5 * (np.mean(pred[y < 0] < 0) + np.mean(pred[y > 0] > 0))

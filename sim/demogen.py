@@ -1,0 +1,279 @@
+"""Seeded demonstrations with ground truth for the two thesis tasks (Ch. 5.2, 5.3).
+
+Pure numpy. Every demonstration is the end-effector pose ``T_obj_ee`` over time in
+the task object's frame, sampled at ``rate`` Hz, with Gaussian noise and optional
+gross outliers, plus the truth the learner should recover:
+
+``pour`` (object ``mug``: origin at the centre of the mug's opening, z up). The
+end-effector's z axis is the bottle's axis and the bottle tip sits at ``TIP_OFFSET``
+(``[0, 0, 0.12]`` in the ee frame). *carry*: the bottle, upright, is translated along
+a straight line until its tip reaches the pour point (above the opening); *pour*: the
+bottle rotates about its tip, about the ee's y axis, tilting its top towards the mug.
+In the tip frame the pour is a rotation only; the ee moves on a sphere about the
+pour point (the truth ``sphere_centre``).
+
+``drawer`` (object ``drawer_handle``: origin at the grasp point of the *closed*
+drawer, x out of the drawer, z up; the frame stays where the closed handle was, so
+the pull shows as motion along +x). *reach*: translate to the handle from above and
+in front while the hand turns to its grasp orientation; *pull*: translate along +x.
+
+The speed profiles do not stop between phases (the carry ends at its mean speed and
+the pour starts at it), as a person moves.
+
+Run ``python -m sctd_sim.demogen pour OUT_DIR --n-demos 10 --seed 0`` to write CSVs
+``demo_00.csv ...`` (``t,x,y,z,qx,qy,qz,qw``) and ``truth.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+
+Array = NDArray[np.float64]
+
+TIP_OFFSET = np.array([0.0, 0.0, 0.12])  # bottle tip in the ee frame (m)
+POUR_POINT = np.array([0.0, 0.0, 0.05])  # tip position while pouring, mug frame (m)
+TASKS = ("pour", "drawer")
+PHASES = {"pour": ("carry", "pour"), "drawer": ("reach", "pull")}
+
+
+@dataclass
+class GeneratedDemo:
+    """One generated demonstration.
+
+    ``poses`` (n, 7) ``T_obj_ee`` with noise and outliers; ``clean`` (n, 7) without;
+    ``phase`` (n - 1,) the phase index of each displacement (rows i -> i + 1);
+    ``outlier_rows`` indices of rows replaced by gross outliers.
+    """
+
+    name: str
+    t: Array
+    poses: Array
+    clean: Array
+    phase: NDArray[np.int64]
+    outlier_rows: NDArray[np.int64]
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class DemoSet:
+    """Demonstrations of one task plus the truth shared by all of them."""
+
+    task: str
+    demos: list[GeneratedDemo]
+    truth: dict
+
+
+def _carry_profile(tau: Array) -> Array:
+    """s(0) = 0, s'(0) = 0, s(1) = 1, s'(1) = 1 (ends at its mean speed)."""
+    return 2.0 * tau**2 - tau**3
+
+
+def _final_profile(tau: Array) -> Array:
+    """s(0) = 0, s'(0) = 1, s(1) = 1, s'(1) = 0 (starts at its mean speed)."""
+    return 1.0 - _carry_profile(1.0 - tau)
+
+
+def _rot_z(a: float) -> Array:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _sample_times(durations: tuple[float, float], rate: float) -> tuple[Array, NDArray[np.int64]]:
+    total = durations[0] + durations[1]
+    n = int(np.floor(total * rate)) + 1
+    t = np.arange(n) / rate
+    # Displacement i (t_i -> t_{i+1}) belongs to phase 1 once it ends after the switch.
+    phase = (t[1:] > durations[0] + 1e-12).astype(np.int64)
+    return t, phase
+
+
+def _corrupt(rng: np.random.Generator, clean: Array, noise: float, rot_noise: float,
+             outliers: float) -> tuple[Array, NDArray[np.int64]]:
+    n = len(clean)
+    T = se3.transform_from_pose(clean)
+    pos = T[:, :3, 3] + rng.normal(0.0, noise, (n, 3))
+    R = T[:, :3, :3] @ se3.matrix_from_rotvec(rng.normal(0.0, rot_noise, (n, 3)))
+    rows = np.zeros(0, dtype=np.int64)
+    if outliers > 0 and n > 6:
+        k = round(outliers * n)
+        rows = np.sort(rng.choice(np.arange(2, n - 2), size=min(k, n - 4), replace=False))
+        dirs = rng.normal(size=(len(rows), 3))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        pos[rows] += dirs * rng.uniform(0.03, 0.10, (len(rows), 1))
+        axes = rng.normal(size=(len(rows), 3))
+        axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+        R[rows] = R[rows] @ se3.matrix_from_rotvec(axes * rng.uniform(0.2, 0.8, (len(rows), 1)))
+    q = se3.quaternion_from_matrix(R)
+    return np.concatenate([pos, q], axis=1), rows.astype(np.int64)
+
+
+def _pour_demo(rng: np.random.Generator, rate: float, pour_jitter: float) -> tuple:
+    phi = rng.uniform(-np.pi / 4, np.pi / 4)  # approach azimuth, from the +x side
+    dist = rng.uniform(0.25, 0.35)
+    height = rng.uniform(0.0, 0.15)
+    P = POUR_POINT + rng.normal(0.0, pour_jitter, 3) if pour_jitter > 0 else POUR_POINT.copy()
+    start_tip = P + np.array([dist * np.cos(phi), dist * np.sin(phi), height])
+    # Upright bottle (ee z up), ee x horizontal towards the mug (+- 10 deg of yaw).
+    yaw = phi + np.pi + rng.uniform(-np.radians(10), np.radians(10))
+    R0 = _rot_z(yaw)
+    theta_max = rng.uniform(np.radians(100), np.radians(130))
+    v_carry = rng.uniform(0.08, 0.12)
+    omega = rng.uniform(0.5, 0.8)
+    d1 = float(np.linalg.norm(P - start_tip)) / v_carry
+    d2 = theta_max / omega
+    t, phase = _sample_times((d1, d2), rate)
+    poses = np.empty((len(t), 7))
+    for i, ti in enumerate(t):
+        if ti <= d1:
+            s = _carry_profile(np.array(ti / d1))
+            tip = start_tip + s * (P - start_tip)
+            R = R0
+        else:
+            s = _final_profile(np.array(min(1.0, (ti - d1) / d2)))
+            R = R0 @ se3.matrix_from_rotvec(np.array([0.0, s * theta_max, 0.0]))
+            tip = P
+        p_ee = tip - R @ TIP_OFFSET
+        poses[i, :3] = p_ee
+        poses[i, 3:] = se3.quaternion_from_matrix(R)
+    info = {"pour_point": P.tolist(), "pour_axis": (R0 @ np.array([0.0, 1.0, 0.0])).tolist(),
+            "pour_angle": float(theta_max),
+            "carry_direction": ((P - start_tip) / np.linalg.norm(P - start_tip)).tolist()}
+    return t, poses, phase, info
+
+
+def _drawer_demo(rng: np.random.Generator, rate: float) -> tuple:
+    start = np.array([rng.uniform(0.20, 0.30), rng.uniform(-0.06, 0.06), rng.uniform(0.08, 0.14)])
+    pull = rng.uniform(0.20, 0.30)
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    w0 = axis * rng.uniform(np.radians(5), np.radians(15))  # start orientation offset
+    v_reach = rng.uniform(0.08, 0.12)
+    v_pull = rng.uniform(0.06, 0.10)
+    d1 = float(np.linalg.norm(start)) / v_reach
+    d2 = pull / v_pull
+    t, phase = _sample_times((d1, d2), rate)
+    poses = np.empty((len(t), 7))
+    for i, ti in enumerate(t):
+        if ti <= d1:
+            s = float(_carry_profile(np.array(ti / d1)))
+            p = (1.0 - s) * start
+            R = se3.matrix_from_rotvec((1.0 - s) * w0)
+        else:
+            s = float(_final_profile(np.array(min(1.0, (ti - d1) / d2))))
+            p = np.array([s * pull, 0.0, 0.0])
+            R = np.eye(3)
+        poses[i, :3] = p
+        poses[i, 3:] = se3.quaternion_from_matrix(R)
+    info = {"reach_direction": (-start / np.linalg.norm(start)).tolist(), "pull_length": pull}
+    return t, poses, phase, info
+
+
+def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: float | None = None,
+             outliers: float = 0.0, rate: float = 50.0, seed: int = 0,
+             pour_jitter: float = 0.0) -> DemoSet:
+    """Generate ``n_demos`` demonstrations of ``task`` (``pour`` or ``drawer``).
+
+    Parameters
+    ----------
+    task : str
+    n_demos : int
+    noise : float
+        Standard deviation of the Gaussian position noise (m).
+    rot_noise : float, optional
+        Standard deviation of the rotation noise (rad, per axis); default ``noise``
+        read as radians (1 mm -> 1 mrad).
+    outliers : float
+        Fraction of rows replaced by gross outliers (3-10 cm and 0.2-0.8 rad away).
+    rate : float
+        Samples per second.
+    seed : int
+        Seed of the numpy ``Generator``; the same arguments give the same data.
+    pour_jitter : float
+        Standard deviation (m) of the pour point between demonstrations (pour only).
+    """
+    if task not in TASKS:
+        raise ValueError(f"task must be one of {TASKS}, got {task!r}")
+    if n_demos < 1 or rate <= 0 or noise < 0 or not 0 <= outliers < 0.5:
+        raise ValueError("need n_demos >= 1, rate > 0, noise >= 0, 0 <= outliers < 0.5")
+    rng = np.random.default_rng(seed)
+    rn = noise if rot_noise is None else rot_noise
+    demos = []
+    for k in range(n_demos):
+        if task == "pour":
+            t, clean, phase, info = _pour_demo(rng, rate, pour_jitter)
+        else:
+            t, clean, phase, info = _drawer_demo(rng, rate)
+        poses, rows = _corrupt(rng, clean, noise, rn, outliers)
+        demos.append(GeneratedDemo(f"demo_{k:02d}.csv", t, poses, clean, phase, rows, info))
+    if task == "pour":
+        dirs = np.array([d.info["carry_direction"] for d in demos])
+        centre = np.mean([d.info["pour_point"] for d in demos], axis=0)
+        truth = {"sphere_centre": centre.tolist(), "tip_offset": TIP_OFFSET.tolist(),
+                 "directions": {"carry": _unit_mean(dirs).tolist()},
+                 "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
+    else:
+        dirs = np.array([d.info["reach_direction"] for d in demos])
+        truth = {"directions": {"reach": _unit_mean(dirs).tolist(), "pull": [1.0, 0.0, 0.0]}}
+    truth.update({
+        "task": task, "object": "mug" if task == "pour" else "drawer_handle",
+        "phases": list(PHASES[task]),
+        "labels": {d.name: d.phase.tolist() for d in demos},
+        "outlier_rows": {d.name: d.outlier_rows.tolist() for d in demos},
+        "params": {"n_demos": n_demos, "noise": noise, "rot_noise": rn, "outliers": outliers,
+                   "rate": rate, "seed": seed, "pour_jitter": pour_jitter},
+    })
+    return DemoSet(task, demos, truth)
+
+
+def _unit_mean(v: Array) -> Array:
+    m = v.mean(axis=0)
+    return m / np.linalg.norm(m)
+
+
+def write_demo_set(demo_set: DemoSet, directory: str | Path, digits: int = 6) -> list[Path]:
+    """Write ``demo_XX.csv`` files and ``truth.json`` into ``directory`` (created)."""
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for d in demo_set.demos:
+        p = out / d.name
+        with p.open("w", newline="") as fh:
+            fh.write("t,x,y,z,qx,qy,qz,qw\n")
+            fmt = ",".join([f"%.{digits}f"] * 8) + "\n"
+            for ti, row in zip(d.t, d.poses, strict=True):
+                fh.write(fmt % (ti, *row))
+        paths.append(p)
+    (out / "truth.json").write_text(json.dumps(demo_set.truth, indent=1) + "\n")
+    return paths
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sctd_sim.demogen", description=__doc__.split("\n")[0])
+    ap.add_argument("task", choices=TASKS)
+    ap.add_argument("out", type=Path, help="output directory (CSV files and truth.json)")
+    ap.add_argument("--n-demos", type=int, default=10)
+    ap.add_argument("--noise", type=float, default=0.001, help="position noise std (m)")
+    ap.add_argument("--rot-noise", type=float, default=None, help="rotation noise std (rad)")
+    ap.add_argument("--outliers", type=float, default=0.0, help="fraction of outlier rows")
+    ap.add_argument("--rate", type=float, default=50.0, help="samples per second")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--pour-jitter", type=float, default=0.0)
+    args = ap.parse_args(argv)
+    ds = generate(args.task, n_demos=args.n_demos, noise=args.noise, rot_noise=args.rot_noise,
+                  outliers=args.outliers, rate=args.rate, seed=args.seed,
+                  pour_jitter=args.pour_jitter)
+    paths = write_demo_set(ds, args.out)
+    print(f"wrote {len(paths)} demonstrations and truth.json to {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,93 @@
+"""Known answers of the demonstration generator (sim/demogen.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from sctd import se3
+from sctd.learn import read_demos
+from sctd_sim import demogen
+
+
+def test_seeded_and_reproducible():
+    a = demogen.generate("pour", 3, seed=4, outliers=0.05)
+    b = demogen.generate("pour", 3, seed=4, outliers=0.05)
+    c = demogen.generate("pour", 3, seed=5, outliers=0.05)
+    for x, y in zip(a.demos, b.demos, strict=True):
+        np.testing.assert_array_equal(x.poses, y.poses)
+    assert not np.allclose(a.demos[0].poses[:5], c.demos[0].poses[:5])
+
+
+def test_pour_ground_truth_geometry():
+    ds = demogen.generate("pour", 4, noise=0.0, seed=1)
+    centre = np.asarray(ds.truth["sphere_centre"])
+    tip = np.asarray(ds.truth["tip_offset"])
+    for d in ds.demos:
+        T = se3.transform_from_pose(d.clean)
+        tip_pos = T[:, :3, :3] @ tip + T[:, :3, 3]
+        phase = d.phase
+        assert phase[0] == 0 and phase[-1] == 1 and np.all(np.diff(phase) >= 0)
+        pour_rows = np.flatnonzero(phase == 1) + 1
+        # While pouring the tip stays at the pour point: the ee moves on a sphere.
+        np.testing.assert_allclose(tip_pos[pour_rows], np.broadcast_to(centre, (len(pour_rows), 3)),
+                                   atol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(T[pour_rows, :3, 3] - centre, axis=1), 0.12,
+                                   atol=1e-9)
+        # Carrying, the bottle is upright (ee z up) and the tip moves on a straight line.
+        carry_rows = np.flatnonzero(phase == 0)
+        np.testing.assert_allclose(T[carry_rows, :3, 2], np.tile([0, 0, 1.0], (len(carry_rows), 1)),
+                                   atol=1e-9)
+        seg = tip_pos[carry_rows] - tip_pos[0]
+        direction = np.asarray(d.info["carry_direction"])
+        np.testing.assert_allclose(np.cross(seg, direction), 0.0, atol=1e-9)
+        # In the tip frame the pour is a rotation about the tip's y axis only.
+        Tt = T[pour_rows] @ se3.transform_from_pose([*tip, 0, 0, 0, 1])
+        d6 = se3.displacement_from_transforms(Tt[:-1], Tt[1:])
+        assert np.abs(d6[:, :3]).max() < 1e-9
+        assert np.abs(d6[:, [3, 5]]).max() < 1e-9 and np.all(d6[:, 4] > 0)
+
+
+def test_drawer_ground_truth():
+    ds = demogen.generate("drawer", 3, noise=0.0, seed=2)
+    assert ds.truth["directions"]["pull"] == [1.0, 0.0, 0.0]
+    for d in ds.demos:
+        pull = np.flatnonzero(d.phase == 1) + 1
+        p = d.clean[pull, :3]
+        assert np.all(np.diff(p[:, 0]) > 0)
+        np.testing.assert_allclose(p[:, 1:], 0.0, atol=1e-12)
+        np.testing.assert_allclose(d.clean[0, :3] / np.linalg.norm(d.clean[0, :3]),
+                                   -np.asarray(d.info["reach_direction"]))
+
+
+def test_noise_and_outliers_where_reported():
+    ds = demogen.generate("pour", 2, noise=0.001, outliers=0.05, seed=3)
+    for d in ds.demos:
+        err = np.linalg.norm(d.poses[:, :3] - d.clean[:, :3], axis=1)
+        rows = d.outlier_rows
+        assert len(rows) == round(0.05 * len(d.t))
+        assert np.all(err[rows] > 0.02)
+        others = np.setdiff1d(np.arange(len(err)), rows)
+        assert err[others].max() < 0.01
+        np.testing.assert_allclose(np.linalg.norm(d.poses[:, 3:], axis=1), 1.0, atol=1e-12)
+
+
+def test_write_demo_set_round_trip(tmp_path):
+    ds = demogen.generate("drawer", 3, seed=0, rate=40.0)
+    demogen.write_demo_set(ds, tmp_path)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    demos = read_demos(tmp_path)
+    assert [d.name for d in demos] == ["demo_00.csv", "demo_01.csv", "demo_02.csv"]
+    for d, g in zip(demos, ds.demos, strict=True):
+        assert len(truth["labels"][d.name]) == len(d.t) - 1
+        np.testing.assert_allclose(d.poses[:, :3], g.poses[:, :3], atol=1e-6)
+        assert np.allclose(np.diff(d.t), 1 / 40.0)
+
+
+def test_rejects_bad_arguments():
+    with pytest.raises(ValueError):
+        demogen.generate("juggle")
+    with pytest.raises(ValueError):
+        demogen.generate("pour", outliers=0.7)

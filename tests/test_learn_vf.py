@@ -1,0 +1,115 @@
+"""Vector fields (Ch. 4.2): RANSAC finds planted fields under outliers for every seed,
+least-squares refinement keeps centres stable, EM and the generated tasks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sctd.learn import Demo, LearnParams, VectorFieldLearner, learn_vector_fields, ransac_iterations
+from sctd.learn.vf import cylinder_field, sphere_field
+from sctd_sim import demogen
+
+
+def _arcs(rng, centre, n_arcs=6, radius=0.12, steps=25):
+    """Trajectories on great-circle arcs about ``centre`` with different axes."""
+    out = []
+    for _ in range(n_arcs):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        start = np.cross(axis, rng.normal(size=3))
+        start = radius * start / np.linalg.norm(start)
+        ang = np.linspace(0, 1.5, steps)
+        K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        pts = [centre + (np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K) @ start for a in ang]
+        out.append(np.array(pts) + rng.normal(0, 0.0005, (steps, 3)))
+    return out
+
+
+def _with_outliers(rng, trajs, frac=0.3):
+    """Add random-walk trajectories (outliers) making up ``frac`` of the points."""
+    n = sum(len(t) for t in trajs)
+    k = int(frac / (1 - frac) * n)
+    walk = np.cumsum(rng.normal(0, 0.01, (k, 3)), axis=0) + rng.uniform(-0.3, 0.3, 3)
+    return [*trajs, walk]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_ransac_finds_planted_sphere_under_outliers(seed):
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(-0.2, 0.2, 3)
+    trajs = _with_outliers(rng, _arcs(rng, centre))
+    vf = VectorFieldLearner(n_fields=1, random_state=seed).fit(trajs)
+    f = vf.ransac_fields_[0]
+    assert f.type == "sphere"
+    assert np.linalg.norm(f.centre - centre) < 0.005
+    assert np.linalg.norm(vf.fields_[0].centre - centre) < 0.005
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_ransac_finds_planted_translation_under_outliers(seed):
+    rng = np.random.default_rng(100 + seed)
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    trajs = [rng.uniform(-0.2, 0.2, 3) + np.outer(np.linspace(0, 0.3, 30), d)
+             + rng.normal(0, 0.001, (30, 3)) for _ in range(5)]
+    vf = VectorFieldLearner(n_fields=1, random_state=seed).fit(_with_outliers(rng, trajs))
+    f = vf.fields_[0]
+    assert f.type == "translation"
+    assert np.degrees(np.arccos(np.clip(f.direction @ d, -1, 1))) < 3.0
+
+
+def test_cylinder_and_sphere_least_squares_are_exact():
+    rng = np.random.default_rng(0)
+    axis = np.array([0.0, 0.6, 0.8])
+    point = np.array([0.1, -0.2, 0.3])
+    p = point + rng.normal(size=(40, 3)) * 0.1
+    v = np.cross(axis, p - point)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    f = cylinder_field(p, v)
+    np.testing.assert_allclose(f.axis, axis, atol=1e-9)
+    assert np.linalg.norm(np.cross(f.point - point, axis)) < 1e-9  # on the axis line
+    c = np.array([0.05, 0.0, 0.1])
+    q = c + rng.normal(size=(40, 3)) * 0.1
+    t = np.cross(rng.normal(size=(40, 3)), q - c)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    np.testing.assert_allclose(sphere_field(q, t).centre, c, atol=1e-9)
+
+
+def test_ransac_iterations_eq_4_23():
+    assert ransac_iterations(0.99, 0.5, 1) == 7
+    assert ransac_iterations(0.99, 0.5, 3) == 35
+    assert ransac_iterations(0.99, 0.0, 3) == 1
+    with pytest.raises(ValueError):
+        ransac_iterations(0.99, 1.0, 2)
+
+
+def test_pour_sphere_centre_is_stable_and_gives_the_tip():
+    ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=5)
+    demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
+    truth = np.asarray(ds.truth["sphere_centre"])
+    centres = []
+    for s in range(3):
+        res = learn_vector_fields(demos, LearnParams(seed=s))
+        kinds = sorted(f.type for f in res.learner.fields_)
+        assert kinds == ["sphere", "translation"]
+        sph = next(f for f in res.learner.fields_ if f.type == "sphere")
+        centres.append(sph.centre)
+        cf = res.learner.candidate_frames_[0]
+        np.testing.assert_allclose(cf["ee_offset"], ds.truth["tip_offset"], atol=0.01)
+        r = res.learner.responsibilities_
+        np.testing.assert_allclose(r.sum(axis=1), 1.0)
+    C = np.array(centres)
+    assert np.linalg.norm(C - truth, axis=1).max() < 0.005
+    assert np.linalg.norm(C - C.mean(axis=0), axis=1).max() < 0.002
+
+
+def test_drawer_two_translation_fields():
+    ds = demogen.generate("drawer", 8, noise=0.001, outliers=0.05, seed=6)
+    demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
+    res = learn_vector_fields(demos, LearnParams(seed=0))
+    dirs = [f.direction for f in res.learner.fields_ if f.type == "translation"]
+    assert len(dirs) == 2
+    for true in ds.truth["directions"].values():
+        err = min(np.degrees(np.arccos(np.clip(d @ np.asarray(true), -1, 1))) for d in dirs)
+        assert err < 5.0
