@@ -16,7 +16,7 @@ import pytest
 import zenoh
 
 from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
 from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
 
@@ -89,7 +89,7 @@ class Rig:
         self.thread.join()
         for d in (*self.subs, self.pub_state, self.pub_obj, self.pub_in):
             d.undeclare()
-        self.session.close()
+        close_session(self.session)
 
 
 @pytest.fixture

@@ -1,6 +1,7 @@
 """``sctd demo``: the main job on one machine, end to end, on a free loopback port.
 
-Starts ``sctd run`` with a skill, a robot (the kinematic stand-in) and the simulated
+Starts ``sctd run`` with a skill, a robot (the Pinocchio simulator, or the kinematic
+stand-in with ``--robot-backend kinematic``) and the simulated
 user as separate processes, prints the FSM state changes as the targets report them,
 and finishes with the target rate, the input -> target latency and the daemon's tick
 statistics. Exits non-zero if any part failed.
@@ -17,7 +18,7 @@ import time
 from pathlib import Path
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
-ROBOTS = {"kinematic": "sctd_sim.kinematic"}
+ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
 
 
 def add_demo_arguments(p: argparse.ArgumentParser) -> None:
@@ -27,8 +28,9 @@ def add_demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=10.0,
                    help="how long the user drives (default %(default)s)")
     p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
-    p.add_argument("--robot-backend", default="kinematic", choices=sorted(ROBOTS),
-                   help="what stands in for the arm")
+    p.add_argument("--robot-backend", default="sim", choices=sorted(ROBOTS),
+                   help="what stands in for the arm: the Pinocchio simulator (sim, default) or "
+                        "the kinematic stand-in")
     p.add_argument("--logs", help="keep the processes' logs in this folder")
 
 
@@ -46,7 +48,7 @@ def _last_json(text: str) -> dict | None:
 def main_demo(args: argparse.Namespace) -> int:
     from ..runtime import codec
     from ..runtime.procs import Child, free_port
-    from ..runtime.zsession import open_session
+    from ..runtime.zsession import session as zsession
     from ..skill import SkillError, load_skill
 
     try:
@@ -86,7 +88,7 @@ def main_demo(args: argparse.Namespace) -> int:
                "--stats-json", log=logdir / "daemon.log") as daemon, \
          Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
                log=logdir / "robot.log") as robot, \
-         open_session(connect=[ep]) as session:
+         zsession(connect=[ep]) as session:
         sub = session.declare_subscriber(keys.status, on_status)
         deadline = time.monotonic() + 30
         while seen["targets"] == 0 and time.monotonic() < deadline and daemon.running() and robot.running():

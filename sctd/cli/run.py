@@ -45,9 +45,11 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_run(args: argparse.Namespace) -> int:
+    import zenoh
+
     from ..runtime.controller import RuntimeConfig
     from ..runtime.daemon import Daemon
-    from ..runtime.zsession import session_from_args
+    from ..runtime.zsession import close_session, open_session
     from ..skill import SkillError, load_skill
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
@@ -70,11 +72,11 @@ def main_run(args: argparse.Namespace) -> int:
         status_rate=args.status_rate,
     )
     try:
-        session = session_from_args(args)
-    except (ValueError, Exception) as e:  # zenoh raises ZError on bad configs
+        session = open_session(args.listen, args.connect, args.zenoh_config)
+    except (ValueError, zenoh.ZError) as e:
         print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
         return 2
-    with session:
+    try:
         daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority)
 
         def on_signal(signum, frame):
@@ -83,6 +85,8 @@ def main_run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, on_signal)
         signal.signal(signal.SIGTERM, on_signal)
         stats = daemon.run(args.duration)
+    finally:
+        close_session(session)
     if args.stats_json:
         print(json.dumps(stats))
     return 0

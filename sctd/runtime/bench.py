@@ -28,7 +28,7 @@ import zenoh
 from . import codec
 from .procs import Child, free_port
 from .timing import Histogram, Ticker, set_timer_slack
-from .zsession import add_zenoh_arguments, open_session, session_from_args
+from .zsession import add_zenoh_arguments, session, session_from_args
 
 PING = "sctd/bench/ping"
 PONG = "sctd/bench/pong"
@@ -146,7 +146,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
                "--rt-priority", str(rt_priority), "--stats-json", log=logdir / "daemon.log") as daemon, \
          Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.runtime.bench", "echo", "--connect", ep, log=logdir / "echo.log"):
-        with open_session(connect=[ep]) as s:  # wait until the daemon publishes targets
+        with session(connect=[ep]) as s:  # wait until the daemon publishes targets
             sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
             end = time.monotonic() + 30
             while sub.try_recv() is None:

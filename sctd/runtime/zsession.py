@@ -14,7 +14,9 @@ ports); ``--zenoh-config FILE`` replaces all of this for multi-host use.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
@@ -55,6 +57,9 @@ def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | No
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "true")
     conf.insert_json5("transport/link/protocols", '["tcp"]')
+    # Shared memory would leave segments in /dev/shm after a kill; loopback TCP is fast.
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    conf.insert_json5("scouting/gossip/autoconnect", '{"router": [], "peer": ["router", "peer"]}')
     conf.insert_json5("listen/endpoints", json.dumps(listen_eps))
     conf.insert_json5("listen/timeout_ms", "-1")
     conf.insert_json5("listen/exit_on_failure", "false")
@@ -68,9 +73,41 @@ def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | No
 
 def open_session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
                  config_file: str | Path | None = None) -> zenoh.Session:
-    """Open a Zenoh session with :func:`make_config` (close it, or use it as a
-    context manager)."""
+    """Open a Zenoh session with :func:`make_config`; close it with :func:`close_session`
+    (or use :func:`session`, a context manager that does)."""
     return zenoh.open(make_config(listen, connect, config_file))
+
+
+def close_session(s: zenoh.Session, timeout: float = 1.0) -> bool:
+    """Close a session within ``timeout`` seconds; False if Zenoh did not finish.
+
+    A program that is still retrying to bind ``tcp/127.0.0.1:7447`` in the background
+    (another one holds it) cannot cancel that retry, and ``Session.close`` then blocks
+    for about 10 s before failing. Closing from a helper thread bounds the wait; the
+    process can exit regardless.
+    """
+    t = threading.Thread(target=_close_quietly, args=(s,), name="zenoh-close", daemon=True)
+    t.start()
+    t.join(timeout)
+    return not t.is_alive()
+
+
+def _close_quietly(s: zenoh.Session) -> None:
+    try:
+        s.close()
+    except zenoh.ZError:  # "close operation timed out!": nothing left to do
+        pass
+
+
+@contextmanager
+def session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
+            config_file: str | Path | None = None) -> Iterator[zenoh.Session]:
+    """``with session(...) as s:`` an open session, closed with a bounded wait."""
+    s = open_session(listen, connect, config_file)
+    try:
+        yield s
+    finally:
+        close_session(s)
 
 
 def add_zenoh_arguments(parser) -> None:
@@ -84,5 +121,6 @@ def add_zenoh_arguments(parser) -> None:
                    help="Zenoh json5 config file replacing the loopback defaults")
 
 
-def session_from_args(args) -> zenoh.Session:
-    return open_session(args.listen, args.connect, args.zenoh_config)
+def session_from_args(args):
+    """``with session_from_args(args) as s:`` for the common Zenoh flags."""
+    return session(args.listen, args.connect, args.zenoh_config)
