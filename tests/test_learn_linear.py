@@ -124,3 +124,38 @@ def test_expansion_option_gives_the_same_states(pour_result):
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res2 = learn_linear(demos, {"tip": TIP}, LearnParams(seed=0, cut="expansion"))
     assert [s.label for s in res2.learner.states_] == [s.label for s in res.learner.states_]
+
+
+def test_dtw_edges_pair_the_same_stage_of_identical_demos():
+    """Two copies of a demonstration, the second sampled twice as densely: DTW pairs
+    each displacement with the ones at the same place, across the two demos."""
+    from sctd.learn.linear import dtw_edges
+
+    x = np.linspace(0.0, 0.3, 16)
+    a = np.stack([x, np.zeros(16), np.zeros(16), np.zeros(16), np.zeros(16), np.zeros(16), np.ones(16)], 1)
+    x2 = np.linspace(0.0, 0.3, 31)
+    b = np.stack([x2, np.zeros(31), np.zeros(31), np.zeros(31), np.zeros(31), np.zeros(31), np.ones(31)], 1)
+    E, w = dtw_edges([a, b, a.copy()])
+    assert len(E) and np.all(E[:, 0] < E[:, 1])
+    assert np.all((w > 0) & (w <= 1))
+    off = [0, 16, 47]
+    # Every edge joins two different demonstrations at (nearly) the same position.
+    demo_of = np.searchsorted(off, E, side="right") - 1
+    assert np.all(demo_of[:, 0] != demo_of[:, 1])
+    allp = np.concatenate([a, b, a])[:, 0]
+    assert np.all(np.abs(allp[E[:, 0]] - allp[E[:, 1]]) <= 0.01 + 1e-12)
+    # The identical copy (demo 2) is matched index for index with the reference...
+    # or the reference is b (median length) and both copies map onto it.
+    assert set(map(tuple, demo_of.tolist())) <= {(0, 1), (1, 2), (0, 2)}
+
+
+def test_dtw_align_option_learns_the_same_skill_shape():
+    from sctd.learn.bench import _accuracy, _demos
+    from sctd.learn.pipeline import LearnParams, learn_linear
+    from sctd_sim import demogen
+
+    ds = demogen.generate("pour", 6, noise=0.001, outliers=0.05, seed=3)
+    r = learn_linear(_demos(ds), {"tip": np.array([0, 0, 0.12, 0, 0, 0, 1.0])},
+                     LearnParams(seed=3, dtw_align=True))
+    assert [s.label.name for s in r.learner.states_] == ["ee:txtytz", "tip:ry"]
+    assert _accuracy(r, ds.truth)[0] >= 0.95

@@ -54,6 +54,8 @@ def add_learn_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPar
     g.add_argument("--axis-support", type=float, default=_D.axis_support,
                    help="share of a state's net motion an axis needs to be in its IM")
     g.add_argument("--margin", type=float, default=_D.margin, help="transition hysteresis (m)")
+    g.add_argument("--dtw-align", action="store_true",
+                   help="add DTW-aligned displacements of different demos as graph-cut neighbours")
     g = parser.add_argument_group("vector fields (Ch. 4.2)")
     g.add_argument("--n-fields", type=int, default=_D.n_fields, help="RANSAC fields n_R")
     g.add_argument("--em-iterations", type=int, default=_D.em_iterations)

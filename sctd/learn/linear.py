@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from .. import se3
+from .demos import dtw
 from .graphcut import alpha_beta_swap, alpha_expansion, energy
 
 Array = NDArray[np.float64]
@@ -192,6 +193,41 @@ def neighbour_graph(poses: ArrayLike, demo_index: ArrayLike, radius: float = 0.0
     return E, w
 
 
+def dtw_edges(poses_by_demo: list[Array], alpha: float = 0.4) -> tuple[IntArray, Array]:
+    """Cross-demonstration neighbours from DTW alignment (Ch. 3.3.1's preprocessing).
+
+    Every demonstration is aligned by DTW (tf-norm local cost) to a reference, the one
+    of median length; each matched pair of displacements becomes an edge of the
+    smoothness term, so the graph cut prefers to label what the demonstrators did at
+    the same stage of the task alike, even where the demonstrations are far apart in
+    space (beyond the spatial neighbour radius).
+
+    Parameters
+    ----------
+    poses_by_demo : list of ndarray, each (m_k, 7)
+        Start pose of each displacement, per demonstration, in global order.
+
+    Returns
+    -------
+    edges : ndarray, shape (e, 2) of int (global displacement indices, i < j)
+    weights : ndarray, shape (e,), ``exp(-tf-norm)`` of the matched poses
+    """
+    if len(poses_by_demo) < 2:
+        return np.zeros((0, 2), np.int64), np.zeros(0)
+    offsets = np.concatenate([[0], np.cumsum([len(p) for p in poses_by_demo])])
+    ref = int(np.argsort([len(p) for p in poses_by_demo])[len(poses_by_demo) // 2])
+    pairs = []
+    for k, P in enumerate(poses_by_demo):
+        if k == ref:
+            continue
+        _cost, path = dtw(P, poses_by_demo[ref], alpha)
+        a, b = path[:, 0] + offsets[k], path[:, 1] + offsets[ref]
+        pairs.append(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1))
+    E = np.unique(np.concatenate(pairs).astype(np.int64), axis=0)
+    allP = np.concatenate(poses_by_demo)
+    return E, np.exp(-_tf_dist(allP[E[:, 0]], allP[E[:, 1]], alpha))
+
+
 def _tf_dist(a: Array, b: Array, alpha: float) -> Array:
     return (np.linalg.norm(a[:, :3] - b[:, :3], axis=1)
             + alpha * se3.quaternion_angle(a[:, 3:], b[:, 3:]))
@@ -300,6 +336,9 @@ class LinearIMLearner:
         state's IM to include it.
     margin : float
         Hysteresis margin of the hyperplane transitions (m).
+    dtw_align : bool
+        Also make DTW-aligned displacements of different demonstrations neighbours in
+        the smoothness term (:func:`dtw_edges`).
     random_state : int or None
         Seed for the SVM solver.
 
@@ -320,7 +359,7 @@ class LinearIMLearner:
     def __init__(self, alpha: float = 0.4, beta: float = 0.01, smoothness: float = 0.005,
                  radius: float = 0.04, max_n: int = 10, C: float = 1000.0, method: str = "swap",
                  min_segment: int = 3, axis_support: float = 0.08, margin: float = 0.005,
-                 random_state: int | None = None):
+                 dtw_align: bool = False, random_state: int | None = None):
         self.alpha = alpha
         self.beta = beta
         self.smoothness = smoothness
@@ -331,6 +370,7 @@ class LinearIMLearner:
         self.min_segment = min_segment
         self.axis_support = axis_support
         self.margin = margin
+        self.dtw_align = dtw_align
         self.random_state = random_state
 
     def fit(self, T_obj_ee: list[ArrayLike], frames: dict[str, ArrayLike] | None = None,
@@ -385,6 +425,12 @@ class LinearIMLearner:
         start_poses = np.concatenate([se3.pose_from_transform(T[:-1]) for T in demos])
         edges, weights = neighbour_graph(start_poses, demo_index, self.radius, self.max_n,
                                          self.alpha)
+        if self.dtw_align:
+            per_demo = [se3.pose_from_transform(T[:-1]) for T in demos]
+            e2, w2 = dtw_edges(per_demo, self.alpha)
+            both = np.concatenate([edges, e2])
+            edges, first = np.unique(both, axis=0, return_index=True)
+            weights = np.concatenate([weights, w2])[first]
         solve = alpha_beta_swap if self.method == "swap" else alpha_expansion
         f = solve(unary, edges, weights, self.smoothness)
         self.edges_, self.weights_ = edges, weights

@@ -43,6 +43,7 @@ class LearnParams:
     min_segment: int = 3
     axis_support: float = 0.08
     margin: float = 0.005
+    dtw_align: bool = False  # DTW-aligned displacements of different demos as neighbours
     # vector fields (Ch. 4.2)
     n_fields: int = 2  # n_R
     em_iterations: int = 5
@@ -137,7 +138,7 @@ def learn_linear(demos: list[Demo], frames: dict[str, Any] | None, params: Learn
                               radius=params.radius, max_n=params.max_n, C=params.C,
                               method=params.cut, min_segment=params.min_segment,
                               axis_support=params.axis_support, margin=params.margin,
-                              random_state=params.seed)
+                              dtw_align=params.dtw_align, random_state=params.seed)
     learner.fit([se3.transform_from_pose(p.poses) for p in prepared],
                 {k: se3.transform_from_pose(v) for k, v in frames.items()}, progress=progress)
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
