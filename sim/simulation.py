@@ -18,10 +18,11 @@ from typing import Any
 
 import can
 import numpy as np
+import pinocchio as pin
 
 from sctd import se3
 
-from .arm import SimArm, ee_transform
+from .arm import SimArm
 from .canbus import FaultConfig
 from .controller import ImpedanceGains
 from .robot import FORWARD_POSTURE, UP_POSTURE, ArmModel, inverse_kinematics, load_arm_model
@@ -76,6 +77,7 @@ class Simulation:
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
         self._wrench = np.zeros(6)
+        self._fk = model.model.createData()  # workspace of state_message (1 kHz: no allocation)
 
     @property
     def t(self) -> float:
@@ -113,7 +115,7 @@ class Simulation:
         p = np.asarray(pose, dtype=float)
         if p.shape != (7,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[3:]) < 1e-6:
             return
-        self.arm.set_target(se3.transform_from_pose(p), stamp)
+        self.arm.set_target(se3.matrix4_from_pose(p.tolist()), stamp)
 
     def state_message(self) -> dict[str, list[float]]:
         """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).
@@ -124,9 +126,10 @@ class Simulation:
         adds ``seq`` and ``stamp``.
         """
         m = self.arm.master
-        T = ee_transform(self.arm.arm, m.q)
+        arm = self.arm.arm
+        pin.framesForwardKinematics(arm.model, self._fk, m.q)
         return {
-            "pose": se3.pose_from_transform(T).tolist(),
+            "pose": se3.pose_from_matrix4(self._fk.oMf[arm.ee_frame_id].homogeneous),
             "q": m.q.tolist(),
             "dq": m.dq.tolist(),
             "wrench": self._wrench.tolist(),
@@ -135,7 +138,7 @@ class Simulation:
     def objects(self) -> dict[str, list[float]]:
         """Scene object poses in world, ``{name: [x, y, z, qx, qy, qz, qw]}``."""
         T_world_ee = self.arm.dynamics.ee_transform()
-        return {name: se3.pose_from_transform(T).tolist()
+        return {name: se3.pose_from_matrix4(T)
                 for name, T in self.scene.objects(T_world_ee).items()}
 
     def scene_outcome(self) -> dict[str, Any]:

@@ -7,6 +7,7 @@ import sys
 
 from . import demo as demo_cmd
 from . import run as run_cmd
+from . import sim as sim_cmd
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,6 +40,14 @@ def build_parser() -> argparse.ArgumentParser:
     learn_cli.add_dtw_arguments(p)
     p.set_defaults(func=learn_cli.main_dtw)
 
+    p = sub.add_parser("sim", help="the Pinocchio simulator as a real-time Zenoh service")
+    sim_cmd.add_sim_arguments(p)
+    p.set_defaults(func=sim_cmd.main_sim)
+
+    p = sub.add_parser("record", help="record a demonstration (ee in the task object's frame) as CSV")
+    sim_cmd.add_record_arguments(p)
+    p.set_defaults(func=sim_cmd.main_record)
+
     bench = sub.add_parser("bench", help="benchmarks that print figures")
     bsub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
     from ..runtime import bench as runtime_bench
@@ -53,6 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-demos", type=int, default=10)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_bench_learn)
+
+    p = bsub.add_parser("sim", help="simulator real-time factor, step response and tracking")
+    sim_cmd.add_bench_sim_arguments(p)
+    p.set_defaults(func=sim_cmd.main_bench_sim)
     return parser
 
 

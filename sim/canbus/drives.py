@@ -29,6 +29,7 @@ from .codec import (
     SYNC_ID,
     JointBusCodecs,
 )
+from .frames import new_message
 from .link import ACCEPTED, DUPLICATED, LinkStats, classify
 from .virtual import drain, send_batch
 
@@ -66,6 +67,7 @@ class JointDrives:
         n = codecs.n_joints
         self.n = n
         self.tau_max = np.asarray(tau_max, dtype=float).copy()
+        self._tau_min = -self.tau_max
         self.timeout = float(timeout)
         self.tau_cmd = np.zeros(n)
         self.braked = np.ones(n, dtype=bool)
@@ -161,7 +163,8 @@ class JointDrives:
         """
         timed_out = (t - self._last_cmd_t) > self.timeout
         braked = timed_out | ~self._enabled
-        tau = np.clip(self.tau_cmd, -self.tau_max, self.tau_max)
+        # minimum/maximum: a third of np.clip's overhead on 7 elements
+        tau = np.minimum(np.maximum(self.tau_cmd, self._tau_min), self.tau_max)
         saturated = tau != self.tau_cmd
         if np.count_nonzero(braked) or np.count_nonzero(self.braked):
             self.brake_events += int(np.count_nonzero(braked & ~self.braked))
@@ -185,10 +188,8 @@ class JointDrives:
         if at_limit is not None and np.count_nonzero(at_limit):
             status = status | np.where(at_limit, STATUS_SATURATED, 0)
         counter = self._counter
-        Message = can.Message
         return [
-            Message(timestamp=stamp, arbitration_id=codec.frame_id, is_extended_id=False, dlc=8,
-                    data=codec.pack(counter, si, qi, dqi, ti), check=False)
+            new_message(stamp, codec.frame_id, False, 8, codec.pack(counter, si, qi, dqi, ti))
             for codec, si, qi, dqi, ti in zip(self._state_codecs, status.tolist(), q.tolist(),
                                               dq.tolist(), tau.tolist(), strict=True)
         ]

@@ -6,6 +6,7 @@ import can
 import numpy as np
 
 from .codec import MODE_ENABLE, JointBusCodecs
+from .frames import new_message
 from .link import ACCEPTED, DUPLICATED, LinkStats, classify
 from .virtual import drain, send_batch
 
@@ -78,15 +79,13 @@ class BusMaster:
         self.cycle = (self.cycle + 1) & 0xFFFFFFFF
         counter = self.cycle & 0xF
         sync = self.codecs.sync
-        Message = can.Message
-        out = [Message(timestamp=stamp, arbitration_id=sync.frame_id, is_extended_id=False,
-                       dlc=8, data=sync.pack(counter, 0, self.cycle, self.period), check=False)]
+        out = [new_message(stamp, sync.frame_id, False, 8,
+                           sync.pack(counter, 0, self.cycle, self.period))]
         mode = MODE_ENABLE if enable else 0
         for codec, ti, qi, dqi in zip(self.codecs.cmd, tau.tolist(), q.tolist(), dq.tolist(),
                                       strict=True):
-            out.append(Message(timestamp=stamp, arbitration_id=codec.frame_id,
-                               is_extended_id=False, dlc=8,
-                               data=codec.pack(counter, mode, ti, qi, dqi), check=False))
+            out.append(new_message(stamp, codec.frame_id, False, 8,
+                                   codec.pack(counter, mode, ti, qi, dqi)))
         return out
 
     def send(self, frames: list[can.Message]) -> bool:

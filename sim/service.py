@@ -1,0 +1,344 @@
+"""``sctd sim``: the Pinocchio simulator as a real-time Zenoh service.
+
+Runs :class:`~sctd_sim.simulation.Simulation` on absolute deadlines (one cycle per
+period of the monotonic clock) and speaks the wire contract (docs/wire-contract.md):
+
+- follows ``sctd/<robot>/target``: a newest-wins ring drained every cycle, so every
+  message is decoded and a malformed one is dropped and counted by reason; the newest
+  valid target goes to the impedance controller, which holds the pose when targets
+  stop (stale-target hold);
+- publishes ``sctd/<robot>/state`` (``pose``, ``q``, ``dq``, ``wrench``; every cycle by
+  default), the scene's objects on ``sctd/<robot>/objects/<name>`` (50 Hz) and the task
+  outcome with the service's own health on ``sctd/<robot>/scene`` (10 Hz, see
+  :meth:`SimService.scene_message`);
+- mirrors every joint-bus cycle on ``sctd/<robot>/can`` while anyone listens, and puts
+  frames received there on the bus (:mod:`sctd_sim.canbus.zenoh_interface`).
+
+Real time: a cycle that starts more than half a period late counts as an overrun;
+short hiccups are caught up (the ticker runs the missed cycles back to back), but when
+the loop falls more than 5 periods behind it skips ahead, so simulated time falls
+behind wall time. Both are counted in the scene message (``overruns``, ``skipped``,
+``behind_s``, ``rtf``), and the first time the simulator cannot keep up a warning
+goes to stderr: it never drifts silently.
+
+    python -m sctd_sim.service --scene pour --connect tcp/127.0.0.1:7447
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+from collections import Counter
+from dataclasses import fields
+from typing import Any
+
+import zenoh
+
+from sctd.runtime import codec
+from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
+from sctd.runtime.zsession import session_from_args
+
+from .canbus import FastVirtualBus, FaultConfig
+from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
+
+_FAULT_NAMES = {
+    "drop": "drop_rate", "drop_rate": "drop_rate",
+    "duplicate": "duplicate_rate", "dup": "duplicate_rate", "duplicate_rate": "duplicate_rate",
+    "corrupt": "corrupt_rate", "corrupt_rate": "corrupt_rate",
+    "delay": "delay", "delay_rate": "delay_rate",
+    "bus_off": "bus_off", "tx": "tx", "rx": "rx", "seed": "seed",
+}
+
+
+def parse_faults(text: str) -> FaultConfig:
+    """``drop=0.01,delay=0.002,...`` -> :class:`~sctd_sim.canbus.FaultConfig`.
+
+    Names: ``drop``, ``duplicate``, ``corrupt`` (probabilities per frame), ``delay``
+    (s; every frame unless ``delay_rate`` is given), ``delay_rate``, ``bus_off``
+    (flag), ``tx``/``rx`` (0/1: which direction of the controller's end), ``seed``.
+
+    Raises
+    ------
+    ValueError
+        Unknown name or bad value, naming it.
+    """
+    types = {f.name: f.type for f in fields(FaultConfig)}
+    kw: dict[str, Any] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        name, eq, value = item.partition("=")
+        key = _FAULT_NAMES.get(name.strip())
+        if key is None:
+            raise ValueError(f"--faults: unknown fault {name!r} (known: {', '.join(sorted(_FAULT_NAMES))})")
+        value = value.strip()
+        try:
+            if types[key] in (bool, "bool"):
+                kw[key] = (value or "1").lower() in ("1", "true", "yes", "on") if eq else True
+            elif types[key] in (int, "int"):
+                kw[key] = int(value)
+            else:
+                kw[key] = float(value)
+        except ValueError:
+            raise ValueError(f"--faults: {name}: not a number: {value!r}") from None
+    if kw.get("delay", 0.0) > 0.0 and "delay_rate" not in kw:
+        kw["delay_rate"] = 1.0
+    return FaultConfig(**kw)
+
+
+class SimService:
+    """The simulator's real-time loop and its Zenoh declarations.
+
+    Parameters
+    ----------
+    session : zenoh.Session
+    sim : Simulation
+    robot : str
+    rate, state_rate, object_rate, scene_rate : float
+        Hz; the publication rates are rounded to whole numbers of cycles.
+    viewer : object, optional
+        Anything with ``update(sim)``, called at about 30 Hz.
+    """
+
+    def __init__(self, session: zenoh.Session, sim, robot: str = codec.DEFAULT_ROBOT,
+                 state_rate: float = 1000.0, object_rate: float = 50.0, scene_rate: float = 10.0,
+                 viewer=None) -> None:
+        self.session = session
+        self.sim = sim
+        self.keys = codec.Keys(robot)
+        self.rate = 1.0 / sim.dt
+        self.every_state = max(1, round(self.rate / state_rate))
+        self.every_object = max(1, round(self.rate / object_rate))
+        self.every_scene = max(1, round(self.rate / scene_rate))
+        self.every_view = max(1, round(self.rate / 30.0))
+        self.viewer = viewer
+        self.dropped: Counter[str] = Counter()
+        self.targets = 0
+        self.injected = 0
+        self.seq = 0
+        self.cycles = 0
+        self.ticker: Ticker | None = None
+        self.cycle_time = Histogram()
+        self.warned = False
+        self._can_watched = False
+        self._inject_bus: FastVirtualBus | None = None
+        self._t0_wall = 0.0
+        self._window = (0.0, 0.0)  # (wall, sim t) at the last scene message
+        self.rtf = 1.0
+        dec = self.session.declare_publisher
+        drop = zenoh.CongestionControl.DROP
+        k = self.keys
+        self.sub_target = session.declare_subscriber(k.target, zenoh.handlers.RingChannel(16))
+        self.pub_state = dec(k.state, express=True, congestion_control=drop)
+        self.pub_objects = {n: dec(k.objects(n), congestion_control=drop) for n in sim.objects()}
+        self.pub_scene = dec(k.scene, congestion_control=drop)
+        self.can_key = can_key(robot)
+        self.pub_can = dec(self.can_key, congestion_control=drop)
+        self._can_listener = self.pub_can.declare_matching_listener(self._on_can_matching)
+        self._can_watched = self.pub_can.matching_status.matching  # type: ignore[attr-defined]
+        self.sub_can = session.declare_subscriber(self.can_key, zenoh.handlers.RingChannel(256),
+                                                  allowed_origin=zenoh.Locality.REMOTE)
+        sim.arm.on_frames.append(self._mirror)
+
+    # -- callbacks (Zenoh threads / the sim's bus) -------------------------------------
+    def _on_can_matching(self, status: zenoh.MatchingStatus) -> None:
+        self._can_watched = status.matching
+
+    def _mirror(self, frames: list) -> None:
+        if self._can_watched:
+            self.pub_can.put(encode_frames(frames))
+
+    # -- per cycle ---------------------------------------------------------------------
+    def _take_targets(self) -> None:
+        newest = None
+        sub = self.sub_target
+        while (s := sub.try_recv()) is not None:
+            try:
+                newest = codec.decode_target(s.payload.to_bytes())
+            except codec.DecodeError as e:
+                self.dropped[f"target_{e.reason}"] += 1
+                continue
+            self.targets += 1
+        if newest is not None:
+            self.sim.set_target(newest["pose"], newest["stamp"])
+
+    def _take_can(self) -> None:
+        bus = self._inject_bus
+        if bus is not None:
+            bus.drain()  # it hears the whole bus; only its sending matters
+        while (s := self.sub_can.try_recv()) is not None:
+            try:
+                frames = decode_frames(s.payload.to_bytes())
+            except FrameDecodeError:
+                self.dropped["can_bad_sample"] += 1
+                continue
+            if bus is None:
+                bus = self._inject_bus = FastVirtualBus(channel=self.sim.channel)
+            bus.send_batch(frames)
+            self.injected += len(frames)
+
+    def cycle(self) -> None:
+        """One cycle: inputs, one simulation step, the publications that are due."""
+        sim = self.sim
+        self._take_targets()
+        self._take_can()
+        sim.step()
+        n = self.cycles
+        self.cycles = n + 1
+        if n % self.every_state == 0:
+            m = sim.state_message()
+            self.pub_state.put(codec.encode_state(self.seq, time.time(), m["pose"], q=m["q"],
+                                                  dq=m["dq"], wrench=m["wrench"]))
+            self.seq += 1
+        if n % self.every_object == 0:
+            now = time.time()
+            for name, pose in sim.objects().items():
+                self.pub_objects[name].put(codec.encode_object(n, now, pose))
+        if n % self.every_scene == 0:
+            self.pub_scene.put(codec.pack(self.scene_message()))
+        if self.viewer is not None and n % self.every_view == 0:
+            self.viewer.update(sim)
+
+    def scene_message(self) -> dict[str, Any]:
+        """Task outcome (see the scene) and the service's health.
+
+        Fields: ``stamp``, ``scene``, ``task_object``, the scene's outcome fields, ``t``
+        (simulated s), ``holding`` (the controller holds: no fresh target), ``rate``,
+        ``cycles``, ``rtf`` (simulated / wall time since the last message), ``behind_s``
+        (how far simulated time trails wall time), ``overruns`` (cycles started more than
+        half a period late), ``skipped`` (cycles given up to resynchronise),
+        ``cycle_ms`` (compute per cycle), ``targets`` (valid targets received),
+        ``dropped`` (reason -> count), ``can_injected`` (frames put on the bus from
+        Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults).
+        """
+        sim = self.sim
+        now = time.monotonic()
+        w0, s0 = self._window
+        if now - w0 > 1e-3 and w0 > 0.0:
+            self.rtf = (sim.t - s0) / (now - w0)
+        self._window = (now, sim.t)
+        tk = self.ticker
+        msg: dict[str, Any] = {"stamp": time.time(), "scene": sim.scene.name,
+                               "task_object": sim.scene.task_object}
+        msg.update(sim.scene_outcome())
+        msg.update(
+            rate=self.rate, cycles=self.cycles, rtf=round(self.rtf, 4),
+            behind_s=round(max(0.0, (now - self._t0_wall) - sim.t), 6) if self._t0_wall else 0.0,
+            overruns=tk.late if tk else 0, skipped=tk.skipped if tk else 0,
+            cycle_ms=self.cycle_time.summary_ms(), targets=self.targets,
+            dropped=dict(self.dropped), can_injected=self.injected, link=sim.link_stats(),
+        )
+        return msg
+
+    # -- the loop ----------------------------------------------------------------------
+    def run(self, stop: threading.Event, duration: float | None = None) -> None:
+        """Cycle on absolute deadlines until ``stop`` is set or ``duration`` s passed."""
+        set_timer_slack(1)
+        period = self.sim.dt
+        tk = self.ticker = Ticker(period, spin=0.0)
+        self._t0_wall = tk.due - period
+        end = None if duration is None else self._t0_wall + duration
+        hist = self.cycle_time
+        clock = time.monotonic
+        grace = self._t0_wall + 1.0  # start-up (first messages, caches) is not judged
+        while not stop.is_set():
+            now, _late = tk.wait()
+            if end is not None and now >= end:
+                break
+            self.cycle()
+            hist.add(clock() - now)
+            if not self.warned and now > grace and (tk.skipped or (now - self._t0_wall) - self.sim.t
+                                                     > 20 * period):
+                self.warned = True
+                print(f"sctd sim: cannot keep real time at {self.rate:.0f} Hz: {tk.late} cycles late, "
+                      f"{tk.skipped} skipped, simulated time {now - self._t0_wall - self.sim.t:.3f} s "
+                      f"behind wall time (median cycle {hist.percentile(50) * 1e3:.3f} ms); "
+                      "see rtf/overruns/skipped on the scene key", file=sys.stderr, flush=True)
+
+    def summary(self) -> dict[str, Any]:
+        """Final figures (also the last scene message's health fields)."""
+        m = self.scene_message()
+        wall = time.monotonic() - self._t0_wall if self._t0_wall else 0.0
+        keep = ("scene", "t", "cycles", "overruns", "skipped", "behind_s", "cycle_ms", "targets",
+                "dropped", "can_injected", "success")
+        out = {k: m[k] for k in keep if k in m}
+        out["rtf_total"] = round(self.sim.t / wall, 4) if wall > 0 else None
+        out["state_messages"] = self.seq
+        return out
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open)."""
+        self.sim.arm.on_frames.remove(self._mirror)
+        decls: list[Any] = [self.sub_target, self.sub_can, self._can_listener, self.pub_state,
+                            self.pub_scene, self.pub_can, *self.pub_objects.values()]
+        for d in decls:
+            d.undeclare()
+        if self._inject_bus is not None:
+            self._inject_bus.shutdown()
+            self._inject_bus = None
+
+    def __enter__(self) -> SimService:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    """``sctd sim`` with parsed arguments; returns the exit code."""
+    try:
+        faults = parse_faults(args.faults) if args.faults else None
+        codec.Keys(args.robot)
+    except ValueError as e:
+        print(f"sctd sim: {e}", file=sys.stderr)
+        return 2
+    if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
+        print("sctd sim: rates must be positive", file=sys.stderr)
+        return 2
+    viewer = None
+    if args.view:
+        from .view import ViewerUnavailable, open_viewer
+
+        try:
+            viewer = open_viewer()
+        except ViewerUnavailable as e:
+            print(f"sctd sim: --view: {e}", file=sys.stderr)
+            return 2
+    from .simulation import Simulation
+
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    with Simulation(scene=args.scene, rate=args.rate, faults=faults,
+                    drive_timeout=args.drive_timeout) as sim, \
+            session_from_args(args) as session, \
+            SimService(session, sim, args.robot, args.state_rate, args.object_rate,
+                       args.scene_rate, viewer) as service:
+        if viewer is not None:
+            viewer.setup(sim)
+        print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
+              f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
+              file=sys.stderr, flush=True)
+        service.run(stop, args.duration)
+        summary = service.summary()
+    print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "
+          f"{summary['rtf_total']}, {summary['overruns']} overruns, {summary['skipped']} skipped "
+          f"cycles, {summary['targets']} targets, dropped {summary['dropped'] or 'none'})",
+          file=sys.stderr, flush=True)
+    if args.json:
+        print(json.dumps(summary), flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from sctd.cli.sim import add_sim_arguments
+
+    p = argparse.ArgumentParser(prog="sctd-sim", description=__doc__.split("\n\n")[0])
+    add_sim_arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

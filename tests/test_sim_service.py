@@ -1,0 +1,170 @@
+"""`sctd sim` as a real process on a free loopback port, driven over Zenoh.
+
+Rates are asserted loosely (the host may be busy; `sctd bench sim` measures speed):
+the point is that the service publishes what the wire contract says, follows targets,
+counts and ignores malformed ones, reports its real-time health, and stops cleanly.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import msgpack
+import pytest
+import zenoh
+
+from sctd.runtime import codec
+from sctd.runtime.zsession import open_session
+from sctd_sim.service import parse_faults
+from tests.conftest import ROOT, Proc, free_port, port_is_free, sctd, wait_for
+
+KEYS = codec.Keys("edan")
+
+
+class Watcher:
+    """Counts and keeps the newest message per key under ``sctd/edan/``."""
+
+    def __init__(self, session: zenoh.Session):
+        self.lock = threading.Lock()
+        self.count: dict[str, int] = {}
+        self.last: dict[str, dict] = {}
+        self.sub = session.declare_subscriber("sctd/edan/**", self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr).removeprefix("sctd/edan/")
+        if key == "can":
+            return
+        msg = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+        with self.lock:
+            self.count[key] = self.count.get(key, 0) + 1
+            self.last[key] = msg
+
+    def get(self, key: str) -> dict | None:
+        with self.lock:
+            return self.last.get(key)
+
+    def n(self, key: str) -> int:
+        with self.lock:
+            return self.count.get(key, 0)
+
+
+def start_sim(tmp_path, *args: str) -> tuple[Proc, int]:
+    port = free_port()
+    proc = sctd("sim", "--listen", f"tcp/127.0.0.1:{port}", *args, log=tmp_path / "sim.log")
+    return proc, port
+
+
+def test_parse_faults():
+    f = parse_faults("drop=0.01,corrupt=0.002,delay=0.003,seed=7,rx=1")
+    assert (f.drop_rate, f.corrupt_rate, f.delay, f.delay_rate, f.seed, f.rx) == (
+        0.01, 0.002, 0.003, 1.0, 7, True)
+    assert parse_faults("bus_off").bus_off
+    with pytest.raises(ValueError, match="unknown fault"):
+        parse_faults("explode=1")
+    with pytest.raises(ValueError, match="probability"):
+        parse_faults("drop=2")
+
+
+def test_sim_publishes_follows_targets_and_counts_malformed_ones(tmp_path):
+    proc, port = start_sim(tmp_path, "--scene", "pour")
+    try:
+        with open_session(connect=[f"tcp/127.0.0.1:{port}"]) as s:
+            w = Watcher(s)
+            assert wait_for(lambda: w.get("scene"), 60), proc.output()
+            # publications: state (>= 500 Hz nominal; loose bound), objects, scene
+            n0, t0 = w.n("state"), time.monotonic()
+            time.sleep(1.0)
+            state_rate = (w.n("state") - n0) / (time.monotonic() - t0)
+            assert state_rate > 200, (state_rate, proc.output())
+            st = codec.decode_state(msgpack.packb(w.get("state")))
+            assert len(st.q) == 7 and len(st.dq) == 7 and st.wrench is not None
+            assert st.wrench[2] < -1.0  # the bottle's weight
+            mug = codec.decode_object(msgpack.packb(w.get("objects/mug"))).pose
+            assert w.get("objects/bottle_tip") is not None
+            scene = w.get("scene")
+            assert scene["scene"] == "pour" and scene["task_object"] == "mug"
+            for k in ("stamp", "t", "tilt", "tip_above_rim", "spilled", "poured", "holding",
+                      "rtf", "overruns", "skipped", "behind_s", "cycles", "link", "dropped"):
+                assert k in scene, k
+            assert scene["holding"] and scene["link"]["controller_rx"]["corrupted"] == 0
+            # start posture: bottle upright, tip about 0.3 m from the mug's opening
+            assert scene["tilt"] < 0.05 and 0.2 < math.dist(scene["tip_in_mug"], [0, 0, 0]) < 0.45
+            assert 0.2 < math.dist(st.pose[:3], mug[:3]) < 0.5
+
+            # malformed targets: dropped, counted by reason, the arm keeps holding
+            pub = s.declare_publisher(KEYS.target)
+            bad = [b"\xc1garbage", msgpack.packb([1, 2, 3]),
+                   codec.pack({"seq": 1, "stamp": time.time(), "pose": [0, 0, 0, 0, 0, 0, 2.0]}),
+                   codec.pack({"seq": 2, "stamp": time.time(), "pose": [math.nan] * 7})]
+            for b in bad:
+                pub.put(b)
+                time.sleep(0.02)
+
+            def dropped() -> int:
+                return sum((w.get("scene") or {}).get("dropped", {}).values())
+            assert wait_for(lambda: dropped() >= len(bad), 10), w.get("scene")
+            d = w.get("scene")["dropped"]
+            assert d.get("target_not_msgpack") == 1 and d.get("target_not_map") == 1, d
+            assert d.get("target_bad_pose") == 1 and d.get("target_nonfinite_pose") == 1, d
+            assert w.get("scene")["holding"] and proc.running()
+
+            # a target 4 cm above: the ee moves there (stale-target hold afterwards)
+            p0 = list(w.get("state")["pose"])
+            goal = [p0[0], p0[1], p0[2] + 0.04, *p0[3:]]
+            for k in range(200):
+                pub.put(codec.encode_target(k, time.time(), goal, "test", "test", -1))
+                time.sleep(0.005)
+            p1 = w.get("state")["pose"]
+            assert math.dist(p1[:3], goal[:3]) < 0.01, (p0, p1)
+            assert w.get("scene")["targets"] >= 100
+            assert wait_for(lambda: w.get("scene")["holding"], 5)  # targets stopped: hold
+            w.sub.undeclare()
+            pub.undeclare()
+    finally:
+        rc = proc.stop()
+    assert rc == 0, proc.output()
+    out = proc.output()
+    assert "stopped after" in out and "real-time factor" in out
+    assert port_is_free(port)
+
+
+def test_sim_rejects_bad_flags(tmp_path):
+    proc = sctd("sim", "--faults", "explode=1", log=tmp_path / "bad.log")
+    assert proc.p.wait(60) == 2
+    assert "unknown fault" in proc.output()
+    proc.stop()
+
+
+def test_demo_with_the_sim_opens_the_drawer(tmp_path):
+    """`sctd demo --skill skills/drawer.yaml` on the Pinocchio sim reaches `pull`; a watcher
+    on the scene key sees the drawer open."""
+    proc = sctd("demo", "--skill", str(ROOT / "skills" / "drawer.yaml"), "--seconds", "12",
+                "--robot-backend", "sim", "--logs", str(tmp_path / "logs"), log=tmp_path / "demo.log")
+    opening = 0.0
+    try:
+        # the demo picks its own port; the sim's log names the scene, the demo's its port
+        port = wait_for(lambda: _demo_port(proc.output()), 30)
+        assert port, proc.output()
+        with open_session(connect=[f"tcp/127.0.0.1:{port}"]) as s:
+            w = Watcher(s)
+            while proc.running():
+                sc = w.get("scene")
+                if sc is not None:
+                    opening = max(opening, sc.get("max_opening", 0.0))
+                time.sleep(0.1)
+            w.sub.undeclare()
+        assert proc.p.wait(120) == 0, proc.output()
+    finally:
+        proc.stop()
+    out = proc.output()
+    assert "reach -> pull" in out, out
+    assert opening > 0.05, (opening, out)
+
+
+def _demo_port(text: str) -> int | None:
+    for word in text.split():
+        if word.startswith("tcp/127.0.0.1:"):
+            return int(word.rsplit(":", 1)[1].rstrip(","))
+    return None
