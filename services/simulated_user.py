@@ -48,8 +48,8 @@ GOALS: dict[str, dict[str, Goal]] = {
     "pour": {
         "carry": Goal("tip", (0.0, 0.0, 0.08)),
         "approach": Goal("tip", (0.0, 0.0, 0.05), tilt=0.5),
-        "pour": Goal("tip", (0.0, 0.0, 0.06), tilt=1.9),
-        "*": Goal("tip", (0.0, 0.0, 0.06), tilt=1.9),
+        "pour": Goal("tip", (0.0, 0.0, 0.06), tilt=1.6),
+        "*": Goal("tip", (0.0, 0.0, 0.06), tilt=1.6),
     },
     "drawer": {
         "reach": Goal("ee", (0.0, 0.0, 0.0)),
@@ -72,8 +72,12 @@ class Policy:
         self.speeds = np.array([lim["max_linear_speed"]] * 3 + [lim["max_angular_speed"]] * 3)
         self.states = {s["name"]: s for s in summary["states"]}
 
-    def command(self, state: str, T_obj_ee: np.ndarray) -> np.ndarray:
+    def command(self, state: str, T_obj_ee: np.ndarray, done: bool = False) -> np.ndarray:
+        """Input for the active ``state``; ``done``: the task is achieved (the mug holds
+        enough), so the user brings the bottle back upright where it is."""
         goal = self.goals.get(state, self.goals["*"])
+        if done:
+            goal = Goal(goal.frame, goal.position, tilt=0.0)
         T_ee_f = self.frames.get(goal.frame, np.eye(4))
         T_f = T_obj_ee @ T_ee_f
         dp = np.asarray(goal.position) - T_f[:3, 3]
@@ -113,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rate", type=float, default=250.0, help="input rate, Hz (default %(default)s)")
     p.add_argument("--duration", type=float, default=10.0)
     p.add_argument("--warmup", type=float, default=0.5, help="s of latency samples to discard")
+    p.add_argument("--fill", type=float, default=0.5,
+                   help="pour: stop pouring once the simulator's scene reports this much poured")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     add_zenoh_arguments(p)
     args = p.parse_args(argv)
@@ -171,6 +177,14 @@ def main(argv: list[str] | None = None) -> int:
                 pass
 
         sub_o = session.declare_subscriber(keys.objects(), on_object)
+
+        def on_scene(sample: zenoh.Sample) -> None:
+            try:
+                info["scene"] = codec.unpack_map(sample.payload.to_bytes())
+            except codec.DecodeError:
+                pass
+
+        sub_sc = session.declare_subscriber(keys.scene, on_scene)
         pub = session.declare_publisher(keys.input(args.device), express=True)
         set_timer_slack(1)
         ticker = Ticker(1.0 / args.rate, spin=0.0)
@@ -192,7 +206,9 @@ def main(argv: list[str] | None = None) -> int:
             T_ee, T_obj = info["T_world_ee"], info["T_world_obj"]
             if T_ee is not None and T_obj is not None:
                 state = info["state"] or summary_holder.get("start", "")
-                u = policy.command(state, se3.invert_transform(T_obj) @ T_ee)
+                scene = info.get("scene") or {}
+                done = args.task == "pour" and scene.get("poured", 0.0) >= args.fill
+                u = policy.command(state, se3.invert_transform(T_obj) @ T_ee, done)
             with lock:
                 sent[seq] = time.monotonic()
                 if len(sent) > 5000:  # inputs overwritten before any tick used them
@@ -201,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
             pub.put(codec.encode_input(seq, time.time(), u.tolist()))
             seq += 1
         elapsed = time.monotonic() - (first_target["t"] or time.monotonic())
-        for d in (sub_t, sub_s, sub_o, pub):
+        for d in (sub_t, sub_s, sub_o, sub_sc, pub):
             d.undeclare()
     report = {
         "task": args.task,

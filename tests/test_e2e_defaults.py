@@ -46,3 +46,4 @@ def test_demo_runs_the_pour_skill_end_to_end(tmp_path):
     out = proc.output()
     assert "state - -> carry" in out and "carry -> approach" in out, out
     assert "input -> target latency" in out and "tick lateness" in out
+    assert "task outcome (sim): poured" in out, out  # the Pinocchio scene reported back

@@ -82,6 +82,14 @@ def main_demo(args: argparse.Namespace) -> int:
                       f"   (mode {msg.get('mode')})", flush=True)
                 seen["state"] = msg["state"]
 
+    scene: dict = {}
+
+    def on_scene(sample) -> None:
+        try:
+            scene.update(codec.unpack_map(sample.payload.to_bytes()))
+        except codec.DecodeError:
+            pass
+
     ok = True
     report: dict | None = None
     with Child("sctd.cli.main", "run", "--skill", args.skill, "--listen", ep, "--rate", str(args.rate),
@@ -90,6 +98,7 @@ def main_demo(args: argparse.Namespace) -> int:
                log=logdir / "robot.log") as robot, \
          zsession(connect=[ep]) as session:
         sub = session.declare_subscriber(keys.status, on_status)
+        sub_scene = session.declare_subscriber(keys.scene, on_scene)
         deadline = time.monotonic() + 30
         while seen["targets"] == 0 and time.monotonic() < deadline and daemon.running() and robot.running():
             time.sleep(0.05)
@@ -105,6 +114,7 @@ def main_demo(args: argparse.Namespace) -> int:
                 print("sctd demo: the simulated user did not report", file=sys.stderr)
                 ok = False
         sub.undeclare()
+        sub_scene.undeclare()
         rc = daemon.stop()
         robot.stop()
     stats = _last_json(daemon.output())
@@ -124,4 +134,11 @@ def main_demo(args: argparse.Namespace) -> int:
     print(f"tick lateness: p50 {tl['p50']:.3f} ms, p99 {tl['p99']:.3f} ms; "
           f"compute: p50 {tc['p50']:.3f} ms, p99 {tc['p99']:.3f} ms")
     print(f"dropped messages: {stats['dropped'] or 'none'}; counters: {stats['counters']}")
+    if scene.get("scene") == "pour":
+        print(f"task outcome (sim): poured {scene.get('poured', 0):.2f} of the bottle, spilled "
+              f"{scene.get('spilled_amount', 0):.2f}, success {scene.get('success')}; "
+              f"sim real-time factor {scene.get('rtf', float('nan')):.2f}")
+    elif scene.get("scene") == "drawer":
+        print(f"task outcome (sim): drawer open {scene.get('opening', 0):.3f} m, success "
+              f"{scene.get('success')}; sim real-time factor {scene.get('rtf', float('nan')):.2f}")
     return 0
