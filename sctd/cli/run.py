@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import signal
 import sys
 
@@ -39,6 +40,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=int, default=10,
                    help="SCHED_FIFO priority of the tick thread, 0 for none; falls back to normal "
                         "priority when not permitted (default %(default)s)")
+    p.add_argument("--cpu", type=int, default=None,
+                   help="pin the tick thread to this CPU (best with that CPU kept free of other work, "
+                        "e.g. isolcpus)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--stats-json", action="store_true", help="print final statistics as JSON on exit")
     add_zenoh_arguments(p)
@@ -77,7 +81,12 @@ def main_run(args: argparse.Namespace) -> int:
         print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
         return 2
     try:
-        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority)
+        if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
+            print(f"sctd run: --cpu {args.cpu}: this machine has CPUs 0-{(os.cpu_count() or 1) - 1}",
+                  file=sys.stderr)
+            return 2
+        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority,
+                        cpu=args.cpu)
 
         def on_signal(signum, frame):
             daemon.stop()

@@ -138,12 +138,14 @@ def _last_json(text: str) -> dict | None:
 
 
 def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float,
-                      rt_priority: int, logdir: Path) -> dict:
+                      rt_priority: int, logdir: Path, cpu: int | None = None) -> dict:
     """Run the processes described in the module doc; return all figures."""
     ep = f"tcp/127.0.0.1:{free_port()}"
     total = seconds + 3.0 + 2.0 + 2.0  # latency + echo + two warm-ups
+    pin = ["--cpu", str(cpu)] if cpu is not None else []
     with Child("sctd.cli.main", "run", "--skill", skill, "--listen", ep, "--rate", str(rate),
-               "--rt-priority", str(rt_priority), "--stats-json", log=logdir / "daemon.log") as daemon, \
+               "--rt-priority", str(rt_priority), "--stats-json", *pin,
+               log=logdir / "daemon.log") as daemon, \
          Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.runtime.bench", "echo", "--connect", ep, log=logdir / "echo.log"):
         with session(connect=[ep]) as s:  # wait until the daemon publishes targets
@@ -216,6 +218,7 @@ def add_latency_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--input-rate", type=float, default=500.0, help="probe input rate, Hz")
     p.add_argument("--skill", default="skills/pour.yaml")
     p.add_argument("--rt-priority", type=int, default=10, help="daemon SCHED_FIFO priority (0: off)")
+    p.add_argument("--cpu", type=int, default=None, help="pin the daemon's tick thread to this CPU")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
@@ -225,7 +228,7 @@ def main_latency(args: argparse.Namespace) -> int:
     logdir.mkdir(parents=True, exist_ok=True)
     try:
         r = run_latency_bench(args.skill, args.rate, args.seconds, args.input_rate,
-                              args.rt_priority, logdir)
+                              args.rt_priority, logdir, args.cpu)
     except RuntimeError as e:
         print(f"sctd bench latency: {e}", file=sys.stderr)
         return 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import os
 import queue
 import threading
 import time
@@ -78,13 +79,14 @@ class Daemon:
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
-                 spin: float = 1e-4, rt_priority: int = 0):
+                 spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None):
         self.config = config
         self.session = session
         self.keys = codec.Keys(config.robot)
         self.controller = Controller(skill, config)
         self.spin = spin
         self.rt_priority = rt_priority
+        self.cpu = cpu
         self.realtime = False
         self.stop_event = threading.Event()
         self.lateness = Histogram()
@@ -181,6 +183,8 @@ class Daemon:
         send = publisher.queue.put
         set_timer_slack(1)
         self.realtime = set_realtime(self.rt_priority)
+        if self.cpu is not None:
+            os.sched_setaffinity(0, {self.cpu})  # this (the tick) thread only
         if self.rt_priority and not self.realtime:
             log.warning("could not get SCHED_FIFO priority %d (needs CAP_SYS_NICE or an rtprio "
                         "limit); ticking at normal priority", self.rt_priority)
