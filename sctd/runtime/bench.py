@@ -127,6 +127,35 @@ def probe_main(argv: list[str]) -> int:
     return 0
 
 
+def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> dict:
+    """The daemon's per-tick controller work, in this process and without Zenoh: the
+    skill, a robot that follows every target and a slowly sweeping input. Back to back
+    (``paced=False``) the caches stay hot; ``paced=True`` sleeps to the next period
+    between ticks as the daemon does, which on some machines (virtual CPUs) makes each
+    tick start cold. Timings of the controller tick only (s), as a Histogram summary."""
+    from .. import se3
+    from ..skill import load_skill
+    from .controller import Controller, RuntimeConfig, Sample
+
+    cfg = RuntimeConfig(rate=rate)
+    ctl = Controller(load_skill(skill_path), cfg)
+    T_obj = se3.transform_from_pose([0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0])
+    T_ee = se3.transform_from_pose([0.35, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0])
+    h = Histogram()
+    set_timer_slack(1)
+    ticker = Ticker(cfg.period, spin=1e-4)
+    for k in range(n):
+        if paced:
+            ticker.wait()
+        t = k * cfg.period
+        u = (0.6 * math.sin(k * 0.001), 0.6 * math.cos(k * 0.00065), 0.3 * math.sin(k * 0.00035))
+        meas = ctl.T_world_target if ctl.T_world_target is not None else T_ee
+        t0 = time.perf_counter()
+        ctl.tick(t, t, Sample(k, t, t, u=u), Sample(k, t, t, T=meas), Sample(0, t, t, T=T_obj))
+        h.add(time.perf_counter() - t0)
+    return h.summary_ms()
+
+
 def _last_json(text: str) -> dict | None:
     for line in reversed(text.splitlines()):
         if line.strip().startswith("{"):
@@ -140,6 +169,8 @@ def _last_json(text: str) -> dict | None:
 def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float,
                       rt_priority: int, logdir: Path, cpu: int | None = None) -> dict:
     """Run the processes described in the module doc; return all figures."""
+    baseline_hot = tick_baseline(skill, rate)
+    baseline_paced = tick_baseline(skill, rate, paced=True)
     ep = f"tcp/127.0.0.1:{free_port()}"
     total = seconds + 3.0 + 2.0 + 2.0  # latency + echo + two warm-ups
     pin = ["--cpu", str(cpu)] if cpu is not None else []
@@ -177,6 +208,8 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
         "skipped_ticks": stats["skipped_ticks"],
         "lateness_ms": stats["lateness_ms"],
         "compute_ms": stats["compute_ms"],
+        "baseline_tick_hot_ms": baseline_hot,
+        "baseline_tick_paced_ms": baseline_paced,
         "publish_ms": stats.get("publish_ms"),
         "echo_rtt_ms": figures["echo_rtt_ms"],
         "latency_ms": figures["latency_ms"],
@@ -191,7 +224,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
 
 def print_report(r: dict) -> None:
     def row(name: str, h: dict) -> str:
-        return (f"  {name:24s} p50 {h['p50']:8.3f}   p99 {h['p99']:8.3f}   p99.9 {h['p999']:8.3f}"
+        return (f"  {name:30s} p50 {h['p50']:8.3f}   p99 {h['p99']:8.3f}   p99.9 {h['p999']:8.3f}"
                 f"   max {h['max']:8.3f}   (n={h['n']})")
 
     print(f"sctd bench latency: {r['skill']} at {r['rate_hz']:.0f} Hz for {r['seconds']:.0f} s, "
@@ -200,6 +233,8 @@ def print_report(r: dict) -> None:
     print("  all figures in ms")
     print(row("tick lateness", r["lateness_ms"]))
     print(row("tick compute", r["compute_ms"]))
+    print(row("  same tick, no Zenoh, hot", r["baseline_tick_hot_ms"]))
+    print(row("  same tick, no Zenoh, 1 kHz", r["baseline_tick_paced_ms"]))
     if r.get("publish_ms"):
         print(row("target put (off-tick)", r["publish_ms"]))
     print(row("input -> target", r["latency_ms"]))
