@@ -15,14 +15,18 @@ Values outside a signal's range saturate to the range.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import cast
 
 import cantools
 
 from .crc import FrameCrc
+
+# (crc ok, rolling counter, payload values in signal order)
+DecodedFrame = tuple[bool, int, tuple[float, ...]]
 
 DBC_PATH = Path(__file__).resolve().parent.parent / "edan_joints.dbc"
 """Path of the shipped joint-bus DBC."""
@@ -185,8 +189,8 @@ class FrameCodec:
         dec.append(f"    return ({crc}) == d[0], (v >> 8) & 15, ({', '.join(outs)},)")
         ns: dict[str, object] = {"c": self.crc}
         exec("\n".join(enc + dec), ns)  # generated from the DBC layout only
-        self._encode = self.pack = ns["_encode"]
-        self._decode = self.unpack = ns["_decode"]
+        self._encode = self.pack = cast(Callable[..., bytearray], ns["_encode"])
+        self._decode = self.unpack = cast(Callable[[bytes | bytearray], DecodedFrame], ns["_decode"])
 
     def encode_cantools(self, counter: int, values: Sequence[float]) -> bytes:
         """:meth:`encode` through cantools (slow reference path)."""
@@ -205,7 +209,8 @@ class FrameCodec:
 
     def decode_cantools(self, data: bytes | bytearray) -> tuple[bool, int, tuple[float, ...]]:
         """:meth:`decode` through cantools (slow reference path)."""
-        d = self.message.decode(bytes(data), decode_choices=False, scaling=True)
+        d = cast(Mapping[str, float], self.message.decode(bytes(data), decode_choices=False,
+                                                          scaling=True))
         vals = tuple(float(d[n]) for n in self.signal_names)
         return self.crc(data) == data[0], int(d["Counter"]), vals
 
@@ -222,7 +227,7 @@ class FrameCodec:
 @cache
 def load_dbc(path: str | Path = DBC_PATH) -> cantools.database.can.Database:
     """Load (once per path) the joint-bus DBC."""
-    return cantools.database.load_file(str(path))
+    return cast(cantools.database.can.Database, cantools.database.load_file(str(path)))
 
 
 class JointBusCodecs:

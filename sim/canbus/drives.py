@@ -146,7 +146,7 @@ class JointDrives:
             got[i] = True
             self._last_counter[i] = counter
             last_t[i] = t
-            enabled[i] = bool(vals[0] & MODE_ENABLE)
+            enabled[i] = bool(int(vals[0]) & MODE_ENABLE)
             tau_cmd[i] = vals[1]
         st.missing += got.count(False)
         if self._sync_counter is not None:

@@ -98,7 +98,7 @@ class FaultInjectingBus(can.BusABC):
         clock: Callable[[], float] | None = None,
         **kwargs: Any,
     ) -> None:
-        super().__init__(channel=getattr(bus, "channel_info", None), **kwargs)
+        super().__init__(channel=getattr(bus, "channel_info", "faults"), **kwargs)
         self.bus = bus
         self.config = config or FaultConfig()
         self.clock = clock or time.monotonic
