@@ -25,7 +25,7 @@ test: setup
 
 lint: setup
 	$(BIN)/ruff check .
-	$(BIN)/mypy sctd
+	$(BIN)/mypy sctd services sim
 
 bench: setup
 	$(BIN)/sctd bench latency
