@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
@@ -36,6 +37,7 @@ from collections import Counter
 from dataclasses import fields
 from typing import Any
 
+import can
 import zenoh
 
 from sctd.runtime import codec
@@ -308,11 +310,16 @@ def run(args: argparse.Namespace) -> int:
             return 2
     from .simulation import Simulation
 
+    try:
+        channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
+    except ValueError as e:
+        print(f"sctd sim: {e}", file=sys.stderr)
+        return 2
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    with Simulation(scene=args.scene, rate=args.rate, faults=faults,
-                    drive_timeout=args.drive_timeout) as sim, \
+    with Simulation(scene=args.scene, rate=args.rate, faults=faults, channel=channel,
+                    bus_factory=bus_factory, drive_timeout=args.drive_timeout) as sim, \
             session_from_args(args) as session, \
             SimService(session, sim, args.robot, args.state_rate, args.object_rate,
                        args.scene_rate, viewer) as service:
@@ -330,6 +337,27 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary), flush=True)
     return 0
+
+
+def can_bus_choice(interface: str, channel: str | None):
+    """(channel, bus_factory) for ``--can-interface``: ``virtual`` is python-can's
+    in-process bus (no kernel needed); ``socketcan`` opens two sockets on a kernel
+    interface (e.g. ``vcan0``, which ``candump`` can then watch); ``auto`` takes
+    socketcan when that interface exists and the virtual bus otherwise."""
+    if interface == "virtual":
+        return channel, None
+    name = channel or "vcan0"
+    exists = os.path.exists(f"/sys/class/net/{name}")
+    if interface == "auto" and not exists:
+        return None, None
+    if not exists:
+        raise ValueError(f"--can-interface socketcan: no network interface {name!r} on this machine "
+                         f"(create one with: ip link add dev {name} type vcan && ip link set up {name})")
+
+    def factory(ch: str):
+        return can.Bus(interface="socketcan", channel=ch, receive_own_messages=False)
+
+    return name, factory
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -168,3 +168,19 @@ def _demo_port(text: str) -> int | None:
         if word.startswith("tcp/127.0.0.1:"):
             return int(word.rsplit(":", 1)[1].rstrip(","))
     return None
+
+
+def test_socketcan_bus_is_optional_and_refused_clearly_when_absent(tmp_path):
+    """The joint bus uses a kernel socketcan interface only when asked and present;
+    `auto` falls back to the in-process virtual bus."""
+    from sctd_sim.service import can_bus_choice
+
+    assert can_bus_choice("virtual", None) == (None, None)
+    name = "sctdnone0"  # no such interface
+    assert can_bus_choice("auto", name) == (None, None)
+    with pytest.raises(ValueError, match="no network interface 'sctdnone0'"):
+        can_bus_choice("socketcan", name)
+    proc = sctd("sim", "--scene", "pour", "--can-interface", "socketcan", "--can-channel", name,
+                "--listen", f"tcp/127.0.0.1:{free_port()}", log=tmp_path / "sim.log")
+    assert proc.p.wait(60) == 2
+    assert "no network interface 'sctdnone0'" in proc.output()

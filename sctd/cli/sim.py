@@ -30,6 +30,11 @@ def add_sim_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--faults", default="", metavar="SPEC",
                    help="joint-bus faults, e.g. drop=0.01,corrupt=0.001,delay=0.002 "
                         "(also duplicate, delay_rate, bus_off, tx=0/1, rx=0/1, seed)")
+    p.add_argument("--can-interface", choices=("virtual", "socketcan", "auto"), default="virtual",
+                   help="joint bus: python-can's in-process virtual bus (default), a socketcan "
+                        "interface such as vcan0, or auto (socketcan when --can-channel exists)")
+    p.add_argument("--can-channel", default=None,
+                   help="socketcan interface name (default vcan0 for socketcan/auto)")
     p.add_argument("--drive-timeout", type=float, default=0.01,
                    help="drive command timeout before it brakes, s (default %(default)s)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
