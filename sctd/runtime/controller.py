@@ -214,10 +214,3 @@ class Controller:
         self.last_in_seq = inp.seq
         return u, ok
 
-
-def pose_list(T: Array) -> list[float]:
-    """4x4 transform -> [x, y, z, qx, qy, qz, qw] as Python floats (for msgpack)."""
-    return se3.pose_from_matrix4(T)
-
-
-transform_from_pose_fast = se3.matrix4_from_pose

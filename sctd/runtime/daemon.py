@@ -21,9 +21,10 @@ from typing import Any
 import msgpack
 import zenoh
 
+from .. import se3
 from ..skill import Bundle, Skill, SkillEngine, SkillError, skill_from_bundle, skill_summary
 from . import codec
-from .controller import Controller, RuntimeConfig, Sample, transform_from_pose_fast
+from .controller import Controller, RuntimeConfig, Sample
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 
 log = logging.getLogger("sctd.run")
@@ -112,7 +113,7 @@ class Daemon:
             with self._lock:
                 self.controller.counters.drop(f"object_{e.reason}")
             return
-        self._objects[name] = Sample(m.seq, m.stamp, time.monotonic(), T=transform_from_pose_fast(m.pose))
+        self._objects[name] = Sample(m.seq, m.stamp, time.monotonic(), T=se3.matrix4_from_pose(m.pose))
 
     def _on_skill_query(self, query: zenoh.Query) -> None:
         payload = query.payload
@@ -160,7 +161,7 @@ class Daemon:
             except codec.DecodeError as e:
                 self.controller.counters.drop(f"state_{e.reason}")
                 continue
-            self._state = Sample(m.seq, m.stamp, now, T=transform_from_pose_fast(m.pose),
+            self._state = Sample(m.seq, m.stamp, now, T=se3.matrix4_from_pose(m.pose),
                                  wrench=m.wrench)
 
     def run(self, duration: float | None = None) -> dict[str, Any]:

@@ -92,7 +92,6 @@ class SkillEngine:
         self.entered = 0.0
         self.last_scale = 1.0  # the vector-field scaling of the last command, for status
         self.last_membership: Array | None = None
-        self._last_frame_pose: Array | None = None
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -184,15 +183,13 @@ class SkillEngine:
                 T = self._linear(T, m, u, dt)
             else:
                 T = self._vector_field(T, m, u, dt)
-        T_f = None  # pose of the last constraint's frame, reused while T is unchanged
+        T_f = None  # pose of the constraint's frame, reused while T and the frame stay
         frame = None
         for c in state.active_constraints:
-            if c.frame != frame:
-                T_f, frame = None, c.frame
+            if c.frame != frame or T_f is None:
+                T_f, frame = self.frame_pose(T, c.frame), c.frame
             T_next = self.project(T, c, T_f)
-            if T_next is T:
-                T_f = self._last_frame_pose
-            else:
+            if T_next is not T:
                 T, T_f = T_next, None
         return T
 
@@ -265,6 +262,11 @@ class SkillEngine:
 
     # --- constraints -------------------------------------------------------------------
 
+    def frame_pose(self, T_obj_ee: Array, frame: str) -> Array:
+        """Pose of an ee-attached ``frame`` (or the ee itself) for ee pose ``T_obj_ee``."""
+        T_ee_f = self.T_ee_frame.get(frame)
+        return T_obj_ee if T_ee_f is None else T_obj_ee @ T_ee_f
+
     def project(self, T: Array, c, T_f: Array | None = None) -> Array:
         """Project pose T onto constraint c (moving the constrained frame minimally).
 
@@ -272,9 +274,7 @@ class SkillEngine:
         constrained frame's pose for this T, may be passed in to save recomputing it.
         """
         if T_f is None:
-            T_ee_f = self.T_ee_frame.get(c.frame)
-            T_f = T if T_ee_f is None else T @ T_ee_f
-        self._last_frame_pose = T_f
+            T_f = self.frame_pose(T, c.frame)
         if isinstance(c, Band):
             s = float(np.dot(c.normal, T_f[:3, 3] - c.point))
             delta = (c.lower - s) if s < c.lower else (c.upper - s) if s > c.upper else 0.0
@@ -329,8 +329,7 @@ class SkillEngine:
 
     def violation(self, T: Array, c) -> float:
         """How far pose T is outside constraint c (m or rad; 0 when satisfied)."""
-        T_ee_f = self.T_ee_frame.get(c.frame)
-        T_f = T if T_ee_f is None else T @ T_ee_f
+        T_f = self.frame_pose(T, c.frame)
         if isinstance(c, Band):
             s = float(np.dot(c.normal, T_f[:3, 3] - c.point))
             return max(0.0, c.lower - s, s - c.upper)
