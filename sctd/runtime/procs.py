@@ -33,6 +33,13 @@ def port_is_free(port: int) -> bool:
             return False
 
 
+def _default_signals() -> None:
+    """In the child before exec: default SIGINT. A parent started as a background job
+    inherits SIGINT ignored, and Python would then never raise KeyboardInterrupt, so
+    tools that stop on Ctrl-C (python -m can.logger) would not stop on SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 class Child:
     """``python -m MODULE ARGS`` as a child process; a context manager that reaps it.
 
@@ -54,7 +61,7 @@ class Child:
             [sys.executable, "-m", module, *args],
             stdout=self._log if self._log is not None else subprocess.PIPE,
             stderr=subprocess.STDOUT if self._log is not None else None,
-            cwd=cwd, start_new_session=True,
+            cwd=cwd, start_new_session=True, preexec_fn=_default_signals,
         )
 
     def __enter__(self) -> Child:
