@@ -130,19 +130,8 @@ class JointDrives:
             ref = self._sync_counter
             if ref is not None and counter == ((ref + 1) & 0xF):
                 ref = self._sync_counter = counter  # this cycle's SYNC was lost
-            last = self._last_counter[i]
-            if counter == ref and last != counter and not got[i]:
-                kind, lost = ACCEPTED, 0 if last is None else (counter - last - 1) & 0xF
-            else:
-                kind, lost = classify(counter, last, ref, got[i])
-            if kind != ACCEPTED:
-                if kind == DUPLICATED:
-                    st.duplicated += 1
-                else:
-                    st.stale += 1
+            if not st.admit(counter, self._last_counter[i], ref, got[i]):
                 continue
-            st.accepted += 1
-            st.lost += lost
             got[i] = True
             self._last_counter[i] = counter
             last_t[i] = t

@@ -45,6 +45,24 @@ class LinkStats:
         """The counters as a plain dict (for status messages and reports)."""
         return asdict(self)
 
+    def admit(self, counter: int, last: int | None, reference: int | None,
+              got_this_cycle: bool) -> bool:
+        """Classify an intact frame of one stream (see :func:`classify`), count the
+        outcome, and return whether the frame is accepted."""
+        if counter == reference and last != counter and not got_this_cycle:
+            lost = 0 if last is None else (counter - last - 1) & 0xF  # the common case
+        else:
+            kind, lost = classify(counter, last, reference, got_this_cycle)
+            if kind == DUPLICATED:
+                self.duplicated += 1
+                return False
+            if kind != ACCEPTED:
+                self.stale += 1
+                return False
+        self.accepted += 1
+        self.lost += lost
+        return True
+
     @property
     def faults(self) -> int:
         """Frames or cycles that were anything but clean."""

@@ -7,7 +7,7 @@ import numpy as np
 
 from .codec import MODE_ENABLE, JointBusCodecs
 from .frames import new_message
-from .link import ACCEPTED, DUPLICATED, LinkStats, classify
+from .link import LinkStats
 from .virtual import drain, send_batch
 
 
@@ -124,19 +124,8 @@ class BusMaster:
             if not ok:
                 st.corrupted += 1
                 continue
-            last = self._last_counter[i]
-            if counter == reference and last != counter and not fresh[i]:
-                kind, lost = ACCEPTED, 0 if last is None else (counter - last - 1) & 0xF
-            else:
-                kind, lost = classify(counter, last, reference, fresh[i])
-            if kind != ACCEPTED:
-                if kind == DUPLICATED:
-                    st.duplicated += 1
-                else:
-                    st.stale += 1
+            if not st.admit(counter, self._last_counter[i], reference, fresh[i]):
                 continue
-            st.accepted += 1
-            st.lost += lost
             fresh[i] = True
             self._last_counter[i] = counter
             self.status[i] = int(vals[0])
