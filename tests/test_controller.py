@@ -142,3 +142,53 @@ def test_swap_keeps_state_by_name():
     assert c.engine.state == "approach" and c.counters.swaps == 1
     c.swap(load_skill(ROOT / "skills" / "drawer.yaml"), 2.0)
     assert c.engine.state == "reach"
+
+
+def test_non_finite_target_is_refused_and_counted():
+    c = ctl()
+    run(c, [[0.5, 0, 0]] * 3)
+    T, pose = c.T_world_target.copy(), list(c._pose)
+    c.engine.command = lambda T_obj, u, dt: np.full((4, 4), np.nan)
+    res = run(c, [[0.5, 0, 0]] * 3, t0=0.01)
+    assert c.counters.nonfinite_output == 3
+    assert all(np.array_equal(r.T_world_target, T) and r.pose == pose for r in res)
+
+
+def pour_mix(n):
+    """Inputs that translate, tilt and pour (the approach and pour states rotate)."""
+    k = np.arange(n)
+    return np.stack([0.8 * np.sin(k * 0.013), 0.8 * np.cos(k * 0.007), np.sin(k * 0.005)], 1).tolist()
+
+
+@given(st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3), st.floats(-np.pi, np.pi))
+@settings(max_examples=25, deadline=None)
+def test_published_pose_is_the_world_target_and_stays_orthonormal(offset, yaw):
+    """The pose composed on floats (object pose times object-frame target) is the world
+    target's, for any object pose; orientations stay on SO(3) over many rotating ticks."""
+    T_mug = se3.transform_from_pose([*offset, *se3.quaternion_from_rotvec([0.1, -0.2, yaw]).tolist()])
+    T_near = T_mug @ se3.transform_from_pose([0.0, 0.0, 0.08 - 0.12, 0, 0, 0, 1])
+    c = ctl()
+    t = 0.0
+    states = set()
+    for k, u in enumerate(pour_mix(1500)):
+        meas = c.T_world_target if c.T_world_target is not None else T_near
+        r = c.tick(t, t, inp(u, t, seq=k), state(meas, t), obj(t, T_mug))
+        states.add(r.state)
+        t += 0.001
+        T = r.T_world_target
+        assert np.allclose(se3.transform_from_pose(r.pose), T, atol=1e-12)
+        assert np.isclose(np.linalg.norm(r.pose[3:]), 1.0, atol=1e-12) and r.pose[6] >= 0.0
+        assert np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)
+    assert {"approach", "pour"} <= states  # the rotating states were exercised
+
+
+def test_moving_object_without_input_never_moves_the_target():
+    """A new object pose re-expresses the held target; the world target stays put."""
+    c = ctl()
+    run(c, [[0.5, 0.2, 0]] * 5)
+    T, pose = c.T_world_target.copy(), list(c._pose)
+    for k in range(20):
+        t = 0.01 + 0.001 * k
+        T_mug = se3.transform_from_pose([0.6 + 0.001 * k, 0.1, 0.75, 0, 0, 0.01 * k, 1])
+        r = c.tick(t, t, inp([0, 0, 0], t), state(T, t), obj(t, T_mug))
+        assert np.array_equal(r.T_world_target, T) and r.pose == pose

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
@@ -147,6 +147,47 @@ def test_linear_mapping_reproduces_identified_displacement(u, axes, frame):
     assert np.allclose(d6, M @ u, atol=1e-12)
     assert np.allclose(np.linalg.pinv(M) @ d6, u, atol=1e-9)
 
+
+
+def reference_linear(T, T_f, M, u, dt, in_frame):
+    """Algorithm 2 written out plainly: rotate by r about the frame's origin and axes
+    (R_w = R_f Rot(r) R_f^T), then translate by d in the object's or the frame's axes."""
+    d6 = M @ u * dt
+    R_f, p_f = T_f[:3, :3], T_f[:3, 3]
+    R_w = R_f @ se3.matrix_from_rotvec(d6[3:]) @ R_f.T
+    out = np.eye(4)
+    out[:3, :3] = R_w @ T[:3, :3]
+    out[:3, 3] = R_w @ (T[:3, 3] - p_f) + p_f + (R_f @ d6[:3] if in_frame else d6[:3])
+    return out
+
+
+@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+       st.lists(st.floats(-1, 1), min_size=18, max_size=18),
+       st.sampled_from(["ee", "tip", "tilted", "fixed"]), st.sampled_from(["object", "frame"]))
+@settings(max_examples=80, deadline=None)
+def test_linear_mapping_matches_plain_algorithm_2(u, m, frame, translation):
+    """The tick's float-level mapping computes what the plain matrix formula does, for
+    frames on the ee (none, a translated and a rotated offset) and fixed in the object."""
+    def q(*w):
+        return se3.quaternion_from_rotvec(w).tolist()
+
+    frames = {"tip": {"parent": "ee", "pose": [0, 0, 0.12, 0, 0, 0, 1]},
+              "tilted": {"parent": "ee", "pose": [0.02, -0.01, 0.1, *q(0.3, -0.4, 0.2)]},
+              "fixed": {"parent": "object", "pose": [0.1, 0.2, 0.0, *q(0.0, 0.5, 1.0)]}}
+    assume(any(m))  # the loader refuses an all-zero matrix
+    matrix = np.array(m).reshape(6, 3).tolist()
+    eng = engine_for(one_state({"type": "linear", "frame": frame, "matrix": matrix,
+                                "translation": translation}, frames=frames))
+    T = se3.transform_from_pose([0.1, -0.2, 0.3, *se3.quaternion_from_rotvec([0.3, -0.2, 0.5])])
+    if frame in eng.T_ee_frame:
+        T_f = T @ eng.T_ee_frame[frame]
+    else:
+        T_f = eng.T_obj_frame.get(frame, T)
+    speeds = np.array([0.1] * 3 + [0.5] * 3)[:, None]
+    expected = reference_linear(T, T_f, np.array(matrix) * speeds, np.array(u), 0.01,
+                                translation == "frame")
+    assert np.allclose(eng.command(T, np.array(u), 0.01), expected, atol=1e-12)
+    assert np.allclose(eng.command(T, tuple(u), 0.01), expected, atol=1e-12)
 
 def test_rotation_about_tip_keeps_tip_fixed():
     eng = engine_for(one_state({"type": "linear", "frame": "tip", "axes": ["rx", "ry", "rz"]}))

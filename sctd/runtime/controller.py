@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine
-from .safety import is_finite_transform, limit_offset, limit_step, sanitize_input
+from .safety import limit_offset, limit_step, sanitize_input
 
 Array = NDArray[np.float64]
 
@@ -54,6 +54,7 @@ class Sample:
     T: Array | None = None  # pose as a 4x4 transform (state, objects)
     u: tuple[float, ...] = ()
     wrench: list[float] | None = None
+    pose: list[float] | None = None  # as received (objects), to tell an unchanged pose
 
 
 @dataclass
@@ -99,6 +100,11 @@ class Controller:
         self._pose: list[float] | None = None
         self._obj_T: Array | None = None
         self._obj_T_inv: Array = np.eye(4)
+        self._T_obj_target: Array | None = None  # the target in the object frame
+        self._obj_rows: tuple[float, ...] = ()  # the object's rotation (9) and position (3)
+        self._obj_q: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
+        self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
+        self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self._install(skill, now=0.0, keep_state=False)
 
     def _install(self, skill: Skill, now: float, keep_state: bool,
@@ -148,6 +154,8 @@ class Controller:
                 return TickResult("waiting", None, self.engine.state, in_seq)
             assert state is not None and state.T is not None
             self.T_world_target = state.T.copy()
+            self._T_obj_target = None
+            self._rot = None
             self._pose = se3.pose_from_matrix4(self.T_world_target)
             self.engine.reset(now, self.engine.state)
         if not (state_ok and obj_ok):
@@ -155,9 +163,17 @@ class Controller:
             return TickResult("hold", self.T_world_target, self.engine.state, in_seq, pose=self._pose)
 
         assert state is not None and obj is not None and state.T is not None and obj.T is not None
+        # The tick works in the object frame, where the skill is; the target is kept there
+        # too while the object's pose does not change, so that a tick converts one pose
+        # (the measured one) in and one (the new target) out.
         T_world_obj = obj.T
-        if T_world_obj is not self._obj_T:  # a new object sample: invert once
+        if T_world_obj is not self._obj_T:  # a new object sample: re-express the target
             self._obj_T, self._obj_T_inv = T_world_obj, se3.invert4(T_world_obj)
+            (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T_world_obj.tolist()
+            self._obj_rows = (a, b, c, d, e, f, g, h, i, x, y, z)
+            self._obj_q = se3.quaternion_from_rows(a, b, c, d, e, f, g, h, i)
+            self._T_obj_target = None
+            self._rot = None
         T_obj_world = self._obj_T_inv
         T_obj_meas = T_obj_world @ state.T
         force = None
@@ -167,39 +183,61 @@ class Controller:
         if changed:
             self.counters.transitions += 1
 
+        T_prev = self._T_obj_target
+        if T_prev is None:
+            T_prev = self._T_obj_target = T_obj_world @ self.T_world_target
         # How far the user pushes: the input's norm, clipped to 1 (a diagonal push of a
         # 3-axis stick is one push, not two); steps are bounded by mag * speed * dt.
-        mag = min(1.0, math.sqrt(sum(x * x for x in u.tolist())))
-        T_target = self.T_world_target
+        mag = min(1.0, math.hypot(*u))
+        T_new = T_prev
         if mag > 0.0:
-            T_obj_prev = T_obj_world @ T_target
-            T_obj_new = self.engine.command(T_obj_prev, u, dt)
-            T_obj_new = limit_step(T_obj_prev, T_obj_new, mag * self.v_max * dt,
-                                   mag * self.w_max * dt)
-            T_target = T_world_obj @ T_obj_new
-        limited = limit_offset(T_target, state.T, cfg.max_offset, cfg.max_offset_rotation)
-        if limited is not T_target:
+            T_new = limit_step(T_prev, self.engine.command(T_prev, u, dt), mag * self.v_max * dt,
+                               mag * self.w_max * dt)
+        limited = limit_offset(T_new, T_obj_meas, cfg.max_offset, cfg.max_offset_rotation)
+        if limited is not T_new:
             self.counters.offset_limited += 1
-            T_target = limited
-        if T_target is not self.T_world_target:
-            if is_finite_transform(T_target):
-                # Re-orthonormalise through the quaternion so that millions of composed
-                # steps cannot drift off SO(3); the published pose is this one.
-                self._pose = se3.pose_from_matrix4(T_target)
-                T_target = se3.matrix4_from_pose(self._pose)
-            else:  # never publish a non-finite target: keep the last one
-                self.counters.nonfinite_output += 1
-                T_target = self.T_world_target
-        self.T_world_target = T_target
+            T_new = limited
+        if T_new is not T_prev and not self._accept(T_new, T_world_obj):
+            self.counters.nonfinite_output += 1  # never publish a non-finite target
         self.mode = "running" if input_ok else "stopped"
-        return TickResult(self.mode, T_target, self.engine.state, in_seq, changed, input_ok,
-                          self._pose)
+        return TickResult(self.mode, self.T_world_target, self.engine.state, in_seq, changed,
+                          input_ok, self._pose)
 
-    def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[Array, bool]:
+    def _accept(self, T_new: Array, T_world_obj: Array) -> bool:
+        """Make the object-frame pose T_new the target, or refuse it (False) when it is
+        not finite.
+
+        The orientation is re-orthonormalised through its unit quaternion whenever it
+        changed, so that millions of composed steps cannot drift off SO(3); a step that
+        only translates keeps the previous (already orthonormal) orientation exactly,
+        and with it the previous world quaternion. The published pose is computed on
+        Python floats: world quaternion = object's * target's, world position = object's
+        rotation times the target's position plus the object's position.
+        """
+        (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T_new.tolist()
+        if not math.isfinite(a + b + c + d + e + f + g + h + i + x + y + z):
+            return False
+        rot: tuple[float, ...] = (a, b, c, d, e, f, g, h, i)
+        if rot != self._rot:
+            q = se3.quaternion_from_rows(*rot)
+            rot = se3.rows_from_quaternion(*q)
+            a, b, c, d, e, f, g, h, i = rot
+            T_new = np.array([[a, b, c, x], [d, e, f, y], [g, h, i, z], [0.0, 0.0, 0.0, 1.0]])
+            self._rot = rot
+            qx, qy, qz, qw = se3.compose_quaternions(self._obj_q, q)
+            self._q_world = (qx, qy, qz, qw) if qw >= 0.0 else (-qx, -qy, -qz, -qw)
+        o = self._obj_rows
+        self._pose = [o[0] * x + o[1] * y + o[2] * z + o[9], o[3] * x + o[4] * y + o[5] * z + o[10],
+                      o[6] * x + o[7] * y + o[8] * z + o[11], *self._q_world]
+        self._T_obj_target = T_new
+        self.T_world_target = T_world_obj @ T_new
+        return True
+
+    def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[tuple[float, ...], bool]:
         """The user command this tick: zero when missing, stale or not finite."""
         cfg = self.config
         if inp is None:
-            return np.zeros(3), False
+            return (0.0, 0.0, 0.0), False
         stale = now - inp.received > cfg.input_timeout or (
             cfg.stamp_check and abs(wall - inp.stamp) > cfg.input_timeout
         )
@@ -207,7 +245,7 @@ class Controller:
             if inp.seq != self.last_in_seq:
                 self.counters.stale_input += 1
                 self.last_in_seq = inp.seq
-            return np.zeros(len(inp.u)), False
+            return (0.0,) * len(inp.u), False
         u, ok = sanitize_input(inp.u, cfg.deadband)
         if not ok and inp.seq != self.last_in_seq:
             self.counters.nonfinite_input += 1

@@ -2,7 +2,8 @@
 
 These are the daemon's own guarantees, independent of what a skill asks for: per-tick
 steps bounded by the maximum speeds (scaled by how far the user pushes), the target kept
-within a bounded offset of the measured pose, and the output always finite.
+within a bounded offset of the measured pose. (The controller refuses a non-finite
+target, so the output is always finite.)
 """
 
 from __future__ import annotations
@@ -32,10 +33,15 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     return out
 
 
-def _within_angle(R_a: Array, R_b: Array, max_angle: float) -> bool:
-    """Whether the rotation R_a^T R_b is at most ``max_angle``: a trace test
-    (cos angle = (trace - 1) / 2), two numpy calls instead of an exact angle."""
-    return (float((R_a * R_b).sum()) - 1.0) * 0.5 >= math.cos(max_angle)
+def _separation(T_a: Array, T_b: Array) -> tuple[float, float]:
+    """Distance between the origins of two transforms and the cosine of the angle of
+    ``R_a^T R_b`` (from its trace: cos = (trace - 1) / 2), on Python floats."""
+    (a0, a1, a2, ax), (a3, a4, a5, ay), (a6, a7, a8, az), _ = T_a.tolist()
+    (b0, b1, b2, bx), (b3, b4, b5, by), (b6, b7, b8, bz), _ = T_b.tolist()
+    dx, dy, dz = bx - ax, by - ay, bz - az
+    trace = (a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
+             + a6 * b6 + a7 * b7 + a8 * b8)
+    return math.sqrt(dx * dx + dy * dy + dz * dz), (trace - 1.0) * 0.5
 
 
 def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation: float) -> Array:
@@ -45,12 +51,9 @@ def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation
     Scaling both parts by one factor keeps the direction of motion (an orbit about a
     feature frame stays an orbit), where clipping each separately would bend it.
     """
-    dx, dy, dz = (T_new[:3, 3] - T_prev[:3, 3]).tolist()
-    dt = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dt, cos_r = _separation(T_prev, T_new)
     # A mapped step that equals the bound exactly must not lose to it by an ulp.
-    if dt <= max_translation * (1.0 + 1e-9) and _within_angle(
-        T_prev[:3, :3], T_new[:3, :3], max_rotation * (1.0 + 1e-9)
-    ):
+    if dt <= max_translation * (1.0 + 1e-9) and cos_r >= math.cos(max_rotation * (1.0 + 1e-9)):
         return T_new
     dr = rotation_angle_between(T_prev[:3, :3], T_new[:3, :3])
     s = 1.0
@@ -68,15 +71,16 @@ def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation
 def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
                  max_rotation: float) -> Array:
     """Keep the target within ``max_translation`` (m) and ``max_rotation`` (rad) of the
-    measured pose, so a blocked or lagging arm never winds up an unbounded target."""
-    d = T_target[:3, 3] - T_measured[:3, 3]
-    dx, dy, dz = d.tolist()
-    n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if n <= max_translation and _within_angle(T_measured[:3, :3], T_target[:3, :3], max_rotation):
+    measured pose, so a blocked or lagging arm never winds up an unbounded target.
+
+    Both poses may be given in any one frame: distance and angle do not depend on it."""
+    n, cos_r = _separation(T_measured, T_target)
+    if n <= max_translation and cos_r >= math.cos(max_rotation):
         return T_target
     ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
     out = T_target.copy()
     if n > max_translation:
+        d = T_target[:3, 3] - T_measured[:3, 3]
         out[:3, 3] = T_measured[:3, 3] + d * (max_translation / n)
     if ang > max_rotation:
         w0, w1, w2 = se3.rotvec_from_matrix3(T_measured[:3, :3].T @ T_target[:3, :3])
@@ -85,19 +89,10 @@ def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
     return out
 
 
-def is_finite_transform(T: Array) -> bool:
-    """True when every entry is finite (NaN and inf propagate through the sum).
-
-    Orthonormality is not checked here: the controller re-orthonormalises every new
-    target through its unit quaternion before publishing it.
-    """
-    return math.isfinite(float(T.sum()))
-
-
-def sanitize_input(u: tuple[float, ...] | list[float], deadband: float) -> tuple[Array, bool]:
+def sanitize_input(u: tuple[float, ...] | list[float], deadband: float) -> tuple[tuple[float, ...], bool]:
     """User input -> (clipped command, ok). Non-finite input is a zero command (not ok);
     each axis is clipped to [-1, 1] and zeroed inside the dead band."""
-    if not all(math.isfinite(x) for x in u):
-        return np.zeros(len(u)), False
-    return np.array([0.0 if abs(x) < deadband else (1.0 if x > 1.0 else -1.0 if x < -1.0 else x)
-                     for x in u]), True
+    if not math.isfinite(sum(u)):  # NaN and inf propagate through the sum
+        return (0.0,) * len(u), False
+    return tuple([0.0 if abs(x) < deadband else (1.0 if x > 1.0 else -1.0 if x < -1.0 else x)
+                  for x in u]), True

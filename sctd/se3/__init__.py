@@ -9,12 +9,16 @@ shared by the runtime and the learner.
 
 from ._fast import (
     angle_between3,
+    compose_quaternions,
     invert4,
     matrix3_from_rotvec,
     matrix4_from_pose,
     pose_from_matrix4,
     quaternion_from_matrix3,
+    quaternion_from_rows,
     rotvec_from_matrix3,
+    rows_from_quaternion,
+    rows_from_rotvec,
 )
 from ._rotations import (
     average_quaternion,
@@ -52,6 +56,7 @@ __all__ = [
     "angle_between3",
     "apply_displacement",
     "average_quaternion",
+    "compose_quaternions",
     "displacement_from_transforms",
     "euler_xyz_from_matrix",
     "exp_se3",
@@ -71,6 +76,7 @@ __all__ = [
     "quaternion_from_matrix",
     "quaternion_from_matrix3",
     "quaternion_from_rotvec",
+    "quaternion_from_rows",
     "quaternion_multiply",
     "quaternion_normalize",
     "rotation_angle",
@@ -78,6 +84,8 @@ __all__ = [
     "rotvec_from_matrix",
     "rotvec_from_matrix3",
     "rotvec_from_quaternion",
+    "rows_from_quaternion",
+    "rows_from_rotvec",
     "tf_norm",
     "tf_norm_of_displacement",
     "transform_from_displacement",

@@ -19,6 +19,15 @@ Array = NDArray[np.float64]
 def quaternion_from_matrix3(R: Array) -> tuple[float, float, float, float]:
     """(qx, qy, qz, qw), qw >= 0, of one rotation matrix (Shepperd's method)."""
     (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = R.tolist()
+    return quaternion_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
+
+
+def quaternion_from_rows(m00: float, m01: float, m02: float, m10: float, m11: float, m12: float,
+                         m20: float, m21: float, m22: float) -> tuple[float, float, float, float]:
+    """(qx, qy, qz, qw), qw >= 0, of the rotation matrix with these entries (row-major).
+
+    Shepperd's method; every branch reads all nine entries, so a non-finite entry gives a
+    non-finite quaternion."""
     tr = m00 + m11 + m22
     if tr >= m00 and tr >= m11 and tr >= m22:
         s = 2.0 * math.sqrt(1.0 + tr)
@@ -38,6 +47,25 @@ def quaternion_from_matrix3(R: Array) -> tuple[float, float, float, float]:
     return x / n, y / n, z / n, w / n
 
 
+def rows_from_quaternion(qx: float, qy: float, qz: float, qw: float) -> tuple[float, ...]:
+    """The 9 entries (row-major) of the rotation of a quaternion (normalised here)."""
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    return (1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy),
+            2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx),
+            2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy))
+
+
+def compose_quaternions(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
+    """Hamilton product a * b of two (x, y, z, w) quaternions (rotation b, then a)."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz)
+
+
 def rotvec_from_matrix3(R: Array) -> tuple[float, float, float]:
     """Rotation vector of one rotation matrix, angle in [0, pi]."""
     x, y, z, w = quaternion_from_matrix3(R)
@@ -51,31 +79,16 @@ def rotvec_from_matrix3(R: Array) -> tuple[float, float, float]:
 
 def matrix3_from_rotvec(w0: float, w1: float, w2: float) -> Array:
     """Rotation matrix of one rotation vector (Rodrigues)."""
-    th2 = w0 * w0 + w1 * w1 + w2 * w2
-    if th2 < 1e-16:
-        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
-    else:
-        th = math.sqrt(th2)
-        a = math.sin(th) / th
-        b = (1.0 - math.cos(th)) / th2
-    return np.array([
-        [1.0 - b * (w1 * w1 + w2 * w2), -a * w2 + b * w0 * w1, a * w1 + b * w0 * w2],
-        [a * w2 + b * w0 * w1, 1.0 - b * (w0 * w0 + w2 * w2), -a * w0 + b * w1 * w2],
-        [-a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1)],
-    ])
+    r = rows_from_rotvec(w0, w1, w2)
+    return np.array([r[0:3], r[3:6], r[6:9]])
 
 
 def matrix4_from_pose(p) -> Array:
     """4x4 transform from [x, y, z, qx, qy, qz, qw] (quaternion normalised here)."""
     x, y, z, qx, qy, qz, qw = p
-    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
-    return np.array([
-        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy), x],
-        [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx), y],
-        [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy), z],
-        [0.0, 0.0, 0.0, 1.0],
-    ])
+    r = rows_from_quaternion(qx, qy, qz, qw)
+    return np.array([[r[0], r[1], r[2], x], [r[3], r[4], r[5], y], [r[6], r[7], r[8], z],
+                     [0.0, 0.0, 0.0, 1.0]])
 
 
 def pose_from_matrix4(T: Array) -> list[float]:
@@ -103,3 +116,17 @@ def angle_between3(R_a: Array, R_b: Array) -> float:
 def _half_sin(R: Array) -> float:
     x, y, z, _ = quaternion_from_matrix3(R)
     return math.sqrt(x * x + y * y + z * z)
+
+
+def rows_from_rotvec(w0: float, w1: float, w2: float) -> tuple[float, ...]:
+    """The 9 entries (row-major) of the rotation matrix of a rotation vector, as floats."""
+    th2 = w0 * w0 + w1 * w1 + w2 * w2
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a = math.sin(th) / th
+        b = (1.0 - math.cos(th)) / th2
+    return (1.0 - b * (w1 * w1 + w2 * w2), -a * w2 + b * w0 * w1, a * w1 + b * w0 * w2,
+            a * w2 + b * w0 * w1, 1.0 - b * (w0 * w0 + w2 * w2), -a * w0 + b * w1 * w2,
+            -a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1))
