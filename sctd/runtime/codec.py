@@ -102,21 +102,26 @@ def _stamp(obj: dict) -> float:
     return float(x)
 
 
+_NUMBERS = frozenset((int, float))  # not bool: type(True) is bool
+
+
 def _floats(obj: dict, key: str, sizes: tuple[int, ...]) -> list[float]:
     x = obj.get(key)
     if not isinstance(x, list | tuple) or len(x) not in sizes:
         raise DecodeError(f"bad_{key}", f"expected {' or '.join(map(str, sizes))} numbers")
-    out = []
-    for e in x:
-        if isinstance(e, bool) or not isinstance(e, int | float):
-            raise DecodeError(f"bad_{key}", "non-numeric element")
-        out.append(float(e))
-    return out
+    if not _NUMBERS.issuperset(map(type, x)):
+        raise DecodeError(f"bad_{key}", "non-numeric element")
+    return list(map(float, x))
+
+
+def _finite(values: list[float]) -> bool:
+    """All finite: NaN and inf propagate through the sum (inf - inf is NaN)."""
+    return math.isfinite(sum(values))
 
 
 def _pose(obj: dict, key: str = "pose") -> list[float]:
     p = _floats(obj, key, (7,))
-    if not all(math.isfinite(e) for e in p):
+    if not _finite(p):
         raise DecodeError(f"nonfinite_{key}")
     n = math.sqrt(p[3] ** 2 + p[4] ** 2 + p[5] ** 2 + p[6] ** 2)
     if abs(n - 1.0) > 1e-2:
@@ -161,7 +166,7 @@ def decode_state(data: bytes) -> StateMsg:
     wrench = None
     if obj.get("wrench") is not None:
         wrench = _floats(obj, "wrench", (6,))
-        if not all(math.isfinite(e) for e in wrench):
+        if not _finite(wrench):
             wrench = None  # a bad wrench must not cost the pose; force guards just see none
     q = obj.get("q")
     dq = obj.get("dq")

@@ -1,10 +1,14 @@
 """``sctd run``: the fixed-rate daemon (DESIGN §7) wired to Zenoh.
 
-Threads: the tick runs on the main thread; Zenoh delivers input and state into
-newest-value ring channels (read with ``try_recv``, never blocking) and objects and
-skill queries through callbacks on Zenoh's threads. A hot-swap bundle is decoded,
-validated and compiled on the query's thread, handed over through a one-slot mailbox,
-and installed between two ticks; the query is answered after the swap.
+Threads: the tick runs on the main thread. Zenoh's callbacks only queue each input,
+state and object message with its arrival time; a decoder thread (at one real-time
+priority below the tick, so that it is never preempted while it holds the GIL) decodes
+and validates them, counts every malformed one, and stores the newest valid sample in a
+one-reference slot, which the tick reads without blocking or decoding. A hot-swap
+bundle is decoded, validated and compiled on the query's thread, handed over through a
+one-slot mailbox, and installed between two ticks; the query is answered after the
+swap. Targets are encoded and put by a publisher thread, so the tick's own work is the
+control step alone.
 """
 
 from __future__ import annotations
@@ -28,29 +32,51 @@ from .controller import Controller, RuntimeConfig, Sample
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 
 log = logging.getLogger("sctd.run")
-RING = 16
 
 
 class _Publisher(threading.Thread):
-    """Publishes targets off the tick thread: a Zenoh put that reaches a remote
-    subscriber writes to the socket (tens of us, with a long tail), which would
+    """Encodes and publishes targets off the tick thread: a Zenoh put that reaches a
+    remote subscriber writes to the socket (tens of us, with a long tail), which would
     otherwise count against every tick. Runs at one FIFO priority below the tick."""
 
     def __init__(self, publisher: Any, rt_priority: int):
         super().__init__(name="sctd-target-publisher", daemon=True)
         self.publisher = publisher
         self.rt_priority = rt_priority
-        self.queue: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
+        # (seq, stamp, pose, state, skill id, in_seq) of each target, None to stop.
+        self.queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
         self.put_time = Histogram()
 
     def run(self) -> None:
         set_timer_slack(1)
         set_realtime(max(0, self.rt_priority - 1))
         q = self.queue
-        while (payload := q.get()) is not None:
+        encode = codec.encode_target
+        while (target := q.get()) is not None:
             t0 = time.monotonic()
-            self.publisher.put(payload)
+            self.publisher.put(encode(*target))
             self.put_time.add(time.monotonic() - t0)
+
+    def close(self) -> None:
+        self.queue.put(None)
+        self.join(timeout=5.0)
+
+
+class _Decoder(threading.Thread):
+    """Decodes queued messages off the tick thread: ``(handler, sample, received)``
+    items, each handled as ``handler(sample, received)``; None stops it."""
+
+    def __init__(self, rt_priority: int):
+        super().__init__(name="sctd-decoder", daemon=True)
+        self.rt_priority = rt_priority
+        self.queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
+
+    def run(self) -> None:
+        set_realtime(max(0, self.rt_priority - 1))
+        q = self.queue
+        while (item := q.get()) is not None:
+            handler, sample, received = item
+            handler(sample, received)
 
     def close(self) -> None:
         self.queue.put(None)
@@ -105,15 +131,39 @@ class Daemon:
 
     # --- Zenoh edges (callbacks run on Zenoh's threads) ---------------------------------
 
-    def _on_object(self, sample: zenoh.Sample) -> None:
+    def _drop(self, reason: str) -> None:
+        with self._lock:  # Zenoh may call back on several threads
+            self.controller.counters.drop(reason)
+
+    def _take_input(self, sample: zenoh.Sample, received: float) -> None:
+        try:
+            m = codec.decode_input(sample.payload.to_bytes())
+        except codec.DecodeError as e:
+            self._drop(f"input_{e.reason}")
+            return
+        self._input = Sample(m.seq, m.stamp, received, u=m.u)
+
+    def _take_state(self, sample: zenoh.Sample, received: float) -> None:
+        try:
+            m = codec.decode_state(sample.payload.to_bytes())
+        except codec.DecodeError as e:
+            self._drop(f"state_{e.reason}")
+            return
+        self._state = Sample(m.seq, m.stamp, received, T=se3.matrix4_from_pose(m.pose),
+                             wrench=m.wrench)
+
+    def _take_object(self, sample: zenoh.Sample, received: float) -> None:
         name = str(sample.key_expr).rsplit("/", 1)[-1]
         try:
             m = codec.decode_object(sample.payload.to_bytes())
         except codec.DecodeError as e:
-            with self._lock:
-                self.controller.counters.drop(f"object_{e.reason}")
+            self._drop(f"object_{e.reason}")
             return
-        self._objects[name] = Sample(m.seq, m.stamp, time.monotonic(), T=se3.matrix4_from_pose(m.pose))
+        # A pose that has not changed keeps its transform (the same array), so that the
+        # controller's object-frame caches stay valid for a still object.
+        prev = self._objects.get(name)
+        T = prev.T if prev is not None and prev.pose == m.pose else se3.matrix4_from_pose(m.pose)
+        self._objects[name] = Sample(m.seq, m.stamp, received, T=T, pose=m.pose)
 
     def _on_skill_query(self, query: zenoh.Query) -> None:
         payload = query.payload
@@ -143,37 +193,24 @@ class Daemon:
 
     # --- the loop ------------------------------------------------------------------------
 
-    def _drain_input(self, sub: Any, now: float) -> None:
-        """Decode everything that arrived since the last tick (so that every malformed
-        message is counted) and keep the newest valid sample."""
-        while (s := sub.try_recv()) is not None:
-            try:
-                m = codec.decode_input(s.payload.to_bytes())
-            except codec.DecodeError as e:
-                self.controller.counters.drop(f"input_{e.reason}")
-                continue
-            self._input = Sample(m.seq, m.stamp, now, u=m.u)
-
-    def _drain_state(self, sub: Any, now: float) -> None:
-        while (s := sub.try_recv()) is not None:
-            try:
-                m = codec.decode_state(s.payload.to_bytes())
-            except codec.DecodeError as e:
-                self.controller.counters.drop(f"state_{e.reason}")
-                continue
-            self._state = Sample(m.seq, m.stamp, now, T=se3.matrix4_from_pose(m.pose),
-                                 wrench=m.wrench)
-
     def run(self, duration: float | None = None) -> dict[str, Any]:
         """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics."""
         cfg = self.config
         keys = self.keys
         s = self.session
-        # Small rings drained every tick: newest valid sample wins, nothing blocks, and a
-        # burst larger than the ring between two ticks loses only its oldest messages.
-        sub_in = s.declare_subscriber(keys.input(cfg.device), zenoh.handlers.RingChannel(RING))
-        sub_state = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(RING))
-        sub_obj = s.declare_subscriber(keys.objects(), self._on_object)
+        # Decoded on arrival into newest-value slots: the newest valid sample wins, every
+        # malformed message is counted, and the tick never waits on the network.
+        decoder = _Decoder(self.rt_priority)
+        decoder.start()
+        inbox = decoder.queue
+        monotonic = time.monotonic
+
+        def queue_to(handler):
+            return lambda sample: inbox.put((handler, sample, monotonic()))
+
+        sub_in = s.declare_subscriber(keys.input(cfg.device), queue_to(self._take_input))
+        sub_state = s.declare_subscriber(keys.state, queue_to(self._take_state))
+        sub_obj = s.declare_subscriber(keys.objects(), queue_to(self._take_object))
         pub_target = s.declare_publisher(keys.target, express=True,
                                          congestion_control=zenoh.CongestionControl.DROP)
         pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
@@ -212,15 +249,12 @@ class Daemon:
                     self.controller.swap(pending.skill, now, pending.engine)
                     pending.state = self.controller.engine.state
                     pending.done.set()
-                self._drain_input(sub_in, now)
-                self._drain_state(sub_state, now)
                 ctl = self.controller
                 res = ctl.tick(now, wall, self._input, self._state,
                                self._objects.get(ctl.skill.object))
                 if res.pose is not None:
                     self.target_seq += 1
-                    send(codec.encode_target(
-                        self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
+                    send((self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
                     self._window_targets += 1
                 done = time.monotonic()
                 compute = done - now
@@ -242,6 +276,7 @@ class Daemon:
             gc.unfreeze()
             for d in (queryable, sub_in, sub_state, sub_obj, pub_target, pub_status):
                 d.undeclare()
+            decoder.close()
         return self.status(ticker, time.monotonic(), 0.0)
 
     def stop(self) -> None:

@@ -1,0 +1,104 @@
+"""Wire contract v1 decoders: round trips, and every malformed message is a DecodeError
+with a reason (never another exception)."""
+
+import math
+
+import msgpack
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sctd.runtime import codec
+
+POSE = [0.1, -0.2, 0.3, 0.0, 0.0, 0.6, 0.8]
+
+
+def test_round_trips():
+    m = codec.decode_input(codec.encode_input(3, 12.5, [0.1, -1, 0.5]))
+    assert (m.seq, m.stamp, m.u) == (3, 12.5, (0.1, -1.0, 0.5))
+    s = codec.decode_state(codec.encode_state(4, 1.0, POSE, q=[0.0] * 7, wrench=[1, 2, 3, 0, 0, 0]))
+    assert s.pose == POSE and s.wrench == [1.0, 2.0, 3.0, 0.0, 0.0, 0.0] and s.q == [0.0] * 7
+    assert all(type(x) is float for x in s.pose + s.wrench)
+    o = codec.decode_object(codec.encode_object(5, 2.0, POSE))
+    assert (o.seq, o.pose) == (5, POSE)
+    t = codec.decode_target(codec.encode_target(6, 3.0, POSE, "carry", "abc", 2))
+    assert t["in_seq"] == 2 and t["v"] == codec.WIRE_VERSION
+
+
+def packed(**fields):
+    return msgpack.packb({"seq": 1, "stamp": 1.0, **fields}, use_bin_type=True)
+
+
+@pytest.mark.parametrize("data, reason", [
+    (b"\xc1", "not_msgpack"),
+    (msgpack.packb([1, 2]), "not_map"),
+    (packed(u=[0.1, 0.2]), "bad_u"),
+    (packed(u=[0.1, True, 0.2]), "bad_u"),       # a bool is not a number
+    (packed(u=[0.1, "0.2", 0.3]), "bad_u"),
+    (packed(u=[0.1, None, 0.3]), "bad_u"),
+    (msgpack.packb({"seq": True, "stamp": 1.0, "u": [0, 0, 0]}), "bad_seq"),
+    (msgpack.packb({"seq": 1, "stamp": float("nan"), "u": [0, 0, 0]}), "bad_stamp"),
+    (msgpack.packb({"v": 0, "seq": 1, "stamp": 1.0, "u": [0, 0, 0]}), "bad_version"),
+])
+def test_malformed_input_reasons(data, reason):
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_input(data)
+    assert e.value.reason == reason
+
+
+@pytest.mark.parametrize("pose, reason", [
+    ([0, 0, 0, 0, 0, 0, float("nan")], "nonfinite_pose"),
+    ([float("inf"), 0, 0, 0, 0, 0, 1], "nonfinite_pose"),
+    ([float("inf"), float("-inf"), 0, 0, 0, 0, 1], "nonfinite_pose"),
+    ([0, 0, 0, 0, 0, 0, 2.0], "bad_pose"),     # quaternion norm off by more than 1 %
+    ([0, 0, 0, 0, 0, 1], "bad_pose"),
+    ([0, 0, 0, 0, 0, False, 1], "bad_pose"),
+])
+def test_malformed_pose_reasons(pose, reason):
+    for decode in (codec.decode_state, codec.decode_object):
+        with pytest.raises(codec.DecodeError) as e:
+            decode(packed(pose=pose))
+        assert e.value.reason == reason
+
+
+def test_bad_wrench_costs_only_the_wrench():
+    s = codec.decode_state(packed(pose=POSE, wrench=[0, 0, float("nan"), 0, 0, 0]))
+    assert s.wrench is None and s.pose == POSE
+    with pytest.raises(codec.DecodeError):
+        codec.decode_state(packed(pose=POSE, wrench=[0, 0, "x", 0, 0, 0]))
+
+
+@given(st.binary(max_size=200))
+@settings(max_examples=300, deadline=None)
+def test_any_bytes_decode_or_raise_decode_error(data):
+    for decode in (codec.decode_input, codec.decode_state, codec.decode_object):
+        try:
+            m = decode(data)
+        except codec.DecodeError:
+            continue
+        assert math.isfinite(m.stamp)
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-2**63, 2**64 - 1) | st.floats() | st.text(max_size=5),
+    lambda kids: st.lists(kids, max_size=8) | st.dictionaries(st.text(max_size=5), kids, max_size=4),
+    max_leaves=20)
+
+
+@given(st.dictionaries(st.sampled_from(["v", "seq", "stamp", "u", "pose", "wrench", "q"]), json_values))
+@settings(max_examples=300, deadline=None)
+def test_any_map_decodes_to_valid_fields_or_raises_decode_error(fields):
+    data = msgpack.packb(fields, use_bin_type=True)
+    try:
+        s = codec.decode_state(data)
+    except codec.DecodeError:
+        pass
+    else:
+        assert len(s.pose) == 7 and all(math.isfinite(x) for x in s.pose)
+        assert s.wrench is None or all(math.isfinite(x) for x in s.wrench)
+    try:
+        m = codec.decode_input(data)
+    except codec.DecodeError:
+        pass
+    else:
+        assert len(m.u) in (3, 6) and all(type(x) is float for x in m.u)
