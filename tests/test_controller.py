@@ -192,3 +192,17 @@ def test_moving_object_without_input_never_moves_the_target():
         T_mug = se3.transform_from_pose([0.6 + 0.001 * k, 0.1, 0.75, 0, 0, 0.01 * k, 1])
         r = c.tick(t, t, inp([0, 0, 0], t), state(T, t), obj(t, T_mug))
         assert np.array_equal(r.T_world_target, T) and r.pose == pose
+
+
+def test_histogram_percentiles_and_clear():
+    from sctd.runtime.timing import Histogram
+    h = Histogram()
+    for k in range(1, 101):
+        h.add(k * 1e-5)  # 0.01 .. 1 ms
+    h.add(1.0)  # beyond the last bin: reported as the max
+    assert abs(h.percentile(50) - 0.51e-3) < 2 * Histogram.BIN  # within a bin
+    assert h.percentile(100) == 1.0 and h.n == 101
+    h.clear()
+    assert h.n == 0 and h.max == 0.0 and not any(h.counts) and h.percentile(99) == 0.0
+    h.add(2e-5)
+    assert abs(h.percentile(99) - 2e-5) < 2 * Histogram.BIN

@@ -120,6 +120,9 @@ def test_targets_at_rate_and_zero_input_holds(daemon):
     status = rig.status[-1]
     assert status["mode"] == "stopped" and status["skill_name"] == "pour"
     assert status["ticks"] > 0 and "p99" in status["lateness_ms"] and "p99" in status["compute_ms"]
+    recent = status["recent_ms"]  # the daemon has run for more than a second
+    assert 500 < recent["compute"]["n"] <= 1100 and recent["compute"]["n"] < status["compute_ms"]["n"]
+    assert recent["lateness"]["p50"] <= recent["lateness"]["max"]
 
 
 def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):

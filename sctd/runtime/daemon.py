@@ -32,29 +32,35 @@ from .controller import Controller, RuntimeConfig, Sample
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 
 log = logging.getLogger("sctd.run")
+RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
 
 
 class _Publisher(threading.Thread):
-    """Encodes and publishes targets off the tick thread: a Zenoh put that reaches a
-    remote subscriber writes to the socket (tens of us, with a long tail), which would
-    otherwise count against every tick. Runs at one FIFO priority below the tick."""
+    """Encodes and publishes targets and status off the tick thread: a Zenoh put that
+    reaches a remote subscriber writes to the socket (tens of us, with a long tail),
+    which would otherwise count against every tick. Runs at one FIFO priority below the
+    tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq)``, a
+    status map (dict), or None to stop."""
 
-    def __init__(self, publisher: Any, rt_priority: int):
-        super().__init__(name="sctd-target-publisher", daemon=True)
-        self.publisher = publisher
+    def __init__(self, target: Any, status: Any, rt_priority: int):
+        super().__init__(name="sctd-publisher", daemon=True)
+        self.target = target
+        self.status = status
         self.rt_priority = rt_priority
-        # (seq, stamp, pose, state, skill id, in_seq) of each target, None to stop.
-        self.queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
-        self.put_time = Histogram()
+        self.queue: queue.SimpleQueue[tuple | dict | None] = queue.SimpleQueue()
+        self.put_time = Histogram()  # target puts
 
     def run(self) -> None:
         set_timer_slack(1)
         set_realtime(max(0, self.rt_priority - 1))
         q = self.queue
         encode = codec.encode_target
-        while (target := q.get()) is not None:
+        while (item := q.get()) is not None:
+            if isinstance(item, dict):
+                self.status.put(codec.pack(item))
+                continue
             t0 = time.monotonic()
-            self.publisher.put(encode(*target))
+            self.target.put(encode(*item))
             self.put_time.add(time.monotonic() - t0)
 
     def close(self) -> None:
@@ -116,8 +122,11 @@ class Daemon:
         self.cpu = cpu
         self.realtime = False
         self.stop_event = threading.Event()
-        self.lateness = Histogram()
+        self.lateness = Histogram()  # since start
         self.compute = Histogram()
+        self._recent_lateness = Histogram()  # the current RECENT-second window
+        self._recent_compute = Histogram()
+        self._recent: dict[str, Any] | None = None  # summaries of the last whole window
         self._objects: dict[str, Sample] = {}
         self._object_drops = 0
         self._pending: _Pending | None = None
@@ -215,7 +224,7 @@ class Daemon:
                                          congestion_control=zenoh.CongestionControl.DROP)
         pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
         queryable = s.declare_queryable(keys.skill, self._on_skill_query)
-        publisher = _Publisher(pub_target, self.rt_priority)
+        publisher = _Publisher(pub_target, pub_status, self.rt_priority)
         publisher.start()
         self._publisher = publisher
         send = publisher.queue.put
@@ -231,7 +240,7 @@ class Daemon:
         ticker = Ticker(cfg.period, spin=self.spin)
         status_period = 1.0 / cfg.status_rate
         next_status = time.monotonic()
-        window_start = time.monotonic()
+        window_start = recent_start = time.monotonic()
         end = None if duration is None else time.monotonic() + duration
         last_state = self.controller.engine.state
         log.info("running skill %s@%s for robot %s at %.0f Hz", self.controller.skill.name,
@@ -260,13 +269,21 @@ class Daemon:
                 compute = done - now
                 self.lateness.add(lateness)
                 self.compute.add(compute)
+                self._recent_lateness.add(lateness)
+                self._recent_compute.add(compute)
                 if compute > self._window_compute_max:
                     self._window_compute_max = compute
                 if res.state != last_state:
                     log.info("state %s -> %s", last_state, res.state)
                     last_state = res.state
                 if done >= next_status:
-                    pub_status.put(codec.pack(self.status(ticker, done, done - window_start)))
+                    if done - recent_start >= RECENT:
+                        self._recent = {"lateness": self._recent_lateness.summary_ms(),
+                                        "compute": self._recent_compute.summary_ms()}
+                        self._recent_lateness.clear()
+                        self._recent_compute.clear()
+                        recent_start = done
+                    send(self.status(ticker, done, done - window_start))
                     window_start = done
                     self._window_targets = 0
                     self._window_compute_max = 0.0
@@ -308,6 +325,7 @@ class Daemon:
             "compute_ms": self.compute.summary_ms(),
             "publish_ms": self._publisher.put_time.summary_ms() if self._publisher else None,
             "compute_max_window_ms": round(self._window_compute_max * 1e3, 4),
+            "recent_ms": self._recent,
             "input_age": age(self._input),
             "state_age": age(self._state),
             "object_age": age(obj),

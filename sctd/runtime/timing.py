@@ -61,6 +61,14 @@ class Histogram:
         if x > self.max:
             self.max = x
 
+    def clear(self) -> None:
+        """Forget every sample (zeroing only the bins up to the largest one used)."""
+        top = min(int(self.max / self.BIN) + 1, self.N)
+        self.counts[:top] = [0] * top
+        self.counts[-1] = 0
+        self.n = 0
+        self.max = 0.0
+
     def percentile(self, p: float) -> float:
         """Upper edge of the bin holding the p-th percentile (s); 0 when empty."""
         if self.n == 0:
