@@ -57,15 +57,38 @@ class Sample:
     pose: list[float] | None = None  # as received (objects), to tell an unchanged pose
 
 
-@dataclass
+class _Target:
+    """A target's world transform, multiplied out only when somebody asks for it: the
+    daemon publishes the pose and never needs the matrix."""
+
+    __slots__ = ("T", "T_obj", "T_world_obj")
+
+    def __init__(self, T_world_obj: Array | None, T_obj: Array | None, T: Array | None = None):
+        self.T_world_obj, self.T_obj, self.T = T_world_obj, T_obj, T
+
+    def matrix(self) -> Array:
+        if self.T is None:
+            assert self.T_world_obj is not None and self.T_obj is not None
+            self.T = self.T_world_obj @ self.T_obj
+        return self.T
+
+
 class TickResult:
-    mode: str  # waiting | hold | stopped | running
-    T_world_target: Array | None
-    state: str
-    in_seq: int
-    state_changed: bool = False
-    input_ok: bool = False
-    pose: list[float] | None = None  # T_world_target as [x, y, z, qx, qy, qz, qw]
+    """What one tick decided: the mode (waiting | hold | stopped | running), the target
+    (``pose`` as [x, y, z, qx, qy, qz, qw] and ``T_world_target``; None while waiting),
+    the FSM state, and the input sequence number it followed."""
+
+    __slots__ = ("_target", "in_seq", "input_ok", "mode", "pose", "state", "state_changed")
+
+    def __init__(self, mode: str, target: _Target | None, state: str, in_seq: int,
+                 state_changed: bool = False, input_ok: bool = False,
+                 pose: list[float] | None = None):
+        self.mode, self._target, self.state, self.in_seq = mode, target, state, in_seq
+        self.state_changed, self.input_ok, self.pose = state_changed, input_ok, pose
+
+    @property
+    def T_world_target(self) -> Array | None:
+        return None if self._target is None else self._target.matrix()
 
 
 @dataclass
@@ -94,7 +117,7 @@ class Controller:
     def __init__(self, skill: Skill, config: RuntimeConfig):
         self.config = config
         self.counters = Counters()
-        self.T_world_target: Array | None = None
+        self._target: _Target | None = None
         self.mode = "waiting"
         self.last_in_seq = -1
         self._pose: list[float] | None = None
@@ -106,6 +129,11 @@ class Controller:
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self._install(skill, now=0.0, keep_state=False)
+
+    @property
+    def T_world_target(self) -> Array | None:
+        """The current target in the world frame (None until the first state arrives)."""
+        return None if self._target is None else self._target.matrix()
 
     def _install(self, skill: Skill, now: float, keep_state: bool,
                  engine: SkillEngine | None = None) -> None:
@@ -148,19 +176,19 @@ class Controller:
         state_ok = state is not None and now - state.received <= cfg.state_timeout
         obj_ok = obj is not None and now - obj.received <= cfg.object_timeout
 
-        if self.T_world_target is None:
+        if self._target is None:
             if not (state_ok and obj_ok):
                 self.mode = "waiting"
                 return TickResult("waiting", None, self.engine.state, in_seq)
             assert state is not None and state.T is not None
-            self.T_world_target = state.T.copy()
+            self._target = _Target(None, None, state.T.copy())
             self._T_obj_target = None
             self._rot = None
-            self._pose = se3.pose_from_matrix4(self.T_world_target)
+            self._pose = se3.pose_from_matrix4(state.T)
             self.engine.reset(now, self.engine.state)
         if not (state_ok and obj_ok):
             self.mode = "hold"  # stale robot state or object pose: hold the last target
-            return TickResult("hold", self.T_world_target, self.engine.state, in_seq, pose=self._pose)
+            return TickResult("hold", self._target, self.engine.state, in_seq, pose=self._pose)
 
         assert state is not None and obj is not None and state.T is not None and obj.T is not None
         # The tick works in the object frame, where the skill is; the target is kept there
@@ -185,7 +213,7 @@ class Controller:
 
         T_prev = self._T_obj_target
         if T_prev is None:
-            T_prev = self._T_obj_target = T_obj_world @ self.T_world_target
+            T_prev = self._T_obj_target = T_obj_world @ self._target.matrix()
         # How far the user pushes: the input's norm, clipped to 1 (a diagonal push of a
         # 3-axis stick is one push, not two); steps are bounded by mag * speed * dt.
         mag = min(1.0, math.hypot(*u))
@@ -200,7 +228,7 @@ class Controller:
         if T_new is not T_prev and not self._accept(T_new, T_world_obj):
             self.counters.nonfinite_output += 1  # never publish a non-finite target
         self.mode = "running" if input_ok else "stopped"
-        return TickResult(self.mode, self.T_world_target, self.engine.state, in_seq, changed,
+        return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
 
     def _accept(self, T_new: Array, T_world_obj: Array) -> bool:
@@ -230,7 +258,7 @@ class Controller:
         self._pose = [o[0] * x + o[1] * y + o[2] * z + o[9], o[3] * x + o[4] * y + o[5] * z + o[10],
                       o[6] * x + o[7] * y + o[8] * z + o[11], *self._q_world]
         self._T_obj_target = T_new
-        self.T_world_target = T_world_obj @ T_new
+        self._target = _Target(T_world_obj, T_new)
         return True
 
     def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[tuple[float, ...], bool]:

@@ -72,6 +72,20 @@ def _flat(rows: list[list[float]]) -> Flat:
     return (a, b, c, d, e, f, g, h, i, x, y, z)
 
 
+def _floats_of(item) -> tuple:
+    """The vectors a check reads, as tuples of floats (see SkillEngine._floats)."""
+    if isinstance(item, Band):
+        return tuple(item.normal.tolist()), tuple(item.point.tolist())
+    if isinstance(item, Box):
+        return tuple(item.lower.tolist()), tuple(item.upper.tolist())
+    if isinstance(item, TiltCone):
+        return tuple(item.axis.tolist()), tuple(item.reference.tolist()), math.cos(item.max_angle)
+    if isinstance(item, Transition):
+        v = item.point if item.point is not None else item.normal  # distance / hyperplane
+        return () if v is None else tuple(v.tolist())
+    return ()
+
+
 class _Offset:
     """A fixed ee -> frame offset, applied to an ee pose on Python floats."""
 
@@ -195,6 +209,13 @@ class SkillEngine:
                 if model is not None and id(model) not in self._trees:
                     self._trees[id(model)] = _Neighbours(model)
         self._out_of = [[t for t in skill.transitions if t.source == s.name] for s in skill.states]
+        # Constraint and guard vectors as Python floats, for the float-level checks.
+        self._floats: dict[int, tuple] = {}
+        for state in skill.states:
+            for c in state.active_constraints:
+                self._floats[id(c)] = _floats_of(c)
+        for t in skill.transitions:
+            self._floats[id(t)] = _floats_of(t)
         self.index = skill.state_index(skill.start)
         self.entered = 0.0
         self.last_scale = 1.0  # the vector-field scaling of the last command, for status
@@ -254,12 +275,11 @@ class SkillEngine:
             f = float(np.dot(force, t.axis)) if t.axis is not None else float(np.linalg.norm(force))
             return f > t.threshold + t.margin
         F = self._frame_values(rows, t.frame)
+        v = self._floats.get(id(t)) or _floats_of(t)
         if t.type == "hyperplane":
-            assert t.normal is not None
-            nx, ny, nz = t.normal.tolist()
+            nx, ny, nz = v
             return nx * F[9] + ny * F[10] + nz * F[11] + t.offset > t.margin
-        assert t.point is not None
-        cx, cy, cz = t.point.tolist()
+        cx, cy, cz = v
         dx, dy, dz = F[9] - cx, F[10] - cy, F[11] - cz
         d = math.sqrt(dx * dx + dy * dy + dz * dz)
         if t.direction == "below":
@@ -362,9 +382,9 @@ class SkillEngine:
         """
         if F is None:
             F = self._frame_values(T.tolist(), c.frame)
+        v = self._floats.get(id(c)) or _floats_of(c)
         if isinstance(c, Band):
-            nx, ny, nz = c.normal.tolist()
-            cx, cy, cz = c.point.tolist()
+            (nx, ny, nz), (cx, cy, cz) = v
             s = nx * (F[9] - cx) + ny * (F[10] - cy) + nz * (F[11] - cz)
             delta = (c.lower - s) if s < c.lower else (c.upper - s) if s > c.upper else 0.0
             if delta == 0.0:
@@ -374,8 +394,7 @@ class SkillEngine:
             return out
         if isinstance(c, Box):
             p = F[9:]
-            q = [min(max(x, lo), hi) for x, lo, hi in zip(p, c.lower.tolist(), c.upper.tolist(),
-                                                          strict=True)]
+            q = [min(max(x, lo), hi) for x, lo, hi in zip(p, *v, strict=True)]
             if q[0] == p[0] and q[1] == p[1] and q[2] == p[2]:
                 return T
             out = T.copy()
@@ -384,13 +403,12 @@ class SkillEngine:
             out[2, 3] += q[2] - p[2]
             return out
         if isinstance(c, TiltCone):
-            ax, ay, az = c.axis.tolist()
-            rx, ry, rz = c.reference.tolist()
+            (ax, ay, az), (rx, ry, rz), cos_max = v
             a0 = F[0] * ax + F[1] * ay + F[2] * az
             a1 = F[3] * ax + F[4] * ay + F[5] * az
             a2 = F[6] * ax + F[7] * ay + F[8] * az
             cos_a = a0 * rx + a1 * ry + a2 * rz
-            if cos_a >= math.cos(c.max_angle):
+            if cos_a >= cos_max:
                 return T
             a = np.array([a0, a1, a2])
             perp = a - cos_a * c.reference
