@@ -56,6 +56,59 @@ def measure_rtf(seconds: float = 3.0, rate: float = 1000.0, chunk: float = 0.25)
     }
 
 
+_PARTS = {
+    "controller": (("controller", "update"),),
+    "bus_controller_end": (("master", "command_frames"), ("master", "send"),
+                           ("master", "receive")),
+    "bus_drives_end": (("drives", "receive"), ("drives", "output"), ("drives", "state_frames"),
+                       ("drives", "send")),
+    "physics": (("dynamics", "step"),),
+}
+"""The parts of a cycle: the ``SimArm`` component methods each is made of."""
+
+
+def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0) -> dict[str, float]:
+    """Per-cycle cost of the cycle's parts, us (mean over cycles, like the real-time
+    factor, so it includes the controller's damping update every few cycles).
+
+    Times the component methods of :data:`_PARTS` (the controller's torque law; the
+    bus work of each end: encoding, sending, receiving and checking frames, and the
+    drives' brake and saturation logic; the physics step) with the arm holding still,
+    as :func:`measure_rtf` runs it. ``other`` is what the cycle spends outside them
+    (and in the timers), ``cycle`` the whole timed cycle: a few microseconds more than
+    an untimed one.
+    """
+    spent = dict.fromkeys(_PARTS, 0.0)
+    pc = time.perf_counter
+
+    def timed(fn: Any, part: str) -> Any:
+        def call(*args: Any, **kwargs: Any) -> Any:
+            t0 = pc()
+            out = fn(*args, **kwargs)
+            spent[part] += pc() - t0
+            return out
+        return call
+
+    with SimArm(rate=rate) as arm:
+        arm.run(0.05)
+        for part, calls in _PARTS.items():
+            for owner, method in calls:
+                obj = getattr(arm, owner)
+                setattr(obj, method, timed(getattr(obj, method), part))
+        rows: dict[str, list[float]] = {part: [] for part in (*_PARTS, "other", "cycle")}
+        for _ in range(max(1, round(seconds * rate))):
+            for part in spent:
+                spent[part] = 0.0
+            t0 = pc()
+            arm.step()
+            total = pc() - t0
+            for part, x in spent.items():
+                rows[part].append(x)
+            rows["other"].append(total - sum(spent.values()))
+            rows["cycle"].append(total)
+    return {part: 1e6 * statistics.fmean(x) for part, x in rows.items()}
+
+
 def step_response(axis: int = 0, size: float = 0.05, rate: float = 1000.0,
                   duration: float = 1.5, tolerance: float = 1e-3) -> dict[str, Any]:
     """Response of the ee to a step of the target along world ``axis``.
@@ -154,11 +207,13 @@ def run_bench(seconds: float = 3.0, rate: float = 1000.0) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``rtf`` (see :func:`measure_rtf`), ``step`` (one entry per axis, see
+        ``rtf`` (see :func:`measure_rtf`), ``breakdown`` (see
+        :func:`measure_breakdown`), ``step`` (one entry per axis, see
         :func:`step_response`), ``tracking`` (one entry per axis, see :func:`tracking`),
         and ``pass`` with the issue's targets checked.
     """
     rtf = measure_rtf(seconds, rate)
+    breakdown = measure_breakdown(min(seconds, 1.0), rate)
     steps = [step_response(axis, 0.05, rate) for axis in range(3)]
     tracks = [tracking(0.25, 0.25, axis, rate) for axis in range(3)]
     worst_settle = max(s["settling_time_s"] for s in steps)
@@ -166,6 +221,7 @@ def run_bench(seconds: float = 3.0, rate: float = 1000.0) -> dict[str, Any]:
     worst_track = max(t["max_error_m"] for t in tracks)
     return {
         "rtf": rtf,
+        "breakdown": breakdown,
         "step": steps,
         "tracking": tracks,
         "pass": {
@@ -185,6 +241,13 @@ def format_report(result: dict[str, Any]) -> str:
         f"frames/cycle, {r['sim_seconds']:.1f} s simulated): {r['rtf']:.2f} "
         f"(best chunk {r['rtf_best_chunk']:.2f}; cycle median {r['cycle_us_median']:.0f} us)",
     ]
+    b = result.get("breakdown")
+    if b:
+        lines.append(
+            f"cycle parts (mean us): controller {b['controller']:.0f}, bus "
+            f"{b['bus_controller_end'] + b['bus_drives_end']:.0f} (controller end "
+            f"{b['bus_controller_end']:.0f}, drives end {b['bus_drives_end']:.0f}), physics "
+            f"{b['physics']:.0f}, other {b['other']:.0f}; whole timed cycle {b['cycle']:.0f}")
     for s in result["step"]:
         lines.append(
             f"5 cm step along {s['axis']}: settles < 1 mm in {s['settling_time_s'] * 1e3:.0f} ms, "

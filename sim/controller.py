@@ -17,7 +17,11 @@ at singularities).
 Damping ``D`` makes each of the six task-space modes critically damped (damping ratio
 ``zeta``) by double diagonalisation (Albu-Schaeffer et al., ICRA 2003): with
 ``Lambda = L L^T`` and ``L^-1 K L^-T = U S U^T``, ``D = 2 zeta L U S^1/2 U^T L^T``.
-It is recomputed every ``gains.damping_every`` cycles (Lambda changes slowly).
+That is the symmetric positive definite solution of ``D Lambda^-1 D = 4 zeta^2 K``,
+which for the diagonal ``K`` is also ``D = 2 zeta K^1/2 (K^1/2 Lambda^-1 K^1/2)^-1/2
+K^1/2``: one symmetric eigen-decomposition of a 6x6 matrix, no inverse nor Cholesky
+factor of ``Lambda``, which is how it is computed. It is recomputed every
+``gains.damping_every`` cycles (Lambda changes slowly).
 
 Target handling: :meth:`CartesianImpedanceController.set_target` records when a target
 arrived (on the controller's clock, the ``t`` of :meth:`update`). A target older than
@@ -35,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 from scipy.linalg.lapack import dposv as _dposv
+from scipy.linalg.lapack import dpotrf as _dpotrf
+from scipy.linalg.lapack import dsyev as _dsyev
 
 from .robot import ArmModel
 
@@ -142,8 +148,13 @@ class CartesianImpedanceController:
         self._lambda2 = 0.0
         self._cycles = 0
         self._started = False
-        self._eye6 = np.eye(6)
         self._friction = g.friction_compensation * arm.damping
+        self._ee_frame_id = arm.ee_frame_id
+        self._eye6 = np.eye(6)
+        self._sigma2_eye6 = g.sigma_min**2 * self._eye6
+        sqrt_k = np.sqrt(self._k)
+        self._sqrt_k_diag = np.diag(sqrt_k)
+        self._sqrt_kk = np.outer(sqrt_k, sqrt_k)
 
     # -- target ----------------------------------------------------------------------
     def set_target(self, T_world_target: np.ndarray, stamp: float | None = None,
@@ -199,19 +210,19 @@ class CartesianImpedanceController:
         ndarray, shape (7,)
             Motor torque command, N m (not yet saturated: the drives do that).
         """
-        model, data, g = self.model, self.data, self.gains
-        self.t = t
-        pin.computeJointJacobians(model, data, q)
-        T_e = self.T_world_ee = pin.updateFramePlacement(
-            model, data, self.arm.ee_frame_id).homogeneous
-        J = pin.getFrameJacobian(model, data, self.arm.ee_frame_id, _LWA)
-        h = pin.nonLinearEffects(model, data, q, dq)
+        # Every Pinocchio term once, then as few array operations as the law allows:
+        # at 7 joints each costs its call overhead, not its arithmetic.
         # (``a.dot(b)`` rather than ``a @ b``: half the overhead on these tiny arrays)
+        model, data, g, ee = self.model, self.data, self.gains, self._ee_frame_id
+        self.t = t
+        J = pin.computeFrameJacobian(model, data, q, ee, _LWA)  # runs the kinematics too
+        T_e = self.T_world_ee = pin.updateFramePlacement(model, data, ee).homogeneous
+        h = pin.nonLinearEffects(model, data, q, dq)
         # Pinocchio >= 3 fills the whole (symmetric) inverse; tested in test_sim_dynamics.
-        Minv = pin.computeMinverse(model, data, q)
-        MinvJt = Minv.dot(J.T)
+        JMinv = J.dot(pin.computeMinverse(model, data, q))  # J M^-1, (6, 7)
+        A = JMinv.dot(J.T)  # J M^-1 J^T = Lambda^-1 (undamped)
         if self._cycles % g.damping_every == 0:
-            self._update_damping(J, MinvJt)
+            self._update_damping(J, A)
         self._cycles += 1
 
         if not self._started:
@@ -220,45 +231,104 @@ class CartesianImpedanceController:
                 self.hold()
         if not self.holding and t - self._rx_t > g.target_timeout:
             self.hold()
-        T_t = self.T_world_target
-        e = self.error
-        e[:3] = T_t[:3, 3] - T_e[:3, 3]
-        e[3:] = pin.log3(T_t[:3, :3].dot(T_e[:3, :3].T))
-        n_p = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        e0, e1, e2, e3, e4, e5 = pose_error(self.T_world_target.tolist(), T_e.tolist())
+        n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if n_p > g.max_error_trans:
-            e[:3] *= g.max_error_trans / n_p
-        n_r = math.sqrt(e[3] * e[3] + e[4] * e[4] + e[5] * e[5])
+            s = g.max_error_trans / n_p
+            e0, e1, e2 = s * e0, s * e1, s * e2
+        n_r = math.sqrt(e3 * e3 + e4 * e4 + e5 * e5)
         if n_r > g.max_error_rot:
-            e[3:] *= g.max_error_rot / n_r
-        v = -J.dot(dq)
+            s = g.max_error_rot / n_r
+            e3, e4, e5 = s * e3, s * e4, s * e5
+        self.error = e = np.array([e0, e1, e2, e3, e4, e5])
+        v = J.dot(dq)
         if g.feedforward and t <= self._ff_until:
-            v += self.v_target
-        F = self._k * e + self.D.dot(v)
+            v = np.subtract(self.v_target, v, out=v)
+        else:
+            v = np.negative(v, out=v)
+        F = self._k * e
+        F += self.D.dot(v)
 
-        # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T Lambda J M^-1 tau0
-        tau_null = g.k_null * (self.q_rest - q) - g.d_null * dq
-        A = J.dot(MinvJt)
-        A.flat[::7] += self._lambda2
-        _c, y, info = _dposv(A, MinvJt.T.dot(tau_null), overwrite_a=1, overwrite_b=1)
+        # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T y, y = Lambda J M^-1 tau0
+        tau_null = g.k_null * (self.q_rest - q)
+        tau_null -= g.d_null * dq
+        if self._lambda2:
+            A += self._lambda2 * self._eye6
+        # A is symmetric: its transpose is the same matrix in Fortran order, which
+        # LAPACK takes without a copy. (LAPACK arguments by position: f2py parses
+        # keywords slowly; here upper triangle, overwrite A and b.)
+        _c, y, info = _dposv(A.T, JMinv.dot(tau_null), 0, 1, 1)
         if info == 0:
-            tau_null -= J.T.dot(y)
+            F -= y  # J^T F + tau0 - J^T y
         else:  # not positive definite (cannot happen with damping): drop null space
             tau_null[:] = 0.0
-        self.tau = J.T.dot(F) + tau_null + h + self._friction * dq
-        return self.tau
+        tau = J.T.dot(F)
+        tau += tau_null
+        tau += h
+        tau += self._friction * dq
+        self.tau = tau
+        return tau
 
-    def _update_damping(self, J: np.ndarray, MinvJt: np.ndarray) -> None:
+    def _update_damping(self, J: np.ndarray, A: np.ndarray) -> None:
+        """Null-space damping ``lambda`` from the smallest singular value of ``J``, and
+        the damping matrix ``D`` from ``A = J M^-1 J^T`` (see the module docstring)."""
         g = self.gains
-        sigma = np.sqrt(max(np.linalg.eigvalsh(J @ J.T)[0], 0.0))
-        if sigma < g.sigma_min:
-            self._lambda2 = (g.damping_max * (1.0 - (sigma / g.sigma_min) ** 2)) ** 2
-        else:
+        # sigma_min(J) > sigma_min iff J J^T - sigma_min^2 I is positive definite: a
+        # Cholesky factorisation decides that; the eigenvalue only when it fails.
+        JJt = J.dot(J.T)
+        JJt -= self._sigma2_eye6
+        if _dpotrf(JJt, 0, 0, 1)[1] == 0:  # upper triangle, no clean-up, overwrite
             self._lambda2 = 0.0
-        Lam = np.linalg.inv(J @ MinvJt + (self._lambda2 + 1e-9) * self._eye6)
-        self.Lambda = Lam
-        Lam = 0.5 * (Lam + Lam.T)
-        L = np.linalg.cholesky(Lam)
-        Linv = np.linalg.inv(L)
-        s, U = np.linalg.eigh(Linv @ self.K @ Linv.T)
-        LU = L @ U
-        self.D = 2.0 * g.zeta * (LU * np.sqrt(np.maximum(s, 0.0))) @ LU.T
+        else:
+            sigma = np.sqrt(max(np.linalg.eigvalsh(J.dot(J.T))[0], 0.0))
+            if sigma < g.sigma_min:
+                self._lambda2 = (g.damping_max * (1.0 - (sigma / g.sigma_min) ** 2)) ** 2
+            else:
+                self._lambda2 = 0.0
+        # D = 2 zeta K^1/2 B^-1/2 K^1/2 with B = K^1/2 Lambda^-1 K^1/2 = P S P^T
+        B = A * self._sqrt_kk
+        B += (self._lambda2 + 1e-9) * self.K
+        # vectors, upper triangle, default workspace (3n - 1), overwrite
+        s, P, info = _dsyev(B.T, 1, 0, 17, 1)
+        if info != 0:  # cannot happen for a symmetric matrix: keep the last D
+            return
+        KP = self._sqrt_k_diag.dot(P)
+        c = 2.0 * g.zeta
+        w = [c / math.sqrt(max(x, 1e-12)) for x in s.tolist()]  # B is positive definite
+        self.D = (KP * w).dot(KP.T)
+
+
+def pose_error(T_world_target: list[list[float]], T_world_ee: list[list[float]]
+               ) -> tuple[float, float, float, float, float, float]:
+    """Pose error ``[p_t - p, log(R_t R^T)]`` of two poses given as nested lists.
+
+    Plain float arithmetic: at 1 kHz this is several times cheaper than the same on
+    3x3 arrays. Equal to ``pin.log3`` to rounding (tested), whose formula it uses
+    away from a half turn; within about 8 degrees of it, it calls ``pin.log3``.
+
+    Parameters
+    ----------
+    T_world_target, T_world_ee : list of list of float, shape (4, 4) (or (3, 4))
+        Rows of the homogeneous transforms (``ndarray.tolist()``).
+
+    Returns
+    -------
+    tuple of float, length 6
+        Position error (m) and rotation vector (rad), world axes.
+    """
+    (r0, r1, r2, px), (s0, s1, s2, py), (t0, t1, t2, pz) = T_world_ee[:3]
+    (a0, a1, a2, qx), (b0, b1, b2, qy), (c0, c1, c2, qz) = T_world_target[:3]
+    # R = R_t R^T: R_ij = (row i of R_t) . (row j of R)
+    cos = 0.5 * (a0 * r0 + a1 * r1 + a2 * r2 + b0 * s0 + b1 * s1 + b2 * s2
+                 + c0 * t0 + c1 * t1 + c2 * t2 - 1.0)
+    if cos < -0.99:  # near a half turn the skew part vanishes: Pinocchio's branch
+        w = pin.log3(np.dot(np.array(T_world_target)[:3, :3],
+                            np.array(T_world_ee)[:3, :3].T))
+        return qx - px, qy - py, qz - pz, float(w[0]), float(w[1]), float(w[2])
+    theta = math.acos(cos) if cos < 1.0 else 0.0
+    # theta / (2 sin theta), with its Taylor series where sin theta loses digits
+    k = 0.5 * theta / math.sin(theta) if theta > 1e-4 else 0.5 + theta * theta / 12.0
+    return (qx - px, qy - py, qz - pz,
+            k * (c0 * s0 + c1 * s1 + c2 * s2 - b0 * t0 - b1 * t1 - b2 * t2),
+            k * (a0 * t0 + a1 * t1 + a2 * t2 - c0 * r0 - c1 * r1 - c2 * r2),
+            k * (b0 * r0 + b1 * r1 + b2 * r2 - a0 * s0 - a1 * s1 - a2 * s2))

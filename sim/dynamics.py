@@ -70,11 +70,13 @@ class ArmDynamics:
         self.t = 0.0
         self._has_wrench = False
         self._tau_min = -arm.tau_max
-        self._dq_min = -arm.dq_max
         self._braked = np.zeros(arm.nq, dtype=bool)
         self._any_braked = False
         self._any_at_limit = False
         self._q_hold = self.q.copy()
+        self._dq_max = arm.dq_max.tolist()
+        self._q_lower = arm.q_lower.tolist()
+        self._q_upper = arm.q_upper.tolist()
 
     def set_external_wrench(self, wrench: np.ndarray) -> None:
         """Set the external wrench at the ee (world axes, ee origin) for the next steps."""
@@ -91,38 +93,62 @@ class ArmDynamics:
 
         ``braked`` (bool, shape (7,)) marks joints held by their brake: they keep the
         position they had when the brake engaged.
+
+        ``q`` and ``dq`` are updated in place; ``tau_motor``, ``ddq`` and ``at_limit``
+        are new arrays.
         """
+        # (at 7 joints every array operation costs its call overhead, not its
+        # arithmetic: as few as possible, and plain floats where they do)
         arm = self.arm
-        self.tau_motor = np.minimum(np.maximum(tau_motor, self._tau_min), arm.tau_max)
-        tau = self.tau_motor - self.friction * self.dq
+        q, dq = self.q, self.dq
+        self.tau_motor = tau_m = np.minimum(np.maximum(tau_motor, self._tau_min), arm.tau_max)
+        tau = self.friction * dq
+        np.subtract(tau_m, tau, out=tau)
         if self._has_wrench:
             tau += self.external_torque()
         if braked is not None and np.count_nonzero(braked):
             newly = braked & ~self._braked
-            self._q_hold[newly] = self.q[newly]
-            self.dq[braked] = 0.0
-            self.q[braked] = self._q_hold[braked]
+            self._q_hold[newly] = q[newly]
+            dq[braked] = 0.0
+            q[braked] = self._q_hold[braked]
             self.ddq = self._constrained_acceleration(tau, braked)
             self._braked = braked.copy()
+            self._any_braked = True
         else:
             if self._any_braked:
                 self._braked[:] = False
-            self.ddq = pin.aba(self.model, self.data, self.q, self.dq, tau)
-        self._any_braked = bool(np.count_nonzero(self._braked))
-        dq = self.dq + self.ddq * dt
-        self.dq = dq = np.minimum(np.maximum(dq, self._dq_min), arm.dq_max)
-        self.q = q = self.q + dq * dt
-        low = q < arm.q_lower
-        high = q > arm.q_upper
-        if np.count_nonzero(low) or np.count_nonzero(high):
+                self._any_braked = False
+            self.ddq = pin.aba(self.model, self.data, q, dq, tau)
+        # Semi-implicit Euler, the speed limiter, then the position stops; on plain
+        # floats (seven joints: one pass is cheaper than ten array operations).
+        q_next, dq_next = q.tolist(), dq.tolist()
+        dq_max, q_lower, q_upper = self._dq_max, self._q_lower, self._q_upper
+        stopped = False
+        for i, a in enumerate(self.ddq.tolist()):
+            v = dq_next[i] + a * dt
+            if v > dq_max[i]:
+                v = dq_max[i]
+            elif v < -dq_max[i]:
+                v = -dq_max[i]
+            x = q_next[i] + v * dt
+            if x < q_lower[i] or x > q_upper[i]:
+                stopped = True
+            dq_next[i] = v
+            q_next[i] = x
+        dq[:] = dq_next
+        q[:] = q_next
+        if stopped:
+            low = q < arm.q_lower
+            high = q > arm.q_upper
             q[low] = arm.q_lower[low]
             q[high] = arm.q_upper[high]
             dq[low] = np.maximum(dq[low], 0.0)
             dq[high] = np.minimum(dq[high], 0.0)
             self.at_limit = low | high
+            self._any_at_limit = True
         elif self._any_at_limit:
             self.at_limit = np.zeros(arm.nq, dtype=bool)
-        self._any_at_limit = bool(np.count_nonzero(self.at_limit))
+            self._any_at_limit = False
         self.t += dt
 
     def _constrained_acceleration(self, tau: np.ndarray, braked: np.ndarray) -> np.ndarray:

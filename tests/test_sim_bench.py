@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from sctd_sim.bench import format_report, measure_rtf, tracking
+from sctd_sim.bench import format_report, measure_breakdown, measure_rtf, tracking
 
 
 def test_measure_rtf_reports_its_figures():
@@ -12,6 +12,14 @@ def test_measure_rtf_reports_its_figures():
     assert r["sim_seconds"] == 0.1
     assert r["rtf"] > 0 and r["rtf_best_chunk"] >= r["rtf"] * 0.999
     assert r["frames_per_cycle"] == 15
+
+
+def test_measure_breakdown_accounts_for_the_whole_cycle():
+    b = measure_breakdown(seconds=0.05)
+    parts = ("controller", "bus_controller_end", "bus_drives_end", "physics", "other")
+    assert set(b) == {*parts, "cycle"}
+    assert all(b[p] > 0 for p in parts if p != "other")
+    assert math.isclose(sum(b[p] for p in parts), b["cycle"], rel_tol=1e-9)
 
 
 def test_tracking_at_a_quarter_metre_per_second_is_within_5_mm():
@@ -30,9 +38,13 @@ def test_format_report():
                       "rms_error_m": 0.001, "cruise_max_error_m": 0.002}],
         "pass": {"rtf>=4": True, "settle<1s": True},
     }
+    assert "cycle parts" not in format_report(result)  # a result without the breakdown
+    result["breakdown"] = {"controller": 40.0, "bus_controller_end": 30.0, "bus_drives_end": 35.0,
+                           "physics": 15.0, "other": 5.0, "cycle": 125.0}
     text = format_report(result)
     assert "real-time factor" in text and "4.20" in text
     assert "settles < 1 mm in 300 ms" in text
     assert "max 3.00 mm" in text
     assert "rtf>=4 ok" in text
+    assert "controller 40, bus 65 (controller end 30, drives end 35), physics 15" in text
     assert not math.isnan(result["rtf"]["rtf"])

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import queue
+import threading
+import types
+
 import can
 import numpy as np
 import pytest
@@ -15,19 +19,24 @@ from sctd_sim.canbus import (
     DBC_PATH,
     STATE_BASE_ID,
     STATUS_BRAKED,
+    STATUS_SATURATED,
     STATUS_TIMEOUT,
     SYNC_ID,
     FastVirtualBus,
     FaultConfig,
     FaultInjectingBus,
     FrameCrc,
+    FrameGroup,
     JointBusCodecs,
     classify,
     crc8,
     frame_crc,
     load_dbc,
 )
+from sctd_sim.canbus.crc import word_tables
+from sctd_sim.canbus.frames import CLASSIC_FRAME_SLOTS
 from sctd_sim.canbus.link import ACCEPTED, DUPLICATED, STALE
+from sctd_sim.canbus.virtual import RxQueue
 
 CODECS = JointBusCodecs()
 
@@ -114,6 +123,87 @@ def test_any_corrupted_byte_is_detected(frame, index, flip):
     assert not codec.decode(data)[0]
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from([c.frame_id for c in CODECS.all]), st.binary(min_size=8, max_size=8))
+def test_word_table_crc_equals_reference(frame_id, data):
+    t1, t23, t45, t67 = word_tables()
+    w23, w45, w67 = (int.from_bytes(data[k:k + 2], "little") for k in (2, 4, 6))
+    crc = CODECS.by_id[frame_id].crc.const ^ t1[data[1]] ^ t23[w23] ^ t45[w45] ^ t67[w67]
+    assert crc == frame_crc(frame_id, data)
+
+
+@st.composite
+def group_frames(draw):
+    group = draw(st.sampled_from([CODECS.cmd_group, CODECS.state_group]))
+    rows = [_values(codec, draw) for codec in group.codecs]
+    return group, draw(st.integers(0, 15)), rows
+
+
+@settings(max_examples=150, deadline=None)
+@given(group_frames())
+def test_frame_group_is_the_frames_one_by_one(frame):
+    group, counter, rows = frame
+    msgs = group.frames(2.5, counter, *zip(*rows, strict=True))
+    assert [m.arbitration_id for m in msgs] == list(group.frame_ids)
+    for codec, m, vals in zip(group.codecs, msgs, rows, strict=True):
+        assert bytes(m.data) == codec.encode_cantools(counter, vals)  # bit for bit
+        assert m.equals(codec.frame(2.5, counter, *vals))
+        assert (m.timestamp, m.dlc, m.is_rx, m.channel) == (2.5, 8, False, None)
+    one_by_one = [codec.decode(m.data) for codec, m in zip(group.codecs, msgs, strict=True)]
+    assert group.unpack_exact(msgs, counter) == tuple(zip(*(v for _, _, v in one_by_one), strict=True))
+    last_two = group.signal_names[-1], group.signal_names[0]
+    assert group.unpacker(last_two)(msgs, counter) == tuple(
+        tuple(v[group.signal_names.index(name)] for _, _, v in one_by_one) for name in last_two)
+
+
+@settings(max_examples=100, deadline=None)
+@given(group_frames(), st.integers(0, 6), st.integers(0, 7), st.integers(1, 255))
+def test_frame_group_refuses_anything_but_the_exact_clean_group(frame, k, index, flip):
+    group, counter, rows = frame
+    msgs = group.frames(0.0, counter, *zip(*rows, strict=True))
+    assert group.unpack_exact(msgs, (counter + 1) & 0xF) is None  # another cycle's
+    assert group.unpack_exact(msgs[:-1], counter) is None  # one missing
+    assert group.unpack_exact([*msgs, msgs[-1]], counter) is None  # one more
+    assert group.unpack_exact(msgs[1:] + msgs[:1], counter) is None  # out of order
+    corrupt = list(msgs)
+    data = bytearray(msgs[k].data)
+    data[index] ^= flip
+    corrupt[k] = can.Message(arbitration_id=msgs[k].arbitration_id, data=data,
+                             is_extended_id=False)
+    assert group.unpack_exact(corrupt, counter) is None
+    corrupt[k] = can.Message(arbitration_id=msgs[k].arbitration_id, data=msgs[k].data[:7],
+                             is_extended_id=False)
+    assert group.unpack_exact(corrupt, counter) is None
+
+
+def test_generated_frames_set_every_message_slot():
+    slots = {"arbitration_id", "timestamp", "data", *CLASSIC_FRAME_SLOTS}
+    assert slots == set(can.Message.__slots__) - {"__weakref__"}
+    m = CODECS.state_group.frames(1.0, 3, *([0] * 7 for _ in range(4)))[0]
+    assert all(hasattr(m, name) for name in slots)
+    assert m.equals(can.Message(timestamp=1.0, arbitration_id=m.arbitration_id, data=m.data,
+                                is_extended_id=False, is_rx=False))
+
+
+def test_frame_group_needs_one_layout():
+    with pytest.raises(ValueError, match="one payload layout"):
+        FrameGroup([CODECS.cmd[0], CODECS.state[0]])
+    with pytest.raises(ValueError, match="no signals"):
+        CODECS.cmd_group.unpacker(["Torque", "Nope"])
+
+
+def test_rx_queue_wakes_a_blocked_receiver_and_drains_in_order():
+    rx = RxQueue()
+    with pytest.raises(queue.Empty):
+        rx.get(timeout=0.01)
+    threading.Timer(0.05, rx.put, args=("late",)).start()
+    assert rx.get(timeout=5.0) == "late"
+    rx.put_batch(["a", "b"])
+    rx.put("c")
+    assert rx.qsize() == 3 and rx.get_nowait() == "a"
+    assert rx.drain() == ["b", "c"] and rx.empty()
+
+
 def test_out_of_range_values_saturate():
     codec = CODECS.cmd[0]
     _ok, _c, vals = codec.decode(codec.encode(0, (1, 1e6, -1e6, 0.0)))
@@ -181,6 +271,56 @@ def test_frames_sent_from_another_virtual_bus_reach_the_drives():
             node.shutdown()
         assert sim.drives.stats.corrupted == 1
         assert sim.drives.stats.unknown == 1
+
+
+def _frame_by_frame(sim):
+    """Turn off both ends' clean-cycle shortcuts: every cycle takes the general path."""
+    sim.master._state_group = types.SimpleNamespace(unpack_exact=lambda frames, counter: None)
+    sim.drives._unpack_cmds = lambda frames, counter: None
+    each = sim.drives._receive_each
+
+    def receive_each(frames, t):
+        each(frames, t)
+        sim.drives._running_t = None  # and output()'s quick case
+
+    sim.drives._receive_each = receive_each
+
+
+@pytest.mark.parametrize("faults", [
+    None,
+    dict(drop_rate=0.1, corrupt_rate=0.05, duplicate_rate=0.05, delay=0.002, delay_rate=0.05,
+         rx=True, seed=13),
+    dict(drop_rate=0.3, tx=False, rx=True, seed=14),
+])
+def test_clean_cycle_shortcuts_change_nothing(faults):
+    runs = []
+    for shortcut in (True, False):
+        with SimArm(faults=None if faults is None else FaultConfig(**faults)) as sim:
+            if not shortcut:
+                _frame_by_frame(sim)
+            batches: list = []
+            sim.on_frames.append(
+                lambda b, out=batches: out.append([(m.arbitration_id, bytes(m.data)) for m in b]))
+            T = sim.T_world_ee  # a quarter turn away: the wrist torques saturate a while
+            T[:3, :3] = T[:3, :3] @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+            T[:3, 3] += [0.03, -0.02, 0.01]
+            for k in range(400):
+                if sim.faults is not None and k in (200, 230):
+                    sim.faults.set_bus_off(k == 200)
+                sim.set_target(T, stamp=sim.t)
+                sim.step()
+            runs.append((sim.link_stats(), sim.q, batches, sim.master.age.copy(),
+                         sim.master.status.copy(), sim.drives.status.copy()))
+    (stats, q, batches, age, m_status, d_status), reference = runs
+    assert stats == reference[0]
+    np.testing.assert_array_equal(q, reference[1])
+    assert batches == reference[2]
+    np.testing.assert_array_equal(age, reference[3])
+    np.testing.assert_array_equal(m_status, reference[4])
+    np.testing.assert_array_equal(d_status, reference[5])
+    if faults is None:
+        assert stats["controller_rx"]["accepted"] == 400 * 7
+        assert any(f[1][1] >> 4 & STATUS_SATURATED for b in batches for f in b[8:])
 
 
 def run_faulty(config, seconds=0.3, **kwargs):

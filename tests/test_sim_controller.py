@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sctd_sim.arm import SimArm, ee_transform
 from sctd_sim.bench import step_response
-from sctd_sim.controller import CartesianImpedanceController
+from sctd_sim.controller import CartesianImpedanceController, ImpedanceGains, pose_error
 from sctd_sim.robot import load_arm_model
+from tests.strategies import rotvecs
 
 
 @pytest.fixture(scope="module")
@@ -108,3 +111,41 @@ def test_arm_near_a_singularity_stays_bounded(arm):
             sim.step()
         assert np.all(np.isfinite(sim.q))
         assert np.all(np.abs(sim.dq) <= arm.dq_max + 1e-9)
+
+
+@settings(max_examples=300, deadline=None)
+@given(rotvecs(max_angle=np.pi), rotvecs(max_angle=np.pi),
+       st.sampled_from([0.0, 1e-9, 1e-5, 1e-4, 1.0, 1.0, 3.0, 3.13, np.pi]))
+def test_pose_error_is_translation_difference_and_log3(r_ee, axis, angle):
+    R = pin.exp3(r_ee)
+    n = np.linalg.norm(axis)
+    R_t = pin.exp3(angle * axis / n if n > 1e-6 else np.zeros(3)) @ R
+    T, T_t = np.eye(4), np.eye(4)
+    T[:3, :3], T[:3, 3] = R, [0.1, -0.2, 0.3]
+    T_t[:3, :3], T_t[:3, 3] = R_t, [0.4, 0.0, -0.1]
+    e = pose_error(T_t.tolist(), T.tolist())
+    np.testing.assert_allclose(e[:3], T_t[:3, 3] - T[:3, 3], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(e[3:], pin.log3(R_t @ R.T), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("q", [np.deg2rad([0, 30, 0, -90, 0, 60, 0]), np.zeros(7),
+                               np.array([0.0, 0.05, 0.0, -0.05, 0.0, 0.05, 0.0])])
+def test_damping_critically_damps_every_task_mode(arm, q):
+    # D is the SPD solution of D Lambda^-1 D = 4 zeta^2 K (Lambda with the null-space
+    # damping), i.e. the double diagonalisation's 2 zeta L U S^1/2 U^T L^T
+    g = ImpedanceGains(zeta=0.8)
+    c = CartesianImpedanceController(arm, g)
+    c.update(q, np.zeros(7), 0.0)
+    data = arm.model.createData()
+    J = pin.computeFrameJacobian(arm.model, data, q, arm.ee_frame_id, pin.LOCAL_WORLD_ALIGNED)
+    M = pin.crba(arm.model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle
+    Lam_inv = J @ np.linalg.solve(M, J.T) + (c._lambda2 + 1e-9) * np.eye(6)
+    np.testing.assert_allclose(c.D, c.D.T, atol=1e-9 * np.abs(c.D).max())
+    assert np.linalg.eigvalsh(c.D).min() > 0
+    np.testing.assert_allclose(c.D @ Lam_inv @ c.D, 4 * g.zeta**2 * c.K, rtol=1e-8,
+                               atol=1e-8 * c.K.max())
+    sigma = np.sqrt(max(np.linalg.eigvalsh(J @ J.T)[0], 0.0))
+    expected = ((g.damping_max * (1 - (sigma / g.sigma_min) ** 2)) ** 2
+                if sigma < g.sigma_min else 0.0)
+    assert c._lambda2 == pytest.approx(expected, abs=1e-15)

@@ -119,3 +119,11 @@ def test_impedance_deflects_under_a_force_by_force_over_stiffness():
         deflection = sim.T_world_ee[:3, 3] - p0
         assert deflection[0] == pytest.approx(10.0 / k, rel=0.1)
         assert abs(deflection[1]) < 2e-4 and abs(deflection[2]) < 5e-4
+
+
+def test_step_updates_the_state_in_place(arm):
+    dyn = ArmDynamics(arm)
+    q, dq = dyn.q, dyn.dq
+    dyn.step(np.zeros(7), DT)  # unsupported: the arm starts to fall
+    assert dyn.q is q and dyn.dq is dq
+    assert np.abs(dq).max() > 0

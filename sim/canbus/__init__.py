@@ -17,6 +17,7 @@ from .codec import (
     STATUS_TIMEOUT,
     SYNC_ID,
     FrameCodec,
+    FrameGroup,
     JointBusCodecs,
     load_dbc,
 )
@@ -44,6 +45,7 @@ __all__ = [
     "FaultInjectingBus",
     "FrameCodec",
     "FrameCrc",
+    "FrameGroup",
     "JointBusCodecs",
     "JointDrives",
     "LinkStats",
