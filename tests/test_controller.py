@@ -206,3 +206,25 @@ def test_histogram_percentiles_and_clear():
     assert h.n == 0 and h.max == 0.0 and not any(h.counts) and h.percentile(99) == 0.0
     h.add(2e-5)
     assert abs(h.percentile(99) - 2e-5) < 2 * Histogram.BIN
+
+
+def test_decoder_thread_survives_a_failing_handler():
+    """A handler that raises costs one message (counted), not the decoder thread."""
+    from types import SimpleNamespace
+
+    from sctd.runtime.daemon import _Decoder
+    errors, seen = [], []
+
+    def bad(sample, received):
+        raise RuntimeError("bug")
+
+    def good(sample, received):
+        seen.append((sample.key_expr, received))
+
+    d = _Decoder(0, errors.append)
+    d.start()
+    for k, handler in enumerate([good, bad, good, bad, good]):
+        d.queue.put((handler, SimpleNamespace(key_expr=f"k/{k}"), float(k)))
+    d.close()
+    assert not d.is_alive()
+    assert seen == [("k/0", 0.0), ("k/2", 2.0), ("k/4", 4.0)] and errors == ["decoder_error"] * 2

@@ -32,6 +32,7 @@ from .controller import Controller, RuntimeConfig, Sample
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 
 log = logging.getLogger("sctd.run")
+INBOX = 4096  # messages waiting for the decoder before new ones are dropped
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
 
 
@@ -70,11 +71,17 @@ class _Publisher(threading.Thread):
 
 class _Decoder(threading.Thread):
     """Decodes queued messages off the tick thread: ``(handler, sample, received)``
-    items, each handled as ``handler(sample, received)``; None stops it."""
+    items, each handled as ``handler(sample, received)``; None stops it.
 
-    def __init__(self, rt_priority: int):
+    ``on_error(reason)`` counts what a handler raised beyond the decoders' own
+    DecodeError (which the handlers count themselves): a bug must cost one message,
+    not the thread that feeds the tick.
+    """
+
+    def __init__(self, rt_priority: int, on_error):
         super().__init__(name="sctd-decoder", daemon=True)
         self.rt_priority = rt_priority
+        self.on_error = on_error
         self.queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
 
     def run(self) -> None:
@@ -82,7 +89,11 @@ class _Decoder(threading.Thread):
         q = self.queue
         while (item := q.get()) is not None:
             handler, sample, received = item
-            handler(sample, received)
+            try:
+                handler(sample, received)
+            except Exception:
+                log.exception("decoding a message on %s failed", sample.key_expr)
+                self.on_error("decoder_error")
 
     def close(self) -> None:
         self.queue.put(None)
@@ -209,13 +220,20 @@ class Daemon:
         s = self.session
         # Decoded on arrival into newest-value slots: the newest valid sample wins, every
         # malformed message is counted, and the tick never waits on the network.
-        decoder = _Decoder(self.rt_priority)
+        decoder = _Decoder(self.rt_priority, self._drop)
         decoder.start()
         inbox = decoder.queue
         monotonic = time.monotonic
 
         def queue_to(handler):
-            return lambda sample: inbox.put((handler, sample, monotonic()))
+            def enqueue(sample: zenoh.Sample) -> None:
+                # A flood faster than the decoder is dropped here and counted, so the
+                # queue (and the daemon's memory) stays bounded.
+                if inbox.qsize() < INBOX:
+                    inbox.put((handler, sample, monotonic()))
+                else:
+                    self._drop("inbox_full")
+            return enqueue
 
         sub_in = s.declare_subscriber(keys.input(cfg.device), queue_to(self._take_input))
         sub_state = s.declare_subscriber(keys.state, queue_to(self._take_state))
