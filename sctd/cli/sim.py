@@ -38,7 +38,12 @@ def add_sim_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--drive-timeout", type=float, default=0.01,
                    help="drive command timeout before it brakes, s (default %(default)s)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
-    p.add_argument("--view", action="store_true", help="live 3D view (needs meshcat or viser)")
+    p.add_argument("--view", action="store_true",
+                   help="live 3D view in a browser, served on 127.0.0.1 (needs viser: "
+                        "pip install 'sctd[view]'; make setup installs it)")
+    p.add_argument("--view-port", type=int, default=0, metavar="PORT",
+                   help="port of the --view page on 127.0.0.1 (default 0: a free one; the URL "
+                        "is printed)")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON on stdout")
     add_zenoh_arguments(p)
 
