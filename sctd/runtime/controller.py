@@ -59,17 +59,18 @@ class Sample:
 
 class _Target:
     """A target's world transform, multiplied out only when somebody asks for it: the
-    daemon publishes the pose and never needs the matrix."""
+    daemon publishes the pose and never needs the matrix. Either the matrix ``T`` or
+    the flat poses of the object (world) and the target (object frame)."""
 
-    __slots__ = ("T", "T_obj", "T_world_obj")
+    __slots__ = ("F_obj", "F_world_obj", "T")
 
-    def __init__(self, T_world_obj: Array | None, T_obj: Array | None, T: Array | None = None):
-        self.T_world_obj, self.T_obj, self.T = T_world_obj, T_obj, T
+    def __init__(self, F_world_obj: tuple | None, F_obj: tuple | None, T: Array | None = None):
+        self.F_world_obj, self.F_obj, self.T = F_world_obj, F_obj, T
 
     def matrix(self) -> Array:
         if self.T is None:
-            assert self.T_world_obj is not None and self.T_obj is not None
-            self.T = self.T_world_obj @ self.T_obj
+            assert self.F_world_obj is not None and self.F_obj is not None
+            self.T = se3.matrix4_from_flat(se3.compose_flat(self.F_world_obj, self.F_obj))
         return self.T
 
 
@@ -121,11 +122,11 @@ class Controller:
         self.mode = "waiting"
         self.last_in_seq = -1
         self._pose: list[float] | None = None
-        self._obj_T: Array | None = None
-        self._obj_T_inv: Array = np.eye(4)
-        self._T_obj_target: Array | None = None  # the target in the object frame
-        self._obj_rows: tuple[float, ...] = ()  # the object's rotation (9) and position (3)
+        self._obj_T: Array | None = None  # the object sample's transform the caches are for
+        self._obj_F: tuple = ()  # its flat pose (world) and inverse
+        self._obj_F_inv: tuple = ()
         self._obj_q: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
+        self._T_obj_target: tuple | None = None  # the target in the object frame (flat)
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self._install(skill, now=0.0, keep_state=False)
@@ -191,74 +192,77 @@ class Controller:
             return TickResult("hold", self._target, self.engine.state, in_seq, pose=self._pose)
 
         assert state is not None and obj is not None and state.T is not None and obj.T is not None
-        # The tick works in the object frame, where the skill is; the target is kept there
-        # too while the object's pose does not change, so that a tick converts one pose
-        # (the measured one) in and one (the new target) out.
-        T_world_obj = obj.T
-        if T_world_obj is not self._obj_T:  # a new object sample: re-express the target
-            self._obj_T, self._obj_T_inv = T_world_obj, se3.invert4(T_world_obj)
-            (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T_world_obj.tolist()
-            self._obj_rows = (a, b, c, d, e, f, g, h, i, x, y, z)
-            self._obj_q = se3.quaternion_from_rows(a, b, c, d, e, f, g, h, i)
+        # The tick works in the object frame, where the skill is, on flat poses (12
+        # floats, see sctd.se3); the target is kept there while the object's pose does
+        # not change, so a tick converts one pose (the measured one) in and one (the new
+        # target) out.
+        if obj.T is not self._obj_T:  # a new object sample: re-express the target
+            self._obj_T = obj.T
+            F = self._obj_F = se3.flat_from_matrix4(obj.T)
+            self._obj_F_inv = se3.invert_flat(F)
+            self._obj_q = se3.quaternion_from_rows(*F[:9])
             self._T_obj_target = None
             self._rot = None
-        T_obj_world = self._obj_T_inv
-        T_obj_meas = T_obj_world @ state.T
+        F_obj_world = self._obj_F_inv
+        F_meas = se3.compose_flat(F_obj_world, se3.flat_from_matrix4(state.T))
         force = None
         if state.wrench is not None:
-            force = T_obj_world[:3, :3] @ np.asarray(state.wrench[:3])
-        changed = self.engine.update(T_obj_meas, now, force)
+            r = F_obj_world
+            fx, fy, fz = state.wrench[:3]
+            force = np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
+                              r[6] * fx + r[7] * fy + r[8] * fz])
+        changed = self.engine.update(F_meas, now, force)
         if changed:
             self.counters.transitions += 1
 
-        T_prev = self._T_obj_target
-        if T_prev is None:
-            T_prev = self._T_obj_target = T_obj_world @ self._target.matrix()
+        F_prev = self._T_obj_target
+        if F_prev is None:
+            F_prev = self._T_obj_target = se3.compose_flat(
+                F_obj_world, se3.flat_from_matrix4(self._target.matrix()))
         # How far the user pushes: the input's norm, clipped to 1 (a diagonal push of a
         # 3-axis stick is one push, not two); steps are bounded by mag * speed * dt.
         mag = min(1.0, math.hypot(*u))
-        T_new = T_prev
+        F_new = F_prev
         if mag > 0.0:
-            T_new = limit_step(T_prev, self.engine.command(T_prev, u, dt), mag * self.v_max * dt,
-                               mag * self.w_max * dt)
-        limited = limit_offset(T_new, T_obj_meas, cfg.max_offset, cfg.max_offset_rotation)
-        if limited is not T_new:
+            F_new = limit_step(F_prev, self.engine.command_flat(F_prev, u, dt),
+                               mag * self.v_max * dt, mag * self.w_max * dt)
+        limited = limit_offset(F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation)
+        if limited is not F_new:
             self.counters.offset_limited += 1
-            T_new = limited
-        if T_new is not T_prev and not self._accept(T_new, T_world_obj):
+            F_new = limited
+        if F_new is not F_prev and not self._accept(F_new):
             self.counters.nonfinite_output += 1  # never publish a non-finite target
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
 
-    def _accept(self, T_new: Array, T_world_obj: Array) -> bool:
-        """Make the object-frame pose T_new the target, or refuse it (False) when it is
+    def _accept(self, F: tuple) -> bool:
+        """Make the flat object-frame pose F the target, or refuse it (False) when it is
         not finite.
 
         The orientation is re-orthonormalised through its unit quaternion whenever it
         changed, so that millions of composed steps cannot drift off SO(3); a step that
         only translates keeps the previous (already orthonormal) orientation exactly,
-        and with it the previous world quaternion. The published pose is computed on
-        Python floats: world quaternion = object's * target's, world position = object's
-        rotation times the target's position plus the object's position.
+        and with it the previous world quaternion. The published pose: world quaternion
+        = object's * target's, world position = object's rotation times the target's
+        position plus the object's position.
         """
-        (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T_new.tolist()
-        if not math.isfinite(a + b + c + d + e + f + g + h + i + x + y + z):
+        if not math.isfinite(sum(F)):  # NaN and inf propagate through the sum
             return False
-        rot: tuple[float, ...] = (a, b, c, d, e, f, g, h, i)
+        rot: tuple[float, ...] = F[:9]
+        x, y, z = F[9], F[10], F[11]
         if rot != self._rot:
             q = se3.quaternion_from_rows(*rot)
             rot = se3.rows_from_quaternion(*q)
-            a, b, c, d, e, f, g, h, i = rot
-            T_new = np.array([[a, b, c, x], [d, e, f, y], [g, h, i, z], [0.0, 0.0, 0.0, 1.0]])
+            F = (*rot, x, y, z)
             self._rot = rot
             qx, qy, qz, qw = se3.compose_quaternions(self._obj_q, q)
             self._q_world = (qx, qy, qz, qw) if qw >= 0.0 else (-qx, -qy, -qz, -qw)
-        o = self._obj_rows
+        o = self._obj_F
         self._pose = [o[0] * x + o[1] * y + o[2] * z + o[9], o[3] * x + o[4] * y + o[5] * z + o[10],
                       o[6] * x + o[7] * y + o[8] * z + o[11], *self._q_world]
-        self._T_obj_target = T_new
-        self._target = _Target(T_world_obj, T_new)
+        self._T_obj_target = F
+        self._target = _Target(o, F)
         return True
 
     def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[tuple[float, ...], bool]:

@@ -33,28 +33,33 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     return out
 
 
-def _separation(T_a: Array, T_b: Array) -> tuple[float, float]:
-    """Distance between the origins of two transforms and the cosine of the angle of
-    ``R_a^T R_b`` (from its trace: cos = (trace - 1) / 2), on Python floats."""
-    (a0, a1, a2, ax), (a3, a4, a5, ay), (a6, a7, a8, az), _ = T_a.tolist()
-    (b0, b1, b2, bx), (b3, b4, b5, by), (b6, b7, b8, bz), _ = T_b.tolist()
+Flat = tuple  # a pose as 12 floats, see sctd.se3
+
+
+def _separation(A: Flat, B: Flat) -> tuple[float, float]:
+    """Distance between the origins of two flat poses and the cosine of the angle of
+    ``R_a^T R_b`` (from its trace: cos = (trace - 1) / 2)."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8, ax, ay, az = A
+    b0, b1, b2, b3, b4, b5, b6, b7, b8, bx, by, bz = B
     dx, dy, dz = bx - ax, by - ay, bz - az
     trace = (a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
              + a6 * b6 + a7 * b7 + a8 * b8)
     return math.sqrt(dx * dx + dy * dy + dz * dz), (trace - 1.0) * 0.5
 
 
-def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation: float) -> Array:
-    """Scale the step T_prev -> T_new uniformly so that the translation is at most
-    ``max_translation`` (m) and the rotation at most ``max_rotation`` (rad).
+def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: float) -> Flat:
+    """Scale the step F_prev -> F_new (flat poses) uniformly so that the translation is
+    at most ``max_translation`` (m) and the rotation at most ``max_rotation`` (rad).
+    Returns F_new itself when it is within the bounds.
 
     Scaling both parts by one factor keeps the direction of motion (an orbit about a
     feature frame stays an orbit), where clipping each separately would bend it.
     """
-    dt, cos_r = _separation(T_prev, T_new)
+    dt, cos_r = _separation(F_prev, F_new)
     # A mapped step that equals the bound exactly must not lose to it by an ulp.
     if dt <= max_translation * (1.0 + 1e-9) and cos_r >= math.cos(max_rotation * (1.0 + 1e-9)):
-        return T_new
+        return F_new
+    T_prev, T_new = se3.matrix4_from_flat(F_prev), se3.matrix4_from_flat(F_new)
     dr = rotation_angle_between(T_prev[:3, :3], T_new[:3, :3])
     s = 1.0
     if dt > max_translation:
@@ -62,21 +67,23 @@ def limit_step(T_prev: Array, T_new: Array, max_translation: float, max_rotation
     if dr > max_rotation:
         s = min(s, max_rotation / dr if dr > 0 else 0.0)
     if s >= 1.0:
-        return T_new
+        return F_new
     if s <= 0.0:
-        return T_prev.copy()
-    return interpolate(T_prev, T_new, s)
+        return F_prev
+    return se3.flat_from_matrix4(interpolate(T_prev, T_new, s))
 
 
-def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
-                 max_rotation: float) -> Array:
+def limit_offset(F_target: Flat, F_measured: Flat, max_translation: float,
+                 max_rotation: float) -> Flat:
     """Keep the target within ``max_translation`` (m) and ``max_rotation`` (rad) of the
-    measured pose, so a blocked or lagging arm never winds up an unbounded target.
+    measured pose (flat poses), so a blocked or lagging arm never winds up an unbounded
+    target. Returns F_target itself when it is within the bounds.
 
     Both poses may be given in any one frame: distance and angle do not depend on it."""
-    n, cos_r = _separation(T_measured, T_target)
+    n, cos_r = _separation(F_measured, F_target)
     if n <= max_translation and cos_r >= math.cos(max_rotation):
-        return T_target
+        return F_target
+    T_target, T_measured = se3.matrix4_from_flat(F_target), se3.matrix4_from_flat(F_measured)
     ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
     out = T_target.copy()
     if n > max_translation:
@@ -86,7 +93,7 @@ def limit_offset(T_target: Array, T_measured: Array, max_translation: float,
         w0, w1, w2 = se3.rotvec_from_matrix3(T_measured[:3, :3].T @ T_target[:3, :3])
         k = max_rotation / ang
         out[:3, :3] = T_measured[:3, :3] @ se3.matrix3_from_rotvec(k * w0, k * w1, k * w2)
-    return out
+    return se3.flat_from_matrix4(out)
 
 
 def sanitize_input(u: tuple[float, ...] | list[float], deadband: float) -> tuple[tuple[float, ...], bool]:

@@ -130,3 +130,38 @@ def rows_from_rotvec(w0: float, w1: float, w2: float) -> tuple[float, ...]:
     return (1.0 - b * (w1 * w1 + w2 * w2), -a * w2 + b * w0 * w1, a * w1 + b * w0 * w2,
             a * w2 + b * w0 * w1, 1.0 - b * (w0 * w0 + w2 * w2), -a * w0 + b * w1 * w2,
             -a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1))
+
+
+# --- flat transforms: 12 floats, rotation row-major (9) then translation (3) ----------
+# The runtime tick keeps poses in this form: Python float arithmetic on 12 numbers costs
+# less than numpy's per-call overhead on 4x4 arrays.
+
+
+def flat_from_matrix4(T: Array) -> tuple[float, ...]:
+    """The 12 floats of a 4x4 rigid transform."""
+    (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T.tolist()
+    return (a, b, c, d, e, f, g, h, i, x, y, z)
+
+
+def matrix4_from_flat(F: tuple[float, ...]) -> Array:
+    """The 4x4 transform of 12 floats."""
+    a, b, c, d, e, f, g, h, i, x, y, z = F
+    return np.array([[a, b, c, x], [d, e, f, y], [g, h, i, z], [0.0, 0.0, 0.0, 1.0]])
+
+
+def compose_flat(A: tuple[float, ...], B: tuple[float, ...]) -> tuple[float, ...]:
+    """A * B of two flat transforms."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8, ax, ay, az = A
+    b0, b1, b2, b3, b4, b5, b6, b7, b8, bx, by, bz = B
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8,
+            a0 * bx + a1 * by + a2 * bz + ax, a3 * bx + a4 * by + a5 * bz + ay,
+            a6 * bx + a7 * by + a8 * bz + az)
+
+
+def invert_flat(A: tuple[float, ...]) -> tuple[float, ...]:
+    """Inverse of a flat rigid transform (R^T, -R^T t)."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8, x, y, z = A
+    return (a0, a3, a6, a1, a4, a7, a2, a5, a8,
+            -(a0 * x + a3 * y + a6 * z), -(a1 * x + a4 * y + a7 * z), -(a2 * x + a5 * y + a8 * z))

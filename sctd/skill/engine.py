@@ -63,13 +63,7 @@ class _Neighbours:
         return r / s if s > 1e-12 else self.prior
 
 
-Flat = tuple  # a frame as 12 floats: rotation row-major (9), then origin (3)
-
-
-def _flat(rows: list[list[float]]) -> Flat:
-    """The 12 floats of a 4x4 transform given as ``T.tolist()``."""
-    (a, b, c, x), (d, e, f, y), (g, h, i, z) = rows[0], rows[1], rows[2]
-    return (a, b, c, d, e, f, g, h, i, x, y, z)
+Flat = tuple  # a pose as 12 floats: rotation row-major (9), then origin (3); see se3
 
 
 def _floats_of(item) -> tuple:
@@ -87,28 +81,31 @@ def _floats_of(item) -> tuple:
 
 
 class _Offset:
-    """A fixed ee -> frame offset, applied to an ee pose on Python floats."""
+    """A fixed ee -> frame offset, applied to a flat ee pose."""
 
     def __init__(self, T_ee_frame: Array):
         R = T_ee_frame[:3, :3]
         self.t = tuple(T_ee_frame[:3, 3].tolist())
         self.R: tuple[float, ...] | None = None if np.allclose(R, np.eye(3), atol=1e-15) \
             else tuple(R.ravel().tolist())
+        self.flat = se3.flat_from_matrix4(T_ee_frame)
 
-    def frame(self, rows: list[list[float]]) -> Flat:
-        """The frame's rotation and origin for the ee pose ``rows`` (``T.tolist()``)."""
-        (a, b, c, x), (d, e, f, y), (g, h, i, z) = rows[0], rows[1], rows[2]
+    def frame(self, F: Flat) -> Flat:
+        """The frame's pose for the ee pose F."""
+        if self.R is not None:
+            return se3.compose_flat(F, self.flat)
+        a, b, c, d, e, f, g, h, i, x, y, z = F
         tx, ty, tz = self.t
-        px = a * tx + b * ty + c * tz + x
-        py = d * tx + e * ty + f * tz + y
-        pz = g * tx + h * ty + i * tz + z
-        if self.R is None:
-            return (a, b, c, d, e, f, g, h, i, px, py, pz)
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self.R
-        return (a * r0 + b * r3 + c * r6, a * r1 + b * r4 + c * r7, a * r2 + b * r5 + c * r8,
-                d * r0 + e * r3 + f * r6, d * r1 + e * r4 + f * r7, d * r2 + e * r5 + f * r8,
-                g * r0 + h * r3 + i * r6, g * r1 + h * r4 + i * r7, g * r2 + h * r5 + i * r8,
-                px, py, pz)
+        return (a, b, c, d, e, f, g, h, i, a * tx + b * ty + c * tz + x,
+                d * tx + e * ty + f * tz + y, g * tx + h * ty + i * tz + z)
+
+
+def _rotation(r00: float, r01: float, r02: float, r10: float, r11: float, r12: float,
+              r20: float, r21: float, r22: float, px: float, py: float, pz: float) -> Flat:
+    """The rotation R (row-major) about the point p, as a flat transform [R, p - R p]."""
+    return (r00, r01, r02, r10, r11, r12, r20, r21, r22,
+            px - (r00 * px + r01 * py + r02 * pz), py - (r10 * px + r11 * py + r12 * pz),
+            pz - (r20 * px + r21 * py + r22 * pz))
 
 
 class _LinearPlan:
@@ -123,17 +120,17 @@ class _LinearPlan:
                   if m.matrix[i, j] != 0.0)
             for i in range(6))
         self.in_frame = m.translation == "frame"
-        self.T_ee_f = T_ee_frame.get(m.frame)  # None: the ee itself or an object frame
-        self.T_obj_f = None if self.T_ee_f is not None or m.frame == "ee" else T_obj_frame[m.frame]
-        self.offset = None if self.T_ee_f is None else _Offset(self.T_ee_f)
-        if self.T_obj_f is not None:
-            self.T_f_inv = se3.invert_transform(self.T_obj_f)
-        if self.T_ee_f is not None:
-            self.T_e_inv = se3.invert_transform(self.T_ee_f)
+        T_ee_f = T_ee_frame.get(m.frame)  # None: the ee itself or an object frame
+        self.offset = None if T_ee_f is None else _Offset(T_ee_f)
+        self.obj_frame: Flat | None = None  # a frame fixed in the object
+        if T_ee_f is None and m.frame != "ee":
+            self.obj_frame = se3.flat_from_matrix4(T_obj_frame[m.frame])
+            self.obj_frame_inv = se3.invert_flat(self.obj_frame)
 
-    def apply(self, T: Array, u: Sequence[float], dt: float) -> Array:
-        """Algorithm 2 with the displacement convention of :mod:`sctd.se3`: rotate about
-        the frame's origin and axes (``T_f Rot(r) T_f^-1 T``), then translate."""
+    def apply(self, F: Flat, u: Sequence[float], dt: float) -> Flat:
+        """Algorithm 2 with the displacement convention of :mod:`sctd.se3` on the flat ee
+        pose F: rotate about the frame's origin and axes (``T_f Rot(r) T_f^-1 T``), then
+        translate (in the object's axes, or the frame's before the rotation)."""
         n = len(u)
         d = [0.0] * 6
         for i, row in enumerate(self.rows):
@@ -141,38 +138,31 @@ class _LinearPlan:
                 if j < n:
                     d[i] += coeff * u[j]
         dx, dy, dz, rx, ry, rz = d[0] * dt, d[1] * dt, d[2] * dt, d[3] * dt, d[4] * dt, d[5] * dt
-        rows = T.tolist() if self.in_frame or rx or ry or rz else None
-        if rx or ry or rz:
-            r00, r01, r02, r10, r11, r12, r20, r21, r22 = se3.rows_from_rotvec(rx, ry, rz)
-            M = np.array([[r00, r01, r02, 0.0], [r10, r11, r12, 0.0], [r20, r21, r22, 0.0],
-                          [0.0, 0.0, 0.0, 1.0]])
-            if self.T_obj_f is not None:  # a frame fixed in the object: left-multiply
-                out = self.T_obj_f @ M @ self.T_f_inv @ T
-            else:  # a frame on the ee: T T_e Rot T_e^-1
-                if self.offset is not None and self.offset.R is None:
-                    tx, ty, tz = self.offset.t  # a pure translation t: [Rot, t - Rot t]
-                    M[0, 3] = tx - (r00 * tx + r01 * ty + r02 * tz)
-                    M[1, 3] = ty - (r10 * tx + r11 * ty + r12 * tz)
-                    M[2, 3] = tz - (r20 * tx + r21 * ty + r22 * tz)
-                elif self.offset is not None:
-                    M = self.T_ee_f @ M @ self.T_e_inv
-                out = T @ M
+        if self.obj_frame is not None:
+            frame = self.obj_frame
+        elif self.offset is not None:
+            frame = self.offset.frame(F)
         else:
-            out = T.copy()
-        if self.in_frame:  # translation along the frame's axes (of the pose before rotating)
-            assert rows is not None
-            if self.T_obj_f is not None:
-                F = _flat(self.T_obj_f.tolist())
-            elif self.offset is not None:
-                F = self.offset.frame(rows)
-            else:
-                F = _flat(rows)
-            dx, dy, dz = (F[0] * dx + F[1] * dy + F[2] * dz, F[3] * dx + F[4] * dy + F[5] * dz,
-                          F[6] * dx + F[7] * dy + F[8] * dz)
-        out[0, 3] += dx
-        out[1, 3] += dy
-        out[2, 3] += dz
-        return out
+            frame = F
+        out = F
+        if rx or ry or rz:
+            rot = se3.rows_from_rotvec(rx, ry, rz)
+            if self.obj_frame is not None:  # T_f Rot T_f^-1 T, T_f fixed in the object
+                M = se3.compose_flat(se3.compose_flat(frame, (*rot, 0.0, 0.0, 0.0)), self.obj_frame_inv)
+                out = se3.compose_flat(M, F)
+            elif self.offset is not None and self.offset.R is None:  # T [Rot about t]
+                out = se3.compose_flat(F, _rotation(*rot, *self.offset.t))
+            elif self.offset is not None:  # T T_e Rot T_e^-1
+                T_e = self.offset.flat
+                M = se3.compose_flat(se3.compose_flat(T_e, (*rot, 0.0, 0.0, 0.0)), se3.invert_flat(T_e))
+                out = se3.compose_flat(F, M)
+            else:  # about the ee itself
+                out = se3.compose_flat(F, (*rot, 0.0, 0.0, 0.0))
+        if self.in_frame:
+            dx, dy, dz = (frame[0] * dx + frame[1] * dy + frame[2] * dz,
+                          frame[3] * dx + frame[4] * dy + frame[5] * dz,
+                          frame[6] * dx + frame[7] * dy + frame[8] * dz)
+        return (*out[:9], out[9] + dx, out[10] + dy, out[11] + dz)
 
 
 class SkillEngine:
@@ -193,8 +183,8 @@ class SkillEngine:
                 self.T_ee_frame[name] = f.T_parent_frame
             else:
                 self.T_obj_frame[name] = f.T_parent_frame
-        # The per-tick paths read poses through one ``tolist`` and do 3-vector math on
-        # Python floats: numpy's per-call overhead dominates on 3x3 arrays.
+        # The per-tick paths work on flat poses (12 Python floats, see sctd.se3):
+        # numpy's per-call overhead dominates on 3x3 and 4x4 arrays.
         self._offsets = {n: _Offset(T) for n, T in self.T_ee_frame.items()}
         self._linear_plans = {}
         for state in skill.states:
@@ -236,13 +226,13 @@ class SkillEngine:
         self.index = self.skill.state_index(state or self.skill.start)
         self.entered = now
 
-    def update(self, T_obj_ee: Array, now: float, force_obj: Array | None = None) -> bool:
+    def update(self, T_obj_ee: Array | Flat, now: float, force_obj: Array | None = None) -> bool:
         """Evaluate the active state's transitions on the measured pose; follow the first
         that fires. Returns True when the state changed.
 
         Parameters
         ----------
-        T_obj_ee : ndarray, shape (4, 4)
+        T_obj_ee : ndarray, shape (4, 4), or flat pose (12 floats, see :mod:`sctd.se3`)
             Measured end-effector pose in the object frame.
         now : float
             Monotonic time (s).
@@ -251,22 +241,20 @@ class SkillEngine:
         """
         if now - self.entered < self.skill.min_dwell:
             return False
-        rows = None
+        F = T_obj_ee if isinstance(T_obj_ee, tuple) else se3.flat_from_matrix4(T_obj_ee)
         for t in self._out_of[self.index]:
-            if t.type in ("hyperplane", "distance") and rows is None:
-                rows = T_obj_ee.tolist()
-            if self._fires(t, rows, now, force_obj):
+            if self._fires(t, F, now, force_obj):
                 self.index = self.skill.state_index(t.target)
                 self.entered = now
                 return True
         return False
 
-    def _frame_values(self, rows: list[list[float]], frame: str) -> Flat:
-        """Rotation and origin (12 floats) of ``frame`` for the ee pose ``rows``."""
+    def frame_of(self, F: Flat, frame: str) -> Flat:
+        """Flat pose of an ee-attached ``frame`` (or the ee itself) for flat ee pose F."""
         off = self._offsets.get(frame)
-        return _flat(rows) if off is None else off.frame(rows)
+        return F if off is None else off.frame(F)
 
-    def _fires(self, t: Transition, rows, now: float, force: Array | None) -> bool:
+    def _fires(self, t: Transition, F: Flat, now: float, force: Array | None) -> bool:
         if t.type == "timeout":
             return now - self.entered >= t.threshold
         if t.type == "force":
@@ -274,13 +262,13 @@ class SkillEngine:
                 return False
             f = float(np.dot(force, t.axis)) if t.axis is not None else float(np.linalg.norm(force))
             return f > t.threshold + t.margin
-        F = self._frame_values(rows, t.frame)
+        G = self.frame_of(F, t.frame)
         v = self._floats.get(id(t)) or _floats_of(t)
         if t.type == "hyperplane":
             nx, ny, nz = v
-            return nx * F[9] + ny * F[10] + nz * F[11] + t.offset > t.margin
+            return nx * G[9] + ny * G[10] + nz * G[11] + t.offset > t.margin
         cx, cy, cz = v
-        dx, dy, dz = F[9] - cx, F[10] - cy, F[11] - cz
+        dx, dy, dz = G[9] - cx, G[10] - cy, G[11] - cz
         d = math.sqrt(dx * dx + dy * dy + dz * dz)
         if t.direction == "below":
             return d < t.threshold - t.margin
@@ -307,23 +295,30 @@ class SkillEngine:
         ndarray, shape (4, 4)
             The new target pose in the object frame (a new array).
         """
+        return se3.matrix4_from_flat(self.command_flat(se3.flat_from_matrix4(T_obj_ee), u, dt))
+
+    def command_flat(self, F: Flat, u: Array | Sequence[float], dt: float) -> Flat:
+        """:meth:`command` on a flat pose (12 floats, see :mod:`sctd.se3`), as the
+        runtime's tick calls it: linear mappings and the band, box and tilt checks run
+        on Python floats; vector fields and constraint projections that move the pose
+        go through arrays."""
         state = self.skill.states[self.index]
         uu = u.tolist() if isinstance(u, np.ndarray) else u
-        T = T_obj_ee
         for m in state.input_mappings:
             if isinstance(m, LinearMapping):
-                T = self._linear_plans[id(m)].apply(T, uu, dt)
+                F = self._linear_plans[id(m)].apply(F, uu, dt)
             else:
-                T = self._vector_field(T, m, np.asarray(u, dtype=float), dt)
-        F = None  # the constraint frame's values, reused while T and the frame stay
+                T = self._vector_field(se3.matrix4_from_flat(F), m, np.asarray(u, dtype=float), dt)
+                F = se3.flat_from_matrix4(T)
+        G = None  # the constraint frame's pose, reused while F and the frame stay
         frame = None
         for c in state.active_constraints:
-            if c.frame != frame or F is None:
-                F, frame = self._frame_values(T.tolist(), c.frame), c.frame
-            T_next = self.project(T, c, F)
-            if T_next is not T:
-                T, F = T_next, None
-        return T.copy() if T is T_obj_ee else T
+            if c.frame != frame or G is None:
+                G, frame = self.frame_of(F, c.frame), c.frame
+            F_next = self.project_flat(F, c, G)
+            if F_next is not F:
+                F, G = F_next, None
+        return F
 
     def _vector_field(self, T: Array, m: VectorFieldMapping, u: Array, dt: float) -> Array:
         """Algorithm 7's translation part: scale (eqs. 4.31-4.34) or blend (eq. 4.35)."""
@@ -338,7 +333,7 @@ class SkillEngine:
             u3 /= mag
             mag = 1.0
         unit = u3 / mag
-        p = np.array(self._frame_values(T.tolist(), m.frame)[9:])
+        p = np.array(self.frame_of(se3.flat_from_matrix4(T), m.frame)[9:])
         nb = self._trees[id(m.model)]
         P = nb.membership(p, m.max_n, m.max_d)
         self.last_membership = P
@@ -372,44 +367,43 @@ class SkillEngine:
         T_ee_f = self.T_ee_frame.get(frame)
         return T_obj_ee if T_ee_f is None else T_obj_ee @ T_ee_f
 
-    def project(self, T: Array, c, F: Flat | None = None) -> Array:
+    def project(self, T: Array, c) -> Array:
         """Project pose T onto constraint c (moving the constrained frame minimally).
 
-        Returns T itself (the same object) when it already satisfies c. ``F``, the
-        constrained frame's rotation and origin for this T as 12 floats, may be passed
-        in to save recomputing it. The checks run on Python floats; only a projection
-        that moves the pose builds arrays.
-        """
-        if F is None:
-            F = self._frame_values(T.tolist(), c.frame)
+        Returns T itself (the same object) when it already satisfies c."""
+        F = se3.flat_from_matrix4(T)
+        G = self.project_flat(F, c)
+        return T if G is F else se3.matrix4_from_flat(G)
+
+    def project_flat(self, F: Flat, c, G: Flat | None = None) -> Flat:
+        """:meth:`project` on a flat ee pose F; returns F itself when it satisfies c.
+        ``G``, the constrained frame's flat pose for this F, may be passed in to save
+        recomputing it. The checks run on Python floats; only a projection that moves
+        the pose builds arrays."""
+        if G is None:
+            G = self.frame_of(F, c.frame)
         v = self._floats.get(id(c)) or _floats_of(c)
         if isinstance(c, Band):
             (nx, ny, nz), (cx, cy, cz) = v
-            s = nx * (F[9] - cx) + ny * (F[10] - cy) + nz * (F[11] - cz)
+            s = nx * (G[9] - cx) + ny * (G[10] - cy) + nz * (G[11] - cz)
             delta = (c.lower - s) if s < c.lower else (c.upper - s) if s > c.upper else 0.0
             if delta == 0.0:
-                return T
-            out = T.copy()
-            out[:3, 3] += delta * c.normal
-            return out
+                return F
+            return (*F[:9], F[9] + delta * nx, F[10] + delta * ny, F[11] + delta * nz)
         if isinstance(c, Box):
-            p = F[9:]
+            p = G[9:]
             q = [min(max(x, lo), hi) for x, lo, hi in zip(p, *v, strict=True)]
             if q[0] == p[0] and q[1] == p[1] and q[2] == p[2]:
-                return T
-            out = T.copy()
-            out[0, 3] += q[0] - p[0]
-            out[1, 3] += q[1] - p[1]
-            out[2, 3] += q[2] - p[2]
-            return out
+                return F
+            return (*F[:9], F[9] + q[0] - p[0], F[10] + q[1] - p[1], F[11] + q[2] - p[2])
         if isinstance(c, TiltCone):
             (ax, ay, az), (rx, ry, rz), cos_max = v
-            a0 = F[0] * ax + F[1] * ay + F[2] * az
-            a1 = F[3] * ax + F[4] * ay + F[5] * az
-            a2 = F[6] * ax + F[7] * ay + F[8] * az
+            a0 = G[0] * ax + G[1] * ay + G[2] * az
+            a1 = G[3] * ax + G[4] * ay + G[5] * az
+            a2 = G[6] * ax + G[7] * ay + G[8] * az
             cos_a = a0 * rx + a1 * ry + a2 * rz
             if cos_a >= cos_max:
-                return T
+                return F
             a = np.array([a0, a1, a2])
             perp = a - cos_a * c.reference
             pn = float(np.linalg.norm(perp))
@@ -419,30 +413,25 @@ class SkillEngine:
                     perp = np.cross(c.reference, [0.0, 1.0, 0.0])
                 pn = float(np.linalg.norm(perp))
             boundary = math.cos(c.max_angle) * c.reference + math.sin(c.max_angle) * perp / pn
-            R_corr = se3.rotation_between(a, boundary)
-            return self._rotate_about(T, F, R_corr)
+            return self._rotate_about(F, G, se3.rotation_between(a, boundary))
         if isinstance(c, NeighbourOrientation):
             nb = self._trees[id(c.model)]
-            i, w = nb.query(np.array(F[9:]), c.max_n, c.max_d)
+            i, w = nb.query(np.array(G[9:]), c.max_n, c.max_d)
             if len(i) == 0:
-                return T
+                return F
             q = c.model.quaternions[i]
             q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
             q_mean = w @ q
             q_mean /= np.linalg.norm(q_mean)
             R_goal = se3.matrix_from_quaternion(q_mean)
-            R_f = np.array(F[:9]).reshape(3, 3)
-            return self._rotate_about(T, F, R_goal @ R_f.T)
+            R_f = np.array(G[:9]).reshape(3, 3)
+            return self._rotate_about(F, G, R_goal @ R_f.T)
         raise TypeError(f"unknown constraint {c!r}")
 
     @staticmethod
-    def _rotate_about(T: Array, F: Flat, R_corr: Array) -> Array:
-        """Rotate pose T by R_corr (object axes) about the origin of frame F."""
-        p_f = np.array(F[9:])
-        out = T.copy()
-        out[:3, :3] = R_corr @ T[:3, :3]
-        out[:3, 3] = R_corr @ (T[:3, 3] - p_f) + p_f
-        return out
+    def _rotate_about(F: Flat, G: Flat, R_corr: Array) -> Flat:
+        """Rotate flat pose F by R_corr (object axes) about the origin of frame G."""
+        return se3.compose_flat(_rotation(*R_corr.ravel().tolist(), *G[9:]), F)
 
     def violation(self, T: Array, c) -> float:
         """How far pose T is outside constraint c (m or rad; 0 when satisfied)."""
