@@ -8,6 +8,7 @@ import logging
 import os
 import signal
 import sys
+import threading
 
 from ..runtime.zsession import add_zenoh_arguments
 
@@ -75,6 +76,15 @@ def main_run(args: argparse.Namespace) -> int:
         max_offset=args.max_offset, max_offset_rotation=args.max_offset_rotation,
         status_rate=args.status_rate,
     )
+    # Signals are caught before anything is bound, so that a SIGINT/SIGTERM that comes
+    # while the daemon is still starting also ends it cleanly (exit 0, port freed).
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     try:
         session = open_session(args.listen, args.connect, args.zenoh_config)
     except (ValueError, zenoh.ZError) as e:
@@ -86,13 +96,7 @@ def main_run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             return 2
         daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority,
-                        cpu=args.cpu)
-
-        def on_signal(signum, frame):
-            daemon.stop()
-
-        signal.signal(signal.SIGINT, on_signal)
-        signal.signal(signal.SIGTERM, on_signal)
+                        cpu=args.cpu, stop_event=stop)
         stats = daemon.run(args.duration)
     finally:
         close_session(session)

@@ -120,10 +120,14 @@ class Daemon:
     config : RuntimeConfig
     spin : float
         Seconds before each deadline to stop sleeping and spin.
+    stop_event : threading.Event, optional
+        Set to stop; pass one set by signal handlers installed before the daemon exists
+        (a stop requested while starting then ends :meth:`run` at once).
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
-                 spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None):
+                 spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
+                 stop_event: threading.Event | None = None):
         self.config = config
         self.session = session
         self.keys = codec.Keys(config.robot)
@@ -132,7 +136,7 @@ class Daemon:
         self.rt_priority = rt_priority
         self.cpu = cpu
         self.realtime = False
-        self.stop_event = threading.Event()
+        self.stop_event = stop_event if stop_event is not None else threading.Event()
         self.lateness = Histogram()  # since start
         self.compute = Histogram()
         self._recent_lateness = Histogram()  # the current RECENT-second window
