@@ -41,7 +41,7 @@ MIN_ROWS = 10  # sctd.learn.demos.MIN_SAMPLES: shorter files make the learner re
 
 def row_from_poses(t: float, pose_world_ee: list[float], pose_world_obj: list[float]) -> list[float]:
     """``[t, x, y, z, qx, qy, qz, qw]`` of the ee in the object frame (qw >= 0)."""
-    T = se3.invert4(se3.matrix4_from_pose(pose_world_obj)) @ se3.matrix4_from_pose(pose_world_ee)
+    T = se3.invert_transform(se3.matrix4_from_pose(pose_world_obj)) @ se3.matrix4_from_pose(pose_world_ee)
     p = se3.pose_from_matrix4(T)
     n = math.sqrt(sum(x * x for x in p[3:]))
     s = (1.0 if p[6] >= 0.0 else -1.0) / n

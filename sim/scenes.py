@@ -140,7 +140,7 @@ class PourGeometry:
 
 def pour_geometry(T_world_tip: np.ndarray, params: PourParams) -> PourGeometry:
     """Bottle opening relative to the mug opening, and the bottle's tilt."""
-    T_mug_tip = se3.invert4(params.T_world_mug) @ T_world_tip
+    T_mug_tip = se3.invert_transform(params.T_world_mug) @ T_world_tip
     p = T_mug_tip[:3, 3]
     radial = float(math.hypot(p[0], p[1]))
     above = float(p[2])

@@ -118,3 +118,49 @@ def test_average_quaternion_sign_invariant():
 def test_zero_quaternion_rejected():
     with pytest.raises(ValueError):
         se3.transform_from_pose([0, 0, 0, 0, 0, 0, 0])
+
+
+# --- the tick's fast paths agree with the vectorised functions -------------------------
+
+
+@given(poses(scale=2.0), poses(scale=2.0))
+def test_fast_paths_agree_with_vectorised(pa, pb):
+    Ta, Tb = se3.transform_from_pose(pa), se3.transform_from_pose(pb)
+    assert np.allclose(se3.matrix4_from_pose(pa.tolist()), Ta, atol=1e-12)
+    back = se3.pose_from_matrix4(Ta)
+    assert np.allclose(back[:3], pa[:3], atol=1e-12) and same_rotation(np.array(back[3:]), pa[3:])
+    assert same_rotation(np.array(se3.quaternion_from_matrix3(Ta[:3, :3])), pa[3:])
+    assert np.allclose(se3.rows_from_quaternion(*pa[3:]), Ta[:3, :3].ravel(), atol=1e-12)
+    q = se3.compose_quaternions(tuple(pa[3:]), tuple(pb[3:]))
+    assert same_rotation(np.array(q), se3.quaternion_multiply(pa[3:], pb[3:]))
+    R_ab = Ta[:3, :3].T @ Tb[:3, :3]
+    assert np.isclose(se3.angle_between3(Ta[:3, :3], Tb[:3, :3]), se3.rotation_angle(R_ab), atol=1e-9)
+
+
+@given(rotvecs())
+def test_fast_rotvec_paths_agree(w):
+    R = se3.matrix_from_rotvec(w)
+    assert np.allclose(se3.matrix3_from_rotvec(*w), R, atol=1e-12)
+    assert np.allclose(se3.rows_from_rotvec(*w), R.ravel(), atol=1e-12)
+    assert np.allclose(se3.rotvec_from_matrix3(R), se3.rotvec_from_matrix(R), atol=1e-9)
+
+
+@given(poses(scale=2.0), poses(scale=2.0))
+def test_flat_transforms_agree_with_matrices(pa, pb):
+    Ta, Tb = se3.transform_from_pose(pa), se3.transform_from_pose(pb)
+    Fa, Fb = se3.flat_from_matrix4(Ta), se3.flat_from_matrix4(Tb)
+    assert len(Fa) == 12 and all(type(x) is float for x in Fa)
+    assert np.array_equal(se3.matrix4_from_flat(Fa), Ta)
+    assert np.allclose(se3.matrix4_from_flat(se3.compose_flat(Fa, Fb)), Ta @ Tb, atol=1e-12)
+    assert np.allclose(se3.matrix4_from_flat(se3.invert_flat(Fa)), se3.invert_transform(Ta),
+                       atol=1e-12)
+
+
+@pytest.mark.parametrize("k", range(9))
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")])
+def test_quaternion_from_rows_propagates_non_finite(k, bad):
+    """Every Shepperd branch reads all nine entries: one bad entry spoils the result."""
+    for w in ([0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]):
+        rows = list(se3.rows_from_rotvec(*w))
+        rows[k] = bad
+        assert not all(np.isfinite(se3.quaternion_from_rows(*rows)))

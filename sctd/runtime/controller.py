@@ -64,7 +64,8 @@ class _Target:
 
     __slots__ = ("F_obj", "F_world_obj", "T")
 
-    def __init__(self, F_world_obj: tuple | None, F_obj: tuple | None, T: Array | None = None):
+    def __init__(self, F_world_obj: se3.Flat | None, F_obj: se3.Flat | None,
+                 T: Array | None = None):
         self.F_world_obj, self.F_obj, self.T = F_world_obj, F_obj, T
 
     def matrix(self) -> Array:
@@ -123,10 +124,10 @@ class Controller:
         self.last_in_seq = -1
         self._pose: list[float] | None = None
         self._obj_T: Array | None = None  # the object sample's transform the caches are for
-        self._obj_F: tuple = ()  # its flat pose (world) and inverse
-        self._obj_F_inv: tuple = ()
+        self._obj_F: se3.Flat = ()  # its flat pose (world) and inverse
+        self._obj_F_inv: se3.Flat = ()
         self._obj_q: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
-        self._T_obj_target: tuple | None = None  # the target in the object frame (flat)
+        self._T_obj_target: se3.Flat | None = None  # the target in the object frame
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self._install(skill, now=0.0, keep_state=False)
@@ -236,7 +237,7 @@ class Controller:
         return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
 
-    def _accept(self, F: tuple) -> bool:
+    def _accept(self, F: se3.Flat) -> bool:
         """Make the flat object-frame pose F the target, or refuse it (False) when it is
         not finite.
 

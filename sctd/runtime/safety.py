@@ -33,7 +33,7 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     return out
 
 
-Flat = tuple  # a pose as 12 floats, see sctd.se3
+Flat = se3.Flat
 
 
 def _separation(A: Flat, B: Flat) -> tuple[float, float]:

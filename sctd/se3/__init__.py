@@ -8,11 +8,11 @@ shared by the runtime and the learner.
 """
 
 from ._fast import (
+    Flat,
     angle_between3,
     compose_flat,
     compose_quaternions,
     flat_from_matrix4,
-    invert4,
     invert_flat,
     matrix3_from_rotvec,
     matrix4_from_flat,
@@ -57,6 +57,7 @@ from ._transforms import (
 )
 
 __all__ = [
+    "Flat",
     "angle_between3",
     "apply_displacement",
     "average_quaternion",
@@ -67,7 +68,6 @@ __all__ = [
     "exp_se3",
     "flat_from_matrix4",
     "hat",
-    "invert4",
     "invert_flat",
     "invert_transform",
     "log_se3",

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
+Flat = tuple  # a rigid transform as 12 floats: rotation row-major (9), then translation (3)
 
 
 def quaternion_from_matrix3(R: Array) -> tuple[float, float, float, float]:
@@ -98,16 +99,6 @@ def pose_from_matrix4(T: Array) -> list[float]:
     return [t[0], t[1], t[2], q[0], q[1], q[2], q[3]]
 
 
-def invert4(T: Array) -> Array:
-    """Inverse of one rigid transform."""
-    out = np.empty((4, 4))
-    Rt = T[:3, :3].T
-    out[:3, :3] = Rt
-    out[:3, 3] = -(Rt @ T[:3, 3])
-    out[3] = (0.0, 0.0, 0.0, 1.0)
-    return out
-
-
 def angle_between3(R_a: Array, R_b: Array) -> float:
     """Angle (rad) of R_a^T R_b, accurate for small and large angles."""
     return 2.0 * math.asin(min(1.0, _half_sin(R_a.T @ R_b)))
@@ -132,7 +123,7 @@ def rows_from_rotvec(w0: float, w1: float, w2: float) -> tuple[float, ...]:
             -a * w1 + b * w0 * w2, a * w0 + b * w1 * w2, 1.0 - b * (w0 * w0 + w1 * w1))
 
 
-# --- flat transforms: 12 floats, rotation row-major (9) then translation (3) ----------
+# --- flat transforms (Flat): 12 floats, rotation row-major then translation ---------
 # The runtime tick keeps poses in this form: Python float arithmetic on 12 numbers costs
 # less than numpy's per-call overhead on 4x4 arrays.
 

@@ -63,7 +63,7 @@ class _Neighbours:
         return r / s if s > 1e-12 else self.prior
 
 
-Flat = tuple  # a pose as 12 floats: rotation row-major (9), then origin (3); see se3
+Flat = se3.Flat
 
 
 def _floats_of(item) -> tuple:

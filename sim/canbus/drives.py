@@ -164,15 +164,10 @@ class JointDrives:
                 elif fid not in self._state_ids:  # state frames are other nodes' business
                     st.unknown += 1
                 continue
-            st.received += 1
-            data = msg.data
-            if len(data) != 8:
-                st.corrupted += 1
+            checked = st.check(msg.data, unpack[i])
+            if checked is None:
                 continue
-            ok, counter, vals = unpack[i](data)
-            if not ok:
-                st.corrupted += 1
-                continue
+            counter, vals = checked
             ref = self._sync_counter
             if ref is not None and counter == ((ref + 1) & 0xF):
                 ref = self._sync_counter = counter  # this cycle's SYNC was lost

@@ -20,6 +20,7 @@ did not deliver a fresh frame (what the control loop feels, whatever the cause).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 ACCEPTED = 0
 CORRUPTED = 1
@@ -44,6 +45,20 @@ class LinkStats:
     def as_dict(self) -> dict[str, int]:
         """The counters as a plain dict (for status messages and reports)."""
         return asdict(self)
+
+    def check(self, data: bytes | bytearray, unpack) -> tuple[int, Any] | None:
+        """Count a frame of a known stream as received and decode it with ``unpack``
+        (``data -> (ok, counter, values)``); a frame that is not 8 bytes or fails its
+        CRC is counted as corrupted and gives None, else ``(counter, values)``."""
+        self.received += 1
+        if len(data) != 8:
+            self.corrupted += 1
+            return None
+        ok, counter, vals = unpack(data)
+        if not ok:
+            self.corrupted += 1
+            return None
+        return counter, vals
 
     def admit(self, counter: int, last: int | None, reference: int | None,
               got_this_cycle: bool) -> bool:

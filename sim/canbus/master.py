@@ -147,15 +147,10 @@ class BusMaster:
                 if msg.arbitration_id not in self._cmd_ids:
                     st.unknown += 1
                 continue
-            st.received += 1
-            data = msg.data
-            if len(data) != 8:
-                st.corrupted += 1
+            checked = st.check(msg.data, unpack[i])
+            if checked is None:
                 continue
-            ok, counter, vals = unpack[i](data)
-            if not ok:
-                st.corrupted += 1
-                continue
+            counter, vals = checked
             if not st.admit(counter, last[i], reference, fresh[i]):
                 continue
             fresh[i] = True
