@@ -25,6 +25,8 @@ from sctd.runtime.safety import interpolate
 from sctd.runtime.timing import Ticker, set_timer_slack
 from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
+from .guard import TargetGuard, TargetLimits
+
 
 @dataclass
 class KinematicScene:
@@ -125,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         period = 1.0 / args.rate
         every = max(1, round(args.rate / args.object_rate))
         ticker = Ticker(period, spin=0.0)
+        guard = TargetGuard(TargetLimits(), period, time.time())  # as the Pinocchio sim's arm
         end = None if args.duration is None else time.monotonic() + args.duration
         seq = 0
         while not stop.is_set():
@@ -135,9 +138,14 @@ def main(argv: list[str] | None = None) -> int:
             if s is not None:
                 try:
                     msg = codec.decode_target(s.payload.to_bytes())
-                    robot.T_world_target = se3.transform_from_pose(msg["pose"])
                 except codec.DecodeError:
-                    pass
+                    msg = None
+                if msg is not None:
+                    F_measured = se3.flat_from_matrix4(robot.T_world_ee)
+                    if guard.admit(msg["pose"], msg["stamp"], F_measured, robot.T_world_target is not None):
+                        robot.T_world_target = se3.transform_from_pose(msg["pose"])
+                    else:
+                        robot.T_world_target = None  # refused: stay where it is
             robot.step(period)
             wall = time.time()
             pose = se3.pose_from_transform(robot.T_world_ee).tolist()

@@ -6,7 +6,10 @@ period of the monotonic clock) and speaks the wire contract (docs/wire-contract.
 - follows ``sctd/<robot>/target``: a newest-wins ring drained every cycle, so every
   message is decoded and a malformed one is dropped and counted by reason; the newest
   valid target goes to the impedance controller, which holds the pose when targets
-  stop (stale-target hold);
+  stop (stale-target hold), if the arm's own guard (:mod:`sctd_sim.guard`) admits it:
+  a target too far from the arm, implying too high a speed, or stamped before the
+  simulator started is refused, the arm holds where it is, and ``target_rejected``
+  counts it;
 - publishes ``sctd/<robot>/state`` (``pose``, ``q``, ``dq``, ``wrench``; every cycle by
   default), the scene's objects on ``sctd/<robot>/objects/<name>`` (50 Hz) and the task
   outcome with the service's own health on ``sctd/<robot>/scene`` (10 Hz, see
@@ -42,12 +45,14 @@ from typing import Any
 import can
 import zenoh
 
+from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
 from sctd.runtime.zsession import session_from_args
 
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
+from .guard import TargetGuard, TargetLimits, limits_from_args
 
 _FAULT_NAMES = {
     "drop": "drop_rate", "drop_rate": "drop_rate",
@@ -104,11 +109,15 @@ class SimService:
         Hz; the publication rates are rounded to whole numbers of cycles.
     viewer : object, optional
         Anything with ``update(sim)``, called at about 30 Hz.
+    limits : TargetLimits, optional
+        What a target may ask of the arm (default: the safe defaults).
+    stamp_check : bool
+        Refuse targets stamped before the service started.
     """
 
     def __init__(self, session: zenoh.Session, sim, robot: str = codec.DEFAULT_ROBOT,
                  state_rate: float = 1000.0, object_rate: float = 50.0, scene_rate: float = 10.0,
-                 viewer=None) -> None:
+                 viewer=None, limits: TargetLimits | None = None, stamp_check: bool = True) -> None:
         self.session = session
         self.sim = sim
         self.keys = codec.Keys(robot)
@@ -131,6 +140,8 @@ class SimService:
         self._t0_wall = 0.0
         self._window = (0.0, 0.0)  # (wall, sim t) at the last scene message
         self.rtf = 1.0
+        self.guard = TargetGuard(limits or TargetLimits(), sim.dt, time.time(), stamp_check)
+        self._F_measured = se3.flat_from_pose(sim.state_message()["pose"])
         dec = self.session.declare_publisher
         drop = zenoh.CongestionControl.DROP
         k = self.keys
@@ -166,7 +177,12 @@ class SimService:
                 continue
             self.targets += 1
         if newest is not None:
-            self.sim.set_target(newest["pose"], newest["stamp"])
+            ctl = self.sim.arm.controller
+            if self.guard.admit(newest["pose"], newest["stamp"], self._F_measured, not ctl.holding):
+                self.sim.set_target(newest["pose"], newest["stamp"])
+            elif not ctl.holding:
+                ctl.hold()  # refused: stay where the arm is (once: holding again and again
+                # would re-take the pose the load has pushed it to, and let it sink)
 
     def _take_can(self) -> None:
         bus = self._inject_bus
@@ -193,6 +209,7 @@ class SimService:
         self.cycles = n + 1
         if n % self.every_state == 0:
             m = sim.state_message()
+            self._F_measured = se3.flat_from_pose(m["pose"])
             self.pub_state.put(codec.encode_state(self.seq, time.time(), m["pose"], q=m["q"],
                                                   dq=m["dq"], wrench=m["wrench"]))
             self.seq += 1
@@ -214,6 +231,9 @@ class SimService:
         (how far simulated time trails wall time), ``overruns`` (cycles started more than
         half a period late), ``skipped`` (cycles given up to resynchronise),
         ``cycle_ms`` (compute per cycle), ``targets`` (valid targets received),
+        ``target_rejected`` (valid targets the arm's guard refused) and
+        ``target_rejected_reasons`` (reason -> count: ``offset``, ``speed``,
+        ``out_of_order``, ``before_start``),
         ``dropped`` (reason -> count), ``can_injected`` (frames put on the bus from
         Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults).
         """
@@ -232,6 +252,8 @@ class SimService:
             behind_s=round(max(0.0, (now - self._t0_wall) - sim.t), 6) if self._t0_wall else 0.0,
             overruns=tk.late if tk else 0, skipped=tk.skipped if tk else 0,
             cycle_ms=self.cycle_time.summary_ms(), targets=self.targets,
+            target_rejected=self.guard.total_rejected,
+            target_rejected_reasons=dict(self.guard.rejected),
             dropped=dict(self.dropped), can_injected=self.injected, link=sim.link_stats(),
         )
         return msg
@@ -266,7 +288,7 @@ class SimService:
         m = self.scene_message()
         wall = time.monotonic() - self._t0_wall if self._t0_wall else 0.0
         keep = ("scene", "t", "cycles", "overruns", "skipped", "behind_s", "cycle_ms", "targets",
-                "dropped", "can_injected", "success")
+                "target_rejected", "target_rejected_reasons", "dropped", "can_injected", "success")
         out = {k: m[k] for k in keep if k in m}
         out["rtf_total"] = round(self.sim.t / wall, 4) if wall > 0 else None
         out["state_messages"] = self.seq
@@ -301,6 +323,11 @@ def run(args: argparse.Namespace) -> int:
     if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
         print("sctd sim: rates must be positive", file=sys.stderr)
         return 2
+    try:
+        limits = limits_from_args(args)
+    except ValueError as e:
+        print(f"sctd sim: {e}", file=sys.stderr)
+        return 2
     view_port = args.view_port
     if not 0 <= view_port <= 65535:
         print(f"sctd sim: --view-port: not a TCP port: {view_port}", file=sys.stderr)
@@ -331,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
                        bus_factory=bus_factory, drive_timeout=args.drive_timeout) as sim, \
             session_from_args(args) as session, \
             SimService(session, sim, args.robot, args.state_rate, args.object_rate,
-                       args.scene_rate, viewer) as service:
+                       args.scene_rate, viewer, limits, not args.no_stamp_check) as service:
         if viewer is not None:
             viewer.setup(sim)
         # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with
@@ -346,7 +373,8 @@ def run(args: argparse.Namespace) -> int:
         summary = service.summary()
     print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "
           f"{summary['rtf_total']}, {summary['overruns']} overruns, {summary['skipped']} skipped "
-          f"cycles, {summary['targets']} targets, dropped {summary['dropped'] or 'none'})",
+          f"cycles, {summary['targets']} targets, {summary['target_rejected']} refused, dropped "
+          f"{summary['dropped'] or 'none'})",
           file=sys.stderr, flush=True)
     if args.json:
         print(json.dumps(summary), flush=True)

@@ -56,6 +56,13 @@ def build_parser() -> argparse.ArgumentParser:
     runtime_bench.add_latency_arguments(p)
     p.set_defaults(func=runtime_bench.main_latency)
 
+    from ..runtime import robustness
+
+    p = bsub.add_parser("robustness", help="the daemon next to the sim under floods, bad bundles, "
+                                           "swaps and a jumping state")
+    robustness.add_robustness_arguments(p)
+    p.set_defaults(func=robustness.main_robustness)
+
     p = bsub.add_parser("learn", help="learning figures on generated demonstrations (accuracy, "
                         "centre error, directions, time, graph-cut energy)")
     p.add_argument("--seed", type=int, default=0)

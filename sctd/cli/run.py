@@ -9,33 +9,30 @@ import os
 import signal
 import sys
 import threading
+from typing import TYPE_CHECKING
 
 from ..runtime.zsession import add_zenoh_arguments
 
-
-def add_run_arguments(p: argparse.ArgumentParser) -> None:
+if TYPE_CHECKING:
     from ..runtime.controller import RuntimeConfig
 
-    d = RuntimeConfig()
+
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    from dataclasses import fields
+
+    from ..runtime.controller import RuntimeConfig
+
     p.add_argument("--skill", required=True, help="skill YAML file")
-    p.add_argument("--rate", type=float, default=d.rate, help="tick rate, Hz (default %(default)s)")
-    p.add_argument("--robot", default=d.robot, help="robot name in the key prefix sctd/<robot>")
-    p.add_argument("--device", default=d.device, help="input device to follow ('*': newest of any)")
-    p.add_argument("--input-timeout", type=float, default=d.input_timeout, help="s (default %(default)s)")
-    p.add_argument("--state-timeout", type=float, default=d.state_timeout, help="s (default %(default)s)")
-    p.add_argument("--object-timeout", type=float, default=d.object_timeout, help="s (default %(default)s)")
+    # One flag per RuntimeConfig setting, named and documented there.
+    for f in fields(RuntimeConfig):
+        if "help" not in f.metadata:
+            continue
+        kind = type(f.default)
+        p.add_argument(f"--{f.name.replace('_', '-')}", type=kind, default=f.default,
+                       help=f"{f.metadata['help']} (default %(default)s)")
     p.add_argument("--no-stamp-check", action="store_true",
-                   help="judge input age by arrival time only (senders with unsynchronised clocks)")
-    p.add_argument("--deadband", type=float, default=d.deadband, help="per input axis (default %(default)s)")
-    p.add_argument("--max-linear-speed", type=float, default=d.max_linear_speed,
-                   help="m/s (default %(default)s)")
-    p.add_argument("--max-angular-speed", type=float, default=d.max_angular_speed,
-                   help="rad/s (default %(default)s)")
-    p.add_argument("--max-offset", type=float, default=d.max_offset,
-                   help="m between target and measured pose (default %(default)s)")
-    p.add_argument("--max-offset-rotation", type=float, default=d.max_offset_rotation,
-                   help="rad between target and measured pose (default %(default)s)")
-    p.add_argument("--status-rate", type=float, default=d.status_rate, help="Hz (default %(default)s)")
+                   help="judge input, state and object ages by arrival time only (senders with "
+                        "unsynchronised clocks)")
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="us before each deadline spent spinning instead of sleeping (default %(default)s)")
     p.add_argument("--rt-priority", type=int, default=10,
@@ -49,11 +46,31 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(p)
 
 
+def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
+    """The RuntimeConfig of parsed ``sctd run`` flags.
+
+    Raises
+    ------
+    ValueError
+        A setting out of range, naming its flag.
+    """
+    from dataclasses import fields
+
+    from ..runtime import codec
+    from ..runtime.controller import RuntimeConfig
+
+    kw = {f.name: getattr(args, f.name) for f in fields(RuntimeConfig) if "help" in f.metadata}
+    for name, value in kw.items():
+        if isinstance(value, float) and not (value >= 0 if name == "deadband" else value > 0):
+            raise ValueError(f"--{name.replace('_', '-')} must be {'>= 0' if name == 'deadband' else '> 0'}")
+    codec.Keys(kw["robot"])  # one key chunk
+    return RuntimeConfig(stamp_check=not args.no_stamp_check, **kw)
+
+
 def main_run(args: argparse.Namespace) -> int:
     import zenoh
 
-    from ..runtime.controller import RuntimeConfig
-    from ..runtime.daemon import Daemon
+    from ..runtime.daemon import Daemon, ingress_limits
     from ..runtime.zsession import close_session, open_session
     from ..skill import SkillError, load_skill
 
@@ -63,19 +80,11 @@ def main_run(args: argparse.Namespace) -> int:
     except SkillError as e:
         print(f"sctd run: {e}", file=sys.stderr)
         return 2
-    for name in ("rate", "input_timeout", "state_timeout", "object_timeout", "max_linear_speed",
-                 "max_angular_speed", "max_offset", "max_offset_rotation", "status_rate"):
-        if not getattr(args, name) > 0:
-            print(f"sctd run: --{name.replace('_', '-')} must be > 0", file=sys.stderr)
-            return 2
-    config = RuntimeConfig(
-        rate=args.rate, robot=args.robot, device=args.device, input_timeout=args.input_timeout,
-        state_timeout=args.state_timeout, object_timeout=args.object_timeout,
-        stamp_check=not args.no_stamp_check, deadband=args.deadband,
-        max_linear_speed=args.max_linear_speed, max_angular_speed=args.max_angular_speed,
-        max_offset=args.max_offset, max_offset_rotation=args.max_offset_rotation,
-        status_rate=args.status_rate,
-    )
+    try:
+        config = runtime_config(args)
+    except ValueError as e:
+        print(f"sctd run: {e}", file=sys.stderr)
+        return 2
     # Signals are caught before anything is bound, so that a SIGINT/SIGTERM that comes
     # while the daemon is still starting also ends it cleanly (exit 0, port freed).
     stop = threading.Event()
@@ -86,7 +95,8 @@ def main_run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     try:
-        session = open_session(args.listen, args.connect, args.zenoh_config)
+        session = open_session(args.listen, args.connect, args.zenoh_config,
+                               size_limits=ingress_limits(config.robot))
     except (ValueError, zenoh.ZError) as e:
         print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
         return 2

@@ -37,6 +37,12 @@ def add_sim_arguments(p: argparse.ArgumentParser) -> None:
                    help="socketcan interface name (default vcan0 for socketcan/auto)")
     p.add_argument("--drive-timeout", type=float, default=0.01,
                    help="drive command timeout before it brakes, s (default %(default)s)")
+    from sctd_sim.guard import add_limit_arguments
+
+    add_limit_arguments(p)
+    p.add_argument("--no-stamp-check", action="store_true",
+                   help="do not refuse targets stamped before the simulator started (senders "
+                        "with unsynchronised clocks)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--view", action="store_true",
                    help="live 3D view in a browser, served on 127.0.0.1 (needs viser: "

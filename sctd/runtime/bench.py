@@ -128,30 +128,37 @@ def probe_main(argv: list[str]) -> int:
 
 
 def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> dict:
-    """The daemon's per-tick controller work, in this process and without Zenoh: the
-    skill, a robot that follows every target and a slowly sweeping input. Back to back
-    (``paced=False``) the caches stay hot; ``paced=True`` sleeps to the next period
-    between ticks as the daemon does, which on some machines (virtual CPUs) makes each
-    tick start cold. Timings of the controller tick only (s), as a Histogram summary."""
+    """The daemon's per-tick work, in this process and without Zenoh: decoding one
+    state message (as the daemon drains about one per tick) and the controller tick,
+    with the skill, a robot that follows every target and a slowly sweeping input. Back
+    to back (``paced=False``) the caches stay hot; ``paced=True`` sleeps to the next
+    period between ticks as the daemon does, which on some machines (virtual CPUs) makes
+    each tick start cold. Timings (s), as a Histogram summary."""
     from .. import se3
     from ..skill import load_skill
     from .controller import Controller, RuntimeConfig, Sample
 
     cfg = RuntimeConfig(rate=rate)
     ctl = Controller(load_skill(skill_path), cfg)
-    T_obj = se3.transform_from_pose([0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0])
-    T_ee = se3.transform_from_pose([0.35, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0])
+    F_obj = se3.flat_from_pose([0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0])
+    pose_ee = [0.35, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
+    q = [0.1] * 7
     h = Histogram()
     set_timer_slack(1)
     ticker = Ticker(cfg.period, spin=1e-4)
+    obj = Sample(0, 0.0, 0.0, F=F_obj)
     for k in range(n):
         if paced:
             ticker.wait()
         t = k * cfg.period
         u = (0.6 * math.sin(k * 0.001), 0.6 * math.cos(k * 0.00065), 0.3 * math.sin(k * 0.00035))
-        meas = ctl.T_world_target if ctl.T_world_target is not None else T_ee
+        pose = ctl._pose if ctl._pose is not None else pose_ee
+        data = codec.encode_state(k, t, pose, q=q, dq=q, wrench=[0.0] * 6)
+        obj.received = obj.stamp = t
         t0 = time.perf_counter()
-        ctl.tick(t, t, Sample(k, t, t, u=u), Sample(k, t, t, T=meas), Sample(0, t, t, T=T_obj))
+        m = codec.decode_state(data)
+        state = Sample(m.seq, m.stamp, t, F=se3.flat_from_pose(m.pose), wrench=m.wrench)
+        ctl.tick(t, t, Sample(k, t, t, u=u), state, obj)
         h.add(time.perf_counter() - t0)
     return h.summary_ms()
 

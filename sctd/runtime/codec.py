@@ -18,6 +18,14 @@ import msgpack
 WIRE_VERSION = 1
 DEFAULT_ROBOT = "edan"
 
+# Largest payloads the runtime decodes (bytes), checked before anything is copied or
+# decoded; larger ones are dropped and counted as ``<kind>_too_large``. A v1 input is
+# about 60 bytes, a state with q, dq and wrench about 300.
+MAX_INPUT_BYTES = 4096
+MAX_STATE_BYTES = 65536
+MAX_OBJECT_BYTES = 4096
+MAX_JOINTS = 64  # longest q / dq a state may carry
+
 
 class DecodeError(ValueError):
     """A malformed message; ``reason`` is a short tag for the drop counters."""
@@ -144,6 +152,7 @@ class StateMsg:
     wrench: list[float] | None
     q: list[float] | None = None
     dq: list[float] | None = None
+    wrench_nonfinite: bool = False  # a wrench was sent but not finite: dropped, the pose kept
 
 
 @dataclass(frozen=True)
@@ -153,29 +162,54 @@ class ObjectMsg:
     pose: list[float]
 
 
+def _size(data: bytes, limit: int) -> None:
+    if len(data) > limit:
+        raise DecodeError("too_large", f"{len(data)} bytes > {limit}")
+
+
+def _joints(obj: dict, key: str) -> list[float] | None:
+    x = obj.get(key)
+    if x is None:
+        return None
+    if not isinstance(x, list | tuple) or not 1 <= len(x) <= MAX_JOINTS:
+        raise DecodeError(f"bad_{key}", f"expected 1 to {MAX_JOINTS} numbers")
+    if not _NUMBERS.issuperset(map(type, x)):
+        raise DecodeError(f"bad_{key}", "non-numeric element")
+    v = list(map(float, x))
+    if not _finite(v):
+        raise DecodeError(f"nonfinite_{key}")
+    return v
+
+
 def decode_input(data: bytes) -> InputMsg:
     """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers)."""
+    _size(data, MAX_INPUT_BYTES)
     obj = unpack_map(data)
     u = _floats(obj, "u", (3, 6))
     return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u))
 
 
 def decode_state(data: bytes) -> StateMsg:
-    """``sctd/<robot>/state``: seq, stamp, pose [7], optional q, dq, wrench [6]."""
+    """``sctd/<robot>/state``: seq, stamp, pose [7], optional q, dq (equal lengths, at
+    most MAX_JOINTS, finite) and wrench [6]. A non-finite wrench is dropped and flagged
+    (``wrench_nonfinite``) without costing the pose: force guards then see none."""
+    _size(data, MAX_STATE_BYTES)
     obj = unpack_map(data)
     wrench = None
+    nonfinite = False
     if obj.get("wrench") is not None:
         wrench = _floats(obj, "wrench", (6,))
         if not _finite(wrench):
-            wrench = None  # a bad wrench must not cost the pose; force guards just see none
-    q = obj.get("q")
-    dq = obj.get("dq")
-    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench,
-                    q if isinstance(q, list) else None, dq if isinstance(dq, list) else None)
+            wrench, nonfinite = None, True
+    q, dq = _joints(obj, "q"), _joints(obj, "dq")
+    if q is not None and dq is not None and len(q) != len(dq):
+        raise DecodeError("bad_dq", f"{len(dq)} velocities for {len(q)} joints")
+    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench, q, dq, nonfinite)
 
 
 def decode_object(data: bytes) -> ObjectMsg:
     """``sctd/<robot>/objects/<name>``: seq, stamp, pose [7]."""
+    _size(data, MAX_OBJECT_BYTES)
     obj = unpack_map(data)
     return ObjectMsg(_int(obj, "seq"), _stamp(obj), _pose(obj))
 

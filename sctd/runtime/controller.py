@@ -16,28 +16,44 @@ from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine
-from .safety import limit_offset, limit_step, sanitize_input
+from .safety import grows_offset, limit_step, sanitize_input
 
 Array = NDArray[np.float64]
 
 
+def _setting(default, help: str):
+    """A RuntimeConfig field with the help text its ``sctd run`` flag shows."""
+    return field(default=default, metadata={"help": help})
+
+
 @dataclass
 class RuntimeConfig:
-    """Daemon settings; defaults are the safe ones (SI units)."""
+    """Daemon settings; defaults are the safe ones (SI units). Every field with a help
+    text is a ``sctd run`` flag of the same name (``--max-offset`` for ``max_offset``)."""
 
-    rate: float = 1000.0  # Hz
-    robot: str = "edan"
-    device: str = "*"  # which input/<device> to follow; '*' = newest of any
-    input_timeout: float = 0.1  # s (MoveIt Servo's default)
-    state_timeout: float = 0.1  # s
-    object_timeout: float = 1.0  # s
-    stamp_check: bool = True  # also reject input whose sender stamp is older than the timeout
-    deadband: float = 0.02  # per input axis
-    max_linear_speed: float = 0.25  # m/s (ISO 10218 reduced speed)
-    max_angular_speed: float = 1.0  # rad/s
-    max_offset: float = 0.05  # m, target vs measured
-    max_offset_rotation: float = 0.35  # rad
-    status_rate: float = 20.0  # Hz
+    rate: float = _setting(1000.0, "tick rate, Hz")
+    robot: str = _setting("edan", "robot name in the key prefix sctd/<robot>")
+    device: str = _setting("*", "input device to follow ('*': newest of any)")
+    input_timeout: float = _setting(0.1, "s after which input is stale: zero command (MoveIt Servo's "
+                                          "default)")
+    state_timeout: float = _setting(0.1, "s after which the robot state is stale: no target")
+    object_timeout: float = _setting(1.0, "s after which the task object's pose is stale: no target")
+    stamp_check: bool = True  # also judge input, state and objects by their sender stamps
+    deadband: float = _setting(0.02, "per input axis")
+    max_linear_speed: float = _setting(0.25, "m/s at full input (ISO 10218 reduced speed)")
+    max_angular_speed: float = _setting(1.0, "rad/s at full input")
+    max_offset: float = _setting(0.05, "m between target and measured pose that a step may not "
+                                       "grow past")
+    max_offset_rotation: float = _setting(0.35, "rad between target and measured pose that a step "
+                                                "may not grow past")
+    state_jump: float = _setting(0.05, "m between two consecutive states that counts as a "
+                                       "discontinuity (fault: no target)")
+    state_jump_rotation: float = _setting(0.3, "rad between two consecutive states that counts as "
+                                               "a discontinuity")
+    reseed_after: float = _setting(0.5, "s of continuous state (and zero input) after a "
+                                        "discontinuity before the target is re-seeded at the "
+                                        "measured pose")
+    status_rate: float = _setting(20.0, "Hz of the status messages")
 
     @property
     def period(self) -> float:
@@ -46,39 +62,53 @@ class RuntimeConfig:
 
 @dataclass
 class Sample:
-    """A decoded message and its arrival time on the receiver's monotonic clock."""
+    """A decoded message and its arrival time on the receiver's monotonic clock.
+
+    ``F`` is a state's or object's pose as a flat transform (see :mod:`sctd.se3`), in
+    world; ``pose`` the object's pose as received (to tell an unchanged pose). A state
+    also carries the :class:`~sctd.runtime.safety.StateWatch` verdict on its stream:
+    ``epoch`` (discontinuities before it) and ``since`` (arrival of the first state of
+    its continuous run).
+    """
 
     seq: int
     stamp: float
     received: float
-    T: Array | None = None  # pose as a 4x4 transform (state, objects)
+    F: se3.Flat | None = None
     u: tuple[float, ...] = ()
     wrench: list[float] | None = None
-    pose: list[float] | None = None  # as received (objects), to tell an unchanged pose
+    pose: list[float] | None = None
+    epoch: int = 0
+    since: float = 0.0
 
 
 class _Target:
     """A target's world transform, multiplied out only when somebody asks for it: the
-    daemon publishes the pose and never needs the matrix. Either the matrix ``T`` or
-    the flat poses of the object (world) and the target (object frame)."""
+    daemon publishes the pose and never needs the matrix. Held as the flat poses of the
+    object (world) and of the target (object frame)."""
 
     __slots__ = ("F_obj", "F_world_obj", "T")
 
-    def __init__(self, F_world_obj: se3.Flat | None, F_obj: se3.Flat | None,
-                 T: Array | None = None):
-        self.F_world_obj, self.F_obj, self.T = F_world_obj, F_obj, T
+    def __init__(self, F_world_obj: se3.Flat, F_obj: se3.Flat):
+        self.F_world_obj, self.F_obj = F_world_obj, F_obj
+        self.T: Array | None = None
 
     def matrix(self) -> Array:
         if self.T is None:
-            assert self.F_world_obj is not None and self.F_obj is not None
             self.T = se3.matrix4_from_flat(se3.compose_flat(self.F_world_obj, self.F_obj))
         return self.T
 
 
 class TickResult:
-    """What one tick decided: the mode (waiting | hold | stopped | running), the target
-    (``pose`` as [x, y, z, qx, qy, qz, qw] and ``T_world_target``; None while waiting),
-    the FSM state, and the input sequence number it followed."""
+    """What one tick decided: the mode, the target to publish (``pose`` as
+    [x, y, z, qx, qy, qz, qw] and ``T_world_target``; None when nothing is published),
+    the FSM state, and the input sequence number it followed.
+
+    Modes: ``waiting`` (no state or object pose yet) and ``fault`` (the state stream
+    jumped or restarted; waiting to re-seed) publish nothing; ``hold`` publishes nothing
+    while the state is stale and the unchanged target while only the object pose is;
+    ``stopped`` (no valid input: the target stays) and ``running`` publish.
+    """
 
     __slots__ = ("_target", "in_seq", "input_ok", "mode", "pose", "state", "state_changed")
 
@@ -97,8 +127,12 @@ class TickResult:
 class Counters:
     nonfinite_input: int = 0
     stale_input: int = 0
+    stale_state: int = 0
+    stale_object: int = 0
     nonfinite_output: int = 0
     offset_limited: int = 0
+    state_discontinuity: int = 0
+    reseeds: int = 0
     transitions: int = 0
     swaps: int = 0
     drops: dict[str, int] = field(default_factory=dict)
@@ -109,6 +143,16 @@ class Counters:
 
 class Controller:
     """Skill + safety, one tick at a time.
+
+    The target moves only on input, and only within the per-tick bound: ``min(1, |u|)``
+    times the maximum speeds times the period, where ``|u|`` is measured on the input
+    axes the active state's mappings read. Steps that would take the target further than
+    ``max_offset`` from the measured pose are refused. Every published target is either
+    within that bound of the previous one or, right after a (re-)seed, the measured pose:
+    the target is seeded when the first state and object pose arrive, re-seeded when the
+    state comes back after going stale (``hold``), and after a discontinuity of the state
+    stream (``fault``) once the state has been continuous for ``reseed_after`` s with zero
+    input.
 
     Parameters
     ----------
@@ -123,7 +167,11 @@ class Controller:
         self.mode = "waiting"
         self.last_in_seq = -1
         self._pose: list[float] | None = None
-        self._obj_T: Array | None = None  # the object sample's transform the caches are for
+        self._publishing = False  # the last tick published: the next may step from its target
+        self._fault = False
+        self._epoch = 0  # the state stream's epoch the target belongs to
+        self._stale_seq = {"state": -1, "object": -1}
+        self._obj_F_src: se3.Flat | None = None  # the object sample's pose the caches are for
         self._obj_F: se3.Flat = ()  # its flat pose (world) and inverse
         self._obj_F_inv: se3.Flat = ()
         self._obj_q: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
@@ -167,45 +215,60 @@ class Controller:
         now : float
             Monotonic time (s) of this tick; arrival times of samples are on this clock.
         wall : float
-            Unix time (s), for the sender-stamp check of the input watchdog.
+            Unix time (s), for the sender-stamp checks (input, state, objects).
         inp, state, obj : Sample or None
             Newest input, robot state (ee pose in world) and task-object pose (in world).
         """
         cfg = self.config
-        dt = cfg.period
         u, input_ok = self._command(now, wall, inp)
         in_seq = inp.seq if inp is not None else -1
-        state_ok = state is not None and now - state.received <= cfg.state_timeout
-        obj_ok = obj is not None and now - obj.received <= cfg.object_timeout
-
-        if self._target is None:
-            if not (state_ok and obj_ok):
-                self.mode = "waiting"
-                return TickResult("waiting", None, self.engine.state, in_seq)
-            assert state is not None and state.T is not None
-            self._target = _Target(None, None, state.T.copy())
-            self._T_obj_target = None
-            self._rot = None
-            self._pose = se3.pose_from_matrix4(state.T)
-            self.engine.reset(now, self.engine.state)
-        if not (state_ok and obj_ok):
-            self.mode = "hold"  # stale robot state or object pose: hold the last target
+        state_ok = self._fresh("state", state, now, wall, cfg.state_timeout)
+        obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
+        if state_ok and state is not None and state.epoch != self._epoch:
+            self._epoch = state.epoch  # the state stream jumped or restarted
+            self._fault = self._target is not None
+        if not state_ok:
+            # Stale state: where the robot is is not known, so nothing is published (the
+            # robot holds on its own stale-target rule) and the target will resume from
+            # the measured pose.
+            return self._quiet("fault" if self._fault else "hold" if self._target is not None
+                               else "waiting", in_seq)
+        assert state is not None and state.F is not None
+        if self._fault:
+            if not obj_ok or now - state.since < cfg.reseed_after or any(u):
+                return self._quiet("fault", in_seq)
+            self._fault = False
+            self._publishing = False
+        if not obj_ok:
+            # Stale object pose, fresh state: the target stays where it is in the world
+            # (it does not need the object to stay put); without one there is nothing.
+            if not self._publishing:
+                return self._quiet("hold" if self._target is not None else "waiting", in_seq)
+            self.mode = "hold"
             return TickResult("hold", self._target, self.engine.state, in_seq, pose=self._pose)
-
-        assert state is not None and obj is not None and state.T is not None and obj.T is not None
+        assert obj is not None and obj.F is not None
         # The tick works in the object frame, where the skill is, on flat poses (12
         # floats, see sctd.se3); the target is kept there while the object's pose does
         # not change, so a tick converts one pose (the measured one) in and one (the new
         # target) out.
-        if obj.T is not self._obj_T:  # a new object sample: re-express the target
-            self._obj_T = obj.T
-            F = self._obj_F = se3.flat_from_matrix4(obj.T)
+        if obj.F is not self._obj_F_src:  # a new object sample: re-express the target
+            self._obj_F_src = F = self._obj_F = obj.F
             self._obj_F_inv = se3.invert_flat(F)
             self._obj_q = se3.quaternion_from_rows(*F[:9])
             self._T_obj_target = None
             self._rot = None
         F_obj_world = self._obj_F_inv
-        F_meas = se3.compose_flat(F_obj_world, se3.flat_from_matrix4(state.T))
+        F_meas = se3.compose_flat(F_obj_world, state.F)
+        seeding = not self._publishing
+        if seeding:
+            # (Re-)seed: this tick's target is the measured pose, so nothing moves; the
+            # input moves it from the next tick on.
+            if self._target is not None:
+                self.counters.reseeds += 1
+            self._rot = None
+            self._accept(F_meas)
+            self.engine.reset(now, self.engine.state)
+            self._publishing = True
         force = None
         if state.wrench is not None:
             r = F_obj_world
@@ -218,24 +281,49 @@ class Controller:
 
         F_prev = self._T_obj_target
         if F_prev is None:
+            assert self._target is not None
             F_prev = self._T_obj_target = se3.compose_flat(
                 F_obj_world, se3.flat_from_matrix4(self._target.matrix()))
-        # How far the user pushes: the input's norm, clipped to 1 (a diagonal push of a
-        # 3-axis stick is one push, not two); steps are bounded by mag * speed * dt.
-        mag = min(1.0, math.hypot(*u))
-        F_new = F_prev
-        if mag > 0.0:
-            F_new = limit_step(F_prev, self.engine.command_flat(F_prev, u, dt),
-                               mag * self.v_max * dt, mag * self.w_max * dt)
-        limited = limit_offset(F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation)
-        if limited is not F_new:
-            self.counters.offset_limited += 1
-            F_new = limited
-        if F_new is not F_prev and not self._accept(F_new):
-            self.counters.nonfinite_output += 1  # never publish a non-finite target
+        # How far the user pushes: the norm of the axes the active mappings read, clipped
+        # to 1 (a diagonal push of a 3-axis stick is one push, not two); steps are
+        # bounded by mag * speed * dt, constraint corrections included.
+        n = len(u)
+        mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
+        if mag > 0.0 and not seeding:
+            mag = min(1.0, mag)
+            F_new = limit_step(F_prev, self.engine.command_flat(F_prev, u, cfg.period),
+                               mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
+            if F_new is not F_prev:
+                if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
+                    self.counters.offset_limited += 1  # refused: the arm lags or is blocked
+                elif not self._accept(F_new):
+                    self.counters.nonfinite_output += 1  # never publish a non-finite target
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
+
+    def _quiet(self, mode: str, in_seq: int) -> TickResult:
+        """A tick that publishes nothing; the next target will be a (re-)seed."""
+        self.mode = mode
+        self._publishing = False
+        return TickResult(mode, None, self.engine.state, in_seq)
+
+    def _fresh(self, kind: str, sample: Sample | None, now: float, wall: float,
+               timeout: float) -> bool:
+        """Whether a state or object sample is recent: arrived within ``timeout`` and,
+        with the stamp check on, stamped within ``timeout`` of this host's clock."""
+        if sample is None:
+            return False
+        if now - sample.received <= timeout and (
+                not self.config.stamp_check or abs(wall - sample.stamp) <= timeout):
+            return True
+        if sample.seq != self._stale_seq[kind]:
+            self._stale_seq[kind] = sample.seq
+            if kind == "state":
+                self.counters.stale_state += 1
+            else:
+                self.counters.stale_object += 1
+        return False
 
     def _accept(self, F: se3.Flat) -> bool:
         """Make the flat object-frame pose F the target, or refuse it (False) when it is
@@ -284,4 +372,3 @@ class Controller:
             self.counters.nonfinite_input += 1
         self.last_in_seq = inp.seq
         return u, ok
-

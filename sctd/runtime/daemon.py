@@ -1,14 +1,15 @@
 """``sctd run``: the fixed-rate daemon (DESIGN §7) wired to Zenoh.
 
-Threads: the tick runs on the main thread. Zenoh's callbacks only queue each input,
-state and object message with its arrival time; a decoder thread (at one real-time
-priority below the tick, so that it is never preempted while it holds the GIL) decodes
-and validates them, counts every malformed one, and stores the newest valid sample in a
-one-reference slot, which the tick reads without blocking or decoding. A hot-swap
-bundle is decoded, validated and compiled on the query's thread, handed over through a
-one-slot mailbox, and installed between two ticks; the query is answered after the
-swap. Targets are encoded and put by a publisher thread, so the tick's own work is the
-control step alone.
+Threads: the tick runs on the main thread and reads its inputs itself. Input, state and
+the active skill's object poses arrive in Zenoh ring channels (newest wins, filled by
+Zenoh's own threads without Python, so a flood of messages costs the tick nothing but
+the few it drains); at the start of each tick the tick drains each ring, checks each
+message's size before copying it, decodes and validates it, counts every malformed one,
+and keeps the newest valid sample. A hot-swap bundle is validated in a child process
+(:mod:`sctd.runtime.worker`), compiled on the query's thread, handed over through a
+one-slot mailbox and installed between two ticks; the query is answered after the swap.
+Targets and status are encoded and put by a publisher thread, so the tick's own work is
+draining its inputs and the control step.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import gc
 import logging
 import os
 import queue
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -26,14 +28,33 @@ import msgpack
 import zenoh
 
 from .. import se3
-from ..skill import Bundle, Skill, SkillEngine, SkillError, skill_from_bundle, skill_summary
+from ..skill import Skill, SkillEngine, SkillError, skill_summary
+from ..skill.loader import MAX_BUNDLE_BYTES
 from . import codec
 from .controller import Controller, RuntimeConfig, Sample
+from .safety import StateWatch
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
+from .worker import BundleWorker
 
 log = logging.getLogger("sctd.run")
-INBOX = 4096  # messages waiting for the decoder before new ones are dropped
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
+# Ring depths: messages a tick can take from each key; more in one period are lost in
+# the ring (newest wins), which only happens under a flood.
+INPUT_DEPTH, STATE_DEPTH, OBJECT_DEPTH = 4, 4, 2
+# Messages on the runtime's input keys larger than this never reach it: Zenoh's
+# low-pass filter drops them on arrival, so what the rings hold is bounded in bytes too.
+# Below it, the size limits of the codec apply and are counted.
+INGRESS_CEILING = 16 * 1024 * 1024
+# How long another Python thread may keep the GIL from the tick (CPython's default is
+# 5 ms): the tick waits at most about this when it wakes while a query is handled.
+SWITCH_INTERVAL = 2e-4
+
+
+def ingress_limits(robot: str) -> list[tuple[str, int]]:
+    """(key expression, bytes) of the low-pass filter for a daemon's session."""
+    k = codec.Keys(robot)
+    return [(k.input("**"), INGRESS_CEILING), (k.state, INGRESS_CEILING),
+            (k.objects("**"), INGRESS_CEILING)]
 
 
 class _Publisher(threading.Thread):
@@ -69,41 +90,23 @@ class _Publisher(threading.Thread):
         self.join(timeout=5.0)
 
 
-class _Decoder(threading.Thread):
-    """Decodes queued messages off the tick thread: ``(handler, sample, received)``
-    items, each handled as ``handler(sample, received)``; None stops it.
+class _Inlet:
+    """One subscription the tick drains: a ring of ``depth`` samples, the size limit of
+    its messages, the drop-reason prefix, and ``take(data, key, now)`` for each one."""
 
-    ``on_error(reason)`` counts what a handler raised beyond the decoders' own
-    DecodeError (which the handlers count themselves): a bug must cost one message,
-    not the thread that feeds the tick.
-    """
+    __slots__ = ("depth", "kind", "limit", "sub", "take")
 
-    def __init__(self, rt_priority: int, on_error):
-        super().__init__(name="sctd-decoder", daemon=True)
-        self.rt_priority = rt_priority
-        self.on_error = on_error
-        self.queue: queue.SimpleQueue[tuple | None] = queue.SimpleQueue()
-
-    def run(self) -> None:
-        set_realtime(max(0, self.rt_priority - 1))
-        q = self.queue
-        while (item := q.get()) is not None:
-            handler, sample, received = item
-            try:
-                handler(sample, received)
-            except Exception:
-                log.exception("decoding a message on %s failed", sample.key_expr)
-                self.on_error("decoder_error")
-
-    def close(self) -> None:
-        self.queue.put(None)
-        self.join(timeout=5.0)
+    def __init__(self, session: zenoh.Session, key: str, depth: int, limit: int, kind: str,
+                 take):
+        self.sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
+        self.depth, self.limit, self.kind, self.take = depth, limit, kind, take
 
 
 @dataclass
 class _Pending:
     skill: Skill
     engine: SkillEngine
+    objects: dict[str, _Inlet]
     done: threading.Event
     state: str = ""
 
@@ -116,7 +119,8 @@ class Daemon:
     skill : Skill
         The skill to start with.
     session : zenoh.Session
-        An open session (the caller owns and closes it).
+        An open session (the caller owns and closes it); open it with
+        ``size_limits=ingress_limits(robot)`` to bound what the rings can hold.
     config : RuntimeConfig
     spin : float
         Seconds before each deadline to stop sleeping and spin.
@@ -143,77 +147,151 @@ class Daemon:
         self._recent_compute = Histogram()
         self._recent: dict[str, Any] | None = None  # summaries of the last whole window
         self._objects: dict[str, Sample] = {}
-        self._object_drops = 0
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
+        self._swap_lock = threading.Lock()
+        self._refused = 0  # bundles refused by the skill queryable
         self.target_seq = 0
         self._input: Sample | None = None
         self._state: Sample | None = None
+        self._watch = StateWatch(config.state_jump, config.state_jump_rotation)
         self._window_targets = 0
         self._window_compute_max = 0.0
         self._publisher: _Publisher | None = None
+        self._worker: BundleWorker | None = None
+        self._inlets: tuple[_Inlet, ...] = ()
+        self._base_inlets: tuple[_Inlet, ...] = ()  # input and state
+        self._object_inlets: dict[str, _Inlet] = {}
 
-    # --- Zenoh edges (callbacks run on Zenoh's threads) ---------------------------------
+    # --- inputs (drained and decoded on the tick thread) --------------------------------
 
     def _drop(self, reason: str) -> None:
-        with self._lock:  # Zenoh may call back on several threads
-            self.controller.counters.drop(reason)
+        self.controller.counters.drop(reason)
 
-    def _take_input(self, sample: zenoh.Sample, received: float) -> None:
-        try:
-            m = codec.decode_input(sample.payload.to_bytes())
-        except codec.DecodeError as e:
-            self._drop(f"input_{e.reason}")
-            return
-        self._input = Sample(m.seq, m.stamp, received, u=m.u)
+    def _drain(self, now: float) -> None:
+        """Take what arrived since the last tick: sizes checked before a payload is
+        copied, every message decoded, the newest valid sample of each key kept."""
+        for inlet in self._inlets:
+            sub = inlet.sub
+            for _ in range(inlet.depth):
+                sample = sub.try_recv()
+                if sample is None:
+                    break
+                payload = sample.payload
+                if len(payload) > inlet.limit:
+                    self._drop(f"{inlet.kind}_too_large")
+                    continue
+                try:
+                    inlet.take(payload.to_bytes(), sample.key_expr, now)
+                except codec.DecodeError as e:
+                    self._drop(f"{inlet.kind}_{e.reason}")
+                except Exception:  # a bug must cost one message, not the daemon
+                    log.exception("decoding a message on %s failed", sample.key_expr)
+                    self._drop("decoder_error")
 
-    def _take_state(self, sample: zenoh.Sample, received: float) -> None:
-        try:
-            m = codec.decode_state(sample.payload.to_bytes())
-        except codec.DecodeError as e:
-            self._drop(f"state_{e.reason}")
-            return
-        self._state = Sample(m.seq, m.stamp, received, T=se3.matrix4_from_pose(m.pose),
-                             wrench=m.wrench)
+    def _take_input(self, data: bytes, key: Any, now: float) -> None:
+        m = codec.decode_input(data)
+        self._input = Sample(m.seq, m.stamp, now, u=m.u)
 
-    def _take_object(self, sample: zenoh.Sample, received: float) -> None:
-        name = str(sample.key_expr).rsplit("/", 1)[-1]
-        try:
-            m = codec.decode_object(sample.payload.to_bytes())
-        except codec.DecodeError as e:
-            self._drop(f"object_{e.reason}")
-            return
-        # A pose that has not changed keeps its transform (the same array), so that the
-        # controller's object-frame caches stay valid for a still object.
+    def _take_state(self, data: bytes, key: Any, now: float) -> None:
+        m = codec.decode_state(data)
+        if m.wrench_nonfinite:
+            self._drop("state_nonfinite_wrench")
+        F = se3.flat_from_pose(m.pose)
+        if self._watch.observe(m.seq, F, now):
+            self.controller.counters.state_discontinuity += 1
+        self._state = Sample(m.seq, m.stamp, now, F=F, wrench=m.wrench, epoch=self._watch.epoch,
+                             since=self._watch.since)
+
+    def _take_object(self, data: bytes, key: Any, now: float) -> None:
+        name = str(key).rsplit("/", 1)[-1]
+        m = codec.decode_object(data)
+        # A pose that has not changed keeps its flat transform (the same tuple), so that
+        # the controller's object-frame caches stay valid for a still object.
         prev = self._objects.get(name)
-        T = prev.T if prev is not None and prev.pose == m.pose else se3.matrix4_from_pose(m.pose)
-        self._objects[name] = Sample(m.seq, m.stamp, received, T=T, pose=m.pose)
+        F = prev.F if prev is not None and prev.pose == m.pose else se3.flat_from_pose(m.pose)
+        self._objects[name] = Sample(m.seq, m.stamp, now, F=F, pose=m.pose)
+
+    def _object_inlet(self, name: str) -> _Inlet:
+        return _Inlet(self.session, self.keys.objects(name), OBJECT_DEPTH, codec.MAX_OBJECT_BYTES,
+                      "object", self._take_object)
+
+    # --- the skill queryable (Zenoh's threads) ------------------------------------------
 
     def _on_skill_query(self, query: zenoh.Query) -> None:
+        # The query ends (the asker stops waiting) when it is dropped: on leaving this
+        # block, not whenever the last reference to it goes.
+        with query:
+            try:
+                self._answer_skill_query(query)
+            except Exception as e:  # every query gets a reply, whatever went wrong
+                log.exception("skill query failed")
+                query.reply_err(msgpack.packb({"error": f"<bundle>: {type(e).__name__}: {e}"},
+                                              use_bin_type=True))
+
+    def _refuse(self, query: zenoh.Query, error: str) -> None:
+        log.warning("refused skill: %s", error)
+        self._refused += 1
+        query.reply_err(msgpack.packb({"error": error}, use_bin_type=True))
+
+    def _answer_skill_query(self, query: zenoh.Query) -> None:
         payload = query.payload
-        if payload is None or len(payload.to_bytes()) == 0:
+        if payload is None or len(payload) == 0:
             summary = skill_summary(self.controller.skill)
             summary["state"] = self.controller.engine.state
             query.reply(self.keys.skill, msgpack.packb(summary, use_bin_type=True))
             return
-        try:
-            bundle = Bundle.unpack(payload.to_bytes())
-            skill = skill_from_bundle(bundle)
-            engine = SkillEngine(skill)
-        except SkillError as e:
-            log.warning("refused skill: %s", e)
-            query.reply_err(msgpack.packb({"error": str(e)}, use_bin_type=True))
+        if len(payload) > MAX_BUNDLE_BYTES:
+            self._refuse(query, f"<bundle>: bundle of {len(payload)} bytes exceeds {MAX_BUNDLE_BYTES}")
             return
-        pending = _Pending(skill, engine, threading.Event())
-        with self._lock:
-            self._pending = pending
-        if not pending.done.wait(timeout=5.0):
-            query.reply_err(msgpack.packb({"error": "daemon did not reach a tick boundary in 5 s"}))
-            return
+        with self._swap_lock:  # one swap at a time
+            worker = self._worker
+            if worker is None:
+                self._refuse(query, "<bundle>: the daemon is not running")
+                return
+            try:
+                skill = worker.skill(payload.to_bytes())
+                engine = SkillEngine(skill)  # KD-tree builds release the GIL
+            except SkillError as e:
+                self._refuse(query, str(e))
+                return
+            old = self._object_inlets
+            objects = {skill.object: old[skill.object] if skill.object in old
+                       else self._object_inlet(skill.object)}
+            pending = _Pending(skill, engine, objects, threading.Event())
+            with self._lock:
+                self._pending = pending
+            deadline = time.monotonic() + 5.0
+            while not pending.done.wait(0.05) and time.monotonic() < deadline \
+                    and not self.stop_event.is_set():
+                pass
+            if not pending.done.is_set():
+                with self._lock:
+                    if self._pending is pending:
+                        self._pending = None
+                for name, inlet in objects.items():
+                    if name not in old:
+                        inlet.sub.undeclare()
+                self._refuse(query, "<bundle>: the daemon stopped or did not reach a tick boundary "
+                                    "in 5 s")
+                return
+            for name, inlet in old.items():  # the tick no longer drains these
+                if name not in objects:
+                    inlet.sub.undeclare()
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
         query.reply(self.keys.skill, msgpack.packb(
             {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state},
             use_bin_type=True))
+
+    def _install(self, pending: _Pending, now: float) -> None:
+        """On the tick thread, between two ticks: the new skill and its object rings."""
+        self.controller.swap(pending.skill, now, pending.engine)
+        self._object_inlets = pending.objects
+        self._inlets = self._base_inlets + tuple(pending.objects.values())
+        for name in [n for n in self._objects if n not in pending.objects]:
+            del self._objects[name]
+        pending.state = self.controller.engine.state
+        pending.done.set()
 
     # --- the loop ------------------------------------------------------------------------
 
@@ -222,26 +300,18 @@ class Daemon:
         cfg = self.config
         keys = self.keys
         s = self.session
-        # Decoded on arrival into newest-value slots: the newest valid sample wins, every
-        # malformed message is counted, and the tick never waits on the network.
-        decoder = _Decoder(self.rt_priority, self._drop)
-        decoder.start()
-        inbox = decoder.queue
-        monotonic = time.monotonic
-
-        def queue_to(handler):
-            def enqueue(sample: zenoh.Sample) -> None:
-                # A flood faster than the decoder is dropped here and counted, so the
-                # queue (and the daemon's memory) stays bounded.
-                if inbox.qsize() < INBOX:
-                    inbox.put((handler, sample, monotonic()))
-                else:
-                    self._drop("inbox_full")
-            return enqueue
-
-        sub_in = s.declare_subscriber(keys.input(cfg.device), queue_to(self._take_input))
-        sub_state = s.declare_subscriber(keys.state, queue_to(self._take_state))
-        sub_obj = s.declare_subscriber(keys.objects(), queue_to(self._take_object))
+        self._worker = BundleWorker()
+        self._base_inlets = (
+            _Inlet(s, keys.input(cfg.device), INPUT_DEPTH, codec.MAX_INPUT_BYTES, "input",
+                   self._take_input),
+            _Inlet(s, keys.state, STATE_DEPTH, codec.MAX_STATE_BYTES, "state", self._take_state),
+        )
+        # Only the objects the active skill needs, by name: a wildcard would let any number
+        # of names cost memory, and a ring per wildcard would lose the task object's
+        # updates whenever another object publishes.
+        obj = self.controller.skill.object
+        self._object_inlets = {obj: self._object_inlet(obj)}
+        self._inlets = self._base_inlets + tuple(self._object_inlets.values())
         pub_target = s.declare_publisher(keys.target, express=True,
                                          congestion_control=zenoh.CongestionControl.DROP)
         pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
@@ -250,6 +320,8 @@ class Daemon:
         publisher.start()
         self._publisher = publisher
         send = publisher.queue.put
+        switch_interval = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL)
         set_timer_slack(1)
         self.realtime = set_realtime(self.rt_priority)
         if self.cpu is not None:
@@ -277,9 +349,8 @@ class Daemon:
                 if pending is not None:
                     with self._lock:
                         self._pending = None
-                    self.controller.swap(pending.skill, now, pending.engine)
-                    pending.state = self.controller.engine.state
-                    pending.done.set()
+                    self._install(pending, now)
+                self._drain(now)
                 ctl = self.controller
                 res = ctl.tick(now, wall, self._input, self._state,
                                self._objects.get(ctl.skill.object))
@@ -311,11 +382,18 @@ class Daemon:
                     self._window_compute_max = 0.0
                     next_status = done + status_period
         finally:
+            self.stop_event.set()
+            queryable.undeclare()  # no new swaps; one under way fails its wait and replies
+            worker, self._worker = self._worker, None
             publisher.close()
             gc.unfreeze()
-            for d in (queryable, sub_in, sub_state, sub_obj, pub_target, pub_status):
+            sys.setswitchinterval(switch_interval)
+            for inlet in (*self._base_inlets, *self._object_inlets.values()):
+                inlet.sub.undeclare()
+            for d in (pub_target, pub_status):
                 d.undeclare()
-            decoder.close()
+            if worker is not None:
+                worker.close()
         return self.status(ticker, time.monotonic(), 0.0)
 
     def stop(self) -> None:
@@ -357,9 +435,14 @@ class Daemon:
             "counters": {
                 "nonfinite_input": c.nonfinite_input,
                 "stale_input": c.stale_input,
+                "stale_state": c.stale_state,
+                "stale_object": c.stale_object,
                 "nonfinite_output": c.nonfinite_output,
                 "offset_limited": c.offset_limited,
+                "state_discontinuity": c.state_discontinuity,
+                "reseeds": c.reseeds,
                 "transitions": c.transitions,
                 "swaps": c.swaps,
+                "swaps_refused": self._refused,
             },
         }

@@ -1,9 +1,10 @@
 """Safety limits applied last in every tick (DESIGN §7 step 6). Pure numpy.
 
 These are the daemon's own guarantees, independent of what a skill asks for: per-tick
-steps bounded by the maximum speeds (scaled by how far the user pushes), the target kept
-within a bounded offset of the measured pose. (The controller refuses a non-finite
-target, so the output is always finite.)
+steps bounded by the maximum speeds (scaled by how far the user pushes), steps that
+would take the target too far from the measured pose refused, and a robot state stream
+that jumps or restarts detected (:class:`StateWatch`). (The controller refuses a
+non-finite target, so the output is always finite.)
 """
 
 from __future__ import annotations
@@ -73,27 +74,71 @@ def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: 
     return se3.flat_from_matrix4(interpolate(T_prev, T_new, s))
 
 
-def limit_offset(F_target: Flat, F_measured: Flat, max_translation: float,
-                 max_rotation: float) -> Flat:
-    """Keep the target within ``max_translation`` (m) and ``max_rotation`` (rad) of the
-    measured pose (flat poses), so a blocked or lagging arm never winds up an unbounded
-    target. Returns F_target itself when it is within the bounds.
+def grows_offset(F_prev: Flat, F_new: Flat, F_measured: Flat, max_translation: float,
+                 max_rotation: float) -> bool:
+    """Whether the step F_prev -> F_new (flat poses) takes the target's offset to the
+    measured pose past ``max_translation`` (m) or ``max_rotation`` (rad) and further
+    than it was: such a step is refused, so a blocked or lagging arm never winds up an
+    unbounded target. A step that keeps or shrinks an offset already beyond a bound is
+    allowed (the user can always back off), and the target is never dragged towards the
+    measured pose: it moves only on input.
 
-    Both poses may be given in any one frame: distance and angle do not depend on it."""
-    n, cos_r = _separation(F_measured, F_target)
-    if n <= max_translation and cos_r >= math.cos(max_rotation):
-        return F_target
-    T_target, T_measured = se3.matrix4_from_flat(F_target), se3.matrix4_from_flat(F_measured)
-    ang = rotation_angle_between(T_measured[:3, :3], T_target[:3, :3])
-    out = T_target.copy()
-    if n > max_translation:
-        d = T_target[:3, 3] - T_measured[:3, 3]
-        out[:3, 3] = T_measured[:3, 3] + d * (max_translation / n)
-    if ang > max_rotation:
-        w0, w1, w2 = se3.rotvec_from_matrix3(T_measured[:3, :3].T @ T_target[:3, :3])
-        k = max_rotation / ang
-        out[:3, :3] = T_measured[:3, :3] @ se3.matrix3_from_rotvec(k * w0, k * w1, k * w2)
-    return se3.flat_from_matrix4(out)
+    All three poses may be given in any one frame: distance and angle do not depend on it.
+    """
+    d_new, cos_new = _separation(F_measured, F_new)
+    far = d_new > max_translation
+    turned = cos_new < math.cos(max_rotation)
+    if not (far or turned):
+        return False
+    d_prev, cos_prev = _separation(F_measured, F_prev)
+    return (far and d_new > d_prev) or (turned and cos_new < cos_prev)
+
+
+def separation(F_a: Flat, F_b: Flat) -> tuple[float, float]:
+    """Distance (m) between the origins of two flat poses and the angle (rad) between
+    their orientations."""
+    d, cos_r = _separation(F_a, F_b)
+    return d, math.acos(max(-1.0, min(1.0, cos_r)))
+
+
+def separated(F_a: Flat, F_b: Flat, max_translation: float, max_rotation: float) -> bool:
+    """Whether two flat poses are further apart than ``max_translation`` (m) or
+    ``max_rotation`` (rad)."""
+    d, cos_r = _separation(F_a, F_b)
+    return d > max_translation or cos_r < math.cos(max_rotation)
+
+
+class StateWatch:
+    """Continuity of the robot's state stream, judged message by message.
+
+    Two consecutive states further apart than ``max_jump`` (m) or ``max_jump_rotation``
+    (rad), or a ``seq`` that goes backwards (a restarted robot), are a discontinuity:
+    :attr:`epoch` counts them, and :attr:`since` is the arrival time of the first state
+    of the current continuous run. The runtime stops publishing targets at a new epoch
+    and re-seeds at the measured pose once the run has lasted long enough.
+    """
+
+    def __init__(self, max_jump: float, max_jump_rotation: float):
+        self.max_jump = max_jump
+        self.max_jump_rotation = max_jump_rotation
+        self.epoch = 0
+        self.since = 0.0
+        self._seq: int | None = None
+        self._F: Flat | None = None
+
+    def observe(self, seq: int, F: Flat, received: float) -> bool:
+        """Take one valid state (flat ee pose F, world); True when it is discontinuous
+        with the previous one."""
+        prev_seq, prev_F = self._seq, self._F
+        self._seq, self._F = seq, F
+        if prev_F is None:
+            self.since = received
+            return False
+        if seq < prev_seq or separated(prev_F, F, self.max_jump, self.max_jump_rotation):  # type: ignore[operator]
+            self.epoch += 1
+            self.since = received
+            return True
+        return False
 
 
 def sanitize_input(u: tuple[float, ...] | list[float], deadband: float) -> tuple[tuple[float, ...], bool]:

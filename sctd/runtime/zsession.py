@@ -13,6 +13,7 @@ ports); ``--zenoh-config FILE`` replaces all of this for multi-host use.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import threading
 from collections.abc import Iterator, Sequence
@@ -26,24 +27,41 @@ _RETRY = '{"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor
 
 
 def check_loopback(endpoint: str) -> None:
-    """Refuse endpoints that are not TCP on a loopback address (safety of defaults)."""
+    """Refuse endpoints that are not TCP on a loopback IP literal (127.0.0.0/8 or
+    ``[::1]``), with a port: names are not accepted, since a name can resolve anywhere
+    (``127.attacker.example``; ``localhost`` is whatever /etc/hosts says)."""
     proto, _, rest = endpoint.partition("/")
-    host = rest.rsplit(":", 1)[0]
-    if proto != "tcp" or not (host.startswith("127.") or host in ("localhost", "[::1]")):
+    host, colon, port = rest.rpartition(":")
+    ok = proto == "tcp" and bool(colon) and port.isdigit() and 0 <= int(port) <= 65535
+    if ok:
+        if host.startswith("[") and host.endswith("]"):
+            host = host[1:-1]
+        try:
+            ok = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            ok = False
+    if not ok:
         raise ValueError(
-            f"endpoint {endpoint!r}: only tcp on loopback without --zenoh-config "
-            "(use a Zenoh config file for other hosts)"
+            f"endpoint {endpoint!r}: only tcp/<loopback IP>:<port> (127.0.0.0/8 or [::1]) without "
+            "--zenoh-config (use a Zenoh config file for other hosts)"
         )
 
 
 def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
-                config_file: str | Path | None = None) -> zenoh.Config:
-    """Build the session config (see module doc)."""
+                config_file: str | Path | None = None,
+                size_limits: Sequence[tuple[str, int]] = ()) -> zenoh.Config:
+    """Build the session config (see module doc).
+
+    ``size_limits``: (key expression, bytes) pairs; puts larger than that arriving on a
+    matching key are dropped by Zenoh on arrival (its low-pass filter), before any Python
+    sees them. They are added to a config file's own filters.
+    """
     if config_file is not None:
         conf = zenoh.Config.from_file(str(config_file))
         for key, eps in (("listen", listen), ("connect", connect)):
             if eps:
                 conf.insert_json5(f"{key}/endpoints", json.dumps(list(eps)))
+        _add_size_limits(conf, size_limits)
         return conf
     for ep in [*(listen or []), *(connect or [])]:
         check_loopback(ep)
@@ -68,14 +86,29 @@ def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | No
     conf.insert_json5("connect/timeout_ms", "-1")
     conf.insert_json5("connect/exit_on_failure", "false")
     conf.insert_json5("connect/retry", _RETRY)
+    _add_size_limits(conf, size_limits)
     return conf
 
 
+def _add_size_limits(conf: zenoh.Config, size_limits: Sequence[tuple[str, int]]) -> None:
+    if not size_limits:
+        return
+    try:
+        filters = json.loads(conf.get_json("low_pass_filter")) or []
+    except (zenoh.ZError, ValueError):
+        filters = []
+    for i, (key, limit) in enumerate(size_limits):
+        filters.append({"id": f"sctd-size-{i}", "key_exprs": [key], "messages": ["put"],
+                        "flows": ["ingress"], "size_limit": int(limit)})
+    conf.insert_json5("low_pass_filter", json.dumps(filters))
+
+
 def open_session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
-                 config_file: str | Path | None = None) -> zenoh.Session:
+                 config_file: str | Path | None = None,
+                 size_limits: Sequence[tuple[str, int]] = ()) -> zenoh.Session:
     """Open a Zenoh session with :func:`make_config`; close it with :func:`close_session`
     (or use :func:`session`, a context manager that does)."""
-    return zenoh.open(make_config(listen, connect, config_file))
+    return zenoh.open(make_config(listen, connect, config_file, size_limits))
 
 
 def close_session(s: zenoh.Session, timeout: float = 1.0) -> bool:

@@ -84,6 +84,12 @@ def matrix3_from_rotvec(w0: float, w1: float, w2: float) -> Array:
     return np.array([r[0:3], r[3:6], r[6:9]])
 
 
+def flat_from_pose(p) -> tuple[float, ...]:
+    """The 12 floats of [x, y, z, qx, qy, qz, qw] (quaternion normalised here)."""
+    x, y, z, qx, qy, qz, qw = p
+    return (*rows_from_quaternion(qx, qy, qz, qw), float(x), float(y), float(z))
+
+
 def matrix4_from_pose(p) -> Array:
     """4x4 transform from [x, y, z, qx, qy, qz, qw] (quaternion normalised here)."""
     x, y, z, qx, qy, qz, qw = p

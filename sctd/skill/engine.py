@@ -108,6 +108,18 @@ def _rotation(r00: float, r01: float, r02: float, r10: float, r11: float, r12: f
             pz - (r20 * px + r21 * py + r22 * pz))
 
 
+def _input_axes(mappings) -> tuple[int, ...]:
+    """The input axes a state's mappings read: the non-zero columns of linear mappings,
+    the first three for vector fields (a translation command)."""
+    axes: set[int] = set()
+    for m in mappings:
+        if isinstance(m, LinearMapping):
+            axes.update(j for j in range(m.matrix.shape[1]) if np.any(m.matrix[:, j] != 0.0))
+        else:
+            axes.update((0, 1, 2))
+    return tuple(sorted(axes))
+
+
 class _LinearPlan:
     """A linear mapping prepared for the tick: the matrix's non-zero entries scaled by
     the skill's speeds, and how its frame hangs (ee, ee offset, or fixed in the object)."""
@@ -199,6 +211,7 @@ class SkillEngine:
                 if model is not None and id(model) not in self._trees:
                     self._trees[id(model)] = _Neighbours(model)
         self._out_of = [[t for t in skill.transitions if t.source == s.name] for s in skill.states]
+        self._axes = [_input_axes(s.input_mappings) for s in skill.states]
         # Constraint and guard vectors as Python floats, for the float-level checks.
         self._floats: dict[int, tuple] = {}
         for state in skill.states:
@@ -216,6 +229,12 @@ class SkillEngine:
     @property
     def state(self) -> str:
         return self.skill.states[self.index].name
+
+    @property
+    def input_axes(self) -> tuple[int, ...]:
+        """Indices of the input axes the active state's mappings read: how far the user
+        pushes is measured on these alone, so an axis no mapping uses moves nothing."""
+        return self._axes[self.index]
 
     @property
     def finished(self) -> bool:

@@ -12,3 +12,6 @@ class SkillError(ValueError):
         self.problem = problem
         where = f"{file}: {path}" if path else file
         super().__init__(f"{where}: {problem}")
+
+    def __reduce__(self):  # picklable (the daemon validates bundles in a child process)
+        return (type(self), (self.file, self.path, self.problem))

@@ -13,6 +13,7 @@ import io
 import json
 import math
 import posixpath
+import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,6 +46,7 @@ from .model import (
 FORMAT_VERSION = 1
 BUNDLE_FORMAT = "sctd-skill-bundle"
 MAX_BUNDLE_BYTES = 64 * 1024 * 1024
+MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,8 @@ class Bundle:
             isinstance(k, str) and isinstance(v, bytes) for k, v in files.items()
         ):
             raise SkillError(name, "files", "expected a map of relative path -> bytes")
+        for rel in files:
+            _check_relative(name, f"files[{rel!r}]", rel)
         return cls(name=name, yaml_text=text, files=files)
 
 
@@ -135,13 +139,41 @@ def skill_from_bundle(bundle: Bundle) -> Skill:
 # --- parsing --------------------------------------------------------------------------
 
 
+class _StrictLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """Safe YAML (libyaml's parser where present) that refuses duplicate mapping keys:
+    plain YAML loaders keep the last of two equal keys, silently."""
+
+
+def _mapping_without_duplicates(loader: Any, node: yaml.MappingNode, deep: bool = False) -> Any:
+    loader.flatten_mapping(node)
+    seen = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            duplicate = key in seen
+            seen.add(key)
+        except TypeError:  # unhashable: construct_mapping names it
+            continue
+        if duplicate:
+            raise yaml.constructor.ConstructorError(
+                "while constructing a mapping", node.start_mark, f"duplicate key {key!r}",
+                key_node.start_mark)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                              _mapping_without_duplicates)
+
+
 def _parse_yaml(file: str, text: str) -> Any:
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a safe loader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else ""
         raise SkillError(file, where, f"invalid YAML ({getattr(exc, 'problem', exc)})") from None
+    except RecursionError:
+        raise SkillError(file, "", "invalid YAML (nested too deeply)") from None
 
 
 def _model_references(doc: Any) -> list[tuple[str, str]]:
@@ -165,7 +197,8 @@ def _model_references(doc: Any) -> list[tuple[str, str]]:
 
 def _check_relative(file: str, where: str, rel: str) -> None:
     norm = posixpath.normpath(rel)
-    if rel.startswith("/") or norm.startswith("..") or "\\" in rel:
+    if (not rel or rel.startswith("/") or norm == "." or norm == ".." or norm.startswith("../")
+            or "\\" in rel or "\0" in rel):
         raise SkillError(file, where, f"model path {rel!r} must be relative, inside the skill dir")
 
 
@@ -532,17 +565,14 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
             doc = json.loads(data)
         except (ValueError, UnicodeDecodeError) as exc:
             raise SkillError(where, "", f"invalid JSON ({exc})") from None
+        except RecursionError:
+            raise SkillError(where, "", "invalid JSON (nested too deeply)") from None
         if not isinstance(doc, dict):
             raise SkillError(where, "", "expected a JSON object")
         fields_doc = doc.get("fields")
         arrays = {k: doc.get(k) for k in ("points", "quaternions", "responsibilities")}
     elif rel.endswith(".npz"):
-        try:
-            with np.load(io.BytesIO(data), allow_pickle=False) as z:
-                arrays = {k: z[k] for k in ("points", "quaternions", "responsibilities") if k in z}
-                fields_doc = json.loads(str(z["fields"])) if "fields" in z else None
-        except (ValueError, OSError, KeyError) as exc:
-            raise SkillError(where, "", f"not a pickle-free npz model file ({exc})") from None
+        arrays, fields_doc = _npz_arrays(data, where)
     else:
         raise SkillError(where, "", "model files must be .json or .npz")
 
@@ -573,6 +603,26 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
         raise SkillError(where, f"quaternions[{bad[0]}]", f"not unit (norm {norms[bad[0]]:.6f})")
     return VectorFieldModel(fields=fields, points=points, quaternions=quats / norms[:, None],
                             responsibilities=resp)
+
+
+def _npz_arrays(data: bytes, where: str) -> tuple[dict[str, Any], Any]:
+    """The arrays and the ``fields`` document of a pickle-free .npz model file."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            size = sum(info.file_size for info in zf.infolist())
+        if size > MAX_MODEL_BYTES:
+            raise SkillError(where, "", f"model file inflates to {size} bytes (at most {MAX_MODEL_BYTES})")
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            arrays = {k: z[k] for k in ("points", "quaternions", "responsibilities") if k in z}
+            fields_doc = json.loads(str(z["fields"])) if "fields" in z else None
+    except SkillError:
+        raise
+    except RecursionError:
+        raise SkillError(where, "fields", "invalid JSON (nested too deeply)") from None
+    except Exception as exc:  # zipfile, zlib and numpy raise many unrelated types on bad bytes
+        raise SkillError(where, "", f"not a pickle-free npz model file ({type(exc).__name__}: "
+                         f"{str(exc)[:200]})") from None
+    return arrays, fields_doc
 
 
 def _field(fd: Any, path: str, where: str) -> Field:

@@ -1,0 +1,377 @@
+"""``sctd bench robustness``: the daemon next to the simulator under floods, hostile
+bundles and a jumping state, with the quiet run as the baseline of the same bench.
+
+Processes, all on one free loopback port held by this (the bench's) session:
+``sctd sim --scene pour`` (the Pinocchio arm at 1 kHz), ``sctd run`` (the pour skill),
+and per phase a flooder (``python -m sctd.runtime.robustness flood ...``). Every
+figure comes from what the daemon publishes: its targets (by ``seq``, with their
+``stamp``), its status (tick counters, the per-second ``recent_ms`` windows, the drop
+counters) and its resident memory (``/proc``).
+
+Phases: quiet; the fastest valid-input flood one client can send; a 10 MB garbage
+flood; poses on 50k distinct object names; 20 malformed bundles; good swaps; one state
+1 m away with zero input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import msgpack
+import zenoh
+
+from . import codec
+from .procs import Child, free_port
+from .zsession import add_zenoh_arguments, session, session_from_args
+
+KEYS = codec.Keys()
+
+
+# --- what the phases send ---------------------------------------------------------------
+
+
+def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
+    """Twenty different bundles the daemon must refuse with an error reply, from the
+    shipped skills in ``skills``: bytes that are not a bundle, bundles whose YAML or
+    model files are broken, hostile or invalid."""
+    from ..skill import Bundle, bundle_from_file
+
+    pour = bundle_from_file(skills / "pour.yaml")
+    vf = bundle_from_file(skills / "pour-vf.yaml")
+    rel = next(iter(vf.files))
+    bomb = io.BytesIO()
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("points.npy", b"\0" * (300 * 1024 * 1024))
+
+    def yaml(text: str) -> bytes:
+        return Bundle(pour.name, text, {}).pack()
+
+    def packed(**fields: Any) -> bytes:
+        m = {"format": "sctd-skill-bundle", "version": 1, "name": "x.yaml", "yaml": pour.yaml_text,
+             "files": {}}
+        m.update(fields)
+        return msgpack.packb(m, use_bin_type=True)
+
+    big = "description: |\n" + "".join(f"  line {k} of a long description\n" for k in range(300_000))
+    return [
+        ("garbage bytes", b"\x00\xffnot msgpack at all"),
+        ("a msgpack list", msgpack.packb([1, 2, 3])),
+        ("truncated bundle", pour.pack()[:-40]),
+        ("wrong format", packed(format="zip")),
+        ("wrong version", packed(version=99)),
+        ("files not bytes", packed(files={"m.npz": "text"})),
+        ("escaping file name", Bundle(vf.name, vf.yaml_text, {**vf.files, "../x.npz": b""}).pack()),
+        ("corrupt npz", Bundle(vf.name, vf.yaml_text, {rel: b"PK\x03\x04broken"}).pack()),
+        ("npz zip bomb", Bundle(vf.name, vf.yaml_text, {rel: bomb.getvalue()}).pack()),
+        ("missing model file", Bundle(vf.name, vf.yaml_text, {}).pack()),
+        ("deeply nested yaml", yaml("[" * 5000)),
+        ("yaml syntax error", yaml("states: [a, b\nfsm: {")),
+        ("duplicate keys", yaml(pour.yaml_text + "\nname: again\n")),
+        ("unknown field", yaml(pour.yaml_text + "\nspeed_of_light: 3e8\n")),
+        ("not a mapping", yaml("- just\n- a list\n")),
+        ("negative angle", yaml(pour.yaml_text.replace("max_angle: 0.10", "max_angle: -1"))),
+        ("empty object", yaml(pour.yaml_text.replace("object: mug", "object: ''"))),
+        ("non-unit quaternion", yaml(pour.yaml_text.replace("[0, 0, 0.12, 0, 0, 0, 1]",
+                                                            "[0, 0, 0.12, 0, 0, 0, 3]"))),
+        ("nan limit", yaml(pour.yaml_text.replace("max_linear_speed: 0.1", "max_linear_speed: .nan"))),
+        ("10 MB yaml", yaml(pour.yaml_text.replace("description:", "note:", 1) + big)),
+    ]
+
+
+def flood_main(argv: list[str]) -> int:
+    """A flooder: ``garbage`` (10 MB messages on input), ``valid`` (the fastest stream
+    of valid zero-input messages this process can put) or ``objects`` (valid poses on
+    ``--names`` distinct object names). Prints ``{"sent": n, "seconds": s}``."""
+    p = argparse.ArgumentParser(prog="sctd-bench-flood")
+    p.add_argument("kind", choices=("garbage", "valid", "objects"))
+    p.add_argument("--seconds", type=float, default=5.0)
+    p.add_argument("--size", type=int, default=10 * 1024 * 1024)
+    p.add_argument("--names", type=int, default=50_000)
+    add_zenoh_arguments(p)
+    args = p.parse_args(argv)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    sent = 0
+    with session_from_args(args) as s:
+        time.sleep(1.0)  # routes to the daemon's subscribers
+        t0 = time.monotonic()
+        end = t0 + args.seconds
+        if args.kind == "garbage":
+            pub = s.declare_publisher(KEYS.input("flood"))
+            blob = os.urandom(args.size)
+            while time.monotonic() < end and not stop.is_set():
+                pub.put(blob)
+                sent += 1
+        elif args.kind == "valid":
+            pub = s.declare_publisher(KEYS.input("flood"), congestion_control=zenoh.CongestionControl.DROP)
+            batch: list[bytes] = []
+            while not stop.is_set():
+                if sent % 2000 == 0:  # fresh stamps, so every message is valid on arrival
+                    if time.monotonic() >= end:
+                        break
+                    now = time.time()
+                    batch = [codec.encode_input(sent + k, now, (0.0, 0.0, 0.0)) for k in range(2000)]
+                pub.put(batch[sent % 2000])
+                sent += 1
+        else:
+            for k in range(args.names):
+                s.put(KEYS.objects(f"flood{k}"), codec.encode_object(k, time.time(), [0, 0, 0, 0, 0, 0, 1]))
+                sent += 1
+        seconds = time.monotonic() - t0
+        time.sleep(0.2)
+    print(json.dumps({"sent": sent, "seconds": round(seconds, 3)}), flush=True)
+    return 0
+
+
+# --- the bench's view of the daemon ----------------------------------------------------
+
+
+class _Watch:
+    """Targets (seq, stamp, position) and status windows, as the daemon publishes them."""
+
+    def __init__(self, s: zenoh.Session):
+        self.lock = threading.Lock()
+        self.targets: list[tuple[int, float, list[float], str]] = []
+        self.status: dict | None = None
+        self.windows: list[tuple[float, dict]] = []  # (bench time, recent_ms)
+        self.state: dict | None = None
+        self.subs = [s.declare_subscriber(KEYS.target, self._on_target),
+                     s.declare_subscriber(KEYS.status, self._on_status),
+                     s.declare_subscriber(KEYS.state, zenoh.handlers.RingChannel(1))]
+
+    def _on_target(self, sample: zenoh.Sample) -> None:
+        m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+        with self.lock:
+            self.targets.append((m["seq"], m["stamp"], m["pose"][:3], m["skill"]))
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+        with self.lock:
+            recent = m.get("recent_ms")
+            if recent is not None and (not self.windows or self.windows[-1][1] != recent):
+                self.windows.append((time.monotonic(), recent))
+            self.status = m
+
+    def last_state(self) -> dict | None:
+        s = self.subs[2].try_recv()
+        if s is not None:
+            self.state = msgpack.unpackb(s.payload.to_bytes(), raw=False)
+        return self.state
+
+    def snapshot(self) -> dict:
+        with self.lock:
+            return dict(self.status or {})
+
+    def close(self) -> None:
+        for sub in self.subs:
+            sub.undeclare()
+
+
+def _rss_kib(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    return 0
+
+
+def _phase(w: _Watch, daemon_pid: int, run, settle: float = 1.2) -> dict:
+    """Run ``run()`` and report what the daemon did meanwhile: tick counters, targets
+    (rate from their own stamps, largest gap between consecutive ones), the worst and
+    median per-second lateness window, drop counters, memory."""
+    s0, rss0 = w.snapshot(), _rss_kib(daemon_pid)
+    t0 = time.monotonic()
+    with w.lock:
+        k0 = len(w.targets)
+    extra = run() or {}
+    time.sleep(settle)  # the last second's window reaches a status message
+    t1 = time.monotonic()
+    s1, rss1 = w.snapshot(), _rss_kib(daemon_pid)
+    with w.lock:
+        tg = w.targets[k0:]
+        windows = [r for (t, r) in w.windows if t0 + 1.0 < t <= t1]
+    tg.sort()
+    gaps = [b[1] - a[1] for a, b in zip(tg, tg[1:], strict=False) if b[0] == a[0] + 1]
+    rate = (tg[-1][0] - tg[0][0]) / (tg[-1][1] - tg[0][1]) if len(tg) > 1 and tg[-1][1] > tg[0][1] else 0.0
+    p99s = sorted(win["lateness"]["p99"] for win in windows)
+    drops0, drops1 = s0.get("dropped", {}), s1.get("dropped", {})
+    c0, c1 = s0.get("counters", {}), s1.get("counters", {})
+    return {
+        "seconds": round(t1 - t0, 2),
+        "ticks": s1.get("ticks", 0) - s0.get("ticks", 0),
+        "late_ticks": s1.get("late_ticks", 0) - s0.get("late_ticks", 0),
+        "skipped_ticks": s1.get("skipped_ticks", 0) - s0.get("skipped_ticks", 0),
+        "target_rate_hz": round(rate, 1),
+        "max_target_gap_ms": round(max(gaps) * 1e3, 3) if gaps else None,
+        "lateness_p99_ms_worst_window": p99s[-1] if p99s else None,
+        "lateness_p99_ms_median_window": p99s[len(p99s) // 2] if p99s else None,
+        "lateness_max_ms": max((win["lateness"]["max"] for win in windows), default=None),
+        "dropped": {k: v - drops0.get(k, 0) for k, v in drops1.items() if v != drops0.get(k, 0)},
+        "counters": {k: v - c0.get(k, 0) for k, v in c1.items() if v != c0.get(k, 0)},
+        "rss_growth_kib": rss1 - rss0,
+        "targets": tg,
+        **extra,
+    }
+
+
+def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    pour, pour_vf = str(skills / "pour.yaml"), str(skills / "pour-vf.yaml")
+    out: dict[str, Any] = {"seconds_per_phase": seconds}
+    with session(listen=[hub]) as s, \
+            Child("sctd.cli.main", "sim", "--scene", "pour", "--connect", hub, "--listen",
+                  f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
+            Child("sctd.cli.main", "run", "--skill", pour, "--connect", hub, "--listen",
+                  f"tcp/127.0.0.1:{free_port()}", "--stats-json", log=logdir / "daemon.log") as daemon:
+        w = _Watch(s)
+        end = time.monotonic() + 90
+        while len(w.targets) < 2000:
+            if time.monotonic() > end or not daemon.running():
+                raise RuntimeError(f"the daemon published no targets; see {logdir}")
+            time.sleep(0.1)
+        pid = daemon.p.pid
+
+        def flood(kind: str, *extra: str) -> dict:
+            with Child("sctd.runtime.robustness", "flood", kind, "--seconds", str(seconds),
+                       "--connect", hub, *extra, log=logdir / f"flood-{kind}.log") as f:
+                f.p.wait(timeout=seconds + 120)
+            lines = [ln for ln in f.output().splitlines() if ln.startswith("{")]
+            got = json.loads(lines[-1]) if lines else {"sent": 0, "seconds": 0.0}
+            return {"sent": got["sent"], "sent_per_s": round(got["sent"] / max(got["seconds"], 1e-9))}
+
+        out["quiet"] = _phase(w, pid, lambda: time.sleep(seconds))
+        out["valid_flood"] = _phase(w, pid, lambda: flood("valid"))
+        out["garbage_flood"] = _phase(w, pid, lambda: flood("garbage"))
+        out["object_names"] = _phase(w, pid, lambda: flood("objects", "--names", "50000"))
+
+        def bad_bundles() -> dict:
+            replies = errors = 0
+            for _name, payload in malformed_bundles(skills):
+                got = list(s.get(KEYS.skill, payload=payload, timeout=60.0))
+                replies += len(got)
+                errors += sum(1 for r in got if r.err is not None)
+            return {"bundles": 20, "replies": replies, "error_replies": errors}
+
+        out["bad_bundles"] = _phase(w, pid, bad_bundles)
+
+        def swaps() -> dict:
+            from ..skill import bundle_from_file
+
+            ok = 0
+            for k in range(6):
+                b = bundle_from_file(pour_vf if k % 2 == 0 else pour)
+                got = list(s.get(KEYS.skill, payload=b.pack(), timeout=30.0))
+                ok += sum(1 for r in got if r.ok is not None)
+                time.sleep(0.3)
+            return {"swaps": 6, "ok_replies": ok}
+
+        out["good_swaps"] = _phase(w, pid, swaps)
+
+        def far_state() -> dict:
+            st = w.last_state()
+            assert st is not None
+            pose = list(st["pose"])
+            pose[0] += 1.0
+            s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
+            time.sleep(max(2.0, seconds / 2))
+            return {}
+
+        out["far_state"] = _phase(w, pid, far_state)
+        w.close()
+        daemon.stop()
+    return out
+
+
+def summarise(r: dict) -> dict:
+    """The figures and their targets; drops the raw target lists."""
+    bound_m = 0.1 * 1e-3  # the pour skill: 0.1 m/s per 1 kHz tick
+    far = r["far_state"]
+    tg = far.pop("targets")
+    steps = [math.dist(a[2], b[2]) / (b[0] - a[0]) for a, b in zip(tg, tg[1:], strict=False)]
+    far["max_step_per_tick_mm"] = round(max(steps) * 1e3, 6) if steps else None
+    for phase in r.values():
+        if isinstance(phase, dict):
+            phase.pop("targets", None)
+    q = r["quiet"]["lateness_p99_ms_worst_window"] or 0.0
+    vf = r["valid_flood"]["lateness_p99_ms_worst_window"] or 0.0
+    g = r["garbage_flood"]
+    r["criteria"] = {
+        "garbage flood: targets >= 995 Hz": g["target_rate_hz"] >= 995,
+        "garbage flood: no skipped tick": g["skipped_ticks"] == 0,
+        "valid flood: lateness p99 <= 0.5 ms": vf <= 0.5,
+        "valid flood: lateness p99 <= 2 x quiet (or within one 5 us bin)": vf <= max(2 * q, q + 0.005),
+        "50k object names: RSS growth <= 5 MB": r["object_names"]["rss_growth_kib"] <= 5 * 1024,
+        "20 malformed bundles: 20 error replies": r["bad_bundles"]["error_replies"] == 20,
+        "good swaps: no gap between targets over 2 ms": (r["good_swaps"]["max_target_gap_ms"] or 99) <= 2.0,
+        "state 1 m away, zero input: no step above the bound":
+            far["max_step_per_tick_mm"] is not None and far["max_step_per_tick_mm"] <= bound_m * 1e3,
+    }
+    return r
+
+
+def print_report(r: dict) -> None:
+    print(f"sctd bench robustness: pour skill next to the Pinocchio sim at 1 kHz, "
+          f"{r['seconds_per_phase']:.0f} s per flood")
+    cols = ("ticks", "late_ticks", "skipped_ticks", "target_rate_hz", "max_target_gap_ms",
+            "lateness_p99_ms_worst_window", "lateness_p99_ms_median_window", "lateness_max_ms",
+            "rss_growth_kib")
+    print("  phase            " + "  ".join(f"{c.replace('_ms', '').replace('lateness_', 'late ')[:16]:>16s}"
+                                         for c in cols))
+    for name in ("quiet", "valid_flood", "garbage_flood", "object_names", "bad_bundles", "good_swaps",
+                 "far_state"):
+        ph = r[name]
+        vals = "  ".join(f"{'-' if ph.get(c) is None else ph[c]!s:>16s}" for c in cols)
+        print(f"  {name:16s} {vals}")
+    for name in ("valid_flood", "garbage_flood", "object_names"):
+        print(f"  {name}: sent {r[name]['sent']} ({r[name]['sent_per_s']}/s); dropped {r[name]['dropped']}")
+    b = r["bad_bundles"]
+    print(f"  bad_bundles: {b['bundles']} sent, {b['replies']} replies, {b['error_replies']} errors; "
+          f"counters {b['counters']}")
+    print(f"  good_swaps: {r['good_swaps']['ok_replies']} of {r['good_swaps']['swaps']} swapped")
+    f = r["far_state"]
+    print(f"  far_state: counters {f['counters']}; largest target step per tick "
+          f"{f['max_step_per_tick_mm']} mm (bound 0.1 mm)")
+    mark = {True: "met", False: "NOT met"}
+    for k, v in r["criteria"].items():
+        print(f"  {k}: {mark[v]}")
+
+
+def add_robustness_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seconds", type=float, default=5.0, help="length of each flood, s")
+    p.add_argument("--skills", default="skills", help="folder of the shipped skills")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def main_robustness(args: argparse.Namespace) -> int:
+    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
+    logdir.mkdir(parents=True, exist_ok=True)
+    try:
+        r = summarise(run_robustness_bench(Path(args.skills), args.seconds, logdir))
+    except RuntimeError as e:
+        print(f"sctd bench robustness: {e}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print_report(r)
+    return 0
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "flood":
+        sys.exit(flood_main(sys.argv[2:]))
+    print("usage: python -m sctd.runtime.robustness flood garbage|valid|objects [...]", file=sys.stderr)
+    sys.exit(2)
