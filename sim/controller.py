@@ -23,6 +23,11 @@ K^1/2``: one symmetric eigen-decomposition of a 6x6 matrix, no inverse nor Chole
 factor of ``Lambda``, which is how it is computed. It is recomputed every
 ``gains.damping_every`` cycles (Lambda changes slowly).
 
+Load data: a payload set with :meth:`CartesianImpedanceController.set_payload` (mass
+and centre of mass in the ee frame, as a real arm is configured with the tool and the
+object it holds) has its weight compensated by a feed-forward wrench, so the arm holding
+it rests at its target instead of sagging by ``m g / k``.
+
 Target handling: :meth:`CartesianImpedanceController.set_target` records when a target
 arrived (on the controller's clock, the ``t`` of :meth:`update`). A target older than
 ``gains.target_timeout`` is stale: the controller then holds the pose it measured at
@@ -45,6 +50,7 @@ from scipy.linalg.lapack import dsyev as _dsyev
 from .robot import ArmModel
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+GRAVITY = 9.81
 
 
 @dataclass(frozen=True)
@@ -155,6 +161,22 @@ class CartesianImpedanceController:
         sqrt_k = np.sqrt(self._k)
         self._sqrt_k_diag = np.diag(sqrt_k)
         self._sqrt_kk = np.outer(sqrt_k, sqrt_k)
+        self._payload_weight = 0.0  # m g of the configured load, N
+        self._payload_com = (0.0, 0.0, 0.0)  # its centre of mass in the ee frame, m
+
+    def set_payload(self, mass: float, com_in_ee) -> None:
+        """Configure the load the arm holds: its weight is compensated from now on.
+
+        Parameters
+        ----------
+        mass : float
+            kg (0 for none).
+        com_in_ee : array_like, shape (3,)
+            Centre of mass in the ee frame, m.
+        """
+        self._payload_weight = float(mass) * GRAVITY
+        cx, cy, cz = (float(x) for x in com_in_ee)
+        self._payload_com = (cx, cy, cz)
 
     # -- target ----------------------------------------------------------------------
     def set_target(self, T_world_target: np.ndarray, stamp: float | None = None,
@@ -248,6 +270,14 @@ class CartesianImpedanceController:
             v = np.negative(v, out=v)
         F = self._k * e
         F += self.D.dot(v)
+        w = self._payload_weight
+        if w:  # minus the load's weight (0, 0, -w) and its moment r x (0, 0, -w) at the ee
+            cx, cy, cz = self._payload_com
+            (r0, r1, r2, _), (s0, s1, s2, _), _, _ = T_e.tolist()
+            rx, ry = r0 * cx + r1 * cy + r2 * cz, s0 * cx + s1 * cy + s2 * cz
+            F[2] += w
+            F[3] += ry * w
+            F[4] -= rx * w
 
         # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T y, y = Lambda J M^-1 tau0
         tau_null = g.k_null * (self.q_rest - q)

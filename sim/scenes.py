@@ -62,6 +62,10 @@ class Scene(Protocol):
     def outcome(self) -> dict[str, Any]:
         """Task outcome so far (plain JSON/msgpack types)."""
 
+    def payload(self) -> tuple[float, np.ndarray] | None:
+        """The load the arm carries as its controller is configured with it (a real arm's
+        load data): mass (kg) and centre of mass in the ee frame (m); None for none."""
+
 
 # -- pour -----------------------------------------------------------------------------
 @dataclass
@@ -207,6 +211,12 @@ class PourScene:
         r = T_world_ee[:3, :3].dot(P.com_in_ee)
         # [force, r x force] with force = (0, 0, fz), written out (np.cross costs ~25 us)
         return np.array([0.0, 0.0, fz, r[1] * fz, -r[0] * fz, 0.0])
+
+    def payload(self) -> tuple[float, np.ndarray] | None:
+        """The full bottle, as configured when it was grasped (pouring makes it lighter
+        than that: the controller then sees a little upward error)."""
+        P = self.params
+        return P.bottle_mass_empty + P.liquid_mass, P.com_in_ee.copy()
 
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
         """``mug`` and ``bottle_tip``."""
@@ -362,6 +372,10 @@ class DrawerScene:
         """``drawer_handle``: the closed handle's frame (fixed, see the module doc)."""
         return {"drawer_handle": self.params.T_world_closed.copy()}
 
+    def payload(self) -> tuple[float, np.ndarray] | None:
+        """None: the hand holds the handle, the drawer is not a load it carries."""
+        return None
+
     def outcome(self) -> dict[str, Any]:
         """Opening, whether the handle is held, success."""
         P = self.params
@@ -396,6 +410,10 @@ class EmptyScene:
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
         """No objects."""
         return {}
+
+    def payload(self) -> tuple[float, np.ndarray] | None:
+        """No load."""
+        return None
 
     def outcome(self) -> dict[str, Any]:
         """Nothing to score."""

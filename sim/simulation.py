@@ -76,6 +76,9 @@ class Simulation:
             q0 = start_posture(model, self.scene.start_pose())
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
+        payload = self.scene.payload()
+        if payload is not None:  # the arm's load data, as a real arm is configured with it
+            self.arm.controller.set_payload(*payload)
         self._wrench = np.zeros(6)
         self._fk = model.model.createData()  # workspace of state_message (1 kHz: no allocation)
 

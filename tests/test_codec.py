@@ -53,6 +53,8 @@ def test_malformed_input_reasons(data, reason):
     ([0, 0, 0, 0, 0, 0, 2.0], "bad_pose"),     # quaternion norm off by more than 1 %
     ([0, 0, 0, 0, 0, 1], "bad_pose"),
     ([0, 0, 0, 0, 0, False, 1], "bad_pose"),
+    ([0, 0, 0, 1e300, 0, 0, 1], "bad_pose"),  # found by fuzzing: ** 2 raised OverflowError
+    ([2000.0, 0, 0, 0, 0, 0, 1], "bad_pose"),  # beyond MAX_POSITION
 ])
 def test_malformed_pose_reasons(pose, reason):
     for decode in (codec.decode_state, codec.decode_object):
@@ -63,7 +65,7 @@ def test_malformed_pose_reasons(pose, reason):
 
 def test_bad_wrench_costs_only_the_wrench():
     s = codec.decode_state(packed(pose=POSE, wrench=[0, 0, float("nan"), 0, 0, 0]))
-    assert s.wrench is None and s.pose == POSE
+    assert s.wrench is None and s.pose == POSE and s.wrench_nonfinite
     with pytest.raises(codec.DecodeError):
         codec.decode_state(packed(pose=POSE, wrench=[0, 0, "x", 0, 0, 0]))
 
@@ -102,3 +104,25 @@ def test_any_map_decodes_to_valid_fields_or_raises_decode_error(fields):
         pass
     else:
         assert len(m.u) in (3, 6) and all(type(x) is float for x in m.u)
+
+
+@pytest.mark.parametrize("fields, reason", [
+    ({"q": [0.0] * 7, "dq": [0.0] * 6}, "bad_dq"),
+    ({"q": [0.0] * 65}, "bad_q"),
+    ({"q": []}, "bad_q"),
+    ({"q": [float("nan")] * 7}, "nonfinite_q"),
+    ({"dq": ["x"] * 7}, "bad_dq"),
+])
+def test_joint_lists_are_checked(fields, reason):
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_state(packed(pose=POSE, **fields))
+    assert e.value.reason == reason
+
+
+@pytest.mark.parametrize("decode, limit", [
+    (codec.decode_input, codec.MAX_INPUT_BYTES), (codec.decode_state, codec.MAX_STATE_BYTES),
+    (codec.decode_object, codec.MAX_OBJECT_BYTES)])
+def test_payloads_over_the_size_limit_are_refused_before_decoding(decode, limit):
+    with pytest.raises(codec.DecodeError) as e:
+        decode(b"\xc1" * (limit + 1))  # not even msgpack: the size is checked first
+    assert e.value.reason == "too_large"

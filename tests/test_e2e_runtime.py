@@ -7,6 +7,7 @@ the test publishes input and reads target/status. Timing assertions are loose
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 
@@ -143,7 +144,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
         got = sorted({m["seq"]: m for _, m in rig.targets if m["seq"] >= first["seq"]}.values(),
                      key=lambda m: m["seq"])
     bound = 0.1 * 0.001 * (1 + 1e-9)  # the pour skill's 0.1 m/s at 1 kHz
-    for a, b in zip(got, got[1:], strict=False):
+    for a, b in itertools.pairwise(got):
         step = np.linalg.norm(np.subtract(b["pose"][:3], a["pose"][:3]))
         assert step <= bound * (b["seq"] - a["seq"]) + 1e-12, (a["seq"], b["seq"], step)
     moved = np.subtract(got[-1]["pose"][:3], first["pose"][:3])
@@ -151,7 +152,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     # Watchdog (0.1 s at 1 kHz): targets that still follow the last input move on at
     # most ~100 ticks after it arrived, then the target is frozen.
     after = sorted(with_last(), key=lambda m: m["seq"])
-    moving = [b["seq"] for a, b in zip(after, after[1:], strict=False) if b["pose"] != a["pose"]]
+    moving = [b["seq"] for a, b in itertools.pairwise(after) if b["pose"] != a["pose"]]
     assert not moving or moving[-1] - after[0]["seq"] <= 101 + 5
     assert all(m["pose"] == after[-1]["pose"] for m in after[-200:])
 
@@ -165,12 +166,16 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
         msgpack.packb({"seq": 1, "stamp": time.time(), "u": [1, 0]}),
         msgpack.packb({"seq": 1, "stamp": time.time(), "u": ["a", 0, 0]}),
     ]
-    for _ in range(20):
+    # 2 ms apart: the runtime takes at most 2000 input messages per second (Zenoh drops
+    # the rest of a burst on arrival, uncounted)
+    for _ in range(10):
         for raw in bad:
             rig.send(None, raw=raw)
+            time.sleep(0.002)
         rig.send([float("nan"), 1.0, 1.0])
+        time.sleep(0.002)
         rig.send([float("inf"), 0.0, 0.0])
-        time.sleep(0.01)
+        time.sleep(0.002)
     time.sleep(0.3)
     assert rig.last()["pose"] == before
     assert proc.p.poll() is None, "a malformed message must never be fatal"

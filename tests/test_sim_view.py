@@ -136,7 +136,9 @@ def test_view_follows_the_sim_and_serves_on_loopback_only():
                 np.testing.assert_allclose(h["/arm/links"].points[-1, 1], T_world_ee[:3, 3], atol=1e-6)
                 for name, pose in sim.objects().items():
                     node = h[f"/objects/{name}"]
-                    np.testing.assert_allclose(node.position, pose[:3], atol=1e-9)
+                    # viser keeps a position within np.allclose (rtol 1e-5) of the one it has:
+                    # as the arm settles, the bottle tip moves less than that per frame
+                    np.testing.assert_allclose(node.position, pose[:3], rtol=2e-5, atol=1e-8)
                     assert same_rotation(node.wxyz, wxyz_from_pose(pose)), name
             # the arm did move and turn, and the view with it
             T_now = sim.arm.T_world_ee
@@ -152,7 +154,7 @@ def test_view_follows_the_sim_and_serves_on_loopback_only():
             assert math.dist(seen["/arm/ee"]["position"], ee[:3, 3]) < 1e-9
             assert same_rotation(seen["/arm/ee"]["wxyz"], wxyz_from_pose(se3.pose_from_matrix4(ee)))
             tip = sim.objects()["bottle_tip"]
-            assert math.dist(seen["/objects/bottle_tip"]["position"], tip[:3]) < 1e-9
+            assert math.dist(seen["/objects/bottle_tip"]["position"], tip[:3]) < 1e-5  # viser's allclose
             assert same_rotation(seen["/objects/bottle_tip"]["wxyz"], wxyz_from_pose(tip))
             assert seen["/arm/spheres"]["type"] == "BatchedMeshesMessage"
         assert wait_for(lambda: port_is_free(port), 5) and listeners(port) == []

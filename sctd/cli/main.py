@@ -63,6 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
     robustness.add_robustness_arguments(p)
     p.set_defaults(func=robustness.main_robustness)
 
+    from . import fuzz
+
+    p = bsub.add_parser("fuzz", help="coverage-guided fuzzing of every decoder, the bundle unpacker and "
+                                     "the skill loader (atheris)")
+    fuzz.add_fuzz_arguments(p)
+    p.set_defaults(func=fuzz.main_fuzz)
+
     p = bsub.add_parser("learn", help="learning figures on generated demonstrations (accuracy, "
                         "centre error, directions, time, graph-cut energy)")
     p.add_argument("--seed", type=int, default=0)

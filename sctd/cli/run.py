@@ -96,7 +96,7 @@ def main_run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     try:
         session = open_session(args.listen, args.connect, args.zenoh_config,
-                               size_limits=ingress_limits(config.robot))
+                               **ingress_limits(config.robot))
     except (ValueError, zenoh.ZError) as e:
         print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
         return 2

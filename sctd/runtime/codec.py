@@ -25,6 +25,7 @@ MAX_INPUT_BYTES = 4096
 MAX_STATE_BYTES = 65536
 MAX_OBJECT_BYTES = 4096
 MAX_JOINTS = 64  # longest q / dq a state may carry
+MAX_POSITION = 1000.0  # m: a pose further from the world origin is not a pose of this robot
 
 
 class DecodeError(ValueError):
@@ -131,9 +132,12 @@ def _pose(obj: dict, key: str = "pose") -> list[float]:
     p = _floats(obj, key, (7,))
     if not _finite(p):
         raise DecodeError(f"nonfinite_{key}")
-    n = math.sqrt(p[3] ** 2 + p[4] ** 2 + p[5] ** 2 + p[6] ** 2)
+    # x * x, not x ** 2: a huge finite element gives inf, where ** raises OverflowError
+    n = math.sqrt(p[3] * p[3] + p[4] * p[4] + p[5] * p[5] + p[6] * p[6])
     if abs(n - 1.0) > 1e-2:
         raise DecodeError(f"bad_{key}", f"quaternion norm {n:.4f}")
+    if max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_POSITION:
+        raise DecodeError(f"bad_{key}", f"position beyond {MAX_POSITION:g} m")
     return p
 
 

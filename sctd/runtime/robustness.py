@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import math
 import os
@@ -37,6 +38,7 @@ from .procs import Child, free_port
 from .zsession import add_zenoh_arguments, session, session_from_args
 
 KEYS = codec.Keys()
+SWAPS = 10
 
 
 # --- what the phases send ---------------------------------------------------------------
@@ -58,19 +60,26 @@ def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
     def yaml(text: str) -> bytes:
         return Bundle(pour.name, text, {}).pack()
 
+    def edit(old: str, new: str) -> bytes:
+        assert old in pour.yaml_text, old  # each case must really break the skill
+        return yaml(pour.yaml_text.replace(old, new))
+
     def packed(**fields: Any) -> bytes:
         m = {"format": "sctd-skill-bundle", "version": 1, "name": "x.yaml", "yaml": pour.yaml_text,
              "files": {}}
         m.update(fields)
         return msgpack.packb(m, use_bin_type=True)
 
-    big = "description: |\n" + "".join(f"  line {k} of a long description\n" for k in range(300_000))
+    def long_description(n: int) -> str:
+        line = next(ln for ln in pour.yaml_text.splitlines() if ln.startswith("description:"))
+        block = "description: |\n" + "".join(f"  line {k} of a long description\n" for k in range(n))
+        return pour.yaml_text.replace(line + "\n", block)
+
     return [
         ("garbage bytes", b"\x00\xffnot msgpack at all"),
         ("a msgpack list", msgpack.packb([1, 2, 3])),
         ("truncated bundle", pour.pack()[:-40]),
-        ("wrong format", packed(format="zip")),
-        ("wrong version", packed(version=99)),
+        ("wrong format", packed(format="zip", version=99)),
         ("files not bytes", packed(files={"m.npz": "text"})),
         ("escaping file name", Bundle(vf.name, vf.yaml_text, {**vf.files, "../x.npz": b""}).pack()),
         ("corrupt npz", Bundle(vf.name, vf.yaml_text, {rel: b"PK\x03\x04broken"}).pack()),
@@ -81,12 +90,13 @@ def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
         ("duplicate keys", yaml(pour.yaml_text + "\nname: again\n")),
         ("unknown field", yaml(pour.yaml_text + "\nspeed_of_light: 3e8\n")),
         ("not a mapping", yaml("- just\n- a list\n")),
-        ("negative angle", yaml(pour.yaml_text.replace("max_angle: 0.10", "max_angle: -1"))),
-        ("empty object", yaml(pour.yaml_text.replace("object: mug", "object: ''"))),
-        ("non-unit quaternion", yaml(pour.yaml_text.replace("[0, 0, 0.12, 0, 0, 0, 1]",
-                                                            "[0, 0, 0.12, 0, 0, 0, 3]"))),
-        ("nan limit", yaml(pour.yaml_text.replace("max_linear_speed: 0.1", "max_linear_speed: .nan"))),
-        ("10 MB yaml", yaml(pour.yaml_text.replace("description:", "note:", 1) + big)),
+        ("negative angle", edit("max_angle: 0.10", "max_angle: -1")),
+        ("empty object", edit("object: mug", "object: ''")),
+        ("non-unit quaternion", edit("[0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]",
+                                     "[0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 3.0]")),
+        ("nan limit", edit("max_linear_speed: 0.10 ", "max_linear_speed: .nan ")),
+        ("7 MB yaml (parsed)", yaml(long_description(200_000))),
+        ("10 MB yaml (too big)", yaml(long_description(300_000))),
     ]
 
 
@@ -147,9 +157,9 @@ class _Watch:
         self.status: dict | None = None
         self.windows: list[tuple[float, dict]] = []  # (bench time, recent_ms)
         self.state: dict | None = None
+        self.state_ring = s.declare_subscriber(KEYS.state, zenoh.handlers.RingChannel(1))
         self.subs = [s.declare_subscriber(KEYS.target, self._on_target),
-                     s.declare_subscriber(KEYS.status, self._on_status),
-                     s.declare_subscriber(KEYS.state, zenoh.handlers.RingChannel(1))]
+                     s.declare_subscriber(KEYS.status, self._on_status)]
 
     def _on_target(self, sample: zenoh.Sample) -> None:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
@@ -165,7 +175,7 @@ class _Watch:
             self.status = m
 
     def last_state(self) -> dict | None:
-        s = self.subs[2].try_recv()
+        s = self.state_ring.try_recv()
         if s is not None:
             self.state = msgpack.unpackb(s.payload.to_bytes(), raw=False)
         return self.state
@@ -177,6 +187,7 @@ class _Watch:
     def close(self) -> None:
         for sub in self.subs:
             sub.undeclare()
+        self.state_ring.undeclare()
 
 
 def _rss_kib(pid: int) -> int:
@@ -200,10 +211,10 @@ def _phase(w: _Watch, daemon_pid: int, run, settle: float = 1.2) -> dict:
     t1 = time.monotonic()
     s1, rss1 = w.snapshot(), _rss_kib(daemon_pid)
     with w.lock:
-        tg = w.targets[k0:]
+        tg = w.targets[max(0, k0 - 1):]  # from the last target before the phase
         windows = [r for (t, r) in w.windows if t0 + 1.0 < t <= t1]
     tg.sort()
-    gaps = [b[1] - a[1] for a, b in zip(tg, tg[1:], strict=False) if b[0] == a[0] + 1]
+    gaps = [b[1] - a[1] for a, b in itertools.pairwise(tg) if b[0] == a[0] + 1]
     rate = (tg[-1][0] - tg[0][0]) / (tg[-1][1] - tg[0][1]) if len(tg) > 1 and tg[-1][1] > tg[0][1] else 0.0
     p99s = sorted(win["lateness"]["p99"] for win in windows)
     drops0, drops1 = s0.get("dropped", {}), s1.get("dropped", {})
@@ -270,12 +281,15 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
             from ..skill import bundle_from_file
 
             ok = 0
-            for k in range(6):
+            windows = []  # (query sent, reply + 5 ms), wall clock as the targets' stamps
+            for k in range(SWAPS):
                 b = bundle_from_file(pour_vf if k % 2 == 0 else pour)
+                t0 = time.time()
                 got = list(s.get(KEYS.skill, payload=b.pack(), timeout=30.0))
+                windows.append((t0, time.time() + 0.005))
                 ok += sum(1 for r in got if r.ok is not None)
                 time.sleep(0.3)
-            return {"swaps": 6, "ok_replies": ok}
+            return {"swaps": SWAPS, "ok_replies": ok, "windows": windows}
 
         out["good_swaps"] = _phase(w, pid, swaps)
 
@@ -297,9 +311,14 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
 def summarise(r: dict) -> dict:
     """The figures and their targets; drops the raw target lists."""
     bound_m = 0.1 * 1e-3  # the pour skill: 0.1 m/s per 1 kHz tick
+    sw = r["good_swaps"]
+    tg, windows = sw["targets"], sw.pop("windows")
+    gaps = [b[1] - a[1] for a, b in itertools.pairwise(tg)
+            if b[0] == a[0] + 1 and any(t0 <= a[1] <= t1 for t0, t1 in windows)]
+    sw["max_gap_at_swaps_ms"] = round(max(gaps) * 1e3, 3) if gaps else None
     far = r["far_state"]
     tg = far.pop("targets")
-    steps = [math.dist(a[2], b[2]) / (b[0] - a[0]) for a, b in zip(tg, tg[1:], strict=False)]
+    steps = [math.dist(a[2], b[2]) / (b[0] - a[0]) for a, b in itertools.pairwise(tg)]
     far["max_step_per_tick_mm"] = round(max(steps) * 1e3, 6) if steps else None
     for phase in r.values():
         if isinstance(phase, dict):
@@ -314,7 +333,7 @@ def summarise(r: dict) -> dict:
         "valid flood: lateness p99 <= 2 x quiet (or within one 5 us bin)": vf <= max(2 * q, q + 0.005),
         "50k object names: RSS growth <= 5 MB": r["object_names"]["rss_growth_kib"] <= 5 * 1024,
         "20 malformed bundles: 20 error replies": r["bad_bundles"]["error_replies"] == 20,
-        "good swaps: no gap between targets over 2 ms": (r["good_swaps"]["max_target_gap_ms"] or 99) <= 2.0,
+        "good swaps: no gap between targets over 2 ms": (sw["max_gap_at_swaps_ms"] or 99) <= 2.0,
         "state 1 m away, zero input: no step above the bound":
             far["max_step_per_tick_mm"] is not None and far["max_step_per_tick_mm"] <= bound_m * 1e3,
     }
@@ -339,7 +358,10 @@ def print_report(r: dict) -> None:
     b = r["bad_bundles"]
     print(f"  bad_bundles: {b['bundles']} sent, {b['replies']} replies, {b['error_replies']} errors; "
           f"counters {b['counters']}")
-    print(f"  good_swaps: {r['good_swaps']['ok_replies']} of {r['good_swaps']['swaps']} swapped")
+    sw = r["good_swaps"]
+    print(f"  good_swaps: {sw['ok_replies']} of {sw['swaps']} swapped (pour <-> pour-vf); largest gap "
+          f"between targets from each query to its reply: {sw['max_gap_at_swaps_ms']} ms (quiet "
+          f"phase, whole phase: {r['quiet']['max_target_gap_ms']} ms)")
     f = r["far_state"]
     print(f"  far_state: counters {f['counters']}; largest target step per tick "
           f"{f['max_step_per_tick_mm']} mm (bound 0.1 mm)")

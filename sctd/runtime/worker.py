@@ -1,30 +1,35 @@
 """Skill bundles validated in a separate process, so that no bundle stalls the tick.
 
 Unpacking, YAML parsing and validation of a hot-swap bundle are pure-Python work that
-holds the GIL for as long as they run (seconds for a 10 MB YAML): in the daemon's
+holds the GIL for as long as they run (seconds for a large YAML): in the daemon's
 process they would delay every SCHED_FIFO tick that falls in that time. They run in a
-child process instead, which also contains what a hostile bundle can do: a nesting too
-deep for the parser, a model file that inflates to gigabytes (the child's address space
-is limited), or a crash of the parser (the child is replaced). The daemon receives the
-validated :class:`~sctd.skill.Skill`, or the error that names what is wrong.
+child process instead (``python -m sctd.runtime.worker``), which also contains what a
+hostile bundle can do: a nesting too deep for the parser, a model file that inflates
+to gigabytes (the child's address space is capped), a parser that crashes or hangs
+(the child is replaced). The daemon receives the validated
+:class:`~sctd.skill.Skill`, or the error that names what is wrong.
 
-The child is started with ``spawn`` (a fresh interpreter: forking a process that runs
-Zenoh's threads is not safe) when the worker is created, and it exits when its pipe
-closes, so it never outlives the daemon.
+The child is a plain subprocess (not :mod:`multiprocessing`, which would re-import the
+daemon's main module in it) reading length-prefixed bundles on stdin and writing
+length-prefixed results on stdout; it exits when stdin closes, so it never outlives
+the daemon.
 """
 
 from __future__ import annotations
 
-import logging
-import multiprocessing
+import os
+import pickle
+import select
+import struct
+import subprocess
+import sys
 import threading
-from multiprocessing.connection import Connection
-from typing import Any
+from typing import IO, Any
 
 from ..skill import Skill, SkillError
 
-log = logging.getLogger("sctd.run")
 WHERE = "<bundle>"
+_HEADER = struct.Struct("!Q")
 
 
 class BundleWorker:
@@ -42,28 +47,30 @@ class BundleWorker:
     def __init__(self, timeout: float = 30.0, memory: int = 2 << 30):
         self.timeout = timeout
         self.memory = memory
-        self._ctx = multiprocessing.get_context("spawn")
         self._lock = threading.Lock()  # one bundle at a time
-        self._proc: Any = None
-        self._conn: Connection | None = None
+        self._proc: subprocess.Popen | None = None
         self._closed = False
         self._spawn()
 
     def _spawn(self) -> None:
-        parent, child = self._ctx.Pipe()
-        proc = self._ctx.Process(target=_serve, args=(child, self.memory), daemon=True,
-                                 name="sctd-skill-worker")
-        proc.start()
-        child.close()
-        self._proc, self._conn = proc, parent
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "sctd.runtime.worker", str(self.memory)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+            close_fds=True)
 
     def _replace(self) -> None:
-        if self._conn is not None:
-            self._conn.close()
-        if self._proc is not None:
-            self._proc.kill()
-            self._proc.join(timeout=5.0)
-        self._spawn()
+        self._kill()
+        if not self._closed:
+            self._spawn()
+
+    def _kill(self) -> None:
+        proc = self._proc
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+            for f in (proc.stdin, proc.stdout):
+                if f is not None:
+                    f.close()
 
     def skill(self, payload: bytes) -> Skill:
         """Validate a packed bundle (``Bundle.pack``) in the child.
@@ -75,22 +82,25 @@ class BundleWorker:
             or crashes the parser.
         """
         with self._lock:
-            conn = self._conn
-            if conn is None:
-                raise SkillError(WHERE, "", "the validating process is closed")
+            proc = self._proc
+            if self._closed or proc is None:
+                raise SkillError(WHERE, "", "the validating process is stopped")
+            assert proc.stdin is not None and proc.stdout is not None
             try:
-                conn.send_bytes(payload)
-                if not conn.poll(self.timeout):
-                    self._replace()
-                    raise SkillError(WHERE, "", f"validation took longer than {self.timeout:g} s")
-                kind, value = conn.recv()  # a Skill pickled by our own child
-            except (EOFError, OSError) as exc:
+                proc.stdin.write(_HEADER.pack(len(payload)))
+                proc.stdin.write(payload)
+                proc.stdin.flush()
+                data = _read_message(proc.stdout, self.timeout)
+            except TimeoutError:
+                self._replace()
+                raise SkillError(WHERE, "", f"validation took longer than {self.timeout:g} s") from None
+            except (EOFError, OSError, ValueError):
+                code = proc.poll()
+                self._replace()
                 if self._closed:
                     raise SkillError(WHERE, "", "the validating process was stopped") from None
-                code = self._proc.exitcode if self._proc is not None else None
-                self._replace()
-                raise SkillError(WHERE, "", f"the validating process died (exit code {code}): "
-                                 f"{type(exc).__name__}") from None
+                raise SkillError(WHERE, "", f"the validating process died (exit code {code})") from None
+            kind, value = pickle.loads(data)  # written by our own child
         if kind == "ok":
             return value
         error = SkillError(WHERE, "", value) if kind == "raw" else value
@@ -106,11 +116,8 @@ class BundleWorker:
         proc = self._proc
         if proc is not None:
             proc.kill()  # a pure validator: nothing to lose
-            proc.join(timeout=5.0)
         with self._lock:
-            if self._conn is not None:
-                self._conn.close()
-                self._conn = None
+            self._kill()
             self._proc = None
 
     def __enter__(self) -> BundleWorker:
@@ -118,6 +125,27 @@ class BundleWorker:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _read_message(f: IO[bytes], timeout: float) -> bytes:
+    """One length-prefixed message from a pipe, waiting at most ``timeout`` s for it."""
+    fd = f.fileno()
+    ready, _, _ = select.select([fd], [], [], timeout)
+    if not ready:
+        raise TimeoutError
+    header = _read_exactly(fd, _HEADER.size)
+    return _read_exactly(fd, _HEADER.unpack(header)[0])
+
+
+def _read_exactly(fd: int, n: int) -> bytes:
+    parts = []
+    while n > 0:
+        chunk = os.read(fd, min(n, 1 << 20))
+        if not chunk:
+            raise EOFError
+        parts.append(chunk)
+        n -= len(chunk)
+    return b"".join(parts)
 
 
 def compile_bundle(payload: bytes) -> tuple[str, Any]:
@@ -135,17 +163,6 @@ def compile_bundle(payload: bytes) -> tuple[str, Any]:
         return "raw", "needs more memory than a skill may take to validate"
 
 
-def _serve(conn: Connection, memory: int) -> None:
-    """The child's loop: bundle bytes in, ``compile_bundle`` out, until the pipe closes."""
-    _limit_memory(memory)
-    while True:
-        try:
-            payload = conn.recv_bytes()
-        except (EOFError, OSError):
-            return
-        conn.send(compile_bundle(payload))
-
-
 def _limit_memory(extra: int) -> None:
     """Cap the address space at what the process holds now plus ``extra`` bytes."""
     import resource
@@ -153,9 +170,28 @@ def _limit_memory(extra: int) -> None:
     try:
         with open("/proc/self/statm") as f:
             pages = int(f.read().split()[0])
-        import os
-
         limit = pages * os.sysconf("SC_PAGE_SIZE") + extra
         resource.setrlimit(resource.RLIMIT_AS, (limit, resource.RLIM_INFINITY))
     except (OSError, ValueError):  # not Linux: no cap
         pass
+
+
+def main(argv: list[str]) -> int:
+    """The child's loop: bundles on stdin, ``compile_bundle`` results on stdout, until
+    stdin closes."""
+    _limit_memory(int(argv[0]) if argv else 2 << 30)
+    fd_in, out = sys.stdin.buffer.fileno(), sys.stdout.buffer
+    while True:
+        try:
+            header = _read_exactly(fd_in, _HEADER.size)
+            payload = _read_exactly(fd_in, _HEADER.unpack(header)[0])
+        except (EOFError, OSError):
+            return 0
+        result = pickle.dumps(compile_bundle(payload), protocol=pickle.HIGHEST_PROTOCOL)
+        out.write(_HEADER.pack(len(result)))
+        out.write(result)
+        out.flush()
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

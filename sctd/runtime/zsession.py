@@ -49,19 +49,22 @@ def check_loopback(endpoint: str) -> None:
 
 def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
                 config_file: str | Path | None = None,
-                size_limits: Sequence[tuple[str, int]] = ()) -> zenoh.Config:
+                size_limits: Sequence[tuple[str, int]] = (),
+                rate_limits: Sequence[tuple[str, float]] = ()) -> zenoh.Config:
     """Build the session config (see module doc).
 
     ``size_limits``: (key expression, bytes) pairs; puts larger than that arriving on a
     matching key are dropped by Zenoh on arrival (its low-pass filter), before any Python
-    sees them. They are added to a config file's own filters.
+    sees them. ``rate_limits``: (key expression, Hz) pairs; puts arriving on matching
+    keys faster than that, all such keys together, are dropped on arrival (Zenoh's
+    downsampling). Both are added to a config file's own filters.
     """
     if config_file is not None:
         conf = zenoh.Config.from_file(str(config_file))
         for key, eps in (("listen", listen), ("connect", connect)):
             if eps:
                 conf.insert_json5(f"{key}/endpoints", json.dumps(list(eps)))
-        _add_size_limits(conf, size_limits)
+        _add_ingress_limits(conf, size_limits, rate_limits)
         return conf
     for ep in [*(listen or []), *(connect or [])]:
         check_loopback(ep)
@@ -86,29 +89,40 @@ def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | No
     conf.insert_json5("connect/timeout_ms", "-1")
     conf.insert_json5("connect/exit_on_failure", "false")
     conf.insert_json5("connect/retry", _RETRY)
-    _add_size_limits(conf, size_limits)
+    _add_ingress_limits(conf, size_limits, rate_limits)
     return conf
 
 
-def _add_size_limits(conf: zenoh.Config, size_limits: Sequence[tuple[str, int]]) -> None:
-    if not size_limits:
-        return
+def _config_list(conf: zenoh.Config, key: str) -> list:
     try:
-        filters = json.loads(conf.get_json("low_pass_filter")) or []
+        return json.loads(conf.get_json(key)) or []
     except (zenoh.ZError, ValueError):
-        filters = []
-    for i, (key, limit) in enumerate(size_limits):
-        filters.append({"id": f"sctd-size-{i}", "key_exprs": [key], "messages": ["put"],
-                        "flows": ["ingress"], "size_limit": int(limit)})
-    conf.insert_json5("low_pass_filter", json.dumps(filters))
+        return []
+
+
+def _add_ingress_limits(conf: zenoh.Config, size_limits: Sequence[tuple[str, int]],
+                        rate_limits: Sequence[tuple[str, float]]) -> None:
+    if size_limits:
+        filters = _config_list(conf, "low_pass_filter")
+        for i, (key, limit) in enumerate(size_limits):
+            filters.append({"id": f"sctd-size-{i}", "key_exprs": [key], "messages": ["put"],
+                            "flows": ["ingress"], "size_limit": int(limit)})
+        conf.insert_json5("low_pass_filter", json.dumps(filters))
+    if rate_limits:
+        rules = _config_list(conf, "downsampling")
+        for i, (key, hz) in enumerate(rate_limits):
+            rules.append({"id": f"sctd-rate-{i}", "messages": ["put"], "flows": ["ingress"],
+                          "rules": [{"key_expr": key, "freq": float(hz)}]})
+        conf.insert_json5("downsampling", json.dumps(rules))
 
 
 def open_session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
                  config_file: str | Path | None = None,
-                 size_limits: Sequence[tuple[str, int]] = ()) -> zenoh.Session:
+                 size_limits: Sequence[tuple[str, int]] = (),
+                 rate_limits: Sequence[tuple[str, float]] = ()) -> zenoh.Session:
     """Open a Zenoh session with :func:`make_config`; close it with :func:`close_session`
     (or use :func:`session`, a context manager that does)."""
-    return zenoh.open(make_config(listen, connect, config_file, size_limits))
+    return zenoh.open(make_config(listen, connect, config_file, size_limits, rate_limits))
 
 
 def close_session(s: zenoh.Session, timeout: float = 1.0) -> bool:

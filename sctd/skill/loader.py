@@ -45,7 +45,11 @@ from .model import (
 
 FORMAT_VERSION = 1
 BUNDLE_FORMAT = "sctd-skill-bundle"
-MAX_BUNDLE_BYTES = 64 * 1024 * 1024
+# A packed bundle's largest size. The runtime copies a hot-swap payload once while it
+# holds the GIL (about 0.25 ms per MB here), so this bounds what a swap can cost the tick;
+# a vector-field model of 20k demonstration points is 1.4 MB compressed.
+MAX_BUNDLE_BYTES = 8 * 1024 * 1024
+MAX_TEXT = 10_000  # characters of a skill's name or description
 MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
 
 
@@ -167,7 +171,7 @@ _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
 
 def _parse_yaml(file: str, text: str) -> Any:
     try:
-        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a safe loader)
+        return yaml.load(text, Loader=_StrictLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}" if mark is not None else ""
@@ -285,6 +289,9 @@ class _Parser:
         description = doc.get("description", "")
         if not isinstance(description, str):
             raise self.fail("description", "expected a string")
+        for key, text in (("name", name), ("description", description)):
+            if len(text) > MAX_TEXT:
+                raise self.fail(key, f"{len(text)} characters, at most {MAX_TEXT}")
 
         limits = Limits()
         if "limits" in doc:

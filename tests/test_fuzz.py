@@ -1,0 +1,16 @@
+"""A short coverage-guided fuzz run of every decoder (the full one is `sctd bench fuzz`):
+only the documented errors may escape (DecodeError, FrameDecodeError, SkillError)."""
+
+import pytest
+
+from sctd.cli.fuzz import TARGETS, run_target
+from tests.conftest import ROOT
+
+pytest.importorskip("atheris", reason="atheris is in the dev extra; make setup installs it")
+
+
+@pytest.mark.parametrize("target", TARGETS)
+def test_decoder_raises_only_its_documented_error(target, tmp_path):
+    r = run_target(target, 2000, ROOT / "skills", tmp_path, timeout=300)
+    assert r["ok"], r["log_tail"]
+    assert r["runs"] >= 2000 and r["coverage"]
