@@ -128,12 +128,13 @@ def probe_main(argv: list[str]) -> int:
 
 
 def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> dict:
-    """The daemon's per-tick work, in this process and without Zenoh: decoding one
-    state message (as the daemon drains about one per tick) and the controller tick,
-    with the skill, a robot that follows every target and a slowly sweeping input. Back
-    to back (``paced=False``) the caches stay hot; ``paced=True`` sleeps to the next
-    period between ticks as the daemon does, which on some machines (virtual CPUs) makes
-    each tick start cold. Timings (s), as a Histogram summary."""
+    """The daemon's per-tick control step, in this process and without Zenoh: the
+    controller tick on a decoded state message (the daemon decodes its inputs ahead of
+    each deadline, outside the compute it reports), with the skill, a robot that follows
+    every target and a slowly sweeping input. Back to back (``paced=False``) the caches
+    stay hot; ``paced=True`` sleeps to the next period between ticks as the daemon does,
+    which on some machines (virtual CPUs) makes each tick start cold. Timings (s), as a
+    Histogram summary."""
     from .. import se3
     from ..skill import load_skill
     from .controller import Controller, RuntimeConfig, Sample
@@ -155,9 +156,9 @@ def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = Fal
         pose = ctl._pose if ctl._pose is not None else pose_ee
         data = codec.encode_state(k, t, pose, q=q, dq=q, wrench=[0.0] * 6)
         obj.received = obj.stamp = t
-        t0 = time.perf_counter()
         m = codec.decode_state(data)
         state = Sample(m.seq, m.stamp, t, F=se3.flat_from_pose(m.pose), wrench=m.wrench)
+        t0 = time.perf_counter()
         ctl.tick(t, t, Sample(k, t, t, u=u), state, obj)
         h.add(time.perf_counter() - t0)
     return h.summary_ms()

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import msgpack
 
@@ -141,15 +141,15 @@ def _pose(obj: dict, key: str = "pose") -> list[float]:
     return p
 
 
-@dataclass(frozen=True)
-class InputMsg:
+# Named tuples, not frozen dataclasses: the tick decodes about one state per period,
+# and a frozen dataclass costs ~2 us to build against ~0.3 us for a named tuple.
+class InputMsg(NamedTuple):
     seq: int
     stamp: float
     u: tuple[float, ...]  # may hold non-finite values: the runtime treats those as zero
 
 
-@dataclass(frozen=True)
-class StateMsg:
+class StateMsg(NamedTuple):
     seq: int
     stamp: float
     pose: list[float]
@@ -159,8 +159,7 @@ class StateMsg:
     wrench_nonfinite: bool = False  # a wrench was sent but not finite: dropped, the pose kept
 
 
-@dataclass(frozen=True)
-class ObjectMsg:
+class ObjectMsg(NamedTuple):
     seq: int
     stamp: float
     pose: list[float]
@@ -179,10 +178,9 @@ def _joints(obj: dict, key: str) -> list[float] | None:
         raise DecodeError(f"bad_{key}", f"expected 1 to {MAX_JOINTS} numbers")
     if not _NUMBERS.issuperset(map(type, x)):
         raise DecodeError(f"bad_{key}", "non-numeric element")
-    v = list(map(float, x))
-    if not _finite(v):
+    if not math.isfinite(sum(x)):  # ints and floats alike
         raise DecodeError(f"nonfinite_{key}")
-    return v
+    return x if type(x) is list else list(x)
 
 
 def decode_input(data: bytes) -> InputMsg:

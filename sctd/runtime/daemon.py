@@ -3,9 +3,12 @@
 Threads: the tick runs on the main thread and reads its inputs itself. Input, state and
 the active skill's object poses arrive in Zenoh ring channels (newest wins, filled by
 Zenoh's own threads without Python, so a flood of messages costs the tick nothing but
-the few it drains); at the start of each tick the tick drains each ring, checks each
-message's size before copying it, decodes and validates it, counts every malformed one,
-and keeps the newest valid sample. A hot-swap bundle is validated in a child process
+the few it drains). ``DRAIN_LEAD`` before each deadline the tick thread wakes, drains
+each ring, checks each message's size before copying it, decodes and validates it,
+counts every malformed one, and keeps the newest valid sample; at the deadline the
+control step runs on them. (Decoding costs far more after a 1 ms sleep than in a hot
+loop; done ahead of the deadline it delays no tick, and one that overruns the lead
+shows as lateness.) A hot-swap bundle is validated in a child process
 (:mod:`sctd.runtime.worker`), compiled on the query's thread, handed over through a
 one-slot mailbox and installed between two ticks; the query is answered after the swap.
 Targets and status are encoded and put by a publisher thread, so the tick's own work is
@@ -40,7 +43,8 @@ log = logging.getLogger("sctd.run")
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
 # Ring depths: messages a tick can take from each key; more in one period are lost in
 # the ring (newest wins), which only happens under a flood.
-INPUT_DEPTH, STATE_DEPTH, OBJECT_DEPTH = 4, 4, 2
+INPUT_DEPTH, STATE_DEPTH, OBJECT_DEPTH = 2, 3, 2
+DRAIN_LEAD = 2.5e-4  # s before each deadline the inputs are drained and decoded
 # Messages on the runtime's input keys larger than this never reach it: Zenoh's
 # low-pass filter drops them on arrival, so what the rings hold is bounded in bytes too.
 # Below it, the size limits of the codec apply and are counted.
@@ -351,16 +355,19 @@ class Daemon:
                  self.controller.skill.id, cfg.robot, cfg.rate)
         try:
             while not self.stop_event.is_set():
-                now, lateness = ticker.wait()
-                if end is not None and now >= end:
-                    break
-                wall = time.time()
+                ahead = ticker.due - DRAIN_LEAD - time.monotonic()
+                if ahead > 0.0:
+                    time.sleep(ahead)
                 pending = self._pending
                 if pending is not None:
                     with self._lock:
                         self._pending = None
-                    self._install(pending, now)
-                self._drain(now)
+                    self._install(pending, time.monotonic())
+                self._drain(time.monotonic())
+                now, lateness = ticker.wait()
+                if end is not None and now >= end:
+                    break
+                wall = time.time()
                 ctl = self.controller
                 res = ctl.tick(now, wall, self._input, self._state,
                                self._objects.get(ctl.skill.object))

@@ -46,8 +46,8 @@ from .model import (
 FORMAT_VERSION = 1
 BUNDLE_FORMAT = "sctd-skill-bundle"
 # A packed bundle's largest size. The runtime copies a hot-swap payload once while it
-# holds the GIL (about 0.25 ms per MB here), so this bounds what a swap can cost the tick;
-# a vector-field model of 20k demonstration points is 1.4 MB compressed.
+# holds the GIL (0.25-1 ms per MB on the development VM), so this bounds what a swap can
+# cost the tick; a vector-field model of 20k demonstration points is 1.4 MB compressed.
 MAX_BUNDLE_BYTES = 8 * 1024 * 1024
 MAX_TEXT = 10_000  # characters of a skill's name or description
 MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
