@@ -175,6 +175,7 @@ class Daemon:
         self._inlets: tuple[_Inlet, ...] = ()
         self._base_inlets: tuple[_Inlet, ...] = ()  # input and state
         self._object_inlets: dict[str, _Inlet] = {}
+        self._trash: list[Any] = []  # oversized samples, released after the control step
 
     # --- inputs (drained and decoded on the tick thread) --------------------------------
 
@@ -193,6 +194,8 @@ class Daemon:
                 payload = sample.payload
                 if len(payload) > inlet.limit:
                     self._drop(f"{inlet.kind}_too_large")
+                    # freeing megabytes takes a while: after the control step, not here
+                    self._trash.append(sample)
                     continue
                 try:
                     inlet.take(payload.to_bytes(), sample.key_expr, now)
@@ -377,6 +380,8 @@ class Daemon:
                     self._window_targets += 1
                 done = time.monotonic()
                 compute = done - now
+                if self._trash:
+                    self._trash.clear()
                 self.lateness.add(lateness)
                 self.compute.add(compute)
                 self._recent_lateness.add(lateness)
