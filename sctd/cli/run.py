@@ -178,16 +178,18 @@ def main_swap(args: argparse.Namespace) -> int:
 
     from ..runtime.codec import Keys
     from ..runtime.zsession import session_from_args
-    from ..skill import SkillError, bundle_from_file, skill_from_bundle
+    from ..skill import Bundle, SkillError, bundle_from_file, skill_from_bundle
 
     try:
         bundle = bundle_from_file(args.skill)
         skill_from_bundle(bundle)  # refuse locally what the daemon would refuse
+        payload = bundle.pack()
+        Bundle.unpack(payload)  # the size limit too
     except SkillError as e:
         print(f"sctd swap: {e}", file=sys.stderr)
         return 2
     with session_from_args(args) as session:
-        replies = session.get(Keys(args.robot).skill, payload=bundle.pack(), timeout=args.timeout)
+        replies = session.get(Keys(args.robot).skill, payload=payload, timeout=args.timeout)
         for reply in replies:
             if reply.ok is not None:
                 body = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
