@@ -294,11 +294,19 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
         out["good_swaps"] = _phase(w, pid, swaps)
 
         def far_state() -> dict:
-            st = w.last_state()
-            assert st is not None
-            pose = list(st["pose"])
-            pose[0] += 1.0
-            s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
+            def jumps() -> int:
+                return w.snapshot().get("counters", {}).get("state_discontinuity", 0)
+
+            before = jumps()
+            for _ in range(40):  # again only if the state key's rate limit dropped it
+                st = w.last_state()
+                assert st is not None
+                pose = list(st["pose"])
+                pose[0] += 1.0
+                s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
+                time.sleep(0.1)
+                if jumps() > before:
+                    break
             time.sleep(max(2.0, seconds / 2))
             return {}
 
