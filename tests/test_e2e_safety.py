@@ -371,7 +371,7 @@ def test_sim_refuses_a_target_far_from_the_arm(tmp_path):
         for k in range(100):
             pub.put(codec.encode_target(k, time.time() - 3600, old, "x", "x", -1))  # before start
             time.sleep(0.005)
-        assert wait_for(lambda: lis.get("scene")["targets"] >= 200, 10), lis.get("scene")
+        assert wait_for(lambda: lis.get("scene")["targets"] >= 200, 30), lis.get("scene")
         time.sleep(0.2)
         reasons = lis.get("scene")["target_rejected_reasons"]
         assert reasons["offset"] >= 20 and reasons["before_start"] >= 20, reasons
