@@ -10,8 +10,14 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from sctd.runtime.procs import Child, free_port, port_is_free
+
+# No per-example deadline: the suite runs on loaded machines (CI, two suites at once),
+# where a deadline measures the machine, not the code.
+settings.register_profile("sctd", deadline=None)
+settings.load_profile("sctd")
 
 __all__ = ["ROOT", "Proc", "free_port", "port_is_free", "sctd", "wait_for"]
 

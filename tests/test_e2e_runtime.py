@@ -140,6 +140,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     of ticks, then not at all."""
     _proc, rig, _ = daemon
     first = rig.last()
+    assert wait_for(lambda: rig.status, 10)
     reseeds0 = rig.status[-1]["counters"]["reseeds"]
     rig.drive([1.0, 0.0, 0.0], 1.0)
     last_in = rig.seq
