@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml setup.py
 	touch $(STAMP)
 
 demo: setup
-	$(BIN)/sctd demo --skill skills/pour.yaml --seconds 10
+	$(BIN)/sctd demo --skill skills/pour.yaml --seconds 40
 
 test: setup
 	$(BIN)/python -m pytest -q

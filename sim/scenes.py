@@ -98,6 +98,8 @@ class PourParams:
     start_position : ndarray, shape (3,)
         Start position of the ee in world (orientation: bottle upright, ee x towards
         the mug).
+    start_yaw : float
+        Start orientation's turn about world z from ee x towards the mug, rad.
     """
 
     T_world_mug: np.ndarray = field(
@@ -115,6 +117,7 @@ class PourParams:
     liquid_mass: float = 0.3
     com_in_ee: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.05]))
     start_position: np.ndarray = field(default_factory=lambda: np.array([0.45, 0.0, 0.68]))
+    start_yaw: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -189,8 +192,9 @@ class PourScene:
         self.geometry: PourGeometry | None = None
 
     def start_pose(self) -> np.ndarray:
-        """Bottle upright, 0.3 m short of the mug, ee x towards it."""
-        return se3.transform_from_rt(np.eye(3), self.params.start_position)
+        """Bottle upright, 0.3 m short of the mug, ee x towards it (turned by ``start_yaw``)."""
+        R = se3.matrix_from_rotvec([0.0, 0.0, self.params.start_yaw])
+        return se3.transform_from_rt(R, self.params.start_position)
 
     def tip_transform(self, T_world_ee: np.ndarray) -> np.ndarray:
         """``T_world_tip`` of the bottle opening."""
@@ -213,10 +217,10 @@ class PourScene:
         return np.array([0.0, 0.0, fz, r[1] * fz, -r[0] * fz, 0.0])
 
     def payload(self) -> tuple[float, np.ndarray] | None:
-        """The full bottle, as configured when it was grasped (pouring makes it lighter
-        than that: the controller then sees a little upward error)."""
+        """The bottle with what is left in it (the arm's load data follows it as it
+        empties, as a real arm's load estimate from its force-torque sensing would)."""
         P = self.params
-        return P.bottle_mass_empty + P.liquid_mass, P.com_in_ee.copy()
+        return P.bottle_mass_empty + P.liquid_mass * self.remaining, P.com_in_ee
 
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
         """``mug`` and ``bottle_tip``."""
@@ -232,6 +236,7 @@ class PourScene:
             "spilled": self.spilled > 1e-9,
             "remaining": self.remaining,
             "success": self.poured >= self.params.fill_target and self.spilled <= 1e-9,
+            "fill_target": self.params.fill_target,
         }
         if g is not None:
             out.update(tip_in_mug=g.tip_in_mug.tolist(), tip_above_rim=g.tip_above_rim,
@@ -272,6 +277,8 @@ class DrawerParams:
         Opening that counts as success, m.
     start_position : ndarray, shape (3,)
         Start position of the ee in world (orientation: the handle's).
+    start_yaw : float
+        Start orientation's turn about world z from the handle's, rad.
     """
 
     T_world_closed: np.ndarray = field(
@@ -288,6 +295,7 @@ class DrawerParams:
     coupling_damping: float = 60.0
     success_opening: float = 0.20
     start_position: np.ndarray = field(default_factory=lambda: np.array([0.50, 0.0, 0.71]))
+    start_yaw: float = 0.0
 
 
 def drawer_force(opening: float, speed: float, params: DrawerParams) -> float:
@@ -326,8 +334,8 @@ class DrawerScene:
 
     def start_pose(self) -> np.ndarray:
         """Hand above and in front of the handle, in the handle's orientation."""
-        return se3.transform_from_rt(self.params.T_world_closed[:3, :3],
-                                     self.params.start_position)
+        R = se3.matrix_from_rotvec([0.0, 0.0, self.params.start_yaw]) @ self.params.T_world_closed[:3, :3]
+        return se3.transform_from_rt(R, self.params.start_position)
 
     @property
     def axis(self) -> np.ndarray:
@@ -387,6 +395,7 @@ class DrawerScene:
             "attached": self.attached,
             "grasps": self.grasps,
             "success": self.opening >= P.success_opening,
+            "target_opening": P.success_opening,
         }
 
 
@@ -424,9 +433,41 @@ SCENES = {"pour": PourScene, "drawer": DrawerScene, "empty": EmptyScene}
 """Scene classes by name."""
 
 
-def make_scene(name: str) -> Scene:
-    """Scene by name (``pour``, ``drawer``, ``empty``)."""
+def make_scene(name: str, trial_seed: int | None = None, attempt: int = 0) -> Scene:
+    """Scene by name (``pour``, ``drawer``, ``empty``); with ``trial_seed``, a seeded
+    random start (:func:`randomize`; ``attempt`` draws another one for the same seed,
+    for a start the arm cannot reach)."""
     try:
-        return SCENES[name]()
+        scene = SCENES[name]()
     except KeyError:
         raise ValueError(f"scene: unknown {name!r}, expected one of {sorted(SCENES)}") from None
+    if trial_seed is not None:
+        randomize(scene, trial_seed, attempt)
+    return scene
+
+
+START_OFFSET = 0.10  # m: the hand starts within this of the scene's start, per axis
+START_YAW = np.radians(15.0)  # rad: and within this of its start orientation's yaw
+OBJECT_OFFSET = 0.05  # m: the task object stands within this of its default, per axis
+
+
+def randomize(scene: Scene, seed: int, attempt: int = 0) -> None:
+    """A seeded random start for an evaluation trial: the hand within +-START_OFFSET
+    (each axis) and +-START_YAW of the scene's start, the task object within
+    +-OBJECT_OFFSET of its default (on the table: horizontally for the mug)."""
+    rng = np.random.default_rng([seed, attempt] if attempt else seed)
+    P = getattr(scene, "params", None)
+    if P is None:
+        return
+    scene.default_start_pose = scene.start_pose()  # type: ignore[attr-defined]  # (start_posture's via)
+    P.start_position = P.start_position + rng.uniform(-START_OFFSET, START_OFFSET, 3)
+    P.start_yaw = float(rng.uniform(-START_YAW, START_YAW))
+    shift = rng.uniform(-OBJECT_OFFSET, OBJECT_OFFSET, 3)
+    if isinstance(P, PourParams):
+        shift[2] = 0.0  # the mug stands on the table
+        P.T_world_mug = P.T_world_mug.copy()
+        P.T_world_mug[:3, 3] += shift
+    elif isinstance(P, DrawerParams):
+        P.T_world_closed = P.T_world_closed.copy()
+        P.T_world_closed[:3, 3] += shift
+    scene.reset()

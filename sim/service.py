@@ -332,7 +332,8 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= view_port <= 65535:
         print(f"sctd sim: --view-port: not a TCP port: {view_port}", file=sys.stderr)
         return 2
-    from .simulation import Simulation
+    from .scenes import make_scene
+    from .simulation import Simulation, trial_scene
 
     try:
         channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
@@ -349,12 +350,16 @@ def run(args: argparse.Namespace) -> int:
             print(f"sctd sim: --view: {e}", file=sys.stderr)
             return 2
         print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
+    if args.trial_seed is not None:
+        scene, q0 = trial_scene(args.scene, args.trial_seed)
+    else:
+        scene, q0 = make_scene(args.scene), None
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     # the view closes last (server stopped, port free), after the loop and the service
     with viewer if viewer is not None else contextlib.nullcontext(), \
-            Simulation(scene=args.scene, rate=args.rate, faults=faults, channel=channel,
+            Simulation(scene=scene, q0=q0, rate=args.rate, faults=faults, channel=channel,
                        bus_factory=bus_factory, drive_timeout=args.drive_timeout) as sim, \
             session_from_args(args) as session, \
             SimService(session, sim, args.robot, args.state_rate, args.object_rate,

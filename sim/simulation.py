@@ -50,6 +50,9 @@ class Simulation:
     drive_timeout : float, optional
         Drive command timeout, s.
     arm : ArmModel, optional
+    compensate_payload : bool, optional
+        Tell the arm's controller the load the hand holds (the bottle as it empties), as
+        a real arm is configured; False only to measure what that buys.
 
     Attributes
     ----------
@@ -69,16 +72,17 @@ class Simulation:
         faults: FaultConfig | None = None,
         drive_timeout: float = 0.01,
         arm: ArmModel | None = None,
+        compensate_payload: bool = True,
     ) -> None:
+        self.compensate_payload = compensate_payload
         self.scene: Scene = make_scene(scene) if isinstance(scene, str) else scene
         model = arm or load_arm_model()
         if q0 is None:
-            q0 = start_posture(model, self.scene.start_pose())
+            q0 = start_posture(model, self.scene.start_pose(), getattr(self.scene, "default_start_pose",
+                                                                       None))
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
-        payload = self.scene.payload()
-        if payload is not None:  # the arm's load data, as a real arm is configured with it
-            self.arm.controller.set_payload(*payload)
+        self._payload()
         self._wrench = np.zeros(6)
         self._fk = model.model.createData()  # workspace of state_message (1 kHz: no allocation)
 
@@ -101,8 +105,15 @@ class Simulation:
         """One cycle: scene interaction at the current state, then the arm's cycle."""
         dyn = self.arm.dynamics
         self._wrench = self.scene.step(dyn.ee_transform(), dyn.ee_velocity(), self.arm.dt)
+        self._payload()
         self.arm.set_external_wrench(self._wrench)
         self.arm.step()
+
+    def _payload(self) -> None:
+        """The arm's load data, as a real arm is configured with the object it holds."""
+        payload = self.scene.payload() if self.compensate_payload else None
+        if payload is not None:
+            self.arm.controller.set_payload(*payload)
 
     def run(self, seconds: float) -> None:
         """Run ``round(seconds * rate)`` cycles."""
@@ -166,15 +177,45 @@ class Simulation:
         self.close()
 
 
-def start_posture(arm: ArmModel, T_world_ee: np.ndarray) -> np.ndarray:
+def trial_scene(name: str, seed: int, arm: ArmModel | None = None, attempts: int = 50
+                ) -> tuple[Scene, np.ndarray]:
+    """The scene of evaluation trial ``seed`` and the arm's start posture: the seeded
+    random start (:func:`~sctd_sim.scenes.randomize`), drawn again (deterministically)
+    while the arm cannot reach it, so every run of trial ``seed`` starts the same."""
+    model = arm or load_arm_model()
+    for attempt in range(attempts):
+        scene = make_scene(name, trial_seed=seed, attempt=attempt)
+        try:
+            return scene, start_posture(model, scene.start_pose(), getattr(scene, "default_start_pose", None))
+        except RuntimeError:
+            continue
+    raise RuntimeError(f"trial {seed}: no reachable start in {attempts} draws")
+
+
+def start_posture(arm: ArmModel, T_world_ee: np.ndarray, via: np.ndarray | None = None) -> np.ndarray:
     """Joint positions reaching ``T_world_ee``: IK from the up, rest and forward
-    postures, then from fixed pseudo-random seeds.
+    postures, then from fixed pseudo-random seeds; with ``via`` (a nearby pose, such as
+    a scene's default start), first by continuation from the posture of ``via`` along
+    the straight path to ``T_world_ee``, so that nearby starts get nearby postures.
 
     Raises
     ------
     RuntimeError
-        If the pose is out of reach from both seeds.
+        If the pose is out of reach from every seed.
     """
+    if via is not None and not np.allclose(via, T_world_ee):
+        q = start_posture(arm, via)
+        ok = True
+        for s in np.linspace(0.1, 1.0, 10):
+            T = via.copy()
+            T[:3, 3] = via[:3, 3] + s * (T_world_ee[:3, 3] - via[:3, 3])
+            w = se3.rotvec_from_matrix(via[:3, :3].T @ T_world_ee[:3, :3])
+            T[:3, :3] = via[:3, :3] @ se3.matrix_from_rotvec(s * w)
+            q, ok = inverse_kinematics(arm, T, q_init=q, max_iter=300)
+            if not ok:
+                break
+        if ok:
+            return q
     rng = np.random.default_rng(0)  # fixed: the same start posture every run
     seeds = [UP_POSTURE, arm.rest, FORWARD_POSTURE]
     seeds += [rng.uniform(0.8 * arm.q_lower, 0.8 * arm.q_upper) for _ in range(30)]

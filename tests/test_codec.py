@@ -29,6 +29,13 @@ def packed(**fields):
     return msgpack.packb({"seq": 1, "stamp": 1.0, **fields}, use_bin_type=True)
 
 
+def test_buttons_round_trip_and_default_to_none_pressed():
+    m = codec.decode_input(codec.encode_input(1, 1.0, [0.1, 0, 0], buttons=[1, 0, True]))
+    assert m.buttons == (1, 0, 1) and m.u == (0.1, 0.0, 0.0)
+    assert codec.decode_input(codec.encode_input(1, 1.0, [0, 0, 0])).buttons == ()
+    assert codec.decode_input(packed(u=[0, 0, 0], buttons=[False, True])).buttons == (0, 1)
+
+
 @pytest.mark.parametrize("data, reason", [
     (b"\xc1", "not_msgpack"),
     (msgpack.packb([1, 2]), "not_map"),
@@ -39,6 +46,10 @@ def packed(**fields):
     (msgpack.packb({"seq": True, "stamp": 1.0, "u": [0, 0, 0]}), "bad_seq"),
     (msgpack.packb({"seq": 1, "stamp": float("nan"), "u": [0, 0, 0]}), "bad_stamp"),
     (msgpack.packb({"v": 0, "seq": 1, "stamp": 1.0, "u": [0, 0, 0]}), "bad_version"),
+    (packed(u=[0, 0, 0], buttons=[0, 2]), "bad_buttons"),
+    (packed(u=[0, 0, 0], buttons=[0.0, 1]), "bad_buttons"),   # a float is not a button
+    (packed(u=[0, 0, 0], buttons="01"), "bad_buttons"),
+    (packed(u=[0, 0, 0], buttons=[0] * 33), "bad_buttons"),   # more than MAX_BUTTONS
 ])
 def test_malformed_input_reasons(data, reason):
     with pytest.raises(codec.DecodeError) as e:

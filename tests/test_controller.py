@@ -341,3 +341,64 @@ def test_state_watch_flags_jumps_turns_and_restarts():
     assert w.observe(4, F(turned), 0.003) and w.epoch == 2
     assert w.observe(1, F(turned), 0.004) and w.epoch == 3  # seq backwards: a restart
     assert not w.observe(2, F(turned), 0.005) and w.since == 0.004
+
+
+def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
+    """skills/teleop.yaml: button 0 toggles translate/rotate (rising edge, counted per
+    message by ButtonWatch); enable (button 1) = 0 makes the command zero."""
+    from sctd.runtime.controller import ButtonWatch
+    from sctd.skill import WORLD_OBJECT
+
+    teleop = load_skill(ROOT / "skills" / "teleop.yaml")
+    assert teleop.object == WORLD_OBJECT
+    c = Controller(teleop, RuntimeConfig())
+    world = Sample(0, 0.0, 0.0, F=se3.flat_from_matrix4(np.eye(4)))
+    watch = ButtonWatch()
+    T = T_START.copy()
+    seq = 0
+
+    def tick(t, u, buttons=(0, 1, 0)):
+        nonlocal seq, T
+        seq += 1
+        world.received = world.stamp = t
+        s = Sample(seq, t, t, u=tuple(u), buttons=buttons, presses=watch.observe(buttons))
+        r = c.tick(t, t, s, state(T, t), world)
+        T = r.T_world_target
+        return r
+
+    t = 0.0
+    for _ in range(50):
+        t += 0.001
+        r = tick(t, [1, 0, 0])
+    assert r.state == "translate" and T[0, 3] > T_START[0, 3] + 0.004
+    p = T[:3, 3].copy()
+    # press (two messages with the button down count once), then rotate about world z
+    for b in [(1, 1, 0), (1, 1, 0), (0, 1, 0)]:
+        t += 0.001
+        r = tick(t, [0, 0, 0], b)
+    assert r.state == "rotate" and c.counters.presses == 1
+    R0 = T[:3, :3].copy()
+    for _ in range(100):
+        t += 0.001
+        r = tick(t, [0, 0, 1])
+    assert np.allclose(T[:3, 3], p, atol=1e-12)  # rotation about the hand's origin
+    w = se3.rotvec_from_matrix(R0.T @ T[:3, :3])
+    assert w[2] > 0.04 and abs(w[0]) < 1e-9 and abs(w[1]) < 1e-9
+    # deadman released: no motion, counted
+    held = T.copy()
+    for _ in range(20):
+        t += 0.001
+        r = tick(t, [0, 0, 1], (0, 0, 0))
+    assert np.array_equal(T, held) and c.counters.disabled_input > 0 and r.mode == "stopped"
+
+
+def test_a_press_on_stale_input_does_nothing():
+    from sctd.runtime.controller import ButtonWatch
+
+    c = Controller(load_skill(ROOT / "skills" / "teleop.yaml"), RuntimeConfig())
+    world = Sample(0, 0.0, 0.0, F=se3.flat_from_matrix4(np.eye(4)))
+    w = ButtonWatch()
+    c.tick(0.0, 0.0, None, state(T_START, 0.0), world)
+    old = Sample(1, 0.0, 0.0, u=(0, 0, 0), buttons=(1, 1, 0), presses=w.observe((1, 1, 0)))
+    r = c.tick(0.5, 0.5, old, state(T_START, 0.5), Sample(0, 0.5, 0.5, F=world.F))
+    assert r.state == "translate" and c.counters.presses == 0

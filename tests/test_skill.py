@@ -272,9 +272,94 @@ def test_vector_field_scaling(fmt):
     assert np.allclose(across, [0, 0.1 * 0.1 * dt, 0])      # orthogonal: clipped to min_v
     assert np.allclose(against, [-0.1 * 0.1 * dt, 0, 0])
     assert np.array_equal(eng.command(T, np.zeros(3), dt)[:3, 3], T[:3, 3])
-    # Orientation pulled to the neighbours' (rz 0.4) by the constraint.
+    # Orientation pulled towards the neighbours' (rz 0.4) by the constraint, at most as
+    # far per command as the push may turn the hand (|u| * max_angular_speed * dt).
     R = eng.command(T, np.array([1.0, 0, 0]), dt)[:3, :3]
-    assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.4], atol=1e-9)
+    assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.5 * dt], atol=1e-9)
+    R = eng.command(T, np.array([0.5, 0, 0]), dt)[:3, :3]
+    assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.25 * dt], atol=1e-9)
+    T_k = T
+    for _ in range(100):  # 0.4 rad at 0.005 rad per command: there in 80
+        T_k = eng.command(T_k, np.array([1.0, 0, 0]), dt)
+    assert np.allclose(se3.rotvec_from_matrix(T_k[:3, :3]), [0, 0, 0.4], atol=1e-9)
+    # A projection outside a command is a whole one.
+    c = eng.skill.states[0].active_constraints[0]
+    assert np.allclose(se3.rotvec_from_matrix(eng.project(T, c)[:3, :3]), [0, 0, 0.4], atol=1e-9)
+
+
+def two_field_model() -> VectorFieldModel:
+    """A reach along -x next to the end of a pull along +x (the drawer's overlap):
+    points of both at x in [0, 0.2]; those of the pull upright, of the reach turned
+    about z by 1 rad; the position alone says "pull" (responsibilities 0.1 / 0.9)."""
+    n = 41
+    x = np.linspace(0.0, 0.2, n)
+    pts = np.concatenate([np.stack([x, np.zeros(n), np.zeros(n)], 1),
+                          np.stack([x, np.zeros(n), np.full(n, 0.01)], 1)])
+    q = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)),
+                        np.tile(se3.quaternion_from_rotvec([0.0, 0.0, 1.0]), (n, 1))])
+    resp = np.tile([0.1, 0.9], (2 * n, 1))
+    fields = (Field("translation", direction=np.array([-1.0, 0, 0]), weight=0.5),
+              Field("translation", direction=np.array([1.0, 0, 0]), weight=0.5))
+    return VectorFieldModel(fields, pts, q, resp)
+
+
+def _two_field_engine(combine, rotation_weight=0.0):
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0]["combine"] = combine
+    doc["states"]["go"]["active_constraints"][0]["rotation_weight"] = rotation_weight
+    files = {"m.json": vector_field_model_to_bytes(two_field_model(), "m.json")}
+    return SkillEngine(load_text(yaml.safe_dump(doc), files))
+
+
+def test_intent_membership_follows_the_push_where_fields_overlap():
+    """By position alone a push along the reach runs at the min_v floor; weighing the
+    fields by the push as well, the reach is what the user means."""
+    T = se3.transform_from_rt(np.eye(3), [0.1, 0.0, 0.0])
+    dt = 0.01
+    weighted, intent = _two_field_engine("weighted"), _two_field_engine("intent")
+    push = np.array([-1.0, 0.0, 0.0])
+    assert weighted.command(T, push, dt)[0, 3] - 0.1 > -0.1 * dt * 0.2  # s = 0.1 - 0.9 < 0: the min_v floor
+    assert np.isclose(intent.command(T, push, dt)[0, 3] - 0.1, -0.1 * dt, rtol=0.05)
+    assert intent.last_membership[0] > 0.9
+    # and a pull is still a pull
+    assert np.isclose(intent.command(T, -push, dt)[0, 3] - 0.1, 0.1 * dt, rtol=0.01)
+    assert intent.last_membership[1] > 0.99
+    # zero input never moves the hand, whatever the fields say
+    for eng in (weighted, intent):
+        assert np.array_equal(eng.command(T, np.zeros(3), dt), T)
+
+
+@given(st.lists(st.floats(0, 1), min_size=2, max_size=4), st.lists(st.floats(-1, 1), min_size=4, max_size=4),
+       st.floats(0, 20))
+@settings(deadline=None)
+def test_intent_membership_is_a_distribution_that_favours_agreement(p, s, kappa):
+    from sctd.skill.engine import intent_membership
+
+    k = len(p)
+    P = np.asarray(p) + 1e-3
+    P /= P.sum()
+    prior = np.full(k, 1.0 / k)
+    post = intent_membership(P, prior, s[:k], kappa)
+    assert np.all(post >= 0) and np.isclose(post.sum(), 1.0)
+    base = intent_membership(P, prior, [0.0] * k, kappa)  # no evidence: the mixed prior
+    assert np.allclose(base, 0.9 * P + 0.1 * prior)
+    i, j = int(np.argmax(s[:k])), int(np.argmin(s[:k]))
+    assert post[i] / base[i] >= post[j] / base[j] - 1e-12  # the push's field gains most
+
+
+def test_neighbour_orientation_by_pose_follows_the_demonstrations_turned_as_the_hand():
+    """At a position both upright and turned demonstrations passed, by position the
+    constraint turns an upright hand towards their mean; by pose it keeps it upright,
+    and keeps a turned hand turned."""
+    T_up = se3.transform_from_rt(np.eye(3), [0.1, 0.0, 0.005])
+    T_turned = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, 0.95]), [0.1, 0.0, 0.005])
+    by_position, by_pose = _two_field_engine("weighted", 0.0), _two_field_engine("weighted", 0.1)
+    c = by_pose.skill.states[0].active_constraints[0]
+    assert c.rotation_weight == 0.1
+    angle = lambda T: float(se3.rotvec_from_matrix(T[:3, :3])[2])  # noqa: E731
+    assert 0.3 < angle(by_position.project(T_up, by_position.skill.states[0].active_constraints[0])) < 0.7
+    assert abs(angle(by_pose.project(T_up, c))) < 1e-9
+    assert np.isclose(angle(by_pose.project(T_turned, c)), 1.0, atol=1e-9)
 
 
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
@@ -354,3 +439,37 @@ def test_summary_is_json_and_has_matrix():
     carry = s["states"][0]["input_mappings"][0]
     assert np.allclose(carry["matrix"], np.vstack([np.eye(3), np.zeros((3, 3))]))
     assert s["transitions"][0]["below"] == 0.15 and math.isclose(s["transitions"][0]["margin"], 0.01)
+
+
+def sphere_model(centre, pivot) -> VectorFieldModel:
+    """A pouring sphere of radius 0.12 about ``centre``, demonstrated by a hand whose
+    point ``pivot`` (ee offset) sat on the centre; points on its lower half."""
+    a = np.linspace(-0.6, 0.6, 25)
+    pts = np.array([[0.12 * math.sin(x), 0.0, -0.12 * math.cos(x)] for x in a]) + centre
+    q = np.array([se3.quaternion_from_rotvec([0.0, x, 0.0]) for x in a])
+    f = Field("sphere", weight=1.0, centre=np.asarray(centre, float), radius=0.12,
+              pivot=np.asarray(pivot, float))
+    return VectorFieldModel((f,), pts, q, np.ones((len(a), 1)))
+
+
+def test_rigid_motion_turns_the_hand_about_its_pivot_on_a_sphere():
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0]["motion"] = "rigid"
+    doc["states"]["go"]["active_constraints"] = []
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    T = se3.transform_from_rt(np.eye(3), centre - pivot)  # upright, the pivot on the centre
+    dt = 0.01
+    T1 = eng.command(T, np.array([1.0, 0.0, 0.0]), dt)  # tangent at the sphere's bottom
+    assert np.linalg.norm((T1 @ np.append(pivot, 1.0))[:3] - centre) < 1e-9  # the opening stays
+    assert np.isclose(np.linalg.norm(T1[:3, 3] - T[:3, 3]), 0.1 * dt, rtol=1e-3)  # at the speed
+    w = se3.rotvec_from_matrix(T1[:3, :3])
+    assert w[1] < 0 and np.isclose(np.linalg.norm(w), 0.1 * dt / 0.12, rtol=1e-3)  # tilts about y
+    assert np.array_equal(eng.command(T, np.zeros(3), dt), T)  # zero input: nothing turns
+    # far from the centre (the opening not brought there yet) the push only translates
+    # (scaled by its agreement with the field, eq. 4.34)
+    T_far = se3.transform_from_rt(np.eye(3), centre - pivot + [0.1, 0.0, 0.0])
+    T2 = eng.command(T_far, np.array([1.0, 0.0, 0.0]), dt)
+    d = T2[:3, 3] - T_far[:3, 3]
+    assert np.allclose(T2[:3, :3], np.eye(3)) and 0 < d[0] <= 0.1 * dt and np.allclose(d[1:], 0)

@@ -25,8 +25,9 @@ def add_demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", default="skills/pour.yaml", help="skill YAML (default %(default)s)")
     p.add_argument("--task", choices=sorted(set(TASK_OF_OBJECT.values())),
                    help="what the simulated user tries to do (default: from the skill's object)")
-    p.add_argument("--seconds", type=float, default=10.0,
-                   help="how long the user drives (default %(default)s)")
+    p.add_argument("--seconds", type=float, default=40.0,
+                   help="the longest the user drives; it stops when it has done the task "
+                        "(default %(default)s)")
     p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
     p.add_argument("--robot-backend", default="sim", choices=sorted(ROBOTS),
                    help="what stands in for the arm: the Pinocchio simulator (sim, default) or "
@@ -107,7 +108,7 @@ def main_demo(args: argparse.Namespace) -> int:
             ok = False
         else:
             user = Child("sctd_services.simulated_user", "--task", task, "--connect", ep,
-                         "--duration", str(args.seconds), "--json")
+                         "--duration", str(args.seconds), "--until-done", "--json")
             report = _last_json(user.communicate(timeout=args.seconds + 60))
             user.stop()
             if report is None:
@@ -126,7 +127,7 @@ def main_demo(args: argparse.Namespace) -> int:
     lat = report["latency_ms"]
     print(f"final state: {report['final_state']} (end state {skill.end}"
           f"{', reached' if report['final_state'] == skill.end else ', not reached'})")
-    print(f"targets: {report['target_rate']:.0f} /s at the user over {args.seconds:.0f} s "
+    print(f"targets: {report['target_rate']:.0f} /s at the user over {report['elapsed_s']:.1f} s "
           f"(daemon at {args.rate:.0f} Hz; {stats['ticks']} ticks, {stats['late_ticks']} late)")
     print(f"input -> target latency: p50 {lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, "
           f"max {lat['max']:.3f} ms ({lat['n']} samples)")

@@ -40,6 +40,13 @@ def build_parser() -> argparse.ArgumentParser:
     learn_cli.add_dtw_arguments(p)
     p.set_defaults(func=learn_cli.main_dtw)
 
+    from . import eval as eval_cmd
+
+    p = sub.add_parser("eval", help="measure a skill's assistance with the simulated user "
+                                    "(success, time, effort; lockstep or real time)")
+    eval_cmd.add_eval_arguments(p)
+    p.set_defaults(func=eval_cmd.main_eval)
+
     p = sub.add_parser("sim", help="the Pinocchio simulator as a real-time Zenoh service")
     sim_cmd.add_sim_arguments(p)
     p.set_defaults(func=sim_cmd.main_sim)

@@ -19,6 +19,9 @@ def add_sim_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", default="pour", choices=("pour", "drawer"),
                    help="task scene (default %(default)s)")
     p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    p.add_argument("--trial-seed", type=int, default=None, metavar="N",
+                   help="start from the seeded random start N of an evaluation trial (hand within "
+                        "+-10 cm and +-15 deg of yaw of the scene's start, the object within +-5 cm)")
     p.add_argument("--rate", type=float, default=1000.0,
                    help="simulation cycle rate, Hz (default %(default)s)")
     p.add_argument("--state-rate", type=float, default=1000.0,
@@ -88,6 +91,9 @@ def add_bench_sim_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=3.0,
                    help="simulated seconds of the real-time-factor run (default %(default)s)")
     p.add_argument("--rate", type=float, default=1000.0, help="cycle rate, Hz (default %(default)s)")
+    p.add_argument("--scene", choices=("pour", "drawer"), default=None,
+                   help="measure the step (5 cm along world x) and tracking in this scene, with "
+                        "its load, instead of the empty-workspace figures")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
@@ -97,6 +103,12 @@ def main_bench_sim(args: argparse.Namespace) -> int:
     if args.seconds <= 0 or args.rate <= 0:
         print("sctd bench sim: --seconds and --rate must be positive", file=sys.stderr)
         return 2
+    if args.scene is not None:
+        from sctd_sim.bench import format_scene_report, run_scene_bench
+
+        result = run_scene_bench(args.scene, args.rate)
+        print(json.dumps(result, default=float) if args.json else format_scene_report(result))
+        return 0
     result = run_bench(args.seconds, args.rate)
     if args.json:
         print(json.dumps(result, default=float))

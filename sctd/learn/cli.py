@@ -70,6 +70,17 @@ def add_learn_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPar
     g.add_argument("--max-d", type=float, default=_D.max_d, help="neighbour distance (m)")
     g.add_argument("--k-s", type=float, default=_D.k_s, help="sigmoid k (eq. 4.33)")
     g.add_argument("--vf-max-n", type=int, default=_D.vf_max_n, help="neighbours at run time")
+    g.add_argument("--vf-motion", choices=("rigid", "translate"), default=_D.vf_motion,
+                   help="rigid: motion along a sphere or cylinder field turns the hand about its "
+                        "centre or axis; translate: only moves it, as in the thesis (default %(default)s)")
+    g.add_argument("--vf-rotation-weight", type=float, default=_D.vf_rotation_weight,
+                   help="m per rad: the neighbour-orientation constraint takes the demonstration "
+                        "points nearest in pose (position and orientation) rather than in position "
+                        "alone (0, the thesis) (default %(default)s)")
+    g.add_argument("--vf-combine", choices=("intent", "weighted", "most_probable"), default=_D.vf_combine,
+                   help="how fields' agreements combine: intent weighs them by the membership given "
+                        "the position and the command; weighted (eq. 4.32) and most_probable "
+                        "(eq. 4.31) by the position's alone (default %(default)s)")
     g.add_argument("--max-linear-speed", type=float, default=_D.max_linear_speed)
     g.add_argument("--max-angular-speed", type=float, default=_D.max_angular_speed)
     return parser

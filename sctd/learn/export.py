@@ -115,6 +115,12 @@ def write_vf_skill(result: VectorFieldResult, out: str | Path) -> Skill:
     tmp = out.with_name(rel + ".tmp")
     tmp.write_bytes(data)
     os.replace(tmp, out.with_name(rel))
+    constraint: dict[str, Any] = {"type": "neighbour_orientation", "model": rel, "frame": "ee",
+                                  "max_n": p.vf_max_n, "max_d": p.max_d,
+                                  "rotation_weight": p.vf_rotation_weight}
+    pivots = [f for f in result.learner.fields_ if f.pivot is not None]
+    if pivots and p.vf_motion == "rigid":  # orientation pulled about the point the hand turned about
+        constraint["pivot"] = _r(max(pivots, key=lambda f: f.weight).pivot)
     doc = {
         "sctd_skill": 1, "name": out.stem,
         "description": (f"Learned by sctd learn --method vf from {len(result.prepared)} "
@@ -124,10 +130,9 @@ def write_vf_skill(result: VectorFieldResult, out: str | Path) -> Skill:
         "fsm": {"start": "default", "end": "default", "transitions": []},
         "states": {"default": {
             "input_mapping": [{"type": "vector_field", "model": rel, "frame": "ee", "mode": "scale",
-                               "combine": "weighted", "min_v": p.min_v, "k_s": p.k_s,
-                               "max_n": p.vf_max_n, "max_d": p.max_d}],
-            "active_constraints": [{"type": "neighbour_orientation", "model": rel, "frame": "ee",
-                                    "max_n": p.vf_max_n, "max_d": p.max_d}]}},
+                               "combine": p.vf_combine, "min_v": p.min_v, "k_s": p.k_s,
+                               "max_n": p.vf_max_n, "max_d": p.max_d, "motion": p.vf_motion}],
+            "active_constraints": [constraint]}},
         "candidate_frames": result.learner.candidate_frames_,
     }
     lines = ["Learned skill (sctd learn --method vf). Fields:"]

@@ -57,6 +57,9 @@ class LearnParams:
     max_d: float = 0.15
     k_s: float = 0.5
     vf_max_n: int = 5
+    vf_combine: str = "intent"  # intent: membership given the command too (weighted: eq. 4.32)
+    vf_rotation_weight: float = 0.1  # m/rad: neighbour orientation by pose (0: by position, the thesis)
+    vf_motion: str = "rigid"  # rigid: rotational fields turn the hand (translate: the thesis')
     # skill
     object: str = "object"
     max_linear_speed: float = 0.10

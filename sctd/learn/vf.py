@@ -171,6 +171,12 @@ class VectorFieldLearner:
         like any motion).
     refine_steps : int
         Least-squares refinements of each RANSAC winner.
+    chance_weight : float
+        Weight of the chance-inlier correction when comparing field types.
+    pivot_spread : float
+        A rotational field whose centre (or axis point) stays within this RMS distance
+        (m) of one point of the hand over its inliers gets that point as its ``pivot``
+        (the demonstrations turned about it: a bottle's opening).
     random_state : int, numpy Generator or None
 
     Attributes
@@ -196,7 +202,7 @@ class VectorFieldLearner:
                  outlier_ratio: float = 0.7, min_inliers: int = 10, min_weight: float = 0.05,
                  coherence: bool = True, coherence_run: int = 3, coherence_radius: float = 0.05,
                  min_radius: float = 0.02, max_radius: float = 0.3, refine_steps: int = 2,
-                 chance_weight: float = 0.5, random_state=None):
+                 chance_weight: float = 0.5, pivot_spread: float = 0.02, random_state=None):
         self.n_fields = n_fields
         self.em_iterations = em_iterations
         self.angles = angles
@@ -212,6 +218,7 @@ class VectorFieldLearner:
         self.max_radius = max_radius
         self.refine_steps = refine_steps
         self.chance_weight = chance_weight
+        self.pivot_spread = pivot_spread
         self.random_state = random_state
 
     # --- helpers ----------------------------------------------------------------------
@@ -459,8 +466,11 @@ class VectorFieldLearner:
             if sel.any():
                 R = se3.matrix_from_quaternion(self.quaternions_[sel])
                 off = np.einsum("nji,nj->ni", R, pos - self.points_[sel])
-                entry["ee_offset"] = [round(float(x), 6) for x in off.mean(axis=0)]
-                entry["ee_offset_spread"] = round(float(np.sqrt(np.mean(
-                    np.sum((off - off.mean(axis=0)) ** 2, axis=1)))), 6)
+                mean = off.mean(axis=0)
+                spread = float(np.sqrt(np.mean(np.sum((off - mean) ** 2, axis=1))))
+                entry["ee_offset"] = [round(float(x), 6) for x in mean]
+                entry["ee_offset_spread"] = round(spread, 6)
+                if spread < self.pivot_spread:  # the demonstrations turned about a point of the hand
+                    self.fields_[m] = replace(f, pivot=mean)
             out.append(entry)
         self.candidate_frames_ = out

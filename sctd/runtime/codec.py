@@ -26,6 +26,9 @@ MAX_STATE_BYTES = 65536
 MAX_OBJECT_BYTES = 4096
 MAX_JOINTS = 64  # longest q / dq a state may carry
 MAX_POSITION = 1000.0  # m: a pose further from the world origin is not a pose of this robot
+MAX_BUTTONS = 32
+# Button positions in an input message's ``buttons`` (wire contract v1).
+BUTTON_MODE, BUTTON_ENABLE, BUTTON_ESCAPE = 0, 1, 2
 
 
 class DecodeError(ValueError):
@@ -147,6 +150,7 @@ class InputMsg(NamedTuple):
     seq: int
     stamp: float
     u: tuple[float, ...]  # may hold non-finite values: the runtime treats those as zero
+    buttons: tuple[int, ...] = ()  # 0/1 by position; () when the message has none
 
 
 class StateMsg(NamedTuple):
@@ -184,11 +188,19 @@ def _joints(obj: dict, key: str) -> list[float] | None:
 
 
 def decode_input(data: bytes) -> InputMsg:
-    """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers)."""
+    """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers), optional buttons
+    (at most MAX_BUTTONS values 0 or 1 by position: 0 mode switch, 1 enable, 2 escape)."""
     _size(data, MAX_INPUT_BYTES)
     obj = unpack_map(data)
     u = _floats(obj, "u", (3, 6))
-    return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u))
+    b = obj.get("buttons")
+    buttons: tuple[int, ...] = ()
+    if b is not None:
+        if not isinstance(b, list | tuple) or len(b) > MAX_BUTTONS or not all(
+                x is True or x is False or (type(x) is int and x in (0, 1)) for x in b):
+            raise DecodeError("bad_buttons", f"expected at most {MAX_BUTTONS} values 0 or 1")
+        buttons = tuple(int(x) for x in b)
+    return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u), buttons)
 
 
 def decode_state(data: bytes) -> StateMsg:
@@ -216,8 +228,12 @@ def decode_object(data: bytes) -> ObjectMsg:
     return ObjectMsg(_int(obj, "seq"), _stamp(obj), _pose(obj))
 
 
-def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...]) -> bytes:
-    return pack({"seq": seq, "stamp": stamp, "u": [float(x) for x in u]})
+def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...],
+                 buttons: list[int] | tuple[int, ...] | None = None) -> bytes:
+    msg: dict[str, Any] = {"seq": seq, "stamp": stamp, "u": [float(x) for x in u]}
+    if buttons is not None:
+        msg["buttons"] = [int(bool(x)) for x in buttons]
+    return pack(msg)
 
 
 def encode_state(seq: int, stamp: float, pose: list[float], *, q: list[float] | None = None,

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine
+from .codec import BUTTON_ENABLE
 from .safety import grows_offset, limit_step, sanitize_input
 
 Array = NDArray[np.float64]
@@ -80,6 +81,29 @@ class Sample:
     pose: list[float] | None = None
     epoch: int = 0
     since: float = 0.0
+    buttons: tuple[int, ...] = ()
+    presses: tuple[int, ...] = ()  # input: rising edges per button so far (ButtonWatch)
+
+
+class ButtonWatch:
+    """Rising edges of input buttons, counted message by message (so that a press is not
+    lost when a tick sees only the newest of several messages)."""
+
+    def __init__(self) -> None:
+        self._last: tuple[int, ...] = ()
+        self.presses: tuple[int, ...] = ()
+
+    def observe(self, buttons: tuple[int, ...]) -> tuple[int, ...]:
+        """Take one message's buttons; the press counts so far."""
+        last, counts = self._last, list(self.presses)
+        if len(counts) < len(buttons):
+            counts += [0] * (len(buttons) - len(counts))
+        for i, b in enumerate(buttons):
+            if b and not (i < len(last) and last[i]):
+                counts[i] += 1
+        self._last = buttons
+        self.presses = tuple(counts)
+        return self.presses
 
 
 class _Target:
@@ -127,6 +151,8 @@ class TickResult:
 class Counters:
     nonfinite_input: int = 0
     stale_input: int = 0
+    disabled_input: int = 0
+    presses: int = 0
     stale_state: int = 0
     stale_object: int = 0
     nonfinite_output: int = 0
@@ -166,6 +192,7 @@ class Controller:
         self._target: _Target | None = None
         self.mode = "waiting"
         self.last_in_seq = -1
+        self._presses: tuple[int, ...] = ()  # press counts of the input already acted on
         self._pose: list[float] | None = None
         self._publishing = False  # the last tick published: the next may step from its target
         self._fault = False
@@ -222,6 +249,7 @@ class Controller:
         cfg = self.config
         u, input_ok = self._command(now, wall, inp)
         in_seq = inp.seq if inp is not None else -1
+        pressed = self._pressed(inp, input_ok)
         state_ok = self._fresh("state", state, now, wall, cfg.state_timeout)
         obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
         if state_ok and state is not None and state.epoch != self._epoch:
@@ -275,7 +303,7 @@ class Controller:
             fx, fy, fz = state.wrench[:3]
             force = np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
                               r[6] * fx + r[7] * fy + r[8] * fz])
-        changed = self.engine.update(F_meas, now, force)
+        changed = self.engine.update(F_meas, now, force, pressed)
         if changed:
             self.counters.transitions += 1
 
@@ -354,8 +382,23 @@ class Controller:
         self._target = _Target(o, F)
         return True
 
+    def _pressed(self, inp: Sample | None, fresh: bool) -> frozenset[int]:
+        """Buttons pressed since the last tick (rising edges of a fresh input; presses on
+        a stale or disabled one are dropped)."""
+        if inp is None or not inp.presses or inp.presses == self._presses:
+            return frozenset()
+        last = self._presses
+        self._presses = inp.presses
+        if not fresh:
+            return frozenset()
+        new = frozenset(i for i, n in enumerate(inp.presses)  # enable is held, not pressed
+                        if i != BUTTON_ENABLE and n > (last[i] if i < len(last) else 0))
+        self.counters.presses += len(new)
+        return new
+
     def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[tuple[float, ...], bool]:
-        """The user command this tick: zero when missing, stale or not finite."""
+        """The user command this tick: zero when missing, stale, not finite or not enabled
+        (``buttons[1] == 0``)."""
         cfg = self.config
         if inp is None:
             return (0.0, 0.0, 0.0), False
@@ -365,6 +408,12 @@ class Controller:
         if stale:
             if inp.seq != self.last_in_seq:
                 self.counters.stale_input += 1
+                self.last_in_seq = inp.seq
+            return (0.0,) * len(inp.u), False
+        b = inp.buttons
+        if len(b) > BUTTON_ENABLE and not b[BUTTON_ENABLE]:  # the deadman is released
+            if inp.seq != self.last_in_seq:
+                self.counters.disabled_input += 1
                 self.last_in_seq = inp.seq
             return (0.0,) * len(inp.u), False
         u, ok = sanitize_input(inp.u, cfg.deadband)

@@ -31,10 +31,10 @@ import msgpack
 import zenoh
 
 from .. import se3
-from ..skill import Skill, SkillEngine, SkillError, skill_summary
+from ..skill import WORLD_OBJECT, Skill, SkillEngine, SkillError, skill_summary
 from ..skill.loader import MAX_BUNDLE_BYTES
 from . import codec
-from .controller import Controller, RuntimeConfig, Sample
+from .controller import ButtonWatch, Controller, RuntimeConfig, Sample
 from .safety import StateWatch
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 from .worker import BundleWorker
@@ -168,6 +168,8 @@ class Daemon:
         self._input: Sample | None = None
         self._state: Sample | None = None
         self._watch = StateWatch(config.state_jump, config.state_jump_rotation)
+        self._buttons = ButtonWatch()
+        self._world = Sample(0, 0.0, 0.0, F=se3.flat_from_pose([0, 0, 0, 0, 0, 0, 1]))
         self._window_targets = 0
         self._window_compute_max = 0.0
         self._publisher: _Publisher | None = None
@@ -207,7 +209,8 @@ class Daemon:
 
     def _take_input(self, data: bytes, key: Any, now: float) -> None:
         m = codec.decode_input(data)
-        self._input = Sample(m.seq, m.stamp, now, u=m.u)
+        presses = self._buttons.observe(m.buttons) if m.buttons else self._buttons.presses
+        self._input = Sample(m.seq, m.stamp, now, u=m.u, buttons=m.buttons, presses=presses)
 
     def _take_state(self, data: bytes, key: Any, now: float) -> None:
         m = codec.decode_state(data)
@@ -273,8 +276,9 @@ class Daemon:
                 self._refuse(query, str(e))
                 return
             old = self._object_inlets
-            objects = {skill.object: old[skill.object] if skill.object in old
-                       else self._object_inlet(skill.object)}
+            objects = {} if skill.object == WORLD_OBJECT else {
+                skill.object: old[skill.object] if skill.object in old
+                else self._object_inlet(skill.object)}
             pending = _Pending(skill, engine, objects, threading.Event())
             with self._lock:
                 self._pending = pending
@@ -327,7 +331,7 @@ class Daemon:
         # of names cost memory, and a ring per wildcard would lose the task object's
         # updates whenever another object publishes.
         obj = self.controller.skill.object
-        self._object_inlets = {obj: self._object_inlet(obj)}
+        self._object_inlets = {} if obj == WORLD_OBJECT else {obj: self._object_inlet(obj)}
         self._inlets = self._base_inlets + tuple(self._object_inlets.values())
         pub_target = s.declare_publisher(keys.target, express=True,
                                          congestion_control=zenoh.CongestionControl.DROP)
@@ -372,8 +376,12 @@ class Daemon:
                     break
                 wall = time.time()
                 ctl = self.controller
-                res = ctl.tick(now, wall, self._input, self._state,
-                               self._objects.get(ctl.skill.object))
+                if ctl.skill.object == WORLD_OBJECT:  # always there, always fresh
+                    obj_sample: Sample | None = self._world
+                    self._world.received, self._world.stamp = now, wall
+                else:
+                    obj_sample = self._objects.get(ctl.skill.object)
+                res = ctl.tick(now, wall, self._input, self._state, obj_sample)
                 if res.pose is not None:
                     self.target_seq += 1
                     send((self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
@@ -457,6 +465,8 @@ class Daemon:
             "counters": {
                 "nonfinite_input": c.nonfinite_input,
                 "stale_input": c.stale_input,
+                "disabled_input": c.disabled_input,
+                "presses": c.presses,
                 "stale_state": c.stale_state,
                 "stale_object": c.stale_object,
                 "nonfinite_output": c.nonfinite_output,

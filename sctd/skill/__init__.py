@@ -16,6 +16,7 @@ from .loader import (
 )
 from .model import (
     AXIS_NAMES,
+    WORLD_OBJECT,
     Band,
     Box,
     Field,
@@ -34,6 +35,7 @@ from .summary import field_summary, skill_summary
 
 __all__ = [
     "AXIS_NAMES",
+    "WORLD_OBJECT",
     "Band",
     "Box",
     "Bundle",

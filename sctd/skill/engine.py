@@ -52,6 +52,25 @@ class _Neighbours:
         w = 1.0 / (d + 1e-3)
         return i, w / w.sum() if len(w) else w
 
+    def query_pose(self, p: Array, q: Sequence[float], max_n: int, max_d: float,
+                   rotation_weight: float) -> tuple[Array, Array]:
+        """Like :meth:`query`, but the ``max_n`` nearest in pose: of the points within
+        ``max_d`` (at most ``POSE_CANDIDATES * max_n`` of them), those with the smallest
+        ``sqrt(|dp|^2 + (rotation_weight * angle)^2)`` to position ``p`` and unit
+        quaternion ``q`` [x, y, z, w]."""
+        d, i = self.tree.query(p, k=POSE_CANDIDATES * max_n, distance_upper_bound=max_d)
+        d, i = np.atleast_1d(d), np.atleast_1d(i)
+        ok = np.isfinite(d)
+        d, i = d[ok], i[ok]
+        if len(i) == 0:
+            return i, d
+        c = np.abs(self.model.quaternions[i] @ np.asarray(q, dtype=float))
+        angle = 2.0 * np.arccos(np.clip(c, 0.0, 1.0))
+        dist = np.sqrt(d * d + (rotation_weight * angle) ** 2)
+        best = np.argsort(dist, kind="stable")[:max_n]
+        w = 1.0 / (dist[best] + 1e-3)
+        return i[best], w / w.sum()
+
     def membership(self, p: Array, max_n: int, max_d: float) -> Array:
         """P(F | p): neighbours' EM responsibilities, distance-weighted (the prior when
         no demonstration point is near)."""
@@ -64,6 +83,17 @@ class _Neighbours:
 
 
 Flat = se3.Flat
+POSE_CANDIDATES = 8  # points within max_d a pose query ranks, per neighbour it keeps
+INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
+
+
+def intent_membership(P: Array, prior: Array, s: Sequence[float], kappa: float) -> Array:
+    """``P(F | p, u)``: the position's membership ``P`` (mixed with ``INTENT_PRIOR`` of
+    the fields' weights ``prior``, so that no field is ruled out by position alone)
+    times each field's agreement with the command, ``exp(kappa * s_F)``, normalised."""
+    post = ((1.0 - INTENT_PRIOR) * P + INTENT_PRIOR * prior) * np.exp(kappa * (np.asarray(s) - 1.0))
+    total = float(post.sum())
+    return post / total if total > 1e-300 else P
 
 
 def _floats_of(item) -> tuple:
@@ -132,6 +162,7 @@ class _LinearPlan:
                   if m.matrix[i, j] != 0.0)
             for i in range(6))
         self.in_frame = m.translation == "frame"
+        self.rotate_in_object = m.rotation == "object"
         T_ee_f = T_ee_frame.get(m.frame)  # None: the ee itself or an object frame
         self.offset = None if T_ee_f is None else _Offset(T_ee_f)
         self.obj_frame: Flat | None = None  # a frame fixed in the object
@@ -159,7 +190,9 @@ class _LinearPlan:
         out = F
         if rx or ry or rz:
             rot = se3.rows_from_rotvec(rx, ry, rz)
-            if self.obj_frame is not None:  # T_f Rot T_f^-1 T, T_f fixed in the object
+            if self.rotate_in_object:  # about the frame's origin, around the object's axes
+                out = se3.compose_flat(_rotation(*rot, *frame[9:]), F)
+            elif self.obj_frame is not None:  # T_f Rot T_f^-1 T, T_f fixed in the object
                 M = se3.compose_flat(se3.compose_flat(frame, (*rot, 0.0, 0.0, 0.0)), self.obj_frame_inv)
                 out = se3.compose_flat(M, F)
             elif self.offset is not None and self.offset.R is None:  # T [Rot about t]
@@ -175,6 +208,63 @@ class _LinearPlan:
                           frame[3] * dx + frame[4] * dy + frame[5] * dz,
                           frame[6] * dx + frame[7] * dy + frame[8] * dz)
         return (*out[:9], out[9] + dx, out[10] + dy, out[11] + dz)
+
+
+RIGID_MIN_RADIUS = 0.02  # m: closer to a field's centre or axis than this, no turning
+RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the field's
+RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
+
+
+def _rigid_step(T: Array, p: Array, R_frame: Array, d: Array, P: Array, fields) -> Array:
+    """Move the hand T (object frame) by the frame displacement ``d`` at the frame's
+    position ``p`` (orientation ``R_frame``): the part of it along each rotational field
+    (weighted by its membership ``P``) as a rotation of the whole hand about the field's
+    centre (sphere) or axis (cylinder), the rest as a translation. A field with a
+    ``pivot`` turns about that point of the hand (where the demonstrations turned)
+    rather than about the centre fitted in the object frame, so that a bottle's opening
+    stays where the user put it."""
+    out = T.copy()
+    rest = d.copy()
+    for k, f in enumerate(fields):
+        if f.type == "translation" or P[k] < 1e-6:
+            continue
+        dk = P[k] * d
+        if f.pivot is not None:
+            pivot = p + R_frame @ f.pivot
+            if f.type == "sphere":
+                off = float(np.linalg.norm(pivot - f.centre))
+            else:
+                v = pivot - f.point
+                off = float(np.linalg.norm(v - float(v @ f.axis) * f.axis))
+            dk = dk * min(1.0, max(0.0, (RIGID_REACH - off) / (RIGID_REACH - RIGID_FULL)))
+        if f.type == "sphere":
+            centre = f.centre if f.pivot is None else p + R_frame @ f.pivot
+            r = p - centre
+            rho = float(np.linalg.norm(r))
+            if rho < RIGID_MIN_RADIUS:
+                continue
+            n = r / rho
+            t = dk - float(dk @ n) * n  # tangent to the sphere
+            w = np.cross(n, t) / rho  # the rotation that moves p by t
+        else:
+            a, centre = f.axis, f.point if f.pivot is None else p + R_frame @ f.pivot
+            r = p - centre
+            r_perp = r - float(r @ a) * a
+            rho = float(np.linalg.norm(r_perp))
+            if rho < RIGID_MIN_RADIUS:
+                continue
+            e = np.cross(a, r_perp) / rho  # around the axis
+            along = float(dk @ e)
+            t = along * e
+            w = a * (along / rho)
+        if not np.any(t):
+            continue
+        R = se3.matrix_from_rotvec(w)
+        out[:3, :3] = R @ out[:3, :3]
+        out[:3, 3] = R @ (out[:3, 3] - centre) + centre
+        rest -= t
+    out[:3, 3] += rest
+    return out
 
 
 class SkillEngine:
@@ -223,6 +313,7 @@ class SkillEngine:
         self.entered = 0.0
         self.last_scale = 1.0  # the vector-field scaling of the last command, for status
         self.last_membership: Array | None = None
+        self._turn_budget = math.inf  # rad a neighbour orientation may turn (command_flat sets it)
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -245,7 +336,8 @@ class SkillEngine:
         self.index = self.skill.state_index(state or self.skill.start)
         self.entered = now
 
-    def update(self, T_obj_ee: Array | Flat, now: float, force_obj: Array | None = None) -> bool:
+    def update(self, T_obj_ee: Array | Flat, now: float, force_obj: Array | None = None,
+               pressed: frozenset[int] | set[int] = frozenset()) -> bool:
         """Evaluate the active state's transitions on the measured pose; follow the first
         that fires. Returns True when the state changed.
 
@@ -257,16 +349,27 @@ class SkillEngine:
             Monotonic time (s).
         force_obj : ndarray, shape (3,), optional
             Measured force at the end-effector, in the object frame (N).
+        pressed : set of int
+            Input buttons pressed since the last update (rising edges).
         """
+        # A button press is an event, not a condition: it acts however long the state has
+        # been active (the dwell only keeps geometric guards from chattering).
+        if pressed:
+            for t in self._out_of[self.index]:
+                if t.type == "button" and t.button in pressed:
+                    return self._enter(t.target, now)
         if now - self.entered < self.skill.min_dwell:
             return False
         F = T_obj_ee if isinstance(T_obj_ee, tuple) else se3.flat_from_matrix4(T_obj_ee)
         for t in self._out_of[self.index]:
-            if self._fires(t, F, now, force_obj):
-                self.index = self.skill.state_index(t.target)
-                self.entered = now
-                return True
+            if t.type != "button" and self._fires(t, F, now, force_obj):
+                return self._enter(t.target, now)
         return False
+
+    def _enter(self, state: str, now: float) -> bool:
+        self.index = self.skill.state_index(state)
+        self.entered = now
+        return True
 
     def frame_of(self, F: Flat, frame: str) -> Flat:
         """Flat pose of an ee-attached ``frame`` (or the ee itself) for flat ee pose F."""
@@ -323,6 +426,13 @@ class SkillEngine:
         go through arrays."""
         state = self.skill.states[self.index]
         uu = u.tolist() if isinstance(u, np.ndarray) else u
+        # How far a neighbour-orientation correction may turn this tick: as far as the
+        # user's push lets the hand turn (the runtime bounds the whole step by the same
+        # push), so that turning towards the demonstrations never uses up the step the
+        # user's own motion needs, and zero input turns nothing.
+        n = len(uu)
+        push = min(1.0, math.sqrt(sum(uu[j] * uu[j] for j in self.input_axes if j < n)))
+        self._turn_budget = push * self.skill.limits.max_angular_speed * dt
         for m in state.input_mappings:
             if isinstance(m, LinearMapping):
                 F = self._linear_plans[id(m)].apply(F, uu, dt)
@@ -337,6 +447,7 @@ class SkillEngine:
             F_next = self.project_flat(F, c, G)
             if F_next is not F:
                 F, G = F_next, None
+        self._turn_budget = math.inf  # a projection outside a command is a whole one
         return F
 
     def _vector_field(self, T: Array, m: VectorFieldMapping, u: Array, dt: float) -> Array:
@@ -352,11 +463,14 @@ class SkillEngine:
             u3 /= mag
             mag = 1.0
         unit = u3 / mag
-        p = np.array(self.frame_of(se3.flat_from_matrix4(T), m.frame)[9:])
+        G = self.frame_of(se3.flat_from_matrix4(T), m.frame)
+        p = np.array(G[9:])
         nb = self._trees[id(m.model)]
         P = nb.membership(p, m.max_n, m.max_d)
-        self.last_membership = P
         fields = m.model.fields
+        if m.combine == "intent":
+            P = intent_membership(P, nb.prior, [agreement(f, p, unit) for f in fields], m.intent_kappa)
+        self.last_membership = P
         if m.mode == "scale":
             if m.combine == "most_probable":
                 k = int(np.argmax(P))
@@ -375,8 +489,11 @@ class SkillEngine:
             step = direction * mag
             scale = 1.0
         self.last_scale = scale
+        d = step * (self.skill.limits.max_linear_speed * dt)  # the frame's displacement
+        if m.motion == "rigid":
+            return _rigid_step(T, p, np.array(G[:9]).reshape(3, 3), d, P, fields)
         out = T.copy()
-        out[:3, 3] += step * (self.skill.limits.max_linear_speed * dt)
+        out[:3, 3] += d
         return out
 
     # --- constraints -------------------------------------------------------------------
@@ -435,7 +552,11 @@ class SkillEngine:
             return self._rotate_about(F, G, se3.rotation_between(a, boundary))
         if isinstance(c, NeighbourOrientation):
             nb = self._trees[id(c.model)]
-            i, w = nb.query(np.array(G[9:]), c.max_n, c.max_d)
+            if c.rotation_weight > 0.0:
+                i, w = nb.query_pose(np.array(G[9:]), se3.quaternion_from_rows(*G[:9]), c.max_n,
+                                     c.max_d, c.rotation_weight)
+            else:
+                i, w = nb.query(np.array(G[9:]), c.max_n, c.max_d)
             if len(i) == 0:
                 return F
             q = c.model.quaternions[i]
@@ -444,7 +565,17 @@ class SkillEngine:
             q_mean /= np.linalg.norm(q_mean)
             R_goal = se3.matrix_from_quaternion(q_mean)
             R_f = np.array(G[:9]).reshape(3, 3)
-            return self._rotate_about(F, G, R_goal @ R_f.T)
+            R_corr = R_goal @ R_f.T
+            budget = self._turn_budget
+            if budget < math.inf:  # turn towards the goal at most that far this tick
+                r = se3.rotvec_from_matrix(R_corr)
+                angle = float(np.linalg.norm(r))
+                if angle > budget:
+                    R_corr = se3.matrix_from_rotvec(r * (budget / angle))
+            if c.pivot is not None:  # about a point of the hand (the opening of a bottle)
+                o = np.array(G[9:]) + R_f @ c.pivot
+                return se3.compose_flat(_rotation(*R_corr.ravel().tolist(), *o), F)
+            return self._rotate_about(F, G, R_corr)
         raise TypeError(f"unknown constraint {c!r}")
 
     @staticmethod

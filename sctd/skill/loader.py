@@ -397,7 +397,7 @@ class _Parser:
         md = self.mapping(md, path)
         kind = self.choice(md.get("type"), f"{path}.type", ("linear", "vector_field"))
         if kind == "linear":
-            self.known_keys(md, path, {"type", "frame", "matrix", "axes", "translation"})
+            self.known_keys(md, path, {"type", "frame", "matrix", "axes", "translation", "rotation"})
             frame = self.frame_ref(md.get("frame", "ee"), f"{path}.frame", frames)
             if "matrix" in md and "axes" in md:
                 raise self.fail(path, "give either matrix or axes, not both")
@@ -409,9 +409,11 @@ class _Parser:
                 raise self.fail(path, "a linear mapping needs matrix (6 rows) or axes")
             translation = self.choice(md.get("translation", "object"), f"{path}.translation",
                                       ("object", "frame"))
-            return LinearMapping(frame=frame, matrix=matrix, translation=translation)  # type: ignore[arg-type]
+            rotation = self.choice(md.get("rotation", "frame"), f"{path}.rotation", ("frame", "object"))
+            return LinearMapping(frame=frame, matrix=matrix, translation=translation,  # type: ignore[arg-type]
+                                 rotation=rotation)  # type: ignore[arg-type]
         self.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s",
-                                   "max_n", "max_d", "blend"})
+                                   "max_n", "max_d", "blend", "motion", "intent_kappa"})
         model_file = self.string(md.get("model"), f"{path}.model")
         return VectorFieldMapping(
             model_file=model_file,
@@ -419,12 +421,15 @@ class _Parser:
             frame=self.ee_frame_ref(md.get("frame", "ee"), f"{path}.frame", frames),
             mode=self.choice(md.get("mode", "scale"), f"{path}.mode", ("scale", "blend")),  # type: ignore[arg-type]
             combine=self.choice(md.get("combine", "weighted"), f"{path}.combine",  # type: ignore[arg-type]
-                                ("most_probable", "weighted")),
+                                ("most_probable", "weighted", "intent")),
+            intent_kappa=self.number(md.get("intent_kappa", 4.0), f"{path}.intent_kappa", 0.0, 50.0),
             min_v=self.number(md.get("min_v", 0.1), f"{path}.min_v", 0.0, 1.0),
             k_s=self.number(md.get("k_s", 0.5), f"{path}.k_s", -0.99, 0.99),
             max_n=self.integer(md.get("max_n", 5), f"{path}.max_n", 1),
             max_d=self.number(md.get("max_d", 0.15), f"{path}.max_d", 0.0, lo_open=True),
             blend=self.number(md.get("blend", 0.5), f"{path}.blend", 0.0, 10.0),
+            motion=self.choice(md.get("motion", "translate"), f"{path}.motion",  # type: ignore[arg-type]
+                               ("translate", "rigid")),
         )
 
     def matrix(self, v: Any, path: str) -> np.ndarray:
@@ -497,7 +502,7 @@ class _Parser:
                 raise self.fail(f"{path}.upper", "every upper bound must be >= its lower bound")
             return Box(frame=self.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame", frames),
                        lower=box_lo, upper=box_hi)
-        self.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d"})
+        self.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d", "pivot", "rotation_weight"})
         model_file = self.string(cd.get("model"), f"{path}.model")
         return NeighbourOrientation(
             model_file=model_file,
@@ -505,6 +510,8 @@ class _Parser:
             frame=self.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame", frames),
             max_n=self.integer(cd.get("max_n", 5), f"{path}.max_n", 1),
             max_d=self.number(cd.get("max_d", 0.15), f"{path}.max_d", 0.0, lo_open=True),
+            pivot=None if cd.get("pivot") is None else self.vector(cd["pivot"], f"{path}.pivot", 3),
+            rotation_weight=self.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
         )
 
     def transition(self, td: Any, path: str, names: tuple[str, ...],
@@ -515,7 +522,7 @@ class _Parser:
         if source == target:
             raise self.fail(f"{path}.to", "a transition must lead to another state")
         kind = self.choice(td.get("type"), f"{path}.type",
-                           ("hyperplane", "distance", "timeout", "force"))
+                           ("hyperplane", "distance", "timeout", "force", "button"))
         common = {"from", "to", "type", "margin"}
         if kind == "hyperplane":
             self.known_keys(td, path, common | {"frame", "normal", "offset"})
@@ -539,6 +546,10 @@ class _Parser:
                               threshold=self.number(td[direction], f"{path}.{direction}", 0.0),
                               direction=direction,  # type: ignore[arg-type]
                               margin=self.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
+        if kind == "button":
+            self.known_keys(td, path, common | {"button"})
+            return Transition(source, target, "button",
+                              button=self.integer(td.get("button", 0), f"{path}.button", 0))
         if kind == "timeout":
             self.known_keys(td, path, common | {"after"})
             return Transition(source, target, "timeout",
@@ -661,12 +672,14 @@ def _field(fd: Any, path: str, where: str) -> Field:
     weight, sigma, inliers = num("weight", 1.0), num("sigma", 0.3), int(num("inliers", 0))
     if kind == "translation":
         return Field("translation", weight, sigma, inliers, direction=vec("direction", unit=True))
+    pivot = None if fd.get("pivot") is None else vec("pivot")
     if kind == "cylinder":
-        return Field("cylinder", weight, sigma, inliers, point=vec("point"), axis=vec("axis", unit=True))
+        return Field("cylinder", weight, sigma, inliers, point=vec("point"), axis=vec("axis", unit=True),
+                     pivot=pivot)
     if kind == "sphere":
         radius = fd.get("radius")
         return Field("sphere", weight, sigma, inliers, centre=vec("centre"),
-                     radius=None if radius is None else num("radius", 0.0))
+                     radius=None if radius is None else num("radius", 0.0), pivot=pivot)
     raise SkillError(where, f"{path}.type", f"expected translation, cylinder or sphere, got {kind!r}")
 
 

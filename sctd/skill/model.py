@@ -19,6 +19,7 @@ Array = NDArray[np.float64]
 
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 BUILTIN_FRAMES = ("ee", "object")
+WORLD_OBJECT = "world"  # a skill's ``object``: the world frame itself (no object pose needed)
 
 
 @dataclass(frozen=True)
@@ -38,13 +39,15 @@ class LinearMapping:
     """Linear input mapping (eq. 4.1, Algorithm 2).
 
     ``matrix`` (6, k) maps input axes to a displacement [tx, ty, tz, rx, ry, rz] at full
-    speed: rotation about ``frame``'s origin and own axes; translation in the object's
-    axes (``translation == "object"``, Algorithm 2) or in ``frame``'s axes.
+    speed: rotation about ``frame``'s origin and its own axes (``rotation == "frame"``,
+    Algorithm 2) or the object's axes; translation in the object's axes
+    (``translation == "object"``, Algorithm 2) or in ``frame``'s axes.
     """
 
     frame: str
     matrix: Array  # (6, k)
     translation: Literal["object", "frame"] = "object"
+    rotation: Literal["frame", "object"] = "frame"
     type: str = "linear"
 
 
@@ -66,6 +69,9 @@ class Field:
     axis: Array | None = None
     centre: Array | None = None
     radius: float | None = None
+    pivot: Array | None = None  # the centre (sphere) or an axis point (cylinder) as a fixed
+    # point of the mapping's frame (its offset in that frame), when the demonstrations
+    # turned about a point of the hand (a bottle's opening): rigid motion turns about it
 
 
 @dataclass(frozen=True)
@@ -91,18 +97,35 @@ class VectorFieldMapping:
     ``scale`` mode the command is scaled by the sigmoid-normalised agreement with the
     fields (eqs. 4.31-4.34); in ``blend`` mode its direction is bent towards them
     (eq. 4.35) without changing its magnitude, so zero input never moves.
+
+    ``motion``: ``translate`` moves the frame by the (scaled or bent) command, as in the
+    thesis; ``rigid`` turns the part of it that follows a rotational field (tangent to
+    a sphere, around a cylinder's axis), weighted by the field's membership, into a
+    rotation of the whole hand about the field's centre or axis, so that the hand turns
+    as it moves along the field (a bottle tilts about its opening, a crank's handle
+    keeps its grip) instead of waiting for an orientation constraint to catch up.
+
+    ``combine``: how the fields' agreements make one scaling (``scale``) and one bend
+    (``blend``): ``most_probable`` (eq. 4.31) and ``weighted`` (eq. 4.32) weigh them by
+    the position's membership ``P(F | p)``; ``intent`` by the membership given the
+    command as well, ``P(F | p, u) ~ P'(F | p) exp(intent_kappa * s_F(u))`` with ``P'``
+    the membership mixed with 10 % of the fields' weights: where fields overlap in
+    space (the start of a reach and the end of a pull), the one the user's push
+    follows is the one the user means.
     """
 
     model_file: str
     model: VectorFieldModel
     frame: str = "ee"
     mode: Literal["scale", "blend"] = "scale"
-    combine: Literal["most_probable", "weighted"] = "weighted"
+    combine: Literal["most_probable", "weighted", "intent"] = "weighted"
+    intent_kappa: float = 4.0
     min_v: float = 0.1
     k_s: float = 0.5
     max_n: int = 5
     max_d: float = 0.15
     blend: float = 0.5
+    motion: Literal["translate", "rigid"] = "translate"
     type: str = "vector_field"
 
 
@@ -156,6 +179,9 @@ class NeighbourOrientation:
     frame: str = "ee"
     max_n: int = 5
     max_d: float = 0.15
+    pivot: Array | None = None  # turn about this point of the frame (its offset), not its origin
+    rotation_weight: float = 0.0  # m per rad: > 0 picks the neighbours nearest in pose, not
+    # in position alone (the demonstrations near where the hand is *and* as it is turned)
     type: str = "neighbour_orientation"
 
 
@@ -180,7 +206,7 @@ class Transition:
 
     source: str
     target: str
-    type: Literal["hyperplane", "distance", "timeout", "force"]
+    type: Literal["hyperplane", "distance", "timeout", "force", "button"]
     frame: str = "ee"
     normal: Array | None = None
     offset: float = 0.0
@@ -189,6 +215,7 @@ class Transition:
     direction: Literal["below", "above"] = "below"
     axis: Array | None = None
     margin: float = 0.0
+    button: int = 0
 
 
 @dataclass(frozen=True)

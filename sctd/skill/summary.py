@@ -36,17 +36,20 @@ def field_summary(f: Field) -> dict[str, Any]:
         out["centre"] = _list(f.centre)
         if f.radius is not None:
             out["radius"] = f.radius
+    if f.pivot is not None:
+        out["pivot"] = _list(f.pivot)
     return out
 
 
 def _mapping(m) -> dict[str, Any]:
     if isinstance(m, LinearMapping):
-        return {"type": "linear", "frame": m.frame, "translation": m.translation,
+        return {"type": "linear", "frame": m.frame, "translation": m.translation, "rotation": m.rotation,
                 "matrix": _list(m.matrix)}
     assert isinstance(m, VectorFieldMapping)
     return {"type": "vector_field", "frame": m.frame, "model": m.model_file, "mode": m.mode,
-            "combine": m.combine, "min_v": m.min_v, "k_s": m.k_s, "max_n": m.max_n,
-            "max_d": m.max_d, "blend": m.blend, "fields": len(m.model.fields)}
+            "combine": m.combine, "intent_kappa": m.intent_kappa, "min_v": m.min_v, "k_s": m.k_s,
+            "max_n": m.max_n, "max_d": m.max_d, "blend": m.blend, "motion": m.motion,
+            "fields": len(m.model.fields)}
 
 
 def _constraint(c) -> dict[str, Any]:
@@ -59,8 +62,11 @@ def _constraint(c) -> dict[str, Any]:
     if isinstance(c, Box):
         return {"type": c.type, "frame": c.frame, "lower": _list(c.lower), "upper": _list(c.upper)}
     assert isinstance(c, NeighbourOrientation)
-    return {"type": c.type, "frame": c.frame, "model": c.model_file, "max_n": c.max_n,
-            "max_d": c.max_d, "points": len(c.model.points)}
+    out = {"type": c.type, "frame": c.frame, "model": c.model_file, "max_n": c.max_n,
+           "max_d": c.max_d, "rotation_weight": c.rotation_weight, "points": len(c.model.points)}
+    if c.pivot is not None:
+        out["pivot"] = _list(c.pivot)
+    return out
 
 
 def _transition(t: Transition) -> dict[str, Any]:
@@ -72,6 +78,8 @@ def _transition(t: Transition) -> dict[str, Any]:
         out[t.direction] = t.threshold
     elif t.type == "timeout":
         out["after"] = t.threshold
+    elif t.type == "button":
+        out["button"] = t.button
     else:
         out.update(above=t.threshold, axis=_list(t.axis), margin=t.margin)
     return out

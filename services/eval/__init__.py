@@ -1,0 +1,1 @@
+"""``sctd eval``: assistance measured with the simulated user, in lockstep or real time."""

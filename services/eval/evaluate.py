@@ -1,0 +1,249 @@
+"""Evaluations: skills x seeded trials, lockstep or real time, and their figures.
+
+``sctd eval`` is a thin wrapper over :func:`evaluate`. Each skill runs the same trials
+(seeds ``seed .. seed + trials - 1``: the same starts for every skill) with the same
+simulated user. An unassisted baseline (``skills/teleop.yaml``, object ``world``) runs
+with the speed limits of the assisted skill it is compared with.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
+from sctd_services.user import PROFILES
+
+from .trial import TaskSpec, TrialResult
+
+TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
+TELEOP = Path(__file__).resolve().parents[2] / "skills" / "teleop.yaml"
+
+
+@dataclass
+class Entry:
+    """One skill under evaluation: ``label`` as given (or how the baseline was made),
+    ``path`` of the file that runs (a copy with other limits for a baseline)."""
+
+    label: str
+    path: Path
+    skill: Skill
+    baseline_of: str | None = None
+
+
+def task_of(skills: list[Skill], task: str | None) -> str:
+    """The task: given, or the one every skill's object implies."""
+    if task is not None:
+        return task
+    tasks = {TASK_OF_OBJECT.get(s.object) for s in skills if s.object != WORLD_OBJECT}
+    if len(tasks) != 1 or None in tasks:
+        raise ValueError("cannot tell the task from the skills' objects; pass --task pour|drawer")
+    return tasks.pop()  # type: ignore[return-value]
+
+
+def with_limits(path: Path, limits: Limits, directory: Path) -> Path:
+    """A copy of the skill file at ``path`` (and its model files) with other limits."""
+    bundle = bundle_from_file(path)
+    doc = yaml.safe_load(bundle.yaml_text)
+    doc["limits"] = {"max_linear_speed": limits.max_linear_speed,
+                     "max_angular_speed": limits.max_angular_speed}
+    directory.mkdir(parents=True, exist_ok=True)
+    out = directory / Path(bundle.name).name
+    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    for rel, data in bundle.files.items():
+        (directory / rel).parent.mkdir(parents=True, exist_ok=True)
+        (directory / rel).write_bytes(data)
+    return out
+
+
+def entries(paths: list[str], baseline: bool, workdir: Path) -> list[Entry]:
+    """The skills to evaluate; a world-object skill (the baseline) gets the first
+    assisted skill's limits, and ``baseline`` adds one teleop run per assisted skill."""
+    given = [Entry(p, Path(p), load_skill(p)) for p in paths]
+    assisted = [e for e in given if e.skill.object != WORLD_OBJECT]
+    out: list[Entry] = []
+    for e in given:
+        if e.skill.object == WORLD_OBJECT and assisted:
+            ref = assisted[0]
+            p = with_limits(e.path, ref.skill.limits, workdir / f"{e.skill.name}-as-{ref.skill.name}")
+            e = Entry(e.label, p, load_skill(p), ref.label)
+        out.append(e)
+    if baseline:  # one baseline per set of limits: same limits, same seeds, same trials
+        done: list = []
+        for ref in assisted:
+            if ref.skill.limits in done:
+                continue
+            done.append(ref.skill.limits)
+            p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}")
+            out.append(Entry(f"teleop (limits of {ref.label})", p, load_skill(p), ref.label))
+    return out
+
+
+def _lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None,
+                  keep: bool) -> dict[str, Any]:
+    from .lockstep import run_trial
+
+    demos = read_demo_poses(demos_dir) if demos_dir else None
+    return run_trial(load_skill(path), spec, seed, demos).as_dict(with_trajectory=keep)
+
+
+def _realtime_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
+                  logdir: Path) -> dict[str, Any]:
+    from .realtime import run_trial
+
+    demos = read_demo_poses(demos_dir) if demos_dir else None
+    return run_trial(path, spec, seed, demos, logdir).as_dict(with_trajectory=keep)
+
+
+def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
+    """The demonstrations' poses (n, 7), object frame, for the DTW figure."""
+    from sctd.learn.demos import read_demos
+
+    return [d.poses for d in read_demos(directory)]
+
+
+def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, lockstep: bool,
+             demos: str | None = None, jobs: int | None = None, keep: bool = False,
+             logdir: Path | None = None,
+             progress: Callable[[int, int, str], None] | None = None) -> list[dict[str, Any]]:
+    """Run every entry's trials; one result map per entry (see :func:`summarise`)."""
+    seeds = list(range(seed, seed + trials))
+    total = len(ents) * trials
+    done = 0
+    results = []
+    logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
+    for e in ents:
+        per_trial: list[dict[str, Any]] = []
+        if lockstep:
+            n = max(1, min(jobs or os.cpu_count() or 1, trials))
+            with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
+                futures = [pool.submit(_lockstep_job, str(e.path), spec, s, demos, keep) for s in seeds]
+                for f in futures:
+                    per_trial.append(f.result())
+                    done += 1
+                    if progress:
+                        progress(done, total, e.label)
+        else:
+            for s in seeds:
+                per_trial.append(_realtime_job(str(e.path), spec, s, demos, keep, logdir / e.skill.name))
+                done += 1
+                if progress:
+                    progress(done, total, e.label)
+        results.append(summarise(e, per_trial, spec.time_limit))
+    return results
+
+
+def _stats(xs: list[float]) -> dict[str, float | None]:
+    if not xs:
+        return {"mean": None, "std": None, "median": None}
+    a = np.asarray(xs, dtype=float)
+    return {"mean": round(float(a.mean()), 3), "std": round(float(a.std()), 3),
+            "median": round(float(np.median(a)), 3)}
+
+
+def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float = 60.0) -> dict[str, Any]:
+    """The figures of one skill over its trials (the JSON of ``sctd eval --json``).
+    ``time_s_limited_median`` counts every trial that did not succeed at ``time_limit``
+    (a censored median: defined even when few or no trials succeed)."""
+    n = len(per_trial)
+    ok = [t for t in per_trial if t["outcome"] == "success"]
+    times = [t["time_s"] for t in ok if t["time_s"] is not None]
+    limited = [t["time_s"] if t["outcome"] == "success" and t["time_s"] is not None else time_limit
+               for t in per_trial]
+    dtws = [t["dtw"] for t in per_trial if t.get("dtw") is not None]
+    durations = [t["duration_s"] for t in per_trial]
+    switch = [t["switch_time_s"] for t in per_trial]
+    share = sum(switch) / sum(durations) if sum(durations) > 0 else 0.0
+    return {
+        "skill": e.label,
+        "name": e.skill.name,
+        "id": e.skill.id,
+        "baseline_of": e.baseline_of,
+        "trials": n,
+        "successes": len(ok),
+        "success_rate": round(len(ok) / n, 4) if n else 0.0,
+        "time_s": _stats(times),
+        "time_s_limited_median": round(float(np.median(limited)), 3) if n else None,
+        "spill_mean": round(float(np.mean([t["spill"] for t in per_trial])), 5) if n else 0.0,
+        "dtw": {k: v for k, v in _stats(dtws).items() if k != "median"} if dtws else None,
+        "mode_switches_mean": round(float(np.mean([t["mode_switches"] for t in per_trial])), 3) if n else 0.0,
+        "switch_time_s_mean": round(float(np.mean(switch)), 3) if n else 0.0,
+        "switch_share": round(share, 4),
+        "effort_mean": round(float(np.mean([t["effort"] for t in per_trial])), 3) if n else 0.0,
+        "stuck": sum(1 for t in per_trial if t["outcome"] == "stuck"),
+        "limits": asdict(e.skill.limits),
+        "per_trial": per_trial,
+    }
+
+
+def table(results: list[dict[str, Any]]) -> list[str]:
+    """Rows like the thesis' Tables 5.1-5.4."""
+
+    def pm(d: dict | None, digits: int = 2) -> str:
+        if not d or d.get("mean") is None:
+            return "-"
+        return f"{d['mean']:.{digits}f} +- {d['std']:.{digits}f}"
+
+    w = max(12, *(len(r["skill"]) for r in results))
+    head = (f"{'skill':<{w}}  {'success':>9}  {'time [s] (median)':>22}  {'spill':>6}  {'DTW':>15}  "
+            f"{'switches (s)':>13}  {'effort':>7}  {'stuck':>5}")
+    rows = [head, "-" * len(head)]
+    for r in results:
+        t = r["time_s"]
+        time_cell = "-" if t["mean"] is None else f"{pm(t)} ({t['median']:.2f})"
+        rows.append(f"{r['skill']:<{w}}  {r['successes']:>4}/{r['trials']:<4}  {time_cell:>22}  "
+                    f"{r['spill_mean']:>6.3f}  {pm(r['dtw'], 3):>15}  "
+                    f"{r['mode_switches_mean']:>5.1f} ({r['switch_time_s_mean']:>4.1f})  "
+                    f"{r['effort_mean']:>7.2f}  {r['stuck']:>5}")
+    return rows
+
+
+def profile_line(spec: TaskSpec) -> str:
+    p = PROFILES[spec.profile]
+    return (f"user {p.name}: reaction delay {p.reaction_delay} s, update every {p.update_period} s, "
+            f"noise {p.noise_constant} + {p.noise_gain} |u|, dead zone {p.dead_zone}, "
+            f"mode switch {p.switch_time} s")
+
+
+def limits_line(r: dict[str, Any]) -> str:
+    lim = r["limits"]
+    of = f" (the limits of {r['baseline_of']})" if r.get("baseline_of") else ""
+    return f"  {r['skill']}: {lim['max_linear_speed']} m/s, {lim['max_angular_speed']} rad/s{of}"
+
+
+def median_ratio(results: list[dict[str, Any]]) -> list[str]:
+    """Each assisted skill's median time against the baseline's with the same limits:
+    over successful trials, and with every other trial counted at the time limit."""
+    out = []
+    for ref in results:
+        if ref.get("baseline_of") or ref["name"] == "teleop":
+            continue
+        b = next((r for r in results if r.get("baseline_of") and r["limits"] == ref["limits"]), None)
+        if b is None:
+            continue
+        a, u = ref["time_s"]["median"], b["time_s"]["median"]
+        both = (f"{a:.2f} s vs {u:.2f} s ({a / u:.2f} of the baseline's)" if a is not None and u is not None
+                else f"{'-' if a is None else f'{a:.2f} s'} vs {'-' if u is None else f'{u:.2f} s'}")
+        al, ul = ref["time_s_limited_median"], b["time_s_limited_median"]
+        out.append(f"  {ref['skill']}: successful trials {both}; failures at the limit "
+                   f"{al:.2f} s vs {ul:.2f} s ({al / ul:.2f}); {ref['successes']}/{ref['trials']} "
+                   f"vs {b['successes']}/{b['trials']} succeeded")
+    return out
+
+
+def strip_trajectories(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [{**r, "per_trial": [{k: v for k, v in t.items() if k not in ("trajectory", "series")}
+                                for t in r["per_trial"]]} for r in results]
+
+
+__all__ = ["Entry", "TaskSpec", "TrialResult", "entries", "evaluate", "summarise", "table",
+           "task_of", "with_limits"]

@@ -1,0 +1,138 @@
+"""A trial with real processes over Zenoh at real time (the default of ``sctd eval``).
+
+Per trial, on a free loopback port held by the evaluator's session: ``sctd sim
+--trial-seed N`` (the Pinocchio arm from the seeded start), ``sctd run --skill`` (the
+daemon) and the simulated user client (:mod:`sctd_services.simulated_user`, the same
+:class:`~sctd_services.user.SimulatedUser` the lockstep trials step). The evaluator
+watches what they publish (the hand's state, the objects, the scene, the targets' mode
+and the user's input) and feeds the same :class:`~.trial.TrialRecorder`.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from sctd import se3
+from sctd.runtime import codec
+from sctd.runtime.procs import Child, free_port
+from sctd.runtime.zsession import session
+from sctd_services.simulated_user import OBJECTS
+from sctd_services.user import PROFILES, Observation
+
+from .trial import TaskSpec, TrialRecorder, TrialResult
+
+WATCH_RATE = 100.0  # Hz at which the evaluator samples what it sees
+
+
+class _Watcher:
+    def __init__(self, s: zenoh.Session, task: str):
+        k = codec.Keys()
+        self.lock = threading.Lock()
+        self.T_world_ee: Any = None
+        self.objects: dict[str, Any] = {}
+        self.scene: dict[str, Any] = {}
+        self.mode: str | None = None
+        self.u: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self.buttons: tuple[int, ...] = (0, 1, 0)
+        self.status: dict[str, Any] = {}
+        self.inputs = 0
+        self.subs = [s.declare_subscriber(key, cb) for key, cb in (
+            (k.state, self._state), (k.scene, self._scene), (k.target, self._target),
+            (k.input("*"), self._input), (k.status, self._status))]
+        self.subs += [s.declare_subscriber(k.objects(n), self._object) for n in OBJECTS[task]]
+
+    def _state(self, sample: zenoh.Sample) -> None:
+        try:
+            self.T_world_ee = se3.transform_from_pose(codec.decode_state(sample.payload.to_bytes()).pose)
+        except codec.DecodeError:
+            pass
+
+    def _object(self, sample: zenoh.Sample) -> None:
+        try:
+            pose = codec.decode_object(sample.payload.to_bytes()).pose
+        except codec.DecodeError:
+            return
+        self.objects[str(sample.key_expr).rsplit("/", 1)[-1]] = se3.transform_from_pose(pose)
+
+    def _scene(self, sample: zenoh.Sample) -> None:
+        try:
+            self.scene = codec.unpack_map(sample.payload.to_bytes())
+        except codec.DecodeError:
+            pass
+
+    def _target(self, sample: zenoh.Sample) -> None:
+        try:
+            self.mode = codec.decode_target(sample.payload.to_bytes())["state"]
+        except codec.DecodeError:
+            pass
+
+    def _input(self, sample: zenoh.Sample) -> None:
+        try:
+            m = codec.decode_input(sample.payload.to_bytes())
+        except codec.DecodeError:
+            return
+        self.u, self.buttons = m.u, m.buttons or (0, 1, 0)
+        self.inputs += 1
+
+    def _status(self, sample: zenoh.Sample) -> None:
+        try:
+            self.status = codec.unpack_map(sample.payload.to_bytes())
+        except codec.DecodeError:
+            pass
+
+    def observation(self, task: str) -> Observation | None:
+        if self.T_world_ee is None or self.mode is None or any(n not in self.objects for n in OBJECTS[task]):
+            return None
+        return Observation(time.monotonic(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode)
+
+    def close(self) -> None:
+        for sub in self.subs:
+            sub.undeclare()
+
+
+def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | None = None,
+              logdir: Path | None = None, startup: float = 90.0) -> TrialResult:
+    """One real-time trial of the skill file ``skill_path`` from the seeded start."""
+    logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
+    logdir.mkdir(parents=True, exist_ok=True)
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    profile = PROFILES[spec.profile]
+    rec = TrialRecorder(spec.task, seed, profile.switch_time, spec.time_limit, spec.stuck_after)
+
+    def ep() -> str:
+        return f"tcp/127.0.0.1:{free_port()}"
+
+    with session(listen=[hub]) as s:
+        w = _Watcher(s, spec.task)
+        try:
+            with Child("sctd.cli.main", "sim", "--scene", spec.task, "--trial-seed", str(seed),
+                       "--connect", hub, "--listen", ep(), log=logdir / f"sim-{seed}.log") as sim, \
+                    Child("sctd.cli.main", "run", "--skill", str(skill_path), "--connect", hub,
+                          "--listen", ep(), log=logdir / f"daemon-{seed}.log") as daemon:
+                end = time.monotonic() + startup
+                while w.observation(spec.task) is None:  # the daemon publishes targets
+                    if time.monotonic() > end or not (sim.running() and daemon.running()):
+                        raise RuntimeError(f"trial {seed}: no targets within {startup:.0f} s; see {logdir}")
+                    time.sleep(0.05)
+                with Child("sctd_services.simulated_user", "--task", spec.task, "--seed", str(seed),
+                           "--profile", spec.profile, "--axes", str(spec.axes),
+                           "--duration", str(spec.time_limit + 30), "--connect", hub, "--listen", ep(),
+                           log=logdir / f"user-{seed}.log"):
+                    period = 1.0 / WATCH_RATE
+                    while True:
+                        time.sleep(period)
+                        obs = w.observation(spec.task)
+                        if obs is None or w.inputs == 0:  # the trial starts with the user
+                            continue
+                        st = w.status
+                        if rec.add(obs, w.u, w.buttons, st.get("vf_scale")) is not None:
+                            break
+        finally:
+            w.close()
+    return rec.result(demos)

@@ -1,0 +1,217 @@
+"""One evaluation trial: what is recorded, when it ends, and the figures it yields.
+
+The same :class:`TrialRecorder` judges lockstep and real-time trials: it is fed what
+the evaluator sees (the hand's pose, the objects, the scene's outcome, the mode, the
+user's input) and decides the outcome:
+
+- **success**: the scene's ``success`` (pour: the fill target reached without a drop
+  spilled, once the bottle stops pouring; drawer: opened to the target);
+- **failure**: a spill, the drawer's handle lost while pulling it, or the time limit;
+- **stuck**: no progress towards the task's intent for ``stuck_after`` seconds (an
+  observer of its own, the same intent code the simulated user runs, watches it).
+
+Completion times use the thesis' clocks (Ch. 5.2, 5.3): pour, from the bottle opening
+coming within 35 cm of the mug to the end of pouring; drawer, from the hand coming
+within 20 cm of the handle to the drawer open.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+from sctd_services.user.intent import Observation, make_intent
+
+Array = NDArray[np.float64]
+START_DISTANCE = {"pour": 0.35, "drawer": 0.20}  # m, the thesis' clocks
+TASK_OBJECT = {"pour": "mug", "drawer": "drawer_handle"}
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """What every trial of an evaluation shares: the task, the device's axes, the
+    simulated user's profile (a name of :data:`~sctd_services.user.PROFILES`) and the
+    limits on a trial (s)."""
+
+    task: str
+    axes: int = 3
+    profile: str = "steady"
+    time_limit: float = 60.0
+    stuck_after: float = 10.0
+
+
+@dataclass
+class TrialResult:
+    """What one trial came to (plain data, for JSON)."""
+
+    seed: int
+    outcome: str  # success | failure | stuck
+    reason: str
+    time_s: float | None  # the thesis' clock; None when the task never started or ended
+    duration_s: float  # from the trial's start to its end
+    spill: float
+    progress: float  # poured fraction or drawer opening (m)
+    mode_switches: int
+    switch_time_s: float
+    effort: float  # integral of |u| over the trial
+    stuck_episodes: int
+    dtw: float | None = None
+    trajectory: list[list[float]] = field(default_factory=list, repr=False)  # t, T_obj_ee pose
+    series: dict[str, list[Any]] = field(default_factory=dict, repr=False)
+
+    def as_dict(self, with_trajectory: bool = False) -> dict[str, Any]:
+        d = {k: v for k, v in self.__dict__.items() if k not in ("trajectory", "series")}
+        if with_trajectory:
+            d["trajectory"] = self.trajectory
+            d["series"] = self.series
+        return d
+
+
+class TrialRecorder:
+    """Watches a trial and decides when and how it ends.
+
+    Parameters
+    ----------
+    task : str
+    seed : int
+    switch_time : float
+        Seconds one mode switch costs the user (charged per press of button 0).
+    time_limit, stuck_after : float
+        s.
+    record_every : float
+        s between recorded trajectory samples (50 Hz, as the demonstrations).
+    """
+
+    def __init__(self, task: str, seed: int, switch_time: float, time_limit: float = 60.0,
+                 stuck_after: float = 10.0, record_every: float = 0.02):
+        self.task = task
+        self.seed = seed
+        self.switch_time = switch_time
+        self.time_limit = time_limit
+        self.stuck_after = stuck_after
+        self.record_every = record_every
+        self.observer = make_intent(task)  # judges progress; never steers
+        self.t0: float | None = None
+        self.t_task: float | None = None
+        self.t_end_task: float | None = None
+        self.best = math.inf
+        self.t_best = 0.0
+        self.stuck_episodes = 0
+        self._phase = ""
+        self.effort = 0.0
+        self.switches = 0
+        self._last_t: float | None = None
+        self._last_button = 0
+        self._next_record = 0.0
+        self.trajectory: list[list[float]] = []
+        self.series: dict[str, list[Any]] = {"t": [], "vf_scale": [], "membership": []}
+        self.outcome: str | None = None
+        self.reason = ""
+        self._attached_once = False
+        self._scene: dict[str, Any] = {}
+
+    def add(self, obs: Observation, u: tuple[float, ...] | list[float], buttons: tuple[int, ...],
+            vf_scale: float | None = None, membership: list[float] | None = None) -> str | None:
+        """Take one observation (with the input in force); returns the outcome once the
+        trial is over (and keeps returning it)."""
+        if self.outcome is not None:
+            return self.outcome
+        t = obs.t
+        if self.t0 is None:
+            self.t0 = self.t_best = t
+        if self._last_t is not None:
+            self.effort += float(np.linalg.norm(u)) * (t - self._last_t)
+        self._last_t = t
+        b0 = buttons[0] if buttons else 0
+        if b0 and not self._last_button:
+            self.switches += 1
+        self._last_button = b0
+        scene = self._scene = obs.scene
+        T_obj = obs.objects[TASK_OBJECT[self.task]]
+        T_obj_ee = se3.invert_transform(T_obj) @ obs.T_world_ee
+        if t >= self._next_record:
+            self._next_record = t + self.record_every
+            self.trajectory.append([t - self.t0, *se3.pose_from_transform(T_obj_ee).tolist()])
+            self.series["t"].append(t - self.t0)
+            self.series["vf_scale"].append(float("nan") if vf_scale is None else vf_scale)
+            self.series["membership"].append(membership if membership is not None else [])
+        # the thesis' clock starts
+        if self.t_task is None:
+            ref = obs.objects["bottle_tip"][:3, 3] if self.task == "pour" else obs.T_world_ee[:3, 3]
+            if float(np.linalg.norm(ref - T_obj[:3, 3])) < START_DISTANCE[self.task]:
+                self.t_task = t
+        # progress, as the intent sees it
+        d = self.observer.desire(obs)
+        if d.phase != self._phase:  # a new sub-goal: progress is measured towards it
+            self._phase, self.best, self.t_best = d.phase, d.error, t
+        elif d.error < self.best - 0.005:
+            self.best, self.t_best = d.error, t
+        elif t - self.t_best > self.stuck_after:
+            self.stuck_episodes += 1
+            return self._end("stuck", f"no progress for {self.stuck_after:.0f} s ({d.phase})", t)
+        # outcome
+        if self.task == "pour":
+            if scene.get("spilled_amount", 0.0) > 1e-9:
+                return self._end("failure", "spilled", t)
+            if scene.get("poured", 0.0) >= scene.get("fill_target", 0.5) and not scene.get("pouring", False):
+                return self._end("success" if scene.get("success") else "failure", "poured", t)
+        else:
+            if scene.get("attached"):
+                self._attached_once = True
+            elif self._attached_once and scene.get("opening", 0.0) > 0.01 and not scene.get("success"):
+                return self._end("failure", "handle lost while pulling", t)
+            if scene.get("success"):
+                return self._end("success", "opened", t)
+        if t - self.t0 > self.time_limit:
+            return self._end("failure", f"time limit ({self.time_limit:.0f} s)", t)
+        return None
+
+    def _end(self, outcome: str, reason: str, t: float) -> str:
+        self.outcome, self.reason = outcome, reason
+        if outcome == "success":
+            self.t_end_task = t
+        self.t_stop = t
+        return outcome
+
+    def result(self, demos: list[Array] | None = None) -> TrialResult:
+        scene = self._scene
+        progress = scene.get("poured", 0.0) if self.task == "pour" else scene.get("opening", 0.0)
+        time_s = None
+        if self.t_task is not None and self.t_end_task is not None:
+            time_s = round(self.t_end_task - self.t_task, 3)
+        duration = (self.t_stop - self.t0) if self.t0 is not None and self.outcome else 0.0
+        res = TrialResult(
+            seed=self.seed, outcome=self.outcome or "failure", reason=self.reason or "not finished",
+            time_s=time_s, duration_s=round(duration, 3), spill=float(scene.get("spilled_amount", 0.0)),
+            progress=float(progress), mode_switches=self.switches,
+            switch_time_s=self.switches * self.switch_time, effort=round(self.effort, 4),
+            stuck_episodes=self.stuck_episodes, trajectory=self.trajectory, series=self.series)
+        if demos and self.t_task is not None:
+            res.dtw = dtw_to_demos(self._task_part(), demos)
+        return res
+
+    def _task_part(self) -> Array:
+        """The recorded poses on the thesis' clock (object frame)."""
+        start = (self.t_task or 0.0) - (self.t0 or 0.0)
+        end = ((self.t_end_task or self.t_stop) - (self.t0 or 0.0))
+        rows = [r[1:] for r in self.trajectory if start <= r[0] <= end]
+        return np.asarray(rows) if rows else np.zeros((0, 7))
+
+
+def dtw_to_demos(poses: Array, demos: list[Array]) -> float | None:
+    """Mean over the demonstrations of the DTW cost with the tf-norm (Ch. 5.1) per
+    aligned pair of poses (so trials of different lengths compare)."""
+    from sctd.learn.demos import dtw
+
+    if len(poses) < 2:
+        return None
+    costs = []
+    for demo in demos:
+        cost, path = dtw(poses, demo)
+        costs.append(cost / max(1, len(path)))
+    return round(float(np.mean(costs)), 5)

@@ -1,0 +1,277 @@
+"""The simulated user: a task intent, a learned model of the device, human limits.
+
+The user knows the task (:mod:`.intent`) and what a person in the chair is shown of
+the skill: the name of the active mode (state) and the number of input axes. It knows
+nothing of mappings, fields or constraints. It learns how the stick moves the hand in
+each mode from the robot's response to its own inputs (:mod:`.device`): trying each
+axis in a mode it has not seen, then choosing at every correction the input whose
+predicted motion comes closest to what the intent wants, and updating the model from
+what the hand then did; when that stops bringing it closer for a while, it tries the
+stick out again. Where the current mode cannot produce the wanted motion, or nothing of
+its most wanted part, for a while it lets go and tries the mode switch (button 0), as a
+person who knows the device has modes; if pressing it changes nothing, it stops trying.
+Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
+stick only every update period, its deflections are noisy and never smaller than its
+dead zone, and a mode switch costs it time with the stick released.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+
+from .device import DeviceModel
+from .human import PROFILES, HumanProfile
+from .intent import Desire, Observation, make_intent
+
+Array = NDArray[np.float64]
+PROBE = 0.6  # deflection of a trial push
+PROGRESS = 0.003  # decrease of the intent's error that counts as getting closer
+LACKING = 0.9  # a mode that leaves this much of the most wanted part undone cannot give it
+REPROBE_AFTER = 2.0  # s without getting closer before the user tries the stick out again
+
+
+def twist_between(T_a: Array, T_b: Array, dt: float) -> Array:
+    """World-frame twist [v, w] that takes pose T_a to T_b in ``dt`` seconds."""
+    v = (T_b[:3, 3] - T_a[:3, 3]) / dt
+    w = se3.rotvec_from_matrix(T_b[:3, :3] @ T_a[:3, :3].T) / dt
+    return np.concatenate([v, w])
+
+
+@dataclass
+class _Switch:
+    start: float
+    mode: str  # the mode shown when the switch was pressed
+
+
+class SimulatedUser:
+    """Steps a simulated person: observations in, stick deflections and buttons out.
+
+    Parameters
+    ----------
+    task : str
+        ``pour`` or ``drawer`` (the intent).
+    n_axes : int
+        Input axes of the device (what the display says).
+    profile : HumanProfile or str
+    seed : int
+        Noise seed.
+    """
+
+    def __init__(self, task: str, n_axes: int = 3, profile: HumanProfile | str = "steady",
+                 seed: int = 0):
+        self.task = task
+        self.intent = make_intent(task)
+        self.n = n_axes
+        self.profile = PROFILES[profile] if isinstance(profile, str) else profile
+        self.rng = np.random.default_rng(seed)
+        self.models: dict[str, DeviceModel] = {}
+        self._seen: deque[Observation] = deque()
+        self._history: deque[tuple[float, Array]] = deque()  # (time, output) as applied
+        self._perceived: Observation | None = None
+        self._next = 0.0
+        self._out = np.zeros(n_axes)
+        self._buttons = (0, 1, 0)
+        self._probes: dict[str, list[Array]] = {}
+        self._switch: _Switch | None = None
+        self._bad_since: float | None = None
+        self._mode_since = 0.0
+        self._mode = ""
+        self.switch_works: bool | None = None  # unknown until tried
+        self._best_error = np.inf  # the intent's error at its best since the last re-try
+        self._improved = 0.0  # when it last got better
+        self._phase = ""
+        self.reprobes = 0
+        self.switches = 0
+        self.switch_time = 0.0
+        self.desire: Desire | None = None
+
+    # -- the loop ----------------------------------------------------------------------
+
+    def step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, int, int]]:
+        """The stick's deflection (``n_axes``) and the buttons (mode, enable, escape) at
+        time ``t`` (s, any clock the observations share), given the newest observation."""
+        self._seen.append(obs)
+        perceived = self._perceive(t)
+        if perceived is None or t < self._next:
+            return tuple(self._out.tolist()), self._buttons
+        self._next = t + self.profile.update_period
+        self._learn(perceived)
+        if perceived.mode != self._mode:
+            self._mode, self._mode_since = perceived.mode, t
+        u, buttons = self._decide(t, perceived)
+        self._out = self._as_made(u)
+        self._buttons = buttons
+        self._history.append((t, self._out.copy()))
+        while len(self._history) > 2 and self._history[1][0] < t - 5.0:
+            self._history.popleft()
+        return tuple(self._out.tolist()), buttons
+
+    @property
+    def done(self) -> bool:
+        return self.desire is not None and self.desire.done
+
+    # -- parts ---------------------------------------------------------------------------
+
+    def _perceive(self, t: float) -> Observation | None:
+        """The newest observation at least a reaction delay old."""
+        cutoff = t - self.profile.reaction_delay
+        seen = self._seen
+        while len(seen) > 1 and seen[1].t <= cutoff:
+            seen.popleft()
+        return seen[0] if seen and seen[0].t <= cutoff else None
+
+    def _applied(self, t: float) -> Array:
+        """The deflection the user had made at time ``t``."""
+        out = np.zeros(self.n)
+        for ti, u in self._history:
+            if ti > t:
+                break
+            out = u
+        return out
+
+    def _learn(self, now: Observation) -> None:
+        """Update the current mode's model with how the hand moved since the last
+        correction, and the input that was held meanwhile."""
+        last, self._perceived = self._perceived, now
+        if last is None or last.mode != now.mode or self._switch is not None:
+            return
+        dt = now.t - last.t
+        if dt < 1e-3:
+            return
+        model = self.models.setdefault(now.mode, DeviceModel(self.n))
+        model.update(self._applied(last.t), twist_between(last.T_world_ee, now.T_world_ee, dt))
+
+    def _decide(self, t: float, obs: Observation) -> tuple[Array, tuple[int, int, int]]:
+        zero = np.zeros(self.n)
+        if self._switch is not None:  # stick released while switching
+            s = self._switch
+            if t - s.start < self.profile.switch_time:
+                return zero, (1, 1, 0) if t - s.start < self.profile.update_period else (0, 1, 0)
+            if t - s.start >= self.profile.switch_time + self.profile.reaction_delay:
+                if obs.mode == s.mode:
+                    self.switch_works = False  # the switch does nothing with this skill
+                else:
+                    self.switch_works = True
+                self._switch = None
+                self._bad_since = None
+            return zero, (0, 1, 0)
+        desire = self.desire = self.intent.desire(obs)
+        if desire.done:
+            return zero, (0, 1, 0)
+        model = self.models.setdefault(obs.mode, DeviceModel(self.n))
+        if self._no_progress(t, desire) and model.known and obs.mode not in self._probes:
+            # What used to work does not any more (the device behaves differently here):
+            # wiggle the stick again to see what it does now.
+            model.relearn()
+            self.reprobes += 1
+        if not model.known or self._probes.get(obs.mode):
+            return self._probe(obs.mode, model), (0, 1, 0)
+        self._probes.pop(obs.mode, None)
+        u, residual = self._best_effort(model, desire)
+        lacking = self._lacking(model, desire)
+        if self._wants_switch(t, obs.mode, max(residual, lacking), desire):
+            self._switch = _Switch(t, obs.mode)
+            self.switches += 1
+            self.switch_time += self.profile.switch_time
+            return zero, (1, 1, 0)
+        if lacking > LACKING and self.switch_works is not False:
+            # This mode cannot give what is most wanted: rather than do the rest of the
+            # wish (moving the opening off the mug while the bottle should tilt), the user
+            # lets go and gets ready to switch.
+            return zero, (0, 1, 0)
+        return u, (0, 1, 0)
+
+    def _no_progress(self, t: float, desire: Desire) -> bool:
+        """Whether the intent's error has not got better for ``REPROBE_AFTER`` seconds
+        (a new sub-goal starts the clock again)."""
+        if desire.phase != self._phase:
+            self._phase, self._best_error, self._improved = desire.phase, desire.error, t
+            return False
+        if desire.error < self._best_error - PROGRESS:
+            self._best_error, self._improved = desire.error, t
+            return False
+        if t - self._improved > REPROBE_AFTER:
+            self._best_error, self._improved = desire.error, t
+            return True
+        return False
+
+    @staticmethod
+    def _best_effort(model: DeviceModel, desire: Desire) -> tuple[Array, float]:
+        """The input for what is wanted; when the mode cannot give all of it (its axes
+        couple what the user wants apart), one thing at a time: the position, or else
+        the orientation, as a person would. The residual is of the whole wish."""
+        u, residual = model.command(desire.twist, desire.W)
+        if residual < 0.8:
+            return u, residual
+        for part in (slice(0, 3), slice(3, 6)):
+            W = np.zeros_like(desire.W)
+            W[part, :] = desire.W[part, :]  # the wish's rows for the position, or the orientation
+            if not np.any(W @ desire.twist):
+                continue
+            u_part, r_part = model.command(desire.twist, W)
+            if r_part < 0.8:
+                b = desire.W @ desire.twist
+                whole = float(np.linalg.norm(desire.W @ model.predict(u_part) - b) / np.linalg.norm(b))
+                return u_part, whole
+        return u, residual
+
+    def _probe(self, mode: str, model: DeviceModel) -> Array:
+        """Try each axis both ways, one correction each (a person wiggling the stick to
+        see what it does); then wait for the response before using the model."""
+        queue = self._probes.get(mode)
+        if queue is None:
+            queue = self._probes[mode] = []
+            for i in range(self.n):
+                e = np.zeros(self.n)
+                e[i] = PROBE
+                queue += [e, -e]
+        if queue:
+            return queue.pop(0)
+        if not model.known:  # the last pushes were too small to count: again
+            del self._probes[mode]
+        return np.zeros(self.n)
+
+    @staticmethod
+    def _lacking(model: DeviceModel, desire: Desire) -> float:
+        """How little of the most wanted part of the wish (the position, or the
+        orientation: the one with the larger weighted share) this mode can give when it
+        is asked for that part alone: 1 when pushing the stick does nothing for it (a
+        translation mode when the bottle must tilt), 0 when it can give it all."""
+        b = desire.W @ desire.twist
+        parts = (slice(0, 3), slice(3, 6))
+        shares = [float(np.linalg.norm(b[p])) for p in parts]
+        if max(shares) < 1e-9:
+            return 0.0
+        p = parts[int(np.argmax(shares))]
+        W = np.zeros_like(desire.W)
+        W[p, :] = desire.W[p, :]
+        return model.command(desire.twist, W)[1]
+
+    def _wants_switch(self, t: float, mode: str, residual: float, desire: Desire) -> bool:
+        """Switch when this mode has not been able to give the wanted motion for a while
+        and another mode might (or one known to do better exists)."""
+        if self.switch_works is False or t - self._mode_since < 1.0:
+            return False
+        better = [m for name, m in self.models.items() if name != mode and m.known
+                  and m.command(desire.twist, desire.W)[1] < residual - 0.3]
+        if better:
+            return True
+        if residual > 0.85:
+            if self._bad_since is None:
+                self._bad_since = t
+            return t - self._bad_since > 1.5
+        self._bad_since = None
+        return False
+
+    def _as_made(self, u: Array) -> Array:
+        """The deflection the person actually makes: noisy, nothing below the dead zone."""
+        p = self.profile
+        noisy = u + self.rng.normal(0.0, 1.0, self.n) * (p.noise_constant + p.noise_gain * np.abs(u))
+        noisy[np.abs(u) < p.dead_zone] = 0.0  # no deliberate deflection that small
+        return np.clip(noisy, -1.0, 1.0)

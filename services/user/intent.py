@@ -1,0 +1,208 @@
+"""What a person wants the hand to do next, per task, from the scene alone.
+
+Written once per task and independent of any skill: an intent looks at what a person in
+the chair sees (the hand, the objects, the task's progress: how full the mug is, how
+far the drawer is open) and says how the hand should move next, as a desired twist of
+the end-effector in the world frame, with a weight matrix saying which components
+matter. It never looks at the skill, its states or its mappings.
+
+pour: bring the bottle opening over the mug at a safe height with the bottle upright,
+tilt until the mug holds the scene's fill target, bring the bottle upright again.
+drawer: reach the handle, then pull until the drawer is open to the scene's target.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+
+Array = NDArray[np.float64]
+UP = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass
+class Observation:
+    """What the user sees at time ``t``: the hand and the objects in the world (4x4),
+    the task's progress (the scene's outcome fields) and the mode the display shows
+    (the skill's active state name)."""
+
+    t: float
+    T_world_ee: Array
+    objects: dict[str, Array]
+    scene: dict[str, Any]
+    mode: str = ""
+
+
+@dataclass
+class Desire:
+    """How the hand should move: ``twist`` [v, w] (world axes, at the ee origin; m/s,
+    rad/s), ``W`` (6, 6) the weight of each component's error (so m/s and rad/s
+    compare), ``error`` a distance to the current sub-goal (progress), ``phase`` the
+    intent's own step, ``done`` the task is achieved as far as the user can tell."""
+
+    twist: Array
+    W: Array
+    error: float
+    phase: str
+    done: bool = False
+
+
+def _saturate(v: Array, limit: float) -> Array:
+    n = float(np.linalg.norm(v))
+    return v if n <= limit else v * (limit / n)
+
+
+@dataclass
+class PourIntent:
+    """Bring the opening over the mug, pour to the fill target, upright again.
+
+    Attributes
+    ----------
+    height : float
+        Opening above the mug's opening while pouring, m (the stream lands in the mug
+        from up to 0.15 m).
+    centred : float
+        Horizontal distance from the mug's axis within which the user starts tilting, m.
+    off_centre : float
+        Distance at which a pouring user stops and re-centres, m.
+    pour_tilt : float
+        Tilt the user aims for while pouring, rad (the bottle flows past about 1.3).
+    upright_tilt : float
+        Tilt below which the bottle counts as upright again, rad.
+    carry_tilt : float
+        Tilt the user tolerates while bringing the bottle over the mug (well below the
+        angle at which it flows), rad.
+    """
+
+    height: float = 0.05
+    centred: float = 0.025
+    off_centre: float = 0.033
+    pour_tilt: float = 1.65
+    upright_tilt: float = 0.3
+    carry_tilt: float = 0.5  # rad of tilt that does not worry a user carrying the bottle
+    gain: float = 2.0  # 1/s: desired speed per unit error
+    v_max: float = 0.10  # m/s: the fastest the user wants the opening to move
+    w_max: float = 0.6  # rad/s
+    phase: str = "bring"
+    _axis: Array | None = field(default=None, repr=False)
+
+    def desire(self, obs: Observation) -> Desire:
+        T_mug = obs.objects["mug"]
+        T_tip = obs.objects["bottle_tip"]
+        p_tip, z_b = T_tip[:3, 3], T_tip[:3, 2]
+        p_m = se3.invert_transform(T_mug) @ np.append(p_tip, 1.0)
+        radial, height = math.hypot(p_m[0], p_m[1]), float(p_m[2])
+        tilt = math.acos(max(-1.0, min(1.0, float(z_b @ UP))))
+        poured = float(obs.scene.get("poured", 0.0))
+        fill = float(obs.scene.get("fill_target", 0.5))
+        if self.phase == "bring" and radial < self.centred and abs(height - self.height) < 0.02:
+            self.phase = "pour"
+        if self.phase == "pour" and poured >= fill:
+            self.phase = "upright"
+        if self.phase == "pour" and radial > self.off_centre:
+            self.phase = "bring"
+        if self.phase == "upright" and tilt < self.upright_tilt:
+            self.phase = "done"
+
+        # the opening's goal: over the mug's axis, higher while still far from it
+        lift = 0.04 * min(1.0, max(0.0, (radial - 0.02) / 0.05))
+        goal = T_mug[:3, :3] @ np.array([0.0, 0.0, self.height + lift]) + T_mug[:3, 3]
+        v_tip = _saturate(self.gain * (goal - p_tip), self.v_max)
+        if self.phase == "pour":
+            axis = self._tilt_axis(obs.T_world_ee, z_b, tilt)  # further over, one way
+            w = axis * self.gain * (self.pour_tilt - tilt)
+            err_rot = abs(self.pour_tilt - tilt)
+        else:
+            self._axis = None
+            back = np.cross(z_b, UP)  # rotating about it brings the bottle upright
+            n = float(np.linalg.norm(back))
+            # bringing: only a tilt beyond carry_tilt needs undoing; upright: all of it
+            excess = tilt if self.phase in ("upright", "done") else max(0.0, tilt - self.carry_tilt)
+            w = back / n * self.gain * excess if n > 1e-9 else np.zeros(3)
+            err_rot = excess
+        w = _saturate(w, self.w_max)
+        # the hand's twist that moves the opening so: v_ee = v_tip - w x (p_tip - p_ee)
+        v_ee = v_tip - np.cross(w, p_tip - obs.T_world_ee[:3, 3])
+        W = np.zeros((6, 6))
+        W[:3, :3] = np.eye(3) / self.v_max
+        # spinning the bottle about its own axis does not matter
+        W[3:, 3:] = (np.eye(3) - np.outer(z_b, z_b)) / self.w_max
+        err = float(np.linalg.norm(goal - p_tip)) + 0.05 * err_rot
+        if self.phase == "pour":  # progress: tilting far enough, then the mug filling
+            err = (float(np.linalg.norm(goal - p_tip)) + 0.05 * max(0.0, self.pour_tilt - tilt)
+                   + 0.5 * max(0.0, fill - poured))
+        done = self.phase == "done"
+        if done:
+            v_ee, w = np.zeros(3), np.zeros(3)
+        return Desire(np.concatenate([v_ee, w]), W, err, self.phase, done)
+
+    def _tilt_axis(self, T_world_ee: Array, z_b: Array, tilt: float) -> Array:
+        """The horizontal axis to tilt about: away from upright, kept once chosen (the
+        hand's y axis when the bottle is upright: tipping its top forwards)."""
+        if self._axis is None:
+            a = np.cross(UP, z_b) if tilt > 0.05 else T_world_ee[:3, 1].copy()
+            a[2] = 0.0
+            n = float(np.linalg.norm(a))
+            self._axis = a / n if n > 1e-9 else np.array([0.0, 1.0, 0.0])
+        return self._axis
+
+
+@dataclass
+class DrawerIntent:
+    """Reach and grasp the handle, pull to the target opening.
+
+    Attributes
+    ----------
+    overshoot : float
+        How much further than the target the user pulls, m.
+    """
+
+    overshoot: float = 0.03
+    gain: float = 2.0
+    v_max: float = 0.10
+    phase: str = "reach"
+
+    def desire(self, obs: Observation) -> Desire:
+        H = obs.objects["drawer_handle"]  # the closed handle; x opens the drawer
+        axis = H[:3, 0]
+        opening = float(obs.scene.get("opening", 0.0))
+        target = float(obs.scene.get("target_opening", 0.2)) + self.overshoot
+        attached = bool(obs.scene.get("attached", False))
+        handle = H[:3, 3] + opening * axis
+        p = obs.T_world_ee[:3, 3]
+        if attached and self.phase == "reach":
+            self.phase = "pull"
+        if self.phase == "pull" and not attached:
+            self.phase = "reach"  # lost the grip
+        if opening >= target - self.overshoot + 1e-3 and self.phase == "pull":
+            self.phase = "done"
+        if self.phase == "reach":
+            v = _saturate(self.gain * (handle - p), self.v_max)
+            err = float(np.linalg.norm(handle - p))
+        else:
+            lateral = handle - p - float((handle - p) @ axis) * axis
+            along = max(0.0, target - opening)
+            v = _saturate(self.gain * (lateral + min(along, 0.05) * axis), self.v_max)
+            err = along + float(np.linalg.norm(lateral))
+        W = np.zeros((6, 6))
+        W[:3, :3] = np.eye(3) / self.v_max
+        W[3:, 3:] = np.eye(3) * 0.1  # the hand's orientation hardly matters
+        done = self.phase == "done"
+        twist = np.zeros(6) if done else np.concatenate([v, np.zeros(3)])
+        return Desire(twist, W, err, self.phase, done)
+
+
+INTENTS = {"pour": PourIntent, "drawer": DrawerIntent}
+
+
+def make_intent(task: str) -> PourIntent | DrawerIntent:
+    try:
+        return INTENTS[task]()
+    except KeyError:
+        raise ValueError(f"unknown task {task!r} (known: {', '.join(INTENTS)})") from None

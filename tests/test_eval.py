@@ -1,0 +1,116 @@
+"""`sctd eval`: trials in lockstep and in real time agree; the simulated user is the
+same person whatever the skill calls its states or how it orders its input axes; the
+command prints the table and, with --json, one JSON object."""
+
+from __future__ import annotations
+
+import json
+import statistics
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+
+from sctd.skill import load_skill
+from sctd_services.eval import lockstep, realtime
+from sctd_services.eval.evaluate import entries, task_of, with_limits
+from sctd_services.eval.trial import TaskSpec
+from tests.conftest import ROOT
+
+POUR = ROOT / "skills" / "pour.yaml"
+
+
+def _renamed_and_permuted(tmp_path):
+    """pour.yaml with every state renamed and the input axes of every linear mapping
+    permuted (input 0 drives what input 1 did, 1 what 2 did, 2 what 0 did)."""
+    src = yaml.safe_load(POUR.read_text())
+    doc = yaml.safe_load(POUR.read_text())
+    names = {old: f"mode_{k}" for k, old in enumerate(src["states"])}
+    doc["states"] = {names[k]: v for k, v in doc["states"].items()}
+    doc["fsm"]["start"], doc["fsm"]["end"] = names[src["fsm"]["start"]], names[src["fsm"]["end"]]
+    for t in doc["fsm"]["transitions"]:
+        t["from"], t["to"] = names[t["from"]], names[t["to"]]
+    axis_index = {"tx": 0, "ty": 1, "tz": 2, "rx": 3, "ry": 4, "rz": 5}
+    perm = [1, 2, 0]
+    for state in doc["states"].values():
+        for m in state["input_mapping"]:
+            if "axes" in m:
+                M = np.zeros((6, len(m["axes"])))
+                for j, a in enumerate(m.pop("axes")):
+                    M[axis_index[a], j] = 1.0
+            else:
+                M = np.asarray(m["matrix"], dtype=float)
+            m["matrix"] = M[:, perm].tolist()
+    out = tmp_path / "pour-renamed.yaml"
+    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return out
+
+
+def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
+    path = _renamed_and_permuted(tmp_path)
+    skill = load_skill(path)
+    assert {s.name for s in skill.states} == {"mode_0", "mode_1", "mode_2"}
+    spec = TaskSpec("pour")
+    for seed in (0, 1):
+        a = lockstep.run_trial(load_skill(POUR), spec, seed)
+        b = lockstep.run_trial(skill, spec, seed)
+        assert a.outcome == "success" and b.outcome == "success", (a, b)
+
+
+def test_lockstep_and_real_time_agree(tmp_path):
+    """Over 5 seeded trials, the same outcome in at least 4 and median times within 20 %."""
+    spec = TaskSpec("pour")
+    seeds = range(5)
+    lock = [lockstep.run_trial(load_skill(POUR), spec, s) for s in seeds]
+    real = [realtime.run_trial(POUR, spec, s, logdir=tmp_path / f"rt{s}") for s in seeds]
+    same = sum(a.outcome == b.outcome for a, b in zip(lock, real, strict=True))
+    assert same >= 4, ([a.outcome for a in lock], [b.outcome for b in real])
+    tl = [r.time_s for r in lock if r.time_s is not None]
+    tr = [r.time_s for r in real if r.time_s is not None]
+    assert tl and tr
+    ml, mr = statistics.median(tl), statistics.median(tr)
+    assert abs(ml - mr) <= 0.2 * ml, (tl, tr)
+
+
+def test_baseline_runs_with_the_assisted_skills_limits(tmp_path):
+    ents = entries([str(POUR), str(ROOT / "skills" / "teleop.yaml")], baseline=True, workdir=tmp_path)
+    pour = load_skill(POUR)
+    assert [e.label for e in ents][:2] == [str(POUR), str(ROOT / "skills" / "teleop.yaml")]
+    for e in ents[1:]:
+        assert e.skill.limits == pour.limits and e.baseline_of == str(POUR)
+    # one baseline per set of limits: pour-linear and pour-vf share theirs
+    vf = ROOT / "skills" / "pour-vf.yaml"
+    ents = entries([str(POUR), str(ROOT / "skills" / "pour-linear.yaml"), str(vf)],
+                   baseline=True, workdir=tmp_path / "b")
+    base = [e for e in ents if e.baseline_of]
+    assert [e.skill.limits for e in base] == [pour.limits, load_skill(vf).limits]
+    assert task_of([e.skill for e in ents], None) == "pour"
+    p = with_limits(ROOT / "skills" / "pour-vf.yaml", pour.limits, tmp_path / "vf")
+    assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf.npz").exists()
+
+
+def test_eval_cli_json_is_one_object(tmp_path):
+    """With --json, stdout is one JSON object and nothing else (the table and the
+    progress bar go to stderr); --report writes the same object and the figures."""
+    proc = subprocess.run([sys.executable, "-m", "sctd.cli.main", "eval", "--skill", str(POUR),
+                           "--trials", "2", "--lockstep", "--jobs", "1", "--json",
+                           "--report", str(tmp_path / "rep")],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT, check=False)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(proc.stdout)  # the whole of stdout: one object
+    assert isinstance(doc, dict) and "trials" in proc.stderr
+    r = doc["results"][0]
+    for key in ("skill", "name", "id", "trials", "successes", "success_rate", "time_s", "spill_mean",
+                "dtw", "mode_switches_mean", "switch_time_s_mean", "effort_mean", "stuck", "limits",
+                "per_trial"):
+        assert key in r, key
+    assert doc["task"] == "pour" and r["trials"] == 2 and len(r["per_trial"]) == 2
+    assert r["skill"] == str(POUR)
+    assert r["successes"] == sum(t["outcome"] == "success" for t in r["per_trial"])
+    assert json.loads((tmp_path / "rep" / "evaluation.json").read_text())["results"][0]["id"] == r["id"]
+    assert list((tmp_path / "rep").glob("*.png"))
+
+
+pytestmark = pytest.mark.timeout(900)
