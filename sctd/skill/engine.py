@@ -96,6 +96,16 @@ def intent_membership(P: Array, prior: Array, s: Sequence[float], kappa: float) 
     return post / total if total > 1e-300 else P
 
 
+Rows9 = tuple[float, float, float, float, float, float, float, float, float]
+
+
+def _matrix_of_quaternion(x: float, y: float, z: float, w: float) -> Rows9:
+    """Row-major rotation matrix of the unit quaternion (x, y, z, w), as nine floats."""
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w),
+            2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w),
+            2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y))
+
+
 def _floats_of(item) -> tuple:
     """The vectors a check reads, as tuples of floats (see SkillEngine._floats)."""
     if isinstance(item, Band):
@@ -215,6 +225,31 @@ RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the
 RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
 
 
+def _norm3(v: Array) -> float:
+    x, y, z = v.tolist()
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _cross3(a: Array, b: Array) -> Array:
+    ax, ay, az = a.tolist()
+    bx, by, bz = b.tolist()
+    return np.array([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx])
+
+
+def _rodrigues(w: Array) -> Array:
+    """The rotation matrix of rotation vector ``w`` (Rodrigues' formula, on floats)."""
+    x, y, z = w.tolist()
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return np.eye(3)
+    kx, ky, kz = x / th, y / th, z / th
+    c, s = math.cos(th), math.sin(th)
+    v = 1.0 - c
+    return np.array([[c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
+                     [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
+                     [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
+
+
 def _rigid_step(T: Array, p: Array, R_frame: Array, d: Array, P: Array, fields) -> Array:
     """Move the hand T (object frame) by the frame displacement ``d`` at the frame's
     position ``p`` (orientation ``R_frame``): the part of it along each rotational field
@@ -232,34 +267,34 @@ def _rigid_step(T: Array, p: Array, R_frame: Array, d: Array, P: Array, fields) 
         if f.pivot is not None:
             pivot = p + R_frame @ f.pivot
             if f.type == "sphere":
-                off = float(np.linalg.norm(pivot - f.centre))
+                off = _norm3(pivot - f.centre)
             else:
                 v = pivot - f.point
-                off = float(np.linalg.norm(v - float(v @ f.axis) * f.axis))
+                off = _norm3(v - float(v @ f.axis) * f.axis)
             dk = dk * min(1.0, max(0.0, (RIGID_REACH - off) / (RIGID_REACH - RIGID_FULL)))
         if f.type == "sphere":
             centre = f.centre if f.pivot is None else p + R_frame @ f.pivot
             r = p - centre
-            rho = float(np.linalg.norm(r))
+            rho = _norm3(r)
             if rho < RIGID_MIN_RADIUS:
                 continue
             n = r / rho
             t = dk - float(dk @ n) * n  # tangent to the sphere
-            w = np.cross(n, t) / rho  # the rotation that moves p by t
+            w = _cross3(n, t) / rho  # the rotation that moves p by t
         else:
             a, centre = f.axis, f.point if f.pivot is None else p + R_frame @ f.pivot
             r = p - centre
             r_perp = r - float(r @ a) * a
-            rho = float(np.linalg.norm(r_perp))
+            rho = _norm3(r_perp)
             if rho < RIGID_MIN_RADIUS:
                 continue
-            e = np.cross(a, r_perp) / rho  # around the axis
+            e = _cross3(a, r_perp) / rho  # around the axis
             along = float(dk @ e)
             t = along * e
             w = a * (along / rho)
-        if not np.any(t):
+        if not (t[0] or t[1] or t[2]):
             continue
-        R = se3.matrix_from_rotvec(w)
+        R = _rodrigues(w)
         out[:3, :3] = R @ out[:3, :3]
         out[:3, 3] = R @ (out[:3, 3] - centre) + centre
         rest -= t
@@ -468,15 +503,19 @@ class SkillEngine:
         nb = self._trees[id(m.model)]
         P = nb.membership(p, m.max_n, m.max_d)
         fields = m.model.fields
+        agree = None
         if m.combine == "intent":
-            P = intent_membership(P, nb.prior, [agreement(f, p, unit) for f in fields], m.intent_kappa)
+            agree = [agreement(f, p, unit) for f in fields]
+            P = intent_membership(P, nb.prior, agree, m.intent_kappa)
         self.last_membership = P
         if m.mode == "scale":
             if m.combine == "most_probable":
                 k = int(np.argmax(P))
                 s = agreement(fields[k], p, unit)
             else:
-                s = sum(P[k] * agreement(f, p, unit) for k, f in enumerate(fields))
+                if agree is None:
+                    agree = [agreement(f, p, unit) for f in fields]
+                s = sum(float(P[k]) * a for k, a in enumerate(agree))
             scale = min(1.0, max(m.min_v, float(sigmoid(s, m.k_s))))
             step = u3 * scale
         else:
@@ -561,22 +600,41 @@ class SkillEngine:
                 return F
             q = c.model.quaternions[i]
             q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
-            q_mean = w @ q
-            q_mean /= np.linalg.norm(q_mean)
-            R_goal = se3.matrix_from_quaternion(q_mean)
-            R_f = np.array(G[:9]).reshape(3, 3)
-            R_corr = R_goal @ R_f.T
+            gx, gy, gz, gw = (w @ q).tolist()
+            # The correction q_goal * q_frame^-1 and its angle, on floats (this runs every
+            # tick): turned towards the goal at most the budget.
+            fx, fy, fz, fw = se3.quaternion_from_rows(*G[:9])
+            cw = gw * fw + gx * fx + gy * fy + gz * fz
+            cx = -gw * fx + gx * fw - gy * fz + gz * fy
+            cy = -gw * fy + gy * fw - gz * fx + gx * fz
+            cz = -gw * fz + gz * fw - gx * fy + gy * fx
+            if cw < 0.0:
+                cw, cx, cy, cz = -cw, -cx, -cy, -cz
+            vn = math.sqrt(cx * cx + cy * cy + cz * cz)
+            n = math.sqrt(cw * cw + vn * vn)
+            if n < 1e-12:
+                return F
             budget = self._turn_budget
-            if budget < math.inf:  # turn towards the goal at most that far this tick
-                r = se3.rotvec_from_matrix(R_corr)
-                angle = float(np.linalg.norm(r))
-                if angle > budget:
-                    R_corr = se3.matrix_from_rotvec(r * (budget / angle))
+            if vn > 1e-15 and 2.0 * math.atan2(vn, cw) > budget:
+                h = 0.5 * budget
+                k = math.sin(h) / vn
+                cx, cy, cz, cw = cx * k, cy * k, cz * k, math.cos(h)
+            else:
+                cx, cy, cz, cw = cx / n, cy / n, cz / n, cw / n
+            R9 = _matrix_of_quaternion(cx, cy, cz, cw)
             if c.pivot is not None:  # about a point of the hand (the opening of a bottle)
-                o = np.array(G[9:]) + R_f @ c.pivot
-                return se3.compose_flat(_rotation(*R_corr.ravel().tolist(), *o), F)
-            return self._rotate_about(F, G, R_corr)
+                px, py, pz = self._floats_pivot(c)
+                o = (G[9] + G[0] * px + G[1] * py + G[2] * pz,
+                     G[10] + G[3] * px + G[4] * py + G[5] * pz,
+                     G[11] + G[6] * px + G[7] * py + G[8] * pz)
+                return se3.compose_flat(_rotation(*R9, *o), F)
+            return se3.compose_flat(_rotation(*R9, *G[9:]), F)
         raise TypeError(f"unknown constraint {c!r}")
+
+    @staticmethod
+    def _floats_pivot(c: NeighbourOrientation) -> tuple[float, float, float]:
+        assert c.pivot is not None
+        return float(c.pivot[0]), float(c.pivot[1]), float(c.pivot[2])
 
     @staticmethod
     def _rotate_about(F: Flat, G: Flat, R_corr: Array) -> Flat:
