@@ -17,7 +17,7 @@ from sctd import se3
 
 from .arm import SimArm
 from .robot import ArmModel, load_arm_model
-from .simulation import start_posture
+from .simulation import Simulation, start_posture
 
 BENCH_CENTRE = se3.transform_from_rt(np.diag([-1.0, 1.0, -1.0]), [0.50, 0.0, 0.35])
 """Centre of the benchmark motions: hand pointing down in mid-workspace."""
@@ -206,8 +206,6 @@ def scene_step(scene: str, size: float = 0.05, rate: float = 1000.0, duration: f
     the loop (the full bottle in the pour scene, held by a controller that knows its
     load as it empties; the free hand in front of the drawer). Settling: the last time
     the error exceeded ``tolerance``. ``hold`` seconds of holding the start come first."""
-    from .simulation import Simulation
-
     with Simulation(scene=scene, rate=rate, compensate_payload=compensate) as sim:
         T0 = sim.arm.T_world_ee
         pose0 = se3.pose_from_transform(T0)
@@ -246,8 +244,6 @@ def scene_tracking(scene: str, speed: float = 0.1, distance: float = 0.15, rate:
                    ramp: float = 0.1) -> dict[str, Any]:
     """Error of the hand following a target moving along world y from the scene's start
     at ``speed`` (trapezoidal, as :func:`tracking`), with the scene in the loop."""
-    from .simulation import Simulation
-
     with Simulation(scene=scene, rate=rate) as sim:
         T0 = sim.arm.T_world_ee
         for _ in range(round(0.5 * rate)):

@@ -24,8 +24,8 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
                    help="first trial seed: trial k starts from the seeded random start seed + k")
     p.add_argument("--user", default="steady", help="simulated user profile (steady, noisy)")
     p.add_argument("--baseline", action="store_true",
-                   help="also run the unassisted baseline (skills/teleop.yaml) with each assisted "
-                        "skill's limits")
+                   help="also run the unassisted baseline (skills/teleop.yaml) once per distinct "
+                        "set of the assisted skills' speed limits")
     p.add_argument("--demos", metavar="DIR", help="demonstrations to compare trajectories with (DTW)")
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
