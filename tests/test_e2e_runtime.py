@@ -102,7 +102,9 @@ def daemon(tmp_path):
                 f"tcp/127.0.0.1:{port}", "--rate", "1000", log=tmp_path / "daemon.log")
     rig = Rig(port)
     try:
-        assert wait_for(lambda: len(rig.targets) > 50, 20), proc.output()
+        assert wait_for(lambda: len(rig.targets) > 50, 20), (
+            f"{len(rig.targets)} targets, {len(rig.status)} status messages, last status "
+            f"{rig.status[-1] if rig.status else None}; daemon log: {proc.output()}")
         yield proc, rig, port
     finally:
         rig.close()

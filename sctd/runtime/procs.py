@@ -8,6 +8,7 @@ grace period) when its context exits, so nothing is left running.
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -15,12 +16,49 @@ import sys
 from pathlib import Path
 from typing import IO
 
+_EPHEMERAL = Path("/proc/sys/net/ipv4/ip_local_port_range")
+_handed_out: set[int] = set()
+_random = random.SystemRandom()  # not the seeded global generator: processes must differ
+
+
+def _ephemeral_range() -> tuple[int, int]:
+    try:
+        low, high = (int(x) for x in _EPHEMERAL.read_text().split())
+        return low, high
+    except (OSError, ValueError):
+        return 32768, 60999  # Linux's default
+
 
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    """A TCP port on 127.0.0.1 that was free a moment ago, and that nothing else will
+    be given in the meantime.
+
+    It is drawn at random from below the kernel's ephemeral range, never from it: a
+    port from ``bind(("127.0.0.1", 0))`` is free again once that socket closes, and
+    until the child that is to listen on it has started (a second or more for Python),
+    any ephemeral allocation can take it, e.g. a test's own session listening on
+    ``tcp/127.0.0.1:0``, which then connects to itself while the child retries its
+    listen forever. A port is not handed out twice by one process.
+    """
+    low, _high = _ephemeral_range()
+    top = min(low, 65536) - 1
+    bottom = max(10000, top - 15000)
+    if top - bottom < 1000:  # an unusual range: fall back to the kernel's choice
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+    for _ in range(1000):
+        port = _random.randint(bottom, top)
+        if port in _handed_out or port == 7447:
+            continue
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        _handed_out.add(port)
+        return port
+    raise RuntimeError(f"no free TCP port on 127.0.0.1 in {bottom}-{top}")
 
 
 def port_is_free(port: int) -> bool:
