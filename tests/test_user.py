@@ -104,3 +104,71 @@ def test_user_at_rest_sends_exactly_zero():
         u, _ = user.step(0.01 * k, _drawer_obs(0.01 * k, [0.2, 0.0, 0.6], 0.25, True))
         if k > 60:
             assert u == (0.0, 0.0, 0.0)
+
+
+MUG = se3.transform_from_rt(np.eye(3), [0.75, 0.0, 0.65])
+T_EE_TIP = se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.12])
+
+
+def _pour_obs(t, T_world_ee, mode="m", poured=0.0):
+    return Observation(t, T_world_ee, {"mug": MUG, "bottle_tip": T_world_ee @ T_EE_TIP},
+                       {"poured": poured, "fill_target": 0.5}, mode)
+
+
+def _hand_with_tip_at(offset):
+    return se3.transform_from_rt(np.eye(3), MUG[:3, 3] + np.asarray(offset) - [0.0, 0.0, 0.12])
+
+
+def test_pour_intent_takes_an_opening_inside_the_rim_as_close_enough():
+    it = make_intent("pour")
+    d = it.desire(_pour_obs(0.0, _hand_with_tip_at([0.028, 0.0, 0.075])))
+    assert d.phase == "bring" and d.close_enough  # not centred, but over the opening
+    it.settle()
+    assert it.desire(_pour_obs(0.1, _hand_with_tip_at([0.028, 0.0, 0.075]))).phase == "pour"
+    for far in ([0.033, 0.0, 0.075], [0.0, 0.0, 0.13], [0.0, 0.0, 0.01]):  # off the rim, too high, too low
+        d = make_intent("pour").desire(_pour_obs(0.0, _hand_with_tip_at(far)))
+        assert d.phase == "bring" and not d.close_enough, far
+
+
+class ToyTilter:
+    """A mode that only turns the bottle about its opening (``B`` maps the stick to a
+    world-frame rotation): it cannot bring the opening any closer to the mug's axis."""
+
+    def __init__(self, B, T):
+        self.B, self.T = B, T
+
+    def step(self, u, dt):
+        w = (self.B @ np.asarray(u))[3:]
+        R = se3.matrix_from_rotvec(w * dt)
+        tip = (self.T @ T_EE_TIP)[:3, 3]
+        T = self.T.copy()
+        T[:3, :3] = R @ T[:3, :3]
+        T[:3, 3] = R @ (T[:3, 3] - tip) + tip
+        self.T = T
+
+
+def test_user_who_cannot_centre_the_opening_pours_from_inside_the_rim():
+    """In a mode that only tilts, with the opening 2.8 cm off the mug's axis (inside its
+    4 cm rim), the user stops trying to centre it and tilts the bottle to pour."""
+    B = np.zeros((6, 3))
+    B[3, 0], B[4, 1] = 0.4, 0.4  # the stick turns about world x and y
+    toy = ToyTilter(B, _hand_with_tip_at([0.0, 0.028, 0.075]))
+    user = SimulatedUser("pour", 3, PROFILES["steady"], seed=2)
+    t, dt = 0.0, 0.01
+    while t < 20.0:
+        u, _ = user.step(t, _pour_obs(t, toy.T))
+        toy.step(u, dt)
+        t += dt
+    z = (toy.T @ T_EE_TIP)[:3, 2]
+    tilt = float(np.arccos(np.clip(z[2], -1.0, 1.0)))
+    assert user.settled >= 1 and user.intent.phase == "pour" and tilt > 1.2, (user.settled, tilt)
+
+
+def test_user_learns_from_the_input_held_between_two_observations():
+    """The stick changes at the user's corrections, not at the observations' times: what
+    it learns from is the input averaged over the interval between two observations."""
+    user = SimulatedUser("drawer", 2, PROFILES["steady"])
+    user._history.extend([(0.0, np.array([1.0, 0.0])), (0.15, np.array([0.0, -1.0]))])
+    assert np.allclose(user._applied(0.1, 0.2), [0.5, -0.5])
+    assert np.allclose(user._applied(0.0, 0.1), [1.0, 0.0])
+    assert np.allclose(user._applied(0.2, 0.3), [0.0, -1.0])

@@ -5,7 +5,9 @@ Pinocchio simulation with its target guard, the runtime's controller tick (skill
 engine and safety limits), the state-continuity and button watches the daemon runs
 on its inputs, and the simulated user, all on the simulator's clock. Messages take
 no time here, and the robot's state reaches the tick one cycle old, as it would at
-best over the wire; the user acts on observations a reaction delay old either way.
+best over the wire; the user acts on observations a reaction delay old either way, and
+sees them at the rates the simulator service publishes them (objects 50 Hz, the scene's
+outcome 10 Hz), so that both ways of running give the user the same information.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from .trial import TaskSpec, TrialRecorder, TrialResult
 
 USER_RATE = 100.0  # Hz at which the user client publishes (the input bridges' default)
 OBJECT_RATE = 50.0  # Hz at which the simulator publishes object poses
+SCENE_RATE = 10.0  # Hz at which it publishes the scene's outcome (what the user sees of progress)
 
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
@@ -46,6 +49,8 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
     every_user = max(1, round(1.0 / (USER_RATE * sim.dt)))
     every_object = max(1, round(1.0 / (OBJECT_RATE * sim.dt)))
+    every_scene = max(1, round(1.0 / (SCENE_RATE * sim.dt)))
+    scene: dict[str, Any] = {}
     world = Sample(0, 0.0, 0.0, F=se3.flat_from_pose([0, 0, 0, 0, 0, 0, 1]))
     objects: dict[str, Any] = {}
     obj_sample: Sample | None = None
@@ -69,8 +74,10 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
         if skill.object == WORLD_OBJECT:
             world.received = world.stamp = t
             obj_sample = world
+        if k % every_scene == 0:
+            scene = sim.scene_outcome()
         if k % every_user == 0:
-            obs = Observation(t, se3.transform_from_pose(pose), objects, sim.scene_outcome(), mode)
+            obs = Observation(t, se3.transform_from_pose(pose), objects, scene, mode)
             eng = ctl.engine
             membership = None if eng.last_membership is None else eng.last_membership.tolist()
             if rec.add(obs, u, b, eng.last_scale, membership) is not None:

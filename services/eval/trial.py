@@ -61,6 +61,7 @@ class TrialResult:
     effort: float  # integral of |u| over the trial
     stuck_episodes: int
     dtw: float | None = None
+    phase_s: dict[str, float] = field(default_factory=dict)  # s spent in each of the intent's steps
     trajectory: list[list[float]] = field(default_factory=list, repr=False)  # t, T_obj_ee pose
     series: dict[str, list[Any]] = field(default_factory=dict, repr=False)
 
@@ -114,6 +115,8 @@ class TrialRecorder:
         self.reason = ""
         self._attached_once = False
         self._scene: dict[str, Any] = {}
+        self.phase_s: dict[str, float] = {}
+        self._done_part = 0.0  # the most poured (fraction) or opened (m) so far
 
     def add(self, obs: Observation, u: tuple[float, ...] | list[float], buttons: tuple[int, ...],
             vf_scale: float | None = None, membership: list[float] | None = None) -> str | None:
@@ -126,6 +129,8 @@ class TrialRecorder:
             self.t0 = self.t_best = t
         if self._last_t is not None:
             self.effort += float(np.linalg.norm(u)) * (t - self._last_t)
+            if self._phase:
+                self.phase_s[self._phase] = self.phase_s.get(self._phase, 0.0) + (t - self._last_t)
         self._last_t = t
         b0 = buttons[0] if buttons else 0
         if b0 and not self._last_button:
@@ -147,10 +152,14 @@ class TrialRecorder:
                 self.t_task = t
         # progress, as the intent sees it
         d = self.observer.desire(obs)
+        done_part = float(obs.scene.get("poured" if self.task == "pour" else "opening", 0.0))
         if d.phase != self._phase:  # a new sub-goal: progress is measured towards it
             self._phase, self.best, self.t_best = d.phase, d.error, t
-        elif d.error < self.best - 0.005:
-            self.best, self.t_best = d.error, t
+        elif d.error < self.best - 0.005 or done_part > self._done_part + 0.005:
+            # closer to the sub-goal, or more of the task done (a user who pours from
+            # short of the observer's centre still makes progress)
+            self.best, self.t_best = min(self.best, d.error), t
+            self._done_part = max(self._done_part, done_part)
         elif t - self.t_best > self.stuck_after:
             self.stuck_episodes += 1
             return self._end("stuck", f"no progress for {self.stuck_after:.0f} s ({d.phase})", t)
@@ -190,7 +199,8 @@ class TrialRecorder:
             time_s=time_s, duration_s=round(duration, 3), spill=float(scene.get("spilled_amount", 0.0)),
             progress=float(progress), mode_switches=self.switches,
             switch_time_s=self.switches * self.switch_time, effort=round(self.effort, 4),
-            stuck_episodes=self.stuck_episodes, trajectory=self.trajectory, series=self.series)
+            stuck_episodes=self.stuck_episodes, trajectory=self.trajectory, series=self.series,
+            phase_s={k: round(v, 3) for k, v in self.phase_s.items()})
         if demos and self.t_task is not None:
             res.dtw = dtw_to_demos(self._task_part(), demos)
         return res

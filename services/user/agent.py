@@ -7,7 +7,8 @@ each mode from the robot's response to its own inputs (:mod:`.device`): trying e
 axis in a mode it has not seen, then choosing at every correction the input whose
 predicted motion comes closest to what the intent wants, and updating the model from
 what the hand then did; when that stops bringing it closer for a while, it tries the
-stick out again. Where the current mode cannot produce the wanted motion, or nothing of
+stick out again, or, when it is as close as the task needs (the bottle's opening inside
+the mug's rim), goes on to the next step. Where the current mode cannot produce the wanted motion, or nothing of
 its most wanted part, for a while it lets go and tries the mode switch (button 0), as a
 person who knows the device has modes; if pressing it changes nothing, it stops trying.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
@@ -87,6 +88,7 @@ class SimulatedUser:
         self._improved = 0.0  # when it last got better
         self._phase = ""
         self.reprobes = 0
+        self.settled = 0  # sub-goals taken as reached when close enough
         self.switches = 0
         self.switch_time = 0.0
         self.desire: Desire | None = None
@@ -126,14 +128,22 @@ class SimulatedUser:
             seen.popleft()
         return seen[0] if seen and seen[0].t <= cutoff else None
 
-    def _applied(self, t: float) -> Array:
-        """The deflection the user had made at time ``t``."""
-        out = np.zeros(self.n)
+    def _applied(self, t0: float, t1: float) -> Array:
+        """The deflection the user held from ``t0`` to ``t1``, averaged over that time
+        (the stick changes at the user's own corrections, which need not fall on the
+        times of the observations it learns from)."""
+        total = np.zeros(self.n)
+        current = np.zeros(self.n)
+        at = t0
         for ti, u in self._history:
-            if ti > t:
+            if ti >= t1:
                 break
-            out = u
-        return out
+            if ti > at:
+                total += current * (ti - at)
+                at = ti
+            current = u
+        total += current * (t1 - at)
+        return total / (t1 - t0)
 
     def _learn(self, now: Observation) -> None:
         """Update the current mode's model with how the hand moved since the last
@@ -145,7 +155,7 @@ class SimulatedUser:
         if dt < 1e-3:
             return
         model = self.models.setdefault(now.mode, DeviceModel(self.n))
-        model.update(self._applied(last.t), twist_between(last.T_world_ee, now.T_world_ee, dt))
+        model.update(self._applied(last.t, now.t), twist_between(last.T_world_ee, now.T_world_ee, dt))
 
     def _decide(self, t: float, obs: Observation) -> tuple[Array, tuple[int, int, int]]:
         zero = np.zeros(self.n)
@@ -166,10 +176,17 @@ class SimulatedUser:
             return zero, (0, 1, 0)
         model = self.models.setdefault(obs.mode, DeviceModel(self.n))
         if self._no_progress(t, desire) and model.known and obs.mode not in self._probes:
-            # What used to work does not any more (the device behaves differently here):
-            # wiggle the stick again to see what it does now.
-            model.relearn()
-            self.reprobes += 1
+            if desire.close_enough:
+                # Not quite there, but as close as the task needs and no closer for a
+                # while: on to the next step.
+                self.intent.settle()
+                self.settled += 1
+                desire = self.desire = self.intent.desire(obs)
+            else:
+                # What used to work does not any more (the device behaves differently
+                # here): wiggle the stick again to see what it does now.
+                model.relearn()
+                self.reprobes += 1
         if not model.known or self._probes.get(obs.mode):
             return self._probe(obs.mode, model), (0, 1, 0)
         self._probes.pop(obs.mode, None)
