@@ -10,7 +10,8 @@ what the hand then did; when that stops bringing it closer for a while, it tries
 stick out again, or, when it is as close as the task needs (the bottle's opening inside
 the mug's rim), goes on to the next step. Where the current mode cannot produce the
 wanted motion, or nothing of its most wanted part, for a while it lets go and tries the
-mode switch (button 0), as a person who knows the device has modes; if pressing it changes nothing, it stops trying.
+mode switch (button 0), as a person who knows the device has modes; if pressing it
+changes nothing, it stops trying.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
 stick only every update period, its deflections are noisy and never smaller than its
 dead zone, and a mode switch costs it time with the stick released.
