@@ -148,9 +148,11 @@ def _close_quietly(s: zenoh.Session) -> None:
 
 @contextmanager
 def session(listen: Sequence[str] | None = None, connect: Sequence[str] | None = None,
-            config_file: str | Path | None = None) -> Iterator[zenoh.Session]:
-    """``with session(...) as s:`` an open session, closed with a bounded wait."""
-    s = open_session(listen, connect, config_file)
+            config_file: str | Path | None = None,
+            rate_limits: Sequence[tuple[str, float]] = ()) -> Iterator[zenoh.Session]:
+    """``with session(...) as s:`` an open session, closed with a bounded wait
+    (``rate_limits``: see :func:`make_config`)."""
+    s = open_session(listen, connect, config_file, rate_limits=rate_limits)
     try:
         yield s
     finally:
@@ -168,6 +170,6 @@ def add_zenoh_arguments(parser) -> None:
                    help="Zenoh json5 config file replacing the loopback defaults")
 
 
-def session_from_args(args):
+def session_from_args(args, rate_limits: Sequence[tuple[str, float]] = ()):
     """``with session_from_args(args) as s:`` for the common Zenoh flags."""
-    return session(args.listen, args.connect, args.zenoh_config)
+    return session(args.listen, args.connect, args.zenoh_config, rate_limits)

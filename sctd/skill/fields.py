@@ -7,6 +7,8 @@ vectorised.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -33,6 +35,35 @@ def field_vectors(f: Field, points: ArrayLike) -> Array:
         v = p - f.centre
     n = np.linalg.norm(v, axis=1, keepdims=True)
     return np.where(n > 1e-9, v / np.maximum(n, 1e-9), 0.0)
+
+
+def field_vector3(f: Field, p: tuple[float, float, float]) -> tuple[float, float, float]:
+    """:func:`field_vectors` at one point, on Python floats (the runtime's tick)."""
+    x, y, z = p
+    if f.type == "translation":
+        assert f.direction is not None
+        dx, dy, dz = f.direction.tolist()
+        return dx, dy, dz
+    if f.type == "cylinder":
+        assert f.axis is not None and f.point is not None
+        (ax, ay, az), (cx, cy, cz) = f.axis.tolist(), f.point.tolist()
+        rx, ry, rz = x - cx, y - cy, z - cz
+        vx, vy, vz = ay * rz - az * ry, az * rx - ax * rz, ax * ry - ay * rx
+    else:
+        assert f.centre is not None
+        cx, cy, cz = f.centre.tolist()
+        vx, vy, vz = x - cx, y - cy, z - cz
+    n = math.sqrt(vx * vx + vy * vy + vz * vz)
+    return (vx / n, vy / n, vz / n) if n > 1e-9 else (0.0, 0.0, 0.0)
+
+
+def agreement3(f: Field, p: tuple[float, float, float], unit: tuple[float, float, float]) -> float:
+    """:func:`agreement` on Python floats (the same value)."""
+    gx, gy, gz = field_vector3(f, p)
+    c = unit[0] * gx + unit[1] * gy + unit[2] * gz
+    if f.type == "sphere":
+        return math.sqrt(max(0.0, 1.0 - c * c))
+    return c
 
 
 def deviation_angles(f: Field, points: ArrayLike, vectors: ArrayLike) -> Array:

@@ -28,6 +28,11 @@ from sctd_services.user import PROFILES, Observation
 from .trial import TaskSpec, TrialRecorder, TrialResult
 
 WATCH_RATE = 100.0  # Hz at which the evaluator samples what it sees
+# The evaluator keeps only the newest state and target, which it reads at WATCH_RATE: Zenoh
+# drops the rest of their 1 kHz on arrival (its downsampling, before any Python callback),
+# so that watching does not take from the simulator, the daemon and the user the CPU they
+# need to keep real time on a small machine.
+WATCH_INGRESS = 250.0  # Hz
 
 
 class _Watcher:
@@ -108,7 +113,8 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     def ep() -> str:
         return f"tcp/127.0.0.1:{free_port()}"
 
-    with session(listen=[hub]) as s:
+    keys = codec.Keys()
+    with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
         w = _Watcher(s, spec.task)
         try:
             with Child("sctd.cli.main", "sim", "--scene", spec.task, "--trial-seed", str(seed),
