@@ -70,6 +70,7 @@ def test_lockstep_and_real_time_agree(tmp_path):
     seeds = range(5)
     lock = [lockstep.run_trial(load_skill(POUR), spec, s) for s in seeds]
     real = [realtime.run_trial(POUR, spec, s, logdir=tmp_path / f"rt{s}") for s in seeds]
+    assert all(r.sim_rtf is None for r in lock) and all(r.sim_rtf and r.sim_rtf > 0 for r in real)
     same = sum(a.outcome == b.outcome for a, b in zip(lock, real, strict=True))
     assert same >= 4, ([a.outcome for a in lock], [b.outcome for b in real])
     tl = [r.time_s for r in lock if r.time_s is not None]

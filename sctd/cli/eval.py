@@ -107,4 +107,8 @@ def main_eval(args: argparse.Namespace) -> int:
         if r["switch_share"]:
             print(f"  {r['skill']}: mode switching took {100 * r['switch_share']:.1f} % of the trials' time "
                   "(Herlant et al. 2016: 17.4 % on a JACO)")
+        rtf = r.get("sim_rtf_min")
+        if rtf is not None and rtf < 0.95:
+            print(f"  {r['skill']}: the simulator kept only {rtf:.2f} of real time in a trial (this machine "
+                  "could not run it, the daemon and the user at full rate): its times are not comparable")
     return 0

@@ -180,6 +180,7 @@ def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float = 60.
         "switch_share": round(share, 4),
         "effort_mean": round(float(np.mean([t["effort"] for t in per_trial])), 3) if n else 0.0,
         "stuck": sum(1 for t in per_trial if t["outcome"] == "stuck"),
+        "sim_rtf_min": min((t["sim_rtf"] for t in per_trial if t.get("sim_rtf") is not None), default=None),
         "limits": asdict(e.skill.limits),
         "per_trial": per_trial,
     }

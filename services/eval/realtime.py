@@ -114,6 +114,8 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
         return f"tcp/127.0.0.1:{free_port()}"
 
     keys = codec.Keys()
+    first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start
+    obs: Observation | None = None
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
         w = _Watcher(s, spec.task)
         try:
@@ -136,9 +138,15 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
                         obs = w.observation(spec.task)
                         if obs is None or w.inputs == 0:  # the trial starts with the user
                             continue
+                        if first is None and "t" in w.scene:
+                            first = (obs.t, float(w.scene["t"]))
                         st = w.status
                         if rec.add(obs, w.u, w.buttons, st.get("vf_scale")) is not None:
                             break
         finally:
             w.close()
-    return rec.result(demos)
+    res = rec.result(demos)
+    if first is not None and "t" in w.scene and obs is not None and obs.t - first[0] > 1.0:
+        # how well the simulator kept real time (its last scene message is <= 0.1 s old)
+        res.sim_rtf = round((float(w.scene["t"]) - first[1]) / (obs.t - first[0]), 3)
+    return res

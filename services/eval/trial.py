@@ -62,6 +62,7 @@ class TrialResult:
     stuck_episodes: int
     dtw: float | None = None
     phase_s: dict[str, float] = field(default_factory=dict)  # s spent in each of the intent's steps
+    sim_rtf: float | None = None  # real time: simulated / wall time over the trial (None in lockstep)
     trajectory: list[list[float]] = field(default_factory=list, repr=False)  # t, T_obj_ee pose
     series: dict[str, list[Any]] = field(default_factory=dict, repr=False)
 
