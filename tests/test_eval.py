@@ -116,3 +116,34 @@ def test_eval_cli_json_is_one_object(tmp_path):
 
 
 pytestmark = pytest.mark.timeout(900)
+
+
+def _held_bottle(t: float, tilt: float):
+    from sctd import se3
+    from sctd_services.user import Observation
+
+    mug = se3.transform_from_rt(np.eye(3), [0.75, 0.0, 0.65])
+    tip = mug[:3, 3] + [0.0, 0.002, 0.072]  # over the opening, 2 cm above the height aimed for
+    R = se3.matrix_from_rotvec([0.0, tilt, 0.0])
+    T_ee = se3.transform_from_rt(R, tip - R @ [0.0, 0.0, 0.12])
+    T_tip = T_ee @ se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.12])
+    scene = {"poured": 0.0, "fill_target": 0.5, "spilled_amount": 0.0, "pouring": False}
+    return Observation(t, T_ee, {"mug": mug, "bottle_tip": T_tip}, scene, "m")
+
+
+@pytest.mark.parametrize("tilting", [True, False])
+def test_a_user_who_pours_from_close_enough_is_not_stuck(tilting):
+    """The trial's observer judges as the user does: with the opening as close as the
+    task needs and no closer for a while, tilting the bottle is progress (towards
+    pouring); holding it still for 10 s more is not."""
+    from sctd_services.eval.trial import TrialRecorder
+
+    rec = TrialRecorder("pour", 0, switch_time=1.0)
+    outcome = None
+    for k in range(1400):  # 14 s at 100 Hz: 3 s still, then (or not) tilting at 0.1 rad/s
+        t = 0.01 * k
+        tilt = 0.1 * max(0.0, t - 3.0) if tilting else 0.0
+        outcome = rec.add(_held_bottle(t, tilt), (0.0, 0.0, 1.0), (0, 1, 0))
+        if outcome is not None:
+            break
+    assert (outcome is None) if tilting else (outcome == "stuck"), (outcome, rec.reason)
