@@ -172,3 +172,17 @@ def test_user_learns_from_the_input_held_between_two_observations():
     assert np.allclose(user._applied(0.1, 0.2), [0.5, -0.5])
     assert np.allclose(user._applied(0.0, 0.1), [1.0, 0.0])
     assert np.allclose(user._applied(0.2, 0.3), [0.0, -1.0])
+
+
+def test_user_client_exits_1_when_no_target_arrives():
+    """Alone on a loopback port, the Zenoh client drives for its duration, sees no
+    target and says so with exit code 1 (it used to exit 0 whatever happened)."""
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT, free_port
+
+    proc = subprocess.run([sys.executable, "-m", "sctd_services.simulated_user", "--task", "drawer",
+                           "--duration", "1", "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                          capture_output=True, text=True, timeout=60, cwd=ROOT, check=False)
+    assert proc.returncode == 1 and "no target arrived" in proc.stderr, (proc.returncode, proc.stderr)

@@ -455,7 +455,6 @@ class LinearIMLearner:
     def _build_states(self, demos: list[Array]) -> None:
         cleaned = [_absorb_short_runs(f, c, self.min_segment)
                    for f, c in zip(self.graph_labels_, self.costs_, strict=True)]
-        self.cleaned_labels_ = cleaned
         runs = [_runs(f) for f in cleaned]
         counts = np.array([len(r) for r in runs])
         values, freq = np.unique(counts, return_counts=True)

@@ -402,14 +402,8 @@ class VectorFieldLearner:
         sigma = np.array(sig)
         pi = inl.sum(axis=1) / n
         pi0 = max(0.05, 1.0 - pi.sum())
-        bg = 1.0 / math.pi  # uniform density of the outlier angles
-        keep_pts = [m for m in inl]
         for _ in range(max(1, self.em_iterations)):
-            # E-step (eq. 4.27), half-normal likelihood of the deviation angle.
-            TH = np.stack([self._angles(f, p, v) for f in fields], axis=1)
-            like = (2.0 / (sigma * math.sqrt(2 * math.pi))) * np.exp(-0.5 * (TH / sigma) ** 2)
-            num = np.concatenate([like * pi, np.full((n, 1), pi0 * bg)], axis=1)
-            R = num / num.sum(axis=1, keepdims=True)
+            TH, R = self._e_step(fields, sigma, pi, pi0, p, v)
             # M-step (eqs. 4.28-4.30); spread as the weighted RMS angle.
             w = R.sum(axis=0)
             pi = w[:-1] / n
@@ -417,7 +411,7 @@ class VectorFieldLearner:
             sigma = np.maximum(math.radians(1.0),
                                np.sqrt(np.sum(R[:, :-1] * TH**2, axis=0) / np.maximum(w[:-1], 1e-12)))
             hard = np.argmax(R, axis=1)
-            new_fields, new_sigma, new_pi, keep_pts = [], [], [], []
+            new_fields, new_sigma, new_pi = [], [], []
             for m, f in enumerate(fields):
                 assigned = hard == m
                 if self.coherence:
@@ -428,14 +422,10 @@ class VectorFieldLearner:
                 new_fields.append(g if g is not None else f)
                 new_sigma.append(sigma[m])
                 new_pi.append(pi[m])
-                keep_pts.append(assigned)
             if not new_fields:
                 break
             fields, sigma, pi = new_fields, np.array(new_sigma), np.array(new_pi)
-        TH = np.stack([self._angles(f, p, v) for f in fields], axis=1)
-        like = (2.0 / (sigma * math.sqrt(2 * math.pi))) * np.exp(-0.5 * (TH / sigma) ** 2)
-        num = np.concatenate([like * pi, np.full((n, 1), pi0 * bg)], axis=1)
-        R = num / num.sum(axis=1, keepdims=True)
+        _, R = self._e_step(fields, sigma, pi, pi0, p, v)
         hard = np.argmax(R, axis=1)
         self.assignment_ = np.where(hard == len(fields), -1, hard)
         Rf = R[:, :-1]
@@ -446,6 +436,16 @@ class VectorFieldLearner:
         self.fields_ = [replace(f, weight=float(weights[m]), sigma=float(sigma[m]),
                                 inliers=int(np.sum(self.assignment_ == m)))
                         for m, f in enumerate(fields)]
+
+    def _e_step(self, fields, sigma: Array, pi: Array, pi0: float, p: Array,
+                v: Array) -> tuple[Array, Array]:
+        """Eq. 4.27: the deviation angles (n, k) and the responsibilities (n, k + 1; the
+        last column the outliers, whose angles have the uniform density 1 / pi), from a
+        half-normal likelihood of each field's deviation angle."""
+        TH = np.stack([self._angles(f, p, v) for f in fields], axis=1)
+        like = (2.0 / (sigma * math.sqrt(2 * math.pi))) * np.exp(-0.5 * (TH / sigma) ** 2)
+        num = np.concatenate([like * pi, np.full((len(p), 1), pi0 / math.pi)], axis=1)
+        return TH, num / num.sum(axis=1, keepdims=True)
 
     def _candidate_frames(self) -> None:
         out = []
