@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from sctd.runtime.procs import Child, free_port, port_is_free
+from sctd.cli.procs import Child, free_port, port_is_free
 
 # No per-example deadline: the suite runs on loaded machines (CI, two suites at once),
 # where a deadline measures the machine, not the code.

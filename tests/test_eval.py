@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
+from sctd.cli import eval_realtime as realtime
 from sctd.skill import load_skill
-from sctd_services.eval import lockstep, realtime
+from sctd_services.eval import lockstep
 from sctd_services.eval.evaluate import entries, task_of, with_limits
 from sctd_services.eval.trial import TaskSpec
 from tests.conftest import ROOT

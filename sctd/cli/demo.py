@@ -48,9 +48,9 @@ def _last_json(text: str) -> dict | None:
 
 def main_demo(args: argparse.Namespace) -> int:
     from ..runtime import codec
-    from ..runtime.procs import Child, free_port
     from ..runtime.zsession import session as zsession
     from ..skill import SkillError, load_skill
+    from .procs import Child, free_port
 
     try:
         skill = load_skill(args.skill)

@@ -7,10 +7,32 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+from sctd.skill import SkillError
+from sctd_services.eval.evaluate import (
+    entries,
+    evaluate,
+    limits_line,
+    lockstep_job,
+    median_ratio,
+    profile_line,
+    strip_trajectories,
+    table,
+    task_of,
+)
+from sctd_services.eval.report import write_report
+from sctd_services.eval.trial import TaskSpec
+from sctd_services.user import PROFILES
+
+from .errors import fail
+from .eval_realtime import realtime_job
 
 
 def add_eval_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,37 +59,18 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--logs", metavar="DIR", help="keep the real-time trials' process logs here")
 
 
-def main_eval(args: argparse.Namespace) -> int:
-    from sctd_services.eval.evaluate import (
-        entries,
-        evaluate,
-        limits_line,
-        median_ratio,
-        profile_line,
-        strip_trajectories,
-        table,
-        task_of,
-    )
-    from sctd_services.eval.trial import TaskSpec
-    from sctd_services.user import PROFILES
-
-    from ..skill import SkillError
-
+def _check(args: argparse.Namespace) -> str | None:
+    """The first problem with the arguments, as ``--flag: problem``, or None."""
     if args.user not in PROFILES:
-        print(f"sctd eval: --user: unknown profile {args.user!r} (known: {', '.join(PROFILES)})",
-              file=sys.stderr)
-        return 2
+        return f"--user: unknown profile {args.user!r} (known: {', '.join(PROFILES)})"
     if args.trials < 1:
-        print("sctd eval: --trials must be >= 1", file=sys.stderr)
-        return 2
-    work = Path(tempfile.mkdtemp(prefix="sctd-eval-"))
-    try:
-        ents = entries(args.skill, args.baseline, work)
-        task = task_of([e.skill for e in ents], args.task)
-    except (SkillError, ValueError) as e:
-        print(f"sctd eval: {e}", file=sys.stderr)
-        return 2
-    spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit)
+        return "--trials: must be >= 1"
+    if args.jobs is not None and args.jobs < 1:
+        return "--jobs: must be >= 1"
+    return None
+
+
+def _progress_bar() -> Callable[[int, int, str], None]:
     t0 = time.monotonic()
 
     def progress(done: int, total: int, label: str) -> None:
@@ -75,23 +78,12 @@ def main_eval(args: argparse.Namespace) -> int:
         print(f"\r  [{'#' * n}{'.' * (30 - n)}] {done}/{total} trials ({label}) "
               f"{time.monotonic() - t0:.0f} s", end="", file=sys.stderr, flush=True)
 
-    results = evaluate(ents, spec, args.trials, args.seed, args.lockstep, args.demos, args.jobs,
-                       keep=bool(args.report), logdir=Path(args.logs) if args.logs else None,
-                       progress=progress)
-    print(file=sys.stderr)
-    header = {"task": task, "trials": args.trials, "seed": args.seed, "user": args.user,
-              "lockstep": args.lockstep}
-    if args.report:
-        from sctd_services.eval.report import write_report
+    return progress
 
-        for f in write_report(results, Path(args.report), header):
-            print(f"sctd eval: wrote {f}", file=sys.stderr)
-    plain = strip_trajectories(results)
-    if args.json:
-        print(json.dumps({**header, "results": plain}))
-        return 0
+
+def _print_table(plain: list[dict[str, Any]], spec: TaskSpec, args: argparse.Namespace) -> None:
     how = "lockstep (simulated time)" if args.lockstep else "real time, over Zenoh"
-    print(f"sctd eval: task {task}, {args.trials} trials per skill from seed {args.seed}, {how}")
+    print(f"sctd eval: task {spec.task}, {args.trials} trials per skill from seed {args.seed}, {how}")
     print(f"  {profile_line(spec)}")
     print("  speed limits:")
     for r in plain:
@@ -111,4 +103,34 @@ def main_eval(args: argparse.Namespace) -> int:
         if rtf is not None and rtf < 0.95:
             print(f"  {r['skill']}: the simulator kept only {rtf:.2f} of real time in a trial (this machine "
                   "could not run it, the daemon and the user at full rate): its times are not comparable")
+
+
+def main_eval(args: argparse.Namespace) -> int:
+    problem = _check(args)
+    if problem:
+        return fail("eval", problem)
+    work = Path(tempfile.mkdtemp(prefix="sctd-eval-"))
+    try:
+        ents = entries(args.skill, args.baseline, work)
+        task = task_of([e.skill for e in ents], args.task)
+    except (SkillError, ValueError) as e:
+        return fail("eval", str(e))
+    spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit)
+    # lockstep trials are independent and run in parallel; real-time ones, which start
+    # processes (the application layer's job), run one at a time
+    job = lockstep_job if args.lockstep else realtime_job
+    jobs = (args.jobs or os.cpu_count() or 1) if args.lockstep else 1
+    results = evaluate(ents, spec, args.trials, args.seed, job, jobs, args.demos, keep=bool(args.report),
+                       logdir=Path(args.logs) if args.logs else None, progress=_progress_bar())
+    print(file=sys.stderr)
+    header = {"task": task, "trials": args.trials, "seed": args.seed, "user": args.user,
+              "lockstep": args.lockstep}
+    if args.report:
+        for f in write_report(results, Path(args.report), header):
+            print(f"sctd eval: wrote {f}", file=sys.stderr)
+    plain = strip_trajectories(results)
+    if args.json:
+        print(json.dumps({**header, "results": plain}))
+    else:
+        _print_table(plain, spec, args)
     return 0

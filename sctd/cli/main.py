@@ -57,13 +57,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = sub.add_parser("bench", help="benchmarks that print figures")
     bsub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    from ..runtime import bench as runtime_bench
+    from ..bench import latency as runtime_bench
 
     p = bsub.add_parser("latency", help="daemon tick timing and input->target latency vs a Zenoh echo")
     runtime_bench.add_latency_arguments(p)
     p.set_defaults(func=runtime_bench.main_latency)
 
-    from ..runtime import robustness
+    from ..bench import robustness
 
     p = bsub.add_parser("robustness", help="the daemon next to the sim under floods, bad bundles, "
                                            "swaps and a jumping state")

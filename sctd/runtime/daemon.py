@@ -24,6 +24,8 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -101,6 +103,13 @@ class _Publisher(threading.Thread):
         self.queue.put(None)
         self.join(timeout=5.0)
 
+    def __enter__(self) -> _Publisher:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 class _Inlet:
     """One subscription the tick drains: a ring of ``depth`` samples, the size limit of
@@ -121,6 +130,51 @@ class _Pending:
     objects: dict[str, _Inlet]
     done: threading.Event
     state: str = ""
+
+
+def _reply(body: dict[str, Any]) -> bytes:
+    """A skill-queryable reply (summary, swap result or error) as a msgpack map."""
+    return msgpack.packb(body, use_bin_type=True)
+
+
+@dataclass
+class _Window:
+    """The loop's status window: when it started, when the next status is due, when the
+    recent-percentile window started, and the last FSM state seen (for the log)."""
+
+    start: float
+    state: str
+    next_status: float = 0.0
+    recent_start: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.next_status = self.recent_start = self.start
+
+
+@contextmanager
+def _tick_thread_settings(rt_priority: int, cpu: int | None) -> Iterator[bool]:
+    """The calling (tick) thread's real-time settings for the ``with`` block: a short
+    GIL switch interval, 1 us timer slack, SCHED_FIFO ``rt_priority`` (0: off), pinned
+    to ``cpu``, and the collector frozen. Yields whether SCHED_FIFO was granted; the
+    switch interval and the collector are restored on exit."""
+    switch_interval = sys.getswitchinterval()
+    sys.setswitchinterval(SWITCH_INTERVAL)
+    try:
+        set_timer_slack(1)
+        realtime = set_realtime(rt_priority)
+        if cpu is not None:
+            os.sched_setaffinity(0, {cpu})  # this (the tick) thread only
+        if rt_priority and not realtime:
+            log.warning("could not get SCHED_FIFO priority %d (needs CAP_SYS_NICE or an rtprio "
+                        "limit); ticking at normal priority", rt_priority)
+        gc.collect()
+        gc.freeze()  # long-lived objects out of the collector's way; ticks allocate little
+        try:
+            yield realtime
+        finally:
+            gc.unfreeze()
+    finally:
+        sys.setswitchinterval(switch_interval)
 
 
 class Daemon:
@@ -245,20 +299,21 @@ class Daemon:
                 self._answer_skill_query(query)
             except Exception as e:  # every query gets a reply, whatever went wrong
                 log.exception("skill query failed")
-                query.reply_err(msgpack.packb({"error": f"<bundle>: {type(e).__name__}: {e}"},
-                                              use_bin_type=True))
+                self._refuse(query, f"<bundle>: {type(e).__name__}: {e}")
 
     def _refuse(self, query: zenoh.Query, error: str) -> None:
+        """Every refusal, whatever its cause, is one error reply ``{"error": text}``
+        (``text`` reads ``<file>: <field>: <problem>``) and is counted."""
         log.warning("refused skill: %s", error)
         self._refused += 1
-        query.reply_err(msgpack.packb({"error": error}, use_bin_type=True))
+        query.reply_err(_reply({"error": error}))
 
     def _answer_skill_query(self, query: zenoh.Query) -> None:
         payload = query.payload
         if payload is None or len(payload) == 0:
             summary = skill_summary(self.controller.skill)
             summary["state"] = self.controller.engine.state
-            query.reply(self.keys.skill, msgpack.packb(summary, use_bin_type=True))
+            query.reply(self.keys.skill, _reply(summary))
             return
         if len(payload) > MAX_BUNDLE_BYTES:
             # refused before it is copied out of Zenoh's buffer
@@ -300,9 +355,8 @@ class Daemon:
                 if name not in objects:
                     inlet.sub.undeclare()
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
-        query.reply(self.keys.skill, msgpack.packb(
-            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state},
-            use_bin_type=True))
+        query.reply(self.keys.skill, _reply(
+            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}))
 
     def _install(self, pending: _Pending, now: float) -> None:
         """On the tick thread, between two ticks: the new skill and its object rings."""
@@ -317,114 +371,123 @@ class Daemon:
     # --- the loop ------------------------------------------------------------------------
 
     def run(self, duration: float | None = None) -> dict[str, Any]:
-        """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics."""
-        cfg = self.config
-        keys = self.keys
-        s = self.session
-        self._worker = BundleWorker()
+        """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics.
+
+        Everything the run opens (the bundle worker, the subscriptions, publishers and
+        queryable, the publisher thread, the process' real-time settings) is entered on
+        one exit stack, so a failure at any point releases what was opened before it.
+        """
+        with ExitStack() as stack:
+            self._open(stack)
+            ticker = Ticker(self.config.period, spin=self.spin)
+            log.info("running skill %s@%s for robot %s at %.0f Hz", self.controller.skill.name,
+                     self.controller.skill.id, self.config.robot, self.config.rate)
+            self._loop(ticker, None if duration is None else time.monotonic() + duration)
+        return self.status(ticker, time.monotonic(), 0.0)
+
+    def _open(self, stack: ExitStack) -> None:
+        """Declare and start what a run needs; each is closed by ``stack`` (in reverse)."""
+        keys, s = self.keys, self.session
+        self._worker = stack.enter_context(BundleWorker())
+        stack.callback(setattr, self, "_worker", None)
         self._base_inlets = (
-            _Inlet(s, keys.input(cfg.device), INPUT_DEPTH, codec.MAX_INPUT_BYTES, "input",
+            _Inlet(s, keys.input(self.config.device), INPUT_DEPTH, codec.MAX_INPUT_BYTES, "input",
                    self._take_input),
             _Inlet(s, keys.state, STATE_DEPTH, codec.MAX_STATE_BYTES, "state", self._take_state),
         )
+        stack.callback(self._close_inlets)
         # Only the objects the active skill needs, by name: a wildcard would let any number
         # of names cost memory, and a ring per wildcard would lose the task object's
         # updates whenever another object publishes.
         obj = self.controller.skill.object
         self._object_inlets = {} if obj == WORLD_OBJECT else {obj: self._object_inlet(obj)}
         self._inlets = self._base_inlets + tuple(self._object_inlets.values())
-        pub_target = s.declare_publisher(keys.target, express=True,
-                                         congestion_control=zenoh.CongestionControl.DROP)
-        pub_status = s.declare_publisher(keys.status, congestion_control=zenoh.CongestionControl.DROP)
-        queryable = s.declare_queryable(keys.skill, self._on_skill_query)
-        publisher = _Publisher(pub_target, pub_status, self.rt_priority)
-        publisher.start()
-        self._publisher = publisher
-        send = publisher.queue.put
-        switch_interval = sys.getswitchinterval()
-        sys.setswitchinterval(SWITCH_INTERVAL)
-        set_timer_slack(1)
-        self.realtime = set_realtime(self.rt_priority)
-        if self.cpu is not None:
-            os.sched_setaffinity(0, {self.cpu})  # this (the tick) thread only
-        if self.rt_priority and not self.realtime:
-            log.warning("could not get SCHED_FIFO priority %d (needs CAP_SYS_NICE or an rtprio "
-                        "limit); ticking at normal priority", self.rt_priority)
-        gc.collect()
-        gc.freeze()  # long-lived objects out of the collector's way; ticks allocate little
-        ticker = Ticker(cfg.period, spin=self.spin)
-        status_period = 1.0 / cfg.status_rate
-        next_status = time.monotonic()
-        window_start = recent_start = time.monotonic()
-        end = None if duration is None else time.monotonic() + duration
-        last_state = self.controller.engine.state
-        log.info("running skill %s@%s for robot %s at %.0f Hz", self.controller.skill.name,
-                 self.controller.skill.id, cfg.robot, cfg.rate)
-        try:
-            while not self.stop_event.is_set():
-                ahead = ticker.due - DRAIN_LEAD - time.monotonic()
-                if ahead > 0.0:
-                    time.sleep(ahead)
-                pending = self._pending
-                if pending is not None:
-                    with self._lock:
-                        self._pending = None
-                    self._install(pending, time.monotonic())
-                self._drain(time.monotonic())
-                now, lateness = ticker.wait()
-                if end is not None and now >= end:
-                    break
-                wall = time.time()
-                ctl = self.controller
-                if ctl.skill.object == WORLD_OBJECT:  # always there, always fresh
-                    obj_sample: Sample | None = self._world
-                    self._world.received, self._world.stamp = now, wall
-                else:
-                    obj_sample = self._objects.get(ctl.skill.object)
-                res = ctl.tick(now, wall, self._input, self._state, obj_sample)
-                if res.pose is not None:
-                    self.target_seq += 1
-                    send((self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
-                    self._window_targets += 1
-                done = time.monotonic()
-                compute = done - now
-                if self._trash:
-                    self._trash.clear()
-                self.lateness.add(lateness)
-                self.compute.add(compute)
-                self._recent_lateness.add(lateness)
-                self._recent_compute.add(compute)
-                if compute > self._window_compute_max:
-                    self._window_compute_max = compute
-                if res.state != last_state:
-                    log.info("state %s -> %s", last_state, res.state)
-                    last_state = res.state
-                if done >= next_status:
-                    if done - recent_start >= RECENT:
-                        self._recent = {"lateness": self._recent_lateness.summary_ms(),
-                                        "compute": self._recent_compute.summary_ms()}
-                        self._recent_lateness.clear()
-                        self._recent_compute.clear()
-                        recent_start = done
-                    send(self.status(ticker, done, done - window_start))
-                    window_start = done
-                    self._window_targets = 0
-                    self._window_compute_max = 0.0
-                    next_status = done + status_period
-        finally:
-            self.stop_event.set()
-            queryable.undeclare()  # no new swaps; one under way fails its wait and replies
-            worker, self._worker = self._worker, None
-            publisher.close()
-            gc.unfreeze()
-            sys.setswitchinterval(switch_interval)
-            for inlet in (*self._base_inlets, *self._object_inlets.values()):
-                inlet.sub.undeclare()
-            for d in (pub_target, pub_status):
-                d.undeclare()
-            if worker is not None:
-                worker.close()
-        return self.status(ticker, time.monotonic(), 0.0)
+        pub_target = stack.enter_context(s.declare_publisher(
+            keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP))
+        pub_status = stack.enter_context(s.declare_publisher(
+            keys.status, congestion_control=zenoh.CongestionControl.DROP))
+        self._publisher = stack.enter_context(_Publisher(pub_target, pub_status, self.rt_priority))
+        self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
+        # no new swaps once the loop ends; one under way fails its wait and replies
+        stack.enter_context(s.declare_queryable(keys.skill, self._on_skill_query))
+        stack.callback(self.stop_event.set)
+
+    def _close_inlets(self) -> None:
+        for inlet in (*self._base_inlets, *self._object_inlets.values()):
+            inlet.sub.undeclare()
+
+    def _loop(self, ticker: Ticker, end: float | None) -> None:
+        """The tick loop: drain ahead of each deadline, step at it, account after it."""
+        assert self._publisher is not None
+        send = self._publisher.queue.put
+        window = _Window(time.monotonic(), self.controller.engine.state)
+        while not self.stop_event.is_set():
+            ahead = ticker.due - DRAIN_LEAD - time.monotonic()
+            if ahead > 0.0:
+                time.sleep(ahead)
+            self._before_tick()
+            now, lateness = ticker.wait()
+            if end is not None and now >= end:
+                break
+            state = self._step(now, send)
+            done = time.monotonic()
+            if self._trash:
+                self._trash.clear()
+            self._account(window, lateness, done - now, state)
+            if done >= window.next_status:
+                send(self._window_status(window, ticker, done))
+
+    def _before_tick(self) -> None:
+        """Between two ticks: install a swapped-in skill, then drain the inputs."""
+        pending = self._pending
+        if pending is not None:
+            with self._lock:
+                self._pending = None
+            self._install(pending, time.monotonic())
+        self._drain(time.monotonic())
+
+    def _step(self, now: float, send: Any) -> str:
+        """The control step at the deadline ``now``; queues the target, returns the state."""
+        wall = time.time()
+        ctl = self.controller
+        if ctl.skill.object == WORLD_OBJECT:  # always there, always fresh
+            obj_sample: Sample | None = self._world
+            self._world.received, self._world.stamp = now, wall
+        else:
+            obj_sample = self._objects.get(ctl.skill.object)
+        res = ctl.tick(now, wall, self._input, self._state, obj_sample)
+        if res.pose is not None:
+            self.target_seq += 1
+            send((self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
+            self._window_targets += 1
+        return res.state
+
+    def _account(self, window: _Window, lateness: float, compute: float, state: str) -> None:
+        self.lateness.add(lateness)
+        self.compute.add(compute)
+        self._recent_lateness.add(lateness)
+        self._recent_compute.add(compute)
+        if compute > self._window_compute_max:
+            self._window_compute_max = compute
+        if state != window.state:
+            log.info("state %s -> %s", window.state, state)
+            window.state = state
+
+    def _window_status(self, window: _Window, ticker: Ticker, done: float) -> dict[str, Any]:
+        """The status map that closes a status window (and, each RECENT s, the recent
+        percentiles); resets the window's counts."""
+        if done - window.recent_start >= RECENT:
+            self._recent = {"lateness": self._recent_lateness.summary_ms(),
+                            "compute": self._recent_compute.summary_ms()}
+            self._recent_lateness.clear()
+            self._recent_compute.clear()
+            window.recent_start = done
+        status = self.status(ticker, done, done - window.start)
+        window.start = done
+        window.next_status = done + 1.0 / self.config.status_rate
+        self._window_targets = 0
+        self._window_compute_max = 0.0
+        return status
 
     def stop(self) -> None:
         self.stop_event.set()

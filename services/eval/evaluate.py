@@ -8,10 +8,10 @@ with the speed limits of the assisted skill it is compared with.
 
 from __future__ import annotations
 
-import os
 import tempfile
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -20,9 +20,11 @@ from typing import Any
 import numpy as np
 import yaml
 
+from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
 from sctd_services.user import PROFILES
 
+from .lockstep import run_trial
 from .trial import TaskSpec, TrialResult
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
@@ -88,57 +90,53 @@ def entries(paths: list[str], baseline: bool, workdir: Path) -> list[Entry]:
     return out
 
 
-def _lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None,
-                  keep: bool) -> dict[str, Any]:
-    from .lockstep import run_trial
+TrialJob = Callable[[str, TaskSpec, int, "str | None", bool, Path], dict[str, Any]]
+"""How one trial runs: ``(skill path, spec, seed, demos dir, keep trajectory, log dir) ->
+TrialResult.as_dict()``. :func:`lockstep_job` here; the real-time one, which starts
+processes, is the application layer's (:func:`sctd.cli.eval_realtime.realtime_job`)."""
 
+
+def lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
+                 logdir: Path) -> dict[str, Any]:
+    """One lockstep trial (in this process, simulated time; ``logdir`` is unused)."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
     return run_trial(load_skill(path), spec, seed, demos).as_dict(with_trajectory=keep)
 
 
-def _realtime_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
-                  logdir: Path) -> dict[str, Any]:
-    from .realtime import run_trial
-
-    demos = read_demo_poses(demos_dir) if demos_dir else None
-    return run_trial(path, spec, seed, demos, logdir).as_dict(with_trajectory=keep)
-
-
 def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
     """The demonstrations' poses (n, 7), object frame, for the DTW figure."""
-    from sctd.learn.demos import read_demos
-
     return [d.poses for d in read_demos(directory)]
 
 
-def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, lockstep: bool,
-             demos: str | None = None, jobs: int | None = None, keep: bool = False,
-             logdir: Path | None = None,
+def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: TrialJob = lockstep_job,
+             jobs: int = 1, demos: str | None = None, keep: bool = False, logdir: Path | None = None,
              progress: Callable[[int, int, str], None] | None = None) -> list[dict[str, Any]]:
-    """Run every entry's trials; one result map per entry (see :func:`summarise`)."""
+    """Run every entry's trials; one result map per entry (see :func:`summarise`).
+
+    With ``jobs`` > 1 the trials run in that many spawned processes (lockstep trials are
+    independent; real-time ones compete for the CPU and should run one at a time).
+    """
     seeds = list(range(seed, seed + trials))
     total = len(ents) * trials
     done = 0
     results = []
     logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
-    for e in ents:
-        per_trial: list[dict[str, Any]] = []
-        if lockstep:
-            n = max(1, min(jobs or os.cpu_count() or 1, trials))
-            with ProcessPoolExecutor(n, mp_context=get_context("spawn")) as pool:
-                futures = [pool.submit(_lockstep_job, str(e.path), spec, s, demos, keep) for s in seeds]
-                for f in futures:
-                    per_trial.append(f.result())
-                    done += 1
-                    if progress:
-                        progress(done, total, e.label)
-        else:
-            for s in seeds:
-                per_trial.append(_realtime_job(str(e.path), spec, s, demos, keep, logdir / e.skill.name))
+    n = max(1, min(jobs, trials))
+    with ExitStack() as stack:
+        pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn"))) if n > 1 else None
+        for e in ents:
+            args = [(str(e.path), spec, s, demos, keep, logdir / e.skill.name) for s in seeds]
+            if pool is not None:
+                runs = (f.result() for f in [pool.submit(job, *a) for a in args])
+            else:
+                runs = (job(*a) for a in args)
+            per_trial: list[dict[str, Any]] = []
+            for r in runs:
+                per_trial.append(r)
                 done += 1
                 if progress:
                     progress(done, total, e.label)
-        results.append(summarise(e, per_trial, spec.time_limit))
+            results.append(summarise(e, per_trial, spec.time_limit))
     return results
 
 

@@ -1,5 +1,9 @@
 """A trial with real processes over Zenoh at real time (the default of ``sctd eval``).
 
+It orchestrates processes, so it lives in the application layer, next to ``sctd demo``:
+the evaluation service (:mod:`sctd_services.eval`) is handed :func:`realtime_job` by
+``sctd eval`` and never starts a process itself.
+
 Per trial, on a free loopback port held by the evaluator's session: ``sctd sim
 --trial-seed N`` (the Pinocchio arm from the seeded start), ``sctd run --skill`` (the
 daemon) and the simulated user client (:mod:`sctd_services.simulated_user`, the same
@@ -20,12 +24,13 @@ import zenoh
 
 from sctd import se3
 from sctd.runtime import codec
-from sctd.runtime.procs import Child, free_port
 from sctd.runtime.zsession import session
+from sctd_services.eval.evaluate import read_demo_poses
+from sctd_services.eval.trial import TaskSpec, TrialRecorder, TrialResult
 from sctd_services.simulated_user import OBJECTS
 from sctd_services.user import PROFILES, Observation
 
-from .trial import TaskSpec, TrialRecorder, TrialResult
+from .procs import Child, free_port
 
 WATCH_RATE = 100.0  # Hz at which the evaluator samples what it sees
 # The evaluator keeps only the newest state and target, which it reads at WATCH_RATE: Zenoh
@@ -150,3 +155,10 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
         # how well the simulator kept real time (its last scene message is <= 0.1 s old)
         res.sim_rtf = round((float(w.scene["t"]) - first[1]) / (obs.t - first[0]), 3)
     return res
+
+
+def realtime_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
+                 logdir: Path) -> dict[str, Any]:
+    """One real-time trial as :func:`sctd_services.eval.evaluate.evaluate` runs it."""
+    demos = read_demo_poses(demos_dir) if demos_dir else None
+    return run_trial(path, spec, seed, demos, logdir).as_dict(with_trajectory=keep)

@@ -3,7 +3,7 @@ bundles and a jumping state, with the quiet run as the baseline of the same benc
 
 Processes, all on one free loopback port held by this (the bench's) session:
 ``sctd sim --scene pour`` (the Pinocchio arm at 1 kHz), ``sctd run`` (the pour skill),
-and per phase a flooder (``python -m sctd.runtime.robustness flood ...``). Every
+and per phase a flooder (``python -m sctd.bench.robustness flood ...``). Every
 figure comes from what the daemon publishes: its targets (by ``seq``, with their
 ``stamp``), its status (tick counters, the per-second ``recent_ms`` windows, the drop
 counters) and its resident memory (``/proc``).
@@ -33,9 +33,10 @@ from typing import Any
 import msgpack
 import zenoh
 
-from . import codec
-from .procs import Child, free_port
-from .zsession import add_zenoh_arguments, session, session_from_args
+from sctd.cli.procs import Child, free_port
+from sctd.runtime import codec
+from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
+from sctd.skill import Bundle, bundle_from_file
 
 KEYS = codec.Keys()
 SWAPS = 10
@@ -48,8 +49,6 @@ def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
     """Twenty different bundles the daemon must refuse with an error reply, from the
     shipped skills in ``skills``: bytes that are not a bundle, bundles whose YAML or
     model files are broken, hostile or invalid."""
-    from ..skill import Bundle, bundle_from_file
-
     pour = bundle_from_file(skills / "pour.yaml")
     vf = bundle_from_file(skills / "pour-vf.yaml")
     rel = next(iter(vf.files))
@@ -255,7 +254,7 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
         pid = daemon.p.pid
 
         def flood(kind: str, *extra: str) -> dict:
-            with Child("sctd.runtime.robustness", "flood", kind, "--seconds", str(seconds),
+            with Child("sctd.bench.robustness", "flood", kind, "--seconds", str(seconds),
                        "--connect", hub, *extra, log=logdir / f"flood-{kind}.log") as f:
                 f.p.wait(timeout=seconds + 120)
             lines = [ln for ln in f.output().splitlines() if ln.startswith("{")]
@@ -278,7 +277,6 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
         out["bad_bundles"] = _phase(w, pid, bad_bundles)
 
         def swaps() -> dict:
-            from ..skill import bundle_from_file
 
             ok = 0
             windows = []  # (query sent, reply + 5 ms), wall clock as the targets' stamps
@@ -403,5 +401,5 @@ def main_robustness(args: argparse.Namespace) -> int:
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "flood":
         sys.exit(flood_main(sys.argv[2:]))
-    print("usage: python -m sctd.runtime.robustness flood garbage|valid|objects [...]", file=sys.stderr)
+    print("usage: python -m sctd.bench.robustness flood garbage|valid|objects [...]", file=sys.stderr)
     sys.exit(2)

@@ -4,7 +4,7 @@ Processes, all on one free loopback port:
 - ``sctd run`` (the daemon under test), with the pour skill by default;
 - the kinematic stand-in robot (state at 1 kHz, objects at 50 Hz);
 - an echo process that republishes ``sctd/bench/ping`` on ``sctd/bench/pong``;
-- the probe (``python -m sctd.runtime.bench probe``): first measures the echo round
+- the probe (``python -m sctd.bench.latency probe``): first measures the echo round
   trip, then publishes input and measures input -> target latency (send time of input
   ``seq`` to the arrival of the first target whose ``in_seq`` is ``seq``).
 Both probe measurements use the same kind of Zenoh callback, so they are comparable.
@@ -25,10 +25,13 @@ from pathlib import Path
 
 import zenoh
 
-from . import codec
-from .procs import Child, free_port
-from .timing import Histogram, Ticker, set_timer_slack
-from .zsession import add_zenoh_arguments, session, session_from_args
+from sctd import se3
+from sctd.cli.procs import Child, free_port
+from sctd.runtime import codec
+from sctd.runtime.controller import Controller, RuntimeConfig, Sample
+from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
+from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
+from sctd.skill import load_skill
 
 PING = "sctd/bench/ping"
 PONG = "sctd/bench/pong"
@@ -135,9 +138,6 @@ def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = Fal
     stay hot; ``paced=True`` sleeps to the next period between ticks as the daemon does,
     which on some machines (virtual CPUs) makes each tick start cold. Timings (s), as a
     Histogram summary."""
-    from .. import se3
-    from ..skill import load_skill
-    from .controller import Controller, RuntimeConfig, Sample
 
     cfg = RuntimeConfig(rate=rate)
     ctl = Controller(load_skill(skill_path), cfg)
@@ -186,7 +186,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
                "--rt-priority", str(rt_priority), "--stats-json", *pin,
                log=logdir / "daemon.log") as daemon, \
          Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
-         Child("sctd.runtime.bench", "echo", "--connect", ep, log=logdir / "echo.log"):
+         Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         with session(connect=[ep]) as s:  # wait until the daemon publishes targets
             sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
             end = time.monotonic() + 30
@@ -195,7 +195,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
                     raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
                 time.sleep(0.05)
             sub.undeclare()
-        probe = Child("sctd.runtime.bench", "probe", "--connect", ep, "--rate", str(input_rate),
+        probe = Child("sctd.bench.latency", "probe", "--connect", ep, "--rate", str(input_rate),
                       "--seconds", str(seconds))
         figures = _last_json(probe.communicate(timeout=total + 60))
         probe.stop()
@@ -285,6 +285,6 @@ def main_latency(args: argparse.Namespace) -> int:
 if __name__ == "__main__":
     commands = {"echo": echo_main, "probe": probe_main}
     if len(sys.argv) < 2 or sys.argv[1] not in commands:
-        print("usage: python -m sctd.runtime.bench {echo,probe} ...", file=sys.stderr)
+        print("usage: python -m sctd.bench.latency {echo,probe} ...", file=sys.stderr)
         sys.exit(2)
     sys.exit(commands[sys.argv[1]](sys.argv[2:]))
