@@ -20,13 +20,14 @@ import signal
 import sys
 import threading
 import time
+from contextlib import ExitStack
 from typing import Any
 
 import zenoh
 
 from sctd import se3
 from sctd.runtime import codec
-from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
+from sctd.runtime.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
 from .user import INTENTS, PROFILES, Observation, SimulatedUser
@@ -36,28 +37,35 @@ OBJECTS = {"pour": ("mug", "bottle_tip"), "drawer": ("drawer_handle",)}
 
 class UserClient:
     """The Zenoh edge of a :class:`SimulatedUser`: subscriptions that keep the newest
-    observation, and one :meth:`step` per input message."""
+    observation, and one :meth:`step` per input message. A context manager owning its
+    subscriptions and publisher."""
 
     def __init__(self, session: zenoh.Session, user: SimulatedUser, robot: str = "edan",
                  device: str = "simuser", warmup: float = 0.5):
         self.user = user
         self.keys = codec.Keys(robot)
         self.lock = threading.Lock()
-        self.latency = Histogram()
+        self.latency = RoundTrips()
         self.warmup = warmup
         self.t_start = time.monotonic()
-        self.sent: dict[int, float] = {}
         self.info: dict[str, Any] = {"mode": None, "targets": 0, "changes": [], "T_world_ee": None,
                                      "scene": {}, "first_target": None}
         self.objects: dict[str, Any] = {}
         k = self.keys
-        self.subs = [session.declare_subscriber(k.target, self._on_target),
-                     session.declare_subscriber(k.state, self._on_state),
-                     session.declare_subscriber(k.scene, self._on_scene)]
-        self.subs += [session.declare_subscriber(k.objects(n), self._on_object)
-                      for n in OBJECTS[user.task]]
-        self.pub = session.declare_publisher(k.input(device), express=True)
+        self._stack = ExitStack()
+        for key, callback in ((k.target, self._on_target), (k.state, self._on_state),
+                              (k.scene, self._on_scene)):
+            self._stack.enter_context(session.declare_subscriber(key, callback))
+        for name in OBJECTS[user.task]:
+            self._stack.enter_context(session.declare_subscriber(k.objects(name), self._on_object))
+        self.pub = self._stack.enter_context(session.declare_publisher(k.input(device), express=True))
         self.seq = 0
+
+    def __enter__(self) -> UserClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def _on_target(self, sample: zenoh.Sample) -> None:
         now = time.monotonic()
@@ -65,10 +73,9 @@ class UserClient:
             msg = codec.decode_target(sample.payload.to_bytes())
         except codec.DecodeError:
             return
+        self.latency.counting = now - self.t_start > self.warmup
+        self.latency.answered(msg["in_seq"], now)
         with self.lock:
-            t_sent = self.sent.pop(msg["in_seq"], None)
-            if t_sent is not None and now - self.t_start > self.warmup:
-                self.latency.add(now - t_sent)
             info = self.info
             info["targets"] += 1
             if info["first_target"] is None:
@@ -112,21 +119,24 @@ class UserClient:
         buttons: tuple[int, ...] = (0, 1, 0)
         if obs is not None:
             u, buttons = self.user.step(obs.t, obs)
-        with self.lock:
-            self.sent[self.seq] = time.monotonic()
-            if len(self.sent) > 5000:  # inputs overwritten before any tick used them
-                for k in list(self.sent)[:1000]:
-                    del self.sent[k]
+        self.send(u, buttons)
+
+    def send(self, u: tuple[float, ...], buttons: tuple[int, ...]) -> None:
+        self.latency.sent(self.seq)
         self.pub.put(codec.encode_input(self.seq, time.time(), u, buttons))
         self.seq += 1
 
+    def let_go(self) -> None:
+        """Release the stick (zero input, deadman held) for a few messages."""
+        for _ in range(5):
+            self.send((0.0,) * self.user.n, (0, 1, 0))
+            time.sleep(0.01)
+
     def close(self) -> None:
-        for sub in self.subs:
-            sub.undeclare()
-        self.pub.undeclare()
+        self._stack.close()
 
 
-def main(argv: list[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sctd-simulated-user", description=__doc__.split("\n\n")[0])
     p.add_argument("--task", default="pour", choices=sorted(INTENTS))
     p.add_argument("--profile", default="steady", choices=sorted(PROFILES))
@@ -141,34 +151,27 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--warmup", type=float, default=0.5, help="s of latency samples to discard")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     add_zenoh_arguments(p)
-    args = p.parse_args(argv)
+    return p
 
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *a: stop.set())
-    signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    user = SimulatedUser(args.task, args.axes, args.profile, seed=args.seed)
-    # The hand's pose at 250 Hz is plenty for a person deciding at 100 Hz: Zenoh drops the
-    # rest of the state's 1 kHz on arrival, leaving the CPU to the simulator and the daemon
-    # (the targets, whose in_seq the latency measurement needs, all arrive).
-    with session_from_args(args, rate_limits=[(codec.Keys(args.robot).state, 250.0)]) as session:
-        client = UserClient(session, user, args.robot, args.device, args.warmup)
-        set_timer_slack(1)
-        ticker = Ticker(1.0 / args.rate, spin=0.0)
-        end = time.monotonic() + args.duration
-        while not stop.is_set() and time.monotonic() < end:
-            ticker.wait()
-            client.step()
-            if args.until_done and user.done:
-                break
-        for _ in range(5):  # let go of the stick
-            client.pub.put(codec.encode_input(client.seq, time.time(), (0.0,) * user.n, (0, 1, 0)))
-            client.seq += 1
-            time.sleep(0.01)
-        first = client.info["first_target"] or time.monotonic()
-        elapsed = time.monotonic() - first
-        client.close()
+
+def _drive(client: UserClient, args: argparse.Namespace, stop: threading.Event) -> float:
+    """Step the user at ``--rate`` until the duration, a stop or (``--until-done``) the
+    task is done; returns the seconds since the first target."""
+    set_timer_slack(1)
+    ticker = Ticker(1.0 / args.rate, spin=0.0)
+    end = time.monotonic() + args.duration
+    while not stop.is_set() and time.monotonic() < end:
+        ticker.wait()
+        client.step()
+        if args.until_done and client.user.done:
+            break
+    client.let_go()
+    return time.monotonic() - (client.info["first_target"] or time.monotonic())
+
+
+def _report(client: UserClient, args: argparse.Namespace, elapsed: float) -> dict[str, Any]:
     info = client.info
-    report = {
+    return {
         "task": args.task,
         "profile": args.profile,
         "inputs_sent": client.seq,
@@ -177,19 +180,38 @@ def main(argv: list[str] | None = None) -> int:
         "elapsed_s": round(elapsed, 3),
         "state_changes": info["changes"],
         "final_state": info["mode"],
-        "mode_switches": user.switches,
-        "done": user.done,
-        "latency_ms": client.latency.summary_ms(),
+        "mode_switches": client.user.switches,
+        "done": client.user.done,
+        "latency_ms": client.latency.histogram.summary_ms(),
     }
+
+
+def _print_report(report: dict[str, Any]) -> None:
+    for t, a, b in report["state_changes"]:
+        print(f"  t={t:6.2f}s  state {a} -> {b}")
+    lat = report["latency_ms"]
+    print(f"  targets: {report['targets_received']} ({report['target_rate']} /s); "
+          f"input->target latency p50 {lat['p50']} ms, p99 {lat['p99']} ms, max {lat['max']} ms")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *a: stop.set())
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    user = SimulatedUser(args.task, args.axes, args.profile, seed=args.seed)
+    # The hand's pose at 250 Hz is plenty for a person deciding at 100 Hz: Zenoh drops the
+    # rest of the state's 1 kHz on arrival, leaving the CPU to the simulator and the daemon
+    # (the targets, whose in_seq the latency measurement needs, all arrive).
+    with session_from_args(args, rate_limits=[(codec.Keys(args.robot).state, 250.0)]) as session, \
+            UserClient(session, user, args.robot, args.device, args.warmup) as client:
+        elapsed = _drive(client, args, stop)
+    report = _report(client, args, elapsed)
     if args.json:
         print(json.dumps(report))
     else:
-        for t, a, b in report["state_changes"]:
-            print(f"  t={t:6.2f}s  state {a} -> {b}")
-        lat = report["latency_ms"]
-        print(f"  targets: {report['targets_received']} ({report['target_rate']} /s); "
-              f"input->target latency p50 {lat['p50']} ms, p99 {lat['p99']} ms, max {lat['max']} ms")
-    if not info["targets"]:
+        _print_report(report)
+    if not report["targets_received"]:
         print("sctd-simulated-user: no target arrived (is the daemon running, on the same Zenoh?)",
               file=sys.stderr)
         return 1

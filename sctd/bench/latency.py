@@ -21,6 +21,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
@@ -29,7 +30,7 @@ from sctd import se3
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
-from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
+from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
 from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
 from sctd.skill import load_skill
 
@@ -44,16 +45,13 @@ def echo_main(argv: list[str]) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     signal.signal(signal.SIGINT, lambda *a: stop.set())
-    with session_from_args(args) as s:
-        pub = s.declare_publisher(PONG, express=True)
-        sub = s.declare_subscriber(PING, lambda sample: pub.put(sample.payload.to_bytes()))
+    with session_from_args(args) as s, s.declare_publisher(PONG, express=True) as pub, \
+            s.declare_subscriber(PING, lambda sample: pub.put(sample.payload.to_bytes())):
         stop.wait()
-        sub.undeclare()
-        pub.undeclare()
     return 0
 
 
-def probe_main(argv: list[str]) -> int:
+def _probe_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sctd-bench-probe")
     p.add_argument("--rate", type=float, default=500.0)
     p.add_argument("--echo-seconds", type=float, default=3.0)
@@ -61,72 +59,61 @@ def probe_main(argv: list[str]) -> int:
     p.add_argument("--warmup", type=float, default=1.0)
     p.add_argument("--robot", default="edan")
     add_zenoh_arguments(p)
-    args = p.parse_args(argv)
+    return p
+
+
+def _send_phase(trips: RoundTrips, rate: float, seconds: float, warmup: float,
+                send: Callable[[int], None]) -> None:
+    """Send messages 0, 1, ... at ``rate`` for ``seconds``, counting round trips after
+    ``warmup``; then wait 0.2 s for the last answers and forget the unanswered."""
+    ticker = Ticker(1.0 / rate, spin=0.0)
+    start = time.monotonic()
+    seq = 0
+    trips.counting = False
+    while (now := time.monotonic()) < start + seconds:
+        ticker.wait()
+        trips.counting = now - start > warmup
+        trips.sent(seq)
+        send(seq)
+        seq += 1
+    trips.counting = False
+    time.sleep(0.2)
+    trips.clear()
+
+
+def _sweep(k: int) -> list[float]:
+    """Input ``k`` of a slow sweep, so the target really moves (and the skill works)."""
+    return [0.6 * math.sin(k * 0.002), 0.6 * math.cos(k * 0.0013), 0.3 * math.sin(k * 0.0007)]
+
+
+def probe_main(argv: list[str]) -> int:
+    """The echo round trip, then the input -> target latency; prints both as JSON."""
+    args = _probe_parser().parse_args(argv)
     keys = codec.Keys(args.robot)
     set_timer_slack(1)
-    rtt, latency = Histogram(), Histogram()
-    sent: dict[int, float] = {}
-    lock = threading.Lock()
-    counting = threading.Event()
-    got = {"pongs": 0, "targets": 0}
+    echo, latency = RoundTrips(), RoundTrips()
 
     def on_pong(sample: zenoh.Sample) -> None:
-        now = time.monotonic()
-        seq = int(sample.payload.to_bytes())
-        with lock:
-            t = sent.pop(seq, None)
-            got["pongs"] += 1
-        if t is not None and counting.is_set():
-            rtt.add(now - t)
+        echo.answered(int(sample.payload.to_bytes()), time.monotonic())
 
     def on_target(sample: zenoh.Sample) -> None:
         now = time.monotonic()
         try:
-            msg = codec.decode_target(sample.payload.to_bytes())
+            latency.answered(codec.decode_target(sample.payload.to_bytes())["in_seq"], now)
         except codec.DecodeError:
-            return
-        with lock:
-            t = sent.pop(msg["in_seq"], None)
-            got["targets"] += 1
-        if t is not None and counting.is_set():
-            latency.add(now - t)
+            pass
 
-    with session_from_args(args) as s:
-        subs = [s.declare_subscriber(PONG, on_pong), s.declare_subscriber(keys.target, on_target)]
-        pub_ping = s.declare_publisher(PING, express=True)
-        pub_in = s.declare_publisher(keys.input("bench"), express=True)
-
-        def phase(seconds: float, send) -> None:
-            ticker = Ticker(1.0 / args.rate, spin=0.0)
-            start = time.monotonic()
-            seq = 0
-            while (now := time.monotonic()) < start + seconds:
-                ticker.wait()
-                if now - start > args.warmup:
-                    counting.set()
-                with lock:
-                    sent[seq] = time.monotonic()
-                send(seq)
-                seq += 1
-            counting.clear()
-            time.sleep(0.2)
-            with lock:
-                sent.clear()
-
-        phase(args.echo_seconds + args.warmup, lambda k: pub_ping.put(str(k).encode()))
-
-        def send_input(k: int) -> None:
-            # A slow sweep, so the target really moves (and the skill does real work).
-            u = [0.6 * math.sin(k * 0.002), 0.6 * math.cos(k * 0.0013), 0.3 * math.sin(k * 0.0007)]
-            pub_in.put(codec.encode_input(k, time.time(), u))
-
-        phase(args.seconds + args.warmup, send_input)
-        for sub in subs:
-            sub.undeclare()
-        pub_ping.undeclare()
-        pub_in.undeclare()
-    print(json.dumps({"echo_rtt_ms": rtt.summary_ms(), "latency_ms": latency.summary_ms(),
-                      "pongs": got["pongs"], "targets": got["targets"]}))
+    with session_from_args(args) as s, \
+            s.declare_subscriber(PONG, on_pong), s.declare_subscriber(keys.target, on_target), \
+            s.declare_publisher(PING, express=True) as pub_ping, \
+            s.declare_publisher(keys.input("bench"), express=True) as pub_in:
+        _send_phase(echo, args.rate, args.echo_seconds + args.warmup, args.warmup,
+                    lambda k: pub_ping.put(str(k).encode()))
+        _send_phase(latency, args.rate, args.seconds + args.warmup, args.warmup,
+                    lambda k: pub_in.put(codec.encode_input(k, time.time(), _sweep(k))))
+    print(json.dumps({"echo_rtt_ms": echo.histogram.summary_ms(),
+                      "latency_ms": latency.histogram.summary_ms(),
+                      "pongs": echo.answers, "targets": latency.answers}))
     return 0
 
 

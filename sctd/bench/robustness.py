@@ -27,6 +27,7 @@ import tempfile
 import threading
 import time
 import zipfile
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
@@ -148,7 +149,8 @@ def flood_main(argv: list[str]) -> int:
 
 
 class _Watch:
-    """Targets (seq, stamp, position) and status windows, as the daemon publishes them."""
+    """Targets (seq, stamp, position) and status windows, as the daemon publishes them.
+    A context manager owning its subscriptions."""
 
     def __init__(self, s: zenoh.Session):
         self.lock = threading.Lock()
@@ -156,9 +158,17 @@ class _Watch:
         self.status: dict | None = None
         self.windows: list[tuple[float, dict]] = []  # (bench time, recent_ms)
         self.state: dict | None = None
-        self.state_ring = s.declare_subscriber(KEYS.state, zenoh.handlers.RingChannel(1))
-        self.subs = [s.declare_subscriber(KEYS.target, self._on_target),
-                     s.declare_subscriber(KEYS.status, self._on_status)]
+        self._stack = ExitStack()
+        self.state_ring = self._stack.enter_context(
+            s.declare_subscriber(KEYS.state, zenoh.handlers.RingChannel(1)))
+        self._stack.enter_context(s.declare_subscriber(KEYS.target, self._on_target))
+        self._stack.enter_context(s.declare_subscriber(KEYS.status, self._on_status))
+
+    def __enter__(self) -> _Watch:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.close()
 
     def _on_target(self, sample: zenoh.Sample) -> None:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
@@ -183,10 +193,6 @@ class _Watch:
         with self.lock:
             return dict(self.status or {})
 
-    def close(self) -> None:
-        for sub in self.subs:
-            sub.undeclare()
-        self.state_ring.undeclare()
 
 
 def _rss_kib(pid: int) -> int:
@@ -236,81 +242,88 @@ def _phase(w: _Watch, daemon_pid: int, run, settle: float = 1.2) -> dict:
     }
 
 
+class _Phases:
+    """What each phase does next to the running daemon, through the bench's session."""
+
+    def __init__(self, s: zenoh.Session, watch: _Watch, hub: str, skills: Path, seconds: float,
+                 logdir: Path):
+        self.s, self.watch, self.hub = s, watch, hub
+        self.skills, self.seconds, self.logdir = skills, seconds, logdir
+
+    def quiet(self) -> dict:
+        time.sleep(self.seconds)
+        return {}
+
+    def flood(self, kind: str, *extra: str) -> dict:
+        with Child("sctd.bench.robustness", "flood", kind, "--seconds", str(self.seconds),
+                   "--connect", self.hub, *extra, log=self.logdir / f"flood-{kind}.log") as f:
+            f.p.wait(timeout=self.seconds + 120)
+        lines = [ln for ln in f.output().splitlines() if ln.startswith("{")]
+        got = json.loads(lines[-1]) if lines else {"sent": 0, "seconds": 0.0}
+        return {"sent": got["sent"], "sent_per_s": round(got["sent"] / max(got["seconds"], 1e-9))}
+
+    def bad_bundles(self) -> dict:
+        replies = errors = 0
+        for _name, payload in malformed_bundles(self.skills):
+            got = list(self.s.get(KEYS.skill, payload=payload, timeout=60.0))
+            replies += len(got)
+            errors += sum(1 for r in got if r.err is not None)
+        return {"bundles": 20, "replies": replies, "error_replies": errors}
+
+    def swaps(self) -> dict:
+        paths = (self.skills / "pour-vf.yaml", self.skills / "pour.yaml")
+        ok = 0
+        windows = []  # (query sent, reply + 5 ms), wall clock as the targets' stamps
+        for k in range(SWAPS):
+            b = bundle_from_file(paths[k % 2])
+            t0 = time.time()
+            got = list(self.s.get(KEYS.skill, payload=b.pack(), timeout=30.0))
+            windows.append((t0, time.time() + 0.005))
+            ok += sum(1 for r in got if r.ok is not None)
+            time.sleep(0.3)
+        return {"swaps": SWAPS, "ok_replies": ok, "windows": windows}
+
+    def far_state(self) -> dict:
+        def jumps() -> int:
+            return self.watch.snapshot().get("counters", {}).get("state_discontinuity", 0)
+
+        before = jumps()
+        for _ in range(40):  # again only if the state key's rate limit dropped it
+            st = self.watch.last_state()
+            assert st is not None
+            pose = list(st["pose"])
+            pose[0] += 1.0
+            self.s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
+            time.sleep(0.1)
+            if jumps() > before:
+                break
+        time.sleep(max(2.0, self.seconds / 2))
+        return {}
+
+
 def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
     hub = f"tcp/127.0.0.1:{free_port()}"
-    pour, pour_vf = str(skills / "pour.yaml"), str(skills / "pour-vf.yaml")
     out: dict[str, Any] = {"seconds_per_phase": seconds}
     with session(listen=[hub]) as s, \
             Child("sctd.cli.main", "sim", "--scene", "pour", "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
-            Child("sctd.cli.main", "run", "--skill", pour, "--connect", hub, "--listen",
-                  f"tcp/127.0.0.1:{free_port()}", "--stats-json", log=logdir / "daemon.log") as daemon:
-        w = _Watch(s)
+            Child("sctd.cli.main", "run", "--skill", str(skills / "pour.yaml"), "--connect", hub,
+                  "--listen", f"tcp/127.0.0.1:{free_port()}", "--stats-json",
+                  log=logdir / "daemon.log") as daemon, \
+            _Watch(s) as w:
         end = time.monotonic() + 90
         while len(w.targets) < 2000:
             if time.monotonic() > end or not daemon.running():
                 raise RuntimeError(f"the daemon published no targets; see {logdir}")
             time.sleep(0.1)
         pid = daemon.p.pid
-
-        def flood(kind: str, *extra: str) -> dict:
-            with Child("sctd.bench.robustness", "flood", kind, "--seconds", str(seconds),
-                       "--connect", hub, *extra, log=logdir / f"flood-{kind}.log") as f:
-                f.p.wait(timeout=seconds + 120)
-            lines = [ln for ln in f.output().splitlines() if ln.startswith("{")]
-            got = json.loads(lines[-1]) if lines else {"sent": 0, "seconds": 0.0}
-            return {"sent": got["sent"], "sent_per_s": round(got["sent"] / max(got["seconds"], 1e-9))}
-
-        out["quiet"] = _phase(w, pid, lambda: time.sleep(seconds))
-        out["valid_flood"] = _phase(w, pid, lambda: flood("valid"))
-        out["garbage_flood"] = _phase(w, pid, lambda: flood("garbage"))
-        out["object_names"] = _phase(w, pid, lambda: flood("objects", "--names", "50000"))
-
-        def bad_bundles() -> dict:
-            replies = errors = 0
-            for _name, payload in malformed_bundles(skills):
-                got = list(s.get(KEYS.skill, payload=payload, timeout=60.0))
-                replies += len(got)
-                errors += sum(1 for r in got if r.err is not None)
-            return {"bundles": 20, "replies": replies, "error_replies": errors}
-
-        out["bad_bundles"] = _phase(w, pid, bad_bundles)
-
-        def swaps() -> dict:
-
-            ok = 0
-            windows = []  # (query sent, reply + 5 ms), wall clock as the targets' stamps
-            for k in range(SWAPS):
-                b = bundle_from_file(pour_vf if k % 2 == 0 else pour)
-                t0 = time.time()
-                got = list(s.get(KEYS.skill, payload=b.pack(), timeout=30.0))
-                windows.append((t0, time.time() + 0.005))
-                ok += sum(1 for r in got if r.ok is not None)
-                time.sleep(0.3)
-            return {"swaps": SWAPS, "ok_replies": ok, "windows": windows}
-
-        out["good_swaps"] = _phase(w, pid, swaps)
-
-        def far_state() -> dict:
-            def jumps() -> int:
-                return w.snapshot().get("counters", {}).get("state_discontinuity", 0)
-
-            before = jumps()
-            for _ in range(40):  # again only if the state key's rate limit dropped it
-                st = w.last_state()
-                assert st is not None
-                pose = list(st["pose"])
-                pose[0] += 1.0
-                s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
-                time.sleep(0.1)
-                if jumps() > before:
-                    break
-            time.sleep(max(2.0, seconds / 2))
-            return {}
-
-        out["far_state"] = _phase(w, pid, far_state)
-        w.close()
-        daemon.stop()
+        ph = _Phases(s, w, hub, skills, seconds, logdir)
+        for name, run in (("quiet", ph.quiet), ("valid_flood", lambda: ph.flood("valid")),
+                          ("garbage_flood", lambda: ph.flood("garbage")),
+                          ("object_names", lambda: ph.flood("objects", "--names", "50000")),
+                          ("bad_bundles", ph.bad_bundles), ("good_swaps", ph.swaps),
+                          ("far_state", ph.far_state)):
+            out[name] = _phase(w, pid, run)
     return out
 
 

@@ -11,11 +11,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tempfile
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from ..runtime import codec
+from ..runtime.zsession import session as zsession
+from ..skill import Skill, SkillError, load_skill
+from .errors import EXIT_FAILED, EXIT_OK, fail
+from .procs import Child, free_port
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
 ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
@@ -46,100 +55,116 @@ def _last_json(text: str) -> dict | None:
     return None
 
 
-def main_demo(args: argparse.Namespace) -> int:
-    from ..runtime import codec
-    from ..runtime.zsession import session as zsession
-    from ..skill import SkillError, load_skill
-    from .procs import Child, free_port
+class _Watch:
+    """What the demo shows while it runs: the FSM state changes the daemon's status
+    reports (printed as they happen) and the simulator's last scene message. A context
+    manager owning its two subscriptions."""
 
-    try:
-        skill = load_skill(args.skill)
-    except SkillError as e:
-        print(f"sctd demo: {e}", file=sys.stderr)
-        return 2
-    task = args.task or TASK_OF_OBJECT.get(skill.object)
-    if task is None:
-        print(f"sctd demo: no scene for object {skill.object!r}; pass --task", file=sys.stderr)
-        return 2
-    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-demo-"))
-    logdir.mkdir(parents=True, exist_ok=True)
-    ep = f"tcp/127.0.0.1:{free_port()}"
-    print(f"sctd demo: skill {skill.name}@{skill.id} ({args.skill}), task {task}, "
-          f"robot {args.robot_backend}, Zenoh {ep}, logs in {logdir}")
-    keys = codec.Keys("edan")
-    t0 = time.monotonic()
-    seen = {"state": None, "targets": 0}
-    lock = threading.Lock()
+    def __init__(self, session: zenoh.Session, keys: codec.Keys):
+        self.t0 = time.monotonic()
+        self.state: str | None = None
+        self.targets = 0
+        self.scene: dict[str, Any] = {}
+        self._lock = threading.Lock()
+        self._stack = ExitStack()
+        self._stack.enter_context(session.declare_subscriber(keys.status, self._on_status))
+        self._stack.enter_context(session.declare_subscriber(keys.scene, self._on_scene))
 
-    def on_status(sample) -> None:
+    def __enter__(self) -> _Watch:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.close()
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
         try:
             msg = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
             return
-        with lock:
-            seen["targets"] = msg.get("targets", 0)
-            if msg.get("targets", 0) > 0 and msg.get("state") != seen["state"]:
-                print(f"  t={time.monotonic() - t0:6.2f}s  state {seen['state'] or '-'} -> {msg['state']}"
-                      f"   (mode {msg.get('mode')})", flush=True)
-                seen["state"] = msg["state"]
+        with self._lock:
+            self.targets = msg.get("targets", 0)
+            if self.targets > 0 and msg.get("state") != self.state:
+                print(f"  t={time.monotonic() - self.t0:6.2f}s  state {self.state or '-'} -> "
+                      f"{msg['state']}   (mode {msg.get('mode')})", flush=True)
+                self.state = msg["state"]
 
-    scene: dict = {}
-
-    def on_scene(sample) -> None:
+    def _on_scene(self, sample: zenoh.Sample) -> None:
         try:
-            scene.update(codec.unpack_map(sample.payload.to_bytes()))
+            self.scene.update(codec.unpack_map(sample.payload.to_bytes()))
         except codec.DecodeError:
             pass
 
-    ok = True
-    report: dict | None = None
+    def wait_for_targets(self, seconds: float, *children: Child) -> bool:
+        deadline = time.monotonic() + seconds
+        while self.targets == 0 and time.monotonic() < deadline and all(c.running() for c in children):
+            time.sleep(0.05)
+        return self.targets > 0
+
+
+def _drive(args: argparse.Namespace, task: str, ep: str, logdir: Path) -> tuple[dict | None, dict]:
+    """Start the daemon and the robot, then the simulated user once targets flow; the
+    user's report (None when it did not get one) and the last scene message."""
     with Child("sctd.cli.main", "run", "--skill", args.skill, "--listen", ep, "--rate", str(args.rate),
                "--stats-json", log=logdir / "daemon.log") as daemon, \
-         Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
-               log=logdir / "robot.log") as robot, \
-         zsession(connect=[ep]) as session:
-        sub = session.declare_subscriber(keys.status, on_status)
-        sub_scene = session.declare_subscriber(keys.scene, on_scene)
-        deadline = time.monotonic() + 30
-        while seen["targets"] == 0 and time.monotonic() < deadline and daemon.running() and robot.running():
-            time.sleep(0.05)
-        if seen["targets"] == 0:
-            print("sctd demo: no targets within 30 s; see the logs", file=sys.stderr)
-            ok = False
+            Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
+                  log=logdir / "robot.log") as robot, \
+            zsession(connect=[ep]) as session, \
+            _Watch(session, codec.Keys("edan")) as watch:
+        report = None
+        if not watch.wait_for_targets(30.0, daemon, robot):
+            fail("demo", "no targets within 30 s; see the logs", EXIT_FAILED)
         else:
-            user = Child("sctd_services.simulated_user", "--task", task, "--connect", ep,
-                         "--duration", str(args.seconds), "--until-done", "--json")
-            report = _last_json(user.communicate(timeout=args.seconds + 60))
-            user.stop()
+            with Child("sctd_services.simulated_user", "--task", task, "--connect", ep,
+                       "--duration", str(args.seconds), "--until-done", "--json") as user:
+                report = _last_json(user.communicate(timeout=args.seconds + 60))
             if report is None:
-                print("sctd demo: the simulated user did not report", file=sys.stderr)
-                ok = False
-        sub.undeclare()
-        sub_scene.undeclare()
+                fail("demo", "the simulated user did not report", EXIT_FAILED)
         rc = daemon.stop()
-        robot.stop()
     stats = _last_json(daemon.output())
     if rc != 0 or stats is None:
-        print(f"sctd demo: the daemon exited with {rc}; see {logdir / 'daemon.log'}", file=sys.stderr)
-        return 1
-    if not ok or report is None:
-        return 1
-    lat = report["latency_ms"]
-    print(f"final state: {report['final_state']} (end state {skill.end}"
-          f"{', reached' if report['final_state'] == skill.end else ', not reached'})")
-    print(f"targets: {report['target_rate']:.0f} /s at the user over {report['elapsed_s']:.1f} s "
-          f"(daemon at {args.rate:.0f} Hz; {stats['ticks']} ticks, {stats['late_ticks']} late)")
+        fail("demo", f"the daemon exited with {rc}; see {logdir / 'daemon.log'}", EXIT_FAILED)
+        return None, watch.scene
+    return (None if report is None else {"user": report, "daemon": stats}), watch.scene
+
+
+def _print_outcome(skill: Skill, rate: float, report: dict, scene: dict) -> None:
+    user, stats = report["user"], report["daemon"]
+    lat = user["latency_ms"]
+    print(f"final state: {user['final_state']} (end state {skill.end}"
+          f"{', reached' if user['final_state'] == skill.end else ', not reached'})")
+    print(f"targets: {user['target_rate']:.0f} /s at the user over {user['elapsed_s']:.1f} s "
+          f"(daemon at {rate:.0f} Hz; {stats['ticks']} ticks, {stats['late_ticks']} late)")
     print(f"input -> target latency: p50 {lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, "
           f"max {lat['max']:.3f} ms ({lat['n']} samples)")
     tl, tc = stats["lateness_ms"], stats["compute_ms"]
     print(f"tick lateness: p50 {tl['p50']:.3f} ms, p99 {tl['p99']:.3f} ms; "
           f"compute: p50 {tc['p50']:.3f} ms, p99 {tc['p99']:.3f} ms")
     print(f"dropped messages: {stats['dropped'] or 'none'}; counters: {stats['counters']}")
+    rtf = scene.get("rtf", float("nan"))
     if scene.get("scene") == "pour":
         print(f"task outcome (sim): poured {scene.get('poured', 0):.2f} of the bottle, spilled "
               f"{scene.get('spilled_amount', 0):.2f}, success {scene.get('success')}; "
-              f"sim real-time factor {scene.get('rtf', float('nan')):.2f}")
+              f"sim real-time factor {rtf:.2f}")
     elif scene.get("scene") == "drawer":
         print(f"task outcome (sim): drawer open {scene.get('opening', 0):.3f} m, success "
-              f"{scene.get('success')}; sim real-time factor {scene.get('rtf', float('nan')):.2f}")
-    return 0
+              f"{scene.get('success')}; sim real-time factor {rtf:.2f}")
+
+
+def main_demo(args: argparse.Namespace) -> int:
+    try:
+        skill = load_skill(args.skill)
+    except SkillError as e:
+        return fail("demo", str(e))
+    task = args.task or TASK_OF_OBJECT.get(skill.object)
+    if task is None:
+        return fail("demo", f"{args.skill}: object: no scene for object {skill.object!r}; pass --task")
+    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-demo-"))
+    logdir.mkdir(parents=True, exist_ok=True)
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    print(f"sctd demo: skill {skill.name}@{skill.id} ({args.skill}), task {task}, "
+          f"robot {args.robot_backend}, Zenoh {ep}, logs in {logdir}")
+    report, scene = _drive(args, task, ep, logdir)
+    if report is None:
+        return EXIT_FAILED
+    _print_outcome(skill, args.rate, report, scene)
+    return EXIT_OK

@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import math
 import os
+import threading
 import time
 
 PR_SET_TIMERSLACK = 29
@@ -133,3 +134,44 @@ class Ticker:
             self.skipped += missed
             self.due += missed * self.period
         return now, lateness
+
+
+class RoundTrips:
+    """Round-trip times of numbered messages: the send time of message ``seq``, and the
+    time to the first answer that names ``seq`` (a pong, or a target whose ``in_seq``
+    is the input's ``seq``). Thread-safe: answers arrive on Zenoh's threads.
+
+    Parameters
+    ----------
+    keep : int
+        Send times held at most; the oldest tenth is forgotten past it (messages that
+        no answer named, e.g. inputs a newer one overwrote before any tick read them).
+    """
+
+    def __init__(self, keep: int = 5000):
+        self.histogram = Histogram()
+        self.counting = True  # whether answers add to the histogram (off in a warm-up)
+        self.answers = 0  # answers seen, counted or not, named a sent message or not
+        self._keep = keep
+        self._sent: dict[int, float] = {}
+        self._lock = threading.Lock()
+
+    def sent(self, seq: int) -> None:
+        with self._lock:
+            self._sent[seq] = time.monotonic()
+            if len(self._sent) > self._keep:
+                for k in list(self._sent)[: self._keep // 10]:
+                    del self._sent[k]
+
+    def answered(self, seq: int, now: float) -> None:
+        """An answer naming ``seq`` arrived at ``now`` (``time.monotonic()``)."""
+        with self._lock:
+            t = self._sent.pop(seq, None)
+            self.answers += 1
+        if t is not None and self.counting:
+            self.histogram.add(now - t)
+
+    def clear(self) -> None:
+        """Forget the send times (between phases: late answers then count nothing)."""
+        with self._lock:
+            self._sent.clear()

@@ -129,6 +129,18 @@ class TrialRecorder:
         t = obs.t
         if self.t0 is None:
             self.t0 = self.t_best = t
+        self._account(t, u, buttons)
+        self._scene = obs.scene
+        T_obj = obs.objects[TASK_OBJECT[self.task]]
+        self._record(t, se3.invert_transform(T_obj) @ obs.T_world_ee, vf_scale, membership)
+        if self.t_task is None:  # the thesis' clock starts
+            ref = obs.objects["bottle_tip"][:3, 3] if self.task == "pour" else obs.T_world_ee[:3, 3]
+            if float(np.linalg.norm(ref - T_obj[:3, 3])) < START_DISTANCE[self.task]:
+                self.t_task = t
+        return self._progress(obs) or self._outcome(obs.scene, t)
+
+    def _account(self, t: float, u: tuple[float, ...] | list[float], buttons: tuple[int, ...]) -> None:
+        """Effort, time per phase and mode switches (presses of button 0) up to ``t``."""
         if self._last_t is not None:
             self.effort += float(np.linalg.norm(u)) * (t - self._last_t)
             if self._phase:
@@ -138,21 +150,22 @@ class TrialRecorder:
         if b0 and not self._last_button:
             self.switches += 1
         self._last_button = b0
-        scene = self._scene = obs.scene
-        T_obj = obs.objects[TASK_OBJECT[self.task]]
-        T_obj_ee = se3.invert_transform(T_obj) @ obs.T_world_ee
-        if t >= self._next_record:
-            self._next_record = t + self.record_every
-            self.trajectory.append([t - self.t0, *se3.pose_from_transform(T_obj_ee).tolist()])
-            self.series["t"].append(t - self.t0)
-            self.series["vf_scale"].append(float("nan") if vf_scale is None else vf_scale)
-            self.series["membership"].append(membership if membership is not None else [])
-        # the thesis' clock starts
-        if self.t_task is None:
-            ref = obs.objects["bottle_tip"][:3, 3] if self.task == "pour" else obs.T_world_ee[:3, 3]
-            if float(np.linalg.norm(ref - T_obj[:3, 3])) < START_DISTANCE[self.task]:
-                self.t_task = t
-        # progress, as the intent sees it
+
+    def _record(self, t: float, T_obj_ee: Array, vf_scale: float | None,
+                membership: list[float] | None) -> None:
+        """One trajectory and series sample every ``record_every`` s."""
+        if t < self._next_record:
+            return
+        assert self.t0 is not None
+        self._next_record = t + self.record_every
+        self.trajectory.append([t - self.t0, *se3.pose_from_transform(T_obj_ee).tolist()])
+        self.series["t"].append(t - self.t0)
+        self.series["vf_scale"].append(float("nan") if vf_scale is None else vf_scale)
+        self.series["membership"].append(membership if membership is not None else [])
+
+    def _progress(self, obs: Observation) -> str | None:
+        """Progress as the intent sees it; ends the trial as stuck without any."""
+        t = obs.t
         d = self.observer.desire(obs)
         if d.close_enough and d.phase == self._phase and t - self.t_best > REPROBE_AFTER:
             # as the user does: a sub-goal as close as the task needs and no closer for a
@@ -170,7 +183,10 @@ class TrialRecorder:
         elif t - self.t_best > self.stuck_after:
             self.stuck_episodes += 1
             return self._end("stuck", f"no progress for {self.stuck_after:.0f} s ({d.phase})", t)
-        # outcome
+        return None
+
+    def _outcome(self, scene: dict[str, Any], t: float) -> str | None:
+        """The task's outcome from the scene, or the time limit; None while it goes on."""
         if self.task == "pour":
             if scene.get("spilled_amount", 0.0) > 1e-9:
                 return self._end("failure", "spilled", t)
@@ -183,6 +199,7 @@ class TrialRecorder:
                 return self._end("failure", "handle lost while pulling", t)
             if scene.get("success"):
                 return self._end("success", "opened", t)
+        assert self.t0 is not None
         if t - self.t0 > self.time_limit:
             return self._end("failure", f"time limit ({self.time_limit:.0f} s)", t)
         return None
