@@ -26,6 +26,7 @@ test: setup
 lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/mypy sctd services sim
+	$(BIN)/lint-imports
 
 bench: setup
 	$(BIN)/sctd bench latency
