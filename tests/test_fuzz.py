@@ -3,7 +3,7 @@ only the documented errors may escape (DecodeError, FrameDecodeError, SkillError
 
 import pytest
 
-from sctd.cli.fuzz import TARGETS, run_target
+from sctd.bench.fuzz import TARGETS, run_target
 from tests.conftest import ROOT
 
 pytest.importorskip("atheris", reason="atheris is in the dev extra; make setup installs it")

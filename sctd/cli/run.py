@@ -9,19 +9,21 @@ import os
 import signal
 import sys
 import threading
-from typing import TYPE_CHECKING
+from dataclasses import fields
+from typing import Any
 
-from ..runtime.zsession import add_zenoh_arguments
+import msgpack
+import zenoh
 
-if TYPE_CHECKING:
-    from ..runtime.controller import RuntimeConfig
+from ..runtime import codec
+from ..runtime.controller import RuntimeConfig
+from ..runtime.daemon import Daemon, ingress_limits
+from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
+from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
+from .errors import EXIT_FAILED, EXIT_OK, fail
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
-    from dataclasses import fields
-
-    from ..runtime.controller import RuntimeConfig
-
     p.add_argument("--skill", required=True, help="skill YAML file")
     # One flag per RuntimeConfig setting, named and documented there.
     for f in fields(RuntimeConfig):
@@ -54,57 +56,45 @@ def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
     ValueError
         A setting out of range, naming its flag.
     """
-    from dataclasses import fields
-
-    from ..runtime import codec
-    from ..runtime.controller import RuntimeConfig
-
     kw = {f.name: getattr(args, f.name) for f in fields(RuntimeConfig) if "help" in f.metadata}
     for name, value in kw.items():
         if isinstance(value, float) and not (value >= 0 if name == "deadband" else value > 0):
-            raise ValueError(f"--{name.replace('_', '-')} must be {'>= 0' if name == 'deadband' else '> 0'}")
+            raise ValueError(f"--{name.replace('_', '-')}: must be {'>= 0' if name == 'deadband' else '> 0'}")
     codec.Keys(kw["robot"])  # one key chunk
     return RuntimeConfig(stamp_check=not args.no_stamp_check, **kw)
 
 
-def main_run(args: argparse.Namespace) -> int:
-    import zenoh
-
-    from ..runtime.daemon import Daemon, ingress_limits
-    from ..runtime.zsession import close_session, open_session
-    from ..skill import SkillError, load_skill
-
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
-    try:
-        skill = load_skill(args.skill)
-    except SkillError as e:
-        print(f"sctd run: {e}", file=sys.stderr)
-        return 2
-    try:
-        config = runtime_config(args)
-    except ValueError as e:
-        print(f"sctd run: {e}", file=sys.stderr)
-        return 2
-    # Signals are caught before anything is bound, so that a SIGINT/SIGTERM that comes
-    # while the daemon is still starting also ends it cleanly (exit 0, port freed).
+def _stop_on_signals() -> threading.Event:
+    """An event set by SIGINT/SIGTERM. Installed before anything is bound, so that a
+    signal that comes while the daemon is still starting also ends it cleanly (exit 0,
+    port freed)."""
     stop = threading.Event()
 
-    def on_signal(signum, frame):
+    def on_signal(signum: int, frame: Any) -> None:
         stop.set()
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
+    return stop
+
+
+def main_run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
+    try:
+        skill = load_skill(args.skill)
+        config = runtime_config(args)
+    except (SkillError, ValueError) as e:
+        return fail("run", str(e))
+    n_cpus = os.cpu_count() or 1
+    if args.cpu is not None and not 0 <= args.cpu < n_cpus:
+        return fail("run", f"--cpu: {args.cpu}: this machine has CPUs 0-{n_cpus - 1}")
+    stop = _stop_on_signals()
     try:
         session = open_session(args.listen, args.connect, args.zenoh_config,
                                **ingress_limits(config.robot))
     except (ValueError, zenoh.ZError) as e:
-        print(f"sctd run: cannot open Zenoh session: {e}", file=sys.stderr)
-        return 2
+        return fail("run", f"cannot open Zenoh session: {e}")
     try:
-        if args.cpu is not None and not 0 <= args.cpu < (os.cpu_count() or 1):
-            print(f"sctd run: --cpu {args.cpu}: this machine has CPUs 0-{(os.cpu_count() or 1) - 1}",
-                  file=sys.stderr)
-            return 2
         daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority,
                         cpu=args.cpu, stop_event=stop)
         stats = daemon.run(args.duration)
@@ -112,7 +102,7 @@ def main_run(args: argparse.Namespace) -> int:
         close_session(session)
     if args.stats_json:
         print(json.dumps(stats))
-    return 0
+    return EXIT_OK
 
 
 def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
@@ -121,16 +111,18 @@ def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_inspect(args: argparse.Namespace) -> int:
-    from ..skill import SkillError, load_skill, skill_summary
-
     try:
         s = skill_summary(load_skill(args.skill))
     except SkillError as e:
-        print(f"sctd inspect: {e}", file=sys.stderr)
-        return 2
+        return fail("inspect", str(e))
     if args.json:
         print(json.dumps(s, indent=2))
-        return 0
+    else:
+        _print_summary(s)
+    return EXIT_OK
+
+
+def _print_summary(s: dict[str, Any]) -> None:
     print(f"skill {s['name']} (id {s['id']}), object {s['object']}: {s['description']}")
     print(f"  limits: {s['limits']['max_linear_speed']} m/s, {s['limits']['max_angular_speed']} rad/s")
     for name, f in s["frames"].items():
@@ -154,7 +146,6 @@ def main_inspect(args: argparse.Namespace) -> int:
         print(f"  field {f}")
     for c in s["candidate_frames"]:
         print(f"  candidate frame {c}")
-    return 0
 
 
 def _describe_matrix(m: list[list[float]]) -> str:
@@ -174,38 +165,26 @@ def add_swap_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_swap(args: argparse.Namespace) -> int:
-    import msgpack
-
-    from ..runtime.codec import Keys
-    from ..runtime.zsession import session_from_args
-    from ..skill import Bundle, SkillError, bundle_from_file, skill_from_bundle
-
     try:
         bundle = bundle_from_file(args.skill)
         skill_from_bundle(bundle)  # refuse locally what the daemon would refuse
         payload = bundle.pack()
         Bundle.unpack(payload)  # the size limit too
     except SkillError as e:
-        print(f"sctd swap: {e}", file=sys.stderr)
-        return 2
+        return fail("swap", str(e))
+    key = codec.Keys(args.robot).skill
     with session_from_args(args) as session:
-        replies = session.get(Keys(args.robot).skill, payload=payload, timeout=args.timeout)
-        for reply in replies:
+        for reply in session.get(key, payload=payload, timeout=args.timeout):
             if reply.ok is not None:
                 body = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
                 print(body.get("id"))
-                return 0
+                return EXIT_OK
             body = _err_body(reply.err.payload.to_bytes()) if reply.err is not None else "no reply"
-            print(f"sctd swap: refused by the daemon: {body}", file=sys.stderr)
-            return 1
-    print(f"sctd swap: no daemon answered on {Keys(args.robot).skill} within {args.timeout} s",
-          file=sys.stderr)
-    return 1
+            return fail("swap", f"refused by the daemon: {body}", EXIT_FAILED)
+    return fail("swap", f"no daemon answered on {key} within {args.timeout} s", EXIT_FAILED)
 
 
 def _err_body(data: bytes) -> str:
-    import msgpack
-
     try:
         body = msgpack.unpackb(data, raw=False)
         return body.get("error", str(body)) if isinstance(body, dict) else str(body)

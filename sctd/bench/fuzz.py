@@ -5,9 +5,11 @@ unpacker, the skill YAML loader and the vector-field model files.
 Each target has one documented error (``DecodeError``, ``FrameDecodeError``,
 ``SkillError``): any other exception escaping a decoder is a crash, which atheris
 reports with the input that caused it, and the target fails. Each target runs in its own
-process (``python -m sctd.cli.fuzz TARGET -runs=N``: libFuzzer exits the process when
+process (``python -m sctd.bench.fuzz TARGET -runs=N``: libFuzzer exits the process when
 it is done), seeded with valid messages and the shipped skills, and instruments only
-sctd's own modules.
+sctd's own modules. Those are imported inside the functions that build the seeds and
+harnesses, not at the top of this module: atheris instruments a module only when it is
+first imported within ``atheris.instrument_imports()``.
 """
 
 from __future__ import annotations
@@ -122,7 +124,7 @@ def _instrumented(target: str) -> Callable[[bytes], None]:
 
 
 def child_main(argv: list[str]) -> int:
-    """``python -m sctd.cli.fuzz TARGET [libFuzzer flags] [corpus dirs]``."""
+    """``python -m sctd.bench.fuzz TARGET [libFuzzer flags] [corpus dirs]``."""
     import atheris
 
     target = argv[0]
@@ -141,7 +143,7 @@ def run_target(target: str, runs: int, skills: Path, workdir: Path, max_len: int
         (corpus / f"seed{i}").write_bytes(seed)
     artifacts = workdir / f"{target}-crashes"
     artifacts.mkdir(exist_ok=True)
-    cmd = [sys.executable, "-m", "sctd.cli.fuzz", target, f"-runs={runs}", f"-max_len={max_len}",
+    cmd = [sys.executable, "-m", "sctd.bench.fuzz", target, f"-runs={runs}", f"-max_len={max_len}",
            "-rss_limit_mb=4096", "-timeout=20", f"-artifact_prefix={artifacts}/", "-print_final_stats=1",
            str(corpus)]
     t0 = time.monotonic()
