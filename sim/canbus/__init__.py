@@ -21,6 +21,7 @@ from .codec import (
 )
 from .crc import FrameCrc, crc8, frame_crc
 from .drives import JointDrives
+from .endpoint import BusEndpoint
 from .faults import FaultConfig, FaultCounts, FaultInjectingBus
 from .layout import DBC_PATH, load_dbc
 from .link import LinkStats, classify
@@ -37,6 +38,7 @@ __all__ = [
     "STATUS_SATURATED",
     "STATUS_TIMEOUT",
     "SYNC_ID",
+    "BusEndpoint",
     "BusMaster",
     "FastVirtualBus",
     "FaultConfig",
