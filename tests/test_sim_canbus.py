@@ -31,12 +31,13 @@ from sctd_sim.canbus import (
     FrameCrc,
     FrameGroup,
     JointBusCodecs,
+    _codec_generated,
     classify,
+    codegen,
     crc8,
     frame_crc,
     load_dbc,
 )
-from sctd_sim.canbus import _codec_generated, codegen
 from sctd_sim.canbus.crc import word_tables
 from sctd_sim.canbus.frames import CLASSIC_FRAME_SLOTS
 from sctd_sim.canbus.link import ACCEPTED, DUPLICATED, STALE
