@@ -355,20 +355,22 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"sctd sim: {e}", file=sys.stderr)
         return 2
-    viewer = None
-    if args.view:
-        from .view import ViewerUnavailable, open_viewer
-
-        try:
-            viewer = open_viewer(args.view_port)
-        except ViewerUnavailable as e:
-            print(f"sctd sim: --view: {e}", file=sys.stderr)
-            return 2
-        print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    summary = _serve(args, settings, viewer, stop)
+    # the view closes last (server stopped, port free), after the loop and the service
+    with contextlib.ExitStack() as stack:
+        viewer = None
+        if args.view:
+            from .view import ViewerUnavailable, open_viewer
+
+            try:
+                viewer = stack.enter_context(open_viewer(args.view_port))
+            except ViewerUnavailable as e:
+                print(f"sctd sim: --view: {e}", file=sys.stderr)
+                return 2
+            print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
+        summary = _serve(stack, args, settings, viewer, stop)
     print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "
           f"{summary['rtf_total']}, {summary['overruns']} overruns, {summary['skipped']} skipped "
           f"cycles, {summary['targets']} targets, {summary['target_rejected']} refused, dropped "
@@ -379,9 +381,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _serve(args: argparse.Namespace, settings: _Settings, viewer: Any,
-           stop: threading.Event) -> dict[str, Any]:
-    """Build the scene, run the service until ``stop`` or ``--duration``; its summary."""
+def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Settings,
+           viewer: Any, stop: threading.Event) -> dict[str, Any]:
+    """Build the scene, the simulation, the session and the service (entered on
+    ``stack``), run until ``stop`` or ``--duration``; the service's summary."""
     from .scenes import make_scene
     from .simulation import Simulation, trial_scene
 
@@ -389,26 +392,25 @@ def _serve(args: argparse.Namespace, settings: _Settings, viewer: Any,
         scene, q0 = trial_scene(args.scene, args.trial_seed)
     else:
         scene, q0 = make_scene(args.scene), None
-    # the view closes last (server stopped, port free), after the loop and the service
-    with viewer if viewer is not None else contextlib.nullcontext(), \
-            Simulation(scene=scene, q0=q0, rate=args.rate, faults=settings.faults,
-                       channel=settings.channel, bus_factory=settings.bus_factory,
-                       drive_timeout=args.drive_timeout) as sim, \
-            session_from_args(args) as session, \
-            SimService(session, sim, args.robot, args.state_rate, args.object_rate,
-                       args.scene_rate, viewer, settings.limits, not args.no_stamp_check) as service:
-        if viewer is not None:
-            viewer.setup(sim)
-        # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with
-        # --view viser and trimesh); frozen, a full collection in the loop no longer
-        # scans it (with the view, ~40 ms and the cycles skipped otherwise).
-        gc.collect()
-        gc.freeze()
-        print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
-              f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
-              file=sys.stderr, flush=True)
-        service.run(stop, args.duration)
-        return service.summary()
+    sim = stack.enter_context(Simulation(
+        scene=scene, q0=q0, rate=args.rate, faults=settings.faults, channel=settings.channel,
+        bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout))
+    session = stack.enter_context(session_from_args(args))
+    service = stack.enter_context(SimService(
+        session, sim, args.robot, args.state_rate, args.object_rate, args.scene_rate, viewer,
+        settings.limits, not args.no_stamp_check))
+    if viewer is not None:
+        viewer.setup(sim)
+    # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with
+    # --view viser and trimesh); frozen, a full collection in the loop no longer
+    # scans it (with the view, ~40 ms and the cycles skipped otherwise).
+    gc.collect()
+    gc.freeze()
+    print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
+          f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
+          file=sys.stderr, flush=True)
+    service.run(stop, args.duration)
+    return service.summary()
 
 
 def can_bus_choice(interface: str, channel: str | None
