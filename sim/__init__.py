@@ -9,8 +9,9 @@ Main entry points:
 - :class:`Simulation` (``sctd_sim.simulation``): scene + arm, plain-data in and out,
   what the ``sctd sim`` service drives;
 - :class:`SimArm` (``sctd_sim.arm``): the arm's full 1 kHz data path
-  (controller -> CAN -> drives -> dynamics -> CAN -> controller);
-- :func:`run_bench` (``sctd_sim.bench``): the simulator's figures.
+  (controller -> CAN -> drives -> dynamics -> CAN -> controller).
+
+The simulator's figures (``sctd bench sim``) are measured by :mod:`sctd.bench.sim`.
 """
 
 from __future__ import annotations
@@ -33,8 +34,6 @@ _LAZY = {
     "PourScene": "scenes",
     "DrawerScene": "scenes",
     "make_scene": "scenes",
-    "run_bench": "bench",
-    "format_report": "bench",
 }
 
 __all__ = sorted(_LAZY)

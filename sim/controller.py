@@ -253,16 +253,7 @@ class CartesianImpedanceController:
                 self.hold()
         if not self.holding and t - self._rx_t > g.target_timeout:
             self.hold()
-        e0, e1, e2, e3, e4, e5 = pose_error(self.T_world_target.tolist(), T_e.tolist())
-        n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        if n_p > g.max_error_trans:
-            s = g.max_error_trans / n_p
-            e0, e1, e2 = s * e0, s * e1, s * e2
-        n_r = math.sqrt(e3 * e3 + e4 * e4 + e5 * e5)
-        if n_r > g.max_error_rot:
-            s = g.max_error_rot / n_r
-            e3, e4, e5 = s * e3, s * e4, s * e5
-        self.error = e = np.array([e0, e1, e2, e3, e4, e5])
+        self.error = e = self._saturated_error(T_e)
         v = J.dot(dq)
         if g.feedforward and t <= self._ff_until:
             v = np.subtract(self.v_target, v, out=v)
@@ -270,14 +261,8 @@ class CartesianImpedanceController:
             v = np.negative(v, out=v)
         F = self._k * e
         F += self.D.dot(v)
-        w = self._payload_weight
-        if w:  # minus the load's weight (0, 0, -w) and its moment r x (0, 0, -w) at the ee
-            cx, cy, cz = self._payload_com
-            (r0, r1, r2, _), (s0, s1, s2, _), _, _ = T_e.tolist()
-            rx, ry = r0 * cx + r1 * cy + r2 * cz, s0 * cx + s1 * cy + s2 * cz
-            F[2] += w
-            F[3] += ry * w
-            F[4] -= rx * w
+        if self._payload_weight:
+            self._add_payload_wrench(F, T_e)
 
         # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T y, y = Lambda J M^-1 tau0
         tau_null = g.k_null * (self.q_rest - q)
@@ -298,6 +283,32 @@ class CartesianImpedanceController:
         tau += self._friction * dq
         self.tau = tau
         return tau
+
+    def _saturated_error(self, T_world_ee: np.ndarray) -> np.ndarray:
+        """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target, each
+        part scaled down to ``gains.max_error_trans`` / ``max_error_rot``."""
+        g = self.gains
+        e0, e1, e2, e3, e4, e5 = pose_error(self.T_world_target.tolist(), T_world_ee.tolist())
+        n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+        if n_p > g.max_error_trans:
+            s = g.max_error_trans / n_p
+            e0, e1, e2 = s * e0, s * e1, s * e2
+        n_r = math.sqrt(e3 * e3 + e4 * e4 + e5 * e5)
+        if n_r > g.max_error_rot:
+            s = g.max_error_rot / n_r
+            e3, e4, e5 = s * e3, s * e4, s * e5
+        return np.array([e0, e1, e2, e3, e4, e5])
+
+    def _add_payload_wrench(self, F: np.ndarray, T_world_ee: np.ndarray) -> None:
+        """Add to ``F`` (shape (6,), world axes at the ee) minus the load's weight
+        ``(0, 0, -w)`` and its moment ``r x (0, 0, -w)``, ``r`` the centre of mass."""
+        w = self._payload_weight
+        cx, cy, cz = self._payload_com
+        (r0, r1, r2, _), (s0, s1, s2, _), _, _ = T_world_ee.tolist()
+        rx, ry = r0 * cx + r1 * cy + r2 * cz, s0 * cx + s1 * cy + s2 * cz
+        F[2] += w
+        F[3] += ry * w
+        F[4] -= rx * w
 
     def _update_damping(self, J: np.ndarray, A: np.ndarray) -> None:
         """Null-space damping ``lambda`` from the smallest singular value of ``J``, and

@@ -107,13 +107,7 @@ class ArmDynamics:
         if self._has_wrench:
             tau += self.external_torque()
         if braked is not None and np.count_nonzero(braked):
-            newly = braked & ~self._braked
-            self._q_hold[newly] = q[newly]
-            dq[braked] = 0.0
-            q[braked] = self._q_hold[braked]
-            self.ddq = self._constrained_acceleration(tau, braked)
-            self._braked = braked.copy()
-            self._any_braked = True
+            self.ddq = self._braked_acceleration(tau, braked)
         else:
             if self._any_braked:
                 self._braked[:] = False
@@ -138,18 +132,36 @@ class ArmDynamics:
         dq[:] = dq_next
         q[:] = q_next
         if stopped:
-            low = q < arm.q_lower
-            high = q > arm.q_upper
-            q[low] = arm.q_lower[low]
-            q[high] = arm.q_upper[high]
-            dq[low] = np.maximum(dq[low], 0.0)
-            dq[high] = np.minimum(dq[high], 0.0)
-            self.at_limit = low | high
-            self._any_at_limit = True
+            self._stop_at_limits()
         elif self._any_at_limit:
             self.at_limit = np.zeros(arm.nq, dtype=bool)
             self._any_at_limit = False
         self.t += dt
+
+    def _braked_acceleration(self, tau: np.ndarray, braked: np.ndarray) -> np.ndarray:
+        """Hold the ``braked`` joints (at the position they had when their brake
+        engaged, at rest) and return the acceleration of the others under ``tau``."""
+        q, dq = self.q, self.dq
+        newly = braked & ~self._braked
+        self._q_hold[newly] = q[newly]
+        dq[braked] = 0.0
+        q[braked] = self._q_hold[braked]
+        ddq = self._constrained_acceleration(tau, braked)
+        self._braked = braked.copy()
+        self._any_braked = True
+        return ddq
+
+    def _stop_at_limits(self) -> None:
+        """Put joints past a position limit back on it, without velocity into it."""
+        arm, q, dq = self.arm, self.q, self.dq
+        low = q < arm.q_lower
+        high = q > arm.q_upper
+        q[low] = arm.q_lower[low]
+        q[high] = arm.q_upper[high]
+        dq[low] = np.maximum(dq[low], 0.0)
+        dq[high] = np.minimum(dq[high], 0.0)
+        self.at_limit = low | high
+        self._any_at_limit = True
 
     def _constrained_acceleration(self, tau: np.ndarray, braked: np.ndarray) -> np.ndarray:
         free = ~braked

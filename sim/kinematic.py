@@ -9,6 +9,7 @@ robot side cheap and deterministic.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import signal
 import sys
@@ -102,8 +103,8 @@ class KinematicRobot:
         return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="sctd-kinematic", description=__doc__.split("\n\n")[0])
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the kinematic robot's flags to ``p``."""
     p.add_argument("--scene", default="pour", choices=("pour", "drawer"))
     p.add_argument("--robot", default="edan")
     p.add_argument("--rate", type=float, default=1000.0, help="state rate, Hz")
@@ -111,54 +112,68 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--tau", type=float, default=0.02, help="tracking time constant, s")
     p.add_argument("--duration", type=float, default=None)
     add_zenoh_arguments(p)
-    args = p.parse_args(argv)
 
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sctd_sim.kinematic``: follow targets until SIGINT/SIGTERM or
+    ``--duration``."""
+    p = argparse.ArgumentParser(prog="sctd-kinematic", description=__doc__.split("\n\n")[0])
+    add_arguments(p)
+    args = p.parse_args(argv)
     keys = codec.Keys(args.robot)
     robot = KinematicRobot(kinematic_scene(args.scene), tau=args.tau)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    with session_from_args(args) as session:
-        sub = session.declare_subscriber(keys.target, zenoh.handlers.RingChannel(1))
-        pub_state = session.declare_publisher(keys.state, express=True,
-                                              congestion_control=zenoh.CongestionControl.DROP)
-        pubs = {n: session.declare_publisher(keys.objects(n)) for n in robot.objects()}
-        set_timer_slack(1)
-        period = 1.0 / args.rate
-        every = max(1, round(args.rate / args.object_rate))
-        ticker = Ticker(period, spin=0.0)
-        guard = TargetGuard(TargetLimits(), period, time.time())  # as the Pinocchio sim's arm
-        end = None if args.duration is None else time.monotonic() + args.duration
-        seq = 0
-        while not stop.is_set():
-            now, _ = ticker.wait()
-            if end is not None and now > end:
-                break
-            s = sub.try_recv()
-            if s is not None:
-                try:
-                    msg = codec.decode_target(s.payload.to_bytes())
-                except codec.DecodeError:
-                    msg = None
-                if msg is not None:
-                    F_measured = se3.flat_from_matrix4(robot.T_world_ee)
-                    if guard.admit(msg["pose"], msg["stamp"], F_measured, robot.T_world_target is not None):
-                        robot.T_world_target = se3.transform_from_pose(msg["pose"])
-                    else:
-                        robot.T_world_target = None  # refused: stay where it is
-            robot.step(period)
-            wall = time.time()
-            pose = se3.pose_from_transform(robot.T_world_ee).tolist()
-            pub_state.put(codec.encode_state(seq, wall, pose, wrench=[0.0] * 6))
-            if seq % every == 0:
-                for name, T in robot.objects().items():
-                    pubs[name].put(codec.encode_object(seq, wall, se3.pose_from_transform(T).tolist()))
-            seq += 1
-        sub.undeclare()
-        pub_state.undeclare()
-        for pub in pubs.values():
-            pub.undeclare()
+    with session_from_args(args) as session, contextlib.ExitStack() as stack:
+        sub = stack.enter_context(session.declare_subscriber(keys.target, zenoh.handlers.RingChannel(1)))
+        pub_state = stack.enter_context(session.declare_publisher(
+            keys.state, express=True, congestion_control=zenoh.CongestionControl.DROP))
+        pubs = {n: stack.enter_context(session.declare_publisher(keys.objects(n)))
+                for n in robot.objects()}
+        _follow(robot, sub, pub_state, pubs, args, stop)
     return 0
+
+
+def _follow(robot: KinematicRobot, sub: zenoh.Subscriber, pub_state: zenoh.Publisher,
+            pubs: dict[str, zenoh.Publisher], args: argparse.Namespace, stop: threading.Event) -> None:
+    """The fixed-rate loop: take the newest target, step, publish state (and objects)."""
+    set_timer_slack(1)
+    period = 1.0 / args.rate
+    every = max(1, round(args.rate / args.object_rate))
+    ticker = Ticker(period, spin=0.0)
+    guard = TargetGuard(TargetLimits(), period, time.time())  # as the Pinocchio sim's arm
+    end = None if args.duration is None else time.monotonic() + args.duration
+    seq = 0
+    while not stop.is_set():
+        now, _ = ticker.wait()
+        if end is not None and now > end:
+            break
+        s = sub.try_recv()
+        if s is not None:
+            _take_target(robot, guard, s.payload.to_bytes())
+        robot.step(period)
+        wall = time.time()
+        pose = se3.pose_from_transform(robot.T_world_ee).tolist()
+        pub_state.put(codec.encode_state(seq, wall, pose, wrench=[0.0] * 6))
+        if seq % every == 0:
+            for name, T in robot.objects().items():
+                pubs[name].put(codec.encode_object(seq, wall, se3.pose_from_transform(T).tolist()))
+        seq += 1
+
+
+def _take_target(robot: KinematicRobot, guard: TargetGuard, payload: bytes) -> None:
+    """Follow a target the guard admits; refused, stay where the arm is; undecodable,
+    ignore it."""
+    try:
+        msg = codec.decode_target(payload)
+    except codec.DecodeError:
+        return
+    F_measured = se3.flat_from_matrix4(robot.T_world_ee)
+    if guard.admit(msg["pose"], msg["stamp"], F_measured, robot.T_world_target is not None):
+        robot.T_world_target = se3.transform_from_pose(msg["pose"])
+    else:
+        robot.T_world_target = None  # refused: stay where it is
 
 
 if __name__ == "__main__":

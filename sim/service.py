@@ -39,8 +39,9 @@ import sys
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import fields
-from typing import Any
+from typing import Any, NamedTuple
 
 import can
 import zenoh
@@ -53,6 +54,7 @@ from sctd.runtime.zsession import session_from_args
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
 from .guard import TargetGuard, TargetLimits, limits_from_args
+from .options import add_service_arguments
 
 _FAULT_NAMES = {
     "drop": "drop_rate", "drop_rate": "drop_rate",
@@ -142,20 +144,41 @@ class SimService:
         self.rtf = 1.0
         self.guard = TargetGuard(limits or TargetLimits(), sim.dt, time.time(), stamp_check)
         self._F_measured = se3.flat_from_pose(sim.state_message()["pose"])
-        dec = self.session.declare_publisher
-        drop = zenoh.CongestionControl.DROP
-        k = self.keys
-        self.sub_target = session.declare_subscriber(k.target, zenoh.handlers.RingChannel(16))
-        self.pub_state = dec(k.state, express=True, congestion_control=drop)
-        self.pub_objects = {n: dec(k.objects(n), congestion_control=drop) for n in sim.objects()}
-        self.pub_scene = dec(k.scene, congestion_control=drop)
         self.can_key = can_key(robot)
-        self.pub_can = dec(self.can_key, congestion_control=drop)
-        self._can_listener = self.pub_can.declare_matching_listener(self._on_can_matching)
+        self._resources = contextlib.ExitStack()  # the declarations, while entered
+
+    # -- declarations ------------------------------------------------------------------
+    def __enter__(self) -> SimService:
+        """Declare the subscribers and publishers (a failure midway undeclares the ones
+        made) and hook the bus mirror; :meth:`__exit__` undoes it all."""
+        with contextlib.ExitStack() as stack:
+            self._declare(stack)
+            self._resources = stack.pop_all()
+        return self
+
+    def _declare(self, stack: contextlib.ExitStack) -> None:
+        session, k, drop = self.session, self.keys, zenoh.CongestionControl.DROP
+
+        def publisher(key: str, **kw: Any) -> zenoh.Publisher:
+            return stack.enter_context(session.declare_publisher(key, congestion_control=drop, **kw))
+
+        self.sub_target = stack.enter_context(
+            session.declare_subscriber(k.target, zenoh.handlers.RingChannel(16)))
+        self.pub_state = publisher(k.state, express=True)
+        self.pub_objects = {n: publisher(k.objects(n)) for n in self.sim.objects()}
+        self.pub_scene = publisher(k.scene)
+        self.pub_can = publisher(self.can_key)
+        stack.enter_context(self.pub_can.declare_matching_listener(self._on_can_matching))
         self._can_watched = self.pub_can.matching_status.matching  # type: ignore[attr-defined]
-        self.sub_can = session.declare_subscriber(self.can_key, zenoh.handlers.RingChannel(256),
-                                                  allowed_origin=zenoh.Locality.REMOTE)
-        sim.arm.on_frames.append(self._mirror)
+        self.sub_can = stack.enter_context(session.declare_subscriber(
+            self.can_key, zenoh.handlers.RingChannel(256), allowed_origin=zenoh.Locality.REMOTE))
+        self.sim.arm.on_frames.append(self._mirror)
+        stack.callback(self.sim.arm.on_frames.remove, self._mirror)
+
+    def __exit__(self, *exc: object) -> None:
+        """Undeclare everything, close the injection bus (the session stays open)."""
+        self._resources.close()
+        self._inject_bus = None
 
     # -- callbacks (Zenoh threads / the sim's bus) -------------------------------------
     def _on_can_matching(self, status: zenoh.MatchingStatus) -> None:
@@ -195,7 +218,8 @@ class SimService:
                 self.dropped["can_bad_sample"] += 1
                 continue
             if bus is None:
-                bus = self._inject_bus = FastVirtualBus(channel=self.sim.channel)
+                bus = self._inject_bus = self._resources.enter_context(
+                    FastVirtualBus(channel=self.sim.channel))
             bus.send_batch(frames)
             self.injected += len(frames)
 
@@ -294,88 +318,59 @@ class SimService:
         out["state_messages"] = self.seq
         return out
 
-    def close(self) -> None:
-        """Undeclare everything (the session stays open)."""
-        self.sim.arm.on_frames.remove(self._mirror)
-        decls: list[Any] = [self.sub_target, self.sub_can, self._can_listener, self.pub_state,
-                            self.pub_scene, self.pub_can, *self.pub_objects.values()]
-        for d in decls:
-            d.undeclare()
-        if self._inject_bus is not None:
-            self._inject_bus.shutdown()
-            self._inject_bus = None
 
-    def __enter__(self) -> SimService:
-        return self
+class _Settings(NamedTuple):
+    """What :func:`run` takes from the flags, checked."""
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    faults: FaultConfig | None
+    limits: TargetLimits
+    channel: str | None
+    bus_factory: Callable[[str], can.BusABC] | None
+
+
+def _settings_from_args(args: argparse.Namespace) -> _Settings:
+    """Check the flags (in the order the errors are reported).
+
+    Raises
+    ------
+    ValueError
+        A bad flag, with the message ``sctd sim`` prints.
+    """
+    faults = parse_faults(args.faults) if args.faults else None
+    codec.Keys(args.robot)
+    if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
+        raise ValueError("rates must be positive")
+    limits = limits_from_args(args)
+    if not 0 <= args.view_port <= 65535:
+        raise ValueError(f"--view-port: not a TCP port: {args.view_port}")
+    channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
+    return _Settings(faults, limits, channel, bus_factory)
 
 
 def run(args: argparse.Namespace) -> int:
-    """``sctd sim`` with parsed arguments; returns the exit code."""
+    """``sctd sim`` with parsed arguments (:func:`~sctd_sim.options.add_service_arguments`);
+    returns the exit code (2: bad flags)."""
     try:
-        faults = parse_faults(args.faults) if args.faults else None
-        codec.Keys(args.robot)
+        settings = _settings_from_args(args)
     except ValueError as e:
         print(f"sctd sim: {e}", file=sys.stderr)
         return 2
-    if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
-        print("sctd sim: rates must be positive", file=sys.stderr)
-        return 2
-    try:
-        limits = limits_from_args(args)
-    except ValueError as e:
-        print(f"sctd sim: {e}", file=sys.stderr)
-        return 2
-    view_port = args.view_port
-    if not 0 <= view_port <= 65535:
-        print(f"sctd sim: --view-port: not a TCP port: {view_port}", file=sys.stderr)
-        return 2
-    from .scenes import make_scene
-    from .simulation import Simulation, trial_scene
-
-    try:
-        channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
-    except ValueError as e:
-        print(f"sctd sim: {e}", file=sys.stderr)
-        return 2
-    viewer = None
-    if args.view:
-        from .view import ViewerUnavailable, open_viewer
-
-        try:
-            viewer = open_viewer(view_port)
-        except ViewerUnavailable as e:
-            print(f"sctd sim: --view: {e}", file=sys.stderr)
-            return 2
-        print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
-    if args.trial_seed is not None:
-        scene, q0 = trial_scene(args.scene, args.trial_seed)
-    else:
-        scene, q0 = make_scene(args.scene), None
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     # the view closes last (server stopped, port free), after the loop and the service
-    with viewer if viewer is not None else contextlib.nullcontext(), \
-            Simulation(scene=scene, q0=q0, rate=args.rate, faults=faults, channel=channel,
-                       bus_factory=bus_factory, drive_timeout=args.drive_timeout) as sim, \
-            session_from_args(args) as session, \
-            SimService(session, sim, args.robot, args.state_rate, args.object_rate,
-                       args.scene_rate, viewer, limits, not args.no_stamp_check) as service:
-        if viewer is not None:
-            viewer.setup(sim)
-        # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with
-        # --view viser and trimesh); frozen, a full collection in the loop no longer
-        # scans it (with the view, ~40 ms and the cycles skipped otherwise).
-        gc.collect()
-        gc.freeze()
-        print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
-              f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
-              file=sys.stderr, flush=True)
-        service.run(stop, args.duration)
-        summary = service.summary()
+    with contextlib.ExitStack() as stack:
+        viewer = None
+        if args.view:
+            from .view import ViewerUnavailable, open_viewer
+
+            try:
+                viewer = stack.enter_context(open_viewer(args.view_port))
+            except ViewerUnavailable as e:
+                print(f"sctd sim: --view: {e}", file=sys.stderr)
+                return 2
+            print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
+        summary = _serve(stack, args, settings, viewer, stop)
     print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "
           f"{summary['rtf_total']}, {summary['overruns']} overruns, {summary['skipped']} skipped "
           f"cycles, {summary['targets']} targets, {summary['target_rejected']} refused, dropped "
@@ -386,7 +381,40 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def can_bus_choice(interface: str, channel: str | None):
+def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Settings,
+           viewer: Any, stop: threading.Event) -> dict[str, Any]:
+    """Build the scene, the simulation, the session and the service (entered on
+    ``stack``), run until ``stop`` or ``--duration``; the service's summary."""
+    from .scenes import make_scene
+    from .simulation import Simulation, trial_scene
+
+    if args.trial_seed is not None:
+        scene, q0 = trial_scene(args.scene, args.trial_seed)
+    else:
+        scene, q0 = make_scene(args.scene), None
+    sim = stack.enter_context(Simulation(
+        scene=scene, q0=q0, rate=args.rate, faults=settings.faults, channel=settings.channel,
+        bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout))
+    session = stack.enter_context(session_from_args(args))
+    service = stack.enter_context(SimService(
+        session, sim, args.robot, args.state_rate, args.object_rate, args.scene_rate, viewer,
+        settings.limits, not args.no_stamp_check))
+    if viewer is not None:
+        viewer.setup(sim)
+    # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with
+    # --view viser and trimesh); frozen, a full collection in the loop no longer
+    # scans it (with the view, ~40 ms and the cycles skipped otherwise).
+    gc.collect()
+    gc.freeze()
+    print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
+          f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
+          file=sys.stderr, flush=True)
+    service.run(stop, args.duration)
+    return service.summary()
+
+
+def can_bus_choice(interface: str, channel: str | None
+                   ) -> tuple[str | None, Callable[[str], can.BusABC] | None]:
     """(channel, bus_factory) for ``--can-interface``: ``virtual`` is python-can's
     in-process bus (no kernel needed); ``socketcan`` opens two sockets on a kernel
     interface (e.g. ``vcan0``, which ``candump`` can then watch); ``auto`` takes
@@ -401,17 +429,16 @@ def can_bus_choice(interface: str, channel: str | None):
         raise ValueError(f"--can-interface socketcan: no network interface {name!r} on this machine "
                          f"(create one with: ip link add dev {name} type vcan && ip link set up {name})")
 
-    def factory(ch: str):
+    def factory(ch: str) -> can.BusABC:
         return can.Bus(interface="socketcan", channel=ch, receive_own_messages=False)
 
     return name, factory
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sctd.cli.sim import add_sim_arguments
-
+    """``python -m sctd_sim.service``: parse the flags (the same as ``sctd sim``) and run."""
     p = argparse.ArgumentParser(prog="sctd-sim", description=__doc__.split("\n\n")[0])
-    add_sim_arguments(p)
+    add_service_arguments(p)
     return run(p.parse_args(argv))
 
 

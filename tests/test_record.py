@@ -14,7 +14,7 @@ from sctd import se3
 from sctd.learn.demos import MIN_SAMPLES, read_demo_csv, read_demos
 from sctd.runtime import codec
 from sctd.runtime.zsession import open_session
-from sctd_sim.record import MIN_ROWS, publish_final, row_from_poses
+from sctd_services.record import MIN_ROWS, publish_final, row_from_poses
 from tests.conftest import free_port, port_is_free, sctd, wait_for
 
 KEYS = codec.Keys("edan")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from sctd_sim.bench import format_report, measure_breakdown, measure_rtf, tracking
+from sctd.bench.sim import format_report, measure_breakdown, measure_rtf, tracking
 
 
 def test_measure_rtf_reports_its_figures():
@@ -53,7 +53,7 @@ def test_format_report():
 def test_the_pour_scene_step_settles_because_the_bottle_is_compensated():
     """The issue's known answer: with the full bottle (0.5 kg) uncompensated, a 5 cm
     step settled to 1.6 mm; told its load, the controller settles below 1 mm in < 1 s."""
-    from sctd_sim.bench import scene_step
+    from sctd.bench.sim import scene_step
 
     ok = scene_step("pour", 0.05)
     bare = scene_step("pour", 0.05, compensate=False)

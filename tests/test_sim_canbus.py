@@ -5,8 +5,10 @@ from __future__ import annotations
 import queue
 import threading
 import types
+from pathlib import Path
 
 import can
+import cantools
 import numpy as np
 import pytest
 from can.interfaces import virtual as can_virtual
@@ -25,10 +27,13 @@ from sctd_sim.canbus import (
     FastVirtualBus,
     FaultConfig,
     FaultInjectingBus,
+    FrameCodec,
     FrameCrc,
     FrameGroup,
     JointBusCodecs,
+    _codec_generated,
     classify,
+    codegen,
     crc8,
     frame_crc,
     load_dbc,
@@ -151,9 +156,9 @@ def test_frame_group_is_the_frames_one_by_one(frame):
         assert (m.timestamp, m.dlc, m.is_rx, m.channel) == (2.5, 8, False, None)
     one_by_one = [codec.decode(m.data) for codec, m in zip(group.codecs, msgs, strict=True)]
     assert group.unpack_exact(msgs, counter) == tuple(zip(*(v for _, _, v in one_by_one), strict=True))
-    last_two = group.signal_names[-1], group.signal_names[0]
-    assert group.unpacker(last_two)(msgs, counter) == tuple(
-        tuple(v[group.signal_names.index(name)] for _, _, v in one_by_one) for name in last_two)
+    for names in group.subsets:
+        assert group.unpacker(names)(msgs, counter) == tuple(
+            tuple(v[group.signal_names.index(name)] for _, _, v in one_by_one) for name in names)
 
 
 @settings(max_examples=100, deadline=None)
@@ -190,6 +195,24 @@ def test_frame_group_needs_one_layout():
         FrameGroup([CODECS.cmd[0], CODECS.state[0]])
     with pytest.raises(ValueError, match="no signals"):
         CODECS.cmd_group.unpacker(["Torque", "Nope"])
+    with pytest.raises(ValueError, match="no generated code"):
+        CODECS.cmd_group.unpacker(["Velocity", "Mode"])
+    assert CODECS.cmd_group.subsets == (CODECS.cmd_group.signal_names, ("Mode", "Torque"))
+
+
+def test_generated_codec_is_what_the_dbc_gives():
+    """The checked-in module is byte for byte what the generator writes from the DBC."""
+    assert Path(_codec_generated.__file__).read_text() == codegen.module_source(DBC_PATH)
+    assert codegen.main(["--check"]) == 0
+
+
+def test_a_layout_without_generated_code_is_refused():
+    msg = cantools.database.load_file(str(DBC_PATH)).get_message_by_name("JointCmd_1")
+    msg.get_signal_by_name("Torque").scale = 0.02  # a DBC edited without regenerating
+    with pytest.raises(ValueError, match="JointCmd_1: payload layout not in the generated codec"):
+        FrameCodec(msg)
+    with pytest.raises(ValueError, match="not a group of the generated codec"):
+        FrameGroup(CODECS.cmd[1:])
 
 
 def test_rx_queue_wakes_a_blocked_receiver_and_drains_in_order():

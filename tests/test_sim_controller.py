@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sctd.bench.sim import step_response
 from sctd_sim.arm import SimArm, ee_transform
-from sctd_sim.bench import step_response
 from sctd_sim.controller import CartesianImpedanceController, ImpedanceGains, pose_error
 from sctd_sim.robot import load_arm_model
 from tests.strategies import rotvecs

@@ -8,7 +8,6 @@ position, velocity, torque and status. Each has a CRC-8 and a 4-bit rolling coun
 
 from .codec import (
     CMD_BASE_ID,
-    DBC_PATH,
     MODE_ENABLE,
     STATE_BASE_ID,
     STATUS_BRAKED,
@@ -19,11 +18,12 @@ from .codec import (
     FrameCodec,
     FrameGroup,
     JointBusCodecs,
-    load_dbc,
 )
 from .crc import FrameCrc, crc8, frame_crc
 from .drives import JointDrives
+from .endpoint import BusEndpoint
 from .faults import FaultConfig, FaultCounts, FaultInjectingBus
+from .layout import DBC_PATH, load_dbc
 from .link import LinkStats, classify
 from .master import BusMaster
 from .virtual import FastVirtualBus, drain, send_batch
@@ -38,6 +38,7 @@ __all__ = [
     "STATUS_SATURATED",
     "STATUS_TIMEOUT",
     "SYNC_ID",
+    "BusEndpoint",
     "BusMaster",
     "FastVirtualBus",
     "FaultConfig",

@@ -29,11 +29,12 @@ from .codec import (
     SYNC_ID,
     JointBusCodecs,
 )
-from .link import ACCEPTED, DUPLICATED, LinkStats, classify
-from .virtual import drain, send_batch
+from .endpoint import BusEndpoint
+from .link import ACCEPTED, DUPLICATED, classify
+from .virtual import drain
 
 
-class JointDrives:
+class JointDrives(BusEndpoint):
     """The arm's joint drives as bus nodes.
 
     Parameters
@@ -62,10 +63,8 @@ class JointDrives:
 
     def __init__(self, bus: can.BusABC, codecs: JointBusCodecs, tau_max: np.ndarray,
                  timeout: float = 0.01) -> None:
-        self.bus = bus
-        self.codecs = codecs
-        n = codecs.n_joints
-        self.n = n
+        super().__init__(bus, codecs)
+        n = self.n
         self.tau_max = np.asarray(tau_max, dtype=float).copy()
         self._tau_min = -self.tau_max
         self.timeout = float(timeout)
@@ -75,7 +74,6 @@ class JointDrives:
         self.status = np.full(n, STATUS_BRAKED, dtype=int)
         self._any_saturated = False
         self.brake_events = 0
-        self.stats = LinkStats()
         self._enabled = np.zeros(n, dtype=bool)
         self._last_cmd_t = np.full(n, -np.inf)
         self._last_counter: list[int | None] = [None] * n
@@ -254,12 +252,3 @@ class JointDrives:
             status = self._status_list
         return self._state_group.frames(stamp, self._counter, status, q.tolist(), dq.tolist(),
                                         tau.tolist())
-
-    def send(self, frames: list[can.Message]) -> bool:
-        """Send state frames; False (and ``stats.tx_errors``) if the bus refused."""
-        try:
-            send_batch(self.bus, frames)
-        except can.CanError:
-            self.stats.tx_errors += 1
-            return False
-        return True

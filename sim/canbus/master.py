@@ -6,11 +6,11 @@ import can
 import numpy as np
 
 from .codec import MODE_ENABLE, JointBusCodecs
-from .link import LinkStats
-from .virtual import drain, send_batch
+from .endpoint import BusEndpoint
+from .virtual import drain
 
 
-class BusMaster:
+class BusMaster(BusEndpoint):
     """Controller-side bus endpoint.
 
     Parameters
@@ -38,10 +38,8 @@ class BusMaster:
     """
 
     def __init__(self, bus: can.BusABC, codecs: JointBusCodecs, period: float) -> None:
-        self.bus = bus
-        self.codecs = codecs
-        n = codecs.n_joints
-        self.n = n
+        super().__init__(bus, codecs)
+        n = self.n
         self.period = float(period)
         self.cycle = -1
         self.q = np.zeros(n)
@@ -50,7 +48,6 @@ class BusMaster:
         self.status = np.zeros(n, dtype=int)
         self.fresh = np.zeros(n, dtype=bool)
         self.age = np.full(n, 1 << 30)
-        self.stats = LinkStats()
         self._last_counter: list[int | None] = [None] * n
         self._state_index = {c.frame_id: i for i, c in enumerate(codecs.state)}
         self._status_seen: tuple[int, ...] | None = None  # status as last set from a tuple
@@ -88,15 +85,6 @@ class BusMaster:
                                      dq.tolist())
         out.insert(0, self._sync_frame(stamp, counter, 0, cycle, self.period))
         return out
-
-    def send(self, frames: list[can.Message]) -> bool:
-        """Send a cycle's batch; False (counted in ``stats.tx_errors``) if refused."""
-        try:
-            send_batch(self.bus, frames)
-        except can.CanError:
-            self.stats.tx_errors += 1
-            return False
-        return True
 
     def receive(self) -> np.ndarray:
         """Read pending state frames of the current cycle.

@@ -28,6 +28,7 @@ comma-separated string) and ``zenoh_config`` (a json5 file) change them.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import time
 from collections.abc import Iterable, Sequence
@@ -132,27 +133,26 @@ class ZenohBus(can.BusABC):
                  **kwargs: Any) -> None:
         from sctd.runtime.zsession import close_session, open_session
 
-        self._close_session = close_session
-
         self.channel = channel = str(channel if channel is not None else "edan")
         self.channel_info = f"Zenoh {can_key(channel)}"
         self.key = can_key(channel)
         self.receive_own_messages = receive_own_messages
         self.dropped = 0
         self._rx: queue.SimpleQueue[can.Message] = queue.SimpleQueue()
-        self._own_session = session is None
-        self._session = session if session is not None else open_session(
-            _endpoints(listen), _endpoints(connect), zenoh_config)
-        try:
-            self._pub = self._session.declare_publisher(
-                self.key, congestion_control=zenoh.CongestionControl.BLOCK)
-            self._sub = self._session.declare_subscriber(
-                self.key, self._on_sample, allowed_origin=zenoh.Locality.REMOTE)
-        except Exception:
-            if self._own_session:
-                close_session(self._session)
-            raise
-        super().__init__(channel=channel, **kwargs)
+        # a failure midway closes what was opened; shutdown() closes the rest
+        with contextlib.ExitStack() as stack:
+            if session is None:
+                session = open_session(_endpoints(listen), _endpoints(connect), zenoh_config)
+                stack.callback(close_session, session)  # bounded: see sctd.runtime.zsession
+            self._session = session
+            self._pub = session.declare_publisher(self.key,
+                                                  congestion_control=zenoh.CongestionControl.BLOCK)
+            stack.callback(_undeclare_quietly, self._pub)
+            self._sub = session.declare_subscriber(self.key, self._on_sample,
+                                                   allowed_origin=zenoh.Locality.REMOTE)
+            stack.callback(_undeclare_quietly, self._sub)
+            super().__init__(channel=channel, **kwargs)
+            self._resources = stack.pop_all()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
@@ -199,10 +199,11 @@ class ZenohBus(can.BusABC):
         if self._is_shutdown:
             return
         super().shutdown()
-        for d in (self._sub, self._pub):
-            try:
-                d.undeclare()
-            except Exception:  # the session may already be closed
-                pass
-        if self._own_session:
-            self._close_session(self._session)  # bounded: see sctd.runtime.zsession
+        self._resources.close()
+
+
+def _undeclare_quietly(declaration: zenoh.Publisher | zenoh.Subscriber) -> None:
+    try:
+        declaration.undeclare()
+    except Exception:  # a session the caller gave may already be closed
+        pass

@@ -20,6 +20,7 @@ defaults to the scene's task object (``task_object`` on the scene key).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import signal
@@ -27,13 +28,15 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import TextIO
 
 import zenoh
 
 from sctd import se3
 from sctd.runtime import codec
+from sctd.runtime.codec import DEFAULT_ROBOT
 from sctd.runtime.timing import Ticker
-from sctd.runtime.zsession import session_from_args
+from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
 COLUMNS = "t,x,y,z,qx,qy,qz,qw"
 MIN_ROWS = 10  # sctd.learn.demos.MIN_SAMPLES: shorter files make the learner refuse the folder
@@ -70,6 +73,8 @@ def publish_final(tmp: Path, out_dir: Path, prefix: str = "demo_") -> Path:
 class Recorder:
     """Newest state and object pose from Zenoh, sampled into CSV rows.
 
+    A context manager: subscribed while entered (``with Recorder(...) as rec:``).
+
     Parameters
     ----------
     session : zenoh.Session
@@ -79,17 +84,28 @@ class Recorder:
     """
 
     def __init__(self, session: zenoh.Session, robot: str, object_name: str | None) -> None:
+        self.session = session
         self.keys = codec.Keys(robot)
         self.object_name = object_name
         self.state: codec.StateMsg | None = None
         self.objects: dict[str, list[float]] = {}
         self.dropped = 0
-        self._subs = [
-            session.declare_subscriber(self.keys.state, self._on_state),
-            session.declare_subscriber(self.keys.objects(), self._on_object),
-        ]
-        if object_name is None:
-            self._subs.append(session.declare_subscriber(self.keys.scene, self._on_scene))
+        self._subs = contextlib.ExitStack()  # the subscribers, while entered
+
+    def __enter__(self) -> Recorder:
+        """Subscribe (a failure midway undeclares the ones made); :meth:`__exit__`
+        undeclares."""
+        with contextlib.ExitStack() as stack:
+            declare = self.session.declare_subscriber
+            stack.enter_context(declare(self.keys.state, self._on_state))
+            stack.enter_context(declare(self.keys.objects(), self._on_object))
+            if self.object_name is None:
+                stack.enter_context(declare(self.keys.scene, self._on_scene))
+            self._subs = stack.pop_all()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._subs.close()
 
     def _on_state(self, sample: zenoh.Sample) -> None:
         try:
@@ -123,13 +139,29 @@ class Recorder:
             return None
         return st.stamp, st.pose, obj
 
-    def close(self) -> None:
-        for s in self._subs:
-            s.undeclare()
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the recorder's flags (``sctd record``, ``python -m sctd_services.record``) to
+    ``p``."""
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder of demonstrations; writes the next free demo_NNN.csv")
+    p.add_argument("--object", default=None, metavar="NAME",
+                   help="task object whose frame the trajectory is expressed in "
+                        "(default: the task object the simulator announces on the scene key)")
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    p.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default %(default)s)")
+    p.add_argument("--min-distance", type=float, default=0.0, metavar="M",
+                   help="skip samples closer than this (m, ee position) to the last row (default 0)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="record this many seconds (default: until SIGINT/SIGTERM)")
+    p.add_argument("--wait", type=float, default=10.0,
+                   help="give up when no state/object arrives within this many seconds (default %(default)s)")
+    add_zenoh_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    """``sctd record`` with parsed arguments; returns the exit code."""
+    """``sctd record`` with parsed arguments (:func:`add_arguments`); returns the exit
+    code (1: nothing recorded, 2: bad flags)."""
     if args.rate <= 0 or args.min_distance < 0 or (args.duration is not None and args.duration <= 0):
         print("sctd record: --rate and --duration must be positive, --min-distance >= 0",
               file=sys.stderr)
@@ -139,57 +171,18 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    rows = 0
-    tmp: Path | None = None
-    with session_from_args(args) as session:
-        rec = Recorder(session, args.robot, args.object)
-        try:
-            give_up = time.monotonic() + args.wait
-            while not stop.is_set() and rec.sample() is None:
-                if time.monotonic() > give_up:
-                    what = "state" if rec.state is None else f"object {rec.object_name or '(task object)'}"
-                    print(f"sctd record: no {what} within {args.wait:g} s", file=sys.stderr)
-                    return 1
-                time.sleep(0.01)
-            if stop.is_set():
-                return 1
-            print(f"sctd record: recording the ee in the frame of {rec.object_name!r} at "
-                  f"{args.rate:g} Hz{' until SIGINT' if args.duration is None else ''}",
-                  file=sys.stderr, flush=True)
-            fd, name = _mkstemp(out_dir)
-            tmp = Path(name)
-            with os.fdopen(fd, "w", newline="") as fh:
-                fh.write(COLUMNS + "\n")
-                ticker = Ticker(1.0 / args.rate, spin=0.0)
-                end = None if args.duration is None else time.monotonic() + args.duration
-                t0 = last_t = None
-                last_p = None
-                while not stop.is_set():
-                    now, _ = ticker.wait()
-                    if end is not None and now >= end:
-                        break
-                    s = rec.sample()
-                    if s is None:
-                        continue
-                    stamp, pose_ee, pose_obj = s
-                    if t0 is None:
-                        t0 = stamp
-                    t = stamp - t0
-                    if last_t is not None and t <= last_t:
-                        continue  # the state has not advanced since the last row
-                    row = row_from_poses(t, pose_ee, pose_obj)
-                    if last_p is not None and args.min_distance > 0 and math.dist(
-                            row[1:4], last_p) < args.min_distance:
-                        continue
-                    fh.write(format_row(row))
-                    fh.flush()
-                    rows += 1
-                    last_t, last_p = t, row[1:4]
-                fh.flush()
-                os.fsync(fh.fileno())
-        finally:
-            rec.close()
-    assert tmp is not None
+    with session_from_args(args) as session, Recorder(session, args.robot, args.object) as rec:
+        if not _wait_for_first_sample(rec, args.wait, stop):
+            return 1
+        print(f"sctd record: recording the ee in the frame of {rec.object_name!r} at "
+              f"{args.rate:g} Hz{' until SIGINT' if args.duration is None else ''}",
+              file=sys.stderr, flush=True)
+        fd, name = _mkstemp(out_dir)
+        tmp = Path(name)
+        with os.fdopen(fd, "w", newline="") as fh:
+            rows = _record_rows(rec, fh, args, stop)
+            fh.flush()
+            os.fsync(fh.fileno())
     if rows < MIN_ROWS:
         tmp.unlink()
         print(f"sctd record: only {rows} rows (the learner needs {MIN_ROWS}); nothing written",
@@ -199,6 +192,52 @@ def run(args: argparse.Namespace) -> int:
     print(f"sctd record: {rows} rows -> {final}", file=sys.stderr, flush=True)
     print(final, flush=True)
     return 0
+
+
+def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) -> bool:
+    """Wait until both the state and the object arrived; False (said on stderr when it
+    timed out) if ``wait`` s passed or ``stop`` was set first."""
+    give_up = time.monotonic() + wait
+    while not stop.is_set() and rec.sample() is None:
+        if time.monotonic() > give_up:
+            what = "state" if rec.state is None else f"object {rec.object_name or '(task object)'}"
+            print(f"sctd record: no {what} within {wait:g} s", file=sys.stderr)
+            return False
+        time.sleep(0.01)
+    return not stop.is_set()
+
+
+def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: threading.Event) -> int:
+    """Write the header and one row per tick at ``--rate`` until ``stop`` or
+    ``--duration``, skipping samples whose state has not advanced or that lie closer
+    than ``--min-distance`` to the last row; the number of rows."""
+    fh.write(COLUMNS + "\n")
+    ticker = Ticker(1.0 / args.rate, spin=0.0)
+    end = None if args.duration is None else time.monotonic() + args.duration
+    rows = 0
+    t0 = last_t = None
+    last_p = None
+    while not stop.is_set():
+        now, _ = ticker.wait()
+        if end is not None and now >= end:
+            break
+        s = rec.sample()
+        if s is None:
+            continue
+        stamp, pose_ee, pose_obj = s
+        if t0 is None:
+            t0 = stamp
+        t = stamp - t0
+        if last_t is not None and t <= last_t:
+            continue  # the state has not advanced since the last row
+        row = row_from_poses(t, pose_ee, pose_obj)
+        if last_p is not None and args.min_distance > 0 and math.dist(row[1:4], last_p) < args.min_distance:
+            continue
+        fh.write(format_row(row))
+        fh.flush()
+        rows += 1
+        last_t, last_p = t, row[1:4]
+    return rows
 
 
 def _mkstemp(out_dir: Path) -> tuple[int, str]:
@@ -212,10 +251,10 @@ def _mkstemp(out_dir: Path) -> tuple[int, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sctd.cli.sim import add_record_arguments
-
+    """``python -m sctd_services.record``: parse the flags (the same as ``sctd record``)
+    and record."""
     p = argparse.ArgumentParser(prog="sctd-record", description=__doc__.split("\n\n")[0])
-    add_record_arguments(p)
+    add_arguments(p)
     return run(p.parse_args(argv))
 
 

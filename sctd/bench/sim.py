@@ -1,4 +1,5 @@
-"""Simulator figures: real-time factor, step response, tracking error (``sctd bench sim``).
+"""Simulator figures: real-time factor, step response, tracking error (``sctd bench sim``;
+its flags are in :mod:`sctd.cli.sim`).
 
 All motion figures are measured in simulated time along the full data path (controller
 -> CAN frames -> drives -> Pinocchio -> CAN frames -> controller), so they are the
@@ -14,10 +15,9 @@ from typing import Any
 import numpy as np
 
 from sctd import se3
-
-from .arm import SimArm
-from .robot import ArmModel, load_arm_model
-from .simulation import Simulation, start_posture
+from sctd_sim.arm import SimArm
+from sctd_sim.robot import ArmModel, load_arm_model
+from sctd_sim.simulation import Simulation, start_posture
 
 BENCH_CENTRE = se3.transform_from_rt(np.diag([-1.0, 1.0, -1.0]), [0.50, 0.0, 0.35])
 """Centre of the benchmark motions: hand pointing down in mid-workspace."""
@@ -363,11 +363,3 @@ def format_report(result: dict[str, Any]) -> str:
                                          for k, v in result["pass"].items()))
     return "\n".join(lines)
 
-
-def main() -> None:
-    """Print the report (``python -m sctd_sim.bench``)."""
-    print(format_report(run_bench()))
-
-
-if __name__ == "__main__":
-    main()

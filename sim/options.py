@@ -1,0 +1,57 @@
+"""The command-line flags of the simulator service, defined once.
+
+``python -m sctd_sim.service`` and ``sctd sim`` take the same flags: this module defines
+them and both parse with it. It imports nothing heavy (no Pinocchio, python-can or
+Zenoh beyond what :mod:`sctd.runtime` already loads), so the ``sctd`` command line
+builds its parser without loading the simulator.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from sctd.runtime.codec import DEFAULT_ROBOT
+from sctd.runtime.zsession import add_zenoh_arguments
+
+from .guard import add_limit_arguments
+
+
+def add_service_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the simulator service's flags (see :func:`sctd_sim.service.run`) to ``p``."""
+    p.add_argument("--scene", default="pour", choices=("pour", "drawer"),
+                   help="task scene (default %(default)s)")
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    p.add_argument("--trial-seed", type=int, default=None, metavar="N",
+                   help="start from the seeded random start N of an evaluation trial (hand within "
+                        "+-10 cm and +-15 deg of yaw of the scene's start, the object within +-5 cm)")
+    p.add_argument("--rate", type=float, default=1000.0,
+                   help="simulation cycle rate, Hz (default %(default)s)")
+    p.add_argument("--state-rate", type=float, default=1000.0,
+                   help="state publication rate, Hz, at most --rate (default %(default)s)")
+    p.add_argument("--object-rate", type=float, default=50.0,
+                   help="objects rate, Hz (default %(default)s)")
+    p.add_argument("--scene-rate", type=float, default=10.0,
+                   help="scene key (task outcome, health) rate, Hz (default %(default)s)")
+    p.add_argument("--faults", default="", metavar="SPEC",
+                   help="joint-bus faults, e.g. drop=0.01,corrupt=0.001,delay=0.002 "
+                        "(also duplicate, delay_rate, bus_off, tx=0/1, rx=0/1, seed)")
+    p.add_argument("--can-interface", choices=("virtual", "socketcan", "auto"), default="virtual",
+                   help="joint bus: python-can's in-process virtual bus (default), a socketcan "
+                        "interface such as vcan0, or auto (socketcan when --can-channel exists)")
+    p.add_argument("--can-channel", default=None,
+                   help="socketcan interface name (default vcan0 for socketcan/auto)")
+    p.add_argument("--drive-timeout", type=float, default=0.01,
+                   help="drive command timeout before it brakes, s (default %(default)s)")
+    add_limit_arguments(p)
+    p.add_argument("--no-stamp-check", action="store_true",
+                   help="do not refuse targets stamped before the simulator started (senders "
+                        "with unsynchronised clocks)")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--view", action="store_true",
+                   help="live 3D view in a browser, served on 127.0.0.1 (needs viser: "
+                        "pip install 'sctd[view]'; make setup installs it)")
+    p.add_argument("--view-port", type=int, default=0, metavar="PORT",
+                   help="port of the --view page on 127.0.0.1 (default 0: a free one; the URL "
+                        "is printed)")
+    p.add_argument("--json", action="store_true", help="print the final summary as JSON on stdout")
+    add_zenoh_arguments(p)
