@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -24,7 +25,8 @@ from sctd.learn import (
 from sctd.skill import Skill, skill_from_bundle
 from sctd_sim import demogen
 
-LEARN = Path(__file__).resolve().parents[1] / "sctd" / "learn"
+ROOT = Path(__file__).resolve().parents[1]
+LEARN = ROOT / "sctd" / "learn"
 FORBIDDEN = {"argparse", "subprocess", "matplotlib", "zenoh", "pinocchio", "can", "cantools",
              "sctd_sim", "sctd_services"}
 TIP = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
@@ -109,3 +111,13 @@ def test_learn_is_a_plain_library(path):
     mods, calls = _modules_and_calls(path)
     assert not mods & FORBIDDEN
     assert not calls & {"print", "write_text", "write_bytes", "mkdir", "savefig", "tofile"}
+
+
+def test_the_notebook_example_in_docs_runs(monkeypatch):
+    text = (ROOT / "docs" / "learning.md").read_text()
+    code = re.search(r"```python\n(.*?)```", text, re.S)
+    assert code is not None
+    monkeypatch.chdir(ROOT)
+    scope: dict = {}
+    exec(compile(code.group(1), "docs/learning.md", "exec"), scope)
+    assert [s.input_mappings[0].frame for s in scope["skill"].states] == ["ee", "tip"]
