@@ -12,7 +12,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
@@ -124,7 +124,7 @@ def _learn(args: argparse.Namespace,
                                progress=progress)
 
 
-def run_learn(args: argparse.Namespace) -> dict:
+def run_learn(args: argparse.Namespace) -> dict[str, Any]:
     """Learn, write ``args.out`` (and its model file) and, with ``args.report``, the
     report; return the summary (as ``summary.json`` holds it)."""
     progress = ProgressLine([*STAGES[args.method], "export"], enabled=not args.quiet)

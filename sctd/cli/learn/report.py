@@ -19,7 +19,6 @@ from ...learn.bundle import rounded, state_name
 from ...learn.linear import AXIS_NAMES
 from ...skill import Skill, load_skill
 from ...skill.summary import field_summary, skill_summary
-from . import plots
 
 
 def _replace(path: Path, data: bytes) -> None:
@@ -98,6 +97,10 @@ def write_report(result: LinearResult | VectorFieldResult, skill: Skill,
         return summary
     d = Path(report_dir)
     d.mkdir(parents=True, exist_ok=True)
+    # matplotlib is imported when a report is asked for, not with the sctd command:
+    # every other subcommand (sctd run among them) starts without its import time.
+    from . import plots
+
     figs = plots.linear_figures(result, d) if isinstance(result, LinearResult) \
         else plots.vf_figures(result, d)
     summary["figures"] = [f.name for f in figs]
