@@ -13,7 +13,6 @@ from sctd.learn import (
     spike_mask,
     subsample_by_distance,
     tf_distance,
-    write_demo_csv,
 )
 from sctd_sim import demogen
 
@@ -82,8 +81,10 @@ def test_extra_columns_and_column_order(tmp_path):
 def test_write_then_read(tmp_path):
     t = np.arange(20) * 0.02
     poses = np.tile([0.1, 0.2, 0.3, 0.0, 0.0, np.sin(0.2), np.cos(0.2)], (20, 1))
-    write_demo_csv(tmp_path / "x.csv", t, poses)
-    d = read_demo_csv(tmp_path / "x.csv")
+    rows = np.column_stack([t, poses])
+    text = HEADER + "".join(",".join(f"{x:.6f}" for x in row) + "\n" for row in rows)
+    d = read_demo_csv(_write(tmp_path, text, "x.csv"))
+    np.testing.assert_allclose(d.t, t, atol=1e-6)
     np.testing.assert_allclose(d.poses, poses, atol=1e-6)
 
 

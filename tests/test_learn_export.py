@@ -8,8 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from sctd.learn.cli import add_dtw_arguments, add_learn_arguments, main_dtw, main_learn
-from sctd.learn.pipeline import parse_frame
+from sctd.cli.learn import add_dtw_arguments, add_learn_arguments, main_dtw, main_learn, parse_frame
 from sctd.skill import SkillEngine, load_skill
 from sctd_sim import demogen
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sctd.bench.learn import reference_swap
 from sctd.learn import alpha_beta_swap, alpha_expansion, energy
-from sctd.learn.bench import reference_swap
 
 
 @st.composite

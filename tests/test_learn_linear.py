@@ -9,11 +9,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
+from sctd.bench.learn import demos_of, segmentation_accuracy
 from sctd.learn import (
     SELECTIONS,
     Demo,
     IMLabel,
-    LearnParams,
+    LinearIMLearner,
     im_costs,
     label_set,
     learn_linear,
@@ -21,7 +22,7 @@ from sctd.learn import (
     neighbour_graph,
     selection_matrices,
 )
-from sctd.learn.linear import frame_displacements
+from sctd.learn.linear import dtw_edges, frame_displacements
 from sctd_sim import demogen
 
 from .strategies import poses, unit_quaternions
@@ -100,7 +101,7 @@ def test_neighbour_graph():
 def pour_result():
     ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=11)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
-    return ds, learn_linear(demos, {"tip": TIP}, LearnParams(seed=0))
+    return ds, learn_linear(demos, {"tip": TIP}, learner=LinearIMLearner(random_state=0))
 
 
 def test_pour_known_answer(pour_result):
@@ -122,14 +123,13 @@ def test_pour_known_answer(pour_result):
 def test_expansion_option_gives_the_same_states(pour_result):
     ds, res = pour_result
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
-    res2 = learn_linear(demos, {"tip": TIP}, LearnParams(seed=0, cut="expansion"))
+    res2 = learn_linear(demos, {"tip": TIP}, learner=LinearIMLearner(cut="expansion", random_state=0))
     assert [s.label for s in res2.learner.states_] == [s.label for s in res.learner.states_]
 
 
 def test_dtw_edges_pair_the_same_stage_of_identical_demos():
     """Two copies of a demonstration, the second sampled twice as densely: DTW pairs
     each displacement with the ones at the same place, across the two demos."""
-    from sctd.learn.linear import dtw_edges
 
     x = np.linspace(0.0, 0.3, 16)
     a = np.stack([x, np.zeros(16), np.zeros(16), np.zeros(16), np.zeros(16), np.zeros(16), np.ones(16)], 1)
@@ -150,12 +150,8 @@ def test_dtw_edges_pair_the_same_stage_of_identical_demos():
 
 
 def test_dtw_align_option_learns_the_same_skill_shape():
-    from sctd.learn.bench import _accuracy, _demos
-    from sctd.learn.pipeline import LearnParams, learn_linear
-    from sctd_sim import demogen
-
     ds = demogen.generate("pour", 6, noise=0.001, outliers=0.05, seed=3)
-    r = learn_linear(_demos(ds), {"tip": np.array([0, 0, 0.12, 0, 0, 0, 1.0])},
-                     LearnParams(seed=3, dtw_align=True))
+    r = learn_linear(demos_of(ds), {"tip": np.array([0, 0, 0.12, 0, 0, 0, 1.0])},
+                     learner=LinearIMLearner(dtw_align=True, random_state=3))
     assert [s.label.name for s in r.learner.states_] == ["ee:txtytz", "tip:ry"]
-    assert _accuracy(r, ds.truth)[0] >= 0.95
+    assert segmentation_accuracy(r, ds.truth)[0] >= 0.95

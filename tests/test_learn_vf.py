@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sctd.learn import Demo, LearnParams, VectorFieldLearner, learn_vector_fields, ransac_iterations
+from sctd.learn import Demo, VectorFieldLearner, learn_vector_fields, ransac_iterations
 from sctd.learn.vf import cylinder_field, sphere_field
 from sctd_sim import demogen
 
@@ -90,7 +90,7 @@ def test_pour_sphere_centre_is_stable_and_gives_the_tip():
     truth = np.asarray(ds.truth["sphere_centre"])
     centres = []
     for s in range(3):
-        res = learn_vector_fields(demos, LearnParams(seed=s))
+        res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=s))
         kinds = sorted(f.type for f in res.learner.fields_)
         assert kinds == ["sphere", "translation"]
         sph = next(f for f in res.learner.fields_ if f.type == "sphere")
@@ -107,7 +107,7 @@ def test_pour_sphere_centre_is_stable_and_gives_the_tip():
 def test_drawer_two_translation_fields():
     ds = demogen.generate("drawer", 8, noise=0.001, outliers=0.05, seed=6)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
-    res = learn_vector_fields(demos, LearnParams(seed=0))
+    res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0))
     dirs = [f.direction for f in res.learner.fields_ if f.type == "translation"]
     assert len(dirs) == 2
     for true in ds.truth["directions"].values():

@@ -30,7 +30,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo_cmd.add_demo_arguments(p)
     p.set_defaults(func=demo_cmd.main_demo)
 
-    from ..learn import cli as learn_cli
+    from . import learn as learn_cli
 
     p = sub.add_parser("learn", help="learn a skill from a folder of demonstrations")
     learn_cli.add_learn_arguments(p)
@@ -77,24 +77,17 @@ def build_parser() -> argparse.ArgumentParser:
     fuzz.add_fuzz_arguments(p)
     p.set_defaults(func=fuzz.main_fuzz)
 
+    from ..bench import learn as learn_bench
+
     p = bsub.add_parser("learn", help="learning figures on generated demonstrations (accuracy, "
                         "centre error, directions, time, graph-cut energy)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--n-demos", type=int, default=10)
-    p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_bench_learn)
+    learn_bench.add_bench_learn_arguments(p)
+    p.set_defaults(func=learn_bench.main_bench_learn)
 
     p = bsub.add_parser("sim", help="simulator real-time factor, step response and tracking")
     sim_cmd.add_bench_sim_arguments(p)
     p.set_defaults(func=sim_cmd.main_bench_sim)
     return parser
-
-
-def _bench_learn(args: argparse.Namespace) -> int:
-    from ..learn.bench import main
-
-    argv = ["--seed", str(args.seed), "--n-demos", str(args.n_demos)]
-    return main([*argv, "--json"] if args.json else argv)
 
 
 def main(argv: list[str] | None = None) -> int:

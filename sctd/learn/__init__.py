@@ -1,12 +1,34 @@
 """Learning Shared Control Templates from demonstrations (thesis Ch. 4).
 
-Pure numpy/scipy/scikit-learn/PyMaxflow: no Zenoh, no file I/O inside estimators.
-Linear input mappings (Ch. 4.1): :class:`LinearIMLearner`, :func:`alpha_beta_swap`,
-:func:`alpha_expansion`, :func:`energy`. Vector fields (Ch. 4.2):
-:class:`VectorFieldLearner`. Demonstrations: :func:`read_demos`, :func:`dtw`.
-End to end: :func:`learn_linear`, :func:`learn_vector_fields`, :func:`run_learn`.
+A plain library on numpy/scipy/scikit-learn/PyMaxflow: no Zenoh, no argument
+parsing, no printing, nothing written to disk (``sctd learn`` in :mod:`sctd.cli.learn`
+writes the skill files and the report). scikit-learn is imported when a linear-IM
+learner first fits, not with this package.
+
+From a notebook::
+
+    from sctd.learn import learn, learn_skill, read_demos
+
+    demos = read_demos("skills/demos/pour")
+    skill = learn_skill(demos, method="linear", frames={"tip": [0, 0, 0.12, 0, 0, 0, 1]},
+                        object="mug", smoothness=0.005, random_state=0)
+    result = learn(demos, method="vf", random_state=0)  # learner, labels, timings
+    result.learner.fields_
+
+:func:`learn_skill` returns a validated :class:`sctd.skill.Skill`; :func:`learn` the
+result with the fitted estimator; :func:`skill_bundle` turns a result into the YAML
+text and model files. Hyperparameters are keyword arguments named as the fields of
+:class:`Preprocessing`, :class:`LinearIMLearner` / :class:`VectorFieldLearner`,
+:class:`SkillOptions` and :class:`VectorFieldOptions` (:func:`hyperparameter_names`);
+each is defined once there, with the help text the command line shows.
+
+The parts: demonstrations (:func:`read_demos`, :func:`dtw`, preprocessing); linear IMs
+(Ch. 4.1: :class:`LinearIMLearner`, :func:`alpha_beta_swap`, :func:`alpha_expansion`,
+:func:`energy`); vector fields (Ch. 4.2: :class:`VectorFieldLearner`); end to end
+(:func:`learn_linear`, :func:`learn_vector_fields`, :func:`learn`, :func:`learn_skill`).
 """
 
+from .bundle import skill_bundle
 from .demos import (
     Demo,
     DemoError,
@@ -17,13 +39,13 @@ from .demos import (
     spike_mask,
     subsample_by_distance,
     tf_distance,
-    write_demo_csv,
 )
 from .graphcut import alpha_beta_swap, alpha_expansion, energy
 from .linear import (
     SELECTIONS,
     IMLabel,
     LinearIMLearner,
+    Progress,
     im_costs,
     label_set,
     least_squares_command,
@@ -31,46 +53,60 @@ from .linear import (
     selection_matrices,
     selection_matrix,
 )
+from .params import get_params, hyperparameter
 from .pipeline import (
-    LearnParams,
-    LinearResult,
-    VectorFieldResult,
+    METHODS,
+    STAGES,
+    hyperparameter_names,
+    learn,
     learn_linear,
+    learn_skill,
     learn_vector_fields,
-    run_learn,
 )
+from .preprocess import Prepared, Preprocessing
+from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
 from .vf import VectorFieldLearner, ransac_iterations, unit_vectors
 
 __all__ = [
+    "METHODS",
     "SELECTIONS",
+    "STAGES",
     "Demo",
     "DemoError",
     "IMLabel",
-    "LearnParams",
     "LinearIMLearner",
     "LinearResult",
+    "Prepared",
+    "Preprocessing",
+    "Progress",
+    "SkillOptions",
     "VectorFieldLearner",
+    "VectorFieldOptions",
     "VectorFieldResult",
     "alpha_beta_swap",
     "alpha_expansion",
     "dtw",
     "energy",
+    "get_params",
+    "hyperparameter",
+    "hyperparameter_names",
     "im_costs",
     "label_set",
+    "learn",
     "learn_linear",
+    "learn_skill",
     "learn_vector_fields",
     "least_squares_command",
     "neighbour_graph",
     "ransac_iterations",
     "read_demo_csv",
     "read_demos",
-    "run_learn",
     "selection_matrices",
     "selection_matrix",
+    "skill_bundle",
     "smooth_poses",
     "spike_mask",
     "subsample_by_distance",
     "tf_distance",
     "unit_vectors",
-    "write_demo_csv",
 ]

@@ -87,37 +87,12 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
         raise DemoError(name, None, f"cannot read ({exc.strerror})") from None
     with fh:
         reader = csv.reader(fh)
-        try:
-            header = next(reader)
-        except StopIteration:
-            raise DemoError(name, None, "empty file (expected the header "
-                            f"{','.join(COLUMNS)})") from None
-        header = [h.strip() for h in header]
-        missing = [c for c in COLUMNS if c not in header]
-        if missing:
-            raise DemoError(name, None, f"missing column(s) {', '.join(missing)} "
-                            f"(header must contain {','.join(COLUMNS)})")
-        cols = [header.index(c) for c in COLUMNS]
+        cols, width = _columns(name, next(reader, None))
         rows: list[list[float]] = []
         for k, rec in enumerate(reader, start=1):
             if not rec or all(not x.strip() for x in rec):
                 continue
-            if len(rec) < len(header):
-                raise DemoError(name, k, f"expected {len(header)} values, got {len(rec)}")
-            vals = []
-            for c, j in zip(COLUMNS, cols, strict=True):
-                s = rec[j].strip()
-                try:
-                    v = float(s)
-                except ValueError:
-                    raise DemoError(name, k, f"column {c}: not a number: {s!r}") from None
-                if not math.isfinite(v):
-                    raise DemoError(name, k, f"column {c}: not finite ({s})")
-                vals.append(v)
-            qn = math.sqrt(sum(x * x for x in vals[4:]))
-            if abs(qn - 1.0) > quat_tolerance:
-                raise DemoError(name, k, f"quaternion (qx, qy, qz, qw) has norm {qn:.6f}, "
-                                f"not unit (tolerance {quat_tolerance})")
+            vals = _row(name, k, rec, cols, width, quat_tolerance)
             if rows and vals[0] <= rows[-1][0]:
                 raise DemoError(name, k, f"time {vals[0]} does not increase "
                                 f"(previous row has {rows[-1][0]})")
@@ -128,6 +103,40 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
     a = np.array(rows)
     return Demo(name=path.name, t=a[:, 0], poses=np.concatenate(
         [a[:, 1:4], se3.quaternion_normalize(a[:, 4:8])], axis=1))
+
+
+def _columns(name: str, header: list[str] | None) -> tuple[list[int], int]:
+    """Index of each of ``COLUMNS`` in the header, and the header's width."""
+    if header is None:
+        raise DemoError(name, None, f"empty file (expected the header {','.join(COLUMNS)})")
+    header = [h.strip() for h in header]
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise DemoError(name, None, f"missing column(s) {', '.join(missing)} "
+                        f"(header must contain {','.join(COLUMNS)})")
+    return [header.index(c) for c in COLUMNS], len(header)
+
+
+def _row(name: str, k: int, rec: list[str], cols: list[int], width: int,
+         quat_tolerance: float) -> list[float]:
+    """The values of ``COLUMNS`` in data row ``k``: finite numbers, a unit quaternion."""
+    if len(rec) < width:
+        raise DemoError(name, k, f"expected {width} values, got {len(rec)}")
+    vals = []
+    for c, j in zip(COLUMNS, cols, strict=True):
+        s = rec[j].strip()
+        try:
+            v = float(s)
+        except ValueError:
+            raise DemoError(name, k, f"column {c}: not a number: {s!r}") from None
+        if not math.isfinite(v):
+            raise DemoError(name, k, f"column {c}: not finite ({s})")
+        vals.append(v)
+    qn = math.sqrt(sum(x * x for x in vals[4:]))
+    if abs(qn - 1.0) > quat_tolerance:
+        raise DemoError(name, k, f"quaternion (qx, qy, qz, qw) has norm {qn:.6f}, "
+                        f"not unit (tolerance {quat_tolerance})")
+    return vals
 
 
 def read_demos(directory: str | Path, min_samples: int = MIN_SAMPLES,
@@ -146,17 +155,6 @@ def read_demos(directory: str | Path, min_samples: int = MIN_SAMPLES,
     if not files:
         raise DemoError(str(directory), None, f"no demonstration files ({pattern})")
     return [read_demo_csv(f, min_samples=min_samples) for f in files]
-
-
-def write_demo_csv(path: str | Path, t: ArrayLike, poses: ArrayLike, digits: int = 6) -> None:
-    """Write a demonstration CSV (``t,x,y,z,qx,qy,qz,qw``)."""
-    t = np.asarray(t, dtype=float)
-    poses = np.asarray(poses, dtype=float)
-    with Path(path).open("w", newline="") as fh:
-        fh.write(",".join(COLUMNS) + "\n")
-        fmt = ",".join([f"%.{digits}f"] * 8)
-        for ti, p in zip(t, poses, strict=True):
-            fh.write(fmt % (ti, *p) + "\n")
 
 
 # --- distances ------------------------------------------------------------------------

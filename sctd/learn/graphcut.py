@@ -17,6 +17,9 @@ to the terminal on the other side pays the cost of the side it ends on.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import maxflow
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -96,6 +99,118 @@ def _cut(cost0: Array, cost1: Array, pu: IntArray, pv: IntArray, cap_uv: Array,
     return g.get_grid_segments(nodes).astype(bool)
 
 
+@dataclass(frozen=True)
+class _Potts:
+    """A validated Potts problem: unary (n, L), edges (m, 2) without self-loops, weights
+    (m,), lambda, and the scaled weights ``lambda * w`` the moves' graphs use."""
+
+    U: Array
+    E: IntArray
+    w: Array
+    lam: float
+
+    @property
+    def wl(self) -> Array:
+        return self.lam * self.w
+
+    def energy(self, f: IntArray) -> float:
+        return energy(self.U, self.E, self.w, self.lam, f)
+
+
+_Move = Callable[[_Potts, IntArray, NDArray[np.bool_], tuple[int, ...]], IntArray | None]
+
+
+def _descend(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
+             labels: ArrayLike | None, max_cycles: int,
+             moves: Callable[[int], list[tuple[int, ...]]], move: _Move) -> IntArray:
+    """Shared driver of both algorithms: cycle over ``moves(L)`` (label pairs or labels),
+    keep each proposal of ``move`` that lowers the energy, stop after a cycle without
+    improvement. ``move`` gets the labels in use (recomputed after each accepted move)
+    and returns the proposed labelling, or None when the move cannot change anything."""
+    U, E, w, f = _check(unary, edges, weights, labels)
+    problem = _Potts(U, E, w, float(smoothness))
+    best = problem.energy(f)
+    present = np.zeros(U.shape[1], dtype=bool)
+    present[f] = True
+    for _ in range(max_cycles):
+        improved = False
+        for key in moves(U.shape[1]):
+            f_new = move(problem, f, present, key)
+            if f_new is None:
+                continue
+            e_new = problem.energy(f_new)
+            if e_new < best - 1e-12 * max(1.0, abs(best)):
+                f, best, improved = f_new, e_new, True
+                present = np.zeros(U.shape[1], dtype=bool)
+                present[f] = True
+        if not improved:
+            break
+    return f
+
+
+def _label_pairs(L: int) -> list[tuple[int, ...]]:
+    return [(a, b) for a in range(L) for b in range(a + 1, L)]
+
+
+def _single_labels(L: int) -> list[tuple[int, ...]]:
+    return [(a,) for a in range(L)]
+
+
+def _swap_move(problem: _Potts, f: IntArray, present: NDArray[np.bool_],
+               pair: tuple[int, ...]) -> IntArray | None:
+    """Relabel the nodes labelled a or b optimally among {a, b} (Table A.1)."""
+    a, b = pair
+    # Only pairs with at least one label in use can change anything.
+    if not (present[a] or present[b]):
+        return None
+    U, wl = problem.U, problem.wl
+    eu, ev = problem.E[:, 0], problem.E[:, 1]
+    in_ab = (f == a) | (f == b)
+    idx = np.flatnonzero(in_ab)
+    local = np.full(len(f), -1, dtype=np.int64)
+    local[idx] = np.arange(len(idx))
+    cost_a = U[idx, a].copy()
+    cost_b = U[idx, b].copy()
+    # Edges with exactly one end in P_ab: Potts penalty to the fixed neighbour.
+    iu, iv = in_ab[eu], in_ab[ev]
+    for inside, node, other in ((iu & ~iv, eu, ev), (iv & ~iu, ev, eu)):
+        if not np.any(inside):
+            continue
+        p = local[node[inside]]
+        fq = f[other[inside]]
+        np.add.at(cost_a, p, wl[inside] * (fq != a))
+        np.add.at(cost_b, p, wl[inside] * (fq != b))
+    both = iu & iv
+    take_b = _cut(cost_a, cost_b, local[eu[both]], local[ev[both]], wl[both], wl[both])
+    f_new = f.copy()
+    f_new[idx] = np.where(take_b, b, a)
+    return f_new
+
+
+def _expansion_move(problem: _Potts, f: IntArray, present: NDArray[np.bool_],
+                    label: tuple[int, ...]) -> IntArray:
+    """Let every node keep its label or take alpha, by one (submodular) cut."""
+    (a,) = label
+    U, wl = problem.U, problem.wl
+    eu, ev = problem.E[:, 0], problem.E[:, 1]
+    cost0 = U[np.arange(len(f)), f].copy()  # keep f_p
+    cost1 = U[:, a].copy()  # take alpha
+    fu, fv = f[eu], f[ev]
+    # Pairwise table A=E(0,0), B=E(0,1), C=E(1,0), D=E(1,1)=0 decomposed as
+    # A + (C-A) x_u + (D-C) x_v + (B+C-A-D) (1-x_u) x_v.
+    A = wl * (fu != fv)
+    B = wl * (fu != a)
+    C = wl * (a != fv)
+    cu = C - A  # the constant A does not change the cut
+    np.add.at(cost1, eu, np.maximum(cu, 0.0))
+    np.add.at(cost0, eu, np.maximum(-cu, 0.0))
+    # -C x_v == C (1 - x_v) - C: pay C when v keeps its label.
+    np.add.at(cost0, ev, C)
+    cap = B + C - A  # >= 0: the Potts model is a metric
+    take = _cut(cost0, cost1, eu, ev, np.maximum(cap, 0.0), np.zeros_like(cap))
+    return np.where(take, a, f)
+
+
 def alpha_beta_swap(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
                     labels: ArrayLike | None = None, max_cycles: int = 20) -> IntArray:
     """Minimise the Potts energy by alpha-beta swap moves (Appendix A.3, Algorithm 8).
@@ -124,49 +239,8 @@ def alpha_beta_swap(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoo
     ndarray, shape (n,) of int
         The labelling.
     """
-    U, E, w, f = _check(unary, edges, weights, labels)
-    lam = float(smoothness)
-    n, L = U.shape
-    wl = lam * w
-    eu, ev = E[:, 0], E[:, 1]
-    best = energy(U, E, w, lam, f)
-    for _ in range(max_cycles):
-        improved = False
-        present = np.unique(f)
-        # Only pairs with at least one label in use can change anything.
-        for a in range(L):
-            for b in range(a + 1, L):
-                if a not in present and b not in present:
-                    continue
-                in_ab = (f == a) | (f == b)
-                idx = np.flatnonzero(in_ab)
-                if len(idx) == 0:
-                    continue
-                local = np.full(n, -1, dtype=np.int64)
-                local[idx] = np.arange(len(idx))
-                cost_a = U[idx, a].copy()
-                cost_b = U[idx, b].copy()
-                # Edges with exactly one end in P_ab: Potts penalty to the fixed neighbour.
-                iu, iv = in_ab[eu], in_ab[ev]
-                for inside, node, other in ((iu & ~iv, eu, ev), (iv & ~iu, ev, eu)):
-                    if not np.any(inside):
-                        continue
-                    p = local[node[inside]]
-                    fq = f[other[inside]]
-                    np.add.at(cost_a, p, wl[inside] * (fq != a))
-                    np.add.at(cost_b, p, wl[inside] * (fq != b))
-                both = iu & iv
-                pu, pv = local[eu[both]], local[ev[both]]
-                take_b = _cut(cost_a, cost_b, pu, pv, wl[both], wl[both])
-                f_new = f.copy()
-                f_new[idx] = np.where(take_b, b, a)
-                e_new = energy(U, E, w, lam, f_new)
-                if e_new < best - 1e-12 * max(1.0, abs(best)):
-                    f, best, improved = f_new, e_new, True
-                    present = np.unique(f)
-        if not improved:
-            break
-    return f
+    return _descend(unary, edges, weights, smoothness, labels, max_cycles, _label_pairs,
+                    _swap_move)
 
 
 def alpha_expansion(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
@@ -181,34 +255,5 @@ def alpha_expansion(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoo
     -------
     ndarray, shape (n,) of int
     """
-    U, E, w, f = _check(unary, edges, weights, labels)
-    lam = float(smoothness)
-    n, L = U.shape
-    wl = lam * w
-    eu, ev = E[:, 0], E[:, 1]
-    best = energy(U, E, w, lam, f)
-    for _ in range(max_cycles):
-        improved = False
-        for a in range(L):
-            cost0 = U[np.arange(n), f].copy()  # keep f_p
-            cost1 = U[:, a].copy()  # take alpha
-            fu, fv = f[eu], f[ev]
-            # Pairwise table A=E(0,0), B=E(0,1), C=E(1,0), D=E(1,1)=0 decomposed as
-            # A + (C-A) x_u + (D-C) x_v + (B+C-A-D) (1-x_u) x_v.
-            A = wl * (fu != fv)
-            B = wl * (fu != a)
-            C = wl * (a != fv)
-            cu = C - A  # the constant A does not change the cut
-            np.add.at(cost1, eu, np.maximum(cu, 0.0))
-            np.add.at(cost0, eu, np.maximum(-cu, 0.0))
-            # -C x_v == C (1 - x_v) - C: pay C when v keeps its label.
-            np.add.at(cost0, ev, C)
-            cap = B + C - A  # >= 0: the Potts model is a metric
-            take = _cut(cost0, cost1, eu, ev, np.maximum(cap, 0.0), np.zeros_like(cap))
-            f_new = np.where(take, a, f)
-            e_new = energy(U, E, w, lam, f_new)
-            if e_new < best - 1e-12 * max(1.0, abs(best)):
-                f, best, improved = f_new, e_new, True
-        if not improved:
-            break
-    return f
+    return _descend(unary, edges, weights, smoothness, labels, max_cycles, _single_labels,
+                    _expansion_move)

@@ -25,12 +25,16 @@ Pipeline (:class:`LinearIMLearner`):
    each pair of consecutive states; the frame whose positions separate best *and*
    which the source state's IM can move across the plane is chosen. Reverse
    transitions share the plane with opposite sign; the margin is the hysteresis.
+
+scikit-learn is imported by the first fit, not with this module: ``sctd`` commands
+that never learn do not pay its start-up time.
 """
 
 from __future__ import annotations
 
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,11 +44,16 @@ from scipy.spatial import cKDTree
 from .. import se3
 from .demos import dtw
 from .graphcut import alpha_beta_swap, alpha_expansion, energy
+from .params import hyperparameter
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+CUTS = ("swap", "expansion")
+
+Progress = Callable[[str], None]
+"""A progress callback: called with the name of each stage as it ends."""
 
 SELECTIONS: tuple[tuple[int, ...], ...] = tuple(
     c for k in (1, 2, 3) for c in itertools.combinations(range(6), k)
@@ -257,6 +266,22 @@ class StateIM:
     support: dict = field(default_factory=dict)  # axis name -> fraction of displacements
 
 
+class _Laps:
+    """Stage timings of a fit, reporting each finished stage to a progress callback."""
+
+    def __init__(self, progress: Progress | None):
+        self.progress = progress
+        self.timings: dict[str, float] = {}
+        self._tick = time.perf_counter()
+
+    def __call__(self, name: str) -> None:
+        now = time.perf_counter()
+        self.timings[name] = now - self._tick
+        self._tick = now
+        if self.progress is not None:
+            self.progress(name)
+
+
 def _runs(labels: IntArray) -> list[list[int]]:
     """[start, end (exclusive), label] of each run of equal labels."""
     out: list[list[int]] = []
@@ -310,6 +335,16 @@ def _monotone_assignment(cost: Array, switch_penalty: float) -> IntArray:
     return s
 
 
+def _merge_repeats(states: list[StateIM]) -> list[StateIM]:
+    """Consecutive states with the same IM are one state (the first of them)."""
+    merged = [states[0]]
+    for st in states[1:]:
+        if st.label != merged[-1].label:
+            merged.append(st)
+    return merged
+
+
+@dataclass
 class LinearIMLearner:
     """Learn an FSM of linear input mappings from demonstrations (Algorithm 1).
 
@@ -320,14 +355,14 @@ class LinearIMLearner:
     beta : float
         Cost per controlled DoF (eq. 4.14); thesis ~0.01.
     smoothness : float
-        lambda of eq. 4.16; thesis 0-0.007.
+        lambda of eq. 4.16; thesis 0-0.007 (flag ``--lambda``).
     radius : float
         Spatial neighbour radius (m); thesis ~0.04.
     max_n : int
         Spatial neighbours per displacement; thesis 10.
     C : float
         SVM penalty (eq. 4.17); thesis 1000.
-    method : {"swap", "expansion"}
+    cut : {"swap", "expansion"}
         Graph-cut move (Appendix A.3).
     min_segment : int
         Runs shorter than this many displacements are absorbed by a neighbour run.
@@ -340,7 +375,7 @@ class LinearIMLearner:
         Also make DTW-aligned displacements of different demonstrations neighbours in
         the smoothness term (:func:`dtw_edges`).
     random_state : int or None
-        Seed for the SVM solver.
+        Seed for the SVM solver (flag ``--seed``).
 
     Attributes
     ----------
@@ -356,25 +391,25 @@ class LinearIMLearner:
     timings_ : dict
     """
 
-    def __init__(self, alpha: float = 0.4, beta: float = 0.01, smoothness: float = 0.005,
-                 radius: float = 0.04, max_n: int = 10, C: float = 1000.0, method: str = "swap",
-                 min_segment: int = 3, axis_support: float = 0.08, margin: float = 0.005,
-                 dtw_align: bool = False, random_state: int | None = None):
-        self.alpha = alpha
-        self.beta = beta
-        self.smoothness = smoothness
-        self.radius = radius
-        self.max_n = max_n
-        self.C = C
-        self.method = method
-        self.min_segment = min_segment
-        self.axis_support = axis_support
-        self.margin = margin
-        self.dtw_align = dtw_align
-        self.random_state = random_state
+    alpha: float = hyperparameter(0.4, "tf-norm m/rad (eq. 4.9)")
+    beta: float = hyperparameter(0.01, "cost per DoF (eq. 4.14)")
+    smoothness: float = hyperparameter(0.005, "smoothness (eq. 4.16)", flag="--lambda")
+    radius: float = hyperparameter(0.04, "neighbour radius (m)")
+    max_n: int = hyperparameter(10, "spatial neighbours")
+    C: float = hyperparameter(1000.0, "SVM penalty (eq. 4.17)")
+    cut: str = hyperparameter("swap", "graph-cut move (alpha-beta swap or alpha-expansion)",
+                              choices=CUTS)
+    min_segment: int = hyperparameter(3, "shortest run kept (displacements)")
+    axis_support: float = hyperparameter(
+        0.08, "share of a state's net motion an axis needs to be in its IM")
+    margin: float = hyperparameter(0.005, "transition hysteresis (m)")
+    dtw_align: bool = hyperparameter(
+        False, "add DTW-aligned displacements of different demos as graph-cut neighbours")
+    random_state: int | None = hyperparameter(
+        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
 
     def fit(self, T_obj_ee: list[ArrayLike], frames: dict[str, ArrayLike] | None = None,
-            progress=None) -> LinearIMLearner:
+            progress: Progress | None = None) -> LinearIMLearner:
         """Fit on demonstrations.
 
         Parameters
@@ -385,10 +420,26 @@ class LinearIMLearner:
             Candidate feature frames as offsets ``T_ee_frame`` (``ee`` is always a
             candidate and must not be given).
         progress : callable(str), optional
-            Called with a short description at each stage.
+            Called with the stage's name as each stage ends (``costs``,
+            ``segmentation``, ``states``, ``transitions``).
         """
-        if self.method not in ("swap", "expansion"):
-            raise ValueError(f"method must be 'swap' or 'expansion', got {self.method!r}")
+        demos = self._check_fit(T_obj_ee, frames)
+        lap = _Laps(progress)
+        self._fit_costs(demos)
+        lap("costs")
+        self._fit_segmentation(demos)
+        lap("segmentation")
+        self._build_states()
+        lap("states")
+        self._fit_transitions(demos)
+        lap("transitions")
+        self.timings_ = lap.timings
+        return self
+
+    def _check_fit(self, T_obj_ee: list[ArrayLike], frames: dict[str, ArrayLike] | None) -> list[Array]:
+        """Validate the inputs; set the frames and the label set."""
+        if self.cut not in CUTS:
+            raise ValueError(f"cut must be 'swap' or 'expansion', got {self.cut!r}")
         demos = [np.asarray(T, dtype=float) for T in T_obj_ee]
         if not demos or any(len(T) < 2 for T in demos):
             raise ValueError("every demonstration needs at least 2 poses")
@@ -399,27 +450,17 @@ class LinearIMLearner:
         offsets = [np.eye(4)] + [np.asarray(frames[n], dtype=float) for n in frames]
         self.frame_offsets_ = dict(zip(self.frame_names_, offsets, strict=True))
         self.labels_ = label_set(self.frame_names_)
-        tick = time.perf_counter()
-        timings: dict[str, float] = {}
+        return demos
 
-        def lap(name: str) -> None:
-            nonlocal tick
-            now = time.perf_counter()
-            timings[name] = now - tick
-            tick = now
-            if progress is not None:
-                progress(name)
+    def _fit_costs(self, demos: list[Array]) -> None:
+        """Steps 1-3: displacements of every frame and the cost of every label."""
+        offsets = [self.frame_offsets_[n] for n in self.frame_names_]
+        self.d6_ = [np.stack([frame_displacements(T, off) for off in offsets]) for T in demos]
+        self.costs_ = [im_costs(D, self.labels_, self.frame_names_, self.alpha, self.beta)
+                       for D in self.d6_]
 
-        # 1-3: displacements and costs.
-        self.costs_ = []
-        self.d6_ = []
-        for T in demos:
-            D = np.stack([frame_displacements(T, off) for off in offsets])
-            self.d6_.append(D)
-            self.costs_.append(im_costs(D, self.labels_, self.frame_names_, self.alpha, self.beta))
-        lap("costs")
-
-        # 4: graph-cut segmentation of all demonstrations jointly.
+    def _fit_segmentation(self, demos: list[Array]) -> None:
+        """Step 4: graph-cut segmentation of all demonstrations jointly."""
         unary = np.concatenate(self.costs_)
         demo_index = np.concatenate([np.full(len(c), k) for k, c in enumerate(self.costs_)])
         start_poses = np.concatenate([se3.pose_from_transform(T[:-1]) for T in demos])
@@ -431,7 +472,7 @@ class LinearIMLearner:
             both = np.concatenate([edges, e2])
             edges, first = np.unique(both, axis=0, return_index=True)
             weights = np.concatenate([weights, w2])[first]
-        solve = alpha_beta_swap if self.method == "swap" else alpha_expansion
+        solve = alpha_beta_swap if self.cut == "swap" else alpha_expansion
         f = solve(unary, edges, weights, self.smoothness)
         self.edges_, self.weights_ = edges, weights
         self.energy_ = energy(unary, edges, weights, self.smoothness, f)
@@ -439,78 +480,56 @@ class LinearIMLearner:
                                       np.argmin(unary, axis=1))
         splits = np.cumsum([len(c) for c in self.costs_])[:-1]
         self.graph_labels_ = np.split(f, splits)
-        lap("segmentation")
-
-        # 5: states.
-        self._build_states(demos)
-        lap("states")
-        # 6: transitions.
-        self._fit_transitions(demos)
-        lap("transitions")
-        self.timings_ = timings
-        return self
 
     # --- states -----------------------------------------------------------------------
 
-    def _build_states(self, demos: list[Array]) -> None:
+    def _build_states(self) -> None:
+        """Step 5: the chain of states from the graph-cut runs, then one refinement."""
         cleaned = [_absorb_short_runs(f, c, self.min_segment)
                    for f, c in zip(self.graph_labels_, self.costs_, strict=True)]
         runs = [_runs(f) for f in cleaned]
         counts = np.array([len(r) for r in runs])
         values, freq = np.unique(counts, return_counts=True)
         K = int(values[np.flatnonzero(freq == freq.max())].min())
-        ref = [r for r in runs if len(r) == K]
-        ref_demos = [k for k, r in enumerate(runs) if len(r) == K]
-        states: list[StateIM] = []
-        for s in range(K):
-            used: dict[int, int] = {}
-            motion: list[list[Array]] = [[] for _ in self.frame_names_]
-            for k, r in zip(ref_demos, ref, strict=True):
-                start, end, _ = r[s]
-                for lab in cleaned[k][start:end]:
-                    used[int(lab)] = used.get(int(lab), 0) + 1
-                for fi in range(len(self.frame_names_)):
-                    # The run's interior: smoothing blurs the corners between phases.
-                    trim = min(2, (end - start) // 4)
-                    motion[fi].append(self.d6_[k][fi, start + trim:end - trim].sum(axis=0))
-            states.append(self._state_from_labels(used, motion))
-        # Consecutive states with the same IM are one state.
-        merged = [states[0]]
-        for st in states[1:]:
-            if st.label != merged[-1].label:
-                merged.append(st)
-        self.states_ = merged
+        ref = [k for k, r in enumerate(runs) if len(r) == K]
+        states = [self._state_from_segments([(cleaned[k][runs[k][s][0]:runs[k][s][1]],
+                                              self.d6_[k][:, runs[k][s][0]:runs[k][s][1]])
+                                             for k in ref])
+                  for s in range(K)]
+        merged = _merge_repeats(states)
         # Monotone assignment by how well each state's IM explains each displacement:
         # the residual alone (beta * DoF is a constant per state here and, at small
         # sample spacings, as large as the displacement itself).
-        self.state_labels_ = self._assign(merged)
+        assigned = self._assign(merged)
         # One refinement: the assignment's boundaries are sharper than the graph cut's
         # (spatial neighbours pull a few displacements across a phase change), so the
-        # states' axes are re-derived from the motion within the assigned runs.
+        # states' axes are re-derived from the motion within the assigned runs (each a
+        # contiguous run: the assignment is monotone).
         refined = []
-        for k in range(len(merged)):
-            used_k: dict[int, int] = {}
-            nets: list[list[Array]] = [[] for _ in self.frame_names_]
-            for gl, sl, D in zip(self.graph_labels_, self.state_labels_, self.d6_, strict=True):
-                idx = np.flatnonzero(sl == k)
-                if len(idx) == 0:
-                    continue
-                for lab in gl[idx]:
-                    used_k[int(lab)] = used_k.get(int(lab), 0) + 1
-                cut = min(2, len(idx) // 4)
-                inner = idx[cut:len(idx) - cut]
-                for fi in range(len(self.frame_names_)):
-                    nets[fi].append(D[fi, inner].sum(axis=0))
-            refined.append(self._state_from_labels(used_k, nets) if used_k else merged[k])
+        for k, state in enumerate(merged):
+            segments = [(gl[sl == k], D[:, sl == k])
+                        for gl, sl, D in zip(self.graph_labels_, assigned, self.d6_, strict=True)
+                        if np.any(sl == k)]
+            refined.append(self._state_from_segments(segments) if segments else state)
         if [st.label for st in refined] != [st.label for st in merged]:
-            dedup = [refined[0]]
-            for st in refined[1:]:
-                if st.label != dedup[-1].label:
-                    dedup.append(st)
-            self.states_ = dedup
-            self.state_labels_ = self._assign(dedup)
+            self.states_ = _merge_repeats(refined)
+            self.state_labels_ = self._assign(self.states_)
         else:
-            self.states_ = refined
+            self.states_, self.state_labels_ = refined, assigned
+
+    def _state_from_segments(self, segments: list[tuple[IntArray, Array]]) -> StateIM:
+        """A state from the runs the demonstrations spent in it: per run the graph-cut
+        labels (r,) and every frame's displacements (F, r, 6)."""
+        used: dict[int, int] = {}
+        motion: list[list[Array]] = [[] for _ in self.frame_names_]
+        for labels, D in segments:
+            for lab in labels:
+                used[int(lab)] = used.get(int(lab), 0) + 1
+            # The run's interior: smoothing blurs the corners between phases.
+            trim = min(2, len(labels) // 4)
+            for fi in range(len(self.frame_names_)):
+                motion[fi].append(D[fi, trim:len(labels) - trim].sum(axis=0))
+        return self._state_from_labels(used, motion)
 
     def _assign(self, states: list[StateIM]) -> list[IntArray]:
         out = []

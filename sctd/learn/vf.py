@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,12 +40,12 @@ from scipy.spatial import cKDTree
 from .. import se3
 from ..skill.fields import deviation_angles
 from ..skill.model import Field
+from .params import hyperparameter
 
 Array = NDArray[np.float64]
 
 FIELD_TYPES = ("translation", "cylinder", "sphere")
 SAMPLE_SIZE = {"translation": 1, "cylinder": 2, "sphere": 3}
-DEFAULT_ANGLES = {"sphere": 15.0, "translation": 25.0, "cylinder": 20.0}  # degrees (Ch. 5.2)
 
 
 def unit_vectors(points: ArrayLike, midpoints: bool = True) -> tuple[Array, Array]:
@@ -140,6 +141,7 @@ def _estimate(kind: str, p: Array, v: Array, w: Array | None = None) -> Field | 
     return cylinder_field(p, v, w)
 
 
+@dataclass
 class VectorFieldLearner:
     """Fit basic vector fields to demonstrations by RANSAC and EM (Algorithm 4).
 
@@ -149,7 +151,7 @@ class VectorFieldLearner:
         n_R, fields extracted sequentially by RANSAC (thesis 2).
     em_iterations : int
         EM iterations (thesis 5).
-    angles : dict of str -> float, optional
+    angle_sphere, angle_translation, angle_cylinder : float
         Inlier thresholds in degrees per field type (thesis 15 sphere, 25 translation,
         20 cylinder).
     models : tuple of str
@@ -177,7 +179,8 @@ class VectorFieldLearner:
         A rotational field whose centre (or axis point) stays within this RMS distance
         (m) of one point of the hand over its inliers gets that point as its ``pivot``
         (the demonstrations turned about it: a bottle's opening).
-    random_state : int, numpy Generator or None
+    random_state : int or None
+        Seed of RANSAC (flag ``--seed``).
 
     Attributes
     ----------
@@ -196,37 +199,34 @@ class VectorFieldLearner:
     timings_ : dict
     """
 
-    def __init__(self, n_fields: int = 2, em_iterations: int = 5,
-                 angles: dict[str, float] | None = None,
-                 models: tuple[str, ...] = FIELD_TYPES, p_success: float = 0.99,
-                 outlier_ratio: float = 0.7, min_inliers: int = 10, min_weight: float = 0.05,
-                 coherence: bool = True, coherence_run: int = 3, coherence_radius: float = 0.05,
-                 min_radius: float = 0.02, max_radius: float = 0.3, refine_steps: int = 2,
-                 chance_weight: float = 0.5, pivot_spread: float = 0.02, random_state=None):
-        self.n_fields = n_fields
-        self.em_iterations = em_iterations
-        self.angles = angles
-        self.models = models
-        self.p_success = p_success
-        self.outlier_ratio = outlier_ratio
-        self.min_inliers = min_inliers
-        self.min_weight = min_weight
-        self.coherence = coherence
-        self.coherence_run = coherence_run
-        self.coherence_radius = coherence_radius
-        self.min_radius = min_radius
-        self.max_radius = max_radius
-        self.refine_steps = refine_steps
-        self.chance_weight = chance_weight
-        self.pivot_spread = pivot_spread
-        self.random_state = random_state
+    n_fields: int = hyperparameter(2, "RANSAC fields n_R")
+    em_iterations: int = hyperparameter(5, "EM iterations")
+    angle_sphere: float = hyperparameter(15.0, "degrees")
+    angle_translation: float = hyperparameter(25.0, "degrees")
+    angle_cylinder: float = hyperparameter(20.0, "degrees")
+    models: tuple[str, ...] = FIELD_TYPES
+    p_success: float = 0.99
+    outlier_ratio: float = 0.7
+    min_inliers: int = 10
+    min_weight: float = 0.05
+    coherence: bool = True
+    coherence_run: int = 3
+    coherence_radius: float = 0.05
+    min_radius: float = 0.02
+    max_radius: float = hyperparameter(0.3, "largest sphere/cylinder radius (m)")
+    refine_steps: int = 2
+    chance_weight: float = hyperparameter(
+        0.5, "weight of the chance-inlier correction when comparing field types")
+    pivot_spread: float = 0.02
+    random_state: int | None = hyperparameter(
+        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
 
     # --- helpers ----------------------------------------------------------------------
 
     def _threshold(self, kind: str) -> float:
-        angles = dict(DEFAULT_ANGLES)
-        angles.update(self.angles or {})
-        return math.radians(angles[kind])
+        degrees = {"sphere": self.angle_sphere, "translation": self.angle_translation,
+                   "cylinder": self.angle_cylinder}[kind]
+        return math.radians(degrees)
 
     def _angles(self, f: Field, p: Array, v: Array) -> Array:
         """Deviation angles (A.1); pi/2 where a sphere/cylinder radius is out of range."""
@@ -298,7 +298,7 @@ class VectorFieldLearner:
     # --- fit --------------------------------------------------------------------------
 
     def fit(self, points: list[ArrayLike], quaternions: list[ArrayLike] | None = None,
-            progress=None) -> VectorFieldLearner:
+            progress: Callable[[str], None] | None = None) -> VectorFieldLearner:
         """Fit on demonstrations.
 
         Parameters
@@ -309,9 +309,25 @@ class VectorFieldLearner:
             Orientations at those samples (kept for the neighbour orientation
             constraint and the candidate frames' ee offsets).
         progress : callable(str), optional
+            Called with the stage's name as each stage ends (``ransac``, ``em``).
         """
         rng = np.random.default_rng(self.random_state)
         t0 = time.perf_counter()
+        self._set_vectors(points, quaternions)
+        self._sequential_ransac(rng)
+        if progress is not None:
+            progress("ransac")
+        t1 = time.perf_counter()
+        self._em()
+        if progress is not None:
+            progress("em")
+        self._candidate_frames()
+        self.timings_ = {"ransac": t1 - t0, "em": time.perf_counter() - t1}
+        return self
+
+    def _set_vectors(self, points: list[ArrayLike], quaternions: list[ArrayLike] | None) -> None:
+        """Unit displacement vectors of every demonstration, at chord midpoints, with the
+        orientation there, which demonstration and which sample each came from."""
         P, V, Q, demo, order = [], [], [], [], []
         for k, pts in enumerate(points):
             pts = np.asarray(pts, dtype=float)
@@ -336,10 +352,11 @@ class VectorFieldLearner:
         self.quaternions_ = np.concatenate(Q)
         self.demo_index_ = np.concatenate(demo)
         self.sample_index_ = np.concatenate(order)
+
+    def _sequential_ransac(self, rng: np.random.Generator) -> None:
+        """Algorithm 5: the best field of any type, its inliers removed, n_fields times."""
         p, v = self.points_, self.vectors_
         n = len(p)
-
-        # Sequential RANSAC (Algorithm 5).
         remaining = np.ones(n, dtype=bool)
         self.ransac_fields_, self.ransac_inliers_ = [], []
         for _ in range(self.n_fields):
@@ -358,15 +375,6 @@ class VectorFieldLearner:
             self.ransac_fields_.append(best[0])
             self.ransac_inliers_.append(mask)
             remaining &= ~mask
-        if progress is not None:
-            progress("ransac")
-        t1 = time.perf_counter()
-        self._em()
-        if progress is not None:
-            progress("em")
-        self._candidate_frames()
-        self.timings_ = {"ransac": t1 - t0, "em": time.perf_counter() - t1}
-        return self
 
     def _coherent(self, assigned: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Spatio-temporal coherence: runs of >= coherence_run consecutive samples of

@@ -1,8 +1,8 @@
 """Learning benchmark: the figures issue 3 asks for, on generated demonstrations.
 
 ``run_bench(seed=0, n_demos=10) -> dict`` and ``format_bench(result) -> str``; run as
-``python -m sctd.learn.bench [--seed N] [--n-demos N] [--json]``. It prints figures; it
-asserts nothing (timings depend on the machine).
+``sctd bench learn [--seed N] [--n-demos N] [--json]``. It prints figures; it asserts
+nothing (timings depend on the machine).
 
 - segmentation accuracy of the linear-IM skill against the generator's true phases
   (5 % outliers, 1 mm / 1 mrad noise), per raw displacement;
@@ -27,9 +27,19 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
-from .demos import Demo
-from .graphcut import alpha_beta_swap, alpha_expansion, energy
-from .pipeline import LearnParams, learn_linear, learn_vector_fields
+from sctd_sim import demogen
+
+from ..learn import (
+    Demo,
+    LinearIMLearner,
+    LinearResult,
+    VectorFieldLearner,
+    alpha_beta_swap,
+    alpha_expansion,
+    energy,
+    learn_linear,
+    learn_vector_fields,
+)
 
 
 def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float = 1e6,
@@ -94,11 +104,12 @@ def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float 
     return f
 
 
-def _demos(ds) -> list[Demo]:
+def demos_of(ds: demogen.DemoSet) -> list[Demo]:
+    """The generated demonstrations as the learner reads them."""
     return [Demo(d.name, d.t, d.poses) for d in ds.demos]
 
 
-def _accuracy(result, truth) -> tuple[float, dict]:
+def segmentation_accuracy(result: LinearResult, truth: dict[str, Any]) -> tuple[float, dict]:
     """Share of raw displacements whose state maps to the true phase (states mapped to
     phases by majority)."""
     pairs = np.concatenate([np.stack([np.asarray(result.labels[k]), np.asarray(v)], axis=1)
@@ -123,22 +134,28 @@ def _angle(a, b) -> float:
 def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: float = 0.001,
               n_seeds: int = 5) -> dict[str, Any]:
     """Run every benchmark; returns plain data (see module doc)."""
-    from sctd_sim import demogen
-
     out: dict[str, Any] = {"seed": seed, "n_demos": n_demos, "outliers": outliers, "noise": noise}
     t = time.perf_counter()
     import sklearn.svm  # noqa: F401  (the cold import is not learning time)
 
     out["sklearn_import_s"] = time.perf_counter() - t
-    params = LearnParams(seed=seed)
-    tip = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
-
-    # Linear IMs on the pour task.
     pour = demogen.generate("pour", n_demos, noise=noise, outliers=outliers, seed=seed)
+    lin = _bench_linear(pour, seed, out)
+    _bench_vf_pour(pour, seed, n_seeds, out)
+    drawer = demogen.generate("drawer", n_demos, noise=noise, outliers=outliers, seed=seed)
+    _bench_vf_drawer(drawer, seed, out)
+    out["swap_vs_reference"] = _bench_swap(lin, seed)
+    out["swap_max_rel_diff"] = max(abs(r["rel_diff"]) for r in out["swap_vs_reference"])
+    return out
+
+
+def _bench_linear(pour: demogen.DemoSet, seed: int, out: dict[str, Any]) -> LinearResult:
+    """Linear IMs on the pour task: accuracy, states, transitions, time."""
+    tip = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
     t = time.perf_counter()
-    lin = learn_linear(_demos(pour), {"tip": tip}, params)
+    lin = learn_linear(demos_of(pour), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
     out["linear_time_s"] = time.perf_counter() - t
-    acc, per_demo = _accuracy(lin, pour.truth)
+    acc, per_demo = segmentation_accuracy(lin, pour.truth)
     out["segmentation_accuracy"] = acc
     out["segmentation_accuracy_min_demo"] = min(per_demo.values())
     states = lin.learner.states_
@@ -147,13 +164,16 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
     out["pour_state_tip_rotation_only"] = bool(last.frame == "tip" and all(a >= 3 for a in last.axes))
     out["transitions"] = [{"frame": h.frame, "accuracy": h.accuracy, "reachable": h.reachable}
                           for h in lin.learner.transitions_]
+    return lin
 
-    # Vector fields on the pour task: sphere centre and its spread over seeds.
+
+def _bench_vf_pour(pour: demogen.DemoSet, seed: int, n_seeds: int, out: dict[str, Any]) -> None:
+    """Vector fields on the pour task: sphere centre and its spread over seeds."""
     centre_true = np.asarray(pour.truth["sphere_centre"])
     centres, times, offsets = [], [], []
     for s in range(seed, seed + n_seeds):
         t = time.perf_counter()
-        vf = learn_vector_fields(_demos(pour), LearnParams(seed=s))
+        vf = learn_vector_fields(demos_of(pour), learner=VectorFieldLearner(random_state=s))
         times.append(time.perf_counter() - t)
         spheres = [f for f in vf.learner.fields_ if f.type == "sphere"]
         if spheres:
@@ -172,10 +192,11 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
     out["pour_tip_offset_from_sphere"] = np.mean(offsets, axis=0).tolist() if offsets else None
     out["vf_pour_time_s"] = float(np.max(times))
 
-    # Vector fields on the drawer task.
-    drawer = demogen.generate("drawer", n_demos, noise=noise, outliers=outliers, seed=seed)
+
+def _bench_vf_drawer(drawer: demogen.DemoSet, seed: int, out: dict[str, Any]) -> None:
+    """Vector fields on the drawer task: the translation fields' directions."""
     t = time.perf_counter()
-    vfd = learn_vector_fields(_demos(drawer), params)
+    vfd = learn_vector_fields(demos_of(drawer), learner=VectorFieldLearner(random_state=seed))
     out["vf_drawer_time_s"] = time.perf_counter() - t
     dirs = [f.direction for f in vfd.learner.fields_ if f.type == "translation"]
     out["drawer_fields"] = [f.type for f in vfd.learner.fields_]
@@ -183,10 +204,13 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
         k: (min(_angle(d, v) for d in dirs) if dirs else None)
         for k, v in drawer.truth["directions"].items()}
 
-    # alpha-beta swap against the independent implementation.
+
+def _bench_swap(lin: LinearResult, seed: int) -> list[dict[str, Any]]:
+    """alpha-beta swap against the independent implementation, on the pour problem and
+    on random energies."""
     L = lin.learner
     U = np.concatenate(L.costs_)
-    cases = [("pour problem", U, L.edges_, L.weights_, params.smoothness)]
+    cases = [("pour problem", U, L.edges_, L.weights_, L.smoothness)]
     rng = np.random.default_rng(seed)
     for k in range(3):
         n, nl = 120, 5
@@ -209,9 +233,7 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
         rows.append({"case": name, "nodes": len(Uc), "labels": Uc.shape[1], "edges": len(Ec),
                      "initial": e0, "swap": e1, "expansion": e2, "reference_swap": e3,
                      "rel_diff": (e1 - e3) / abs(e3), "swap_s": t1, "reference_s": t3})
-    out["swap_vs_reference"] = rows
-    out["swap_max_rel_diff"] = max(abs(r["rel_diff"]) for r in rows)
-    return out
+    return rows
 
 
 def format_bench(r: dict[str, Any]) -> str:
@@ -252,16 +274,16 @@ def format_bench(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sctd.learn.bench", description=__doc__.split("\n")[0])
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--n-demos", type=int, default=10)
-    ap.add_argument("--json", action="store_true")
-    args = ap.parse_args(argv)
+def add_bench_learn_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Arguments of ``sctd bench learn``."""
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--n-demos", type=int, default=10)
+    parser.add_argument("--json", action="store_true")
+    return parser
+
+
+def main_bench_learn(args: argparse.Namespace) -> int:
+    """Run ``sctd bench learn``: print the figures (or JSON)."""
     r = run_bench(seed=args.seed, n_demos=args.n_demos)
     print(json.dumps(r, indent=1, default=float) if args.json else format_bench(r))
     return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -1,0 +1,98 @@
+"""Command-line flags derived from a dataclass: each parameter is defined once.
+
+A parameter is a dataclass field; its default, type and documentation live there, and
+the flag comes from it. The field's ``metadata`` (a plain dict, so the defining layer
+needs no import from here) says how:
+
+``help`` (required for a flag)
+    The help text; fields without it get no flag (they keep their default).
+``flag`` (optional)
+    The flag's name when it is not ``--`` plus the field name with ``-`` for ``_``
+    (``smoothness`` -> ``--lambda``, ``random_state`` -> ``--seed``).
+``choices`` (optional)
+    The allowed values.
+``metavar`` (optional)
+    The value's name in the usage line (default the field name in capitals).
+
+Booleans become switches: a field defaulting to False is set by its flag
+(``--dtw-align``), one defaulting to True is cleared by it (``--no-despike``, whose
+name the ``flag`` entry gives). The argparse destination is always the field name, so
+:func:`from_namespace` builds the dataclass back from the parsed namespace::
+
+    add_arguments(parser, LinearIMLearner)
+    learner = from_namespace(LinearIMLearner, parser.parse_args())
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import types
+import typing
+from collections.abc import Collection
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+def flag_name(field: dataclasses.Field) -> str:
+    """The flag of a field: its ``flag`` metadata, else ``--`` + the name with dashes."""
+    return str(field.metadata.get("flag") or "--" + field.name.replace("_", "-"))
+
+
+def _scalar_type(hint: Any) -> Any:
+    """``int`` of ``int | None``; the hint itself otherwise."""
+    if isinstance(hint, types.UnionType) or typing.get_origin(hint) is typing.Union:
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return hint
+
+
+def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type,
+                  only: Collection[str] | None = None, exclude: Collection[str] = ()) -> None:
+    """Add one flag per documented field of dataclass ``cls`` to ``parser``.
+
+    Parameters
+    ----------
+    parser : ArgumentParser or argument group
+    cls : dataclass type
+        Fields with ``help`` metadata become flags, in definition order.
+    only : collection of str, optional
+        Field names to add (default: every documented field).
+    exclude : collection of str
+        Field names to leave out (a flag another call adds, or a differently grouped one).
+
+    Raises
+    ------
+    TypeError
+        ``cls`` is not a dataclass, or a name in ``only`` is no documented field of it.
+    """
+    documented = [f for f in dataclasses.fields(cls) if "help" in f.metadata]
+    unknown = set(only or ()) - {f.name for f in documented}
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no documented field {', '.join(sorted(unknown))}")
+    hints = typing.get_type_hints(cls)
+    for f in documented:
+        if (only is not None and f.name not in only) or f.name in exclude:
+            continue
+        kind = _scalar_type(hints[f.name])
+        kwargs: dict[str, Any] = {"dest": f.name, "help": f.metadata["help"], "default": f.default}
+        if kind is bool:
+            kwargs["action"] = "store_false" if f.default else "store_true"
+        else:
+            kwargs["type"] = kind
+            if f.metadata.get("choices") is not None:
+                kwargs["choices"] = tuple(f.metadata["choices"])
+            if f.metadata.get("metavar") is not None:
+                kwargs["metavar"] = f.metadata["metavar"]
+        parser.add_argument(flag_name(f), **kwargs)
+
+
+def from_namespace(cls: type[T], namespace: argparse.Namespace) -> T:
+    """An instance of dataclass ``cls`` with every field the namespace holds (by field
+    name, as :func:`add_arguments` stores them); the other fields keep their defaults."""
+    given = vars(namespace)
+    values = {f.name: given[f.name] for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+              if f.init and f.name in given}
+    return cls(**values)
