@@ -19,8 +19,8 @@ import msgpack
 import numpy as np
 import zenoh
 
-from sctd.runtime import codec
 from sctd.bench.robustness import malformed_bundles
+from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
 from tests.conftest import ROOT, Proc, free_port, sctd, wait_for

@@ -1,97 +1,103 @@
-"""``sctd``: learn Shared Control Templates from demonstrations and run them."""
+"""``sctd``: learn Shared Control Templates from demonstrations and run them.
+
+Every command is one entry of :data:`COMMANDS` (``sctd bench ...`` one of
+:data:`BENCHES`): the module that defines its flags (``add_arguments``) and runs it
+(``main``), and its one-line help. Only the module of the command being run is imported,
+so ``sctd run`` starts without scikit-learn, Pinocchio or matplotlib, and ``sctd --help``
+without any of them.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 
-from . import demo as demo_cmd
-from . import run as run_cmd
-from . import sim as sim_cmd
+from .errors import Parser
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sctd", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+@dataclass(frozen=True)
+class Command:
+    """One ``sctd`` command: ``module.add_arguments(parser)`` defines its flags,
+    ``module.main(args) -> exit code`` runs it; or a group of subcommands."""
 
-    p = sub.add_parser("run", help="run a skill: the fixed-rate daemon")
-    run_cmd.add_run_arguments(p)
-    p.set_defaults(func=run_cmd.main_run)
+    help: str
+    module: str = ""
+    add_arguments: str = ""
+    main: str = ""
+    group: Mapping[str, Command] = field(default_factory=dict)
 
-    p = sub.add_parser("inspect", help="validate a skill and show its structure")
-    run_cmd.add_inspect_arguments(p)
-    p.set_defaults(func=run_cmd.main_inspect)
+    def attach(self, p: argparse.ArgumentParser, argv: list[str]) -> None:
+        """Give ``p`` this command's flags (a group: its subcommands, the chosen one's
+        flags only), importing the module of the chosen command alone."""
+        if self.group:
+            _subcommands(p, self.group, argv, "BENCH")
+            return
+        mod = importlib.import_module(self.module)
+        getattr(mod, self.add_arguments)(p)
+        main: Callable[[argparse.Namespace], int] = getattr(mod, self.main)
+        p.set_defaults(func=main)
 
-    p = sub.add_parser("swap", help="hot-swap a skill into the running daemon")
-    run_cmd.add_swap_arguments(p)
-    p.set_defaults(func=run_cmd.main_swap)
 
-    p = sub.add_parser("demo", help="run a skill end to end on this machine (daemon, robot, user)")
-    demo_cmd.add_demo_arguments(p)
-    p.set_defaults(func=demo_cmd.main_demo)
+BENCHES: dict[str, Command] = {
+    "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
+                       "sctd.bench.latency", "add_latency_arguments", "main_latency"),
+    "robustness": Command("the daemon next to the sim under floods, bad bundles, swaps and a jumping "
+                          "state", "sctd.bench.robustness", "add_robustness_arguments",
+                          "main_robustness"),
+    "fuzz": Command("coverage-guided fuzzing of every decoder, the bundle unpacker and the skill "
+                    "loader (atheris)", "sctd.bench.fuzz", "add_fuzz_arguments", "main_fuzz"),
+    "learn": Command("learning figures on generated demonstrations (accuracy, centre error, "
+                     "directions, time, graph-cut energy)", "sctd.bench.learn",
+                     "add_bench_learn_arguments", "main_bench_learn"),
+    "sim": Command("simulator real-time factor, step response and tracking",
+                   "sctd.cli.sim", "add_bench_sim_arguments", "main_bench_sim"),
+}
 
-    from . import learn as learn_cli
+COMMANDS: dict[str, Command] = {
+    "run": Command("run a skill: the fixed-rate daemon", "sctd.cli.run", "add_run_arguments", "main_run"),
+    "inspect": Command("validate a skill and show its structure", "sctd.cli.run",
+                       "add_inspect_arguments", "main_inspect"),
+    "swap": Command("hot-swap a skill into the running daemon", "sctd.cli.run",
+                    "add_swap_arguments", "main_swap"),
+    "demo": Command("run a skill end to end on this machine (daemon, robot, user)", "sctd.cli.demo",
+                    "add_demo_arguments", "main_demo"),
+    "learn": Command("learn a skill from a folder of demonstrations", "sctd.cli.learn",
+                     "add_learn_arguments", "main_learn"),
+    "dtw": Command("dynamic time warping distance between two demonstrations", "sctd.cli.learn",
+                   "add_dtw_arguments", "main_dtw"),
+    "eval": Command("measure a skill's assistance with the simulated user (success, time, effort; "
+                    "lockstep or real time)", "sctd.cli.eval", "add_eval_arguments", "main_eval"),
+    "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd.cli.sim",
+                   "add_sim_arguments", "main_sim"),
+    "record": Command("record a demonstration (ee in the task object's frame) as CSV", "sctd.cli.sim",
+                      "add_record_arguments", "main_record"),
+    "bench": Command("benchmarks that print figures", group=BENCHES),
+}
 
-    p = sub.add_parser("learn", help="learn a skill from a folder of demonstrations")
-    learn_cli.add_learn_arguments(p)
-    p.set_defaults(func=learn_cli.main_learn)
 
-    p = sub.add_parser("dtw", help="dynamic time warping distance between two demonstrations")
-    learn_cli.add_dtw_arguments(p)
-    p.set_defaults(func=learn_cli.main_dtw)
+def _subcommands(parser: argparse.ArgumentParser, commands: Mapping[str, Command], argv: list[str],
+                 metavar: str) -> None:
+    sub = parser.add_subparsers(dest=metavar.lower(), required=True, metavar=metavar)
+    chosen = argv[0] if argv else None
+    for name, cmd in commands.items():
+        p = sub.add_parser(name, help=cmd.help, description=cmd.help)
+        if name == chosen:
+            cmd.attach(p, argv[1:])
 
-    from . import eval as eval_cmd
 
-    p = sub.add_parser("eval", help="measure a skill's assistance with the simulated user "
-                                    "(success, time, effort; lockstep or real time)")
-    eval_cmd.add_eval_arguments(p)
-    p.set_defaults(func=eval_cmd.main_eval)
-
-    p = sub.add_parser("sim", help="the Pinocchio simulator as a real-time Zenoh service")
-    sim_cmd.add_sim_arguments(p)
-    p.set_defaults(func=sim_cmd.main_sim)
-
-    p = sub.add_parser("record", help="record a demonstration (ee in the task object's frame) as CSV")
-    sim_cmd.add_record_arguments(p)
-    p.set_defaults(func=sim_cmd.main_record)
-
-    bench = sub.add_parser("bench", help="benchmarks that print figures")
-    bsub = bench.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    from ..bench import latency as runtime_bench
-
-    p = bsub.add_parser("latency", help="daemon tick timing and input->target latency vs a Zenoh echo")
-    runtime_bench.add_latency_arguments(p)
-    p.set_defaults(func=runtime_bench.main_latency)
-
-    from ..bench import robustness
-
-    p = bsub.add_parser("robustness", help="the daemon next to the sim under floods, bad bundles, "
-                                           "swaps and a jumping state")
-    robustness.add_robustness_arguments(p)
-    p.set_defaults(func=robustness.main_robustness)
-
-    from . import fuzz
-
-    p = bsub.add_parser("fuzz", help="coverage-guided fuzzing of every decoder, the bundle unpacker and "
-                                     "the skill loader (atheris)")
-    fuzz.add_fuzz_arguments(p)
-    p.set_defaults(func=fuzz.main_fuzz)
-
-    from ..bench import learn as learn_bench
-
-    p = bsub.add_parser("learn", help="learning figures on generated demonstrations (accuracy, "
-                        "centre error, directions, time, graph-cut energy)")
-    learn_bench.add_bench_learn_arguments(p)
-    p.set_defaults(func=learn_bench.main_bench_learn)
-
-    p = bsub.add_parser("sim", help="simulator real-time factor, step response and tracking")
-    sim_cmd.add_bench_sim_arguments(p)
-    p.set_defaults(func=sim_cmd.main_bench_sim)
+def build_parser(argv: list[str]) -> argparse.ArgumentParser:
+    """The ``sctd`` parser with the flags of the command ``argv`` names."""
+    parser = Parser(prog="sctd", description=__doc__.split("\n\n")[0])
+    _subcommands(parser, COMMANDS, argv, "COMMAND")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv).parse_args(argv)
     return int(args.func(args) or 0)
 
 
