@@ -50,7 +50,8 @@ def _scalar_type(hint: Any) -> Any:
 
 
 def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type,
-                  only: Collection[str] | None = None, exclude: Collection[str] = ()) -> None:
+                  only: Collection[str] | None = None, exclude: Collection[str] = (),
+                  show_default: bool = False) -> None:
     """Add one flag per documented field of dataclass ``cls`` to ``parser``.
 
     Parameters
@@ -62,6 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         Field names to add (default: every documented field).
     exclude : collection of str
         Field names to leave out (a flag another call adds, or a differently grouped one).
+    show_default : bool
+        End each help text of a flag taking a value with ``(default <value>)``.
 
     Raises
     ------
@@ -81,6 +84,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         if kind is bool:
             kwargs["action"] = "store_false" if f.default else "store_true"
         else:
+            if show_default:
+                kwargs["help"] += " (default %(default)s)"
             kwargs["type"] = kind
             if f.metadata.get("choices") is not None:
                 kwargs["choices"] = tuple(f.metadata["choices"])

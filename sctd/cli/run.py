@@ -21,20 +21,13 @@ from ..runtime.daemon import Daemon, ingress_limits
 from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from .errors import EXIT_FAILED, EXIT_OK, fail
+from .options import add_arguments, flag_name, from_namespace
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", required=True, help="skill YAML file")
-    # One flag per RuntimeConfig setting, named and documented there.
-    for f in fields(RuntimeConfig):
-        if "help" not in f.metadata:
-            continue
-        kind = type(f.default)
-        p.add_argument(f"--{f.name.replace('_', '-')}", type=kind, default=f.default,
-                       help=f"{f.metadata['help']} (default %(default)s)")
-    p.add_argument("--no-stamp-check", action="store_true",
-                   help="judge input, state and object ages by arrival time only (senders with "
-                        "unsynchronised clocks)")
+    add_arguments(p, RuntimeConfig, exclude=("stamp_check",), show_default=True)
+    add_arguments(p, RuntimeConfig, only=("stamp_check",))
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="us before each deadline spent spinning instead of sleeping (default %(default)s)")
     p.add_argument("--rt-priority", type=int, default=10,
@@ -56,12 +49,13 @@ def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
     ValueError
         A setting out of range, naming its flag.
     """
-    kw = {f.name: getattr(args, f.name) for f in fields(RuntimeConfig) if "help" in f.metadata}
-    for name, value in kw.items():
-        if isinstance(value, float) and not (value >= 0 if name == "deadband" else value > 0):
-            raise ValueError(f"--{name.replace('_', '-')}: must be {'>= 0' if name == 'deadband' else '> 0'}")
-    codec.Keys(kw["robot"])  # one key chunk
-    return RuntimeConfig(stamp_check=not args.no_stamp_check, **kw)
+    config = from_namespace(RuntimeConfig, args)
+    for f in fields(RuntimeConfig):
+        value = getattr(config, f.name)
+        if isinstance(value, float) and not (value >= 0 if f.name == "deadband" else value > 0):
+            raise ValueError(f"{flag_name(f)}: must be {'>= 0' if f.name == 'deadband' else '> 0'}")
+    codec.Keys(config.robot)  # one key chunk
+    return config
 
 
 def _stop_on_signals() -> threading.Event:

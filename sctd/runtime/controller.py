@@ -30,7 +30,8 @@ def _setting(default, help: str):
 @dataclass
 class RuntimeConfig:
     """Daemon settings; defaults are the safe ones (SI units). Every field with a help
-    text is a ``sctd run`` flag of the same name (``--max-offset`` for ``max_offset``)."""
+    text is a ``sctd run`` flag of the same name (``--max-offset`` for ``max_offset``;
+    ``--no-stamp-check`` clears ``stamp_check``), derived by :mod:`sctd.cli.options`."""
 
     rate: float = _setting(1000.0, "tick rate, Hz")
     robot: str = _setting("edan", "robot name in the key prefix sctd/<robot>")
@@ -39,7 +40,10 @@ class RuntimeConfig:
                                           "default)")
     state_timeout: float = _setting(0.1, "s after which the robot state is stale: no target")
     object_timeout: float = _setting(1.0, "s after which the task object's pose is stale: no target")
-    stamp_check: bool = True  # also judge input, state and objects by their sender stamps
+    stamp_check: bool = field(default=True, metadata={
+        "flag": "--no-stamp-check",
+        "help": "judge input, state and object ages by arrival time only (senders with "
+                "unsynchronised clocks)"})
     deadband: float = _setting(0.02, "per input axis")
     max_linear_speed: float = _setting(0.25, "m/s at full input (ISO 10218 reduced speed)")
     max_angular_speed: float = _setting(1.0, "rad/s at full input")
