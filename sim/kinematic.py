@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
                 except codec.DecodeError:
                     msg = None
                 if msg is not None:
-                    F_measured = se3.flat_from_matrix4(robot.T_world_ee)
+                    F_measured = se3.flat_from_transform(robot.T_world_ee)
                     if guard.admit(msg["pose"], msg["stamp"], F_measured, robot.T_world_target is not None):
                         robot.T_world_target = se3.transform_from_pose(msg["pose"])
                     else:
