@@ -105,13 +105,30 @@ def flat_from_pose(p: Sequence[float]) -> Flat:
 
 
 def pose_from_flat(F: Flat) -> list[float]:
-    """[x, y, z, qx, qy, qz, qw] (Python floats, qw >= 0) of a flat transform."""
+    """Pose of a flat transform: the inverse of :func:`flat_from_pose`.
+
+    Returns
+    -------
+    list of 7 floats
+        [x, y, z, qx, qy, qz, qw] with qw >= 0.
+    """
     qx, qy, qz, qw = quaternion_from_flat(F)
     return [F[9], F[10], F[11], qx, qy, qz, qw]
 
 
 def flat_from_rotvec(w0: float, w1: float, w2: float) -> Flat:
-    """Flat transform of the rotation ``exp([w0, w1, w2])`` (Rodrigues), no translation."""
+    """Flat transform of a rotation vector's rotation (Rodrigues), without translation.
+
+    Parameters
+    ----------
+    w0, w1, w2 : float
+        Rotation vector (axis times angle, rad).
+
+    Returns
+    -------
+    Flat
+        Rotation ``exp([w])``, translation zero.
+    """
     th2 = w0 * w0 + w1 * w1 + w2 * w2
     if th2 < 1e-16:
         a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
@@ -126,19 +143,46 @@ def flat_from_rotvec(w0: float, w1: float, w2: float) -> Flat:
 
 
 def flat_from_transform(T: Array) -> Flat:
-    """Flat transform of a 4x4 rigid transform ``T`` (shape (4, 4))."""
+    """Flat transform of a 4x4 matrix.
+
+    Parameters
+    ----------
+    T : ndarray, shape (4, 4)
+        A rigid transform (its last row is not read).
+
+    Returns
+    -------
+    Flat
+    """
     (a, b, c, x), (d, e, f, y), (g, h, i, z), _ = T.tolist()
     return _new(Flat, (a, b, c, d, e, f, g, h, i, x, y, z))
 
 
 def transform_from_flat(F: Flat) -> Array:
-    """4x4 rigid transform (shape (4, 4), a new array) of a flat transform."""
+    """4x4 matrix of a flat transform.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        A new array.
+    """
     a, b, c, d, e, f, g, h, i, x, y, z = F
     return np.array([[a, b, c, x], [d, e, f, y], [g, h, i, z], [0.0, 0.0, 0.0, 1.0]])
 
 
 def compose_flat(A: Flat, B: Flat) -> Flat:
-    """The product ``A @ B`` of two flat transforms (B's frame expressed through A)."""
+    """Product of two flat transforms: ``A @ B`` as 4x4 matrices.
+
+    Parameters
+    ----------
+    A, B : Flat
+        E.g. ``T_a_b`` and ``T_b_c``.
+
+    Returns
+    -------
+    Flat
+        ``T_a_c``.
+    """
     a0, a1, a2, a3, a4, a5, a6, a7, a8, ax, ay, az = A
     b0, b1, b2, b3, b4, b5, b6, b7, b8, bx, by, bz = B
     return _new(Flat, (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
@@ -149,14 +193,15 @@ def compose_flat(A: Flat, B: Flat) -> Flat:
 
 
 def invert_flat(A: Flat) -> Flat:
-    """Inverse ``[R^T, -R^T t]`` of a flat rigid transform."""
+    """Inverse of a flat rigid transform, ``[R^T, -R^T t]`` (``T_a_b`` -> ``T_b_a``)."""
     a0, a1, a2, a3, a4, a5, a6, a7, a8, x, y, z = A
     return _new(Flat, (a0, a3, a6, a1, a4, a7, a2, a5, a8,
                        -(a0 * x + a3 * y + a6 * z), -(a1 * x + a4 * y + a7 * z), -(a2 * x + a5 * y + a8 * z)))
 
 
 def translate_flat(F: Flat, dx: float, dy: float, dz: float) -> Flat:
-    """F moved by (dx, dy, dz) in its parent's axes (its rotation unchanged)."""
+    """A flat transform moved by (dx, dy, dz) (m, in its parent's axes), its rotation
+    unchanged: ``Trans(d) @ F``."""
     return _new(Flat, (*F[:9], F[9] + dx, F[10] + dy, F[11] + dz))
 
 
@@ -177,7 +222,18 @@ def flat_rotation_about(R: Sequence[float], px: float, py: float, pz: float) -> 
 
 
 def compose_quaternions(a: Sequence[float], b: Sequence[float]) -> tuple[float, float, float, float]:
-    """Hamilton product a * b of two (x, y, z, w) quaternions (rotation b, then a)."""
+    """Hamilton product ``a * b`` of two quaternions (rotation b, then a), on floats.
+
+    Parameters
+    ----------
+    a, b : sequence of 4 floats
+        Quaternions (x, y, z, w).
+
+    Returns
+    -------
+    tuple of 4 floats
+        (x, y, z, w), not normalised and not sign-canonicalised.
+    """
     ax, ay, az, aw = a
     bx, by, bz, bw = b
     return (aw * bx + ax * bw + ay * bz - az * by,
@@ -192,7 +248,17 @@ def _flat_from_matrix3(R: Array) -> Flat:
 
 
 def rotvec_from_matrix3(R: Array) -> tuple[float, float, float]:
-    """Rotation vector (angle in [0, pi]) of one rotation matrix ``R`` (shape (3, 3))."""
+    """Rotation vector of one rotation matrix, on floats.
+
+    Parameters
+    ----------
+    R : ndarray, shape (3, 3)
+
+    Returns
+    -------
+    tuple of 3 floats
+        Axis times angle, angle in [0, pi].
+    """
     x, y, z, w = quaternion_from_flat(_flat_from_matrix3(R))
     s = math.sqrt(x * x + y * y + z * z)
     if s < 1e-12:
@@ -203,13 +269,33 @@ def rotvec_from_matrix3(R: Array) -> tuple[float, float, float]:
 
 
 def matrix3_from_rotvec(w0: float, w1: float, w2: float) -> Array:
-    """Rotation matrix (shape (3, 3)) of one rotation vector (Rodrigues)."""
+    """Rotation matrix of one rotation vector (Rodrigues).
+
+    Parameters
+    ----------
+    w0, w1, w2 : float
+        Rotation vector (axis times angle, rad).
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
     r = flat_from_rotvec(w0, w1, w2)
     return np.array([r[0:3], r[3:6], r[6:9]])
 
 
 def angle_between3(R_a: Array, R_b: Array) -> float:
-    """Angle (rad) of ``R_a^T R_b`` for two rotation matrices (shape (3, 3)), accurate for
-    small and large angles."""
+    """Angle between two orientations, accurate for small and large angles.
+
+    Parameters
+    ----------
+    R_a, R_b : ndarray, shape (3, 3)
+        Rotation matrices.
+
+    Returns
+    -------
+    float
+        The angle (rad, in [0, pi]) of ``R_a^T R_b``.
+    """
     x, y, z, _ = quaternion_from_flat(_flat_from_matrix3(R_a.T @ R_b))
     return 2.0 * math.asin(min(1.0, math.sqrt(x * x + y * y + z * z)))

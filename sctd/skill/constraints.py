@@ -20,17 +20,13 @@ from numpy.typing import NDArray
 from .. import se3
 from .model import VectorFieldModel
 from .reader import Reader
-from .registry import Registry
+from .registry import Registry, plain
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
 _new = tuple.__new__  # _new(Flat, (12 floats)): a Flat without the NamedTuple's Python __new__
 Vec3 = tuple[float, float, float]
-
-
-def _list(a: Array) -> list:
-    return np.asarray(a, dtype=float).round(12).tolist()
 
 
 def _floats3(a: Array) -> Vec3:
@@ -121,8 +117,8 @@ class TiltCone(ActiveConstraint):
         )
 
     def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "axis": _list(self.axis),
-                "reference": _list(self.reference), "max_angle": self.max_angle}
+        return {"type": self.type, "frame": self.frame, "axis": plain(self.axis),
+                "reference": plain(self.reference), "max_angle": self.max_angle}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         ax, ay, az = self._axis3
@@ -178,8 +174,8 @@ class Band(ActiveConstraint):
         )
 
     def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "normal": _list(self.normal),
-                "point": _list(self.point), "lower": self.lower, "upper": self.upper}
+        return {"type": self.type, "frame": self.frame, "normal": plain(self.normal),
+                "point": plain(self.point), "lower": self.lower, "upper": self.upper}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         nx, ny, nz = self._normal3
@@ -216,8 +212,8 @@ class Box(ActiveConstraint):
         return cls(frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"), lower=lower, upper=upper)
 
     def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "lower": _list(self.lower),
-                "upper": _list(self.upper)}
+        return {"type": self.type, "frame": self.frame, "lower": plain(self.lower),
+                "upper": plain(self.upper)}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         p = G[9:]
@@ -277,7 +273,7 @@ class NeighbourOrientation(ActiveConstraint):
                "max_d": self.max_d, "rotation_weight": self.rotation_weight,
                "points": len(self.model.points)}
         if self.pivot is not None:
-            out["pivot"] = _list(self.pivot)
+            out["pivot"] = plain(self.pivot)
         return out
 
     def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:

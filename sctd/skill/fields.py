@@ -18,17 +18,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import SkillError
-from .registry import Registry
+from .registry import Registry, plain
 
 Array = NDArray[np.float64]
 
 RIGID_MIN_RADIUS = 0.02  # m: closer to a field's centre or axis than this, no turning
 RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the field's
 RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
-
-
-def _list(a: ArrayLike) -> list:
-    return np.asarray(a, dtype=float).round(12).tolist()
 
 
 def _norm3(v: Array) -> float:
@@ -119,7 +115,7 @@ class Field(ABC):
         out: dict[str, Any] = {"type": self.type, "inliers": self.inliers, "weight": self.weight,
                                "sigma": self.sigma, **self._parameters()}
         if self.pivot is not None:
-            out["pivot"] = _list(self.pivot)
+            out["pivot"] = plain(self.pivot)
         return out
 
     @abstractmethod
@@ -187,7 +183,7 @@ class TranslationField(Field):
         return cls(**common, direction=r.vec("direction", unit=True))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"direction": _list(self.direction)}
+        return {"direction": plain(self.direction)}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -214,7 +210,7 @@ class CylinderField(Field):
         return cls(**common, point=r.vec("point"), axis=r.vec("axis", unit=True), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        return {"point": _list(self.point), "axis": _list(self.axis)}
+        return {"point": plain(self.point), "axis": plain(self.axis)}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -269,7 +265,7 @@ class SphereField(Field):
                    radius=None if radius is None else r.num("radius", 0.0), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"centre": _list(self.centre)}
+        out: dict[str, Any] = {"centre": plain(self.centre)}
         if self.radius is not None:
             out["radius"] = self.radius
         return out

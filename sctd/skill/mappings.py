@@ -20,7 +20,7 @@ from .. import se3
 from .fields import Field, sigmoid
 from .model import AXIS_NAMES, VectorFieldModel
 from .reader import Reader, kind_of
-from .registry import Registry
+from .registry import Registry, plain
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -28,10 +28,6 @@ Flat = se3.Flat
 _new = tuple.__new__  # _new(Flat, (12 floats)): a Flat without the NamedTuple's Python __new__
 
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
-
-
-def _list(a: Array) -> list:
-    return np.asarray(a, dtype=float).round(12).tolist()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -157,7 +153,7 @@ class LinearMapping(InputMapping):
 
     def summary(self) -> dict[str, Any]:
         return {"type": self.type, "frame": self.frame, "translation": self.translation,
-                "rotation": self.rotation, "matrix": _list(self.matrix)}
+                "rotation": self.rotation, "matrix": plain(self.matrix)}
 
     def input_axes(self) -> set[int]:
         """The matrix's non-zero columns."""

@@ -5,13 +5,16 @@ one class that holds its parameters, reads and validates them from a skill file,
 what it is for the summary and evaluates itself; the class registers itself under its
 ``type`` name where it is defined (``@CONSTRAINTS.register``), as python-can's bus
 backends do. The loader finds a class by the ``type`` a skill file gives, so adding a
-kind of element is adding one class.
+kind of element is adding one class. :func:`plain` is how every summary writes an
+array.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import ClassVar, Generic, Protocol, TypeVar
+
+import numpy as np
+from numpy.typing import ArrayLike
 
 
 class _Element(Protocol):
@@ -53,5 +56,7 @@ class Registry(Generic[E]):
     def __contains__(self, name: object) -> bool:
         return name in self._classes
 
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._classes)
+
+def plain(a: ArrayLike) -> list:
+    """An array as the nested list of floats (rounded to 12 decimals) a summary holds."""
+    return np.asarray(a, dtype=float).round(12).tolist()

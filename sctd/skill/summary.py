@@ -8,11 +8,10 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from .. import se3
 from .fields import Field
 from .model import Skill
+from .registry import plain
 
 
 def field_summary(f: Field) -> dict[str, Any]:
@@ -42,7 +41,7 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
         "limits": {"max_linear_speed": skill.limits.max_linear_speed,
                    "max_angular_speed": skill.limits.max_angular_speed},
         "frames": {n: {"parent": f.parent,
-                       "pose": np.asarray(se3.pose_from_transform(f.T_parent_frame)).round(12).tolist()}
+                       "pose": plain(se3.pose_from_transform(f.T_parent_frame))}
                    for n, f in skill.frames.items() if n not in ("ee", "object")},
         "states": [{"name": s.name,
                     "input_mappings": [m.summary() for m in s.input_mappings],

@@ -19,17 +19,13 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .reader import Reader
-from .registry import Registry
+from .registry import Registry, plain
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
 
 COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
-
-
-def _list(a: Array | None) -> list | None:
-    return None if a is None else np.asarray(a, dtype=float).round(12).tolist()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -109,7 +105,7 @@ class Hyperplane(Transition):
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "normal": _list(self.normal), "offset": self.offset,
+        return {"frame": self.frame, "normal": plain(self.normal), "offset": self.offset,
                 "margin": self.margin}
 
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
@@ -149,7 +145,7 @@ class Distance(Transition):
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "point": _list(self.point), "margin": self.margin,
+        return {"frame": self.frame, "point": plain(self.point), "margin": self.margin,
                 self.direction: self.threshold}
 
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
@@ -203,7 +199,8 @@ class Force(Transition):
                    margin=r.number(td.get("margin", 1.0), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"above": self.above, "axis": _list(self.axis), "margin": self.margin}
+        return {"above": self.above, "axis": None if self.axis is None else plain(self.axis),
+                "margin": self.margin}
 
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
         if force is None:
