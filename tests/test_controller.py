@@ -223,7 +223,7 @@ def test_non_finite_target_is_refused_and_counted():
     c = ctl()
     run(c, [[0.5, 0, 0]] * 3)
     T, pose = c.T_world_target.copy(), list(c._pose)
-    c.engine.command = lambda F, u, dt: se3.Flat(*(float("nan"),) * 12)
+    c.engine.command = lambda F, u, dt: (float("nan"),) * 12
     res = run(c, [[0.5, 0, 0]] * 3, t0=0.01)
     assert c.counters.nonfinite_output == 3
     assert all(np.array_equal(r.T_world_target, T) and r.pose == pose for r in res)

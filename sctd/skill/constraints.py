@@ -25,7 +25,6 @@ from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
-_new = tuple.__new__  # _new(Flat, (12 floats)): a Flat without the NamedTuple's Python __new__
 Vec3 = tuple[float, float, float]
 
 
@@ -220,7 +219,7 @@ class Box(ActiveConstraint):
         q = [min(max(x, lo), hi) for x, lo, hi in zip(p, self._lower3, self._upper3, strict=True)]
         if q[0] == p[0] and q[1] == p[1] and q[2] == p[2]:
             return F
-        return _new(Flat, (*F[:9], F[9] + q[0] - p[0], F[10] + q[1] - p[1], F[11] + q[2] - p[2]))
+        return (*F[:9], F[9] + q[0] - p[0], F[10] + q[1] - p[1], F[11] + q[2] - p[2])
 
 
 def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, ...]:

@@ -25,7 +25,6 @@ from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
-_new = tuple.__new__  # _new(Flat, (12 floats)): a Flat without the NamedTuple's Python __new__
 
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
@@ -180,7 +179,7 @@ class LinearMapping(InputMapping):
             dx, dy, dz = (frame[0] * dx + frame[1] * dy + frame[2] * dz,
                           frame[3] * dx + frame[4] * dy + frame[5] * dz,
                           frame[6] * dx + frame[7] * dy + frame[8] * dz)
-        return _new(Flat, (*out[:9], out[9] + dx, out[10] + dy, out[11] + dz))
+        return (*out[:9], out[9] + dx, out[10] + dy, out[11] + dz)
 
     def _rotate(self, F: Flat, frame: Flat, rot: Flat, fixed: tuple[Flat, Flat] | None,
                 ws: Workspace) -> Flat:

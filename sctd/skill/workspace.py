@@ -24,7 +24,6 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
-_new = tuple.__new__  # _new(Flat, (12 floats)): a Flat without the NamedTuple's Python __new__
 
 
 class FrameOffset:
@@ -45,8 +44,8 @@ class FrameOffset:
             return se3.compose_flat(F, self.flat)
         a, b, c, d, e, f, g, h, i, x, y, z = F
         tx, ty, tz = self.t
-        return _new(Flat, (a, b, c, d, e, f, g, h, i, a * tx + b * ty + c * tz + x,
-                           d * tx + e * ty + f * tz + y, g * tx + h * ty + i * tz + z))
+        return (a, b, c, d, e, f, g, h, i, a * tx + b * ty + c * tz + x,
+                           d * tx + e * ty + f * tz + y, g * tx + h * ty + i * tz + z)
 
 
 class Workspace:
