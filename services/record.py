@@ -44,8 +44,8 @@ MIN_ROWS = 10  # sctd.learn.demos.MIN_SAMPLES: shorter files make the learner re
 
 def row_from_poses(t: float, pose_world_ee: list[float], pose_world_obj: list[float]) -> list[float]:
     """``[t, x, y, z, qx, qy, qz, qw]`` of the ee in the object frame (qw >= 0)."""
-    T = se3.invert_transform(se3.matrix4_from_pose(pose_world_obj)) @ se3.matrix4_from_pose(pose_world_ee)
-    p = se3.pose_from_matrix4(T)
+    T = se3.invert_transform(se3.transform_from_pose(pose_world_obj)) @ se3.transform_from_pose(pose_world_ee)
+    p = se3.pose_from_flat(se3.flat_from_transform(T))
     n = math.sqrt(sum(x * x for x in p[3:]))
     s = (1.0 if p[6] >= 0.0 else -1.0) / n
     return [t, p[0], p[1], p[2], p[3] * s, p[4] * s, p[5] * s, p[6] * s]

@@ -169,7 +169,7 @@ def _take_target(robot: KinematicRobot, guard: TargetGuard, payload: bytes) -> N
         msg = codec.decode_target(payload)
     except codec.DecodeError:
         return
-    F_measured = se3.flat_from_matrix4(robot.T_world_ee)
+    F_measured = se3.flat_from_transform(robot.T_world_ee)
     if guard.admit(msg["pose"], msg["stamp"], F_measured, robot.T_world_target is not None):
         robot.T_world_target = se3.transform_from_pose(msg["pose"])
     else:

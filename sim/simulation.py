@@ -129,7 +129,7 @@ class Simulation:
         p = np.asarray(pose, dtype=float)
         if p.shape != (7,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[3:]) < 1e-6:
             return
-        self.arm.set_target(se3.matrix4_from_pose(p.tolist()), stamp)
+        self.arm.set_target(se3.transform_from_pose(p.tolist()), stamp)
 
     def state_message(self) -> dict[str, list[float]]:
         """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).
@@ -143,7 +143,8 @@ class Simulation:
         arm = self.arm.arm
         pin.framesForwardKinematics(arm.model, self._fk, m.q)
         return {
-            "pose": se3.pose_from_matrix4(self._fk.oMf[arm.ee_frame_id].homogeneous),
+            "pose": se3.pose_from_flat(
+                se3.flat_from_transform(self._fk.oMf[arm.ee_frame_id].homogeneous)),
             "q": m.q.tolist(),
             "dq": m.dq.tolist(),
             "wrench": self._wrench.tolist(),
@@ -152,7 +153,7 @@ class Simulation:
     def objects(self) -> dict[str, list[float]]:
         """Scene object poses in world, ``{name: [x, y, z, qx, qy, qz, qw]}``."""
         T_world_ee = self.arm.dynamics.ee_transform()
-        return {name: se3.pose_from_matrix4(T)
+        return {name: se3.pose_from_flat(se3.flat_from_transform(T))
                 for name, T in self.scene.objects(T_world_ee).items()}
 
     def scene_outcome(self) -> dict[str, Any]:

@@ -150,7 +150,7 @@ class ViserView:
             batched_positions=points, batched_scales=radii, batched_colors=colors)
         h["/arm/links"] = scene.add_line_segments("/arm/links", points[self._ends], _LINK_RGB,
                                                   thickness=0.025)
-        ee_pose = se3.pose_from_matrix4(T_world_ee)
+        ee_pose = se3.pose_from_flat(se3.flat_from_transform(T_world_ee))
         h["/arm/ee"] = scene.add_frame("/arm/ee", axes_length=0.06, axes_radius=0.003,
                                        position=np.asarray(ee_pose[:3]), wxyz=wxyz_from_pose(ee_pose))
         for name, pose in objects.items():
@@ -197,7 +197,8 @@ class ViserView:
             h["/arm/links"].points = points[self._ends]
             ee = h["/arm/ee"]
             ee.position = T_world_ee.translation
-            ee.wxyz = wxyz_from_pose(se3.pose_from_matrix4(T_world_ee.homogeneous))
+            ee.wxyz = wxyz_from_pose(
+                se3.pose_from_flat(se3.flat_from_transform(T_world_ee.homogeneous)))
             for name, pose in objects.items():
                 if drawn.get(name) == pose:  # fixed objects cost nothing (viser's check: ~40 us)
                     continue

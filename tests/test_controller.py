@@ -9,7 +9,6 @@ from hypothesis import strategies as st
 
 from sctd import se3
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
-from sctd.runtime.safety import rotation_angle_between
 from sctd.skill import load_skill
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,7 +26,7 @@ def inp(u, t, seq=1, wall=None):
 
 
 def state(T, t, epoch=0, since=0.0):
-    return Sample(seq=0, stamp=t, received=t, F=se3.flat_from_matrix4(T), epoch=epoch, since=since)
+    return Sample(seq=0, stamp=t, received=t, F=se3.flat_from_transform(T), epoch=epoch, since=since)
 
 
 _OBJ_F: dict[bytes, tuple] = {}
@@ -35,7 +34,7 @@ _OBJ_F: dict[bytes, tuple] = {}
 
 def obj(t, T=T_WORLD_MUG):
     # the same flat tuple for the same pose, as the daemon keeps it for a still object
-    F = _OBJ_F.setdefault(T.tobytes(), se3.flat_from_matrix4(T))
+    F = _OBJ_F.setdefault(T.tobytes(), se3.flat_from_transform(T))
     return Sample(seq=0, stamp=t, received=t, F=F)
 
 
@@ -96,7 +95,7 @@ def test_stale_object_holds_the_target_stale_state_publishes_nothing_then_reseed
     r = c.tick(3.5, 3.5, inp([1, 0, 0], 3.5), state(T, 3.3), obj(3.5))
     assert r.mode == "hold" and r.pose is None and r.T_world_target is None
     # A fresh state arriving with an old sender stamp is stale as well.
-    r = c.tick(3.6, 3.6, inp([1, 0, 0], 3.6), Sample(7, 3.0, 3.6, F=se3.flat_from_matrix4(T)), obj(3.6))
+    r = c.tick(3.6, 3.6, inp([1, 0, 0], 3.6), Sample(7, 3.0, 3.6, F=se3.flat_from_transform(T)), obj(3.6))
     assert r.mode == "hold" and r.pose is None and c.counters.stale_state >= 1
     # Back: the target starts again at the arm's pose (3 cm from the old target), then
     # moves with the input; nothing jumps.
@@ -109,8 +108,8 @@ def test_stale_object_holds_the_target_stale_state_publishes_nothing_then_reseed
 def test_stamp_check_off_judges_state_and_objects_by_arrival_only():
     for check, mode in ((True, "waiting"), (False, "running")):
         c = ctl(stamp_check=check)
-        r = c.tick(1.0, 1.0, inp([0, 0, 0], 1.0), Sample(0, -50.0, 1.0, F=se3.flat_from_matrix4(T_START)),
-                   Sample(0, -50.0, 1.0, F=se3.flat_from_matrix4(T_WORLD_MUG)))
+        r = c.tick(1.0, 1.0, inp([0, 0, 0], 1.0), Sample(0, -50.0, 1.0, F=se3.flat_from_transform(T_START)),
+                   Sample(0, -50.0, 1.0, F=se3.flat_from_transform(T_WORLD_MUG)))
         assert r.mode == mode and (r.pose is not None) == (not check)
 
 
@@ -125,7 +124,7 @@ def test_output_finite_and_steps_bounded_for_any_input(us):
         T = r.T_world_target
         assert np.all(np.isfinite(T))
         step = np.linalg.norm(T[:3, 3] - prev[:3, 3])
-        rot = rotation_angle_between(prev[:3, :3], T[:3, :3])
+        rot = se3.angle_between3(prev[:3, :3], T[:3, :3])
         assert step <= 0.1 * 0.001 + 1e-12  # skill 0.1 m/s caps the daemon's 0.25
         assert rot <= 0.5 * 0.001 + 1e-9
         prev = T
@@ -224,7 +223,7 @@ def test_non_finite_target_is_refused_and_counted():
     c = ctl()
     run(c, [[0.5, 0, 0]] * 3)
     T, pose = c.T_world_target.copy(), list(c._pose)
-    c.engine.command_flat = lambda F, u, dt: (float("nan"),) * 12
+    c.engine.command = lambda F, u, dt: (float("nan"),) * 12
     res = run(c, [[0.5, 0, 0]] * 3, t0=0.01)
     assert c.counters.nonfinite_output == 3
     assert all(np.array_equal(r.T_world_target, T) and r.pose == pose for r in res)
@@ -312,7 +311,7 @@ def test_every_published_target_is_a_bounded_step_or_the_measured_pose(events):
                 seq = 0
             if kind != "stale":
                 seq += 1
-                F = se3.flat_from_matrix4(T_meas)
+                F = se3.flat_from_transform(T_meas)
                 watch.observe(seq, F, t)
                 last_state = Sample(seq, t, t, F=F, epoch=watch.epoch, since=watch.since)
             r = c.tick(t, t, inp(u, t, seq=int(t * 1e6)), last_state, obj(t))  # "stale": it ages
@@ -331,7 +330,7 @@ def test_state_watch_flags_jumps_turns_and_restarts():
     from sctd.runtime.safety import StateWatch
 
     w = StateWatch(0.05, 0.3)
-    F = se3.flat_from_matrix4
+    F = se3.flat_from_transform
     T = T_START
     assert not w.observe(1, F(T), 0.0) and w.epoch == 0
     assert not w.observe(2, F(T @ se3.transform_from_pose([0.049, 0, 0, 0, 0, 0, 1])), 0.001)
@@ -352,7 +351,7 @@ def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
     teleop = load_skill(ROOT / "skills" / "teleop.yaml")
     assert teleop.object == WORLD_OBJECT
     c = Controller(teleop, RuntimeConfig())
-    world = Sample(0, 0.0, 0.0, F=se3.flat_from_matrix4(np.eye(4)))
+    world = Sample(0, 0.0, 0.0, F=se3.flat_from_transform(np.eye(4)))
     watch = ButtonWatch()
     T = T_START.copy()
     seq = 0
@@ -396,7 +395,7 @@ def test_a_press_on_stale_input_does_nothing():
     from sctd.runtime.controller import ButtonWatch
 
     c = Controller(load_skill(ROOT / "skills" / "teleop.yaml"), RuntimeConfig())
-    world = Sample(0, 0.0, 0.0, F=se3.flat_from_matrix4(np.eye(4)))
+    world = Sample(0, 0.0, 0.0, F=se3.flat_from_transform(np.eye(4)))
     w = ButtonWatch()
     c.tick(0.0, 0.0, None, state(T_START, 0.0), world)
     old = Sample(1, 0.0, 0.0, u=(0, 0, 0), buttons=(1, 1, 0), presses=w.observe((1, 1, 0)))

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from sctd import se3
 from sctd.cli.learn import add_dtw_arguments, add_learn_arguments, main_dtw, main_learn, parse_frame
 from sctd.skill import SkillEngine, load_skill
 from sctd_sim import demogen
@@ -47,7 +48,7 @@ def test_learn_linear_writes_a_loadable_skill_and_report(pour_dir, tmp_path, cap
     eng = SkillEngine(skill)
     eng.reset(0.0, "s1")
     T = np.eye(4)
-    T2 = eng.command(T, np.array([1.0, 0.0, 0.0]), 0.01)
+    T2 = se3.transform_from_flat(eng.command(se3.flat_from_transform(T), np.array([1.0, 0.0, 0.0]), 0.01))
     tip = T @ np.r_[0, 0, 0.12, 1]
     np.testing.assert_allclose(T2 @ np.r_[0, 0, 0.12, 1], tip, atol=1e-12)
 

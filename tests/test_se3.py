@@ -120,47 +120,77 @@ def test_zero_quaternion_rejected():
         se3.transform_from_pose([0, 0, 0, 0, 0, 0, 0])
 
 
-# --- the tick's fast paths agree with the vectorised functions -------------------------
+# --- the tick's Flat transforms, against numpy written out -----------------------------
 
 
 @given(poses(scale=2.0), poses(scale=2.0))
-def test_fast_paths_agree_with_vectorised(pa, pb):
-    Ta, Tb = se3.transform_from_pose(pa), se3.transform_from_pose(pb)
-    assert np.allclose(se3.matrix4_from_pose(pa.tolist()), Ta, atol=1e-12)
-    back = se3.pose_from_matrix4(Ta)
+def test_flat_pose_conversions(pa, pb):
+    Ta = se3.transform_from_pose(pa)
+    Fa = se3.flat_from_pose(pa.tolist())
+    assert type(Fa) is tuple and len(Fa) == 12 and all(type(x) is float for x in Fa)
+    assert np.array_equal(se3.transform_from_flat(Fa), Ta)  # the same floats as the batch path
+    back = se3.pose_from_flat(Fa)
     assert np.allclose(back[:3], pa[:3], atol=1e-12) and same_rotation(np.array(back[3:]), pa[3:])
-    assert same_rotation(np.array(se3.quaternion_from_matrix3(Ta[:3, :3])), pa[3:])
-    assert np.allclose(se3.rows_from_quaternion(*pa[3:]), Ta[:3, :3].ravel(), atol=1e-12)
+    assert same_rotation(np.array(se3.quaternion_from_flat(Fa)), pa[3:])
     q = se3.compose_quaternions(tuple(pa[3:]), tuple(pb[3:]))
     assert same_rotation(np.array(q), se3.quaternion_multiply(pa[3:], pb[3:]))
+    Tb = se3.transform_from_pose(pb)
     R_ab = Ta[:3, :3].T @ Tb[:3, :3]
-    assert np.isclose(se3.angle_between3(Ta[:3, :3], Tb[:3, :3]), se3.rotation_angle(R_ab), atol=1e-9)
+    angle = np.arccos(np.clip((np.trace(R_ab) - 1.0) / 2.0, -1.0, 1.0))
+    assert np.isclose(se3.angle_between3(Ta[:3, :3], Tb[:3, :3]), angle, atol=1e-6)
 
 
 @given(rotvecs())
-def test_fast_rotvec_paths_agree(w):
-    R = se3.matrix_from_rotvec(w)
+def test_flat_rotvec_is_rodrigues(w):
+    theta = float(np.linalg.norm(w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    R = np.eye(3) if theta < 1e-12 else (
+        np.eye(3) + np.sin(theta) / theta * K + (1.0 - np.cos(theta)) / theta**2 * (K @ K))
+    F = se3.flat_from_rotvec(*w)
+    assert type(F) is tuple and len(F) == 12 and F[9:] == (0.0, 0.0, 0.0)
+    assert np.allclose(np.reshape(F[:9], (3, 3)), R, atol=1e-12)
     assert np.allclose(se3.matrix3_from_rotvec(*w), R, atol=1e-12)
-    assert np.allclose(se3.rows_from_rotvec(*w), R.ravel(), atol=1e-12)
-    assert np.allclose(se3.rotvec_from_matrix3(R), se3.rotvec_from_matrix(R), atol=1e-9)
+    assert np.allclose(se3.rotvec_from_matrix3(R), w, atol=1e-7)
 
 
-@given(poses(scale=2.0), poses(scale=2.0))
-def test_flat_transforms_agree_with_matrices(pa, pb):
+@given(poses(scale=2.0), poses(scale=2.0), st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+def test_flat_transforms_are_matrix_products(pa, pb, p):
     Ta, Tb = se3.transform_from_pose(pa), se3.transform_from_pose(pb)
-    Fa, Fb = se3.flat_from_matrix4(Ta), se3.flat_from_matrix4(Tb)
-    assert len(Fa) == 12 and all(type(x) is float for x in Fa)
-    assert np.array_equal(se3.matrix4_from_flat(Fa), Ta)
-    assert np.allclose(se3.matrix4_from_flat(se3.compose_flat(Fa, Fb)), Ta @ Tb, atol=1e-12)
-    assert np.allclose(se3.matrix4_from_flat(se3.invert_flat(Fa)), se3.invert_transform(Ta),
-                       atol=1e-12)
+    Fa, Fb = se3.flat_from_transform(Ta), se3.flat_from_transform(Tb)
+    assert type(Fa) is tuple and len(Fa) == 12 and all(type(x) is float for x in Fa)
+    assert np.array_equal(se3.transform_from_flat(Fa), Ta)
+    assert np.allclose(se3.transform_from_flat(se3.compose_flat(Fa, Fb)), Ta @ Tb, atol=1e-12)
+    inv = np.eye(4)
+    inv[:3, :3] = Ta[:3, :3].T
+    inv[:3, 3] = -Ta[:3, :3].T @ Ta[:3, 3]
+    assert np.allclose(se3.transform_from_flat(se3.invert_flat(Fa)), inv, atol=1e-12)
+    moved = se3.transform_from_flat(se3.translate_flat(Fa, *p))
+    assert np.array_equal(moved[:3, :3], Ta[:3, :3]) and np.allclose(moved[:3, 3], Ta[:3, 3] + p)
+    # a rotation about p keeps p where it is, and turns like R
+    M = se3.transform_from_flat(se3.flat_rotation_about(Fa, *p))
+    assert np.allclose(M[:3, :3], Ta[:3, :3]) and np.allclose(M[:3, :3] @ p + M[:3, 3], p, atol=1e-12)
+
+
+def test_flat_known_answer():
+    """A quarter turn about z at (1, 0, 0), applied to the point (0, 1, 0)."""
+    F = se3.flat_from_pose([1.0, 0.0, 0.0, 0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)])
+    G = se3.compose_flat(F, se3.flat_from_pose([0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]))
+    assert np.allclose(G[9:], [0.0, 0.0, 0.0], atol=1e-15)
+    assert np.allclose(se3.quaternion_from_flat(G), [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)])
+    assert se3.FLAT_IDENTITY == se3.flat_from_pose([0, 0, 0, 0, 0, 0, 1])
 
 
 @pytest.mark.parametrize("k", range(9))
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")])
-def test_quaternion_from_rows_propagates_non_finite(k, bad):
+def test_quaternion_from_flat_propagates_non_finite(k, bad):
     """Every Shepperd branch reads all nine entries: one bad entry spoils the result."""
     for w in ([0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]):
-        rows = list(se3.rows_from_rotvec(*w))
+        rows = list(se3.flat_from_rotvec(*w))
         rows[k] = bad
-        assert not all(np.isfinite(se3.quaternion_from_rows(*rows)))
+        assert not all(np.isfinite(se3.quaternion_from_flat(tuple(rows))))
+
+
+def test_unchecked_pose_gives_nan_instead_of_raising():
+    with np.errstate(invalid="ignore"):
+        T = se3.transform_from_pose([0, 0, 0, 0, 0, 0, 0], check=False)
+    assert np.isnan(T[:3, :3]).all()

@@ -122,13 +122,13 @@ def test_view_follows_the_sim_and_serves_on_loopback_only():
             T_start = T.copy()
             T = T @ se3.transform_from_rt(se3.matrix_from_rotvec([0.6, 0.0, 0.0]), [0.0, 0.0, 0.0])
             T[2, 3] += 0.10
-            sim.set_target(se3.pose_from_matrix4(T))
+            sim.set_target(se3.pose_from_flat(se3.flat_from_transform(T)))
             for _ in range(30):
                 sim.run(0.033)
                 view.update(sim)
                 assert view.wait_drawn(5), view.error
                 T_world_ee = sim.arm.T_world_ee
-                ee_pose = se3.pose_from_matrix4(T_world_ee)
+                ee_pose = se3.pose_from_flat(se3.flat_from_transform(T_world_ee))
                 np.testing.assert_allclose(h["/arm/ee"].position, T_world_ee[:3, 3], atol=1e-9)
                 assert same_rotation(h["/arm/ee"].wxyz, wxyz_from_pose(ee_pose))
                 spheres = h["/arm/spheres"].batched_positions  # float32: joints, then the ee
@@ -152,7 +152,8 @@ def test_view_follows_the_sim_and_serves_on_loopback_only():
             seen = client_scene(port)
             ee = sim.arm.T_world_ee
             assert math.dist(seen["/arm/ee"]["position"], ee[:3, 3]) < 1e-9
-            assert same_rotation(seen["/arm/ee"]["wxyz"], wxyz_from_pose(se3.pose_from_matrix4(ee)))
+            ee_pose = se3.pose_from_flat(se3.flat_from_transform(ee))
+            assert same_rotation(seen["/arm/ee"]["wxyz"], wxyz_from_pose(ee_pose))
             tip = sim.objects()["bottle_tip"]
             assert math.dist(seen["/objects/bottle_tip"]["position"], tip[:3]) < 1e-5  # viser's allclose
             assert same_rotation(seen["/objects/bottle_tip"]["wxyz"], wxyz_from_pose(tip))

@@ -13,8 +13,12 @@ from hypothesis import strategies as st
 from sctd import se3
 from sctd.skill import (
     Bundle,
+    CylinderField,
     SkillEngine,
     SkillError,
+    SphereField,
+    TranslationField,
+    VectorFieldModel,
     bundle_from_file,
     load_skill,
     skill_from_bundle,
@@ -22,7 +26,6 @@ from sctd.skill import (
     vector_field_model_to_bytes,
 )
 from sctd.skill.fields import sigmoid
-from sctd.skill.model import Field, VectorFieldModel
 
 ROOT = Path(__file__).resolve().parents[1]
 POUR = ROOT / "skills" / "pour.yaml"
@@ -116,6 +119,31 @@ def test_pickled_npz_is_refused():
 # --- engine: linear mappings ----------------------------------------------------------
 
 
+def command(eng: SkillEngine, T, u, dt):
+    """The engine's command on a 4x4 pose (the tick's Flat pose in and out)."""
+    return se3.transform_from_flat(eng.command(se3.flat_from_transform(T), u, dt))
+
+
+def project(eng: SkillEngine, T, c):
+    """The engine's projection onto constraint c, on a 4x4 pose."""
+    return se3.transform_from_flat(eng.project(se3.flat_from_transform(T), c))
+
+
+def violation(eng: SkillEngine, T, c) -> float:
+    """How far pose T is outside constraint c (m or rad; 0 when satisfied), written out
+    plainly in numpy as the reference for the tick's float-level checks."""
+    T_f = T @ eng.skill.frames[c.frame].T_parent_frame
+    if c.type == "band":
+        s = float(np.dot(c.normal, T_f[:3, 3] - c.point))
+        return max(0.0, c.lower - s, s - c.upper)
+    if c.type == "box":
+        p = T_f[:3, 3]
+        return float(np.linalg.norm(p - np.clip(p, c.lower, c.upper)))
+    assert c.type == "tilt_cone"
+    a = T_f[:3, :3] @ c.axis
+    return max(0.0, math.acos(max(-1.0, min(1.0, float(np.dot(a, c.reference))))) - c.max_angle)
+
+
 def engine_for(doc) -> SkillEngine:
     return SkillEngine(load_text(yaml.safe_dump(doc)))
 
@@ -140,8 +168,8 @@ def test_linear_mapping_reproduces_identified_displacement(u, axes, frame):
     eng = engine_for(one_state({"type": "linear", "frame": frame, "axes": axes}))
     T = se3.transform_from_pose([0.1, -0.2, 0.3, *se3.quaternion_from_rotvec([0.3, -0.2, 0.5])])
     dt = 0.01
-    T2 = eng.command(T, np.array(u), dt)
-    T_ee_f = eng.T_ee_frame.get(frame, np.eye(4))
+    T2 = command(eng, T, np.array(u), dt)
+    T_ee_f = eng.skill.frames[frame].T_parent_frame
     d6 = se3.displacement_from_transforms(T @ T_ee_f, T2 @ T_ee_f)
     M = eng.skill.states[0].input_mappings[0].matrix * np.array([0.1] * 3 + [0.5] * 3)[:, None] * dt
     assert np.allclose(d6, M @ u, atol=1e-12)
@@ -179,21 +207,19 @@ def test_linear_mapping_matches_plain_algorithm_2(u, m, frame, translation):
     eng = engine_for(one_state({"type": "linear", "frame": frame, "matrix": matrix,
                                 "translation": translation}, frames=frames))
     T = se3.transform_from_pose([0.1, -0.2, 0.3, *se3.quaternion_from_rotvec([0.3, -0.2, 0.5])])
-    if frame in eng.T_ee_frame:
-        T_f = T @ eng.T_ee_frame[frame]
-    else:
-        T_f = eng.T_obj_frame.get(frame, T)
+    f = eng.skill.frames[frame]
+    T_f = T @ f.T_parent_frame if f.parent == "ee" else f.T_parent_frame
     speeds = np.array([0.1] * 3 + [0.5] * 3)[:, None]
     expected = reference_linear(T, T_f, np.array(matrix) * speeds, np.array(u), 0.01,
                                 translation == "frame")
-    assert np.allclose(eng.command(T, np.array(u), 0.01), expected, atol=1e-12)
-    assert np.allclose(eng.command(T, tuple(u), 0.01), expected, atol=1e-12)
+    assert np.allclose(command(eng, T, np.array(u), 0.01), expected, atol=1e-12)
+    assert np.allclose(command(eng, T, tuple(u), 0.01), expected, atol=1e-12)
 
 def test_rotation_about_tip_keeps_tip_fixed():
     eng = engine_for(one_state({"type": "linear", "frame": "tip", "axes": ["rx", "ry", "rz"]}))
     T = np.eye(4)
-    T2 = eng.command(T, np.array([1.0, 0.5, -0.3]), 0.1)
-    tip = eng.T_ee_frame["tip"]
+    T2 = command(eng, T, np.array([1.0, 0.5, -0.3]), 0.1)
+    tip = eng.skill.frames["tip"].T_parent_frame
     assert np.allclose((T @ tip)[:3, 3], (T2 @ tip)[:3, 3], atol=1e-12)
     assert not np.allclose(T2[:3, 3], T[:3, 3])
 
@@ -201,7 +227,7 @@ def test_rotation_about_tip_keeps_tip_fixed():
 def test_zero_input_is_identity():
     eng = engine_for(one_state({"type": "linear", "frame": "tip", "axes": ["tx", "ry", "rz"]}))
     T = se3.transform_from_pose([0.1, 0.2, 0.3, 0, 0, 0, 1])
-    assert np.array_equal(eng.command(T, np.zeros(3), 0.001), T)
+    assert np.array_equal(command(eng, T, np.zeros(3), 0.001), T)
 
 
 # --- engine: constraints --------------------------------------------------------------
@@ -215,12 +241,12 @@ def test_tilt_cone_projection_satisfies_and_is_idempotent(w, max_angle):
     eng = engine_for(doc)
     c = eng.skill.states[0].active_constraints[0]
     T = se3.transform_from_rt(se3.matrix_from_rotvec(w), [0.1, 0.0, 0.2])
-    P = eng.project(T, c)
-    assert eng.violation(P, c) < 1e-9
-    assert np.allclose(eng.project(P, c), P)
-    tip = eng.T_ee_frame["tip"]
+    P = project(eng, T, c)
+    assert violation(eng, P, c) < 1e-9
+    assert np.allclose(project(eng, P, c), P)
+    tip = eng.skill.frames["tip"].T_parent_frame
     assert np.allclose((P @ tip)[:3, 3], (T @ tip)[:3, 3], atol=1e-9)  # rotates about the tip
-    if eng.violation(T, c) == 0:
+    if violation(eng, T, c) == 0:
         assert np.array_equal(P, T)
 
 
@@ -232,8 +258,8 @@ def test_box_and_band_projection(p):
     eng = engine_for(doc)
     T = se3.transform_from_rt(np.eye(3), p)
     for c in eng.skill.states[0].active_constraints:
-        P = eng.project(T, c)
-        assert eng.violation(P, c) < 1e-12
+        P = project(eng, T, c)
+        assert violation(eng, P, c) < 1e-12
         assert np.allclose(P[:3, :3], T[:3, :3])
 
 
@@ -255,7 +281,7 @@ def vf_skill_doc(model="m.json", mode="scale"):
 def x_field_model() -> VectorFieldModel:
     pts = np.stack([np.linspace(-0.3, 0.3, 61), np.zeros(61), np.zeros(61)], axis=1)
     q = np.tile(se3.quaternion_from_rotvec([0.0, 0.0, 0.4]), (61, 1))
-    return VectorFieldModel((Field("translation", direction=np.array([1.0, 0, 0]), weight=1.0),),
+    return VectorFieldModel((TranslationField(direction=np.array([1.0, 0, 0]), weight=1.0),),
                             pts, q, np.ones((61, 1)))
 
 
@@ -265,26 +291,26 @@ def test_vector_field_scaling(fmt):
     eng = SkillEngine(load_text(yaml.safe_dump(vf_skill_doc(fmt)), files))
     T = np.eye(4)
     dt = 0.01
-    along = eng.command(T, np.array([1.0, 0, 0]), dt)[:3, 3]
-    across = eng.command(T, np.array([0, 1.0, 0]), dt)[:3, 3]
-    against = eng.command(T, np.array([-1.0, 0, 0]), dt)[:3, 3]
+    along = command(eng, T, np.array([1.0, 0, 0]), dt)[:3, 3]
+    across = command(eng, T, np.array([0, 1.0, 0]), dt)[:3, 3]
+    against = command(eng, T, np.array([-1.0, 0, 0]), dt)[:3, 3]
     assert np.allclose(along, [0.1 * dt, 0, 0])             # aligned: scale 1 (eq. 4.34)
     assert np.allclose(across, [0, 0.1 * 0.1 * dt, 0])      # orthogonal: clipped to min_v
     assert np.allclose(against, [-0.1 * 0.1 * dt, 0, 0])
-    assert np.array_equal(eng.command(T, np.zeros(3), dt)[:3, 3], T[:3, 3])
+    assert np.array_equal(command(eng, T, np.zeros(3), dt)[:3, 3], T[:3, 3])
     # Orientation pulled towards the neighbours' (rz 0.4) by the constraint, at most as
     # far per command as the push may turn the hand (|u| * max_angular_speed * dt).
-    R = eng.command(T, np.array([1.0, 0, 0]), dt)[:3, :3]
+    R = command(eng, T, np.array([1.0, 0, 0]), dt)[:3, :3]
     assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.5 * dt], atol=1e-9)
-    R = eng.command(T, np.array([0.5, 0, 0]), dt)[:3, :3]
+    R = command(eng, T, np.array([0.5, 0, 0]), dt)[:3, :3]
     assert np.allclose(se3.rotvec_from_matrix(R), [0, 0, 0.25 * dt], atol=1e-9)
     T_k = T
     for _ in range(100):  # 0.4 rad at 0.005 rad per command: there in 80
-        T_k = eng.command(T_k, np.array([1.0, 0, 0]), dt)
+        T_k = command(eng, T_k, np.array([1.0, 0, 0]), dt)
     assert np.allclose(se3.rotvec_from_matrix(T_k[:3, :3]), [0, 0, 0.4], atol=1e-9)
     # A projection outside a command is a whole one.
     c = eng.skill.states[0].active_constraints[0]
-    assert np.allclose(se3.rotvec_from_matrix(eng.project(T, c)[:3, :3]), [0, 0, 0.4], atol=1e-9)
+    assert np.allclose(se3.rotvec_from_matrix(project(eng, T, c)[:3, :3]), [0, 0, 0.4], atol=1e-9)
 
 
 def two_field_model() -> VectorFieldModel:
@@ -298,8 +324,8 @@ def two_field_model() -> VectorFieldModel:
     q = np.concatenate([np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)),
                         np.tile(se3.quaternion_from_rotvec([0.0, 0.0, 1.0]), (n, 1))])
     resp = np.tile([0.1, 0.9], (2 * n, 1))
-    fields = (Field("translation", direction=np.array([-1.0, 0, 0]), weight=0.5),
-              Field("translation", direction=np.array([1.0, 0, 0]), weight=0.5))
+    fields = (TranslationField(direction=np.array([-1.0, 0, 0]), weight=0.5),
+              TranslationField(direction=np.array([1.0, 0, 0]), weight=0.5))
     return VectorFieldModel(fields, pts, q, resp)
 
 
@@ -318,22 +344,22 @@ def test_intent_membership_follows_the_push_where_fields_overlap():
     dt = 0.01
     weighted, intent = _two_field_engine("weighted"), _two_field_engine("intent")
     push = np.array([-1.0, 0.0, 0.0])
-    assert weighted.command(T, push, dt)[0, 3] - 0.1 > -0.1 * dt * 0.2  # s = 0.1 - 0.9 < 0: the min_v floor
-    assert np.isclose(intent.command(T, push, dt)[0, 3] - 0.1, -0.1 * dt, rtol=0.05)
+    assert command(weighted, T, push, dt)[0, 3] - 0.1 > -0.1 * dt * 0.2  # s = 0.1 - 0.9 < 0: the min_v floor
+    assert np.isclose(command(intent, T, push, dt)[0, 3] - 0.1, -0.1 * dt, rtol=0.05)
     assert intent.last_membership[0] > 0.9
     # and a pull is still a pull
-    assert np.isclose(intent.command(T, -push, dt)[0, 3] - 0.1, 0.1 * dt, rtol=0.01)
+    assert np.isclose(command(intent, T, -push, dt)[0, 3] - 0.1, 0.1 * dt, rtol=0.01)
     assert intent.last_membership[1] > 0.99
     # zero input never moves the hand, whatever the fields say
     for eng in (weighted, intent):
-        assert np.array_equal(eng.command(T, np.zeros(3), dt), T)
+        assert np.array_equal(command(eng, T, np.zeros(3), dt), T)
 
 
 @given(st.lists(st.floats(0, 1), min_size=2, max_size=4), st.lists(st.floats(-1, 1), min_size=4, max_size=4),
        st.floats(0, 20))
 @settings(deadline=None)
 def test_intent_membership_is_a_distribution_that_favours_agreement(p, s, kappa):
-    from sctd.skill.engine import intent_membership
+    from sctd.skill.mappings import intent_membership
 
     k = len(p)
     P = np.asarray(p) + 1e-3
@@ -357,9 +383,9 @@ def test_neighbour_orientation_by_pose_follows_the_demonstrations_turned_as_the_
     c = by_pose.skill.states[0].active_constraints[0]
     assert c.rotation_weight == 0.1
     angle = lambda T: float(se3.rotvec_from_matrix(T[:3, :3])[2])  # noqa: E731
-    assert 0.3 < angle(by_position.project(T_up, by_position.skill.states[0].active_constraints[0])) < 0.7
-    assert abs(angle(by_pose.project(T_up, c))) < 1e-9
-    assert np.isclose(angle(by_pose.project(T_turned, c)), 1.0, atol=1e-9)
+    assert 0.3 < angle(project(by_position, T_up, by_position.skill.states[0].active_constraints[0])) < 0.7
+    assert abs(angle(project(by_pose, T_up, c))) < 1e-9
+    assert np.isclose(angle(project(by_pose, T_turned, c)), 1.0, atol=1e-9)
 
 
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
@@ -368,7 +394,7 @@ def test_blend_bends_but_keeps_magnitude_and_zero_stays_zero(u):
     files = {"m.json": vector_field_model_to_bytes(x_field_model(), "m.json")}
     eng = SkillEngine(load_text(yaml.safe_dump(vf_skill_doc("m.json", "blend")), files))
     T = np.eye(4)
-    step = eng.command(T, np.array(u), 1.0)[:3, 3]
+    step = command(eng, T, np.array(u), 1.0)[:3, 3]
     mag = min(1.0, float(np.linalg.norm(u)))
     assert np.isclose(np.linalg.norm(step), 0.1 * mag, atol=1e-9)
     if mag > 1e-6:
@@ -389,7 +415,8 @@ def test_sigmoid_known_values():
 
 
 def at(x, y, z):
-    return se3.transform_from_rt(np.eye(3), [x, y, z - 0.12])  # tip (0.12 up the ee z) at (x,y,z)
+    # the ee pose (Flat) with the tip (0.12 up the ee z) at (x, y, z)
+    return se3.flat_from_transform(se3.transform_from_rt(np.eye(3), [x, y, z - 0.12]))
 
 
 def test_fsm_hysteresis_and_dwell():
@@ -447,8 +474,8 @@ def sphere_model(centre, pivot) -> VectorFieldModel:
     a = np.linspace(-0.6, 0.6, 25)
     pts = np.array([[0.12 * math.sin(x), 0.0, -0.12 * math.cos(x)] for x in a]) + centre
     q = np.array([se3.quaternion_from_rotvec([0.0, x, 0.0]) for x in a])
-    f = Field("sphere", weight=1.0, centre=np.asarray(centre, float), radius=0.12,
-              pivot=np.asarray(pivot, float))
+    f = SphereField(weight=1.0, centre=np.asarray(centre, float), radius=0.12,
+                    pivot=np.asarray(pivot, float))
     return VectorFieldModel((f,), pts, q, np.ones((len(a), 1)))
 
 
@@ -461,16 +488,16 @@ def test_rigid_motion_turns_the_hand_about_its_pivot_on_a_sphere():
     eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
     T = se3.transform_from_rt(np.eye(3), centre - pivot)  # upright, the pivot on the centre
     dt = 0.01
-    T1 = eng.command(T, np.array([1.0, 0.0, 0.0]), dt)  # tangent at the sphere's bottom
+    T1 = command(eng, T, np.array([1.0, 0.0, 0.0]), dt)  # tangent at the sphere's bottom
     assert np.linalg.norm((T1 @ np.append(pivot, 1.0))[:3] - centre) < 1e-9  # the opening stays
     assert np.isclose(np.linalg.norm(T1[:3, 3] - T[:3, 3]), 0.1 * dt, rtol=1e-3)  # at the speed
     w = se3.rotvec_from_matrix(T1[:3, :3])
     assert w[1] < 0 and np.isclose(np.linalg.norm(w), 0.1 * dt / 0.12, rtol=1e-3)  # tilts about y
-    assert np.array_equal(eng.command(T, np.zeros(3), dt), T)  # zero input: nothing turns
+    assert np.array_equal(command(eng, T, np.zeros(3), dt), T)  # zero input: nothing turns
     # far from the centre (the opening not brought there yet) the push only translates
     # (scaled by its agreement with the field, eq. 4.34)
     T_far = se3.transform_from_rt(np.eye(3), centre - pivot + [0.1, 0.0, 0.0])
-    T2 = eng.command(T_far, np.array([1.0, 0.0, 0.0]), dt)
+    T2 = command(eng, T_far, np.array([1.0, 0.0, 0.0]), dt)
     d = T2[:3, 3] - T_far[:3, 3]
     assert np.allclose(T2[:3, :3], np.eye(3)) and 0 < d[0] <= 0.1 * dt and np.allclose(d[1:], 0)
 
@@ -480,16 +507,14 @@ def test_rigid_motion_turns_the_hand_about_its_pivot_on_a_sphere():
        st.lists(st.floats(-1, 1), min_size=3, max_size=3))
 @settings(max_examples=200, deadline=None)
 def test_agreement_on_floats_equals_the_vectorised_one(kind, p, u):
-    from sctd.skill.fields import agreement, agreement3
-
     n = float(np.linalg.norm(u))
     assume(n > 1e-3)
     unit = np.asarray(u) / n
-    f = Field(type=kind, weight=1.0, direction=np.array([0.6, 0.0, 0.8]) if kind == "translation" else None,
-              centre=np.array([0.05, -0.02, 0.1]) if kind == "sphere" else None,
-              axis=np.array([0.0, 0.6, 0.8]) if kind == "cylinder" else None,
-              point=np.array([0.1, 0.0, 0.0]) if kind == "cylinder" else None)
-    assert math.isclose(agreement3(f, tuple(p), tuple(unit.tolist())), agreement(f, np.asarray(p), unit),
+    f = {"translation": lambda: TranslationField(direction=np.array([0.6, 0.0, 0.8])),
+         "sphere": lambda: SphereField(centre=np.array([0.05, -0.02, 0.1])),
+         "cylinder": lambda: CylinderField(axis=np.array([0.0, 0.6, 0.8]), point=np.array([0.1, 0.0, 0.0])),
+         }[kind]()
+    assert math.isclose(f.agreement3(tuple(p), tuple(unit.tolist())), f.agreement(np.asarray(p), unit),
                         rel_tol=1e-9, abs_tol=1e-12)
 
 
@@ -498,23 +523,23 @@ def test_reused_neighbour_queries_keep_the_learned_skills_path(name, monkeypatch
     """Reusing a neighbour query while the frame stays within 0.5 mm / 5 mrad of where it
     was made leaves a 3 s push at 1 kHz within 0.1 mm of querying every tick, with a
     fraction of the KD-tree queries; zero input still moves nothing."""
-    import sctd.skill.engine as engine_module
+    import sctd.skill.neighbours as neighbours_module
 
     skill = load_skill(ROOT / "skills" / f"{name}.yaml")
     model = skill.states[0].input_mappings[0].model
 
     def push(reuse: bool):
-        monkeypatch.setattr(engine_module, "REUSE_DISTANCE", 5e-4 if reuse else 0.0)
-        monkeypatch.setattr(engine_module, "REUSE_ANGLE", 5e-3 if reuse else 0.0)
+        monkeypatch.setattr(neighbours_module, "REUSE_DISTANCE", 5e-4 if reuse else 0.0)
+        monkeypatch.setattr(neighbours_module, "REUSE_ANGLE", 5e-3 if reuse else 0.0)
         eng = SkillEngine(skill)
         eng.reset(0.0)
         F = se3.flat_from_pose([*(model.points[0] - [0.0, 0.0, 0.12]), *model.quaternions[0]])
         path = []
         for _ in range(3000):
-            F = eng.command_flat(F, (0.8, 0.3, 0.2), 0.001)
+            F = eng.command(F, (0.8, 0.3, 0.2), 0.001)
             path.append(F[9:])
-        assert eng.command_flat(F, (0.0, 0.0, 0.0), 0.001) == F
-        return np.array(path), sum(nb.queries for nb in eng._trees.values())
+        assert eng.command(F, (0.0, 0.0, 0.0), 0.001) == F
+        return np.array(path), sum(nb.queries for nb in eng.workspace.neighbours.values())
 
     every, n_every = push(False)
     reused, n_reused = push(True)

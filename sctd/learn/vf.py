@@ -38,8 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from .. import se3
-from ..skill.fields import deviation_angles
-from ..skill.model import Field
+from ..skill.fields import CylinderField, Field, SphereField, TranslationField
 from .params import hyperparameter
 
 Array = NDArray[np.float64]
@@ -101,7 +100,7 @@ def translation_field(v: Array, w: Array | None = None) -> Field | None:
     w = np.ones(len(v)) if w is None else w
     m = w @ v
     n = float(np.linalg.norm(m))
-    return None if n < 1e-9 else Field("translation", direction=m / n)
+    return None if n < 1e-9 else TranslationField(direction=m / n)
 
 
 def sphere_field(p: Array, v: Array, w: Array | None = None) -> Field:
@@ -109,7 +108,7 @@ def sphere_field(p: Array, v: Array, w: Array | None = None) -> Field:
     w = np.ones(len(v)) if w is None else w
     c = _centre_lsq(p, v, w)
     r = float(np.average(np.linalg.norm(p - c, axis=1), weights=w + 1e-12))
-    return Field("sphere", centre=c, radius=r)
+    return SphereField(centre=c, radius=r)
 
 
 def cylinder_field(p: Array, v: Array, w: Array | None = None) -> Field | None:
@@ -130,7 +129,7 @@ def cylinder_field(p: Array, v: Array, w: Array | None = None) -> Field | None:
     circ = np.cross(a, p - c)
     if float(np.sum(w * np.sum(circ * v, axis=1))) < 0:
         a = -a
-    return Field("cylinder", point=c, axis=a)
+    return CylinderField(point=c, axis=a)
 
 
 def _estimate(kind: str, p: Array, v: Array, w: Array | None = None) -> Field | None:
@@ -230,12 +229,10 @@ class VectorFieldLearner:
 
     def _angles(self, f: Field, p: Array, v: Array) -> Array:
         """Deviation angles (A.1); pi/2 where a sphere/cylinder radius is out of range."""
-        th = deviation_angles(f, p, v)
-        if f.type == "sphere":
-            assert f.centre is not None
+        th = f.deviation_angles(p, v)
+        if isinstance(f, SphereField):
             r = np.linalg.norm(p - f.centre, axis=1)
-        elif f.type == "cylinder":
-            assert f.axis is not None and f.point is not None
+        elif isinstance(f, CylinderField):
             r = np.linalg.norm(np.cross(f.axis, p - f.point), axis=1)
         else:
             return th
@@ -459,17 +456,18 @@ class VectorFieldLearner:
         out = []
         counts = {"sphere": 0, "cylinder": 0}
         for m, f in enumerate(self.fields_):
-            if f.type == "translation":
+            if isinstance(f, SphereField):
+                pos = f.centre
+            elif isinstance(f, CylinderField):
+                pos = f.point
+            else:
                 continue
             name = f"{f.type}{counts[f.type]}"
             counts[f.type] += 1
-            pos = f.centre if f.type == "sphere" else f.point
-            assert pos is not None
             sel = self.assignment_ == m
             entry: dict = {"name": name, "position": [round(float(x), 6) for x in pos],
                            "kind": f.type}
-            if f.type == "cylinder":
-                assert f.axis is not None
+            if isinstance(f, CylinderField):
                 entry["axis"] = [round(float(x), 6) for x in f.axis]
             if sel.any():
                 R = se3.matrix_from_quaternion(self.quaternions_[sel])

@@ -123,7 +123,7 @@ class _Target:
 
     def matrix(self) -> Array:
         if self.T is None:
-            self.T = se3.matrix4_from_flat(se3.compose_flat(self.F_world_obj, self.F_obj))
+            self.T = se3.transform_from_flat(se3.compose_flat(self.F_world_obj, self.F_obj))
         return self.T
 
 
@@ -203,8 +203,8 @@ class Controller:
         self._epoch = 0  # the state stream's epoch the target belongs to
         self._stale_seq = {"state": -1, "object": -1}
         self._obj_F_src: se3.Flat | None = None  # the object sample's pose the caches are for
-        self._obj_F: se3.Flat = ()  # its flat pose (world) and inverse
-        self._obj_F_inv: se3.Flat = ()
+        self._obj_F: se3.Flat = se3.FLAT_IDENTITY  # its flat pose (world) and inverse
+        self._obj_F_inv: se3.Flat = se3.FLAT_IDENTITY
         self._obj_q: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self._T_obj_target: se3.Flat | None = None  # the target in the object frame
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
@@ -286,7 +286,7 @@ class Controller:
         if obj.F is not self._obj_F_src:  # a new object sample: re-express the target
             self._obj_F_src = F = self._obj_F = obj.F
             self._obj_F_inv = se3.invert_flat(F)
-            self._obj_q = se3.quaternion_from_rows(*F[:9])
+            self._obj_q = se3.quaternion_from_flat(F)
             self._T_obj_target = None
             self._rot = None
         F_obj_world = self._obj_F_inv
@@ -315,7 +315,7 @@ class Controller:
         if F_prev is None:
             assert self._target is not None
             F_prev = self._T_obj_target = se3.compose_flat(
-                F_obj_world, se3.flat_from_matrix4(self._target.matrix()))
+                F_obj_world, se3.flat_from_transform(self._target.matrix()))
         # How far the user pushes: the norm of the axes the active mappings read, clipped
         # to 1 (a diagonal push of a 3-axis stick is one push, not two); steps are
         # bounded by mag * speed * dt, constraint corrections included.
@@ -323,7 +323,7 @@ class Controller:
         mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
         if mag > 0.0 and not seeding:
             mag = min(1.0, mag)
-            F_new = limit_step(F_prev, self.engine.command_flat(F_prev, u, cfg.period),
+            F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
                                mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
             if F_new is not F_prev:
                 if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
@@ -373,9 +373,9 @@ class Controller:
         rot: tuple[float, ...] = F[:9]
         x, y, z = F[9], F[10], F[11]
         if rot != self._rot:
-            q = se3.quaternion_from_rows(*rot)
-            rot = se3.rows_from_quaternion(*q)
-            F = (*rot, x, y, z)
+            q = se3.quaternion_from_flat(F)
+            F = se3.flat_from_pose((x, y, z, *q))
+            rot = F[:9]
             self._rot = rot
             qx, qy, qz, qw = se3.compose_quaternions(self._obj_q, q)
             self._q_world = (qx, qy, qz, qw) if qw >= 0.0 else (-qx, -qy, -qz, -qw)

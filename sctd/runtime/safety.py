@@ -19,11 +19,6 @@ from .. import se3
 Array = NDArray[np.float64]
 
 
-def rotation_angle_between(R_a: Array, R_b: Array) -> float:
-    """Angle (rad) of the rotation ``R_a^T R_b``."""
-    return se3.angle_between3(R_a, R_b)
-
-
 def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     """Pose a fraction ``s`` in [0, 1] of the way from T_a to T_b (translation linear,
     rotation along the geodesic about the frame's own origin)."""
@@ -60,8 +55,8 @@ def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: 
     # A mapped step that equals the bound exactly must not lose to it by an ulp.
     if dt <= max_translation * (1.0 + 1e-9) and cos_r >= math.cos(max_rotation * (1.0 + 1e-9)):
         return F_new
-    T_prev, T_new = se3.matrix4_from_flat(F_prev), se3.matrix4_from_flat(F_new)
-    dr = rotation_angle_between(T_prev[:3, :3], T_new[:3, :3])
+    T_prev, T_new = se3.transform_from_flat(F_prev), se3.transform_from_flat(F_new)
+    dr = se3.angle_between3(T_prev[:3, :3], T_new[:3, :3])
     s = 1.0
     if dt > max_translation:
         s = max_translation / dt if dt > 0 else 0.0
@@ -71,7 +66,7 @@ def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: 
         return F_new
     if s <= 0.0:
         return F_prev
-    return se3.flat_from_matrix4(interpolate(T_prev, T_new, s))
+    return se3.flat_from_transform(interpolate(T_prev, T_new, s))
 
 
 def grows_offset(F_prev: Flat, F_new: Flat, F_measured: Flat, max_translation: float,

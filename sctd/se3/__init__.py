@@ -1,29 +1,31 @@
 """SE(3) pose math on plain numpy arrays.
 
-Poses are ``[x, y, z, qx, qy, qz, qw]`` (quaternion x-y-z-w, Hamilton, as ROS);
-transforms are 4x4 homogeneous matrices; frames live in variable names
-(``T_obj_ee`` is the end-effector's pose in the object frame). Conversions are named
-``<out>_from_<in>``. See :mod:`sctd.se3._transforms` for the displacement convention
-shared by the runtime and the learner.
+Poses are ``[x, y, z, qx, qy, qz, qw]`` (quaternion x-y-z-w, Hamilton, as ROS).
+Transforms are 4x4 homogeneous matrices, vectorised over leading axes
+(``(..., 4, 4)``), or, one at a time in the real-time tick, :class:`Flat` (12 floats;
+see :mod:`sctd.se3._fast`). Frames live in variable names (``T_obj_ee`` is the
+end-effector's pose in the object frame). Conversions are named ``<out>_from_<in>``.
+See :mod:`sctd.se3._transforms` for the displacement convention shared by the runtime
+and the learner.
 """
 
 from ._fast import (
+    FLAT_IDENTITY,
     Flat,
     angle_between3,
     compose_flat,
     compose_quaternions,
-    flat_from_matrix4,
     flat_from_pose,
+    flat_from_rotvec,
+    flat_from_transform,
+    flat_rotation_about,
     invert_flat,
     matrix3_from_rotvec,
-    matrix4_from_flat,
-    matrix4_from_pose,
-    pose_from_matrix4,
-    quaternion_from_matrix3,
-    quaternion_from_rows,
+    pose_from_flat,
+    quaternion_from_flat,
     rotvec_from_matrix3,
-    rows_from_quaternion,
-    rows_from_rotvec,
+    transform_from_flat,
+    translate_flat,
 )
 from ._rotations import (
     average_quaternion,
@@ -58,6 +60,7 @@ from ._transforms import (
 )
 
 __all__ = [
+    "FLAT_IDENTITY",
     "Flat",
     "angle_between3",
     "apply_displacement",
@@ -67,26 +70,25 @@ __all__ = [
     "displacement_from_transforms",
     "euler_xyz_from_matrix",
     "exp_se3",
-    "flat_from_matrix4",
     "flat_from_pose",
+    "flat_from_rotvec",
+    "flat_from_transform",
+    "flat_rotation_about",
     "hat",
     "invert_flat",
     "invert_transform",
     "log_se3",
     "matrix3_from_rotvec",
-    "matrix4_from_flat",
-    "matrix4_from_pose",
     "matrix_from_euler_xyz",
     "matrix_from_quaternion",
     "matrix_from_rotvec",
-    "pose_from_matrix4",
+    "pose_from_flat",
     "pose_from_transform",
     "quaternion_angle",
     "quaternion_conjugate",
+    "quaternion_from_flat",
     "quaternion_from_matrix",
-    "quaternion_from_matrix3",
     "quaternion_from_rotvec",
-    "quaternion_from_rows",
     "quaternion_multiply",
     "quaternion_normalize",
     "rotation_angle",
@@ -94,11 +96,11 @@ __all__ = [
     "rotvec_from_matrix",
     "rotvec_from_matrix3",
     "rotvec_from_quaternion",
-    "rows_from_quaternion",
-    "rows_from_rotvec",
     "tf_norm",
     "tf_norm_of_displacement",
     "transform_from_displacement",
+    "transform_from_flat",
     "transform_from_pose",
     "transform_from_rt",
+    "translate_flat",
 ]

@@ -75,71 +75,52 @@ def matrix_from_quaternion(q: ArrayLike) -> Array:
 
 
 def quaternion_from_matrix(R: ArrayLike) -> Array:
-    """Unit quaternion(s) (..., 4), w >= 0, from rotation matrices (..., 3, 3).
+    """Unit quaternions from rotation matrices (Shepperd's method).
 
-    Uses the largest-diagonal branch (Shepperd) per matrix, so it is accurate near
-    180 degree rotations too.
+    Each matrix takes the branch of its largest of trace and diagonal entries, so the
+    result is accurate near 180 degree rotations too.
+
+    Parameters
+    ----------
+    R : array-like, shape (..., 3, 3)
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        (x, y, z, w) with w >= 0.
     """
     R = np.asarray(R, dtype=float)
     shape = R.shape[:-2]
     R = R.reshape(-1, 3, 3)
-    m00, m11, m22 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
-    trace = m00 + m11 + m22
-    cand = np.stack([trace, m00, m11, m22], axis=-1)
-    branch = np.argmax(cand, axis=-1)
+    trace = R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2]
+    branch = np.argmax(np.stack([trace, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=-1), axis=-1)
     q = np.empty((R.shape[0], 4))
     for b in range(4):
         idx = branch == b
-        if not np.any(idx):
-            continue
-        r = R[idx]
-        if b == 0:
-            s = 2.0 * np.sqrt(1.0 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2])
-            q[idx] = np.stack(
-                [
-                    (r[:, 2, 1] - r[:, 1, 2]) / s,
-                    (r[:, 0, 2] - r[:, 2, 0]) / s,
-                    (r[:, 1, 0] - r[:, 0, 1]) / s,
-                    0.25 * s,
-                ],
-                axis=-1,
-            )
-        elif b == 1:
-            s = 2.0 * np.sqrt(1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2])
-            q[idx] = np.stack(
-                [
-                    0.25 * s,
-                    (r[:, 0, 1] + r[:, 1, 0]) / s,
-                    (r[:, 0, 2] + r[:, 2, 0]) / s,
-                    (r[:, 2, 1] - r[:, 1, 2]) / s,
-                ],
-                axis=-1,
-            )
-        elif b == 2:
-            s = 2.0 * np.sqrt(1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2])
-            q[idx] = np.stack(
-                [
-                    (r[:, 0, 1] + r[:, 1, 0]) / s,
-                    0.25 * s,
-                    (r[:, 1, 2] + r[:, 2, 1]) / s,
-                    (r[:, 0, 2] - r[:, 2, 0]) / s,
-                ],
-                axis=-1,
-            )
-        else:
-            s = 2.0 * np.sqrt(1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1])
-            q[idx] = np.stack(
-                [
-                    (r[:, 0, 2] + r[:, 2, 0]) / s,
-                    (r[:, 1, 2] + r[:, 2, 1]) / s,
-                    0.25 * s,
-                    (r[:, 1, 0] - r[:, 0, 1]) / s,
-                ],
-                axis=-1,
-            )
+        if np.any(idx):
+            q[idx] = _shepperd_branch(R[idx], b)
     q /= np.linalg.norm(q, axis=-1, keepdims=True)
     q = np.where(q[:, 3:4] < 0.0, -q, q)
     return q.reshape((*shape, 4))
+
+
+def _shepperd_branch(r: Array, b: int) -> Array:
+    """Quaternions (n, 4), not normalised, of matrices r (n, 3, 3) by Shepperd's branch b:
+    0 the trace, 1-3 the diagonal entry b - 1 is the largest."""
+    m = [[r[:, i, j] for j in range(3)] for i in range(3)]
+    if b == 0:
+        s = 2.0 * np.sqrt(1.0 + m[0][0] + m[1][1] + m[2][2])
+        cols = [(m[2][1] - m[1][2]) / s, (m[0][2] - m[2][0]) / s, (m[1][0] - m[0][1]) / s, 0.25 * s]
+    elif b == 1:
+        s = 2.0 * np.sqrt(1.0 + m[0][0] - m[1][1] - m[2][2])
+        cols = [0.25 * s, (m[0][1] + m[1][0]) / s, (m[0][2] + m[2][0]) / s, (m[2][1] - m[1][2]) / s]
+    elif b == 2:
+        s = 2.0 * np.sqrt(1.0 + m[1][1] - m[0][0] - m[2][2])
+        cols = [(m[0][1] + m[1][0]) / s, 0.25 * s, (m[1][2] + m[2][1]) / s, (m[0][2] - m[2][0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2][2] - m[0][0] - m[1][1])
+        cols = [(m[0][2] + m[2][0]) / s, (m[1][2] + m[2][1]) / s, 0.25 * s, (m[1][0] - m[0][1]) / s]
+    return np.stack(cols, axis=-1)
 
 
 def matrix_from_rotvec(w: ArrayLike) -> Array:

@@ -34,15 +34,24 @@ from ._rotations import (
 Array = NDArray[np.float64]
 
 
-def transform_from_pose(pose: ArrayLike) -> Array:
-    """4x4 homogeneous matrix (..., 4, 4) from pose(s) [x, y, z, qx, qy, qz, qw] (..., 7).
+def transform_from_pose(pose: ArrayLike, check: bool = True) -> Array:
+    """4x4 homogeneous matrices from poses.
 
-    The quaternion is normalised; it must not be zero.
+    Parameters
+    ----------
+    pose : array-like, shape (..., 7)
+        [x, y, z, qx, qy, qz, qw]; the quaternion is normalised here.
+    check : bool
+        Refuse a quaternion of zero norm (ValueError); without the check it gives NaNs.
+
+    Returns
+    -------
+    ndarray, shape (..., 4, 4)
     """
     pose = np.asarray(pose, dtype=float)
     q = pose[..., 3:]
     n = np.linalg.norm(q, axis=-1, keepdims=True)
-    if np.any(n < 1e-12):
+    if check and np.any(n < 1e-12):
         raise ValueError("pose quaternion of zero norm")
     T = np.zeros((*pose.shape[:-1], 4, 4))
     T[..., :3, :3] = matrix_from_quaternion(q / n)

@@ -1,63 +1,64 @@
 """Skill model, YAML I/O, FSM, input mappings, active constraints, transitions.
 
 Pure numpy/scipy: no Zenoh, no scikit-learn. See ``docs/skill-format.md``.
+
+Each kind of element is one class in the module of its element kind, registered by
+its ``type`` name: input mappings in :mod:`.mappings` (:data:`MAPPINGS`), active
+constraints in :mod:`.constraints` (:data:`CONSTRAINTS`), transitions in
+:mod:`.transitions` (:data:`TRANSITIONS`), vector fields in :mod:`.fields`
+(:data:`FIELDS`).
 """
 
+from .constraints import CONSTRAINTS, ActiveConstraint, Band, Box, NeighbourOrientation, TiltCone
 from .engine import SkillEngine
 from .errors import SkillError
-from .fields import agreement, deviation_angles, field_vectors, guided_direction, sigmoid
-from .loader import (
-    Bundle,
-    bundle_from_file,
-    load_skill,
-    skill_from_bundle,
-    vector_field_model_from_bytes,
-    vector_field_model_to_bytes,
-)
-from .model import (
-    AXIS_NAMES,
-    WORLD_OBJECT,
-    Band,
-    Box,
-    Field,
-    Frame,
-    Limits,
-    LinearMapping,
-    NeighbourOrientation,
-    Skill,
-    State,
-    TiltCone,
-    Transition,
-    VectorFieldMapping,
-    VectorFieldModel,
-)
+from .fields import FIELDS, CylinderField, Field, SphereField, TranslationField, sigmoid
+from .loader import Bundle, bundle_from_file, load_skill, skill_from_bundle
+from .mappings import MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
+from .model import AXIS_NAMES, WORLD_OBJECT, Frame, Limits, Skill, State, VectorFieldModel
+from .modelfile import vector_field_model_from_bytes, vector_field_model_to_bytes
+from .registry import Registry
 from .summary import field_summary, skill_summary
+from .transitions import TRANSITIONS, Button, Distance, Force, Hyperplane, Timeout, Transition
+from .workspace import Workspace
 
 __all__ = [
     "AXIS_NAMES",
+    "CONSTRAINTS",
+    "FIELDS",
+    "MAPPINGS",
+    "TRANSITIONS",
     "WORLD_OBJECT",
+    "ActiveConstraint",
     "Band",
     "Box",
     "Bundle",
+    "Button",
+    "CylinderField",
+    "Distance",
     "Field",
+    "Force",
     "Frame",
+    "Hyperplane",
+    "InputMapping",
     "Limits",
     "LinearMapping",
     "NeighbourOrientation",
+    "Registry",
     "Skill",
     "SkillEngine",
     "SkillError",
+    "SphereField",
     "State",
     "TiltCone",
+    "Timeout",
     "Transition",
+    "TranslationField",
     "VectorFieldMapping",
     "VectorFieldModel",
-    "agreement",
+    "Workspace",
     "bundle_from_file",
-    "deviation_angles",
     "field_summary",
-    "field_vectors",
-    "guided_direction",
     "load_skill",
     "sigmoid",
     "skill_from_bundle",

@@ -1,0 +1,329 @@
+"""Active constraints (geometric limits on the end-effector pose), one class per kind.
+
+Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
+and projects a flat pose onto itself in the tick (``project``, moving the constrained
+frame minimally); :data:`CONSTRAINTS` finds a kind by its ``type`` name. The checks
+run on Python floats, precomputed from the parameters when the constraint is made;
+only a projection that turns the pose builds arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import se3
+from .model import VectorFieldModel
+from .reader import Reader
+from .registry import Registry, plain
+from .workspace import Workspace
+
+Array = NDArray[np.float64]
+Flat = se3.Flat
+Vec3 = tuple[float, float, float]
+
+
+def _floats3(a: Array) -> Vec3:
+    x, y, z = a.tolist()
+    return float(x), float(y), float(z)
+
+
+def _set(obj: object, **values: Any) -> None:
+    """Set the precomputed fields of a frozen dataclass (in ``__post_init__``)."""
+    for k, v in values.items():
+        object.__setattr__(obj, k, v)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ActiveConstraint(ABC):
+    """One active constraint of a state, on the pose of ``frame`` (on the end-effector)."""
+
+    type: ClassVar[str]
+    frame: str = "ee"
+
+    @classmethod
+    @abstractmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> ActiveConstraint:
+        """Read and validate this kind's parameters from the mapping ``cd`` at ``path``."""
+
+    @abstractmethod
+    def summary(self) -> dict[str, Any]:
+        """The constraint as plain data (``sctd inspect --json``, the skill query)."""
+
+    def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
+        """The model files this constraint reads, as (relative path, model)."""
+        return ()
+
+    @abstractmethod
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        """Project the ee pose F (object frame) onto the constraint.
+
+        Parameters
+        ----------
+        F : Flat
+            The end-effector's pose.
+        G : Flat
+            The constrained frame's pose for this F.
+        ws : Workspace
+
+        Returns
+        -------
+        Flat
+            F itself (the same object) when it satisfies the constraint, else the pose
+            with the constrained frame moved minimally onto it.
+        """
+
+
+CONSTRAINTS: Registry[ActiveConstraint] = Registry("active constraint")
+
+
+def _rotate_about(F: Flat, G: Flat, R: Array) -> Flat:
+    """Rotate the pose F by R (3, 3; object axes) about the origin of frame pose G."""
+    return se3.compose_flat(se3.flat_rotation_about(R.ravel().tolist(), *G[9:]), F)
+
+
+@CONSTRAINTS.register
+@dataclass(frozen=True, kw_only=True)
+class TiltCone(ActiveConstraint):
+    """``axis`` (3,; in ``frame``) stays within ``max_angle`` of ``reference`` (3,; object
+    frame); a tilted frame is turned back about its origin onto the cone."""
+
+    type: ClassVar[str] = "tilt_cone"
+    axis: Array
+    reference: Array
+    max_angle: float
+    _axis3: Vec3 = field(init=False, repr=False, compare=False)
+    _reference3: Vec3 = field(init=False, repr=False, compare=False)
+    _cos_max: float = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _set(self, _axis3=_floats3(self.axis), _reference3=_floats3(self.reference),
+             _cos_max=math.cos(self.max_angle))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> TiltCone:
+        r.known_keys(cd, path, {"type", "frame", "axis", "reference", "max_angle"})
+        return cls(
+            frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"),
+            axis=r.vector(cd.get("axis", [0, 0, 1]), f"{path}.axis", 3, unit=True),
+            reference=r.vector(cd.get("reference", [0, 0, 1]), f"{path}.reference", 3, unit=True),
+            max_angle=r.number(cd.get("max_angle"), f"{path}.max_angle", 0.0, math.pi),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "axis": plain(self.axis),
+                "reference": plain(self.reference), "max_angle": self.max_angle}
+
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        ax, ay, az = self._axis3
+        rx, ry, rz = self._reference3
+        a0 = G[0] * ax + G[1] * ay + G[2] * az
+        a1 = G[3] * ax + G[4] * ay + G[5] * az
+        a2 = G[6] * ax + G[7] * ay + G[8] * az
+        cos_a = a0 * rx + a1 * ry + a2 * rz
+        if cos_a >= self._cos_max:
+            return F
+        a = np.array([a0, a1, a2])
+        perp = a - cos_a * self.reference
+        pn = float(np.linalg.norm(perp))
+        if pn < 1e-9:  # exactly opposite: any boundary direction will do
+            perp = np.cross(self.reference, [1.0, 0.0, 0.0])
+            if np.linalg.norm(perp) < 1e-6:
+                perp = np.cross(self.reference, [0.0, 1.0, 0.0])
+            pn = float(np.linalg.norm(perp))
+        boundary = math.cos(self.max_angle) * self.reference + math.sin(self.max_angle) * perp / pn
+        return _rotate_about(F, G, se3.rotation_between(a, boundary))
+
+
+@CONSTRAINTS.register
+@dataclass(frozen=True, kw_only=True)
+class Band(ActiveConstraint):
+    """``frame``'s origin keeps a signed distance in [lower, upper] along the unit
+    ``normal`` (3,) from the plane through ``point`` (3,) (object frame): a height band
+    when normal is z."""
+
+    type: ClassVar[str] = "band"
+    normal: Array
+    point: Array
+    lower: float
+    upper: float
+    _normal3: Vec3 = field(init=False, repr=False, compare=False)
+    _point3: Vec3 = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _set(self, _normal3=_floats3(self.normal), _point3=_floats3(self.point))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> Band:
+        r.known_keys(cd, path, {"type", "frame", "normal", "point", "lower", "upper"})
+        lower = r.number(cd.get("lower"), f"{path}.lower")
+        upper = r.number(cd.get("upper"), f"{path}.upper")
+        if upper < lower:
+            raise r.fail(f"{path}.upper", f"must be >= lower ({lower}), got {upper}")
+        return cls(
+            frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"),
+            normal=r.vector(cd.get("normal", [0, 0, 1]), f"{path}.normal", 3, unit=True),
+            point=r.vector(cd.get("point", [0, 0, 0]), f"{path}.point", 3),
+            lower=lower, upper=upper,
+        )
+
+    def summary(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "normal": plain(self.normal),
+                "point": plain(self.point), "lower": self.lower, "upper": self.upper}
+
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        nx, ny, nz = self._normal3
+        cx, cy, cz = self._point3
+        s = nx * (G[9] - cx) + ny * (G[10] - cy) + nz * (G[11] - cz)
+        delta = (self.lower - s) if s < self.lower else (self.upper - s) if s > self.upper else 0.0
+        if delta == 0.0:
+            return F
+        return se3.translate_flat(F, delta * nx, delta * ny, delta * nz)
+
+
+@CONSTRAINTS.register
+@dataclass(frozen=True, kw_only=True)
+class Box(ActiveConstraint):
+    """``frame``'s origin stays inside the axis-aligned box [lower, upper] (3, each;
+    object frame)."""
+
+    type: ClassVar[str] = "box"
+    lower: Array
+    upper: Array
+    _lower3: Vec3 = field(init=False, repr=False, compare=False)
+    _upper3: Vec3 = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _set(self, _lower3=_floats3(self.lower), _upper3=_floats3(self.upper))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> Box:
+        r.known_keys(cd, path, {"type", "frame", "lower", "upper"})
+        lower = r.vector(cd.get("lower"), f"{path}.lower", 3)
+        upper = r.vector(cd.get("upper"), f"{path}.upper", 3)
+        if np.any(upper < lower):
+            raise r.fail(f"{path}.upper", "every upper bound must be >= its lower bound")
+        return cls(frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"), lower=lower, upper=upper)
+
+    def summary(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "lower": plain(self.lower),
+                "upper": plain(self.upper)}
+
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        p = G[9:]
+        q = [min(max(x, lo), hi) for x, lo, hi in zip(p, self._lower3, self._upper3, strict=True)]
+        if q[0] == p[0] and q[1] == p[1] and q[2] == p[2]:
+            return F
+        return (*F[:9], F[9] + q[0] - p[0], F[10] + q[1] - p[1], F[11] + q[2] - p[2])
+
+
+def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, ...]:
+    """The rotation matrix (row-major, 9 floats) of the unit quaternion (x, y, z, w)."""
+    return (1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w),
+            2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w),
+            2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y))
+
+
+@CONSTRAINTS.register
+@dataclass(frozen=True, kw_only=True)
+class NeighbourOrientation(ActiveConstraint):
+    """Orientation of ``frame`` pulled to the distance-weighted mean orientation of the
+    demonstration points near it (Ch. 4.2.5, Algorithm 7 lines 2-5).
+
+    ``pivot`` (3,): turn about this point of the frame (its offset), not its origin.
+    ``rotation_weight`` (m per rad): > 0 picks the neighbours nearest in pose, not in
+    position alone (the demonstrations near where the hand is *and* as it is turned).
+    Within a command it turns at most ``ws.turn_budget``.
+    """
+
+    type: ClassVar[str] = "neighbour_orientation"
+    model_file: str
+    model: VectorFieldModel
+    max_n: int = 5
+    max_d: float = 0.15
+    pivot: Array | None = None
+    rotation_weight: float = 0.0
+    _pivot3: Vec3 | None = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _set(self, _pivot3=None if self.pivot is None else _floats3(self.pivot))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> NeighbourOrientation:
+        r.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d", "pivot", "rotation_weight"})
+        model_file = r.string(cd.get("model"), f"{path}.model")
+        return cls(
+            model_file=model_file,
+            model=r.model(model_file, f"{path}.model"),
+            frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"),
+            max_n=r.integer(cd.get("max_n", 5), f"{path}.max_n", 1),
+            max_d=r.number(cd.get("max_d", 0.15), f"{path}.max_d", 0.0, lo_open=True),
+            pivot=None if cd.get("pivot") is None else r.vector(cd["pivot"], f"{path}.pivot", 3),
+            rotation_weight=r.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        out = {"type": self.type, "frame": self.frame, "model": self.model_file, "max_n": self.max_n,
+               "max_d": self.max_d, "rotation_weight": self.rotation_weight,
+               "points": len(self.model.points)}
+        if self.pivot is not None:
+            out["pivot"] = plain(self.pivot)
+        return out
+
+    def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
+        return ((self.model_file, self.model),)
+
+    def _goal(self, G: Flat, ws: Workspace) -> tuple[float, float, float, float] | None:
+        """The neighbours' weighted mean orientation (x, y, z, w; not normalised), or
+        None when no demonstration point is near."""
+        nb = ws.neighbours[self.model_file]
+        if self.rotation_weight > 0.0:
+            i, w = nb.query_pose(np.array(G[9:]), se3.quaternion_from_flat(G), self.max_n,
+                                 self.max_d, self.rotation_weight)
+        else:
+            i, w = nb.query(np.array(G[9:]), self.max_n, self.max_d)
+        if len(i) == 0:
+            return None
+        q = self.model.quaternions[i]
+        q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
+        gx, gy, gz, gw = (w @ q).tolist()
+        return gx, gy, gz, gw
+
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        goal = self._goal(G, ws)
+        if goal is None:
+            return F
+        gx, gy, gz, gw = goal
+        # The correction q_goal * q_frame^-1 and its angle, on floats (this runs every
+        # tick): turned towards the goal at most the budget.
+        fx, fy, fz, fw = se3.quaternion_from_flat(G)
+        cw = gw * fw + gx * fx + gy * fy + gz * fz
+        cx = -gw * fx + gx * fw - gy * fz + gz * fy
+        cy = -gw * fy + gy * fw - gz * fx + gx * fz
+        cz = -gw * fz + gz * fw - gx * fy + gy * fx
+        if cw < 0.0:
+            cw, cx, cy, cz = -cw, -cx, -cy, -cz
+        vn = math.sqrt(cx * cx + cy * cy + cz * cz)
+        n = math.sqrt(cw * cw + vn * vn)
+        if n < 1e-12:
+            return F
+        budget = ws.turn_budget
+        if vn > 1e-15 and 2.0 * math.atan2(vn, cw) > budget:
+            h = 0.5 * budget
+            k = math.sin(h) / vn
+            cx, cy, cz, cw = cx * k, cy * k, cz * k, math.cos(h)
+        else:
+            cx, cy, cz, cw = cx / n, cy / n, cz / n, cw / n
+        R9 = _rows_of_unit_quaternion(cx, cy, cz, cw)
+        if self._pivot3 is None:
+            return se3.compose_flat(se3.flat_rotation_about(R9, *G[9:]), F)
+        px, py, pz = self._pivot3  # about a point of the hand (the opening of a bottle)
+        o = (G[9] + G[0] * px + G[1] * py + G[2] * pz,
+             G[10] + G[3] * px + G[4] * py + G[5] * pz,
+             G[11] + G[6] * px + G[7] * py + G[8] * pz)
+        return se3.compose_flat(se3.flat_rotation_about(R9, *o), F)

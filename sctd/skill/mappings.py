@@ -1,0 +1,374 @@
+"""Input mappings (user input -> end-effector motion), one class per kind.
+
+Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
+and applies itself to a flat pose in the tick (``apply``); :data:`MAPPINGS` finds a
+kind by its ``type`` name. Displacements follow the convention of :mod:`sctd.se3`.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import se3
+from .fields import Field, sigmoid
+from .model import AXIS_NAMES, VectorFieldModel
+from .reader import Reader, kind_of
+from .registry import Registry, plain
+from .workspace import Workspace
+
+Array = NDArray[np.float64]
+Flat = se3.Flat
+
+INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
+
+
+@dataclass(frozen=True, kw_only=True)
+class InputMapping(ABC):
+    """One input mapping of a state: moves the end-effector for the user's input.
+
+    ``frame`` is the feature frame the motion is expressed relative to.
+    """
+
+    type: ClassVar[str]
+    frame: str = "ee"
+
+    @classmethod
+    @abstractmethod
+    def from_yaml(cls, r: Reader, md: dict, path: str) -> InputMapping:
+        """Read and validate this kind's parameters from the mapping ``md`` at ``path``."""
+
+    @abstractmethod
+    def summary(self) -> dict[str, Any]:
+        """The mapping as plain data (``sctd inspect --json``, the skill query)."""
+
+    @abstractmethod
+    def input_axes(self) -> set[int]:
+        """The indices of the input axes this mapping reads."""
+
+    def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
+        """The model files this mapping reads, as (relative path, model)."""
+        return ()
+
+    @abstractmethod
+    def apply(self, F: Flat, u: Sequence[float], dt: float, ws: Workspace) -> Flat:
+        """The ee pose F (object frame) moved by input ``u`` over ``dt`` seconds.
+
+        ``u`` holds values in [-1, 1]; axes beyond what the mapping reads are ignored,
+        missing ones count as zero.
+        """
+
+
+MAPPINGS: Registry[InputMapping] = Registry("input mapping")
+
+
+def _matrix(r: Reader, v: Any, path: str) -> Array:
+    """A (6, k) selection matrix given row by row (rows tx, ty, tz, rx, ry, rz)."""
+    if not isinstance(v, list) or len(v) != 6:
+        raise r.fail(path, f"expected 6 rows (tx, ty, tz, rx, ry, rz), got {kind_of(v)}")
+    rows = []
+    width = None
+    for i, row in enumerate(v):
+        if not isinstance(row, list) or not row:
+            raise r.fail(f"{path}[{i}]", f"expected a list of numbers, got {kind_of(row)}")
+        if width is None:
+            width = len(row)
+        elif len(row) != width:
+            raise r.fail(f"{path}[{i}]", f"expected {width} columns like row 0, got {len(row)}")
+        rows.append([r.number(x, f"{path}[{i}][{j}]") for j, x in enumerate(row)])
+    if width not in (1, 2, 3, 6):
+        raise r.fail(path, f"expected 1, 2, 3 or 6 input columns, got {width}")
+    m = np.array(rows)
+    if not np.any(m):
+        raise r.fail(path, "all-zero matrix maps every input to nothing")
+    return m
+
+
+def _axes(r: Reader, v: Any, path: str) -> Array:
+    """The (6, k) selection matrix of a list of k axis names (``-`` negates, null skips)."""
+    if not isinstance(v, list) or not 1 <= len(v) <= 6:
+        raise r.fail(path, f"expected a list of 1-6 axis names, got {kind_of(v)}")
+    m = np.zeros((6, len(v)))
+    for j, a in enumerate(v):
+        if a is None:
+            continue
+        sign = 1.0
+        if isinstance(a, str) and a.startswith("-"):
+            sign, a = -1.0, a[1:]
+        if a not in AXIS_NAMES:
+            raise r.fail(f"{path}[{j}]", f"expected one of {', '.join(AXIS_NAMES)} "
+                         f"(optionally with '-') or null, got {a!r}")
+        m[AXIS_NAMES.index(a), j] = sign
+    if not np.any(m):
+        raise r.fail(path, "no axis selected")
+    return m
+
+
+@MAPPINGS.register
+@dataclass(frozen=True, kw_only=True)
+class LinearMapping(InputMapping):
+    """Linear input mapping (eq. 4.1, Algorithm 2).
+
+    ``matrix`` (6, k) maps input axes to a displacement [tx, ty, tz, rx, ry, rz] at full
+    speed: rotation about ``frame``'s origin and its own axes (``rotation == "frame"``,
+    Algorithm 2) or the object's axes; translation in the object's axes
+    (``translation == "object"``, Algorithm 2) or in ``frame``'s axes.
+    """
+
+    type: ClassVar[str] = "linear"
+    matrix: Array
+    translation: Literal["object", "frame"] = "object"
+    rotation: Literal["frame", "object"] = "frame"
+    # the matrix's non-zero entries per row, (column, value): the tick reads only these
+    _entries: tuple[tuple[tuple[int, float], ...], ...] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        m = self.matrix
+        object.__setattr__(self, "_entries", tuple(
+            tuple((j, float(m[i, j])) for j in range(m.shape[1]) if m[i, j] != 0.0) for i in range(6)))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, md: dict, path: str) -> LinearMapping:
+        r.known_keys(md, path, {"type", "frame", "matrix", "axes", "translation", "rotation"})
+        frame = r.frame_ref(md.get("frame", "ee"), f"{path}.frame")
+        if "matrix" in md and "axes" in md:
+            raise r.fail(path, "give either matrix or axes, not both")
+        if "matrix" in md:
+            matrix = _matrix(r, md["matrix"], f"{path}.matrix")
+        elif "axes" in md:
+            matrix = _axes(r, md["axes"], f"{path}.axes")
+        else:
+            raise r.fail(path, "a linear mapping needs matrix (6 rows) or axes")
+        translation = r.choice(md.get("translation", "object"), f"{path}.translation", ("object", "frame"))
+        rotation = r.choice(md.get("rotation", "frame"), f"{path}.rotation", ("frame", "object"))
+        return cls(frame=frame, matrix=matrix, translation=translation,  # type: ignore[arg-type]
+                   rotation=rotation)  # type: ignore[arg-type]
+
+    def summary(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "translation": self.translation,
+                "rotation": self.rotation, "matrix": plain(self.matrix)}
+
+    def input_axes(self) -> set[int]:
+        """The matrix's non-zero columns."""
+        return {j for j in range(self.matrix.shape[1]) if np.any(self.matrix[:, j] != 0.0)}
+
+    def apply(self, F: Flat, u: Sequence[float], dt: float, ws: Workspace) -> Flat:
+        """Algorithm 2 on floats: rotate about the frame's origin and axes
+        (``T_f Rot(r) T_f^-1 T``), then translate (in the object's axes, or the frame's
+        before the rotation)."""
+        n = len(u)
+        speeds = ws.speeds
+        d = [0.0] * 6
+        for i, row in enumerate(self._entries):
+            for j, coeff in row:
+                if j < n:
+                    d[i] += coeff * speeds[i] * u[j]
+        dx, dy, dz, rx, ry, rz = d[0] * dt, d[1] * dt, d[2] * dt, d[3] * dt, d[4] * dt, d[5] * dt
+        fixed = ws.fixed.get(self.frame)
+        frame = fixed[0] if fixed is not None else ws.offsets[self.frame].frame(F)
+        out = F
+        if rx or ry or rz:
+            out = self._rotate(F, frame, se3.flat_from_rotvec(rx, ry, rz), fixed, ws)
+        if self.translation == "frame":
+            dx, dy, dz = (frame[0] * dx + frame[1] * dy + frame[2] * dz,
+                          frame[3] * dx + frame[4] * dy + frame[5] * dz,
+                          frame[6] * dx + frame[7] * dy + frame[8] * dz)
+        return (*out[:9], out[9] + dx, out[10] + dy, out[11] + dz)
+
+    def _rotate(self, F: Flat, frame: Flat, rot: Flat, fixed: tuple[Flat, Flat] | None,
+                ws: Workspace) -> Flat:
+        """F turned by ``rot`` about the frame's origin (pose ``frame``)."""
+        if self.rotation == "object":  # about the frame's origin, around the object's axes
+            return se3.compose_flat(se3.flat_rotation_about(rot, *frame[9:]), F)
+        if fixed is not None:  # T_f Rot T_f^-1 T, T_f fixed in the object
+            return se3.compose_flat(se3.compose_flat(se3.compose_flat(frame, rot), fixed[1]), F)
+        off = ws.offsets[self.frame]
+        if off.R is None:  # T [Rot about t]
+            return se3.compose_flat(F, se3.flat_rotation_about(rot, *off.t))
+        T_e = off.flat  # T T_e Rot T_e^-1
+        return se3.compose_flat(F, se3.compose_flat(se3.compose_flat(T_e, rot), se3.invert_flat(T_e)))
+
+
+def intent_membership(P: Array, prior: Array, s: Sequence[float], kappa: float) -> Array:
+    """``P(F | p, u)``: the position's membership ``P`` (K,) (mixed with ``INTENT_PRIOR``
+    of the fields' weights ``prior`` (K,), so that no field is ruled out by position
+    alone) times each field's agreement with the command, ``exp(kappa * s_F)``,
+    normalised."""
+    post = ((1.0 - INTENT_PRIOR) * P + INTENT_PRIOR * prior) * np.exp(kappa * (np.asarray(s) - 1.0))
+    total = float(post.sum())
+    return post / total if total > 1e-300 else P
+
+
+def _rodrigues(w: Array) -> Array:
+    """The rotation matrix (3, 3) of rotation vector ``w`` (3,) (Rodrigues, on floats)."""
+    x, y, z = w.tolist()
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return np.eye(3)
+    kx, ky, kz = x / th, y / th, z / th
+    c, s = math.cos(th), math.sin(th)
+    v = 1.0 - c
+    return np.array([[c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
+                     [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
+                     [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
+
+
+def rigid_step(T: Array, p: Array, R_frame: Array, d: Array, P: Array,
+               fields: Sequence[Field]) -> Array:
+    """Move the hand T (4, 4; object frame) by the frame displacement ``d`` (3,) at the
+    frame's position ``p`` (3,) (orientation ``R_frame`` (3, 3)): the part of it along
+    each rotational field (weighted by its membership ``P`` (K,)) as a rotation of the
+    whole hand about the field's centre (sphere) or axis (cylinder), the rest as a
+    translation (:meth:`~sctd.skill.fields.Field.rigid_part`)."""
+    out = T.copy()
+    rest = d.copy()
+    for k, f in enumerate(fields):
+        if P[k] < 1e-6:
+            continue
+        part = f.rigid_part(p, R_frame, P[k] * d)
+        if part is None:
+            continue
+        t, w, centre = part
+        if not (t[0] or t[1] or t[2]):
+            continue
+        R = _rodrigues(w)
+        out[:3, :3] = R @ out[:3, :3]
+        out[:3, 3] = R @ (out[:3, 3] - centre) + centre
+        rest -= t
+    out[:3, 3] += rest
+    return out
+
+
+@MAPPINGS.register
+@dataclass(frozen=True, kw_only=True)
+class VectorFieldMapping(InputMapping):
+    """Vector-field input mapping (Ch. 4.2.5, Algorithm 7).
+
+    The first three input axes are a translation command in the object's axes. In
+    ``scale`` mode the command is scaled by the sigmoid-normalised agreement with the
+    fields (eqs. 4.31-4.34); in ``blend`` mode its direction is bent towards them
+    (eq. 4.35) without changing its magnitude, so zero input never moves.
+
+    ``motion``: ``translate`` moves the frame by the (scaled or bent) command, as in the
+    thesis; ``rigid`` turns the part of it that follows a rotational field (tangent to
+    a sphere, around a cylinder's axis), weighted by the field's membership, into a
+    rotation of the whole hand about the field's centre or axis, so that the hand turns
+    as it moves along the field (a bottle tilts about its opening, a crank's handle
+    keeps its grip) instead of waiting for an orientation constraint to catch up.
+
+    ``combine``: how the fields' agreements make one scaling (``scale``) and one bend
+    (``blend``): ``most_probable`` (eq. 4.31) and ``weighted`` (eq. 4.32) weigh them by
+    the position's membership ``P(F | p)``; ``intent`` by the membership given the
+    command as well, ``P(F | p, u) ~ P'(F | p) exp(intent_kappa * s_F(u))`` with ``P'``
+    the membership mixed with 10 % of the fields' weights: where fields overlap in
+    space (the start of a reach and the end of a pull), the one the user's push
+    follows is the one the user means.
+    """
+
+    type: ClassVar[str] = "vector_field"
+    model_file: str
+    model: VectorFieldModel
+    mode: Literal["scale", "blend"] = "scale"
+    combine: Literal["most_probable", "weighted", "intent"] = "weighted"
+    intent_kappa: float = 4.0
+    min_v: float = 0.1
+    k_s: float = 0.5
+    max_n: int = 5
+    max_d: float = 0.15
+    blend: float = 0.5
+    motion: Literal["translate", "rigid"] = "translate"
+
+    @classmethod
+    def from_yaml(cls, r: Reader, md: dict, path: str) -> VectorFieldMapping:
+        r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s",
+                                "max_n", "max_d", "blend", "motion", "intent_kappa"})
+        model_file = r.string(md.get("model"), f"{path}.model")
+        return cls(
+            model_file=model_file,
+            model=r.model(model_file, f"{path}.model"),
+            frame=r.ee_frame_ref(md.get("frame", "ee"), f"{path}.frame"),
+            mode=r.choice(md.get("mode", "scale"), f"{path}.mode", ("scale", "blend")),  # type: ignore[arg-type]
+            combine=r.choice(md.get("combine", "weighted"), f"{path}.combine",  # type: ignore[arg-type]
+                             ("most_probable", "weighted", "intent")),
+            intent_kappa=r.number(md.get("intent_kappa", 4.0), f"{path}.intent_kappa", 0.0, 50.0),
+            min_v=r.number(md.get("min_v", 0.1), f"{path}.min_v", 0.0, 1.0),
+            k_s=r.number(md.get("k_s", 0.5), f"{path}.k_s", -0.99, 0.99),
+            max_n=r.integer(md.get("max_n", 5), f"{path}.max_n", 1),
+            max_d=r.number(md.get("max_d", 0.15), f"{path}.max_d", 0.0, lo_open=True),
+            blend=r.number(md.get("blend", 0.5), f"{path}.blend", 0.0, 10.0),
+            motion=r.choice(md.get("motion", "translate"), f"{path}.motion",  # type: ignore[arg-type]
+                            ("translate", "rigid")),
+        )
+
+    def summary(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "model": self.model_file, "mode": self.mode,
+                "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
+                "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
+                "motion": self.motion, "fields": len(self.model.fields)}
+
+    def input_axes(self) -> set[int]:
+        """The first three: a translation command."""
+        return {0, 1, 2}
+
+    def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
+        return ((self.model_file, self.model),)
+
+    def apply(self, F: Flat, u: Sequence[float], dt: float, ws: Workspace) -> Flat:
+        """Algorithm 7's translation part: scale (eqs. 4.31-4.34) or blend (eq. 4.35).
+        Sets ``ws.scale`` and ``ws.membership``."""
+        u3 = np.zeros(3)
+        n = min(3, len(u))
+        u3[:n] = np.asarray(u, dtype=float)[:n]
+        mag = float(np.linalg.norm(u3))
+        if mag < 1e-9:
+            ws.scale = 0.0
+            return F
+        if mag > 1.0:
+            u3 /= mag
+            mag = 1.0
+        unit = u3 / mag
+        G = ws.frame_pose(F, self.frame)
+        p = np.array(G[9:])
+        P, step, ws.scale = self._step(ws, p, (G[9], G[10], G[11]), u3, unit, mag)
+        ws.membership = P
+        d = step * (ws.speeds[0] * dt)  # the frame's displacement
+        if self.motion == "rigid":
+            T = rigid_step(se3.transform_from_flat(F), p, np.array(G[:9]).reshape(3, 3), d, P,
+                           self.model.fields)
+            return se3.flat_from_transform(T)
+        dx, dy, dz = d.tolist()
+        return se3.translate_flat(F, dx, dy, dz)
+
+    def _step(self, ws: Workspace, p: Array, p3: tuple[float, float, float], u3: Array, unit: Array,
+              mag: float) -> tuple[Array, Array, float]:
+        """The fields' membership at ``p``, the frame's step at full speed and its scale."""
+        nb = ws.neighbours[self.model_file]
+        P = nb.membership(p, self.max_n, self.max_d)
+        fields = self.model.fields
+        unit3: tuple[float, float, float] = tuple(unit.tolist())
+        agree = None
+        if self.combine == "intent":
+            agree = [f.agreement3(p3, unit3) for f in fields]
+            P = intent_membership(P, nb.prior, agree, self.intent_kappa)
+        if self.mode == "blend":
+            bend = np.zeros(3)
+            for k, f in enumerate(fields):
+                bend += P[k] * f.guided_direction(p, unit)
+            direction = unit + self.blend * bend
+            dn = float(np.linalg.norm(direction))
+            direction = direction / dn if dn > 1e-6 else unit
+            return P, direction * mag, 1.0
+        if self.combine == "most_probable":
+            s = fields[int(np.argmax(P))].agreement3(p3, unit3)
+        else:
+            if agree is None:
+                agree = [f.agreement3(p3, unit3) for f in fields]
+            s = sum(float(P[k]) * a for k, a in enumerate(agree))
+        scale = min(1.0, max(self.min_v, float(sigmoid(s, self.k_s))))
+        return P, u3 * scale, scale

@@ -1,0 +1,232 @@
+"""FSM transitions (guarded edges between states), one class per kind.
+
+Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
+and says in the tick whether it fires (``fires``; a button, an event, through
+``pressed``); :data:`TRANSITIONS` finds a kind by its ``type`` name. Guards carry a
+hysteresis ``margin`` in their own unit.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Set
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import se3
+from .reader import Reader
+from .registry import Registry, plain
+from .workspace import Workspace
+
+Array = NDArray[np.float64]
+Flat = se3.Flat
+
+COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
+
+
+@dataclass(frozen=True, kw_only=True)
+class Transition(ABC):
+    """A guarded FSM edge from state ``source`` to state ``target``."""
+
+    type: ClassVar[str]
+    source: str
+    target: str
+
+    @classmethod
+    @abstractmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Transition:
+        """Read and validate this kind's parameters from the mapping ``td`` at ``path``
+        (``from``, ``to`` and ``type`` already read)."""
+
+    def summary(self) -> dict[str, Any]:
+        """The transition as plain data (``sctd inspect --json``, the skill query)."""
+        return {"from": self.source, "to": self.target, "type": self.type, **self._parameters()}
+
+    @abstractmethod
+    def _parameters(self) -> dict[str, Any]:
+        """This kind's own parameters for :meth:`summary`."""
+
+    @abstractmethod
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        """Whether the guard holds.
+
+        Parameters
+        ----------
+        F : Flat
+            Measured end-effector pose in the object frame.
+        elapsed : float
+            Seconds the source state has been active.
+        force : ndarray, shape (3,), or None
+            Measured force at the end-effector, in the object frame (N).
+        ws : Workspace
+        """
+
+    def pressed(self, buttons: Set[int]) -> bool:
+        """Whether the buttons pressed since the last update (rising edges) fire it: an
+        event, acting however long the state has been active."""
+        return False
+
+
+TRANSITIONS: Registry[Transition] = Registry("transition")
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True)
+class Hyperplane(Transition):
+    """Fires when ``normal . p + offset > margin`` for the position p of ``frame`` in the
+    object frame: the linear-SVM decision function of Algorithm 3 (positive side =
+    ``target``), normalised to a unit ``normal`` (3,) so that it is a distance (m)."""
+
+    type: ClassVar[str] = "hyperplane"
+    frame: str = "ee"
+    normal: Array
+    offset: float = 0.0
+    margin: float = 0.0
+    _normal3: tuple[float, float, float] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_normal3", tuple(self.normal.tolist()))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Hyperplane:
+        r.known_keys(td, path, COMMON_KEYS | {"frame", "normal", "offset"})
+        normal = r.vector(td.get("normal"), f"{path}.normal", 3)
+        norm = float(np.linalg.norm(normal))
+        if norm < 1e-12:
+            raise r.fail(f"{path}.normal", "normal of zero length")
+        offset = r.number(td.get("offset", 0.0), f"{path}.offset")
+        return cls(source=source, target=target,
+                   frame=r.ee_frame_ref(td.get("frame", "ee"), f"{path}.frame"),
+                   normal=normal / norm, offset=offset / norm,
+                   margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"frame": self.frame, "normal": plain(self.normal), "offset": self.offset,
+                "margin": self.margin}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        G = ws.frame_pose(F, self.frame)
+        nx, ny, nz = self._normal3
+        return nx * G[9] + ny * G[10] + nz * G[11] + self.offset > self.margin
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True)
+class Distance(Transition):
+    """Fires when the distance from ``frame`` to ``point`` (3,; object frame) goes below
+    ``threshold - margin`` (``direction == "below"``) or above ``threshold + margin``."""
+
+    type: ClassVar[str] = "distance"
+    frame: str = "ee"
+    point: Array
+    threshold: float
+    direction: Literal["below", "above"] = "below"
+    margin: float = 0.0
+    _point3: tuple[float, float, float] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_point3", tuple(self.point.tolist()))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Distance:
+        r.known_keys(td, path, COMMON_KEYS | {"frame", "point", "below", "above"})
+        if ("below" in td) == ("above" in td):
+            raise r.fail(path, "a distance transition needs exactly one of below, above")
+        direction = "below" if "below" in td else "above"
+        return cls(source=source, target=target,
+                   frame=r.ee_frame_ref(td.get("frame", "ee"), f"{path}.frame"),
+                   point=r.vector(td.get("point", [0, 0, 0]), f"{path}.point", 3),
+                   threshold=r.number(td[direction], f"{path}.{direction}", 0.0),
+                   direction=direction,  # type: ignore[arg-type]
+                   margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"frame": self.frame, "point": plain(self.point), "margin": self.margin,
+                self.direction: self.threshold}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        G = ws.frame_pose(F, self.frame)
+        cx, cy, cz = self._point3
+        dx, dy, dz = G[9] - cx, G[10] - cy, G[11] - cz
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if self.direction == "below":
+            return d < self.threshold - self.margin
+        return d > self.threshold + self.margin
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True)
+class Timeout(Transition):
+    """Fires when the state has been active ``after`` seconds."""
+
+    type: ClassVar[str] = "timeout"
+    after: float
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Timeout:
+        r.known_keys(td, path, COMMON_KEYS | {"after"})
+        return cls(source=source, target=target, after=r.number(td.get("after"), f"{path}.after", 0.0))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"after": self.after}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        return elapsed >= self.after
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True)
+class Force(Transition):
+    """Fires when the measured force, along the unit ``axis`` (3,; object frame) or its
+    norm without one, exceeds ``above + margin`` newtons."""
+
+    type: ClassVar[str] = "force"
+    above: float
+    axis: Array | None = None
+    margin: float = 0.0
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Force:
+        r.known_keys(td, path, COMMON_KEYS | {"above", "axis"})
+        axis = td.get("axis")
+        return cls(source=source, target=target,
+                   above=r.number(td.get("above"), f"{path}.above", 0.0),
+                   axis=None if axis is None else r.vector(axis, f"{path}.axis", 3, unit=True),
+                   margin=r.number(td.get("margin", 1.0), f"{path}.margin", 0.0))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"above": self.above, "axis": None if self.axis is None else plain(self.axis),
+                "margin": self.margin}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        if force is None:
+            return False
+        f = float(np.dot(force, self.axis)) if self.axis is not None else float(np.linalg.norm(force))
+        return f > self.above + self.margin
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True)
+class Button(Transition):
+    """Fires when input button ``button`` (its index in the input message) is pressed."""
+
+    type: ClassVar[str] = "button"
+    button: int = 0
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Button:
+        r.known_keys(td, path, COMMON_KEYS | {"button"})
+        return cls(source=source, target=target, button=r.integer(td.get("button", 0), f"{path}.button", 0))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"button": self.button}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        return False
+
+    def pressed(self, buttons: Set[int]) -> bool:
+        return self.button in buttons
