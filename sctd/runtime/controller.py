@@ -256,6 +256,35 @@ class Controller:
         pressed = self._pressed(inp, input_ok)
         state_ok = self._fresh("state", state, now, wall, cfg.state_timeout)
         obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
+        held = self._gate(now, state, state_ok, obj_ok, u, in_seq)
+        if held is not None:
+            return held
+        assert state is not None and state.F is not None and obj is not None and obj.F is not None
+        # The tick works in the object frame, where the skill is, on flat poses (12
+        # floats, see sctd.se3); the target is kept there while the object's pose does
+        # not change, so a tick converts one pose (the measured one) in and one (the new
+        # target) out.
+        if obj.F is not self._obj_F_src:  # a new object sample: re-express the target
+            self._object_moved(obj.F)
+        F_meas = se3.compose_flat(self._obj_F_inv, state.F)
+        seeding = not self._publishing
+        if seeding:
+            self._seed(F_meas, now)
+        force = None if state.wrench is None else self._force_in_object(state.wrench)
+        changed = self.engine.update(F_meas, now, force, pressed)
+        if changed:
+            self.counters.transitions += 1
+        if not seeding:
+            self._move(u, F_meas)
+        self.mode = "running" if input_ok else "stopped"
+        return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
+                          input_ok, self._pose)
+
+    def _gate(self, now: float, state: Sample | None, state_ok: bool, obj_ok: bool,
+              u: tuple[float, ...], in_seq: int) -> TickResult | None:
+        """The tick's result when it may not step (a stale state or object, a fault not
+        yet cleared), else None. A fault clears after ``reseed_after`` s of continuous
+        state with zero input and a fresh object; the target then re-seeds."""
         if state_ok and state is not None and state.epoch != self._epoch:
             self._epoch = state.epoch  # the state stream jumped or restarted
             self._fault = self._target is not None
@@ -265,9 +294,9 @@ class Controller:
             # the measured pose.
             return self._quiet("fault" if self._fault else "hold" if self._target is not None
                                else "waiting", in_seq)
-        assert state is not None and state.F is not None
+        assert state is not None
         if self._fault:
-            if not obj_ok or now - state.since < cfg.reseed_after or any(u):
+            if not obj_ok or now - state.since < self.config.reseed_after or any(u):
                 return self._quiet("fault", in_seq)
             self._fault = False
             self._publishing = False
@@ -278,61 +307,58 @@ class Controller:
                 return self._quiet("hold" if self._target is not None else "waiting", in_seq)
             self.mode = "hold"
             return TickResult("hold", self._target, self.engine.state, in_seq, pose=self._pose)
-        assert obj is not None and obj.F is not None
-        # The tick works in the object frame, where the skill is, on flat poses (12
-        # floats, see sctd.se3); the target is kept there while the object's pose does
-        # not change, so a tick converts one pose (the measured one) in and one (the new
-        # target) out.
-        if obj.F is not self._obj_F_src:  # a new object sample: re-express the target
-            self._obj_F_src = F = self._obj_F = obj.F
-            self._obj_F_inv = se3.invert_flat(F)
-            self._obj_q = se3.quaternion_from_flat(F)
-            self._T_obj_target = None
-            self._rot = None
-        F_obj_world = self._obj_F_inv
-        F_meas = se3.compose_flat(F_obj_world, state.F)
-        seeding = not self._publishing
-        if seeding:
-            # (Re-)seed: this tick's target is the measured pose, so nothing moves; the
-            # input moves it from the next tick on.
-            if self._target is not None:
-                self.counters.reseeds += 1
-            self._rot = None
-            self._accept(F_meas)
-            self.engine.reset(now, self.engine.state)
-            self._publishing = True
-        force = None
-        if state.wrench is not None:
-            r = F_obj_world
-            fx, fy, fz = state.wrench[:3]
-            force = np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
-                              r[6] * fx + r[7] * fy + r[8] * fz])
-        changed = self.engine.update(F_meas, now, force, pressed)
-        if changed:
-            self.counters.transitions += 1
+        return None
 
+    def _object_moved(self, F: se3.Flat) -> None:
+        """A new object sample: its inverse, and the target to re-express in it."""
+        self._obj_F_src = self._obj_F = F
+        self._obj_F_inv = se3.invert_flat(F)
+        self._obj_q = se3.quaternion_from_flat(F)
+        self._T_obj_target = None
+        self._rot = None
+
+    def _seed(self, F_meas: se3.Flat, now: float) -> None:
+        """(Re-)seed: this tick's target is the measured pose, so nothing moves; the
+        input moves it from the next tick on."""
+        if self._target is not None:
+            self.counters.reseeds += 1
+        self._rot = None
+        self._accept(F_meas)
+        self.engine.reset(now, self.engine.state)
+        self._publishing = True
+
+    def _force_in_object(self, wrench: list[float]) -> Array:
+        """The measured force (world) in the object frame."""
+        r = self._obj_F_inv
+        fx, fy, fz = wrench[:3]
+        return np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
+                         r[6] * fx + r[7] * fy + r[8] * fz])
+
+    def _move(self, u: tuple[float, ...], F_meas: se3.Flat) -> None:
+        """Step the target by the active mappings' command for ``u``, bounded and refused
+        when it would grow the offset to the measured pose past the limit."""
+        cfg = self.config
         F_prev = self._T_obj_target
         if F_prev is None:
             assert self._target is not None
             F_prev = self._T_obj_target = se3.compose_flat(
-                F_obj_world, se3.flat_from_transform(self._target.matrix()))
+                self._obj_F_inv, se3.flat_from_transform(self._target.matrix()))
         # How far the user pushes: the norm of the axes the active mappings read, clipped
         # to 1 (a diagonal push of a 3-axis stick is one push, not two); steps are
         # bounded by mag * speed * dt, constraint corrections included.
         n = len(u)
         mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
-        if mag > 0.0 and not seeding:
-            mag = min(1.0, mag)
-            F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
-                               mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
-            if F_new is not F_prev:
-                if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
-                    self.counters.offset_limited += 1  # refused: the arm lags or is blocked
-                elif not self._accept(F_new):
-                    self.counters.nonfinite_output += 1  # never publish a non-finite target
-        self.mode = "running" if input_ok else "stopped"
-        return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
-                          input_ok, self._pose)
+        if mag <= 0.0:
+            return
+        mag = min(1.0, mag)
+        F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
+                           mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
+        if F_new is F_prev:
+            return
+        if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
+            self.counters.offset_limited += 1  # refused: the arm lags or is blocked
+        elif not self._accept(F_new):
+            self.counters.nonfinite_output += 1  # never publish a non-finite target
 
     def _quiet(self, mode: str, in_seq: int) -> TickResult:
         """A tick that publishes nothing; the next target will be a (re-)seed."""
