@@ -4,3 +4,32 @@ They sit on top of every other layer (application code, with the CLI): each one
 starts processes or simulations, measures, and prints figures. The test suite never
 asserts wall-clock times; these commands are where speed is shown.
 """
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from sctd.cli.errors import EXIT_FAILED, EXIT_OK, fail
+
+
+def run_and_report(name: str, args: argparse.Namespace, run: Callable[[Path], dict[str, Any]],
+                   print_report: Callable[[dict[str, Any]], None]) -> int:
+    """Run a benchmark of processes (``run(logdir)``, logs in ``--logs`` or a temporary
+    folder) and print its figures: JSON with ``--json``, else the report. A benchmark
+    that could not run (RuntimeError) exits 1 with ``sctd bench <name>: <why>``."""
+    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
+    logdir.mkdir(parents=True, exist_ok=True)
+    try:
+        r = run(logdir)
+    except RuntimeError as e:
+        return fail(f"bench {name}", str(e), EXIT_FAILED)
+    if args.json:
+        print(json.dumps(r, indent=2))
+    else:
+        print_report(r)
+    return EXIT_OK

@@ -18,7 +18,6 @@ import json
 import math
 import signal
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -27,6 +26,7 @@ from pathlib import Path
 import zenoh
 
 from sctd import se3
+from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
@@ -254,19 +254,9 @@ def add_latency_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_latency(args: argparse.Namespace) -> int:
-    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
-    logdir.mkdir(parents=True, exist_ok=True)
-    try:
-        r = run_latency_bench(args.skill, args.rate, args.seconds, args.input_rate,
-                              args.rt_priority, logdir, args.cpu)
-    except RuntimeError as e:
-        print(f"sctd bench latency: {e}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(r, indent=2))
-    else:
-        print_report(r)
-    return 0
+    return run_and_report("latency", args, lambda logdir: run_latency_bench(
+        args.skill, args.rate, args.seconds, args.input_rate, args.rt_priority, logdir, args.cpu),
+        print_report)
 
 
 if __name__ == "__main__":

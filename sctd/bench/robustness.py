@@ -23,7 +23,6 @@ import math
 import os
 import signal
 import sys
-import tempfile
 import threading
 import time
 import zipfile
@@ -34,6 +33,7 @@ from typing import Any
 import msgpack
 import zenoh
 
+from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
@@ -397,18 +397,8 @@ def add_robustness_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_robustness(args: argparse.Namespace) -> int:
-    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
-    logdir.mkdir(parents=True, exist_ok=True)
-    try:
-        r = summarise(run_robustness_bench(Path(args.skills), args.seconds, logdir))
-    except RuntimeError as e:
-        print(f"sctd bench robustness: {e}", file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(r, indent=2))
-    else:
-        print_report(r)
-    return 0
+    return run_and_report("robustness", args, lambda logdir: summarise(
+        run_robustness_bench(Path(args.skills), args.seconds, logdir)), print_report)
 
 
 if __name__ == "__main__":
