@@ -1,5 +1,4 @@
-"""Simulator figures: real-time factor, step response, tracking error (``sctd bench sim``;
-its flags are in :mod:`sctd.cli.sim`).
+"""Simulator figures: real-time factor, step response, tracking error (``sctd bench sim``).
 
 All motion figures are measured in simulated time along the full data path (controller
 -> CAN frames -> drives -> Pinocchio -> CAN frames -> controller), so they are the
@@ -8,6 +7,8 @@ same on every machine; only the real-time factor depends on the host.
 
 from __future__ import annotations
 
+import argparse
+import json
 import statistics
 import time
 from typing import Any
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from sctd import se3
+from sctd.cli.errors import fail
 from sctd_sim.arm import SimArm
 from sctd_sim.robot import ArmModel, load_arm_model
 from sctd_sim.simulation import Simulation, start_posture
@@ -363,3 +365,28 @@ def format_report(result: dict[str, Any]) -> str:
                                          for k, v in result["pass"].items()))
     return "\n".join(lines)
 
+
+def add_bench_sim_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags of ``sctd bench sim``."""
+    p.add_argument("--seconds", type=float, default=3.0,
+                   help="simulated seconds of the real-time-factor run (default %(default)s)")
+    p.add_argument("--rate", type=float, default=1000.0, help="cycle rate, Hz (default %(default)s)")
+    p.add_argument("--scene", choices=("pour", "drawer"), default=None,
+                   help="measure the step (5 cm along world x) and tracking in this scene, with "
+                        "its load, instead of the empty-workspace figures")
+    p.add_argument("--json", action="store_true", help="print the figures as JSON")
+
+
+def main_bench_sim(args: argparse.Namespace) -> int:
+    if args.seconds <= 0 or args.rate <= 0:
+        return fail("bench sim", "--seconds, --rate: must be > 0")
+    if args.scene is not None:
+        result = run_scene_bench(args.scene, args.rate)
+        print(json.dumps(result, default=float) if args.json else format_scene_report(result))
+        return 0
+    result = run_bench(args.seconds, args.rate)
+    if args.json:
+        print(json.dumps(result, default=float))
+    else:
+        print(format_report(result))
+    return 0

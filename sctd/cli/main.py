@@ -53,7 +53,7 @@ BENCHES: dict[str, Command] = {
                      "directions, time, graph-cut energy)", "sctd.bench.learn",
                      "add_bench_learn_arguments", "main_bench_learn"),
     "sim": Command("simulator real-time factor, step response and tracking",
-                   "sctd.cli.sim", "add_bench_sim_arguments", "main_bench_sim"),
+                   "sctd.bench.sim", "add_bench_sim_arguments", "main_bench_sim"),
 }
 
 COMMANDS: dict[str, Command] = {
@@ -70,10 +70,12 @@ COMMANDS: dict[str, Command] = {
                    "add_dtw_arguments", "main_dtw"),
     "eval": Command("measure a skill's assistance with the simulated user (success, time, effort; "
                     "lockstep or real time)", "sctd.cli.eval", "add_eval_arguments", "main_eval"),
-    "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd.cli.sim",
-                   "add_sim_arguments", "main_sim"),
-    "record": Command("record a demonstration (ee in the task object's frame) as CSV", "sctd.cli.sim",
-                      "add_record_arguments", "main_record"),
+    # the simulator and the recorder define their flags where they live, once: the same
+    # as python -m sctd_sim.service / python -m sctd_services.record take
+    "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd_sim.service",
+                   "add_service_arguments", "run"),
+    "record": Command("record a demonstration (ee in the task object's frame) as CSV",
+                      "sctd_services.record", "add_arguments", "run"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 

@@ -35,6 +35,7 @@ from ...learn import (
     read_demos,
 )
 from ...skill import SkillError
+from ..errors import fail
 from ..options import add_arguments, from_namespace
 from .report import write_report, write_skill
 
@@ -144,8 +145,7 @@ def main_learn(args: argparse.Namespace) -> int:
     try:
         summary = run_learn(args)
     except (DemoError, SkillError, ValueError) as exc:
-        print(f"sctd learn: error: {exc}", file=sys.stderr)
-        return 2
+        return fail("learn", str(exc))
     sk = summary["skill"]
     print(f"wrote {args.out} ({sk['id']}): {len(sk['states'])} state(s), "
           f"{len(sk['transitions'])} transition(s), {len(summary.get('fields', []))} field(s) "
@@ -170,8 +170,7 @@ def main_dtw(args: argparse.Namespace) -> int:
         a = read_demo_csv(args.a)
         b = read_demo_csv(args.b)
     except DemoError as exc:
-        print(f"sctd dtw: error: {exc}", file=sys.stderr)
-        return 2
+        return fail("dtw", str(exc))
     cost, path = dtw(a.poses, b.poses, args.alpha)
     out = {"cost": cost, "path_length": len(path), "mean_cost": cost / len(path),
            "n_a": len(a), "n_b": len(b), "alpha": args.alpha}
