@@ -21,6 +21,16 @@ def pour_dir(tmp_path_factory):
     return d
 
 
+# The keys summary.json's "hyperparameters" has had since it exists (both methods'),
+# which scripts may read; new ones may be added, none may go.
+SUMMARY_HYPERPARAMETERS = {
+    "spacing", "vf_spacing", "smooth", "despike", "alpha", "beta", "smoothness", "radius", "max_n", "C",
+    "cut", "min_segment", "axis_support", "margin", "dtw_align", "n_fields", "em_iterations",
+    "angle_sphere", "angle_translation", "angle_cylinder", "max_radius", "chance_weight", "min_v",
+    "max_d", "k_s", "vf_max_n", "vf_combine", "vf_rotation_weight", "vf_motion", "object",
+    "max_linear_speed", "max_angular_speed", "seed"}
+
+
 def _learn(argv):
     return main_learn(add_learn_arguments(argparse.ArgumentParser()).parse_args(argv))
 
@@ -41,6 +51,8 @@ def test_learn_linear_writes_a_loadable_skill_and_report(pour_dir, tmp_path, cap
         assert len(lab) == len(truth["labels"][name])
         assert set(lab) <= {0, 1}
     assert summary["hyperparameters"]["alpha"] == 0.4
+    assert SUMMARY_HYPERPARAMETERS <= set(summary["hyperparameters"])  # both methods', as always
+    assert summary["hyperparameters"]["seed"] == summary["hyperparameters"]["random_state"] == 0
     assert summary["skill"]["states"][0]["name"] == "s0"
     for fig in summary["figures"]:
         assert (rep / fig).stat().st_size > 1000
@@ -65,6 +77,7 @@ def test_learn_vf_writes_model_and_candidate_frames(pour_dir, tmp_path):
     assert any(c["kind"] == "sphere" for c in skill.candidate_frames)
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
     assert {f["type"] for f in summary["fields"]} == {"sphere", "translation"}
+    assert SUMMARY_HYPERPARAMETERS <= set(summary["hyperparameters"])
     assert "candidate_frame.png" in summary["figures"]
 
 

@@ -8,6 +8,7 @@ define them in :mod:`sctd.learn`; this module adds only the command's own argume
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -125,6 +126,16 @@ def _learn(args: argparse.Namespace,
                                progress=progress)
 
 
+def _settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Every learning flag's value by field name, both methods', and ``seed`` (the name
+    ``summary.json`` has always given ``random_state``): its ``hyperparameters`` keep
+    every key they had, whatever the method."""
+    names = [f.name for cls in (Preprocessing, LinearIMLearner, VectorFieldLearner, VectorFieldOptions,
+                                SkillOptions)
+             for f in dataclasses.fields(cls) if "help" in f.metadata]
+    return {**{n: getattr(args, n) for n in names if hasattr(args, n)}, "seed": args.random_state}
+
+
 def run_learn(args: argparse.Namespace) -> dict[str, Any]:
     """Learn, write ``args.out`` (and its model file) and, with ``args.report``, the
     report; return the summary (as ``summary.json`` holds it)."""
@@ -137,7 +148,7 @@ def run_learn(args: argparse.Namespace) -> dict[str, Any]:
         progress("export")
     finally:
         progress.close()
-    return write_report(result, skill, args.report, demos_dir=str(args.demos))
+    return write_report(result, skill, args.report, demos_dir=str(args.demos), settings=_settings(args))
 
 
 def main_learn(args: argparse.Namespace) -> int:

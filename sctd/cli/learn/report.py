@@ -71,14 +71,15 @@ def _vf_summary(result: VectorFieldResult) -> dict[str, Any]:
 
 
 def summary_dict(result: LinearResult | VectorFieldResult, skill: Skill,
-                 demos_dir: str = "") -> dict[str, Any]:
-    """``summary.json``: hyperparameters, per-demo labels, fields, timings."""
+                 demos_dir: str = "", settings: dict[str, Any] | None = None) -> dict[str, Any]:
+    """``summary.json``: hyperparameters (the run's, over the command line's
+    ``settings`` when given), per-demo labels, fields, timings."""
     linear = isinstance(result, LinearResult)
     out: dict[str, Any] = {
         "method": "linear" if linear else "vf",
         "demos_dir": demos_dir,
         "skill": skill_summary(skill),
-        "hyperparameters": result.hyperparameters(),
+        "hyperparameters": {**(settings or {}), **result.hyperparameters()},
         "labels": result.labels,
         "timings": {k: round(v, 4) for k, v in result.timings.items()},
         "samples": {p.name: {"raw": p.n_raw, "kept": len(p.keep)} for p in result.prepared},
@@ -89,10 +90,11 @@ def summary_dict(result: LinearResult | VectorFieldResult, skill: Skill,
 
 
 def write_report(result: LinearResult | VectorFieldResult, skill: Skill,
-                 report_dir: str | Path | None, demos_dir: str = "") -> dict[str, Any]:
+                 report_dir: str | Path | None, demos_dir: str = "",
+                 settings: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write ``summary.json`` and the PNG figures into ``report_dir`` (if given); return
     the summary."""
-    summary = summary_dict(result, skill, demos_dir)
+    summary = summary_dict(result, skill, demos_dir, settings)
     if report_dir is None:
         return summary
     d = Path(report_dir)
