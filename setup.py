@@ -1,10 +1,12 @@
-"""Package discovery: ``sim/`` installs as ``sctd_sim`` and ``services/`` as
-``sctd_services`` (DESIGN §3 wants non-generic import names); metadata is in
+"""Package discovery: ``sim/`` installs as ``sctd_sim``, ``services/`` as
+``sctd_services`` (DESIGN §3 wants non-generic import names) and ``skills/`` as the
+package data ``sctd_skills`` (the shipped skills, their model files and
+demonstrations, found by name: ``sctd run --skill pour``); metadata is in
 pyproject.toml."""
 
 from setuptools import find_packages, setup
 
-MAPPED = {"sctd_sim": "sim", "sctd_services": "services"}
+MAPPED = {"sctd_sim": "sim", "sctd_services": "services", "sctd_skills": "skills"}
 
 packages = find_packages(include=["sctd", "sctd.*"])
 for name, folder in MAPPED.items():
@@ -13,5 +15,6 @@ for name, folder in MAPPED.items():
 setup(
     packages=packages,
     package_dir=MAPPED,
-    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"]},
+    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"],
+                  "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"]},
 )

@@ -23,7 +23,9 @@ import zenoh
 from ..runtime import codec
 from ..runtime.zsession import session as zsession
 from ..skill import Skill, SkillError, load_skill
+from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
+from .options import SKILL_HELP
 from .procs import Child, free_port
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
@@ -31,7 +33,7 @@ ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
 
 
 def add_demo_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", default="skills/pour.yaml", help="skill YAML (default %(default)s)")
+    p.add_argument("--skill", default="pour", help=SKILL_HELP + " (default %(default)s)")
     p.add_argument("--task", choices=sorted(set(TASK_OF_OBJECT.values())),
                    help="what the simulated user tries to do (default: from the skill's object)")
     p.add_argument("--seconds", type=float, default=40.0,
@@ -152,6 +154,7 @@ def _print_outcome(skill: Skill, rate: float, report: dict, scene: dict) -> None
 
 def main_demo(args: argparse.Namespace) -> int:
     try:
+        args.skill = str(find_skill(args.skill))
         skill = load_skill(args.skill)
     except SkillError as e:
         return fail("demo", str(e))

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from sctd.skill import SkillError
+from sctd.skill.catalog import find_skill
 from sctd_services.eval.evaluate import (
     entries,
     evaluate,
@@ -36,8 +37,9 @@ from .eval_realtime import realtime_job
 
 
 def add_eval_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", action="append", required=True, metavar="SKILL.yaml",
-                   help="a skill to evaluate (repeatable); skills/teleop.yaml is the unassisted "
+    p.add_argument("--skill", action="append", required=True, metavar="SKILL",
+                   help="a skill to evaluate (repeatable): a path, or the name of a shipped skill "
+                        "(pour, pour.yaml; sctd skills lists them); teleop is the unassisted "
                         "baseline and runs with the first assisted skill's speed limits")
     p.add_argument("--task", choices=("pour", "drawer"),
                    help="the task (default: from the skills' object)")
@@ -111,7 +113,7 @@ def main_eval(args: argparse.Namespace) -> int:
         return fail("eval", problem)
     work = Path(tempfile.mkdtemp(prefix="sctd-eval-"))
     try:
-        ents = entries(args.skill, args.baseline, work)
+        ents = entries([str(find_skill(k)) for k in args.skill], args.baseline, work)
         task = task_of([e.skill for e in ents], args.task)
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))

@@ -14,8 +14,9 @@ import importlib
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from importlib.metadata import version
 
-from .errors import Parser
+from .errors import EXIT_USAGE, Parser
 
 
 @dataclass(frozen=True)
@@ -35,11 +36,22 @@ class Command:
         if self.group:
             _subcommands(p, self.group, argv, "BENCH")
             return
-        mod = importlib.import_module(self.module)
+        try:
+            mod = importlib.import_module(self.module)
+        except ModuleNotFoundError as e:
+            top = (e.name or "").split(".")[0]
+            if top not in EXTRA_OF:
+                raise
+            p.exit(EXIT_USAGE, f"{p.prog}: needs {top}, which is not installed: pip install "
+                               f"'sctd[{EXTRA_OF[top]}]'\n")
         getattr(mod, self.add_arguments)(p)
         main: Callable[[argparse.Namespace], int] = getattr(mod, self.main)
         p.set_defaults(func=main)
 
+
+# The optional libraries and the extra (pyproject.toml) that installs each.
+EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
+            "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev"}
 
 BENCHES: dict[str, Command] = {
     "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
@@ -62,6 +74,8 @@ COMMANDS: dict[str, Command] = {
                        "add_inspect_arguments", "main_inspect"),
     "swap": Command("hot-swap a skill into the running daemon", "sctd.cli.run",
                     "add_swap_arguments", "main_swap"),
+    "skills": Command("list the skills --skill NAME finds (shipped ones); skills show NAME inspects one",
+                      "sctd.cli.skills", "add_skills_arguments", "main_skills"),
     "demo": Command("run a skill end to end on this machine (daemon, robot, user)", "sctd.cli.demo",
                     "add_demo_arguments", "main_demo"),
     "learn": Command("learn a skill from a folder of demonstrations", "sctd.cli.learn",
@@ -93,6 +107,7 @@ def _subcommands(parser: argparse.ArgumentParser, commands: Mapping[str, Command
 def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     """The ``sctd`` parser with the flags of the command ``argv`` names."""
     parser = Parser(prog="sctd", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version", version=f"sctd {version('sctd')}")
     _subcommands(parser, COMMANDS, argv, "COMMAND")
     return parser
 

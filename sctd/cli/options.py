@@ -34,6 +34,9 @@ from typing import Any, TypeVar
 
 T = TypeVar("T")
 
+# The help of every --skill / SKILL argument: how sctd.skill.catalog.find_skill resolves it.
+SKILL_HELP = "a skill: a path, or the name of a shipped skill (pour, pour.yaml; sctd skills lists them)"
+
 
 def flag_name(field: dataclasses.Field) -> str:
     """The flag of a field: its ``flag`` metadata, else ``--`` + the name with dashes."""

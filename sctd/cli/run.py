@@ -20,12 +20,13 @@ from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, ingress_limits
 from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
+from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
-from .options import add_arguments, flag_name, from_namespace
+from .options import SKILL_HELP, add_arguments, flag_name, from_namespace
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", required=True, help="skill YAML file")
+    p.add_argument("--skill", required=True, help=SKILL_HELP)
     add_arguments(p, RuntimeConfig, exclude=("stamp_check",), show_default=True)
     add_arguments(p, RuntimeConfig, only=("stamp_check",))
     p.add_argument("--spin-us", type=float, default=100.0,
@@ -75,7 +76,7 @@ def _stop_on_signals() -> threading.Event:
 def main_run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
     try:
-        skill = load_skill(args.skill)
+        skill = load_skill(find_skill(args.skill))
         config = runtime_config(args)
     except (SkillError, ValueError) as e:
         return fail("run", str(e))
@@ -100,13 +101,13 @@ def main_run(args: argparse.Namespace) -> int:
 
 
 def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("skill", help="skill YAML file")
+    p.add_argument("skill", help=SKILL_HELP)
     p.add_argument("--json", action="store_true", help="machine-readable output")
 
 
 def main_inspect(args: argparse.Namespace) -> int:
     try:
-        s = skill_summary(load_skill(args.skill))
+        s = skill_summary(load_skill(find_skill(args.skill)))
     except SkillError as e:
         return fail("inspect", str(e))
     if args.json:
@@ -152,7 +153,7 @@ def _describe_matrix(m: list[list[float]]) -> str:
 
 
 def add_swap_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("skill", help="skill YAML file to send to the running daemon")
+    p.add_argument("skill", help="the skill to send to the running daemon; " + SKILL_HELP)
     p.add_argument("--robot", default="edan")
     p.add_argument("--timeout", type=float, default=10.0, help="s to wait for the daemon's reply")
     add_zenoh_arguments(p)
@@ -160,7 +161,7 @@ def add_swap_arguments(p: argparse.ArgumentParser) -> None:
 
 def main_swap(args: argparse.Namespace) -> int:
     try:
-        bundle = bundle_from_file(args.skill)
+        bundle = bundle_from_file(find_skill(args.skill))
         skill_from_bundle(bundle)  # refuse locally what the daemon would refuse
         payload = bundle.pack()
         Bundle.unpack(payload)  # the size limit too

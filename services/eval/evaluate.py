@@ -22,13 +22,14 @@ import yaml
 
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
+from sctd.skill.catalog import find_skill
 from sctd_services.user import PROFILES
 
 from .lockstep import run_trial
 from .trial import TaskSpec, TrialResult
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
-TELEOP = Path(__file__).resolve().parents[2] / "skills" / "teleop.yaml"
+TELEOP = find_skill("teleop")  # the unassisted baseline, a shipped skill
 
 
 @dataclass

@@ -1,0 +1,124 @@
+"""An installed sctd: the wheel built from the repository, installed into a fresh
+virtual environment outside the checkout, runs its shipped skills by name from an empty
+folder (``sctd run --skill pour.yaml``, ``sctd skills``, ``sctd inspect pour``), and an
+unknown name exits 2 naming the places searched.
+
+The fresh environment gets the wheel alone (``--no-deps``); its dependencies come from
+this test's environment, whose site-packages is put on its path without running that
+folder's ``.pth`` files, so the checkout's editable install is not seen there.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import sysconfig
+import time
+from pathlib import Path
+
+import pytest
+
+from sctd.runtime import codec
+from sctd.runtime.zsession import close_session, open_session
+from tests.conftest import ROOT, free_port, wait_for
+
+IGNORE = shutil.ignore_patterns(".venv", ".git", "build", "*.egg-info", "__pycache__", ".pytest_cache",
+                                ".mypy_cache", ".ruff_cache", ".hypothesis", "out")
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory) -> Path:
+    """The ``bin`` folder of a fresh virtual environment with the built wheel installed."""
+    tmp = tmp_path_factory.mktemp("install")
+    src = tmp / "src"
+    shutil.copytree(ROOT, src, ignore=IGNORE)  # the build writes build/ next to its sources
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                    "-w", str(tmp / "dist"), str(src)], check=True, capture_output=True, timeout=300)
+    (wheel,) = (tmp / "dist").glob("sctd-*.whl")
+    venv = tmp / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(venv / "bin" / "python"), "install",
+                    "--no-deps", "--no-index", "-q", str(wheel)], check=True, capture_output=True,
+                   timeout=300)
+    fresh_site = Path(subprocess.run(
+        [str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        check=True, capture_output=True, text=True).stdout.strip())
+    (fresh_site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    shutil.rmtree(src)
+    return venv / "bin"
+
+
+def _run(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([str(bin_dir / "sctd"), *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_sctd_comes_from_the_fresh_environment(installed, tmp_path):
+    out = subprocess.run([str(installed / "python"), "-c",
+                          "import sctd, sctd_sim, sctd_skills; "
+                          "print(sctd.__file__); print(sctd_sim.__file__); print(sctd_skills.__file__)"],
+                         cwd=tmp_path, check=True, capture_output=True, text=True).stdout.split()
+    venv = installed.parent.resolve()
+    for path in out:
+        assert Path(path).resolve().is_relative_to(venv), (path, venv)
+        assert not Path(path).resolve().is_relative_to(ROOT)
+    r = _run(installed, tmp_path, "--version")
+    assert r.returncode == 0 and r.stdout.startswith("sctd "), r
+
+
+def test_shipped_skills_resolve_by_name_from_an_empty_folder(installed, tmp_path):
+    r = _run(installed, tmp_path, "skills", "--json")
+    assert r.returncode == 0, r.stderr
+    rows = {row["name"]: row for row in json.loads(r.stdout)}
+    assert {"pour", "pour-vf", "drawer", "drawer-vf", "pour-linear", "teleop"} <= set(rows)
+    assert rows["pour-vf"]["method"] == "vector_field" and rows["pour"]["object"] == "mug"
+    assert all(row["source"] == "shipped" and "error" not in row for row in rows.values())
+    for name in ("pour", "pour.yaml", "skills/pour.yaml"):
+        r = _run(installed, tmp_path, "inspect", name, "--json")
+        assert r.returncode == 0, (name, r.stderr)
+        assert json.loads(r.stdout)["id"] == rows["pour"]["id"]
+    r = _run(installed, tmp_path, "inspect", "pour-vf", "--json")  # its model file came too
+    assert r.returncode == 0 and json.loads(r.stdout)["fields"], r.stderr
+
+
+def test_an_unknown_skill_exits_2_with_the_places_searched(installed, tmp_path):
+    for argv in (("inspect", "pur"), ("run", "--skill", "pur")):
+        r = _run(installed, tmp_path, *argv)
+        assert r.returncode == 2, r
+        line = r.stderr.strip().splitlines()[-1]
+        assert f"not a file ({tmp_path / 'pur'})" in line, line
+        assert "nor a shipped skill in" in line and "did you mean pour" in line, line
+
+
+def test_installed_daemon_runs_a_shipped_skill_by_name(installed, tmp_path):
+    """From an empty folder: the daemon starts on the shipped pour skill, reports
+    ``waiting`` (no robot, so no target) and exits 0 on SIGTERM."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    p = subprocess.Popen([str(installed / "sctd"), "run", "--skill", "pour.yaml", "--listen", ep,
+                          "--connect", ep, "--rt-priority", "0"], cwd=tmp_path,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    session = None
+    try:
+        session = open_session(connect=[ep])
+        seen: list[dict] = []
+        sub = session.declare_subscriber(codec.Keys("edan").status,
+                                         lambda s: seen.append(codec.unpack_map(s.payload.to_bytes())))
+        assert wait_for(lambda: seen, timeout=60.0), "no status from the installed daemon"
+        status = seen[-1]
+        assert status["skill_name"] == "pour" and status["mode"] == "waiting", status
+        assert status["targets"] == 0
+        sub.undeclare()
+        time.sleep(0.2)
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=30)
+        assert p.returncode == 0, err
+    finally:
+        if session is not None:
+            close_session(session)
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
