@@ -4,8 +4,8 @@ folder (``sctd run --skill pour.yaml``, ``sctd skills``, ``sctd inspect pour``),
 unknown name exits 2 naming the places searched.
 
 The fresh environment gets the wheel alone (``--no-deps``); its dependencies come from
-this test's environment, whose site-packages is put on its path without running that
-folder's ``.pth`` files, so the checkout's editable install is not seen there.
+this test's environment, whose site-packages is put on its path with that folder's
+``.pth`` hooks except the checkout's editable install, which is not seen there.
 """
 
 from __future__ import annotations
@@ -46,9 +46,20 @@ def installed(tmp_path_factory) -> Path:
     fresh_site = Path(subprocess.run(
         [str(venv / "bin" / "python"), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
         check=True, capture_output=True, text=True).stdout.strip())
-    (fresh_site / "deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    # only after the install: pip would otherwise see (and replace) this environment's sctd
+    (fresh_site / "deps.pth").write_text(_deps_pth())
     shutil.rmtree(src)
     return venv / "bin"
+
+
+def _deps_pth() -> str:
+    """A ``.pth`` giving the fresh environment this one's site-packages, with the hooks
+    of that folder's own ``.pth`` files (Pinocchio's wheels add their prefix through
+    one) except the checkout's editable install."""
+    site = Path(sysconfig.get_paths()["purelib"])
+    hooks = [line for pth in sorted(site.glob("*.pth")) if not pth.name.startswith("__editable__")
+             for line in pth.read_text().splitlines() if line.startswith("import ")]
+    return "\n".join([str(site), *hooks]) + "\n"
 
 
 def _run(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
