@@ -78,3 +78,17 @@ def test_a_malformed_skill_exits_2_naming_file_and_field(tmp_path):
         line = r.stderr.strip().splitlines()[-1]
         assert line.startswith(f"sctd {argv[0]}: {bad}: "), line
         assert "max_linear_speed" in line, line
+
+
+@pytest.mark.parametrize(("argv", "missing", "extra"), [
+    (["learn", "skills/demos/pour", "--out", "x.yaml"], "maxflow", "learn"),  # on import
+    (["sim", "--duration", "1"], "pinocchio", "sim"),  # imported once the service starts
+])
+def test_a_missing_optional_library_names_the_extra(argv, missing, extra):
+    code = (f"import sys; sys.modules[{missing!r}] = None\n"  # import of it raises ModuleNotFoundError
+            "from sctd.cli.main import main\n"
+            f"sys.exit(main({argv!r}))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().splitlines()[-1] == (
+        f"sctd {argv[0]}: needs {missing}, which is not installed: pip install 'sctd[{extra}]'"), r.stderr

@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import version
 
-from .errors import EXIT_USAGE, Parser
+from .errors import EXIT_USAGE, Parser, fail
 
 
 @dataclass(frozen=True)
@@ -40,11 +40,7 @@ class Command:
         try:
             mod = importlib.import_module(self.module)
         except ModuleNotFoundError as e:
-            top = (e.name or "").split(".")[0]
-            if top not in EXTRA_OF:
-                raise
-            p.exit(EXIT_USAGE, f"{p.prog}: needs {top}, which is not installed: pip install "
-                               f"'sctd[{EXTRA_OF[top]}]'\n")
+            p.exit(EXIT_USAGE, f"{p.prog}: {_missing_extra(e)}\n")
         getattr(mod, self.add_arguments)(p)
         main: Callable[[argparse.Namespace], int] = getattr(mod, self.main)
         p.set_defaults(func=main)
@@ -95,6 +91,15 @@ COMMANDS: dict[str, Command] = {
 }
 
 
+def _missing_extra(e: ModuleNotFoundError) -> str:
+    """``needs <module>, which is not installed: pip install 'sctd[<extra>]'`` for an
+    optional library; re-raises ``e`` for any other missing module (a bug)."""
+    top = (e.name or "").split(".")[0]
+    if top not in EXTRA_OF:
+        raise e
+    return f"needs {top}, which is not installed: pip install 'sctd[{EXTRA_OF[top]}]'"
+
+
 def _subcommands(parser: argparse.ArgumentParser, commands: Mapping[str, Command], argv: list[str],
                  metavar: str) -> None:
     sub = parser.add_subparsers(dest=metavar.lower(), required=True, metavar=metavar)
@@ -118,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser(argv).parse_args(argv)
     try:
         return int(args.func(args) or 0)
+    except ModuleNotFoundError as e:  # an optional library imported once the command runs
+        name = " ".join(n for n in (args.command, getattr(args, "bench", None)) if n)
+        return fail(name, _missing_extra(e))
     except BrokenPipeError:  # the reader went away (sctd skills | head): not our error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
