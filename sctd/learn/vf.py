@@ -132,12 +132,16 @@ def cylinder_field(p: Array, v: Array, w: Array | None = None) -> Field | None:
     return CylinderField(point=c, axis=a)
 
 
+# The least-squares fit of each field kind (by its registry name) to points and vectors.
+ESTIMATORS: dict[str, Callable[[Array, Array, Array | None], Field | None]] = {
+    "translation": lambda p, v, w: translation_field(v, w),
+    "sphere": sphere_field,
+    "cylinder": cylinder_field,
+}
+
+
 def _estimate(kind: str, p: Array, v: Array, w: Array | None = None) -> Field | None:
-    if kind == "translation":
-        return translation_field(v, w)
-    if kind == "sphere":
-        return sphere_field(p, v, w)
-    return cylinder_field(p, v, w)
+    return ESTIMATORS[kind](p, v, w)
 
 
 @dataclass

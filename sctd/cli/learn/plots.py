@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from ... import se3
 from ...learn import IMLabel, LinearResult, VectorFieldResult
 from ...learn.linear import AXIS_NAMES
+from ...skill.fields import CylinderField, SphereField, TranslationField
 
 _COLOURS = [matplotlib.colormaps["tab10"](k) for k in range(10)]
 
@@ -112,12 +113,12 @@ def _fields_figure(result: VectorFieldResult, path: Path) -> Path:
         ax.quiver(p[:, i], p[:, j], v[:, i], v[:, j], color=col, scale=40, width=0.003)
         for m, f in enumerate(V.fields_):
             label = f"{m}: {f.type} ({f.inliers} pts, w={f.weight:.2f})"
-            if f.type == "sphere" and f.centre is not None:
+            if isinstance(f, SphereField):
                 ax.plot(f.centre[i], f.centre[j], "x", color=_COLOURS[m], ms=10, mew=2, label=label)
-            elif f.type == "cylinder" and f.point is not None and f.axis is not None:
+            elif isinstance(f, CylinderField):
                 q = f.point + np.outer([-0.1, 0.1], f.axis)
                 ax.plot(q[:, i], q[:, j], "-", color=_COLOURS[m], lw=2, label=label)
-            elif f.direction is not None:
+            elif isinstance(f, TranslationField):
                 c = p[a == m].mean(axis=0) if np.any(a == m) else p.mean(axis=0)
                 ax.annotate("", xy=(c[i] + 0.08 * f.direction[i], c[j] + 0.08 * f.direction[j]),
                             xytext=(c[i], c[j]),
