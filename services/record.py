@@ -13,6 +13,11 @@ linked to the next free ``demo_NNN.csv`` (``os.link`` fails rather than overwrit
 two recorders never clobber each other), so a demonstration file only ever appears
 complete. A recording shorter than the learner's minimum (10 rows) is discarded.
 
+The finished demonstration is also published on ``sctd/<robot>/demos/<task>/<name>``
+(:func:`sctd.runtime.codec.encode_demo`: the same rows as the file, ``name`` its stem,
+``task`` from ``--task``, else the scene the simulator announces, else the object), so a
+learner on another host gets it.
+
 Works against any robot that speaks the wire contract; with ``sctd sim`` the object
 defaults to the scene's task object (``task_object`` on the scene key).
 """
@@ -39,7 +44,10 @@ from sctd.runtime.timing import Ticker
 from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
 COLUMNS = "t,x,y,z,qx,qy,qz,qw"
-MIN_ROWS = 10  # sctd.learn.demos.MIN_SAMPLES: shorter files make the learner refuse the folder
+MIN_ROWS = codec.MIN_DEMO_ROWS  # sctd.learn.demos.MIN_SAMPLES: the learner refuses shorter ones
+# s the session stays open after the demonstration is put, so that it leaves this
+# process before the session closes (Zenoh may drop what is still queued then)
+LINGER = 0.3
 
 
 def row_from_poses(t: float, pose_world_ee: list[float], pose_world_obj: list[float]) -> list[float]:
@@ -89,6 +97,7 @@ class Recorder:
         self.object_name = object_name
         self.state: codec.StateMsg | None = None
         self.objects: dict[str, list[float]] = {}
+        self.task: str | None = None  # the scene's name (pour, drawer), as the sim announces it
         self.dropped = 0
         self._subs = contextlib.ExitStack()  # the subscribers, while entered
 
@@ -99,8 +108,7 @@ class Recorder:
             declare = self.session.declare_subscriber
             stack.enter_context(declare(self.keys.state, self._on_state))
             stack.enter_context(declare(self.keys.objects(), self._on_object))
-            if self.object_name is None:
-                stack.enter_context(declare(self.keys.scene, self._on_scene))
+            stack.enter_context(declare(self.keys.scene, self._on_scene))
             self._subs = stack.pop_all()
         return self
 
@@ -121,14 +129,15 @@ class Recorder:
             self.dropped += 1
 
     def _on_scene(self, sample: zenoh.Sample) -> None:
-        if self.object_name is not None:
-            return
         try:
             msg = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
             return
+        task = msg.get("scene")
+        if isinstance(task, str) and task:
+            self.task = task
         name = msg.get("task_object")
-        if isinstance(name, str) and name:
+        if self.object_name is None and isinstance(name, str) and name:
             self.object_name = name
 
     def sample(self) -> tuple[float, list[float], list[float]] | None:
@@ -148,6 +157,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--object", default=None, metavar="NAME",
                    help="task object whose frame the trajectory is expressed in "
                         "(default: the task object the simulator announces on the scene key)")
+    p.add_argument("--task", default=None, metavar="NAME",
+                   help="the task the demonstration is published under, sctd/<robot>/demos/<task>/<name> "
+                        "(default: the scene the simulator announces, else the object's name)")
     p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
     p.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default %(default)s)")
     p.add_argument("--min-distance", type=float, default=0.0, metavar="M",
@@ -163,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
     """``sctd record`` with parsed arguments (:func:`add_arguments`); returns the exit
     code (1: nothing recorded, 2: bad flags)."""
     if args.rate <= 0 or args.min_distance < 0 or (args.duration is not None and args.duration <= 0):
-        print("sctd record: --rate and --duration must be positive, --min-distance >= 0",
+        print("sctd record: --rate, --duration: must be > 0; --min-distance: must be >= 0",
               file=sys.stderr)
         return 2
     out_dir = Path(args.out)
@@ -177,21 +189,45 @@ def run(args: argparse.Namespace) -> int:
         print(f"sctd record: recording the ee in the frame of {rec.object_name!r} at "
               f"{args.rate:g} Hz{' until SIGINT' if args.duration is None else ''}",
               file=sys.stderr, flush=True)
-        fd, name = _mkstemp(out_dir)
-        tmp = Path(name)
-        with os.fdopen(fd, "w", newline="") as fh:
-            rows = _record_rows(rec, fh, args, stop)
-            fh.flush()
-            os.fsync(fh.fileno())
-    if rows < MIN_ROWS:
-        tmp.unlink()
-        print(f"sctd record: only {rows} rows (the learner needs {MIN_ROWS}); nothing written",
-              file=sys.stderr)
-        return 1
-    final = publish_final(tmp, out_dir)
-    print(f"sctd record: {rows} rows -> {final}", file=sys.stderr, flush=True)
+        rows: list[list[float]] = []
+        final = _record_file(rec, out_dir, args, stop, rows)
+        if final is None:
+            return 1
+        _publish(session, rec, args.task, final.stem, rows)
+    print(f"sctd record: {len(rows)} rows -> {final}", file=sys.stderr, flush=True)
     print(final, flush=True)
     return 0
+
+
+def _record_file(rec: Recorder, out_dir: Path, args: argparse.Namespace, stop: threading.Event,
+                 rows: list[list[float]]) -> Path | None:
+    """Record into a hidden part file, then link it to the next free ``demo_NNN.csv``
+    (None, and the part file removed, when it is too short for the learner)."""
+    fd, name = _mkstemp(out_dir)
+    tmp = Path(name)
+    with os.fdopen(fd, "w", newline="") as fh:
+        _record_rows(rec, fh, args, stop, rows)
+        fh.flush()
+        os.fsync(fh.fileno())
+    if len(rows) < MIN_ROWS:
+        tmp.unlink()
+        print(f"sctd record: only {len(rows)} rows (the learner needs {MIN_ROWS}); nothing written",
+              file=sys.stderr)
+        return None
+    return publish_final(tmp, out_dir)
+
+
+def _publish(session: zenoh.Session, rec: Recorder, task: str | None, name: str,
+             rows: list[list[float]]) -> None:
+    """The finished demonstration on ``sctd/<robot>/demos/<task>/<name>`` (a learner on
+    another host stores it); ``task``: the flag, else the scene's, else the object."""
+    assert rec.object_name is not None
+    task = task or rec.task or rec.object_name
+    key = rec.keys.demos(task, name)
+    session.put(key, codec.encode_demo(task, name, rec.object_name, rows),
+                congestion_control=zenoh.CongestionControl.BLOCK)
+    print(f"sctd record: published {key}", file=sys.stderr, flush=True)
+    time.sleep(LINGER)
 
 
 def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) -> bool:
@@ -207,14 +243,14 @@ def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) ->
     return not stop.is_set()
 
 
-def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: threading.Event) -> int:
+def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: threading.Event,
+                 out: list[list[float]]) -> None:
     """Write the header and one row per tick at ``--rate`` until ``stop`` or
     ``--duration``, skipping samples whose state has not advanced or that lie closer
-    than ``--min-distance`` to the last row; the number of rows."""
+    than ``--min-distance`` to the last row; each row written is appended to ``out``."""
     fh.write(COLUMNS + "\n")
     ticker = Ticker(1.0 / args.rate, spin=0.0)
     end = None if args.duration is None else time.monotonic() + args.duration
-    rows = 0
     t0 = last_t = None
     last_p = None
     while not stop.is_set():
@@ -233,11 +269,11 @@ def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: thre
         row = row_from_poses(t, pose_ee, pose_obj)
         if last_p is not None and args.min_distance > 0 and math.dist(row[1:4], last_p) < args.min_distance:
             continue
-        fh.write(format_row(row))
+        line = format_row(row)
+        fh.write(line)
         fh.flush()
-        rows += 1
+        out.append([float(x) for x in line.split(",")])  # as written: the file and the message agree
         last_t, last_p = t, row[1:4]
-    return rows
 
 
 def _mkstemp(out_dir: Path) -> tuple[int, str]:

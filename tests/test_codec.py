@@ -137,3 +137,42 @@ def test_payloads_over_the_size_limit_are_refused_before_decoding(decode, limit)
     with pytest.raises(codec.DecodeError) as e:
         decode(b"\xc1" * (limit + 1))  # not even msgpack: the size is checked first
     assert e.value.reason == "too_large"
+
+
+def _demo_rows(n=12):
+    return [[0.01 * k, 0.3 - 0.001 * k, 0.0, 0.03, 0.0, 0.0, 0.0, 1.0] for k in range(n)]
+
+
+def test_demo_round_trips():
+    msg = codec.decode_demo(codec.encode_demo("pour", "demo_003", "mug", _demo_rows()))
+    assert (msg.task, msg.name, msg.object) == ("pour", "demo_003", "mug")
+    assert msg.rows == _demo_rows()
+
+
+@pytest.mark.parametrize(("mutate", "reason", "detail"), [
+    (lambda d: d.update(task="a/b"), "bad_task", "key chunk"),
+    (lambda d: d.update(name=""), "bad_name", "key chunk"),
+    (lambda d: d.update(columns=["t", "x"]), "bad_columns", "expected"),
+    (lambda d: d.update(rows=_demo_rows(9)), "bad_rows", "at least 10"),
+    (lambda d: d["rows"][4].pop(), "bad_rows", "row 4: expected 8 numbers"),
+    (lambda d: d["rows"][5].__setitem__(2, math.nan), "bad_rows", "row 5: not all finite"),
+    (lambda d: d["rows"][6].__setitem__(0, 0.0), "bad_rows", "row 6: t 0.0 not after"),
+    (lambda d: d["rows"][7].__setitem__(7, 0.9), "bad_rows", "row 7: quaternion norm 0.900000"),
+    (lambda d: d["rows"][8].__setitem__(1, 1e6), "bad_rows", "row 8: position beyond"),
+    (lambda d: d["rows"][3].__setitem__(3, "x"), "bad_rows", "row 3: not all finite numbers"),
+])
+def test_a_malformed_demo_is_refused_naming_its_row(mutate, reason, detail):
+    doc = msgpack.unpackb(codec.encode_demo("pour", "d", "mug", _demo_rows()), raw=False)
+    mutate(doc)
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_demo(msgpack.packb(doc, use_bin_type=True))
+    assert e.value.reason == reason and detail in str(e.value), str(e.value)
+
+
+@given(st.binary(max_size=300))
+@settings(max_examples=300)
+def test_any_bytes_decode_as_a_demo_or_raise_decode_error(data):
+    try:
+        codec.decode_demo(data)
+    except codec.DecodeError:
+        pass

@@ -52,8 +52,11 @@ def test_record_until_sigint_against_a_fake_robot(tmp_path):
     ep = f"tcp/127.0.0.1:{port}"
     out = tmp_path / "demos"
     stop = threading.Event()
+    published: list[tuple[str, codec.DemoMsg]] = []
     with open_session(listen=[ep]) as s:
         pub_s, pub_o = s.declare_publisher(KEYS.state), s.declare_publisher(KEYS.objects("box"))
+        sub_d = s.declare_subscriber(KEYS.demos(), lambda m: published.append(
+            (str(m.key_expr), codec.decode_demo(m.payload.to_bytes()))))
 
         def robot() -> None:
             k = 0
@@ -85,8 +88,15 @@ def test_record_until_sigint_against_a_fake_robot(tmp_path):
             th.join()
             pub_s.undeclare()
             pub_o.undeclare()
+            sub_d.undeclare()
     demos = read_demos(out)
     assert [d.name for d in demos] == ["demo_000.csv", "demo_001.csv"]
+    # each finished one was also published, rows as written (no scene: task = the object)
+    assert [k for k, _ in published] == [KEYS.demos("box", "demo_000"), KEYS.demos("box", "demo_001")]
+    for (_, msg), d in zip(published, demos, strict=True):
+        assert (msg.task, msg.object) == ("box", "box")
+        np.testing.assert_array_equal(np.asarray(msg.rows)[:, 0], d.t)
+        np.testing.assert_array_equal(np.asarray(msg.rows)[:, 1:], d.poses)
     assert not list(out.glob(".*"))  # no partial files left
     for d in demos:
         assert d.t[0] == 0.0 and len(d) >= MIN_SAMPLES
@@ -100,14 +110,19 @@ def test_record_from_the_sim_with_the_announced_task_object(tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     sim = sctd("sim", "--scene", "pour", "--listen", ep, log=tmp_path / "sim.log")
+    published: list[str] = []
+    watch = open_session(connect=[ep])
+    watch.declare_subscriber(KEYS.demos(), lambda m: published.append(str(m.key_expr)))
     try:
         rec = sctd("record", "--out", str(tmp_path), "--duration", "1.0", "--connect", ep, "--wait", "60",
                    log=tmp_path / "rec.log")
         assert rec.p.wait(90) == 0, rec.output() + sim.output()
         rec.stop()
     finally:
+        watch.close()
         assert sim.stop() == 0, sim.output()
     assert "'mug'" in rec.output()
+    assert published == [KEYS.demos("pour", "demo_000")]  # the task the simulator announces
     demo = read_demo_csv(tmp_path / "demo_000.csv")
     assert demo.t[0] == 0.0 and len(demo) >= 50
     # the arm holds its start pose: bottle upright 0.3 m in front of the mug (mug x

@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-TARGETS = ("input", "state", "object", "target", "can", "bundle", "skill_yaml", "model_npz",
+TARGETS = ("input", "state", "object", "target", "demo", "can", "bundle", "skill_yaml", "model_npz",
            "model_json")
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -45,6 +45,9 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
         return [codec.encode_object(1, 1.0, pose)]
     if target == "target":
         return [codec.encode_target(1, 1.0, pose, "carry", "abc", 3)]
+    if target == "demo":
+        return [codec.encode_demo("pour", "demo_000", "mug",
+                                  [[0.01 * k, 0.3, 0.0, 0.03, 0.0, 0.0, 0.0, 1.0] for k in range(12)])]
     if target == "can":
         return [msgpack.packb({"v": 1, "frames": [[1.0, 0x80, False, 0, b""],
                                                   [1.0, 0x101, False, 8, b"\x01" * 8]]})]
@@ -68,11 +71,12 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
 def _harness(target: str) -> Callable[[bytes], None]:
     """``test_one_input(data)`` for a target: its documented error is caught, anything
     else escapes (a crash)."""
-    if target in ("input", "state", "object", "target"):
+    if target in ("input", "state", "object", "target", "demo"):
         from ..runtime import codec
 
         decode = {"input": codec.decode_input, "state": codec.decode_state,
-                  "object": codec.decode_object, "target": codec.decode_target}[target]
+                  "object": codec.decode_object, "target": codec.decode_target,
+                  "demo": codec.decode_demo}[target]
 
         def one(data: bytes) -> None:
             try:

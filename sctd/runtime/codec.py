@@ -79,6 +79,10 @@ class Keys:
     def scene(self) -> str:
         return f"{self.prefix}/scene"
 
+    def demos(self, task: str = "*", name: str = "*") -> str:
+        """``sctd/<robot>/demos/<task>/<name>``: finished demonstrations (the recorder)."""
+        return f"{self.prefix}/demos/{task}/{name}"
+
 
 def pack(msg: dict[str, Any]) -> bytes:
     """msgpack-encode a message map, adding the wire version."""
@@ -264,3 +268,72 @@ def decode_target(data: bytes) -> dict[str, Any]:
     _stamp(obj)
     _pose(obj)
     return obj
+
+
+# --- demonstrations (sctd/<robot>/demos/<task>/<name>) ----------------------------------
+
+DEMO_COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
+MAX_DEMO_BYTES = 16 * 1024 * 1024  # ~200k rows: over half an hour at 100 Hz
+MIN_DEMO_ROWS = 10  # what the learner needs (sctd.learn.demos.MIN_SAMPLES)
+DEMO_QUAT_TOLERANCE = 1e-3  # as the learner's CSV reader
+
+
+class DemoMsg(NamedTuple):
+    task: str
+    name: str
+    object: str
+    rows: list[list[float]]  # t, x, y, z, qx, qy, qz, qw: the ee in the object's frame
+
+
+def _chunk(obj: dict, key: str) -> str:
+    x = obj.get(key)
+    if not isinstance(x, str) or not x or any(c in x for c in "/*$?#"):
+        raise DecodeError(f"bad_{key}", f"expected a non-empty key chunk, got {repr(x)[:40]}")
+    return x
+
+
+def encode_demo(task: str, name: str, object_name: str, rows: list[list[float]]) -> bytes:
+    """A finished demonstration: rows ``t, x, y, z, qx, qy, qz, qw`` (the end-effector in
+    the task object's frame, ``t`` from 0, strictly increasing)."""
+    return pack({"task": task, "name": name, "object": object_name, "columns": list(DEMO_COLUMNS),
+                 "rows": [[float(x) for x in r] for r in rows]})
+
+
+def decode_demo(data: bytes) -> DemoMsg:
+    """``sctd/<robot>/demos/<task>/<name>``: task, name, object, columns (exactly
+    :data:`DEMO_COLUMNS`) and at least :data:`MIN_DEMO_ROWS` rows of 8 finite numbers,
+    ``t`` strictly increasing, quaternions unit. A bad row is named by its index
+    (``bad_rows: row 12: ...``)."""
+    _size(data, MAX_DEMO_BYTES)
+    obj = unpack_map(data)
+    task, name, object_name = _chunk(obj, "task"), _chunk(obj, "name"), _chunk(obj, "object")
+    if obj.get("columns") != list(DEMO_COLUMNS):
+        raise DecodeError("bad_columns", f"expected {list(DEMO_COLUMNS)}")
+    rows = obj.get("rows")
+    if not isinstance(rows, list) or len(rows) < MIN_DEMO_ROWS:
+        raise DecodeError("bad_rows", f"expected a list of at least {MIN_DEMO_ROWS} rows")
+    out = []
+    last_t = -math.inf
+    for k, row in enumerate(rows):
+        problem = _demo_row_problem(row, last_t)
+        if problem:
+            raise DecodeError("bad_rows", f"row {k}: {problem}")
+        out.append(list(map(float, row)))
+        last_t = row[0]
+    return DemoMsg(task, name, object_name, out)
+
+
+def _demo_row_problem(row: Any, last_t: float) -> str:
+    """What is wrong with one demonstration row ("" when nothing is)."""
+    if not isinstance(row, list | tuple) or len(row) != len(DEMO_COLUMNS):
+        return f"expected {len(DEMO_COLUMNS)} numbers"
+    if not _NUMBERS.issuperset(map(type, row)) or not _finite(list(row)):
+        return "not all finite numbers"
+    if row[0] <= last_t:
+        return f"t {row[0]!r} not after the previous row's {last_t!r}"
+    qn = math.sqrt(sum(q * q for q in row[4:]))
+    if abs(qn - 1.0) > DEMO_QUAT_TOLERANCE:
+        return f"quaternion norm {qn:.6f} is not unit (tolerance {DEMO_QUAT_TOLERANCE})"
+    if max(abs(row[1]), abs(row[2]), abs(row[3])) > MAX_POSITION:
+        return f"position beyond {MAX_POSITION:g} m"
+    return ""
