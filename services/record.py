@@ -43,7 +43,7 @@ from sctd.runtime.codec import DEFAULT_ROBOT
 from sctd.runtime.timing import Ticker
 from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
-COLUMNS = "t,x,y,z,qx,qy,qz,qw"
+COLUMNS = ",".join(codec.DEMO_COLUMNS)  # the CSV header: the learner's columns (sctd.learn.demos)
 MIN_ROWS = codec.MIN_DEMO_ROWS  # sctd.learn.demos.MIN_SAMPLES: the learner refuses shorter ones
 # s the session stays open after the demonstration is put, so that it leaves this
 # process before the session closes (Zenoh may drop what is still queued then)
@@ -205,16 +205,18 @@ def _record_file(rec: Recorder, out_dir: Path, args: argparse.Namespace, stop: t
     (None, and the part file removed, when it is too short for the learner)."""
     fd, name = _mkstemp(out_dir)
     tmp = Path(name)
-    with os.fdopen(fd, "w", newline="") as fh:
-        _record_rows(rec, fh, args, stop, rows)
-        fh.flush()
-        os.fsync(fh.fileno())
-    if len(rows) < MIN_ROWS:
-        tmp.unlink()
-        print(f"sctd record: only {len(rows)} rows (the learner needs {MIN_ROWS}); nothing written",
-              file=sys.stderr)
-        return None
-    return publish_final(tmp, out_dir)
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            _record_rows(rec, fh, args, stop, rows)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if len(rows) >= MIN_ROWS:
+            return publish_final(tmp, out_dir)
+    finally:
+        tmp.unlink(missing_ok=True)  # linked to its final name, or not to be kept
+    print(f"sctd record: only {len(rows)} rows (the learner needs {MIN_ROWS}); nothing written",
+          file=sys.stderr)
+    return None
 
 
 def _publish(session: zenoh.Session, rec: Recorder, task: str | None, name: str,

@@ -3,17 +3,21 @@ written complete or not at all, numbered without overwriting."""
 
 from __future__ import annotations
 
+import argparse
 import math
 import signal
 import threading
 import time
 
 import numpy as np
+import pytest
 
 from sctd import se3
+from sctd.learn import demos
 from sctd.learn.demos import MIN_SAMPLES, read_demo_csv, read_demos
 from sctd.runtime import codec
 from sctd.runtime.zsession import open_session
+from sctd_services import record
 from sctd_services.record import MIN_ROWS, publish_final, row_from_poses
 from tests.conftest import free_port, port_is_free, sctd, wait_for
 
@@ -21,8 +25,28 @@ KEYS = codec.Keys("edan")
 YAW180 = [0.0, 0.0, 1.0, 0.0]  # object x towards the robot (world -x), z up
 
 
-def test_min_rows_matches_the_learner():
-    assert MIN_ROWS == MIN_SAMPLES
+def test_min_rows_and_columns_match_the_learner():
+    """The recorder's CSV and the demonstration message are what the learner reads (the
+    wire codec and the learner are independent layers, so each has its constants)."""
+    assert MIN_ROWS == codec.MIN_DEMO_ROWS == MIN_SAMPLES
+    assert codec.DEMO_COLUMNS == demos.COLUMNS
+    assert codec.DEMO_QUAT_TOLERANCE == demos.QUAT_TOLERANCE
+
+
+def test_a_failed_recording_leaves_no_part_file(tmp_path, monkeypatch):
+    """An error while recording (any exception out of the row loop) removes the hidden
+    part file: only complete demonstrations ever appear in the folder."""
+    class Boom(Exception):
+        pass
+
+    def failing(*a, **k):
+        raise Boom
+
+    monkeypatch.setattr(record, "_record_rows", failing)
+    args = argparse.Namespace(rate=100.0, min_distance=0.0, duration=None)
+    with pytest.raises(Boom):
+        record._record_file(None, tmp_path, args, threading.Event(), [])
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_row_is_the_ee_in_the_object_frame():

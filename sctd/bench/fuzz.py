@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -197,6 +198,8 @@ def main_fuzz(args: argparse.Namespace) -> int:
         return 2
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="sctd-fuzz-"))
     results = [run_target(t, args.runs, Path(args.skills), work) for t in (args.target or TARGETS)]
+    if not args.keep and all(r["ok"] for r in results):
+        shutil.rmtree(work)  # corpora of a clean run; a crash's inputs are kept and named
     if args.json:
         print(json.dumps(results, indent=2))
     else:

@@ -348,7 +348,7 @@ class Controller:
         # bounded by mag * speed * dt, constraint corrections included.
         n = len(u)
         mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
-        if mag <= 0.0:
+        if not mag > 0.0:  # zero (or, fail-closed, NaN): no step
             return
         mag = min(1.0, mag)
         F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),

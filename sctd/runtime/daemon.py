@@ -144,11 +144,8 @@ class _Window:
 
     start: float
     state: str
-    next_status: float = 0.0
-    recent_start: float = 0.0
-
-    def __post_init__(self) -> None:
-        self.next_status = self.recent_start = self.start
+    next_status: float
+    recent_start: float
 
 
 @contextmanager
@@ -420,7 +417,8 @@ class Daemon:
         """The tick loop: drain ahead of each deadline, step at it, account after it."""
         assert self._publisher is not None
         send = self._publisher.queue.put
-        window = _Window(time.monotonic(), self.controller.engine.state)
+        t0 = time.monotonic()
+        window = _Window(t0, self.controller.engine.state, next_status=t0, recent_start=t0)
         while not self.stop_event.is_set():
             ahead = ticker.due - DRAIN_LEAD - time.monotonic()
             if ahead > 0.0:
