@@ -83,6 +83,21 @@ class Keys:
         """``sctd/<robot>/demos/<task>/<name>``: finished demonstrations (the recorder)."""
         return f"{self.prefix}/demos/{task}/{name}"
 
+    @property
+    def learner(self) -> str:
+        """``sctd/<robot>/learner``: the learner service's training queryable."""
+        return f"{self.prefix}/learner"
+
+    @property
+    def learner_status(self) -> str:
+        """``sctd/<robot>/learner/status``: what the learner stored, refused, is doing."""
+        return f"{self.prefix}/learner/status"
+
+    @property
+    def sim_reset(self) -> str:
+        """``sctd/<robot>/sim/reset``: the simulator's scene reset (a sim-only queryable)."""
+        return f"{self.prefix}/sim/reset"
+
 
 def pack(msg: dict[str, Any]) -> bytes:
     """msgpack-encode a message map, adding the wire version."""
