@@ -87,6 +87,9 @@ COMMANDS: dict[str, Command] = {
                    "add_service_arguments", "run"),
     "record": Command("record a demonstration (ee in the task object's frame) as CSV",
                       "sctd_services.record", "add_arguments", "run"),
+    "teach": Command("show a task on the simulated arm N times, varied as a person would, and "
+                     "record the demonstrations that succeed", "sctd.cli.teach",
+                     "add_teach_arguments", "main_teach"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 
