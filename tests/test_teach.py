@@ -4,6 +4,7 @@ shared-control daemon commands the robot."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 
@@ -78,7 +79,7 @@ def _samples(motion, n: int = 400) -> np.ndarray:
 
 def _peak_speeds(T: np.ndarray, dt: float) -> tuple[float, float]:
     v = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1) / dt
-    w = [se3.angle_between3(A[:3, :3], B[:3, :3]) / dt for A, B in zip(T[:-1], T[1:], strict=True)]
+    w = [se3.angle_between3(A[:3, :3], B[:3, :3]) / dt for A, B in itertools.pairwise(T)]
     return float(v.max()), float(max(w))
 
 
