@@ -219,11 +219,26 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
     except TeachingError as e:
         attempt.reason = attempt.reason or str(e)
     finally:
-        if plan.task == "drawer":  # let go of the handle (see the module doc), whatever happened
-            with contextlib.suppress(TeachingError):
-                teacher.reset_scene(options.scene)
+        with contextlib.suppress(TeachingError):  # whatever happened: leave the task
+            _leave(teacher, plan, geometry, options, speeds)
     attempt.elapsed = time.monotonic() - t0
     return attempt
+
+
+def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: TeachOptions,
+           speeds: Speeds) -> None:
+    """After an attempt, unrecorded: the bottle upright about its opening if it is still
+    tilted (an attempt that ended early); the drawer's handle let go by resetting the
+    scene (see the module doc)."""
+    if plan.task == "drawer":
+        teacher.reset_scene(options.scene)
+        return
+    T_world_obj = teacher.object_pose()
+    T_obj_ee = se3.invert_transform(T_world_obj) @ teacher.target()
+    back = upright(T_obj_ee, geometry, speeds)
+    if back.angle > 0.05:
+        teacher.phase = "upright"
+        teacher.follow(back, T_world_obj)
 
 
 def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeometry,
