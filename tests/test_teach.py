@@ -215,14 +215,22 @@ def test_teach_pour_keeps_two_and_discards_the_spilling_one(tmp_path):
 
 
 def test_teach_drawer_joins_a_running_simulator(tmp_path):
-    """`sctd teach --scene drawer --connect EP` joins a running `sctd sim`; the mistaken
-    attempt 1 never grasps the handle and is discarded; the two kept ones open the drawer
-    past the success opening (the pull is +x in the closed handle's frame)."""
+    """`sctd teach --scene drawer --connect EP` joins a running `sctd sim` (one for pour is
+    refused there, exit 2); the mistaken attempt 1 never grasps the handle and is
+    discarded; the two kept ones open the drawer past the success opening (the pull is +x
+    in the closed handle's frame)."""
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     sim = sctd("sim", "--scene", "drawer", "--listen", ep, log=tmp_path / "sim.log")
     out = tmp_path / "taught"
     try:
+        wrong = sctd("teach", "--scene", "pour", "--out", str(out), "--connect", ep,
+                     log=tmp_path / "wrong.log")
+        try:
+            assert wrong.p.wait(120) == 2, wrong.output()
+        finally:
+            wrong.stop()
+        assert "runs scene 'drawer', not 'pour'" in wrong.output()
         with open_session(connect=[ep]) as s:
             watch = _Demos(s)
             proc = sctd("teach", "--scene", "drawer", "--demos", "2", "--mistake", "1", "--out",

@@ -30,6 +30,7 @@ from sctd_services.teach import (
     CommanderConflict,
     SimulatorLost,
     TeachOptions,
+    WrongScene,
     describe_outcome,
     teach,
 )
@@ -64,7 +65,7 @@ def main_teach(args: argparse.Namespace) -> int:
         try:
             s = open_simulator(stack, args, options)
             kept = teach_demos(s, options)
-        except CommanderConflict as e:
+        except (CommanderConflict, WrongScene) as e:
             return fail("teach", str(e), EXIT_USAGE)
         except SimulatorLost as e:
             return fail("teach", f"{e}{_log_hint(args)}", EXIT_FAILED)

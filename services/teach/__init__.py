@@ -25,7 +25,14 @@ from .plan import (
     plan_demonstration,
     scene_geometry,
 )
-from .stream import CommanderConflict, SimulatorLost, StreamLimits, Teacher, TeachingError
+from .stream import (
+    CommanderConflict,
+    SimulatorLost,
+    StreamLimits,
+    Teacher,
+    TeachingError,
+    WrongScene,
+)
 
 __all__ = [
     "MISTAKE_OFF_AXIS",
@@ -43,6 +50,7 @@ __all__ = [
     "TeachingError",
     "TipTurn",
     "Variation",
+    "WrongScene",
     "describe_outcome",
     "facing",
     "judge",

@@ -41,7 +41,7 @@ from sctd.runtime.codec import DEFAULT_ROBOT
 from ..record import Recorder, Take
 from .motion import Motion, move, task_motions, upright
 from .plan import TASK_OBJECT, DemoPlan, SceneGeometry, Speeds, Variation, plan_demonstration, scene_geometry
-from .stream import SimulatorLost, StreamLimits, Teacher, TeachingError
+from .stream import SimulatorLost, StreamLimits, Teacher, TeachingError, WrongScene
 
 Array = NDArray[np.float64]
 COMMANDER_WINDOW = 1.0  # s of listening for another commander's status before the first target
@@ -151,8 +151,9 @@ def teach(session: zenoh.Session, options: TeachOptions,
         A shared-control daemon commands the robot (before the first target or later;
         from then on no target is published).
     SimulatorLost
-        No simulator within ``options.wait``, one running another scene, or its state
-        stopped.
+        No simulator within ``options.wait``, or its state stopped.
+    WrongScene
+        The simulator runs another scene.
     """
     geometry = scene_geometry(options.scene)
     variation, speeds = variation or Variation(), speeds or Speeds()
@@ -175,26 +176,33 @@ def teach(session: zenoh.Session, options: TeachOptions,
 
 
 def _wait_for_simulator(teacher: Teacher, rec: Recorder, options: TeachOptions) -> None:
-    """Wait for the simulator's state, task object and scene, check its scene, and listen
-    COMMANDER_WINDOW s longer for another commander (its status is 20 Hz by default)."""
+    """Wait for the simulator's state, task object and scene (refusing one that runs
+    another scene as soon as it says so), and listen COMMANDER_WINDOW s longer for
+    another commander (its status is 20 Hz by default)."""
     give_up = time.monotonic() + options.wait
     while rec.sample() is None or rec.scene is None:
         teacher.check_commander()
+        _check_scene(rec, options)
         if time.monotonic() > give_up:
             what = "state" if rec.state is None else "scene" if rec.scene is None else \
                 f"object {rec.object_name}"
             raise SimulatorLost(f"no simulator on sctd/{options.robot}: no {what} within "
                                 f"{options.wait:g} s")
         time.sleep(0.02)
-    running = rec.scene.get("scene")
-    if running != options.scene:
-        raise SimulatorLost(f"the simulator on sctd/{options.robot} runs scene {running!r}, not "
-                            f"{options.scene!r}")
+    _check_scene(rec, options)
     end = time.monotonic() + COMMANDER_WINDOW
     while time.monotonic() < end:
         teacher.check_commander()
         time.sleep(0.02)
     teacher.check_commander()
+
+
+def _check_scene(rec: Recorder, options: TeachOptions) -> None:
+    """WrongScene when the simulator announces another scene than ``options.scene``."""
+    running = rec.scene.get("scene") if rec.scene is not None else None
+    if running is not None and running != options.scene:
+        raise WrongScene(f"the simulator on sctd/{options.robot} runs scene {running!r}, not "
+                         f"{options.scene!r}")
 
 
 def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeometry, out: Path,
@@ -214,7 +222,7 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
                 attempt.kept, attempt.path, attempt.key = take.path is not None, take.path, take.key
                 if take.path is None:
                     attempt.reason = f"only {attempt.rows} rows recorded"
-    except SimulatorLost:
+    except (SimulatorLost, WrongScene):
         raise
     except TeachingError as e:
         attempt.reason = attempt.reason or str(e)

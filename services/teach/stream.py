@@ -55,8 +55,11 @@ class TeachingError(RuntimeError):
 
 
 class SimulatorLost(TeachingError):
-    """No simulator (state, task object, scene) answers, or it runs another scene: the
-    session cannot go on."""
+    """No simulator (state, task object, scene) answers: the session cannot go on."""
+
+
+class WrongScene(TeachingError):
+    """The simulator runs another scene than the one to teach."""
 
 
 @dataclass(frozen=True)
