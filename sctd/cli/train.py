@@ -111,6 +111,10 @@ def main_train(args: argparse.Namespace) -> int:
         for reply in replies:
             if reply.ok is None:
                 body = reply_body(reply.err.payload.to_bytes()) if reply.err is not None else {}
+                if body.get("error") == "Timeout":  # Zenoh's own reply when the query timed out
+                    return fail("train", f"no reply within {args.timeout:g} s: the learner is still "
+                                         f"working and will finish (see {keys.learner_status} and "
+                                         "sctd skills); give a longer --timeout", EXIT_FAILED)
                 return fail("train", f"refused by the learner: {body.get('error', body)}")
             return _print_reply(reply_body(reply.ok.payload.to_bytes()), args.json, args.swap)
     return fail("train", f"no learner answered on {keys.learner} within {args.timeout:g} s "

@@ -50,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the service until SIGINT/SIGTERM; exit code 2 for bad flags."""
     from .check import trial_pool
-    from .service import Learner, store_path
+    from .service import Learner, Stopped, store_path
 
     try:
         settings = CheckSettings(args.trials, args.floor, args.tolerance, args.seed, args.jobs)
@@ -62,16 +62,26 @@ def run(args: argparse.Namespace) -> int:
         os.nice(args.nice)
     logging.basicConfig(level=logging.INFO, format="sctd learner: %(message)s", stream=sys.stderr)
     stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *a: stop.set())
-    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    learner: list[Learner] = []
+
+    def on_signal(*_: object) -> None:
+        stop.set()
+        if learner and learner[0].busy is not None:
+            raise Stopped  # in the service's thread: the request is answered, then we exit
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     pool = trial_pool(settings.jobs) if settings.jobs > 1 else None
     try:
         with session_from_args(args) as session, Learner(session, store, args.robot, settings, pool) as ln:
+            learner.append(ln)
             tasks = ", ".join(f"{t} ({n})" for t, n in store.tasks().items()) or "none yet"
             print(f"sctd learner: store {store.root}: demonstrations of {tasks}, "
                   f"{len(store.skills())} skill(s); answering {ln.keys.learner}",
                   file=sys.stderr, flush=True)
             ln.serve(stop)
+    except Stopped:
+        print("sctd learner: stopped while serving a request", file=sys.stderr)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)

@@ -10,11 +10,12 @@ import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import Executor, ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from sctd.skill.catalog import StoredSkill
 from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user.intent import INTENTS
@@ -56,14 +57,16 @@ def trial_pool(jobs: int) -> Executor:
     return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent)
 
 
-def evaluation(path: Path, task: str, settings: CheckSettings, seed: int, pool: Executor | None,
+def evaluation(stored: StoredSkill, task: str, settings: CheckSettings, seed: int,
+               pool: Executor | None,
                progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
-    """``sctd eval --lockstep`` of the skill file ``path`` on ``task``: the figures of
+    """``sctd eval --lockstep`` of a stored skill on ``task``: the figures of
     :func:`sctd_services.eval.evaluate.summarise` without the per-trial series, and the
     table's rows."""
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="sctd-learner-check-") as work:
-        ents = entries([str(path)], baseline=False, workdir=Path(work))
+        ents = [replace(e, label=stored.ref)
+                for e in entries([str(stored.path)], baseline=False, workdir=Path(work))]
         [res] = evaluate(ents, TaskSpec(task), settings.trials, seed, jobs=settings.jobs,
                          logdir=Path(work) / "logs", progress=progress, pool=pool)
     res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "spill")}

@@ -46,9 +46,17 @@ from .request import Request, RequestError, parse_request, request_map
 from .store import Store
 
 log = logging.getLogger("sctd.learner")
+
+
+class Stopped(BaseException):
+    """Raised in the service's thread by SIGINT/SIGTERM while a request is served: the
+    request gets an error reply and the learner exits (a signal while idle just ends
+    the loop)."""
+
 STATUS_PERIOD = 1.0  # s between the learner's state messages
 DAEMON_TIMEOUT = 3.0  # s to wait for the daemon's skill summary
 SWAP_TIMEOUT = 40.0  # s to wait for a swap's reply (the daemon validates within 30 s)
+PER_SAMPLE = ("labels", "field_labels", "graph_labels")  # report keys with a label per sample
 
 
 def _jsonable(obj: Any) -> Any:
@@ -71,10 +79,13 @@ class _Outcome:
     daemon: dict[str, Any] | None
 
     def reply(self) -> dict[str, Any]:
+        """The reply map; the report without its per-sample labels (the record on disk
+        keeps them)."""
         s = self.stored
+        report = {k: v for k, v in self.report.items() if k not in PER_SAMPLE}
         return {"id": s.id, "name": s.name, "ref": s.ref, "passed": self.passed,
                 "swapped": self.swapped,
-                "reason": self.reason, "summary": self.summary, "report": self.report,
+                "reason": self.reason, "summary": self.summary, "report": report,
                 "evaluation": self.evaluation, "timings": self.timings, "daemon": self.daemon,
                 "path": str(s.path)}
 
@@ -104,6 +115,7 @@ class Learner:
         self.pool = pool
         self.counters: Counter[str] = Counter()
         self.busy: dict[str, Any] | None = None
+        self.stage = "idle"  # what the service's thread is doing, for status and errors
         self._stack = contextlib.ExitStack()
         self._lock = threading.Lock()
 
@@ -114,8 +126,25 @@ class Learner:
             stack.enter_context(s.declare_subscriber(f"{self.keys.prefix}/demos/**", self._on_demo))
             self.queries = stack.enter_context(
                 s.declare_queryable(self.keys.learner, zenoh.handlers.FifoChannel(64)))
+            quit_beat = threading.Event()
+            beat = threading.Thread(target=self._heartbeat, args=(quit_beat,), name="learner-status",
+                                    daemon=True)
+            beat.start()
+            stack.callback(beat.join)
+            stack.callback(quit_beat.set)
             self._stack = stack.pop_all()
         return self
+
+    def _heartbeat(self, quit: threading.Event) -> None:
+        """The learner's state once a second: ready or busy (with what), the store."""
+        while not quit.is_set():
+            try:
+                self.say("state", state="busy" if self.busy else "ready", doing=self.stage,
+                         store=str(self.store.root), tasks=self.store.tasks(),
+                         skills=len(self.store.skills()), counters=dict(self.counters))
+            except Exception:  # a store being written or a closing session: next second
+                log.debug("status failed", exc_info=True)
+            quit.wait(STATUS_PERIOD)
 
     def __exit__(self, *exc: object) -> None:
         self._stack.close()
@@ -156,14 +185,8 @@ class Learner:
     # --- requests (the service's thread) ----------------------------------------------
 
     def serve(self, stop: threading.Event) -> None:
-        """Answer requests in order until ``stop``; a state message once a second."""
-        next_status = 0.0
+        """Answer requests in order until ``stop``."""
         while not stop.is_set():
-            now = time.monotonic()
-            if now >= next_status:
-                self.say("state", state="ready", store=str(self.store.root), tasks=self.store.tasks(),
-                         skills=len(self.store.skills()), counters=dict(self.counters))
-                next_status = now + STATUS_PERIOD
             query = self.queries.try_recv()
             if query is None:
                 stop.wait(0.02)
@@ -185,6 +208,9 @@ class Learner:
             log.exception("training request failed")
             self._refuse(query, f"{type(e).__name__}: {e}")
             return
+        except Stopped:
+            self._refuse(query, f"the learner was stopped while {self.stage}")
+            raise
         query.reply(self.keys.learner, codec.pack(_jsonable(out.reply())))
 
     def _refuse(self, query: zenoh.Query, error: str) -> None:
@@ -199,13 +225,17 @@ class Learner:
         t0 = time.monotonic()
         self.busy = {"task": req.task, "method": req.method, "since": time.time()}
         try:
+            self.stage = f"training {req.task} ({req.method})"
             stored, skill, report = self._train(req)
             t1 = time.monotonic()
+            self.stage = f"checking {stored.ref}"
             ev, passed, reason = self._check(req, stored)
             t2 = time.monotonic()
+            self.stage = f"swapping {stored.ref} in"
             swapped, reason, daemon = self._swap(stored, req, passed, reason)
         finally:
             self.busy = None
+            self.stage = "idle"
         t3 = time.monotonic()
         timings = {"train_s": round(t1 - t0, 3), "check_s": round(t2 - t1, 3),
                    "swap_s": round(t3 - t2, 3), "total_s": round(t3 - t0, 3)}
@@ -249,7 +279,7 @@ class Learner:
         if req.task not in TASKS:
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
-        ev = evaluation(stored.path, req.task, self.settings, seed, self.pool,
+        ev = evaluation(stored, req.task, self.settings, seed, self.pool,
                         lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n))
         rec = self.store.update_record(stored.id, {"evaluation": {
             **stored.record.get("evaluation", {}), req.task: ev}})
