@@ -14,8 +14,7 @@ from typing import Any
 
 import yaml
 
-from ..runtime import codec
-from ..runtime.client import reply_body
+from ..runtime import client, codec
 from ..runtime.zsession import add_zenoh_arguments, session_from_args
 from .errors import EXIT_FAILED, EXIT_OK, fail
 
@@ -47,6 +46,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT,
                    help="s to wait for the learner's reply (default %(default)s; training and the "
                         "check take tens of seconds)")
+    p.add_argument("--find", type=float, default=client.FIND,
+                   help="s to wait for the learner to be found before giving up (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print the reply as JSON on stdout")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     add_zenoh_arguments(p)
@@ -107,18 +108,18 @@ def main_train(args: argparse.Namespace) -> int:
             print(f"sctd train: {line}", file=sys.stderr, flush=True)
 
     with session_from_args(args) as session, session.declare_subscriber(keys.learner_status, on_status):
-        replies = session.get(keys.learner, payload=codec.pack(req), timeout=args.timeout)
-        for reply in replies:
-            if reply.ok is None:
-                body = reply_body(reply.err.payload.to_bytes()) if reply.err is not None else {}
-                if body.get("error") == "Timeout":  # Zenoh's own reply when the query timed out
-                    return fail("train", f"no reply within {args.timeout:g} s: the learner is still "
-                                         f"working and will finish (see {keys.learner_status} and "
-                                         "sctd skills); give a longer --timeout", EXIT_FAILED)
-                return fail("train", f"refused by the learner: {body.get('error', body)}")
-            return _print_reply(reply_body(reply.ok.payload.to_bytes()), args.json, args.swap)
-    return fail("train", f"no learner answered on {keys.learner} within {args.timeout:g} s "
-                         "(is sctd learner running on this robot prefix?)", EXIT_FAILED)
+        got = client.query(session, keys.learner, codec.pack(req), args.timeout, find=args.find)
+    if got is None:
+        return fail("train", f"no learner answered on {keys.learner} (none found within {args.find:g} s: "
+                             "is sctd learner running on this robot prefix?)", EXIT_FAILED)
+    ok, body = got
+    if ok:
+        return _print_reply(body, args.json, args.swap)
+    if body.get("error") == "Timeout":  # Zenoh's own reply when the query timed out
+        return fail("train", f"no reply within {args.timeout:g} s: the learner is still working and "
+                             f"will finish (see {keys.learner_status} and sctd skills); give a longer "
+                             "--timeout", EXIT_FAILED)
+    return fail("train", f"refused by the learner: {body.get('error', body)}")
 
 
 def _print_reply(body: dict[str, Any], as_json: bool, swap: bool) -> int:

@@ -301,7 +301,7 @@ class Learner:
 
     def daemon_summary(self) -> dict[str, Any] | None:
         """The daemon's active skill summary, or None when no daemon answers."""
-        return client.active_skill(self.session, self.keys, DAEMON_TIMEOUT)
+        return client.active_skill(self.session, self.keys, DAEMON_TIMEOUT, find=1.0)
 
     def _swap(self, stored: StoredSkill, req: Request, passed: bool,
               reason: str) -> tuple[bool, str, dict[str, Any] | None]:
