@@ -110,6 +110,9 @@ def test_taught_demonstrations_are_stored_trained_checked_and_swapped(tmp_path, 
     assert (rej["name"], rej["reason"], rej["row"]) == ("bad", "bad_rows", 1)
     assert sorted(p.stem for p in (store / "demos" / "drawer").glob("*.csv")) == names  # bad: not stored
 
+    rc, _, out = _train(tmp_path, ep, "--param", "smoothnes=0.1", log="typo.log")
+    assert rc == 2 and "refused by the learner: params.smoothnes: not a hyperparameter" in out, out
+
     rc, reply, out = _train(tmp_path, ep)
     assert rc == 0 and reply["swapped"] and reply["passed"], out + procs["learner"].output()
     assert reply["evaluation"]["trials"] == 2 and reply["evaluation"]["successes"] >= 1
@@ -161,3 +164,12 @@ def test_kill_9_while_checking_leaves_the_daemon_ticking(tmp_path, loop):
         assert not list((store / "skills").glob(".*"))  # nothing half-written is left
     finally:
         client.stop()
+
+
+def test_train_without_a_learner_says_so(tmp_path):
+    port = free_port()
+    p = sctd("train", "--task", "pour", "--method", "vf", "--find", "1", "--listen",
+             f"tcp/127.0.0.1:{port}", log=tmp_path / "train.log")
+    assert p.p.wait(60) == 1
+    p.stop()
+    assert "no learner answered on sctd/edan/learner (none found within 1 s" in p.output()
