@@ -20,6 +20,11 @@ learner on another host gets it.
 
 Works against any robot that speaks the wire contract; with ``sctd sim`` the object
 defaults to the scene's task object (``task_object`` on the scene key).
+
+As a library (``sctd teach`` records with it): a :class:`Recorder` holds the newest
+state, object poses and scene message; each :class:`Take` on it is one demonstration,
+started and stopped, then kept (the file and the message, as ``sctd record`` makes them)
+or discarded (nothing written, nothing published).
 """
 
 from __future__ import annotations
@@ -33,7 +38,7 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import zenoh
 
@@ -89,15 +94,21 @@ class Recorder:
     robot : str
     object_name : str or None
         None: take the ``task_object`` announced on the scene key.
+    task : str or None
+        The task its demonstrations are published under; None: the scene the simulator
+        announces (``pour``, ``drawer``), else the object's name.
     """
 
-    def __init__(self, session: zenoh.Session, robot: str, object_name: str | None) -> None:
+    def __init__(self, session: zenoh.Session, robot: str, object_name: str | None,
+                 task: str | None = None) -> None:
         self.session = session
         self.keys = codec.Keys(robot)
         self.object_name = object_name
         self.state: codec.StateMsg | None = None
         self.objects: dict[str, list[float]] = {}
-        self.task: str | None = None  # the scene's name (pour, drawer), as the sim announces it
+        self._task = task
+        self.scene_name: str | None = None  # as the simulator announces it (pour, drawer)
+        self.scene: dict[str, Any] | None = None  # the newest scene message (outcome, health)
         self.dropped = 0
         self._subs = contextlib.ExitStack()  # the subscribers, while entered
 
@@ -133,12 +144,19 @@ class Recorder:
             msg = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
             return
-        task = msg.get("scene")
-        if isinstance(task, str) and task:
-            self.task = task
+        self.scene = msg
+        scene = msg.get("scene")
+        if isinstance(scene, str) and scene:
+            self.scene_name = scene
         name = msg.get("task_object")
         if self.object_name is None and isinstance(name, str) and name:
             self.object_name = name
+
+    @property
+    def task(self) -> str | None:
+        """The task demonstrations are published under: the given one, else the scene's,
+        else the object's name (None while neither is known)."""
+        return self._task or self.scene_name or self.object_name
 
     def sample(self) -> tuple[float, list[float], list[float]] | None:
         """(state stamp, ee pose, object pose), or None until both have arrived."""
@@ -147,6 +165,149 @@ class Recorder:
         if st is None or obj is None:
             return None
         return st.stamp, st.pose, obj
+
+
+class Take:
+    """One demonstration being recorded, then kept or discarded.
+
+    Rows sampled from a :class:`Recorder` go to a hidden ``.demo-*.part`` file in
+    ``out_dir`` (flushed as they are written). :meth:`keep` syncs it, links it to the next
+    free ``demo_NNN.csv`` and publishes it on ``sctd/<robot>/demos/<task>/<name>``;
+    :meth:`discard` removes it and publishes nothing. A context manager: leaving it
+    without :meth:`keep` (an error midway included) discards, so a demonstration file
+    only ever appears complete::
+
+        with Take(rec, out_dir) as take:
+            take.start()            # sampled in a background thread
+            ...                     # the demonstration
+            take.stop()
+            path = take.keep() if it_went_well else take.discard()
+
+    (``sctd record`` calls :meth:`record` instead, which samples in the calling thread.)
+
+    Parameters
+    ----------
+    rec : Recorder
+        Entered (subscribed); its object must be known when sampling starts.
+    out_dir : Path
+        Folder of demonstrations (exists).
+    rate : float
+        Sampling rate, Hz.
+    min_distance : float
+        Skip samples closer than this (m, ee position) to the last row.
+    Attributes
+    ----------
+    rows : list of list of float
+        The rows as written (``t, x, y, z, qx, qy, qz, qw``), so the file and the
+        message agree.
+    path : Path or None
+        The kept file.
+    key : str or None
+        The key it was published on.
+    """
+
+    def __init__(self, rec: Recorder, out_dir: Path, rate: float = 100.0,
+                 min_distance: float = 0.0) -> None:
+        self.rec = rec
+        self.out_dir = Path(out_dir)
+        self.rate = rate
+        self.min_distance = min_distance
+        self.rows: list[list[float]] = []
+        self.path: Path | None = None
+        self.key: str | None = None
+        self._fh: TextIO | None = None
+        self._part: Path | None = None
+        self._halt = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    def __enter__(self) -> Take:
+        """Create the part file with the CSV header."""
+        fd, name = _mkstemp(self.out_dir)
+        self._part = Path(name)
+        try:
+            self._fh = os.fdopen(fd, "w", newline="")
+            self._fh.write(COLUMNS + "\n")
+        except BaseException:
+            self._part.unlink(missing_ok=True)
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Stop sampling; remove the part file unless it was kept."""
+        self._halt.set()
+        if self._thread is not None:
+            self._thread.join()
+        self.discard()
+
+    def record(self, stop: threading.Event, duration: float | None = None) -> None:
+        """Sample rows in this thread until ``stop`` is set or ``duration`` s passed."""
+        assert self._fh is not None, "Take.record outside its with block"
+        _record_rows(self.rec, self._fh, self.rate, self.min_distance, stop, duration, self.rows)
+
+    def start(self) -> Take:
+        """Sample rows in a background thread until :meth:`stop`."""
+        def sample() -> None:
+            try:
+                self.record(self._halt)
+            except BaseException as e:  # handed to stop(), which raises it
+                self._error = e
+
+        self._thread = threading.Thread(target=sample, name="take", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> int:
+        """End sampling (the background thread's error, if any, is raised here); the
+        number of rows."""
+        self._halt.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+        if self._error is not None:
+            raise self._error
+        return len(self.rows)
+
+    @property
+    def long_enough(self) -> bool:
+        """Whether the learner accepts it (at least MIN_ROWS rows)."""
+        return len(self.rows) >= MIN_ROWS
+
+    def keep(self) -> Path | None:
+        """Sync the file, link it to the next free ``demo_NNN.csv`` and publish it; None
+        (and discarded) when it is too short for the learner."""
+        self.stop()
+        if not self.long_enough:
+            self.discard()
+            return None
+        fh, part = self._fh, self._part
+        assert fh is not None and part is not None, "Take.keep outside its with block"
+        fh.flush()
+        os.fsync(fh.fileno())
+        fh.close()
+        self.path = publish_final(part, self.out_dir)
+        self._part = None
+        self._publish(self.path.stem)
+        return self.path
+
+    def discard(self) -> None:
+        """Remove the part file (nothing is published); a kept take stays kept."""
+        self._halt.set()
+        if self._fh is not None and not self._fh.closed:
+            self._fh.close()
+        if self._part is not None:
+            self._part.unlink(missing_ok=True)
+            self._part = None
+
+    def _publish(self, name: str) -> None:
+        """The finished demonstration on ``sctd/<robot>/demos/<task>/<name>`` (a learner
+        on another host stores it), under the recorder's task."""
+        rec = self.rec
+        task = rec.task
+        assert rec.object_name is not None and task is not None
+        self.key = rec.keys.demos(task, name)
+        rec.session.put(self.key, codec.encode_demo(task, name, rec.object_name, self.rows),
+                        congestion_control=zenoh.CongestionControl.BLOCK)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -183,53 +344,36 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    with session_from_args(args) as session, Recorder(session, args.robot, args.object) as rec:
+    with session_from_args(args) as session, Recorder(session, args.robot, args.object, args.task) as rec:
         if not _wait_for_first_sample(rec, args.wait, stop):
             return 1
         print(f"sctd record: recording the ee in the frame of {rec.object_name!r} at "
               f"{args.rate:g} Hz{' until SIGINT' if args.duration is None else ''}",
               file=sys.stderr, flush=True)
         rows: list[list[float]] = []
-        final = _record_file(rec, out_dir, args, stop, rows)
+        final, key = _record_file(rec, out_dir, args, stop, rows)
         if final is None:
             return 1
-        _publish(session, rec, args.task, final.stem, rows)
+        print(f"sctd record: published {key}", file=sys.stderr, flush=True)
+        time.sleep(LINGER)
     print(f"sctd record: {len(rows)} rows -> {final}", file=sys.stderr, flush=True)
     print(final, flush=True)
     return 0
 
 
 def _record_file(rec: Recorder, out_dir: Path, args: argparse.Namespace, stop: threading.Event,
-                 rows: list[list[float]]) -> Path | None:
-    """Record into a hidden part file, then link it to the next free ``demo_NNN.csv``
-    (None, and the part file removed, when it is too short for the learner)."""
-    fd, name = _mkstemp(out_dir)
-    tmp = Path(name)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            _record_rows(rec, fh, args, stop, rows)
-            fh.flush()
-            os.fsync(fh.fileno())
-        if len(rows) >= MIN_ROWS:
-            return publish_final(tmp, out_dir)
-    finally:
-        tmp.unlink(missing_ok=True)  # linked to its final name, or not to be kept
-    print(f"sctd record: only {len(rows)} rows (the learner needs {MIN_ROWS}); nothing written",
-          file=sys.stderr)
-    return None
-
-
-def _publish(session: zenoh.Session, rec: Recorder, task: str | None, name: str,
-             rows: list[list[float]]) -> None:
-    """The finished demonstration on ``sctd/<robot>/demos/<task>/<name>`` (a learner on
-    another host stores it); ``task``: the flag, else the scene's, else the object."""
-    assert rec.object_name is not None
-    task = task or rec.task or rec.object_name
-    key = rec.keys.demos(task, name)
-    session.put(key, codec.encode_demo(task, name, rec.object_name, rows),
-                congestion_control=zenoh.CongestionControl.BLOCK)
-    print(f"sctd record: published {key}", file=sys.stderr, flush=True)
-    time.sleep(LINGER)
+                 rows: list[list[float]]) -> tuple[Path | None, str | None]:
+    """One take until ``stop`` or ``--duration``, kept (linked to the next free
+    ``demo_NNN.csv`` and published) unless it is too short for the learner; (file, key),
+    or (None, None) with the part file removed. The rows written are put in ``rows``."""
+    with Take(rec, out_dir, args.rate, args.min_distance) as take:
+        take.record(stop, args.duration)
+        rows.extend(take.rows)
+        if take.keep() is None:
+            print(f"sctd record: only {len(rows)} rows (the learner needs {MIN_ROWS}); nothing written",
+                  file=sys.stderr)
+            return None, None
+        return take.path, take.key
 
 
 def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) -> bool:
@@ -245,14 +389,14 @@ def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) ->
     return not stop.is_set()
 
 
-def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: threading.Event,
-                 out: list[list[float]]) -> None:
-    """Write the header and one row per tick at ``--rate`` until ``stop`` or
-    ``--duration``, skipping samples whose state has not advanced or that lie closer
-    than ``--min-distance`` to the last row; each row written is appended to ``out``."""
-    fh.write(COLUMNS + "\n")
-    ticker = Ticker(1.0 / args.rate, spin=0.0)
-    end = None if args.duration is None else time.monotonic() + args.duration
+def _record_rows(rec: Recorder, fh: TextIO, rate: float, min_distance: float, stop: threading.Event,
+                 duration: float | None, out: list[list[float]]) -> None:
+    """One row per tick at ``rate`` Hz until ``stop`` or ``duration`` s, skipping samples
+    whose state has not advanced or that lie closer than ``min_distance`` to the last
+    row; each row written is appended to ``out`` (as written: the file and the message
+    agree)."""
+    ticker = Ticker(1.0 / rate, spin=0.0)
+    end = None if duration is None else time.monotonic() + duration
     t0 = last_t = None
     last_p = None
     while not stop.is_set():
@@ -269,12 +413,12 @@ def _record_rows(rec: Recorder, fh: TextIO, args: argparse.Namespace, stop: thre
         if last_t is not None and t <= last_t:
             continue  # the state has not advanced since the last row
         row = row_from_poses(t, pose_ee, pose_obj)
-        if last_p is not None and args.min_distance > 0 and math.dist(row[1:4], last_p) < args.min_distance:
+        if last_p is not None and min_distance > 0 and math.dist(row[1:4], last_p) < min_distance:
             continue
         line = format_row(row)
         fh.write(line)
         fh.flush()
-        out.append([float(x) for x in line.split(",")])  # as written: the file and the message agree
+        out.append([float(x) for x in line.split(",")])
         last_t, last_p = t, row[1:4]
 
 

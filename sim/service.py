@@ -15,7 +15,10 @@ period of the monotonic clock) and speaks the wire contract (docs/wire-contract.
   outcome with the service's own health on ``sctd/<robot>/scene`` (10 Hz, see
   :meth:`SimService.scene_message`);
 - mirrors every joint-bus cycle on ``sctd/<robot>/can`` while anyone listens, and puts
-  frames received there on the bus (:mod:`sctd_sim.canbus.zenoh_interface`).
+  frames received there on the bus (:mod:`sctd_sim.canbus.zenoh_interface`);
+- answers the simulator-only queryable ``sctd/<robot>/sim/reset``: the scene's task state
+  back to its start (bottle refilled, drawer closed and released) between two cycles,
+  the arm left where it is (:meth:`SimService._on_reset_query`).
 
 Real time: a cycle that starts more than half a period late counts as an overrun;
 short hiccups are caught up (the ticker runs the missed cycles back to back), but when
@@ -40,7 +43,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from typing import Any, NamedTuple
 
 import can
@@ -99,6 +102,42 @@ def parse_faults(text: str) -> FaultConfig:
     return FaultConfig(**kw)
 
 
+MAX_RESET_BYTES = 4096  # a reset request is a small map; a larger one is refused uncopied
+RESET_WAIT = 5.0  # s a reset request waits for the loop to reach a cycle boundary
+
+
+@dataclass
+class _PendingReset:
+    """A reset handed from a Zenoh thread to the loop; ``done`` set once it happened, at
+    simulated time ``t``."""
+
+    done: threading.Event
+    t: float = 0.0
+
+
+def reset_request_error(payload: bytes, scene: str) -> str | None:
+    """What is wrong with a ``sim/reset`` request for a simulator running ``scene``, or
+    None when it may be carried out.
+
+    The request is empty or a msgpack map whose optional field ``scene`` (str) names
+    the scene the asker expects (a reset meant for another scene is refused); fields it
+    does not know are ignored (wire contract v1). Its size is checked before (the
+    queryable refuses one over MAX_RESET_BYTES uncopied).
+    """
+    if not payload:
+        return None
+    try:
+        msg = codec.unpack_map(payload)
+    except codec.DecodeError as e:
+        return f"<request>: not an empty payload nor a msgpack map ({e})"
+    expected = msg.get("scene")
+    if expected is not None and not isinstance(expected, str):
+        return f"scene: must be a string, got {type(expected).__name__}"
+    if expected is not None and expected != scene:
+        return f"scene: the simulator runs scene {scene!r}, not {expected!r}"
+    return None
+
+
 class SimService:
     """The simulator's real-time loop and its Zenoh declarations.
 
@@ -145,6 +184,11 @@ class SimService:
         self.guard = TargetGuard(limits or TargetLimits(), sim.dt, time.time(), stamp_check)
         self._F_measured = se3.flat_from_pose(sim.state_message()["pose"])
         self.can_key = can_key(robot)
+        self.resets = 0
+        self._reset: _PendingReset | None = None  # handed to the loop by the reset queryable
+        self._reset_serial = threading.Lock()  # one reset request at a time
+        self._reset_lock = threading.Lock()  # the handover of self._reset
+        self._ended = threading.Event()  # the loop has run and returned
         self._resources = contextlib.ExitStack()  # the declarations, while entered
 
     # -- declarations ------------------------------------------------------------------
@@ -174,6 +218,7 @@ class SimService:
             self.can_key, zenoh.handlers.RingChannel(256), allowed_origin=zenoh.Locality.REMOTE))
         self.sim.arm.on_frames.append(self._mirror)
         stack.callback(self.sim.arm.on_frames.remove, self._mirror)
+        stack.enter_context(session.declare_queryable(k.sim_reset, self._on_reset_query))
 
     def __exit__(self, *exc: object) -> None:
         """Undeclare everything, close the injection bus (the session stays open)."""
@@ -187,6 +232,59 @@ class SimService:
     def _mirror(self, frames: list) -> None:
         if self._can_watched:
             self.pub_can.put(encode_frames(frames))
+
+    def _on_reset_query(self, query: zenoh.Query) -> None:
+        """``sim/reset``: check the request, hand the reset to the loop, reply once it
+        happened: ``{ok: true, scene, t}`` (``t`` the simulated time of the reset), or
+        ``{error}`` with nothing changed (malformed request, the loop not cycling)."""
+        with query:  # the asker stops waiting when the query is dropped, on leaving this
+            payload = query.payload
+            size = 0 if payload is None else len(payload)
+            scene = self.sim.scene.name
+            if size > MAX_RESET_BYTES:  # refused before it is copied
+                error: str | None = f"<request>: {size} bytes exceeds {MAX_RESET_BYTES}"
+            else:
+                error = reset_request_error(payload.to_bytes() if payload else b"", scene)
+            t = None
+            if error is None:
+                with self._reset_serial:
+                    t = self._reset_on_loop()
+                if t is None:
+                    error = f"the simulation loop did not reach a cycle boundary in {RESET_WAIT:g} s"
+            if error is not None:
+                query.reply_err(codec.pack({"error": error}))
+                return
+            query.reply(self.keys.sim_reset, codec.pack({"ok": True, "scene": scene, "t": t}))
+
+    def _reset_on_loop(self) -> float | None:
+        """Hand a reset to the loop and wait for it: its simulated time, or None (the
+        request withdrawn, nothing reset) when the loop did not take it in RESET_WAIT s."""
+        pending = _PendingReset(threading.Event())
+        with self._reset_lock:
+            self._reset = pending
+        deadline = time.monotonic() + RESET_WAIT
+        while not pending.done.wait(0.02):
+            if time.monotonic() < deadline and not self._ended.is_set():
+                continue
+            with self._reset_lock:
+                if self._reset is pending:  # not taken: withdraw it
+                    self._reset = None
+                    return None
+            pending.done.wait()  # taken by the loop this very moment: it sets done next
+            break
+        return pending.t
+
+    def _apply_reset(self) -> None:
+        """On the loop thread, between two cycles: the scene's task state back to its
+        start (the arm is not touched)."""
+        with self._reset_lock:
+            pending, self._reset = self._reset, None
+            if pending is None:
+                return
+            self.sim.scene.reset()
+            self.resets += 1
+            pending.t = self.sim.t
+            pending.done.set()
 
     # -- per cycle ---------------------------------------------------------------------
     def _take_targets(self) -> None:
@@ -226,6 +324,8 @@ class SimService:
     def cycle(self) -> None:
         """One cycle: inputs, one simulation step, the publications that are due."""
         sim = self.sim
+        if self._reset is not None:
+            self._apply_reset()
         self._take_targets()
         self._take_can()
         sim.step()
@@ -259,7 +359,8 @@ class SimService:
         ``target_rejected_reasons`` (reason -> count: ``offset``, ``speed``,
         ``out_of_order``, ``before_start``),
         ``dropped`` (reason -> count), ``can_injected`` (frames put on the bus from
-        Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults).
+        Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults),
+        ``resets`` (scene resets done through ``sim/reset``).
         """
         sim = self.sim
         now = time.monotonic()
@@ -279,6 +380,7 @@ class SimService:
             target_rejected=self.guard.total_rejected,
             target_rejected_reasons=dict(self.guard.rejected),
             dropped=dict(self.dropped), can_injected=self.injected, link=sim.link_stats(),
+            resets=self.resets,
         )
         return msg
 
@@ -290,9 +392,13 @@ class SimService:
         tk = self.ticker = Ticker(period, spin=0.0)
         self._t0_wall = tk.due - period
         end = None if duration is None else self._t0_wall + duration
-        hist = self.cycle_time
-        clock = time.monotonic
-        grace = self._t0_wall + 1.0  # start-up (first messages, caches) is not judged
+        try:  # start-up (first messages, caches) is not judged: a grace of 1 s
+            self._loop(tk, stop, end, grace=self._t0_wall + 1.0)
+        finally:
+            self._ended.set()  # a reset request waiting for the loop gives up
+
+    def _loop(self, tk: Ticker, stop: threading.Event, end: float | None, grace: float) -> None:
+        hist, clock, period = self.cycle_time, time.monotonic, self.sim.dt
         while not stop.is_set():
             now, _late = tk.wait()
             if end is not None and now >= end:

@@ -12,9 +12,11 @@ import threading
 import time
 
 import msgpack
+import numpy as np
 import pytest
 import zenoh
 
+from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.zsession import open_session
 from sctd_sim.service import parse_faults
@@ -188,3 +190,78 @@ def test_socketcan_bus_is_optional_and_refused_clearly_when_absent(tmp_path):
                 "--listen", f"tcp/127.0.0.1:{free_port()}", log=tmp_path / "sim.log")
     assert proc.p.wait(60) == 2
     assert "no network interface 'sctdnone0'" in proc.output()
+
+
+def _reset(s: zenoh.Session, payload: bytes | None) -> tuple[bool, dict]:
+    """One ``sim/reset`` query: (ok, the reply's map)."""
+    replies = list(s.get(KEYS.sim_reset, payload=payload, timeout=10.0))
+    assert len(replies) == 1, replies
+    r = replies[0]
+    sample = r.ok if r.ok is not None else r.err
+    return r.ok is not None, msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+
+
+def _turn(w: Watcher, pub: zenoh.Publisher, R_goal, hold: float = 0.0) -> None:
+    """Turn the hand, where it is, to ``R_goal`` (world), each target at most 0.1 rad from
+    the measured orientation (the arm's guard admits it however the machine lags); then
+    hold there ``hold`` s."""
+    end = None
+    for k in range(20000):
+        pose = w.get("state")["pose"]
+        R = se3.matrix_from_quaternion(pose[3:])
+        e = se3.rotvec_from_matrix(R.T @ R_goal)
+        n = float(np.linalg.norm(e))
+        q = se3.quaternion_from_matrix(R @ se3.matrix_from_rotvec(e * min(1.0, 0.1 / max(n, 1e-9))))
+        pub.put(codec.encode_target(k, time.time(), [*pose[:3], *q.tolist()], "test", "test", -1))
+        if end is None and n < 0.02:
+            end = time.monotonic() + hold
+        if end is not None and time.monotonic() >= end:
+            return
+        time.sleep(0.005)
+    raise AssertionError(f"the hand did not turn there: {n:.3f} rad to go")
+
+
+def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_path):
+    """`sim/reset`: a malformed request (not a map, a mistyped field, another scene's)
+    gets an error reply and changes nothing; a valid one puts the scene's task state back
+    (the spilled bottle full again) and replies {ok, scene, t}; the arm stays put."""
+    proc, port = start_sim(tmp_path, "--scene", "pour")
+    try:
+        with open_session(connect=[f"tcp/127.0.0.1:{port}"]) as s:
+            w = Watcher(s)
+            assert wait_for(lambda: w.get("scene") and w.get("state"), 60), proc.output()
+            pub = s.declare_publisher(KEYS.target)
+            # spill: tip the bottle past its pouring angle over the table, then upright
+            R0 = se3.matrix_from_quaternion(w.get("state")["pose"][3:])
+            _turn(w, pub, R0 @ se3.matrix_from_rotvec([0.0, 1.7, 0.0]), hold=1.0)
+            _turn(w, pub, R0)
+            assert wait_for(lambda: w.get("scene")["holding"], 5)
+            sc = w.get("scene")
+            assert sc["spilled"] and sc["remaining"] < 0.95 and sc["tilt"] < 0.1, (sc, proc.output())
+            spilled, resets = sc["spilled_amount"], sc["resets"]
+            assert resets == 0
+            for bad, says in ((b"\xc1garbage", "msgpack map"), (msgpack.packb([1, 2]), "msgpack map"),
+                              (codec.pack({"scene": 3}), "scene: must be a string"),
+                              (codec.pack({"scene": "drawer"}), "runs scene 'pour', not 'drawer'")):
+                ok, body = _reset(s, bad)
+                assert not ok and says in body["error"], (bad, body)
+            c0 = w.get("scene")["cycles"]
+            assert wait_for(lambda: w.get("scene")["cycles"] > c0, 5)
+            sc = w.get("scene")
+            assert sc["resets"] == 0 and sc["spilled_amount"] == spilled, sc  # nothing changed
+            before = list(w.get("state")["pose"])
+            ok, body = _reset(s, codec.pack({"scene": "pour", "unknown": "ignored"}))
+            assert ok and body["ok"] is True and body["scene"] == "pour", body
+            assert wait_for(lambda: w.get("scene")["t"] > body["t"] + 0.2, 5)
+            sc, after = w.get("scene"), w.get("state")["pose"]
+            assert sc["resets"] == 1 and not sc["spilled"] and sc["spilled_amount"] == 0.0, sc
+            assert sc["remaining"] == 1.0 and sc["poured"] == 0.0, sc
+            assert math.dist(before[:3], after[:3]) < 0.002, (before, after)
+            ok, body = _reset(s, None)  # an empty request resets too
+            assert ok and body["scene"] == "pour"
+            w.sub.undeclare()
+            pub.undeclare()
+    finally:
+        rc = proc.stop()
+    assert rc == 0, proc.output()
+    assert port_is_free(port)

@@ -92,6 +92,9 @@ COMMANDS: dict[str, Command] = {
                        "hot-swaps", "sctd_services.learner", "add_arguments", "run"),
     "train": Command("ask the learner to train a skill from stored demonstrations, check and swap it",
                      "sctd.cli.train", "add_train_arguments", "main_train"),
+    "teach": Command("show a task on the simulated arm N times, varied as a person would, and "
+                     "record the demonstrations that succeed", "sctd.cli.teach",
+                     "add_teach_arguments", "main_teach"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 

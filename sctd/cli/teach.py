@@ -1,0 +1,134 @@
+"""``sctd teach``: demonstrations shown on the simulated arm and recorded, on this machine.
+
+Starts ``sctd sim --scene SCENE`` on a free loopback port (unless ``--connect`` or
+``--zenoh-config`` names a running simulator to join), then the demonstrator
+(:func:`sctd_services.teach.teach`): it moves the arm itself, with the variation a
+person shows between demonstrations, records each one, keeps those that succeed in the
+scene (``demo_NNN.csv`` in ``--out``, published on ``sctd/<robot>/demos/<task>/<name>``)
+and discards the others, saying why. One line per attempt, then a summary; exit 0 when
+``--demos`` were kept, 1 when the attempts ran out first or the simulator failed, 2 for
+bad flags or when a shared-control daemon already commands the robot.
+
+:func:`open_simulator` and :func:`teach_demos` are the steps, for a command that goes on
+from the kept demonstrations (learning them) with the simulator still running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+import zenoh
+
+from sctd_services.record import LINGER
+from sctd_services.teach import (
+    Attempt,
+    CommanderConflict,
+    SimulatorLost,
+    TeachOptions,
+    describe_outcome,
+    teach,
+)
+
+from ..runtime.zsession import add_zenoh_arguments, session
+from .errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
+from .options import add_arguments, from_namespace
+from .procs import Child, free_port
+
+
+def add_teach_arguments(p: argparse.ArgumentParser) -> None:
+    own_default = ("out", "max_attempts", "mistakes")  # their help says what the default does
+    add_arguments(p, TeachOptions, exclude=own_default, show_default=True)
+    add_arguments(p, TeachOptions, only=own_default[:2])
+    mistakes = next(f for f in dataclasses.fields(TeachOptions) if f.name == "mistakes")
+    p.add_argument("--mistake", dest="mistakes", type=int, action="append", default=[],
+                   metavar="N", help=mistakes.metadata["help"] + " (repeatable)")
+    p.add_argument("--logs", metavar="DIR",
+                   help="keep the simulator's log in this folder (default: a temporary one)")
+    add_zenoh_arguments(p)
+    p.epilog = ("Without --connect or --zenoh-config, it starts its own simulator on a free "
+                "loopback port. " + (p.epilog or ""))
+
+
+def main_teach(args: argparse.Namespace) -> int:
+    try:
+        args.mistakes = tuple(args.mistakes)
+        options = from_namespace(TeachOptions, args)
+    except ValueError as e:
+        return fail("teach", str(e))
+    with contextlib.ExitStack() as stack:
+        try:
+            s = open_simulator(stack, args, options)
+            kept = teach_demos(s, options)
+        except CommanderConflict as e:
+            return fail("teach", str(e), EXIT_USAGE)
+        except SimulatorLost as e:
+            return fail("teach", f"{e}{_log_hint(args)}", EXIT_FAILED)
+    if len(kept) < options.demos:
+        return fail("teach", f"kept {len(kept)} of the {options.demos} demonstrations asked for in "
+                             f"{options.attempts} attempts (--max-attempts)", EXIT_FAILED)
+    return EXIT_OK
+
+
+def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
+                   options: TeachOptions) -> zenoh.Session:
+    """The session teaching goes through, entered on ``stack``: connected to the
+    simulator ``--connect`` / ``--zenoh-config`` names, else to a ``sctd sim --scene``
+    started here on a free loopback port (stopped when ``stack`` closes, after the
+    session, which lingers a moment so that the last demonstration leaves)."""
+    if args.connect or args.zenoh_config:
+        s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config))
+        print(f"sctd teach: {options.scene} on the simulator at "
+              f"{', '.join(args.connect or [args.zenoh_config])}", flush=True)
+    else:
+        logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-teach-"))
+        logdir.mkdir(parents=True, exist_ok=True)
+        args.sim_log = logdir / "sim.log"
+        ep = f"tcp/127.0.0.1:{free_port()}"
+        stack.enter_context(Child("sctd_sim.service", "--scene", options.scene, "--robot",
+                                  options.robot, "--listen", ep, log=args.sim_log))
+        s = stack.enter_context(session(args.listen, [ep]))
+        print(f"sctd teach: {options.scene} on a simulator started at {ep} (log {args.sim_log})",
+              flush=True)
+    stack.callback(time.sleep, LINGER)  # runs before the session closes
+    return s
+
+
+def teach_demos(s: zenoh.Session, options: TeachOptions) -> list[Attempt]:
+    """Teach with ``options``, printing a line per attempt and the summary; the kept
+    attempts (``Attempt.path``: the CSV)."""
+    out = options.out_dir
+    before = len(list(out.glob("demo_*.csv"))) if out.is_dir() else 0
+    print(f"sctd teach: {options.demos} demonstrations (seed {options.seed}) into {out}"
+          + (f", after the {before} already there" if before else ""), flush=True)
+    seen: list[Attempt] = []
+
+    def report(a: Attempt) -> None:
+        seen.append(a)
+        _print_attempt(a)
+    t0 = time.monotonic()
+    kept = teach(s, options, on_attempt=report)
+    wall = time.monotonic() - t0
+    recorded = sum(a.duration for a in kept) / len(kept) if kept else 0.0
+    print(f"sctd teach: kept {len(kept)} of {options.demos} demonstrations in {out} "
+          f"({len(seen)} attempts, {len(seen) - len(kept)} discarded) in {wall:.0f} s: "
+          f"{wall / max(1, len(kept)):.1f} s per kept demonstration, {recorded:.1f} s of it "
+          "recorded", flush=True)
+    return kept
+
+
+def _print_attempt(a: Attempt) -> None:
+    state = "kept" if a.kept else "discarded"
+    what = describe_outcome(a.outcome) if a.kept else a.reason
+    print(f"  attempt {a.number:2d}  {a.name:8s}  {state:9s}  {a.rows:5d} rows  {a.duration:5.2f} s"
+          f"  {what}   ({a.plan.describe()}; {a.elapsed:.1f} s)", flush=True)
+
+
+def _log_hint(args: argparse.Namespace) -> str:
+    log = getattr(args, "sim_log", None)
+    return f"; see {log}" if log is not None else ""
+

@@ -1,0 +1,194 @@
+"""Smooth hand motions in the task object's frame, as functions of time (pure numpy).
+
+A motion is ``T_obj_ee(t)`` for ``t`` in ``[0, duration]``: a :class:`Line` (the hand
+translated along a curve through a via point while it turns from one orientation to
+another) or a :class:`TipTurn` (the hand turned about a point fixed in it, the bottle's
+opening, about one of its own axes). Each runs along a speed profile in ``tau = t /
+duration`` (:data:`PROFILES`): from rest to its mean speed (a demonstration's first
+phase, as :mod:`sctd_sim.demogen`'s: a person does not stop between carrying and
+pouring), from its mean speed to rest (the second), or rest to rest (minimum jerk, the
+moves between demonstrations).
+
+:func:`task_motions` turns a :class:`~sctd_services.teach.plan.DemoPlan` into the
+demonstration's two phases; :func:`move` is the unrecorded move from anywhere to a pose.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+
+from .plan import DemoPlan, SceneGeometry, Speeds
+
+Array = NDArray[np.float64]
+
+
+def _from_rest(tau: float) -> float:
+    """s(0) = 0, s'(0) = 0, s(1) = 1, s'(1) = 1 (ends at its mean speed; peak 4/3)."""
+    return 2.0 * tau * tau - tau ** 3
+
+
+def _to_rest(tau: float) -> float:
+    """s(0) = 0, s'(0) = 1, s(1) = 1, s'(1) = 0 (starts at its mean speed; peak 4/3)."""
+    return 1.0 - _from_rest(1.0 - tau)
+
+
+def _rest_to_rest(tau: float) -> float:
+    """Minimum jerk: s, s', s'' zero at both ends (peak speed 15/8 of the mean)."""
+    return tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
+
+
+PROFILES: dict[str, Callable[[float], float]] = {
+    "from_rest": _from_rest, "to_rest": _to_rest, "rest_to_rest": _rest_to_rest}
+"""Speed profiles ``s(tau)`` by name: the fraction of the motion done at ``tau``."""
+PEAK = {"from_rest": 4.0 / 3.0, "to_rest": 4.0 / 3.0, "rest_to_rest": 15.0 / 8.0}
+"""Each profile's peak speed over its mean."""
+
+
+class Motion(Protocol):
+    """``T_obj_ee(t)`` for ``t`` in ``[0, duration]`` (held at the ends beyond)."""
+
+    @property
+    def duration(self) -> float:
+        """s"""
+
+    def pose(self, t: float) -> Array:
+        """The hand's pose at ``t``, shape (4, 4)."""
+
+
+def _tau(t: float, duration: float) -> float:
+    return min(1.0, max(0.0, t / duration)) if duration > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class Line:
+    """The hand along the quadratic through ``a`` (at 0), ``via`` (at ``via_at``) and
+    ``b`` (at 1), turning from ``R_a`` to ``R_b`` along the geodesic, both by the profile.
+
+    Attributes
+    ----------
+    a, via, b : ndarray, shape (3,)
+    via_at : float
+    R_a, R_b : ndarray, shape (3, 3)
+    duration : float
+    profile : str
+        A name of :data:`PROFILES`.
+    """
+
+    a: Array
+    via: Array
+    via_at: float
+    b: Array
+    R_a: Array
+    R_b: Array
+    duration: float
+    profile: str
+
+    def position(self, s: float) -> Array:
+        """The curve at parameter ``s`` in [0, 1] (Lagrange through the three points)."""
+        f = self.via_at
+        la = (s - f) * (s - 1.0) / f
+        lv = s * (s - 1.0) / (f * (f - 1.0))
+        lb = s * (s - f) / (1.0 - f)
+        return la * self.a + lv * self.via + lb * self.b
+
+    def pose(self, t: float) -> Array:
+        s = PROFILES[self.profile](_tau(t, self.duration))
+        w = se3.rotvec_from_matrix(self.R_a.T @ self.R_b)
+        return se3.transform_from_rt(self.R_a @ se3.matrix_from_rotvec(s * w), self.position(s))
+
+
+def line(T_a: Array, T_b: Array, speed: float, turn_rate: float, profile: str,
+         via: Array | None = None, via_at: float = 0.5) -> Line:
+    """A :class:`Line` from pose ``T_a`` to ``T_b`` (through ``via``, default the
+    midpoint) taking as long as its length at mean ``speed`` (m/s) or its turn at mean
+    ``turn_rate`` (rad/s) needs, whichever is longer."""
+    a, b = T_a[:3, 3], T_b[:3, 3]
+    v = a + via_at * (b - a) if via is None else via
+    shape = Line(a, v, via_at, b, T_a[:3, :3], T_b[:3, :3], 1.0, profile)
+    s = np.linspace(0.0, 1.0, 65)
+    pts = np.array([shape.position(x) for x in s])
+    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+    angle = se3.angle_between3(T_a[:3, :3], T_b[:3, :3])
+    duration = max(length / speed, angle / turn_rate, 1e-3)
+    return Line(a, v, via_at, b, T_a[:3, :3], T_b[:3, :3], duration, profile)
+
+
+@dataclass(frozen=True)
+class TipTurn:
+    """The hand turned by ``angle`` about its own ``axis`` (unit, hand frame) through the
+    point ``pivot`` (hand frame): ``T(s) = T_start T_pivot Rot(axis, s angle) T_pivot^-1``.
+
+    Attributes
+    ----------
+    T_start : ndarray, shape (4, 4)
+    pivot, axis : ndarray, shape (3,)
+    angle : float
+        rad
+    duration : float
+    profile : str
+    """
+
+    T_start: Array
+    pivot: Array
+    axis: Array
+    angle: float
+    duration: float
+    profile: str
+
+    def pose(self, t: float) -> Array:
+        s = PROFILES[self.profile](_tau(t, self.duration))
+        R = se3.matrix_from_rotvec(self.axis * (s * self.angle))
+        T_turn = se3.transform_from_rt(R, self.pivot - R @ self.pivot)
+        return self.T_start @ T_turn
+
+
+def task_motions(plan: DemoPlan, geometry: SceneGeometry, speeds: Speeds | None = None
+                 ) -> tuple[Motion, Motion]:
+    """The two recorded phases of ``plan``: pour, the carry (a :class:`Line`, the bottle
+    upright) and the pour (a :class:`TipTurn` about the opening's y axis, the hand's);
+    drawer, the reach (a :class:`Line` turning to the handle's orientation) and the pull
+    (a :class:`Line` along the handle's x)."""
+    speeds = speeds or Speeds()
+    k = plan.speed
+    if plan.task == "pour":
+        first = line(plan.T_obj_start, plan.T_obj_goal, k * speeds.carry, k * speeds.pour,
+                     "from_rest", plan.via, plan.via_at)
+        second: Motion = TipTurn(plan.T_obj_goal, geometry.T_ee_tip[:3, 3].copy(),
+                                 np.array([0.0, 1.0, 0.0]), plan.tilt,
+                                 plan.tilt / (k * speeds.pour), "to_rest")
+        return first, second
+    first = line(plan.T_obj_start, plan.T_obj_goal, k * speeds.reach, k * speeds.turn,
+                 "from_rest", plan.via, plan.via_at)
+    T_end = plan.T_obj_goal.copy()
+    T_end[:3, 3] += plan.pull * plan.T_obj_goal[:3, 0]
+    return first, line(plan.T_obj_goal, T_end, k * speeds.pull, k * speeds.turn, "to_rest")
+
+
+def move(T_a: Array, T_b: Array, speeds: Speeds | None = None) -> Line:
+    """The unrecorded move from ``T_a`` to ``T_b``: straight, rest to rest, at the
+    moves' mean speed and turn rate (``speeds``, default :class:`Speeds`)."""
+    speeds = speeds or Speeds()
+    return line(T_a, T_b, speeds.move, speeds.turn, "rest_to_rest")
+
+
+def upright(T_obj_ee: Array, geometry: SceneGeometry, speeds: Speeds | None = None) -> TipTurn:
+    """Turn the bottle upright about its opening (which stays where it is), rest to
+    rest at the moves' turn rate: after a pour, the drops land where the stream did."""
+    speeds = speeds or Speeds()
+    pivot = geometry.T_ee_tip[:3, 3].copy()
+    z = T_obj_ee[:3, 2]
+    axis_obj = np.cross(z, [0.0, 0.0, 1.0])  # turning about it brings z up
+    n = float(np.linalg.norm(axis_obj))
+    angle = math.atan2(n, float(z[2]))
+    if n < 1e-9:
+        return TipTurn(T_obj_ee, pivot, np.array([0.0, 1.0, 0.0]), 0.0, 1e-3, "rest_to_rest")
+    axis = T_obj_ee[:3, :3].T @ (axis_obj / n)  # in the hand's frame
+    return TipTurn(T_obj_ee, pivot, axis, angle, angle / speeds.turn, "rest_to_rest")

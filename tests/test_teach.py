@@ -1,0 +1,257 @@
+"""`sctd teach`: demonstrations planned with a person's variation (seeded, pure), shown on
+the simulated arm, recorded, judged by the scene, kept or discarded; refused while a
+shared-control daemon commands the robot."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from sctd import se3
+from sctd.learn.demos import read_demos
+from sctd.runtime import codec
+from sctd.runtime.zsession import open_session
+from sctd_services.teach import (
+    MISTAKE_OFF_AXIS,
+    StreamLimits,
+    TeachOptions,
+    Variation,
+    judge,
+    move,
+    plan_demonstration,
+    scene_geometry,
+    task_motions,
+    upright,
+)
+from sctd_sim.guard import TargetLimits
+from tests.conftest import free_port, port_is_free, sctd, wait_for
+
+KEYS = codec.Keys("edan")
+TIP = np.array([0.0, 0.0, 0.12])
+
+
+def _same(a, b) -> bool:
+    return all(np.array_equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+
+
+@pytest.mark.parametrize("task", ["pour", "drawer"])
+def test_plans_are_seeded_and_within_the_variation(task):
+    """The same seed gives the same plan attempt by attempt; another seed another one;
+    every variation lies within the issue's ranges; a mistake changes only the goal."""
+    g, V = scene_geometry(task), Variation()
+    for seed in range(5):
+        for n in range(1, 9):
+            p = plan_demonstration(g, seed, n)
+            assert _same(p, plan_demonstration(g, seed, n))
+            assert not _same(p, plan_demonstration(g, seed + 100, n))
+            assert np.all(np.abs(p.T_obj_start[:3, 3] - g.T_obj_start[:3, 3]) <= V.start)
+            assert 1 - V.speed <= p.speed <= 1 + V.speed
+            R_turn = g.T_obj_start[:3, :3].T @ p.T_obj_start[:3, :3]  # a turn about z only
+            np.testing.assert_allclose(se3.rotvec_from_matrix(R_turn), [0, 0, p.yaw], atol=1e-12)
+            # the via point is off the straight path by at most `via` each way across it
+            a, b = p.T_obj_start[:3, 3], p.T_obj_goal[:3, 3]
+            on = a + p.via_at * (b - a)
+            assert math.dist(p.via, on) <= V.via * math.sqrt(2) + 1e-12
+            assert abs((p.via - on) @ (b - a)) < 1e-9
+            wrong = plan_demonstration(g, seed, n, mistake=True)
+            assert wrong.mistake and not p.mistake
+            if task == "pour":
+                assert abs(p.yaw) <= V.pour_yaw and V.pour_tilt[0] <= p.tilt <= V.pour_tilt[1]
+                tip = (p.T_obj_goal @ np.append(TIP, 1))[:3]  # over the mug's axis at the height
+                np.testing.assert_allclose(tip, [0, 0, p.height], atol=1e-12)
+                assert V.pour_height[0] <= p.height <= V.pour_height[1]
+                miss = (wrong.T_obj_goal @ np.append(TIP, 1))[:3]
+                assert math.hypot(miss[0], miss[1]) == pytest.approx(MISTAKE_OFF_AXIS["pour"])
+            else:
+                assert abs(p.yaw) <= V.reach_yaw and V.pull[0] <= p.pull <= V.pull[1]
+                np.testing.assert_array_equal(p.T_obj_goal, np.eye(4))  # the closed handle
+                assert abs(wrong.T_obj_goal[1, 3]) == MISTAKE_OFF_AXIS["drawer"]
+            assert np.array_equal(wrong.T_obj_start, p.T_obj_start) and wrong.speed == p.speed
+
+
+def _samples(motion, n: int = 400) -> np.ndarray:
+    return np.array([motion.pose(t) for t in np.linspace(0.0, motion.duration, n)])
+
+
+def _peak_speeds(T: np.ndarray, dt: float) -> tuple[float, float]:
+    v = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1) / dt
+    w = [se3.angle_between3(A[:3, :3], B[:3, :3]) / dt for A, B in itertools.pairwise(T)]
+    return float(v.max()), float(max(w))
+
+
+@pytest.mark.parametrize("task", ["pour", "drawer"])
+def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
+    """Carry/reach from the start to the goal through the via point; the pour turns
+    about the bottle's opening, tilting its top towards the mug; the pull goes along +x;
+    every motion's peak speed is under the teacher's step bound, itself under the guard."""
+    g = scene_geometry(task)
+    lim, guard = StreamLimits(), TargetLimits()
+    assert lim.max_speed < guard.max_target_speed and lim.max_turn < guard.max_target_angular_speed
+    for n in range(1, 6):
+        p = plan_demonstration(g, 3, n)
+        first, second = task_motions(p, g)
+        A, B = _samples(first), _samples(second)
+        np.testing.assert_allclose(A[0], p.T_obj_start, atol=1e-12)
+        np.testing.assert_allclose(A[-1], p.T_obj_goal, atol=1e-12)
+        assert min(math.dist(x, p.via) for x in A[:, :3, 3]) < 2e-3
+        np.testing.assert_allclose(B[0], p.T_obj_goal, atol=1e-12)
+        if task == "pour":
+            np.testing.assert_allclose(A[:, :3, :3], np.broadcast_to(p.T_obj_goal[:3, :3], (400, 3, 3)),
+                                       atol=1e-12)  # carried upright: a translation
+            tips = B[:, :3, :3] @ TIP + B[:, :3, 3]
+            np.testing.assert_allclose(tips, np.broadcast_to(tips[0], tips.shape), atol=1e-12)
+            z = B[-1, :3, 2]  # the bottle's axis at the end: tilted by `tilt`, towards the mug
+            assert math.acos(z[2]) == pytest.approx(p.tilt)
+            hand_to_tip = tips[-1] - B[-1, :3, 3]
+            assert hand_to_tip[:2] @ -B[-1, :3, 3][:2] > 0  # the hand behind, the tip over the mug
+            back = _samples(upright(B[-1], g))
+            np.testing.assert_allclose(back[-1, :3, 2], [0, 0, 1], atol=1e-9)
+            np.testing.assert_allclose(back[-1, :3, :3] @ TIP + back[-1, :3, 3], tips[-1], atol=1e-9)
+        else:
+            np.testing.assert_allclose(B[-1, :3, 3], [p.pull, 0, 0], atol=1e-12)
+            np.testing.assert_allclose(B[:, 1:3, 3], 0.0, atol=1e-12)
+        for M in (first, second, move(A[-1], A[0])):
+            T = _samples(M, 2000)
+            v, w = _peak_speeds(T, M.duration / 1999)
+            assert v < lim.max_speed and w < lim.max_turn, (type(M).__name__, v, w)
+
+
+def test_judge_uses_the_scene_outcome():
+    assert judge({"scene": "pour", "success": True, "spilled": False}) == ""
+    assert "spilled 0.040" in judge({"scene": "pour", "success": False, "spilled": True,
+                                     "spilled_amount": 0.04, "poured": 0.3})
+    assert "short of the fill target" in judge({"scene": "pour", "success": False, "poured": 0.3})
+    assert judge({"scene": "drawer", "success": True}) == ""
+    why = judge({"scene": "drawer", "success": False, "opening": 0.0, "grasps": 0})
+    assert "opened 0.000 m" in why and "never grasped" in why
+
+
+def test_options_are_checked():
+    with pytest.raises(ValueError, match="--demos"):
+        TeachOptions(demos=0)
+    with pytest.raises(ValueError, match="--mistake"):
+        TeachOptions(mistakes=(0,))
+    assert TeachOptions(scene="drawer").out_dir.as_posix() == "demos/drawer-taught"
+    assert TeachOptions(demos=4).attempts == 8 and TeachOptions(demos=1).attempts == 3
+
+
+class _Demos:
+    """Every demonstration message on ``sctd/edan/demos/**`` (key, decoded)."""
+
+    def __init__(self, session):
+        self.lock = threading.Lock()
+        self.got: list[tuple[str, codec.DemoMsg]] = []
+        self.sub = session.declare_subscriber(KEYS.demos(), self._on)
+
+    def _on(self, sample) -> None:
+        with self.lock:
+            self.got.append((str(sample.key_expr), codec.decode_demo(sample.payload.to_bytes())))
+
+
+def _check_taught(out, published, task, obj, n):
+    """The folder holds exactly the kept demonstrations, which the learner reads, and
+    each was published once, rows as written."""
+    demos = read_demos(out)
+    assert [d.name for d in demos] == [f"demo_{k:03d}.csv" for k in range(n)]
+    assert not list(out.glob(".*"))  # no part file of the discarded one
+    assert [k for k, _ in published] == [KEYS.demos(task, f"demo_{k:03d}") for k in range(n)]
+    for (_, msg), d in zip(published, demos, strict=True):
+        assert (msg.task, msg.object) == (task, obj)
+        written = np.loadtxt(out / d.name, delimiter=",", skiprows=1)  # the file's numbers
+        np.testing.assert_array_equal(np.asarray(msg.rows), written)
+        np.testing.assert_array_equal(written[:, :4], np.column_stack([d.t, d.poses[:, :3]]))
+        assert len(d) > 200 and d.t[0] == 0.0
+    return demos
+
+
+def test_teach_pour_keeps_two_and_discards_the_spilling_one(tmp_path):
+    """`sctd teach --scene pour --demos 2 --mistake 2` (its own simulator): attempt 2 spills
+    and is discarded, neither written nor published; attempts 1 and 3 are kept."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    out = tmp_path / "taught"
+    with open_session(connect=[ep]) as s:
+        watch = _Demos(s)
+        proc = sctd("teach", "--scene", "pour", "--demos", "2", "--mistake", "2", "--out", str(out),
+                    "--seed", "1", "--listen", ep, "--logs", str(tmp_path / "logs"),
+                    log=tmp_path / "teach.log")
+        try:
+            assert proc.p.wait(300) == 0, proc.output()
+        finally:
+            proc.stop()
+        assert wait_for(lambda: len(watch.got) >= 2, 5)
+        watch.sub.undeclare()
+    text = proc.output()
+    lines = [ln for ln in text.splitlines() if ln.strip().startswith("attempt")]
+    assert len(lines) == 3, text
+    assert "demo_000" in lines[0] and "kept" in lines[0]
+    assert "discarded" in lines[1] and "spilled" in lines[1] and "a mistake" in lines[1], text
+    assert "demo_001" in lines[2] and "kept" in lines[2]
+    assert "kept 2 of 2" in text and "1 discarded" in text
+    _check_taught(out, watch.got, "pour", "mug", 2)
+    assert port_is_free(port)
+
+
+def test_teach_drawer_joins_a_running_simulator(tmp_path):
+    """`sctd teach --scene drawer --connect EP` joins a running `sctd sim`; the mistaken
+    attempt 1 never grasps the handle and is discarded; the two kept ones open the drawer
+    past the success opening (the pull is +x in the closed handle's frame)."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    sim = sctd("sim", "--scene", "drawer", "--listen", ep, log=tmp_path / "sim.log")
+    out = tmp_path / "taught"
+    try:
+        with open_session(connect=[ep]) as s:
+            watch = _Demos(s)
+            proc = sctd("teach", "--scene", "drawer", "--demos", "2", "--mistake", "1", "--out",
+                        str(out), "--connect", ep, log=tmp_path / "teach.log")
+            try:
+                assert proc.p.wait(300) == 0, proc.output() + sim.output()
+            finally:
+                proc.stop()
+            assert wait_for(lambda: len(watch.got) >= 2, 5)
+            watch.sub.undeclare()
+    finally:
+        assert sim.stop() == 0, sim.output()
+    text = proc.output()
+    lines = [ln for ln in text.splitlines() if ln.strip().startswith("attempt")]
+    assert len(lines) == 3 and "never grasped" in lines[0] and "discarded" in lines[0], text
+    demos = _check_taught(out, watch.got, "drawer", "drawer_handle", 2)
+    for d in demos:
+        assert d.poses[-1, 0] > 0.2 and abs(d.poses[-1, 1]) < 0.02  # pulled along +x
+    assert port_is_free(port)
+
+
+def test_teach_refuses_while_a_daemon_commands_the_robot(tmp_path):
+    """A shared-control daemon's status on sctd/edan/status: sctd teach exits 2 saying so,
+    before it publishes a single target, and writes nothing."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    daemon = sctd("run", "--skill", "pour", "--listen", ep, log=tmp_path / "daemon.log")
+    out = tmp_path / "taught"
+    try:
+        with open_session(connect=[ep]) as s:
+            targets: list[bytes] = []
+            status: list[bytes] = []
+            sub_t = s.declare_subscriber(KEYS.target, lambda m: targets.append(m.payload.to_bytes()))
+            sub_s = s.declare_subscriber(KEYS.status, lambda m: status.append(b""))
+            assert wait_for(lambda: status, 60), daemon.output()
+            proc = sctd("teach", "--scene", "pour", "--out", str(out), "--connect", ep,
+                        log=tmp_path / "teach.log")
+            try:
+                assert proc.p.wait(120) == 2, proc.output()
+            finally:
+                proc.stop()
+            sub_t.undeclare()
+            sub_s.undeclare()
+    finally:
+        daemon.stop()
+    text = proc.output()
+    assert "shared-control daemon commands sctd/edan" in text and "status" in text, text
+    assert not [t for t in targets if codec.decode_target(t).get("skill") == "sctd-teach"]
+    assert not out.exists() or not list(out.iterdir())
+    assert port_is_free(port)
