@@ -54,6 +54,10 @@ def add_then_learn_arguments(p: argparse.ArgumentParser) -> None:
                         "%(default)s; 0: none)")
 
 
+class LoopError(RuntimeError):
+    """A step of the loop that did not happen (the learner did not start, store or train)."""
+
+
 class _Watch:
     """The learner's status (stored names by key, the newest state) and the daemon's
     status and targets (for the gap across the swap)."""
@@ -103,7 +107,7 @@ def _wait(pred: Any, timeout: float) -> bool:
 
 
 def start_learner(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse.Namespace,
-                  endpoint: str, logdir: Path) -> _Watch:
+                  logdir: Path) -> _Watch:
     """The learner service as a child (store, check trials), running before teaching
     starts; the watch on it and the daemon."""
     store = args.store or str(logdir / "store")
@@ -112,10 +116,10 @@ def start_learner(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse.
     stack.callback(watch.close)
     t0 = time.monotonic()
     stack.enter_context(Child("sctd_services.learner", "--store", store, "--robot", args.robot,
-                              "--trials", str(args.check_trials), "--connect", endpoint,
+                              "--trials", str(args.check_trials), *args.child_zenoh,
                               log=logdir / "learner.log"))
     if not watch.learner_up.wait(60):
-        raise RuntimeError(f"the learner did not start within 60 s; see {logdir / 'learner.log'}")
+        raise LoopError(f"the learner did not start within 60 s; see {logdir / 'learner.log'}")
     print(f"sctd teach: learner up in {time.monotonic() - t0:.1f} s (store {store}, log "
           f"{logdir / 'learner.log'})", flush=True)
     return watch
@@ -127,13 +131,12 @@ def _demo_names(watch: _Watch, keys: codec.Keys, scene: str, kept: list[Any]) ->
     wanted = [keys.demos(scene, a.name) for a in kept]
     if not _wait(lambda: all(k in watch.stored for k in wanted), 30):
         missing = [k for k in wanted if k not in watch.stored]
-        raise RuntimeError(f"the learner did not store {', '.join(missing)} within 30 s")
+        raise LoopError(f"the learner did not store {', '.join(missing)} within 30 s")
     return [watch.stored[k] for k in wanted]
 
 
 def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse.Namespace,
-                   scene: str, kept: list[Any], watch: _Watch, endpoint: str,
-                   logdir: Path) -> dict[str, Any]:
+                   scene: str, kept: list[Any], watch: _Watch, logdir: Path) -> dict[str, Any]:
     """After the last demonstration: the daemon (with ``--swap``), the training request
     for the demonstrations just taught, the swap confirmed on the daemon's status; the
     learner's reply, with ``last_demo_to_swap_s`` and ``swap_gap_ms`` added."""
@@ -142,7 +145,7 @@ def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse
     names = _demo_names(watch, keys, scene, kept)
     if args.swap:
         stack.enter_context(Child("sctd.cli.main", "run", "--skill", START_SKILL[scene], "--robot",
-                                  args.robot, "--connect", endpoint, log=logdir / "run.log"))
+                                  args.robot, *args.child_zenoh, log=logdir / "run.log"))
         print(f"sctd teach: daemon started on the shipped {START_SKILL[scene]!r} (log "
               f"{logdir / 'run.log'}); the arm is the daemon's from now on", flush=True)
     req: dict[str, Any] = {"task": scene, "method": args.then_learn, "demos": names, "swap": args.swap}
@@ -152,7 +155,7 @@ def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse
           f"{args.check_trials} lockstep trials{' and the swap' if args.swap else ''}", flush=True)
     got = client.query(s, keys.learner, codec.pack(req), timeout=900, find=10)
     if got is None or not got[0]:
-        raise RuntimeError(f"the learner did not train: {got[1].get('error') if got else 'no reply'}")
+        raise LoopError(f"the learner did not train: {got[1].get('error') if got else 'no reply'}")
     reply = got[1]
     if reply.get("swapped"):
         _wait(lambda: watch.skill == reply["id"], 10)
@@ -173,8 +176,7 @@ def print_reply(reply: dict[str, Any]) -> None:
               f"{ev.get('trials')} lockstep trials succeeded", flush=True)
         for row in ev.get("table", []):
             print(f"  {row}")
-    print(f"sctd teach: {'swapped' if reply.get('swapped') else 'not swapped'}: {reply.get('reason')}",
-          flush=True)
+    print(f"sctd teach: {reply.get('reason')}", flush=True)  # "swapped: ...", "kept the active ..."
     if reply.get("swapped"):
         gap = reply.get("swap_gap_ms")
         print(f"sctd teach: the daemon runs {reply['id']}; from the last demonstration to the "
