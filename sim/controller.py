@@ -143,6 +143,7 @@ class CartesianImpedanceController:
         self.D = np.zeros((6, 6))
         self.T_world_ee = np.eye(4)
         self.T_world_target = np.eye(4)
+        self._target_rows = self.T_world_target.tolist()  # its rows, for the float arithmetic
         self.v_target = np.zeros(6)
         self.error = np.zeros(6)
         self.tau = np.zeros(arm.nq)
@@ -194,7 +195,8 @@ class CartesianImpedanceController:
             Target twist ``[v, w]`` (world axes); default estimated from consecutive
             targets.
         """
-        T_new = np.asarray(T_world_target, dtype=float)
+        T_new = np.array(T_world_target, dtype=float)  # (a copy)
+        rows = T_new.tolist()
         stamp = self.t if stamp is None else float(stamp)
         g = self.gains
         if twist is not None:
@@ -202,16 +204,23 @@ class CartesianImpedanceController:
             self._ff_until = self.t + g.target_timeout
         elif self._stamp is not None and not self.holding and 0.0 < stamp - self._stamp <= 0.05:
             dt = stamp - self._stamp
-            v = (T_new[:3, 3] - self.T_world_target[:3, 3]) / dt
-            w = pin.log3(T_new[:3, :3] @ self.T_world_target[:3, :3].T) / dt
-            if v @ v <= g.ff_max_speed**2 and w @ w <= g.ff_max_rate**2:
-                self.v_target = np.concatenate([v, w])
+            # on floats where they give the same numbers (the rotation's product stays
+            # numpy's: its rounding is BLAS's)
+            (_, _, _, x), (_, _, _, y), (_, _, _, z), _ = rows
+            (_, _, _, x0), (_, _, _, y0), (_, _, _, z0), _ = self._target_rows
+            vx, vy, vz = (x - x0) / dt, (y - y0) / dt, (z - z0) / dt
+            w0, w1, w2 = pin.log3(T_new[:3, :3] @ self.T_world_target[:3, :3].T).tolist()
+            wx, wy, wz = w0 / dt, w1 / dt, w2 / dt
+            if (vx * vx + vy * vy + vz * vz <= g.ff_max_speed**2
+                    and wx * wx + wy * wy + wz * wz <= g.ff_max_rate**2):
+                self.v_target = np.array((vx, vy, vz, wx, wy, wz))
                 self._ff_until = self.t + 3.0 * dt
             else:
                 self.v_target = np.zeros(6)
         else:
             self.v_target = np.zeros(6)
-        self.T_world_target = T_new.copy()
+        self.T_world_target = T_new
+        self._target_rows = rows
         self._stamp = stamp
         self._rx_t = self.t
         self.holding = False
@@ -220,6 +229,7 @@ class CartesianImpedanceController:
         """Hold the last measured pose (as if the target had gone stale)."""
         self.holding = True
         self.T_world_target = self.T_world_ee.copy()
+        self._target_rows = self.T_world_target.tolist()
         self.v_target = np.zeros(6)
         self._stamp = None
 
@@ -288,7 +298,7 @@ class CartesianImpedanceController:
         """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target, each
         part scaled down to ``gains.max_error_trans`` / ``max_error_rot``."""
         g = self.gains
-        e0, e1, e2, e3, e4, e5 = pose_error(self.T_world_target.tolist(), T_world_ee.tolist())
+        e0, e1, e2, e3, e4, e5 = pose_error(self._target_rows, T_world_ee.tolist())
         n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if n_p > g.max_error_trans:
             s = g.max_error_trans / n_p
