@@ -222,15 +222,15 @@ def _rodrigues(x: float, y: float, z: float) -> Array:
                      [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
 
 
-def rigid_step(T: Array, G: Flat, d: tuple[float, float, float], P: Sequence[float],
-               fields: Sequence[Field]) -> Array:
-    """Move the hand T (4, 4; object frame) by the displacement ``d`` (3 floats) of the
-    frame at pose ``G``: the part of it along each rotational field (weighted by its
-    membership ``P`` (K,)) as a rotation of the whole hand about the field's centre
-    (sphere) or axis (cylinder), the rest as a translation
-    (:meth:`~sctd.skill.fields.Field.rigid_part`). The rotations' products stay numpy's
-    (their rounding is BLAS's); the rest is on floats."""
-    out = T.copy()
+def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field]) -> Flat:
+    """Move the hand F (object frame) by the displacement ``d`` (3 floats) of the frame at
+    pose ``G``: the part of it along each rotational field (weighted by its membership
+    ``P`` (K,)) as a rotation of the whole hand about the field's centre (sphere) or
+    axis (cylinder), the rest as a translation
+    (:meth:`~sctd.skill.fields.Field.rigid_part`). The rotations' matrix products are
+    numpy's (their rounding is BLAS's), the rest is on floats."""
+    R_hand = None  # the hand's rotation once turned (3, 3)
+    x, y, z = F[9], F[10], F[11]
     rx, ry, rz = d
     for k, f in enumerate(fields):
         pk = P[k]
@@ -239,15 +239,18 @@ def rigid_step(T: Array, G: Flat, d: tuple[float, float, float], P: Sequence[flo
         part = f.rigid_part(G, (pk * d[0], pk * d[1], pk * d[2]))
         if part is None:
             continue
-        t, w, centre = part
+        t, w, (c0, c1, c2) = part
         if not (t[0] or t[1] or t[2]):
             continue
         R = _rodrigues(*w)
-        out[:3, :3] = R @ out[:3, :3]
-        out[:3, 3] = R @ (out[:3, 3] - centre) + centre
+        R_hand = R @ (np.array(F[:9]).reshape(3, 3) if R_hand is None else R_hand)
+        m0, m1, m2 = (R @ np.array((x - c0, y - c1, z - c2))).tolist()
+        x, y, z = m0 + c0, m1 + c1, m2 + c2
         rx, ry, rz = rx - t[0], ry - t[1], rz - t[2]
-    out[:3, 3] += (rx, ry, rz)
-    return out
+    if R_hand is None:
+        return (*F[:9], x + rx, y + ry, z + rz)
+    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R_hand.tolist()
+    return (r0, r1, r2, r3, r4, r5, r6, r7, r8, x + rx, y + ry, z + rz)
 
 
 @MAPPINGS.register
@@ -344,8 +347,7 @@ class VectorFieldMapping(InputMapping):
         c = ws.speeds[0] * dt
         d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
         if self.motion == "rigid":
-            T = rigid_step(se3.transform_from_flat(F), G, d, P.tolist(), self.model.fields)
-            return se3.flat_from_transform(T)
+            return rigid_step(F, G, d, P.tolist(), self.model.fields)
         return se3.translate_flat(F, *d)
 
     def _step(self, ws: Workspace, p: Vec3, u: Vec3, unit: Vec3, mag: float
