@@ -157,6 +157,8 @@ class CartesianImpedanceController:
         self._started = False
         self._friction = g.friction_compensation * arm.damping
         self._ee_frame_id = arm.ee_frame_id
+        self._kin_q = b""  # the q (bytes) that _kin is for
+        self._kin: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((6, arm.nq)))
         self._eye6 = np.eye(6)
         self._sigma2_eye6 = g.sigma_min**2 * self._eye6
         sqrt_k = np.sqrt(self._k)
@@ -176,8 +178,9 @@ class CartesianImpedanceController:
             Centre of mass in the ee frame, m.
         """
         self._payload_weight = float(mass) * GRAVITY
-        cx, cy, cz = (float(x) for x in com_in_ee)
-        self._payload_com = (cx, cy, cz)
+        # (set every cycle as the bottle empties: tolist rather than iterating an array)
+        cx, cy, cz = com_in_ee.tolist() if isinstance(com_in_ee, np.ndarray) else com_in_ee
+        self._payload_com = (float(cx), float(cy), float(cz))
 
     # -- target ----------------------------------------------------------------------
     def set_target(self, T_world_target: np.ndarray, stamp: float | None = None,
@@ -245,10 +248,10 @@ class CartesianImpedanceController:
         # Every Pinocchio term once, then as few array operations as the law allows:
         # at 7 joints each costs its call overhead, not its arithmetic.
         # (``a.dot(b)`` rather than ``a @ b``: half the overhead on these tiny arrays)
-        model, data, g, ee = self.model, self.data, self.gains, self._ee_frame_id
+        model, data, g = self.model, self.data, self.gains
         self.t = t
-        J = pin.computeFrameJacobian(model, data, q, ee, _LWA)  # runs the kinematics too
-        T_e = self.T_world_ee = pin.updateFramePlacement(model, data, ee).homogeneous
+        T_e, J = self.kinematics(q)
+        self.T_world_ee = T_e
         h = pin.nonLinearEffects(model, data, q, dq)
         # Pinocchio >= 3 fills the whole (symmetric) inverse; tested in test_sim_dynamics.
         JMinv = J.dot(pin.computeMinverse(model, data, q))  # J M^-1, (6, 7)
@@ -293,6 +296,19 @@ class CartesianImpedanceController:
         tau += self._friction * dq
         self.tau = tau
         return tau
+
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``T_world_ee`` (4x4) and the ee Jacobian (6, 7; world axes at the ee) at the
+        measured ``q``, computed once per ``q``: the simulator reports the pose of the
+        measurement the next :meth:`update` works from. Read-only (they are shared)."""
+        key = q.tobytes()
+        if key != self._kin_q:
+            ee = self._ee_frame_id
+            J = pin.computeFrameJacobian(self.model, self.data, q, ee, _LWA)  # runs the kinematics
+            T = pin.updateFramePlacement(self.model, self.data, ee).homogeneous
+            T.flags.writeable = J.flags.writeable = False
+            self._kin, self._kin_q = (T, J), key
+        return self._kin
 
     def _saturated_error(self, T_world_ee: np.ndarray) -> np.ndarray:
         """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target, each

@@ -19,7 +19,6 @@ from typing import Any
 
 import can
 import numpy as np
-import pinocchio as pin
 
 from sctd import se3
 
@@ -85,7 +84,6 @@ class Simulation:
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
         self._payload()
         self._wrench = np.zeros(6)
-        self._fk = model.model.createData()  # workspace of state_message (1 kHz: no allocation)
 
     @property
     def t(self) -> float:
@@ -150,11 +148,9 @@ class Simulation:
         adds ``seq`` and ``stamp``.
         """
         m = self.arm.master
-        arm = self.arm.arm
-        pin.framesForwardKinematics(arm.model, self._fk, m.q)
+        T_world_ee, _ = self.arm.controller.kinematics(m.q)  # (what its next update uses)
         return {
-            "pose": se3.pose_from_flat(
-                se3.flat_from_transform(self._fk.oMf[arm.ee_frame_id].homogeneous)),
+            "pose": se3.pose_from_flat(se3.flat_from_transform(T_world_ee)),
             "q": m.q.tolist(),
             "dq": m.dq.tolist(),
             "wrench": self._wrench.tolist(),
