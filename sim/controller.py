@@ -139,6 +139,7 @@ class CartesianImpedanceController:
         self.data = arm.model.createData()
         g = self.gains
         self._k = np.array([g.k_trans] * 3 + [g.k_rot] * 3)
+        self._k_floats = tuple(self._k.tolist())
         self.K = np.diag(self._k)
         self.D = np.zeros((6, 6))
         self.T_world_ee = np.eye(4)
@@ -266,16 +267,7 @@ class CartesianImpedanceController:
                 self.hold()
         if not self.holding and t - self._rx_t > g.target_timeout:
             self.hold()
-        self.error = e = self._saturated_error(T_e)
-        v = J.dot(dq)
-        if g.feedforward and t <= self._ff_until:
-            v = np.subtract(self.v_target, v, out=v)
-        else:
-            v = np.negative(v, out=v)
-        F = self._k * e
-        F += self.D.dot(v)
-        if self._payload_weight:
-            self._add_payload_wrench(F, T_e)
+        F = self._task_wrench(T_e, J, dq, t)
 
         # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T y, y = Lambda J M^-1 tau0
         tau_null = g.k_null * (self.q_rest - q)
@@ -287,10 +279,11 @@ class CartesianImpedanceController:
         # keywords slowly; here upper triangle, overwrite A and b.)
         _c, y, info = _dposv(A.T, JMinv.dot(tau_null), 0, 1, 1)
         if info == 0:
-            F -= y  # J^T F + tau0 - J^T y
+            y0, y1, y2, y3, y4, y5 = y.tolist()  # J^T F + tau0 - J^T y
+            F = [F[0] - y0, F[1] - y1, F[2] - y2, F[3] - y3, F[4] - y4, F[5] - y5]
         else:  # not positive definite (cannot happen with damping): drop null space
             tau_null[:] = 0.0
-        tau = J.T.dot(F)
+        tau = J.T.dot(np.array(F))
         tau += tau_null
         tau += h
         tau += self._friction * dq
@@ -310,11 +303,33 @@ class CartesianImpedanceController:
             self._kin, self._kin_q = (T, J), key
         return self._kin
 
-    def _saturated_error(self, T_world_ee: np.ndarray) -> np.ndarray:
-        """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target, each
-        part scaled down to ``gains.max_error_trans`` / ``max_error_rot``."""
+    def _task_wrench(self, T_world_ee: np.ndarray, J: np.ndarray, dq: np.ndarray, t: float
+                     ) -> list[float]:
+        """``F = K e + D (v_t - J dq)``, plus the payload's feed-forward (world axes at the
+        ee; six floats). Sets :attr:`error`. (The products with the matrices are numpy's,
+        whose rounding is BLAS's; the rest is on floats.)"""
         g = self.gains
-        e0, e1, e2, e3, e4, e5 = pose_error(self._target_rows, T_world_ee.tolist())
+        rows = T_world_ee.tolist()
+        e0, e1, e2, e3, e4, e5 = self._saturated_error(rows)
+        self.error = np.array((e0, e1, e2, e3, e4, e5))
+        v = J.dot(dq)
+        if g.feedforward and t <= self._ff_until:
+            v = np.subtract(self.v_target, v, out=v)
+        else:
+            v = np.negative(v, out=v)
+        d0, d1, d2, d3, d4, d5 = self.D.dot(v).tolist()
+        k0, k1, k2, k3, k4, k5 = self._k_floats
+        F = [k0 * e0 + d0, k1 * e1 + d1, k2 * e2 + d2, k3 * e3 + d3, k4 * e4 + d4, k5 * e5 + d5]
+        if self._payload_weight:
+            self._add_payload_wrench(F, rows)
+        return F
+
+    def _saturated_error(self, rows: list[list[float]]) -> tuple[float, ...]:
+        """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target from the
+        measured pose's rows, each part scaled down to ``gains.max_error_trans`` /
+        ``max_error_rot``."""
+        g = self.gains
+        e0, e1, e2, e3, e4, e5 = pose_error(self._target_rows, rows)
         n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if n_p > g.max_error_trans:
             s = g.max_error_trans / n_p
@@ -323,14 +338,15 @@ class CartesianImpedanceController:
         if n_r > g.max_error_rot:
             s = g.max_error_rot / n_r
             e3, e4, e5 = s * e3, s * e4, s * e5
-        return np.array([e0, e1, e2, e3, e4, e5])
+        return e0, e1, e2, e3, e4, e5
 
-    def _add_payload_wrench(self, F: np.ndarray, T_world_ee: np.ndarray) -> None:
-        """Add to ``F`` (shape (6,), world axes at the ee) minus the load's weight
-        ``(0, 0, -w)`` and its moment ``r x (0, 0, -w)``, ``r`` the centre of mass."""
+    def _add_payload_wrench(self, F: list[float], rows: list[list[float]]) -> None:
+        """Add to ``F`` (6 floats, world axes at the ee) minus the load's weight
+        ``(0, 0, -w)`` and its moment ``r x (0, 0, -w)``, ``r`` the centre of mass (the
+        ee's rows give its orientation)."""
         w = self._payload_weight
         cx, cy, cz = self._payload_com
-        (r0, r1, r2, _), (s0, s1, s2, _), _, _ = T_world_ee.tolist()
+        (r0, r1, r2, _), (s0, s1, s2, _), _, _ = rows
         rx, ry = r0 * cx + r1 * cy + r2 * cz, s0 * cx + s1 * cy + s2 * cz
         F[2] += w
         F[3] += ry * w
