@@ -354,4 +354,5 @@ def sigmoid(x: float | Array, k: float) -> float | Array:
     Maps [-1, 1] onto [-1, 1] with f(0) = 0, f(+-1) = +-1 and f(x) = x at k = 0;
     k in (0, 1) makes it stricter (needs closer agreement), k in (-1, 0) more lenient.
     """
-    return (x - k * x) / (k - 2.0 * k * abs(x) + 1.0)  # (abs: np.abs on arrays, cheap on floats)
+    ax = np.abs(x) if isinstance(x, np.ndarray) else abs(x)  # (np.abs costs the tick ~1 us)
+    return (x - k * x) / (k - 2.0 * k * ax + 1.0)
