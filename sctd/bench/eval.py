@@ -25,9 +25,10 @@ from sctd_services.eval.trial import TaskSpec
 RATE = 1000.0  # Hz: the lockstep simulation's cycle (Simulation's default)
 
 
-def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0) -> dict[str, Any]:
+def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0,
+            time_limit: float = 60.0) -> dict[str, Any]:
     """Time ``trials`` lockstep trials of ``skill`` (seeds ``seed ..``) on ``task`` (default:
-    the task of the skill's object).
+    the task of the skill's object), each ending at ``time_limit`` s at the latest.
 
     Returns
     -------
@@ -38,7 +39,7 @@ def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0)
     """
     path = find_skill(skill)
     loaded = load_skill(path)
-    spec = TaskSpec(task_of([loaded], task))
+    spec = TaskSpec(task_of([loaded], task), time_limit=time_limit)
     sim_s, outcomes = 0.0, Counter[str]()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for k in range(trials):
@@ -57,8 +58,9 @@ def format_report(r: dict[str, Any]) -> str:
     """Human-readable report of :func:`measure`'s result."""
     last = r["seed"] + r["trials"] - 1
     outcomes = ", ".join(f"{n} {k}" for k, n in sorted(r["outcomes"].items()))
-    return (f"{r['skill']} on {r['task']}: {r['trials']} lockstep trials (seeds {r['seed']}-{last}) "
-            f"in this process\n"
+    n = r["trials"]
+    return (f"{r['skill']} on {r['task']}: {n} lockstep trial{'s' if n != 1 else ''} (seeds "
+            f"{r['seed']}-{last}) in this process\n"
             f"simulated {r['sim_s']:.1f} s in {r['wall_s']:.1f} s wall (cpu {r['cpu_s']:.1f} s): "
             f"real-time factor {r['rtf']:.2f}, {r['ms_per_step']:.3f} ms per step "
             f"({r['steps']} steps)\noutcomes: {outcomes}")
@@ -73,14 +75,17 @@ def add_bench_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trials", type=int, default=3, help="trials, run one after the other "
                                                          "(default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default %(default)s)")
+    p.add_argument("--time-limit", type=float, default=60.0, help="s per trial (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
 def main_bench_eval(args: argparse.Namespace) -> int:
     if args.trials < 1:
         return fail("bench eval", "--trials: must be >= 1")
+    if not args.time_limit > 0:
+        return fail("bench eval", "--time-limit: must be > 0")
     try:
-        r = measure(args.skill, args.task, args.trials, args.seed)
+        r = measure(args.skill, args.task, args.trials, args.seed, args.time_limit)
     except ValueError as e:  # a skill that does not load (SkillError), no task for it
         return fail("bench eval", str(e))
     print(json.dumps(r) if args.json else format_report(r))

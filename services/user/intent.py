@@ -109,7 +109,7 @@ class PourIntent:
     w_max: float = 0.6  # rad/s
     phase: str = "bring"
     _axis: Array | None = field(default=None, repr=False)
-    _inverse: tuple[bytes, Array] | None = field(default=None, repr=False)  # the mug's, by its pose
+    _inverse: tuple[bytes, Array] | None = field(default=None, repr=False, compare=False)  # mug's
 
     def desire(self, obs: Observation, steer: bool = True) -> Desire:
         """What the hand should do now; with ``steer`` False (an observer judging
