@@ -63,6 +63,8 @@ BENCHES: dict[str, Command] = {
                      "add_bench_learn_arguments", "main_bench_learn"),
     "sim": Command("simulator real-time factor, step response and tracking",
                    "sctd.bench.sim", "add_bench_sim_arguments", "main_bench_sim"),
+    "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
+                    "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
 }
 
 COMMANDS: dict[str, Command] = {
