@@ -153,3 +153,61 @@ def test_record_from_the_sim_with_the_announced_task_object(tmp_path):
     # points back at the robot), 3 cm above its opening
     np.testing.assert_allclose(demo.poses[-1, :3], [0.30, 0.0, 0.03], atol=0.01)
     assert port_is_free(port)
+
+
+def test_a_take_is_kept_or_discarded(tmp_path):
+    """The recorder as a library: a take sampled in the background and discarded leaves no
+    file and publishes nothing; the next one, kept, is demo_000.csv, published once on
+    sctd/edan/demos/<task>/demo_000 with the file's rows; a take too short for the learner
+    is not kept."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    stop = threading.Event()
+    published: list[tuple[str, codec.DemoMsg]] = []
+    with open_session(listen=[ep]) as robot_s, open_session(connect=[ep]) as s:
+        pub_s = robot_s.declare_publisher(KEYS.state)
+        pub_o = robot_s.declare_publisher(KEYS.objects("box"))
+        sub_d = robot_s.declare_subscriber(KEYS.demos(), lambda m: published.append(
+            (str(m.key_expr), codec.decode_demo(m.payload.to_bytes()))))
+
+        def robot() -> None:
+            k = 0
+            while not stop.is_set():
+                pub_s.put(codec.encode_state(k, time.time(), [0.3 + 0.001 * k, 0, 0.5, 0, 0, 0, 1]))
+                pub_o.put(codec.encode_object(k, time.time(), [0.8, 0.0, 0.5, *YAW180]))
+                k += 1
+                time.sleep(0.004)
+
+        th = threading.Thread(target=robot, daemon=True)
+        th.start()
+        try:
+            with record.Recorder(s, "edan", "box", task="slide") as rec:
+                assert wait_for(lambda: rec.sample() is not None, 10)
+                with record.Take(rec, tmp_path, rate=100.0) as take:
+                    take.start()
+                    assert wait_for(lambda: len(take.rows) >= 20, 10)
+                    assert take.stop() >= 20 and take.long_enough
+                    take.discard()
+                assert list(tmp_path.iterdir()) == [] and take.path is None
+                with record.Take(rec, tmp_path, rate=100.0) as take:
+                    take.start()
+                    assert wait_for(lambda: len(take.rows) >= 20, 10)
+                    kept = take.keep()
+                assert kept == tmp_path / "demo_000.csv" and take.key == KEYS.demos("slide", "demo_000")
+                with record.Take(rec, tmp_path, rate=100.0) as short:
+                    assert short.keep() is None  # no rows: not kept
+            assert wait_for(lambda: published, 5)
+        finally:
+            stop.set()
+            th.join()
+            pub_s.undeclare()
+            pub_o.undeclare()
+            sub_d.undeclare()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo_000.csv"]
+    assert [k for k, _ in published] == [KEYS.demos("slide", "demo_000")]
+    msg = published[0][1]
+    assert (msg.task, msg.object) == ("slide", "box")
+    written = np.loadtxt(kept, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(np.asarray(msg.rows), written)
+    assert len(take.rows) == len(written) and written[0, 0] == 0.0
+    assert port_is_free(port)

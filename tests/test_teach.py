@@ -20,6 +20,7 @@ from sctd_services.teach import (
     StreamLimits,
     TeachOptions,
     Variation,
+    facing,
     judge,
     move,
     plan_demonstration,
@@ -48,9 +49,14 @@ def test_plans_are_seeded_and_within_the_variation(task):
             p = plan_demonstration(g, seed, n)
             assert _same(p, plan_demonstration(g, seed, n))
             assert not _same(p, plan_demonstration(g, seed + 100, n))
-            assert np.all(np.abs(p.T_obj_start[:3, 3] - g.T_obj_start[:3, 3]) <= V.start)
+            offset = p.T_obj_start[:3, 3] - g.T_obj_start[:3, 3]
+            assert np.all(np.abs(offset) <= V.start)
+            if task == "pour":  # no higher than the scene's start
+                assert V.pour_start_height[0] <= offset[2] <= V.pour_start_height[1] <= 0.0
             assert 1 - V.speed <= p.speed <= 1 + V.speed
-            R_turn = g.T_obj_start[:3, :3].T @ p.T_obj_start[:3, :3]  # a turn about z only
+            # a turn about z only: from facing the mug from the start (pour), from the handle's
+            R0 = facing(p.T_obj_start[:3, 3], g) if task == "pour" else g.T_obj_start[:3, :3]
+            R_turn = R0.T @ p.T_obj_start[:3, :3]
             np.testing.assert_allclose(se3.rotvec_from_matrix(R_turn), [0, 0, p.yaw], atol=1e-12)
             # the via point is off the straight path by at most `via` each way across it
             a, b = p.T_obj_start[:3, 3], p.T_obj_goal[:3, 3]
@@ -118,6 +124,18 @@ def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
             T = _samples(M, 2000)
             v, w = _peak_speeds(T, M.duration / 1999)
             assert v < lim.max_speed and w < lim.max_turn, (type(M).__name__, v, w)
+
+
+def test_facing_the_mug():
+    """At the scene's start the hand faces the mug as the scene's start pose does; from
+    elsewhere its x axis points at the mug's vertical axis."""
+    g = scene_geometry("pour")
+    np.testing.assert_allclose(facing(g.T_obj_start[:3, 3], g), g.T_obj_start[:3, :3], atol=1e-12)
+    for p in ([0.3, 0.1, 0.0], [0.2, -0.1, 0.1]):
+        R = facing(np.array(p), g)
+        x = R[:, 0]
+        np.testing.assert_allclose(x[:2] / np.linalg.norm(x[:2]), -np.array(p[:2]) / math.hypot(*p[:2]))
+        np.testing.assert_allclose(R[:, 2], [0, 0, 1], atol=1e-12)
 
 
 def test_judge_uses_the_scene_outcome():

@@ -21,6 +21,7 @@ from .plan import (
     SceneGeometry,
     Speeds,
     Variation,
+    facing,
     plan_demonstration,
     scene_geometry,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "TipTurn",
     "Variation",
     "describe_outcome",
+    "facing",
     "judge",
     "move",
     "plan_demonstration",

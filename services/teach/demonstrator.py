@@ -233,7 +233,8 @@ def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeome
     plan = attempt.plan
     take.start()
     try:
-        teacher.hold(lambda: len(take.rows) > 0, 2.0)  # the take has its first row
+        if not teacher.hold(lambda: len(take.rows) > 0, 2.0):  # the take has its first row
+            raise TeachingError("the recorder took no sample within 2 s")
         first, second = task_motions(plan, geometry, speeds)
         teacher.phase = "carry" if plan.task == "pour" else "reach"
         teacher.follow(first, T_world_obj)

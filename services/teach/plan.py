@@ -4,14 +4,16 @@ A person teaching a task by hand never shows it twice the same way. Between
 demonstrations (the ranges of :class:`Variation`, issue 11) the hand starts elsewhere
 (within +-10 cm of the scene's start, each axis), its path bends through a different
 via point, it moves faster or slower (+-30 %), and a pour tilts the bottle about an
-axis turned by up to +-0.3 rad of yaw, with the opening 3-6 cm above the mug's.
+axis turned by up to +-0.3 rad of yaw from facing the mug, with the opening 3-6 cm
+above the mug's.
 
 Everything is planned in the task object's frame (``T_obj_ee``; the scenes'
 conventions, :mod:`sctd_sim.scenes`):
 
 ``pour`` (object ``mug``: origin at the centre of its opening, z up, x towards the
 robot; the bottle's opening, the tip, 0.12 m along the hand's z). *carry*: the bottle,
-upright and turned by the pour yaw, is translated from the start through the via point
+upright, the hand facing the mug from where it starts (its x towards the mug's axis, as
+at the scene's start) and turned by the pour yaw, is translated from the start through the via point
 until its opening is over the mug's centre at the pour height; *pour*: the hand turns
 about the tip's y axis (the hand's), tilting the bottle's top towards the mug, to the
 planned tilt, until the mug holds the fill target.
@@ -57,6 +59,12 @@ class Variation:
     ----------
     start : float
         The hand starts within this of the scene's start position, each axis, m.
+    pour_start_height : tuple of float
+        Pour: the start's height within these offsets from the scene's start instead, m:
+        no higher than the scene's start (the opening 15 cm above the mug's), as a full
+        bottle is lifted no higher than needed. (Starts above it make the carry's
+        mean direction, the learned translation field, steep enough that near the mug a
+        user's push tips the bottle's opening down into it.)
     via : float
         The via point lies within this of the straight path, along each of the two
         directions across it, m.
@@ -66,7 +74,8 @@ class Variation:
         Speeds within this fraction of the nominal ones (:class:`Speeds`), either way.
     pour_yaw : float
         The pour axis (the hand's y, the bottle carried upright) turned about the vertical
-        within this of the scene's, rad.
+        within this of facing the mug from the start (the hand's x towards the mug's
+        axis, as at the scene's start), rad.
     pour_height : tuple of float
         The bottle's opening above the mug's while pouring, m.
     pour_tilt : tuple of float
@@ -79,6 +88,7 @@ class Variation:
     """
 
     start: float = 0.10
+    pour_start_height: tuple[float, float] = (-0.10, 0.0)
     via: float = 0.03
     via_at: tuple[float, float] = (0.35, 0.65)
     speed: float = 0.30
@@ -175,8 +185,8 @@ class DemoPlan:
     speed : float
         Factor on the nominal speeds.
     yaw : float
-        Pour: the pour axis' yaw from the scene's; drawer: the start orientation's from
-        the handle's (rad).
+        Pour: the pour axis' yaw from facing the mug from the start; drawer: the start
+        orientation's from the handle's (rad).
     height : float
         Pour: the bottle's opening above the mug's while pouring, m (0 for the drawer).
     tilt : float
@@ -235,10 +245,13 @@ def plan_demonstration(geometry: SceneGeometry, seed: int, attempt: int,
     V = variation
     speed = 1.0 + float(rng.uniform(-V.speed, V.speed))
     T_start = geometry.T_obj_start.copy()
-    T_start[:3, 3] += rng.uniform(-V.start, V.start, 3)
+    low, high = [-V.start, -V.start, -V.start], [V.start, V.start, V.start]
+    if geometry.task == "pour":
+        low[2], high[2] = V.pour_start_height
+    T_start[:3, 3] += rng.uniform(low, high)
     if geometry.task == "pour":
         yaw = float(rng.uniform(-V.pour_yaw, V.pour_yaw))
-        R = geometry.T_obj_start[:3, :3] @ se3.matrix_from_rotvec([0.0, 0.0, yaw])
+        R = facing(T_start[:3, 3], geometry) @ se3.matrix_from_rotvec([0.0, 0.0, yaw])
         T_start[:3, :3] = R
         tip = np.array([0.0, 0.0, rng.uniform(*V.pour_height)])
         miss = _horizontal(rng) * MISTAKE_OFF_AXIS["pour"]  # drawn always: a mistake changes
@@ -255,6 +268,17 @@ def plan_demonstration(geometry: SceneGeometry, seed: int, attempt: int,
     via, via_at = _via_point(T_start[:3, 3], T_goal[:3, 3], rng, V)
     return DemoPlan(geometry.task, attempt, T_start, via, via_at, T_goal, speed, yaw, height,
                     tilt, pull, mistake)
+
+
+def facing(p_obj_ee: Array, geometry: SceneGeometry) -> Array:
+    """The scene's start orientation turned about the vertical so that the hand at
+    ``p_obj_ee`` (object frame) faces the object's vertical axis as the scene's start
+    faces it (pour: the hand's x towards the mug), shape (3, 3). Spreading the pour
+    planes so (the pour in each demonstration turns about a differently yawed axis)
+    is what lets a learner tell a sphere about the opening from a cylinder."""
+    p0 = geometry.T_obj_start[:3, 3]
+    turn = math.atan2(-p_obj_ee[1], -p_obj_ee[0]) - math.atan2(-p0[1], -p0[0])
+    return se3.matrix_from_rotvec([0.0, 0.0, turn]) @ geometry.T_obj_start[:3, :3]
 
 
 def _horizontal(rng: np.random.Generator) -> Array:
