@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import signal
 import tempfile
 import time
 from pathlib import Path
@@ -64,7 +65,12 @@ def add_teach_arguments(p: argparse.ArgumentParser) -> None:
                 "loopback port. " + (p.epilog or ""))
 
 
+def _stop_on_sigterm(*_: object) -> None:
+    raise SystemExit(143)  # unwinds the stack: the simulator, learner and daemon are stopped
+
+
 def main_teach(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
         args.mistakes = tuple(args.mistakes)
         options = from_namespace(TeachOptions, args)
