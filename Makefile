@@ -7,7 +7,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo teach test lint bench clean
 
 setup: $(STAMP)
 
@@ -19,6 +19,11 @@ $(STAMP): pyproject.toml setup.py
 
 demo: setup
 	$(BIN)/sctd demo --skill skills/pour.yaml --seconds 40
+
+# Teach 10 pours in the simulator, have the learner train a vector-field skill, check it,
+# swap it into the running daemon, then evaluate it next to the shipped one.
+teach: setup
+	$(BIN)/sctd teach --scene pour --then-learn vf --swap --out $$(mktemp -d)/pour-taught
 
 test: setup
 	$(BIN)/python -m pytest -q

@@ -139,10 +139,12 @@ class CartesianImpedanceController:
         self.data = arm.model.createData()
         g = self.gains
         self._k = np.array([g.k_trans] * 3 + [g.k_rot] * 3)
+        self._k_floats = tuple(self._k.tolist())
         self.K = np.diag(self._k)
         self.D = np.zeros((6, 6))
         self.T_world_ee = np.eye(4)
         self.T_world_target = np.eye(4)
+        self._target_rows = self.T_world_target.tolist()  # its rows, for the float arithmetic
         self.v_target = np.zeros(6)
         self.error = np.zeros(6)
         self.tau = np.zeros(arm.nq)
@@ -156,6 +158,8 @@ class CartesianImpedanceController:
         self._started = False
         self._friction = g.friction_compensation * arm.damping
         self._ee_frame_id = arm.ee_frame_id
+        self._kin_q = b""  # the q (bytes) that _kin is for
+        self._kin: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((6, arm.nq)))
         self._eye6 = np.eye(6)
         self._sigma2_eye6 = g.sigma_min**2 * self._eye6
         sqrt_k = np.sqrt(self._k)
@@ -175,8 +179,9 @@ class CartesianImpedanceController:
             Centre of mass in the ee frame, m.
         """
         self._payload_weight = float(mass) * GRAVITY
-        cx, cy, cz = (float(x) for x in com_in_ee)
-        self._payload_com = (cx, cy, cz)
+        # (set every cycle as the bottle empties: tolist rather than iterating an array)
+        cx, cy, cz = com_in_ee.tolist() if isinstance(com_in_ee, np.ndarray) else com_in_ee
+        self._payload_com = (float(cx), float(cy), float(cz))
 
     # -- target ----------------------------------------------------------------------
     def set_target(self, T_world_target: np.ndarray, stamp: float | None = None,
@@ -194,7 +199,8 @@ class CartesianImpedanceController:
             Target twist ``[v, w]`` (world axes); default estimated from consecutive
             targets.
         """
-        T_new = np.asarray(T_world_target, dtype=float)
+        T_new = np.array(T_world_target, dtype=float)  # (a copy)
+        rows = T_new.tolist()
         stamp = self.t if stamp is None else float(stamp)
         g = self.gains
         if twist is not None:
@@ -202,16 +208,23 @@ class CartesianImpedanceController:
             self._ff_until = self.t + g.target_timeout
         elif self._stamp is not None and not self.holding and 0.0 < stamp - self._stamp <= 0.05:
             dt = stamp - self._stamp
-            v = (T_new[:3, 3] - self.T_world_target[:3, 3]) / dt
-            w = pin.log3(T_new[:3, :3] @ self.T_world_target[:3, :3].T) / dt
-            if v @ v <= g.ff_max_speed**2 and w @ w <= g.ff_max_rate**2:
-                self.v_target = np.concatenate([v, w])
+            # on floats where they give the same numbers (the rotation's product stays
+            # numpy's: its rounding is BLAS's)
+            (_, _, _, x), (_, _, _, y), (_, _, _, z), _ = rows
+            (_, _, _, x0), (_, _, _, y0), (_, _, _, z0), _ = self._target_rows
+            vx, vy, vz = (x - x0) / dt, (y - y0) / dt, (z - z0) / dt
+            w0, w1, w2 = pin.log3(T_new[:3, :3] @ self.T_world_target[:3, :3].T).tolist()
+            wx, wy, wz = w0 / dt, w1 / dt, w2 / dt
+            if (vx * vx + vy * vy + vz * vz <= g.ff_max_speed**2
+                    and wx * wx + wy * wy + wz * wz <= g.ff_max_rate**2):
+                self.v_target = np.array((vx, vy, vz, wx, wy, wz))
                 self._ff_until = self.t + 3.0 * dt
             else:
                 self.v_target = np.zeros(6)
         else:
             self.v_target = np.zeros(6)
-        self.T_world_target = T_new.copy()
+        self.T_world_target = T_new
+        self._target_rows = rows
         self._stamp = stamp
         self._rx_t = self.t
         self.holding = False
@@ -220,6 +233,7 @@ class CartesianImpedanceController:
         """Hold the last measured pose (as if the target had gone stale)."""
         self.holding = True
         self.T_world_target = self.T_world_ee.copy()
+        self._target_rows = self.T_world_target.tolist()
         self.v_target = np.zeros(6)
         self._stamp = None
 
@@ -235,10 +249,10 @@ class CartesianImpedanceController:
         # Every Pinocchio term once, then as few array operations as the law allows:
         # at 7 joints each costs its call overhead, not its arithmetic.
         # (``a.dot(b)`` rather than ``a @ b``: half the overhead on these tiny arrays)
-        model, data, g, ee = self.model, self.data, self.gains, self._ee_frame_id
+        model, data, g = self.model, self.data, self.gains
         self.t = t
-        J = pin.computeFrameJacobian(model, data, q, ee, _LWA)  # runs the kinematics too
-        T_e = self.T_world_ee = pin.updateFramePlacement(model, data, ee).homogeneous
+        T_e, J = self.kinematics(q)
+        self.T_world_ee = T_e
         h = pin.nonLinearEffects(model, data, q, dq)
         # Pinocchio >= 3 fills the whole (symmetric) inverse; tested in test_sim_dynamics.
         JMinv = J.dot(pin.computeMinverse(model, data, q))  # J M^-1, (6, 7)
@@ -253,16 +267,7 @@ class CartesianImpedanceController:
                 self.hold()
         if not self.holding and t - self._rx_t > g.target_timeout:
             self.hold()
-        self.error = e = self._saturated_error(T_e)
-        v = J.dot(dq)
-        if g.feedforward and t <= self._ff_until:
-            v = np.subtract(self.v_target, v, out=v)
-        else:
-            v = np.negative(v, out=v)
-        F = self._k * e
-        F += self.D.dot(v)
-        if self._payload_weight:
-            self._add_payload_wrench(F, T_e)
+        F = self._task_wrench(T_e, J, dq, t)
 
         # null space: tau0 - J^T Jbar^T tau0 = tau0 - J^T y, y = Lambda J M^-1 tau0
         tau_null = g.k_null * (self.q_rest - q)
@@ -274,21 +279,57 @@ class CartesianImpedanceController:
         # keywords slowly; here upper triangle, overwrite A and b.)
         _c, y, info = _dposv(A.T, JMinv.dot(tau_null), 0, 1, 1)
         if info == 0:
-            F -= y  # J^T F + tau0 - J^T y
+            y0, y1, y2, y3, y4, y5 = y.tolist()  # J^T F + tau0 - J^T y
+            F = [F[0] - y0, F[1] - y1, F[2] - y2, F[3] - y3, F[4] - y4, F[5] - y5]
         else:  # not positive definite (cannot happen with damping): drop null space
             tau_null[:] = 0.0
-        tau = J.T.dot(F)
+        tau = J.T.dot(np.array(F))
         tau += tau_null
         tau += h
         tau += self._friction * dq
         self.tau = tau
         return tau
 
-    def _saturated_error(self, T_world_ee: np.ndarray) -> np.ndarray:
-        """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target, each
-        part scaled down to ``gains.max_error_trans`` / ``max_error_rot``."""
+    def kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``T_world_ee`` (4x4) and the ee Jacobian (6, 7; world axes at the ee) at the
+        measured ``q``, computed once per ``q``: the simulator reports the pose of the
+        measurement the next :meth:`update` works from. Read-only (they are shared)."""
+        key = q.tobytes()
+        if key != self._kin_q:
+            ee = self._ee_frame_id
+            J = pin.computeFrameJacobian(self.model, self.data, q, ee, _LWA)  # runs the kinematics
+            T = pin.updateFramePlacement(self.model, self.data, ee).homogeneous
+            T.flags.writeable = J.flags.writeable = False
+            self._kin, self._kin_q = (T, J), key
+        return self._kin
+
+    def _task_wrench(self, T_world_ee: np.ndarray, J: np.ndarray, dq: np.ndarray, t: float
+                     ) -> list[float]:
+        """``F = K e + D (v_t - J dq)``, plus the payload's feed-forward (world axes at the
+        ee; six floats). Sets :attr:`error`. (The products with the matrices are numpy's,
+        whose rounding is BLAS's; the rest is on floats.)"""
         g = self.gains
-        e0, e1, e2, e3, e4, e5 = pose_error(self.T_world_target.tolist(), T_world_ee.tolist())
+        rows = T_world_ee.tolist()
+        e0, e1, e2, e3, e4, e5 = self._saturated_error(rows)
+        self.error = np.array((e0, e1, e2, e3, e4, e5))
+        v = J.dot(dq)
+        if g.feedforward and t <= self._ff_until:
+            v = np.subtract(self.v_target, v, out=v)
+        else:
+            v = np.negative(v, out=v)
+        d0, d1, d2, d3, d4, d5 = self.D.dot(v).tolist()
+        k0, k1, k2, k3, k4, k5 = self._k_floats
+        F = [k0 * e0 + d0, k1 * e1 + d1, k2 * e2 + d2, k3 * e3 + d3, k4 * e4 + d4, k5 * e5 + d5]
+        if self._payload_weight:
+            self._add_payload_wrench(F, rows)
+        return F
+
+    def _saturated_error(self, rows: list[list[float]]) -> tuple[float, ...]:
+        """Pose error ``[e_p, e_r]`` (m, rad; see :func:`pose_error`) to the target from the
+        measured pose's rows, each part scaled down to ``gains.max_error_trans`` /
+        ``max_error_rot``."""
+        g = self.gains
+        e0, e1, e2, e3, e4, e5 = pose_error(self._target_rows, rows)
         n_p = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
         if n_p > g.max_error_trans:
             s = g.max_error_trans / n_p
@@ -297,14 +338,15 @@ class CartesianImpedanceController:
         if n_r > g.max_error_rot:
             s = g.max_error_rot / n_r
             e3, e4, e5 = s * e3, s * e4, s * e5
-        return np.array([e0, e1, e2, e3, e4, e5])
+        return e0, e1, e2, e3, e4, e5
 
-    def _add_payload_wrench(self, F: np.ndarray, T_world_ee: np.ndarray) -> None:
-        """Add to ``F`` (shape (6,), world axes at the ee) minus the load's weight
-        ``(0, 0, -w)`` and its moment ``r x (0, 0, -w)``, ``r`` the centre of mass."""
+    def _add_payload_wrench(self, F: list[float], rows: list[list[float]]) -> None:
+        """Add to ``F`` (6 floats, world axes at the ee) minus the load's weight
+        ``(0, 0, -w)`` and its moment ``r x (0, 0, -w)``, ``r`` the centre of mass (the
+        ee's rows give its orientation)."""
         w = self._payload_weight
         cx, cy, cz = self._payload_com
-        (r0, r1, r2, _), (s0, s1, s2, _), _, _ = T_world_ee.tolist()
+        (r0, r1, r2, _), (s0, s1, s2, _), _, _ = rows
         rx, ry = r0 * cx + r1 * cy + r2 * cz, s0 * cx + s1 * cy + s2 * cz
         F[2] += w
         F[3] += ry * w

@@ -77,16 +77,31 @@ class ArmDynamics:
         self._dq_max = arm.dq_max.tolist()
         self._q_lower = arm.q_lower.tolist()
         self._q_upper = arm.q_upper.tolist()
+        self._kin_q = b""  # the q (bytes) that _kin is for
+        self._kin: tuple[np.ndarray, np.ndarray] = (np.eye(4), np.zeros((6, arm.nq)))
 
     def set_external_wrench(self, wrench: np.ndarray) -> None:
         """Set the external wrench at the ee (world axes, ee origin) for the next steps."""
         self.wrench_ext[:] = wrench
-        self._has_wrench = bool(self.wrench_ext.any())
+        self._has_wrench = bool(np.count_nonzero(self.wrench_ext))  # (a fifth of .any()'s cost)
 
     def external_torque(self) -> np.ndarray:
         """Joint torque of the external wrench, ``J_ee^T w_ext``, N m."""
-        J = pin.computeFrameJacobian(self.model, self.data, self.q, self.arm.ee_frame_id, _LWA)
-        return J.T.dot(self.wrench_ext)
+        return self._kinematics()[1].T.dot(self.wrench_ext)
+
+    def _kinematics(self) -> tuple[np.ndarray, np.ndarray]:
+        """``T_world_ee`` (4x4) and the ee Jacobian (6, 7; world axes at the ee) at the
+        current ``q``, computed once per ``q``: a cycle asks for them three times (the
+        scene's pose and twist, the external torque) at the same posture. Read-only
+        (they are shared)."""
+        key = self.q.tobytes()
+        if key != self._kin_q:
+            # the Jacobian's kinematics give the same placement as forwardKinematics
+            J = pin.computeFrameJacobian(self.model, self.data, self.q, self.arm.ee_frame_id, _LWA)
+            T = pin.updateFramePlacement(self.model, self.data, self.arm.ee_frame_id).homogeneous
+            T.flags.writeable = J.flags.writeable = False
+            self._kin, self._kin_q = (T, J), key
+        return self._kin
 
     def step(self, tau_motor: np.ndarray, dt: float, braked: np.ndarray | None = None) -> None:
         """Advance by ``dt`` seconds under motor torque ``tau_motor`` (N m, shape (7,)).
@@ -175,14 +190,12 @@ class ArmDynamics:
 
     # -- measurements ----------------------------------------------------------------
     def ee_transform(self) -> np.ndarray:
-        """``T_world_ee``, shape (4, 4), at the current ``q``."""
-        pin.forwardKinematics(self.model, self.data, self.q)
-        return pin.updateFramePlacement(self.model, self.data, self.arm.ee_frame_id).homogeneous
+        """``T_world_ee``, shape (4, 4), at the current ``q`` (read-only)."""
+        return self._kinematics()[0]
 
     def ee_velocity(self) -> np.ndarray:
         """End-effector twist ``[v, w]`` in world axes at the ee origin, shape (6,)."""
-        J = pin.computeFrameJacobian(self.model, self.data, self.q, self.arm.ee_frame_id, _LWA)
-        return J @ self.dq
+        return self._kinematics()[1] @ self.dq
 
     def mass_matrix(self) -> np.ndarray:
         """Joint-space inertia ``M(q)`` (with armature), shape (7, 7)."""

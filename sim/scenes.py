@@ -145,15 +145,21 @@ class PourGeometry:
     over_opening: bool
 
 
-def pour_geometry(T_world_tip: np.ndarray, params: PourParams) -> PourGeometry:
-    """Bottle opening relative to the mug opening, and the bottle's tilt."""
-    T_mug_tip = se3.invert_transform(params.T_world_mug) @ T_world_tip
-    p = T_mug_tip[:3, 3]
-    radial = float(math.hypot(p[0], p[1]))
-    above = float(p[2])
-    tilt = float(math.acos(min(1.0, max(-1.0, T_world_tip[2, 2]))))
+def pour_geometry(T_world_tip: np.ndarray, params: PourParams,
+                  T_mug_world: np.ndarray | None = None) -> PourGeometry:
+    """Bottle opening relative to the mug opening, and the bottle's tilt.
+
+    ``T_mug_world``: the inverse of ``params.T_world_mug``, when the caller keeps it
+    (the scene does: the mug does not move).
+    """
+    if T_mug_world is None:
+        T_mug_world = se3.invert_transform(params.T_world_mug)
+    p = (T_mug_world @ T_world_tip)[:3, 3]
+    x, y, above = p.tolist()
+    radial = math.hypot(x, y)
+    tilt = math.acos(min(1.0, max(-1.0, float(T_world_tip[2, 2]))))
     over = radial <= params.mug_radius - params.rim_margin and 0.0 <= above <= params.max_drop
-    return PourGeometry(p.copy(), above, radial, tilt, bool(over))
+    return PourGeometry(p.copy(), above, radial, tilt, over)
 
 
 def pour_flow(tilt: float, params: PourParams) -> float:
@@ -182,6 +188,8 @@ class PourScene:
 
     def __init__(self, params: PourParams | None = None) -> None:
         self.params = params or PourParams()
+        self._mug_key = b""  # the T_world_mug (bytes) that _T_mug_world inverts
+        self._T_mug_world = np.eye(4)
         self.reset()
 
     def reset(self) -> None:
@@ -203,7 +211,7 @@ class PourScene:
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
         """Pour for ``dt`` seconds; return the bottle's weight as a wrench on the ee."""
         P = self.params
-        g = self.geometry = pour_geometry(self.tip_transform(T_world_ee), P)
+        g = self.geometry = pour_geometry(self.tip_transform(T_world_ee), P, self._mug_inverse())
         out = min(self.remaining, pour_flow(g.tilt, P) * dt)
         if out > 0.0:
             self.remaining -= out
@@ -212,9 +220,17 @@ class PourScene:
             else:
                 self.spilled += out
         fz = -(P.bottle_mass_empty + P.liquid_mass * self.remaining) * GRAVITY
-        r = T_world_ee[:3, :3].dot(P.com_in_ee)
+        r0, r1, _ = T_world_ee[:3, :3].dot(P.com_in_ee).tolist()
         # [force, r x force] with force = (0, 0, fz), written out (np.cross costs ~25 us)
-        return np.array([0.0, 0.0, fz, r[1] * fz, -r[0] * fz, 0.0])
+        return np.array((0.0, 0.0, fz, r1 * fz, -r0 * fz, 0.0))
+
+    def _mug_inverse(self) -> np.ndarray:
+        """``T_mug_world``, computed again only when the mug's pose changed."""
+        T = self.params.T_world_mug
+        key = T.tobytes()
+        if key != self._mug_key:
+            self._T_mug_world, self._mug_key = se3.invert_transform(T), key
+        return self._T_mug_world
 
     def payload(self) -> tuple[float, np.ndarray] | None:
         """The bottle with what is left in it (the arm's load data follows it as it
@@ -350,22 +366,25 @@ class DrawerScene:
 
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
         """Grasp/release, move the drawer by ``dt``; return the wrench on the ee."""
+        # (on floats: the same numbers as on 3-vectors, without numpy's per-call cost)
         P = self.params
-        axis = P.T_world_closed[:3, 0]
-        p_handle = P.T_world_closed[:3, 3] + self.opening * axis
-        delta = T_world_ee[:3, 3] - p_handle
-        dist = float(np.linalg.norm(delta))
+        (ax, _, _, hx), (ay, _, _, hy), (az, _, _, hz), _ = P.T_world_closed.tolist()  # pull axis, handle
+        o = self.opening
+        (_, _, _, ex), (_, _, _, ey), (_, _, _, ez), _ = T_world_ee.tolist()
+        dx, dy, dz = ex - (hx + o * ax), ey - (hy + o * ay), ez - (hz + o * az)
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         if not self.attached and dist <= P.grasp_radius:
             self.attached = True
             self.grasps += 1
         elif self.attached and dist > P.release_distance:
             self.attached = False
-        force_on_ee = np.zeros(3)
-        pull = 0.0
+        fx = fy = fz = pull = 0.0  # force on the ee, and the pull along the axis
         if self.attached:
-            force_on_ee = -P.coupling_stiffness * delta - P.coupling_damping * (
-                twist[:3] - self.speed * axis)
-            pull = float(-force_on_ee @ axis)
+            k, c, s = P.coupling_stiffness, P.coupling_damping, self.speed
+            vx, vy, vz = twist[:3].tolist()
+            fx, fy, fz = (-k * dx - c * (vx - s * ax), -k * dy - c * (vy - s * ay),
+                          -k * dz - c * (vz - s * az))
+            pull = 0.0 + -fx * ax + -fy * ay + -fz * az  # (summed as numpy's dot sums)
         accel = (pull + drawer_force(self.opening, self.speed, P)) / P.mass
         self.speed += accel * dt
         self.opening += self.speed * dt
@@ -374,7 +393,7 @@ class DrawerScene:
         elif self.opening >= P.max_opening:
             self.opening, self.speed = P.max_opening, min(self.speed, 0.0)
         self.max_opening_reached = max(self.max_opening_reached, self.opening)
-        return np.concatenate([force_on_ee, np.zeros(3)])
+        return np.array((fx, fy, fz, 0.0, 0.0, 0.0))
 
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
         """``drawer_handle``: the closed handle's frame (fixed, see the module doc)."""

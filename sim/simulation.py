@@ -13,12 +13,12 @@ Everything returned is plain Python (lists, floats, bools), ready for msgpack.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
 import can
 import numpy as np
-import pinocchio as pin
 
 from sctd import se3
 
@@ -84,7 +84,6 @@ class Simulation:
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
         self._payload()
         self._wrench = np.zeros(6)
-        self._fk = model.model.createData()  # workspace of state_message (1 kHz: no allocation)
 
     @property
     def t(self) -> float:
@@ -124,12 +123,21 @@ class Simulation:
         """Follow a new ee target ``pose`` (``[x, y, z, qx, qy, qz, qw]``, world).
 
         ``stamp`` is the sender's time (s); only differences of stamps are used, for
-        the target-velocity feed-forward. Non-finite poses are ignored.
+        the target-velocity feed-forward. Non-finite poses, and anything but 7 numbers
+        with a quaternion of norm >= 1e-6, are ignored.
         """
-        p = np.asarray(pose, dtype=float)
-        if p.shape != (7,) or not np.all(np.isfinite(p)) or np.linalg.norm(p[3:]) < 1e-6:
+        # (checked on floats: numpy's vectorised checks of one pose cost more than the
+        # conversion, which takes se3's single-pose path)
+        try:
+            p = [float(x) for x in pose]
+        except (TypeError, ValueError):
             return
-        self.arm.set_target(se3.transform_from_pose(p.tolist()), stamp)
+        if len(p) != 7 or not all(map(math.isfinite, p)):
+            return
+        _, _, _, qx, qy, qz, qw = p
+        if math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) < 1e-6:
+            return
+        self.arm.set_target(se3.transform_from_pose(p), stamp)
 
     def state_message(self) -> dict[str, list[float]]:
         """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).
@@ -140,11 +148,9 @@ class Simulation:
         adds ``seq`` and ``stamp``.
         """
         m = self.arm.master
-        arm = self.arm.arm
-        pin.framesForwardKinematics(arm.model, self._fk, m.q)
+        T_world_ee, _ = self.arm.controller.kinematics(m.q)  # (what its next update uses)
         return {
-            "pose": se3.pose_from_flat(
-                se3.flat_from_transform(self._fk.oMf[arm.ee_frame_id].homogeneous)),
+            "pose": se3.pose_from_flat(se3.flat_from_transform(T_world_ee)),
             "q": m.q.tolist(),
             "dq": m.dq.tolist(),
             "wrench": self._wrench.tolist(),

@@ -43,6 +43,20 @@ def sctd(*args: str, log: Path) -> Proc:
     return Proc("sctd.cli.main", *args, log=log)
 
 
+@pytest.fixture(autouse=True, scope="session")
+def private_store(tmp_path_factory):
+    """The learner's store (``$SCTD_STORE``, read by every skill lookup) is a folder of
+    the test run's own, never the user's; children inherit it."""
+    folder = tmp_path_factory.mktemp("store")
+    old = os.environ.get("SCTD_STORE")
+    os.environ["SCTD_STORE"] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop("SCTD_STORE", None)
+    else:
+        os.environ["SCTD_STORE"] = old
+
+
 @pytest.fixture(autouse=True)
 def no_leaked_processes():
     yield

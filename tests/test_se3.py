@@ -115,6 +115,18 @@ def test_average_quaternion_sign_invariant():
     assert se3.quaternion_angle(mean, q) < 1e-9
 
 
+@given(st.lists(poses(scale=5.0), min_size=1, max_size=4), st.floats(0.5, 2.0))
+def test_one_pose_gives_the_floats_of_the_batch_path(batch, scale):
+    """A single pose takes a fast path on floats: bit for bit the batch path's matrices,
+    for lists, tuples and arrays, with quaternions of any norm."""
+    P = np.array(batch)
+    P[:, 3:] *= scale
+    T = se3.transform_from_pose(P)
+    for i, pose in enumerate(P):
+        for one in (pose, pose.tolist(), tuple(pose.tolist())):
+            assert se3.transform_from_pose(one).tobytes() == T[i].tobytes()
+
+
 def test_zero_quaternion_rejected():
     with pytest.raises(ValueError):
         se3.transform_from_pose([0, 0, 0, 0, 0, 0, 0])

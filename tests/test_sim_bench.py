@@ -59,3 +59,15 @@ def test_the_pour_scene_step_settles_because_the_bottle_is_compensated():
     bare = scene_step("pour", 0.05, compensate=False)
     assert ok["payload_kg"] == 0.5 and ok["settling_time_s"] < 1.0 and ok["final_error_m"] < 1e-3
     assert bare["settling_time_s"] == float("inf") and 1e-3 < bare["final_error_m"] < 3e-3
+
+
+def test_bench_eval_times_lockstep_trials():
+    from sctd.bench.eval import format_report as format_eval
+    from sctd.bench.eval import measure
+
+    r = measure("pour", trials=2, seed=3, time_limit=0.2)  # short trials: each ends at its limit
+    assert r["task"] == "pour" and r["trials"] == 2 and r["outcomes"] == {"failure": 2}
+    assert r["steps"] == round(r["sim_s"] * 1000) and 0.4 <= r["sim_s"] <= 0.45
+    assert r["rtf"] > 0 and r["ms_per_step"] > 0 and r["cpu_s"] > 0
+    text = format_eval(r)
+    assert "2 lockstep trials (seeds 3-4)" in text and "real-time factor" in text

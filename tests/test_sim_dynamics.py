@@ -127,3 +127,25 @@ def test_step_updates_the_state_in_place(arm):
     dyn.step(np.zeros(7), DT)  # unsupported: the arm starts to fall
     assert dyn.q is q and dyn.dq is dq
     assert np.abs(dq).max() > 0
+
+
+def test_kinematics_follow_the_posture_and_are_shared_read_only(arm):
+    """The ee pose, twist and external torque come from one Jacobian per posture: the
+    same numbers as Pinocchio's own calls, again after q changes, and not writable."""
+    dyn = ArmDynamics(arm)
+    data = arm.model.createData()
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    rng = np.random.default_rng(0)
+    w = np.array([5.0, -3.0, 2.0, 0.1, 0.2, -0.3])
+    dyn.set_external_wrench(w)
+    for _ in range(3):
+        dyn.q[:] = rng.uniform(arm.q_lower, arm.q_upper)  # in place, as the integrator does
+        dyn.dq[:] = rng.normal(size=7)
+        pin.framesForwardKinematics(arm.model, data, dyn.q)
+        J = pin.computeFrameJacobian(arm.model, data, dyn.q, arm.ee_frame_id, lwa)
+        T = dyn.ee_transform()
+        assert T.tobytes() == data.oMf[arm.ee_frame_id].homogeneous.tobytes()
+        assert dyn.ee_velocity().tobytes() == (J @ dyn.dq).tobytes()
+        assert dyn.external_torque().tobytes() == J.T.dot(w).tobytes()
+        with pytest.raises(ValueError):
+            T[0, 3] = 1.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from can.interfaces import virtual as can_virtual
 
@@ -210,6 +211,20 @@ def test_simulation_messages_are_plain_data():
         assert out["scene"] == "pour" and out["t"] == pytest.approx(0.02)
         assert not out["spilled"]
         assert msg["wrench"][2] < 0.0  # the bottle's weight
+
+
+def test_state_message_pose_is_the_forward_kinematics_of_the_decoded_joints():
+    """The reported pose is the controller's kinematics of what crossed the bus (shared
+    with its next update): Pinocchio's forward kinematics of the decoded q, bit for bit."""
+    with Simulation("pour") as sim:
+        model = sim.arm.arm
+        data = model.model.createData()
+        for _ in range(3):
+            sim.run(0.01)
+            q = np.array(sim.state_message()["q"])
+            pin.framesForwardKinematics(model.model, data, q)
+            T = data.oMf[model.ee_frame_id].homogeneous
+            assert sim.state_message()["pose"] == se3.pose_from_flat(se3.flat_from_transform(T))
 
 
 def test_simulation_ignores_invalid_targets():

@@ -186,3 +186,28 @@ def test_user_client_exits_1_when_no_target_arrives():
                            "--duration", "1", "--listen", f"tcp/127.0.0.1:{free_port()}"],
                           capture_output=True, text=True, timeout=60, cwd=ROOT, check=False)
     assert proc.returncode == 1 and "no target arrived" in proc.stderr, (proc.returncode, proc.stderr)
+
+
+def _pour_path(k):
+    """The hand carried to the mug, tilted to pour (the mug filling), brought upright."""
+    s = min(1.0, k / 40)
+    tilt = 0.0 if k < 50 else min(1.8, 0.05 * (k - 50)) if k < 120 else max(0.0, 1.8 - 0.05 * (k - 120))
+    T = _hand_with_tip_at([0.3 * (1 - s), 0.05 * (1 - s), 0.05 + 0.1 * (1 - s)])
+    T[:3, :3] = se3.matrix_from_rotvec([0.0, tilt, 0.0])
+    return _pour_obs(0.1 * k, T, poured=0.0 if k < 100 else 0.6)
+
+
+@pytest.mark.parametrize("task", ["pour", "drawer"])
+def test_an_observers_desire_judges_progress_as_the_users(task):
+    """desire(steer=False), what the trial's observer asks, follows the same phases with
+    the same error, done and close_enough as desire(), without a twist or weights."""
+    user, observer = make_intent(task), make_intent(task)
+    phases = set()
+    for k in range(160):
+        obs = (_pour_path(k) if task == "pour" else
+               _drawer_obs(0.1 * k, [0.3 + 0.002 * k, 0.0, 0.6], max(0.0, 0.003 * (k - 60)), k > 60))
+        d, o = user.desire(obs), observer.desire(obs, steer=False)
+        assert (o.phase, o.error, o.done, o.close_enough) == (d.phase, d.error, d.done, d.close_enough)
+        assert not np.any(o.twist) and not np.any(o.W)
+        phases.add(d.phase)
+    assert len(phases) >= 3

@@ -63,6 +63,8 @@ BENCHES: dict[str, Command] = {
                      "add_bench_learn_arguments", "main_bench_learn"),
     "sim": Command("simulator real-time factor, step response and tracking",
                    "sctd.bench.sim", "add_bench_sim_arguments", "main_bench_sim"),
+    "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
+                    "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
 }
 
 COMMANDS: dict[str, Command] = {
@@ -71,7 +73,8 @@ COMMANDS: dict[str, Command] = {
                        "add_inspect_arguments", "main_inspect"),
     "swap": Command("hot-swap a skill into the running daemon", "sctd.cli.run",
                     "add_swap_arguments", "main_swap"),
-    "skills": Command("list the skills --skill NAME finds (shipped ones); skills show NAME inspects one",
+    "skills": Command("list the skills --skill NAME finds (stored and shipped); skills show NAME "
+                      "inspects one, skills swap ID puts a stored one back into the daemon",
                       "sctd.cli.skills", "add_skills_arguments", "main_skills"),
     "demo": Command("run a skill end to end on this machine (daemon, robot, user)", "sctd.cli.demo",
                     "add_demo_arguments", "main_demo"),
@@ -87,6 +90,10 @@ COMMANDS: dict[str, Command] = {
                    "add_service_arguments", "run"),
     "record": Command("record a demonstration (ee in the task object's frame) as CSV",
                       "sctd_services.record", "add_arguments", "run"),
+    "learner": Command("the learner service: stores demonstrations, trains on request, checks and "
+                       "hot-swaps", "sctd_services.learner", "add_arguments", "run"),
+    "train": Command("ask the learner to train a skill from stored demonstrations, check and swap it",
+                     "sctd.cli.train", "add_train_arguments", "main_train"),
     "teach": Command("show a task on the simulated arm N times, varied as a person would, and "
                      "record the demonstrations that succeed", "sctd.cli.teach",
                      "add_teach_arguments", "main_teach"),

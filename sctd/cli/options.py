@@ -35,7 +35,8 @@ from typing import Any, TypeVar
 T = TypeVar("T")
 
 # The help of every --skill / SKILL argument: how sctd.skill.catalog.find_skill resolves it.
-SKILL_HELP = "a skill: a path, or the name of a shipped skill (pour, pour.yaml; sctd skills lists them)"
+SKILL_HELP = ("a skill: a path, a skill in the learner's store (NAME@ID, ID, or NAME: the newest), or "
+              "the name of a shipped skill (pour, pour.yaml); sctd skills lists them")
 
 
 def flag_name(field: dataclasses.Field) -> str:

@@ -12,10 +12,9 @@ import threading
 from dataclasses import fields
 from typing import Any
 
-import msgpack
 import zenoh
 
-from ..runtime import codec
+from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, ingress_limits
 from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
@@ -167,21 +166,12 @@ def main_swap(args: argparse.Namespace) -> int:
         Bundle.unpack(payload)  # the size limit too
     except SkillError as e:
         return fail("swap", str(e))
-    key = codec.Keys(args.robot).skill
+    keys = codec.Keys(args.robot)
     with session_from_args(args) as session:
-        for reply in session.get(key, payload=payload, timeout=args.timeout):
-            if reply.ok is not None:
-                body = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
-                print(body.get("id"))
-                return EXIT_OK
-            body = _err_body(reply.err.payload.to_bytes()) if reply.err is not None else "no reply"
-            return fail("swap", f"refused by the daemon: {body}", EXIT_FAILED)
-    return fail("swap", f"no daemon answered on {key} within {args.timeout} s", EXIT_FAILED)
-
-
-def _err_body(data: bytes) -> str:
-    try:
-        body = msgpack.unpackb(data, raw=False)
-        return body.get("error", str(body)) if isinstance(body, dict) else str(body)
-    except Exception:
-        return data.decode(errors="replace")
+        ok, body = client.swap(session, keys, bundle, args.timeout)
+    if ok:
+        print(body.get("id"))
+        return EXIT_OK
+    if body.get("unanswered"):
+        return fail("swap", body["error"], EXIT_FAILED)
+    return fail("swap", f"refused by the daemon: {body.get('error', body)}", EXIT_FAILED)

@@ -1,16 +1,27 @@
-"""``sctd skills``: the skills that ``--skill NAME`` can find, and ``sctd skills show
-NAME`` (what ``sctd inspect`` prints)."""
+"""``sctd skills``: the skills that ``--skill NAME`` can find (the learner's store, then
+the shipped ones), ``sctd skills show NAME`` (what ``sctd inspect`` prints) and ``sctd
+skills swap REF`` (put a stored skill back into the running daemon: a rollback)."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 from typing import Any
 
-from ..skill import SkillError, load_skill, skill_summary
-from ..skill.catalog import shipped_folder, shipped_skills
-from .errors import EXIT_OK, fail
+from ..runtime import client, codec
+from ..runtime.zsession import add_zenoh_arguments, session_from_args
+from ..skill import SkillError, bundle_from_file, load_skill, skill_summary
+from ..skill.catalog import (
+    StoredSkill,
+    find_stored,
+    shipped_folder,
+    shipped_skills,
+    store_folder,
+    stored_skills,
+)
+from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP
 from .run import main_inspect
 
@@ -21,6 +32,16 @@ def add_skills_arguments(p: argparse.ArgumentParser) -> None:
                           description="what sctd inspect prints for one skill")
     show.add_argument("skill", help=SKILL_HELP)
     show.add_argument("--json", action="store_true", help="machine-readable output")
+    swap = sub.add_parser("swap", help="put a stored skill (NAME@ID, ID or NAME) into the running "
+                                       "daemon: a rollback to an earlier one",
+                          description="put a stored skill into the running daemon")
+    swap.add_argument("ref", metavar="REF", help="a stored skill: NAME@ID, ID (or a prefix of 4+ "
+                                                 "characters), or NAME (the newest)")
+    swap.add_argument("--robot", default=codec.DEFAULT_ROBOT,
+                      help="key prefix sctd/<robot> (default %(default)s)")
+    swap.add_argument("--timeout", type=float, default=40.0,
+                      help="s to wait for the daemon's reply (default %(default)s)")
+    add_zenoh_arguments(swap)
     p.add_argument("--json", action="store_true", help="one JSON list on stdout")
 
 
@@ -35,20 +56,52 @@ def _row(path: Path, source: str) -> dict[str, Any]:
             "source": source, "path": str(path)}
 
 
+def _stored_row(s: StoredSkill) -> dict[str, Any]:
+    row = _row(s.path, "store")
+    rec = s.record
+    ev = {task: f"{e['successes']}/{e['trials']}" for task, e in rec.get("evaluation", {}).items()}
+    return {**row, "name": s.name, "ref": s.ref, "task": rec.get("task"), "created": s.created,
+            "demos": len(rec.get("demos", [])), "evaluation": ev}
+
+
 def main_skills(args: argparse.Namespace) -> int:
     if args.action == "show":
         return main_inspect(args)
-    rows = [_row(p, "shipped") for p in shipped_skills()]
+    if args.action == "swap":
+        return main_skills_swap(args)
+    rows = [_stored_row(s) for s in reversed(stored_skills())]  # newest first
+    rows += [_row(p, "shipped") for p in shipped_skills()]
     if args.json:
         print(json.dumps(rows))
         return EXIT_OK
     if not rows:
-        return fail("skills", f"no skills in {shipped_folder()}", 1)
-    print(f"{'name':14s} {'id':18s} {'object':15s} {'method':22s} source")
+        return fail("skills", f"no skills in {store_folder()} nor {shipped_folder()}", 1)
+    print(f"{'name':22s} {'id':18s} {'object':15s} {'method':22s} source")
     for r in rows:
-        print(f"{r['name']:14s} {r['id'] or '-':18s} {r['object'] or '-':15s} "
-              f"{r['method'] or r.get('error', '-'):22s} {r['source']} ({r['path']})")
+        where = r["path"]
+        if r["source"] == "store":
+            made = time.strftime("%Y-%m-%d %H:%M", time.localtime(r["created"]))
+            checks = ", ".join(f"{t} {v}" for t, v in r["evaluation"].items()) or "not checked"
+            where = f"{made}, {r['demos']} demos, {checks}; {where}"
+        print(f"{r['name']:22s} {r['id'] or '-':18s} {r['object'] or '-':15s} "
+              f"{r['method'] or r.get('error', '-'):22s} {r['source']} ({where})")
     return EXIT_OK
 
 
-
+def main_skills_swap(args: argparse.Namespace) -> int:
+    """``sctd skills swap REF``: the stored skill's bundle to the daemon."""
+    try:
+        stored = find_stored(args.ref)
+        if stored is None:
+            known = ", ".join(s.ref for s in stored_skills()) or "none"
+            return fail("skills swap", f"{args.ref}: no such skill in the store {store_folder()} "
+                                       f"(stored: {known})")
+        bundle = bundle_from_file(stored.path)
+    except SkillError as e:
+        return fail("skills swap", str(e))
+    with session_from_args(args) as session:
+        ok, body = client.swap(session, codec.Keys(args.robot), bundle, args.timeout)
+    if not ok:
+        return fail("skills swap", body.get("error", str(body)), EXIT_FAILED)
+    print(f"{stored.ref}: swapped into the daemon (state {body.get('state')})")
+    return EXIT_OK

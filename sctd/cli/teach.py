@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import signal
 import tempfile
 import time
 from pathlib import Path
@@ -39,6 +40,14 @@ from ..runtime.zsession import add_zenoh_arguments, session
 from .errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from .options import add_arguments, from_namespace
 from .procs import Child, free_port
+from .teach_loop import (
+    LoopError,
+    add_then_learn_arguments,
+    evaluate_taught,
+    learn_and_swap,
+    print_reply,
+    start_learner,
+)
 
 
 def add_teach_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,30 +58,48 @@ def add_teach_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mistake", dest="mistakes", type=int, action="append", default=[],
                    metavar="N", help=mistakes.metadata["help"] + " (repeatable)")
     p.add_argument("--logs", metavar="DIR",
-                   help="keep the simulator's log in this folder (default: a temporary one)")
+                   help="keep the simulator's log (and the learner's and daemon's) in this folder "
+                        "(default: a temporary one)")
+    add_then_learn_arguments(p)
     add_zenoh_arguments(p)
     p.epilog = ("Without --connect or --zenoh-config, it starts its own simulator on a free "
                 "loopback port. " + (p.epilog or ""))
 
 
+def _stop_on_sigterm(*_: object) -> None:
+    raise SystemExit(143)  # unwinds the stack: the simulator, learner and daemon are stopped
+
+
 def main_teach(args: argparse.Namespace) -> int:
+    signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
         args.mistakes = tuple(args.mistakes)
         options = from_namespace(TeachOptions, args)
     except ValueError as e:
         return fail("teach", str(e))
+    if args.swap and not args.then_learn:
+        return fail("teach", "--swap: needs --then-learn METHOD")
+    reply = None
     with contextlib.ExitStack() as stack:
         try:
             s = open_simulator(stack, args, options)
+            watch = start_learner(stack, s, args, args.logdir) if args.then_learn else None
             kept = teach_demos(s, options)
+            if watch is not None and len(kept) == options.demos:
+                reply = learn_and_swap(stack, s, args, options.scene, kept, watch, args.logdir)
         except (CommanderConflict, WrongScene) as e:
             return fail("teach", str(e), EXIT_USAGE)
-        except SimulatorLost as e:
+        except (SimulatorLost, LoopError) as e:
             return fail("teach", f"{e}{_log_hint(args)}", EXIT_FAILED)
     if len(kept) < options.demos:
         return fail("teach", f"kept {len(kept)} of the {options.demos} demonstrations asked for in "
                              f"{options.attempts} attempts (--max-attempts)", EXIT_FAILED)
-    return EXIT_OK
+    if reply is None:
+        return EXIT_OK
+    print_reply(reply)
+    if reply.get("passed") and args.eval_trials > 0:
+        evaluate_taught(reply, options.scene, args.then_learn, args.eval_trials)
+    return EXIT_OK if reply.get("swapped") or (reply.get("passed") and not args.swap) else EXIT_FAILED
 
 
 def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
@@ -81,15 +108,18 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
     simulator ``--connect`` / ``--zenoh-config`` names, else to a ``sctd sim --scene``
     started here on a free loopback port (stopped when ``stack`` closes, after the
     session, which lingers a moment so that the last demonstration leaves)."""
+    logdir = args.logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-teach-"))
+    logdir.mkdir(parents=True, exist_ok=True)
     if args.connect or args.zenoh_config:
         s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config))
+        args.child_zenoh = (["--zenoh-config", args.zenoh_config] if args.zenoh_config
+                            else [x for ep in args.connect for x in ("--connect", ep)])
         print(f"sctd teach: {options.scene} on the simulator at "
               f"{', '.join(args.connect or [args.zenoh_config])}", flush=True)
     else:
-        logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-teach-"))
-        logdir.mkdir(parents=True, exist_ok=True)
         args.sim_log = logdir / "sim.log"
         ep = f"tcp/127.0.0.1:{free_port()}"
+        args.child_zenoh = ["--connect", ep]  # how the learner and the daemon join it
         stack.enter_context(Child("sctd_sim.service", "--scene", options.scene, "--robot",
                                   options.robot, "--listen", ep, log=args.sim_log))
         s = stack.enter_context(session(args.listen, [ep]))

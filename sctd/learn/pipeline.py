@@ -106,12 +106,18 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
                              prepared, learner, labels, field_labels, timings)
 
 
+def hyperparameter_fields(method: str) -> list[dataclasses.Field]:
+    """The dataclass fields that define ``method``'s hyperparameters (their metadata has
+    the command line's help and flag), each name once."""
+    out: list[dataclasses.Field] = []
+    for part in _PARTS[_check_method(method)]:
+        out += [f for f in dataclasses.fields(part) if f.init and f.name not in {g.name for g in out}]
+    return out
+
+
 def hyperparameter_names(method: str) -> list[str]:
     """The keyword arguments :func:`learn` accepts as hyperparameters for ``method``."""
-    names: list[str] = []
-    for part in _PARTS[_check_method(method)]:
-        names += [f.name for f in dataclasses.fields(part) if f.init and f.name not in names]
-    return names
+    return [f.name for f in hyperparameter_fields(method)]
 
 
 def _check_method(method: str) -> str:

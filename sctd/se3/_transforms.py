@@ -20,9 +20,12 @@ frame's own origin and axes. The 6-vector ``[d, r]`` is what a linear input mapp
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ._fast import flat_from_pose, transform_from_flat
 from ._rotations import (
     matrix_from_quaternion,
     matrix_from_rotvec,
@@ -48,6 +51,12 @@ def transform_from_pose(pose: ArrayLike, check: bool = True) -> Array:
     -------
     ndarray, shape (..., 4, 4)
     """
+    one = _one_pose(pose)
+    if one is not None:
+        _, _, _, qx, qy, qz, qw = one
+        if math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) >= 1e-12:
+            # One pose on floats: the same numbers, without the vectorised path's cost.
+            return transform_from_flat(flat_from_pose(one))
     pose = np.asarray(pose, dtype=float)
     q = pose[..., 3:]
     n = np.linalg.norm(q, axis=-1, keepdims=True)
@@ -58,6 +67,16 @@ def transform_from_pose(pose: ArrayLike, check: bool = True) -> Array:
     T[..., :3, 3] = pose[..., :3]
     T[..., 3, 3] = 1.0
     return T
+
+
+def _one_pose(pose: ArrayLike) -> list[float] | None:
+    """``pose`` as a list of 7 numbers when it is a single pose, else None."""
+    if isinstance(pose, np.ndarray):
+        return pose.tolist() if pose.shape == (7,) else None
+    if isinstance(pose, list | tuple) and len(pose) == 7 and all(
+            isinstance(v, int | float) for v in pose):
+        return list(pose)
+    return None
 
 
 def pose_from_transform(T: ArrayLike) -> Array:

@@ -278,30 +278,27 @@ class NeighbourOrientation(ActiveConstraint):
     def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
         return ((self.model_file, self.model),)
 
-    def _goal(self, G: Flat, ws: Workspace) -> tuple[float, float, float, float] | None:
-        """The neighbours' weighted mean orientation (x, y, z, w; not normalised), or
-        None when no demonstration point is near."""
+    def _goal(self, G: Flat, q_G: tuple[float, float, float, float], ws: Workspace
+              ) -> tuple[float, float, float, float] | None:
+        """The neighbours' weighted mean orientation (x, y, z, w; not normalised) for the
+        frame at pose G (orientation ``q_G``), or None when no demonstration point is
+        near."""
         nb = ws.neighbours[self.model_file]
         if self.rotation_weight > 0.0:
-            i, w = nb.query_pose(np.array(G[9:]), se3.quaternion_from_flat(G), self.max_n,
-                                 self.max_d, self.rotation_weight)
+            answer = nb.query_pose(G[9:], q_G, self.max_n, self.max_d, self.rotation_weight)
         else:
-            i, w = nb.query(np.array(G[9:]), self.max_n, self.max_d)
-        if len(i) == 0:
-            return None
-        q = self.model.quaternions[i]
-        q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
-        gx, gy, gz, gw = (w @ q).tolist()
-        return gx, gy, gz, gw
+            answer = nb.query(G[9:], self.max_n, self.max_d)
+        return nb.mean_orientation(answer)
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
-        goal = self._goal(G, ws)
+        q_G = se3.quaternion_from_flat(G)
+        goal = self._goal(G, q_G, ws)
         if goal is None:
             return F
         gx, gy, gz, gw = goal
         # The correction q_goal * q_frame^-1 and its angle, on floats (this runs every
         # tick): turned towards the goal at most the budget.
-        fx, fy, fz, fw = se3.quaternion_from_flat(G)
+        fx, fy, fz, fw = q_G
         cw = gw * fw + gx * fx + gy * fy + gz * fz
         cx = -gw * fx + gx * fw - gy * fz + gz * fy
         cy = -gw * fy + gy * fw - gz * fx + gx * fz

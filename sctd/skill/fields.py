@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -27,15 +28,31 @@ RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the
 RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
 
 
-def _norm3(v: Array) -> float:
-    x, y, z = v.tolist()
+Vec3 = tuple[float, float, float]
+
+
+def _dot3(a: Sequence[float], b: Sequence[float]) -> float:
+    """``a . b`` of two 3-vectors, summed as numpy's dot sums them (from 0.0, in order)."""
+    return 0.0 + a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _norm3(x: float, y: float, z: float) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
-def _cross3(a: Array, b: Array) -> Array:
-    ax, ay, az = a.tolist()
-    bx, by, bz = b.tolist()
-    return np.array([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx])
+def _cross3(a: Sequence[float], b: Sequence[float]) -> Vec3:
+    """``a x b`` (the products and differences np.cross computes)."""
+    ax, ay, az = a
+    bx, by, bz = b
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+def _pivot_centre(G: Sequence[float], pivot: Array) -> Vec3:
+    """The position ``p + R pivot`` of a pivot on the frame with pose ``G`` (flat:
+    rotation R row-major, then position p). The product is numpy's: its rounding is
+    BLAS's, which floats do not reproduce."""
+    mx, my, mz = (np.array(G[:9]).reshape(3, 3) @ pivot).tolist()
+    return G[9] + mx, G[10] + my, G[11] + mz
 
 
 class FieldReader:
@@ -154,11 +171,12 @@ class Field(ABC):
         4.35's ``v_F``): its own direction there."""
         return self.vectors(point)[0]
 
-    def rigid_part(self, p: Array, R_frame: Array, d: Array) -> tuple[Array, Array, Array] | None:
-        """The part of the frame displacement ``d`` (3,) at the frame's position ``p``
-        (orientation ``R_frame``) that turns the whole hand about this field, as
-        ``(t, w, centre)``: the displacement of ``p`` it takes, the rotation vector and
-        the point it turns about (object frame); None for a field that does not turn."""
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
+        """The part of the frame displacement ``d`` that turns the whole hand about this
+        field, for the frame at pose ``G`` (flat, see :mod:`sctd.se3`: its rotation,
+        then its position p), as ``(t, w, centre)``: the displacement of p it takes,
+        the rotation vector and the point it turns about (3 floats each, object frame);
+        None for a field that does not turn. On floats (the runtime's tick)."""
         return None
 
 
@@ -225,21 +243,28 @@ class CylinderField(Field):
         n = math.sqrt(vx * vx + vy * vy + vz * vz)
         return (vx / n, vy / n, vz / n) if n > 1e-9 else (0.0, 0.0, 0.0)
 
-    def rigid_part(self, p: Array, R_frame: Array, d: Array) -> tuple[Array, Array, Array] | None:
-        """Around the axis: the part of ``d`` along the circulation at ``p``."""
-        a, centre = self.axis, self.point
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
+        """Around the axis: the part of ``d`` along the circulation at the frame."""
+        a0, a1, a2 = a = self.axis.tolist()
+        c0, c1, c2 = centre = self.point.tolist()
         if self.pivot is not None:
-            centre = p + R_frame @ self.pivot
-            v = centre - self.point
-            d = d * _pivot_reach(_norm3(v - float(v @ a) * a))
-        r = p - centre
-        r_perp = r - float(r @ a) * a
-        rho = _norm3(r_perp)
+            o0, o1, o2 = centre
+            c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
+            v = (c0 - o0, c1 - o1, c2 - o2)
+            va = _dot3(v, a)
+            k = _pivot_reach(_norm3(v[0] - va * a0, v[1] - va * a1, v[2] - va * a2))
+            d = (d[0] * k, d[1] * k, d[2] * k)
+        r = (G[9] - c0, G[10] - c1, G[11] - c2)
+        ra = _dot3(r, a)
+        r_perp = (r[0] - ra * a0, r[1] - ra * a1, r[2] - ra * a2)
+        rho = _norm3(*r_perp)
         if rho < RIGID_MIN_RADIUS:
             return None
-        e = _cross3(a, r_perp) / rho  # around the axis
-        along = float(d @ e)
-        return along * e, a * (along / rho), centre
+        x, y, z = _cross3(a, r_perp)  # around the axis
+        e = (x / rho, y / rho, z / rho)
+        along = _dot3(d, e)
+        w = along / rho
+        return (along * e[0], along * e[1], along * e[2]), (a0 * w, a1 * w, a2 * w), centre
 
 
 @FIELDS.register
@@ -304,19 +329,23 @@ class SphereField(Field):
         n = float(np.linalg.norm(t))
         return t / n if n > 1e-9 else np.zeros(3)
 
-    def rigid_part(self, p: Array, R_frame: Array, d: Array) -> tuple[Array, Array, Array] | None:
-        """About the centre: the part of ``d`` tangent to the sphere through ``p``."""
-        centre = self.centre
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
+        """About the centre: the part of ``d`` tangent to the sphere through the frame."""
+        c0, c1, c2 = centre = self.centre.tolist()
         if self.pivot is not None:
-            centre = p + R_frame @ self.pivot
-            d = d * _pivot_reach(_norm3(centre - self.centre))
-        r = p - centre
-        rho = _norm3(r)
+            s0, s1, s2 = centre
+            c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
+            k = _pivot_reach(_norm3(c0 - s0, c1 - s1, c2 - s2))
+            d = (d[0] * k, d[1] * k, d[2] * k)
+        r0, r1, r2 = G[9] - c0, G[10] - c1, G[11] - c2
+        rho = _norm3(r0, r1, r2)
         if rho < RIGID_MIN_RADIUS:
             return None
-        n = r / rho
-        t = d - float(d @ n) * n  # tangent to the sphere
-        return t, _cross3(n, t) / rho, centre
+        n = (r0 / rho, r1 / rho, r2 / rho)
+        dn = _dot3(d, n)
+        t = (d[0] - dn * n[0], d[1] - dn * n[1], d[2] - dn * n[2])  # tangent to the sphere
+        x, y, z = _cross3(n, t)
+        return t, (x / rho, y / rho, z / rho), centre
 
 
 def sigmoid(x: float | Array, k: float) -> float | Array:
@@ -325,4 +354,5 @@ def sigmoid(x: float | Array, k: float) -> float | Array:
     Maps [-1, 1] onto [-1, 1] with f(0) = 0, f(+-1) = +-1 and f(x) = x at k = 0;
     k in (0, 1) makes it stricter (needs closer agreement), k in (-1, 0) more lenient.
     """
-    return (x - k * x) / (k - 2.0 * k * np.abs(x) + 1.0)
+    ax = np.abs(x) if isinstance(x, np.ndarray) else abs(x)  # (np.abs costs the tick ~1 us)
+    return (x - k * x) / (k - 2.0 * k * ax + 1.0)

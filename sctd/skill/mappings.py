@@ -25,6 +25,7 @@ from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
+Vec3 = tuple[float, float, float]
 
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
@@ -195,19 +196,21 @@ class LinearMapping(InputMapping):
         return se3.compose_flat(F, se3.compose_flat(se3.compose_flat(T_e, rot), se3.invert_flat(T_e)))
 
 
-def intent_membership(P: Array, prior: Array, s: Sequence[float], kappa: float) -> Array:
+def intent_membership(P: Sequence[float], prior: Sequence[float], s: Sequence[float],
+                      kappa: float) -> Array:
     """``P(F | p, u)``: the position's membership ``P`` (K,) (mixed with ``INTENT_PRIOR``
     of the fields' weights ``prior`` (K,), so that no field is ruled out by position
     alone) times each field's agreement with the command, ``exp(kappa * s_F)``,
-    normalised."""
-    post = ((1.0 - INTENT_PRIOR) * P + INTENT_PRIOR * prior) * np.exp(kappa * (np.asarray(s) - 1.0))
-    total = float(post.sum())
-    return post / total if total > 1e-300 else P
+    normalised. (On floats, with the numbers of the same sum on arrays.)"""
+    post = [((1.0 - INTENT_PRIOR) * p + INTENT_PRIOR * q) * math.exp(kappa * (x - 1.0))
+            for p, q, x in zip(P, prior, s, strict=True)]
+    # numpy sums fewer than 8 numbers in order, more pairwise: the same total either way
+    total = sum(post) if len(post) < 8 else float(np.sum(post))
+    return np.array([x / total for x in post]) if total > 1e-300 else np.array(P, dtype=float)
 
 
-def _rodrigues(w: Array) -> Array:
-    """The rotation matrix (3, 3) of rotation vector ``w`` (3,) (Rodrigues, on floats)."""
-    x, y, z = w.tolist()
+def _rodrigues(x: float, y: float, z: float) -> Array:
+    """The rotation matrix (3, 3) of the rotation vector (x, y, z) (Rodrigues, on floats)."""
     th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
         return np.eye(3)
@@ -219,30 +222,35 @@ def _rodrigues(w: Array) -> Array:
                      [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
 
 
-def rigid_step(T: Array, p: Array, R_frame: Array, d: Array, P: Array,
-               fields: Sequence[Field]) -> Array:
-    """Move the hand T (4, 4; object frame) by the frame displacement ``d`` (3,) at the
-    frame's position ``p`` (3,) (orientation ``R_frame`` (3, 3)): the part of it along
-    each rotational field (weighted by its membership ``P`` (K,)) as a rotation of the
-    whole hand about the field's centre (sphere) or axis (cylinder), the rest as a
-    translation (:meth:`~sctd.skill.fields.Field.rigid_part`)."""
-    out = T.copy()
-    rest = d.copy()
+def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field]) -> Flat:
+    """Move the hand F (object frame) by the displacement ``d`` (3 floats) of the frame at
+    pose ``G``: the part of it along each rotational field (weighted by its membership
+    ``P`` (K,)) as a rotation of the whole hand about the field's centre (sphere) or
+    axis (cylinder), the rest as a translation
+    (:meth:`~sctd.skill.fields.Field.rigid_part`). The rotations' matrix products are
+    numpy's (their rounding is BLAS's), the rest is on floats."""
+    R_hand = None  # the hand's rotation once turned (3, 3)
+    x, y, z = F[9], F[10], F[11]
+    rx, ry, rz = d
     for k, f in enumerate(fields):
-        if P[k] < 1e-6:
+        pk = P[k]
+        if pk < 1e-6:
             continue
-        part = f.rigid_part(p, R_frame, P[k] * d)
+        part = f.rigid_part(G, (pk * d[0], pk * d[1], pk * d[2]))
         if part is None:
             continue
-        t, w, centre = part
+        t, w, (c0, c1, c2) = part
         if not (t[0] or t[1] or t[2]):
             continue
-        R = _rodrigues(w)
-        out[:3, :3] = R @ out[:3, :3]
-        out[:3, 3] = R @ (out[:3, 3] - centre) + centre
-        rest -= t
-    out[:3, 3] += rest
-    return out
+        R = _rodrigues(*w)
+        R_hand = R @ (np.array(F[:9]).reshape(3, 3) if R_hand is None else R_hand)
+        m0, m1, m2 = (R @ np.array((x - c0, y - c1, z - c2))).tolist()
+        x, y, z = m0 + c0, m1 + c1, m2 + c2
+        rx, ry, rz = rx - t[0], ry - t[1], rz - t[2]
+    if R_hand is None:
+        return (*F[:9], x + rx, y + ry, z + rz)
+    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R_hand.tolist()
+    return (r0, r1, r2, r3, r4, r5, r6, r7, r8, x + rx, y + ry, z + rz)
 
 
 @MAPPINGS.register
@@ -321,54 +329,58 @@ class VectorFieldMapping(InputMapping):
 
     def apply(self, F: Flat, u: Sequence[float], dt: float, ws: Workspace) -> Flat:
         """Algorithm 7's translation part: scale (eqs. 4.31-4.34) or blend (eq. 4.35).
-        Sets ``ws.scale`` and ``ws.membership``."""
-        u3 = np.zeros(3)
+        Sets ``ws.scale`` and ``ws.membership``. (On floats: the numbers of the same
+        arithmetic on 3-vectors, where numpy's per-call cost dominated the tick.)"""
         n = min(3, len(u))
-        u3[:n] = np.asarray(u, dtype=float)[:n]
-        mag = float(np.linalg.norm(u3))
+        u0, u1, u2 = (float(u[j]) if j < n else 0.0 for j in range(3))
+        mag = math.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
         if mag < 1e-9:
             ws.scale = 0.0
             return F
         if mag > 1.0:
-            u3 /= mag
+            u0, u1, u2 = u0 / mag, u1 / mag, u2 / mag
             mag = 1.0
-        unit = u3 / mag
         G = ws.frame_pose(F, self.frame)
-        p = np.array(G[9:])
-        P, step, ws.scale = self._step(ws, p, (G[9], G[10], G[11]), u3, unit, mag)
+        P, (s0, s1, s2), ws.scale = self._step(ws, (G[9], G[10], G[11]), (u0, u1, u2),
+                                               (u0 / mag, u1 / mag, u2 / mag), mag)
         ws.membership = P
-        d = step * (ws.speeds[0] * dt)  # the frame's displacement
+        c = ws.speeds[0] * dt
+        d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
         if self.motion == "rigid":
-            T = rigid_step(se3.transform_from_flat(F), p, np.array(G[:9]).reshape(3, 3), d, P,
-                           self.model.fields)
-            return se3.flat_from_transform(T)
-        dx, dy, dz = d.tolist()
-        return se3.translate_flat(F, dx, dy, dz)
+            return rigid_step(F, G, d, P.tolist(), self.model.fields)
+        return se3.translate_flat(F, *d)
 
-    def _step(self, ws: Workspace, p: Array, p3: tuple[float, float, float], u3: Array, unit: Array,
-              mag: float) -> tuple[Array, Array, float]:
+    def _step(self, ws: Workspace, p: Vec3, u: Vec3, unit: Vec3, mag: float
+              ) -> tuple[Array, Vec3, float]:
         """The fields' membership at ``p``, the frame's step at full speed and its scale."""
         nb = ws.neighbours[self.model_file]
         P = nb.membership(p, self.max_n, self.max_d)
         fields = self.model.fields
-        unit3: tuple[float, float, float] = tuple(unit.tolist())
         agree = None
         if self.combine == "intent":
-            agree = [f.agreement3(p3, unit3) for f in fields]
-            P = intent_membership(P, nb.prior, agree, self.intent_kappa)
+            agree = [f.agreement3(p, unit) for f in fields]
+            P = intent_membership(P.tolist(), nb.prior.tolist(), agree, self.intent_kappa)
         if self.mode == "blend":
-            bend = np.zeros(3)
-            for k, f in enumerate(fields):
-                bend += P[k] * f.guided_direction(p, unit)
-            direction = unit + self.blend * bend
-            dn = float(np.linalg.norm(direction))
-            direction = direction / dn if dn > 1e-6 else unit
-            return P, direction * mag, 1.0
+            return P, self._blend(p, unit, mag, P), 1.0
         if self.combine == "most_probable":
-            s = fields[int(np.argmax(P))].agreement3(p3, unit3)
+            s = fields[int(np.argmax(P))].agreement3(p, unit)
         else:
             if agree is None:
-                agree = [f.agreement3(p3, unit3) for f in fields]
-            s = sum(float(P[k]) * a for k, a in enumerate(agree))
+                agree = [f.agreement3(p, unit) for f in fields]
+            Pk = P.tolist()
+            s = sum(Pk[k] * a for k, a in enumerate(agree))
         scale = min(1.0, max(self.min_v, float(sigmoid(s, self.k_s))))
-        return P, u3 * scale, scale
+        return P, (u[0] * scale, u[1] * scale, u[2] * scale), scale
+
+    def _blend(self, p: Vec3, unit: Vec3, mag: float, P: Array) -> Vec3:
+        """Eq. 4.35: the command's direction bent towards the fields' (the step at full
+        speed)."""
+        p_a, unit_a = np.array(p), np.array(unit)
+        bend = np.zeros(3)
+        for k, f in enumerate(self.model.fields):
+            bend += P[k] * f.guided_direction(p_a, unit_a)
+        direction = unit_a + self.blend * bend
+        dn = float(np.linalg.norm(direction))
+        direction = direction / dn if dn > 1e-6 else unit_a
+        x, y, z = (direction * mag).tolist()
+        return x, y, z

@@ -41,15 +41,17 @@ class Neighbours:
         self.prior = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
         self._last: dict[tuple, tuple] = {}
         self.queries = 0  # KD-tree queries made (the rest were reused)
+        self._mean_of: tuple[Array, Array] | None = None  # the answer _mean is of
+        self._mean: tuple[float, float, float, float] | None = None
 
-    def _reuse(self, key: tuple, p: Array, q: Sequence[float] | None = None):
+    def _reuse(self, key: tuple, p: Sequence[float], q: Sequence[float] | None = None):
         """The kept answer for ``key`` if it was made within the reuse distance (and
         angle) of position ``p`` (and quaternion ``q``), else None."""
         last = self._last.get(key)
         if last is None:
             return None
         (x, y, z), q_last, answer = last
-        px, py, pz = p.tolist()
+        px, py, pz = p
         if (px - x) ** 2 + (py - y) ** 2 + (pz - z) ** 2 > REUSE_DISTANCE ** 2:
             return None
         if q is not None:
@@ -58,18 +60,19 @@ class Neighbours:
                 return None
         return answer
 
-    def _keep(self, key: tuple, p: Array, q: Sequence[float] | None, answer):
-        self._last[key] = (tuple(p.tolist()), q, answer)
+    def _keep(self, key: tuple, p: Sequence[float], q: Sequence[float] | None, answer):
+        self._last[key] = (tuple(p), q, answer)
         self.queries += 1
         return answer
 
-    def query(self, p: Array, max_n: int, max_d: float) -> tuple[Array, Array]:
-        """Indices and distance weights of up to ``max_n`` points within ``max_d``."""
+    def query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Array, Array]:
+        """Indices and distance weights of up to ``max_n`` points within ``max_d`` of the
+        position ``p`` (3 floats, or shape (3,))."""
         key = ("query", max_n, max_d)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._query(p, max_n, max_d))
 
-    def _query(self, p: Array, max_n: int, max_d: float) -> tuple[Array, Array]:
+    def _query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Array, Array]:
         d, i = self.tree.query(p, k=max_n, distance_upper_bound=max_d)
         d = np.atleast_1d(d)
         i = np.atleast_1d(i)
@@ -78,7 +81,7 @@ class Neighbours:
         w = 1.0 / (d + 1e-3)
         return i, w / w.sum() if len(w) else w
 
-    def query_pose(self, p: Array, q: Sequence[float], max_n: int, max_d: float,
+    def query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
                    rotation_weight: float) -> tuple[Array, Array]:
         """Like :meth:`query`, but the ``max_n`` nearest in pose: of the points within
         ``max_d`` (at most ``POSE_CANDIDATES * max_n`` of them), those with the smallest
@@ -90,7 +93,7 @@ class Neighbours:
             answer = self._keep(key, p, tuple(q), self._query_pose(p, q, max_n, max_d, rotation_weight))
         return answer
 
-    def _query_pose(self, p: Array, q: Sequence[float], max_n: int, max_d: float,
+    def _query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
                     rotation_weight: float) -> tuple[Array, Array]:
         d, i = self.tree.query(p, k=POSE_CANDIDATES * max_n, distance_upper_bound=max_d)
         d, i = np.atleast_1d(d), np.atleast_1d(i)
@@ -105,14 +108,31 @@ class Neighbours:
         w = 1.0 / (dist[best] + 1e-3)
         return i[best], w / w.sum()
 
-    def membership(self, p: Array, max_n: int, max_d: float) -> Array:
+    def mean_orientation(self, answer: tuple[Array, Array]) -> tuple[float, float, float, float] | None:
+        """The weighted mean quaternion (x, y, z, w; not normalised) of the points an
+        answer of :meth:`query` or :meth:`query_pose` names (indices, weights), each
+        taken in the first one's hemisphere; None for no points. Worked out once per
+        answer: a reused answer has the same mean."""
+        if answer is self._mean_of:
+            return self._mean
+        i, w = answer
+        mean = None
+        if len(i):
+            q = self.model.quaternions[i]
+            q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
+            gx, gy, gz, gw = (w @ q).tolist()
+            mean = (gx, gy, gz, gw)
+        self._mean_of, self._mean = answer, mean
+        return mean
+
+    def membership(self, p: Sequence[float], max_n: int, max_d: float) -> Array:
         """P(F | p): neighbours' EM responsibilities, distance-weighted (the prior when
         no demonstration point is near)."""
         key = ("membership", max_n, max_d)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._membership(p, max_n, max_d))
 
-    def _membership(self, p: Array, max_n: int, max_d: float) -> Array:
+    def _membership(self, p: Sequence[float], max_n: int, max_d: float) -> Array:
         i, w = self._query(p, max_n, max_d)
         if len(i) == 0:
             return self.prior

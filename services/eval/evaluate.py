@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 from multiprocessing import get_context
@@ -22,14 +22,14 @@ import yaml
 
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
-from sctd.skill.catalog import find_skill
+from sctd.skill.catalog import shipped_folder
 from sctd_services.user import PROFILES
 
 from .lockstep import run_trial
 from .trial import TaskSpec, TrialResult
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
-TELEOP = find_skill("teleop")  # the unassisted baseline, a shipped skill
+TELEOP = shipped_folder() / "teleop.yaml"  # the unassisted baseline, always the shipped one
 
 
 @dataclass
@@ -111,11 +111,13 @@ def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
 
 def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: TrialJob = lockstep_job,
              jobs: int = 1, demos: str | None = None, keep: bool = False, logdir: Path | None = None,
-             progress: Callable[[int, int, str], None] | None = None) -> list[dict[str, Any]]:
+             progress: Callable[[int, int, str], None] | None = None,
+             pool: Executor | None = None) -> list[dict[str, Any]]:
     """Run every entry's trials; one result map per entry (see :func:`summarise`).
 
     With ``jobs`` > 1 the trials run in that many spawned processes (lockstep trials are
-    independent; real-time ones compete for the CPU and should run one at a time).
+    independent; real-time ones compete for the CPU and should run one at a time); a
+    long-running caller (the learner service) passes its own warm ``pool`` instead.
     """
     seeds = list(range(seed, seed + trials))
     total = len(ents) * trials
@@ -124,7 +126,8 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
     logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
     n = max(1, min(jobs, trials))
     with ExitStack() as stack:
-        pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn"))) if n > 1 else None
+        if pool is None and n > 1:
+            pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn")))
         for e in ents:
             args = [(str(e.path), spec, s, demos, keep, logdir / e.skill.name) for s in seeds]
             if pool is not None:

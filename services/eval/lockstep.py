@@ -67,9 +67,10 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
         watch.observe(k, F, t)
         state = Sample(k, t, t, F=F, wrench=m["wrench"], epoch=watch.epoch, since=watch.since)
         if k % every_object == 0:
-            objects = {n: se3.transform_from_pose(p) for n, p in sim.objects().items()}
+            poses = sim.objects()
+            objects = {n: se3.transform_from_pose(p) for n, p in poses.items()}
             if skill.object != WORLD_OBJECT:
-                p = sim.objects()[skill.object]
+                p = poses[skill.object]
                 obj_sample = Sample(k, t, t, F=se3.flat_from_pose(p), pose=p)
         if skill.object == WORLD_OBJECT:
             world.received = world.stamp = t

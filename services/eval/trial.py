@@ -119,6 +119,8 @@ class TrialRecorder:
         self._scene: dict[str, Any] = {}
         self.phase_s: dict[str, float] = {}
         self._done_part = 0.0  # the most poured (fraction) or opened (m) so far
+        self._obj_key = b""  # the task object's pose (bytes) _T_obj_world inverts
+        self._T_obj_world = np.eye(4)
 
     def add(self, obs: Observation, u: tuple[float, ...] | list[float], buttons: tuple[int, ...],
             vf_scale: float | None = None, membership: list[float] | None = None) -> str | None:
@@ -132,7 +134,7 @@ class TrialRecorder:
         self._account(t, u, buttons)
         self._scene = obs.scene
         T_obj = obs.objects[TASK_OBJECT[self.task]]
-        self._record(t, se3.invert_transform(T_obj) @ obs.T_world_ee, vf_scale, membership)
+        self._record(t, T_obj, obs.T_world_ee, vf_scale, membership)
         if self.t_task is None:  # the thesis' clock starts
             ref = obs.objects["bottle_tip"][:3, 3] if self.task == "pour" else obs.T_world_ee[:3, 3]
             if float(np.linalg.norm(ref - T_obj[:3, 3])) < START_DISTANCE[self.task]:
@@ -151,13 +153,17 @@ class TrialRecorder:
             self.switches += 1
         self._last_button = b0
 
-    def _record(self, t: float, T_obj_ee: Array, vf_scale: float | None,
+    def _record(self, t: float, T_world_obj: Array, T_world_ee: Array, vf_scale: float | None,
                 membership: list[float] | None) -> None:
         """One trajectory and series sample every ``record_every`` s."""
         if t < self._next_record:
             return
         assert self.t0 is not None
         self._next_record = t + self.record_every
+        key = T_world_obj.tobytes()  # (the object rarely moves: its inverse is kept)
+        if key != self._obj_key:
+            self._obj_key, self._T_obj_world = key, se3.invert_transform(T_world_obj)
+        T_obj_ee = self._T_obj_world @ T_world_ee
         self.trajectory.append([t - self.t0, *se3.pose_from_transform(T_obj_ee).tolist()])
         self.series["t"].append(t - self.t0)
         self.series["vf_scale"].append(float("nan") if vf_scale is None else vf_scale)
@@ -166,12 +172,12 @@ class TrialRecorder:
     def _progress(self, obs: Observation) -> str | None:
         """Progress as the intent sees it; ends the trial as stuck without any."""
         t = obs.t
-        d = self.observer.desire(obs)
+        d = self.observer.desire(obs, steer=False)
         if d.close_enough and d.phase == self._phase and t - self.t_best > REPROBE_AFTER:
             # as the user does: a sub-goal as close as the task needs and no closer for a
             # while counts as reached (progress is then measured towards the next one)
             self.observer.settle()
-            d = self.observer.desire(obs)
+            d = self.observer.desire(obs, steer=False)
         done_part = float(obs.scene.get("poured" if self.task == "pour" else "opening", 0.0))
         if d.phase != self._phase:  # a new sub-goal: progress is measured towards it
             self._phase, self.best, self.t_best = d.phase, d.error, t

@@ -56,6 +56,11 @@ class Desire:
     close_enough: bool = False  # the sub-goal is not reached, but within what the task tolerates
 
 
+NO_TWIST = np.zeros(6)  # what an observer's desire() holds instead of a twist and weights
+NO_WEIGHTS = np.zeros((6, 6))
+NO_TWIST.flags.writeable = NO_WEIGHTS.flags.writeable = False
+
+
 def _saturate(v: Array, limit: float) -> Array:
     n = float(np.linalg.norm(v))
     return v if n <= limit else v * (limit / n)
@@ -104,14 +109,17 @@ class PourIntent:
     w_max: float = 0.6  # rad/s
     phase: str = "bring"
     _axis: Array | None = field(default=None, repr=False)
+    _inverse: tuple[bytes, Array] | None = field(default=None, repr=False, compare=False)  # mug's
 
-    def desire(self, obs: Observation) -> Desire:
+    def desire(self, obs: Observation, steer: bool = True) -> Desire:
+        """What the hand should do now; with ``steer`` False (an observer judging
+        progress, which never steers) the twist and the weights are left zero."""
         T_mug = obs.objects["mug"]
         T_tip = obs.objects["bottle_tip"]
-        p_tip, z_b = T_tip[:3, 3], T_tip[:3, 2]
-        p_m = se3.invert_transform(T_mug) @ np.append(p_tip, 1.0)
-        radial, height = math.hypot(p_m[0], p_m[1]), float(p_m[2])
-        tilt = math.acos(max(-1.0, min(1.0, float(z_b @ UP))))
+        (_, _, _, tx), (_, _, _, ty), (_, _, zz, tz), _ = T_tip.tolist()  # the opening, the axis' z
+        mx, my, height, _ = (self._mug_inverse(T_mug) @ np.array((tx, ty, tz, 1.0))).tolist()
+        radial = math.hypot(mx, my)
+        tilt = math.acos(max(-1.0, min(1.0, zz)))  # (the bottle axis . UP)
         poured = float(obs.scene.get("poured", 0.0))
         fill = float(obs.scene.get("fill_target", 0.5))
         if self.phase == "bring" and radial < self.centred and abs(height - self.height) < 0.02:
@@ -126,37 +134,56 @@ class PourIntent:
         # the opening's goal: over the mug's axis, higher while still far from it
         lift = 0.04 * min(1.0, max(0.0, (radial - 0.02) / 0.05))
         goal = T_mug[:3, :3] @ np.array([0.0, 0.0, self.height + lift]) + T_mug[:3, 3]
+        gx, gy, gz = goal.tolist()
+        ex, ey, ez = gx - tx, gy - ty, gz - tz
+        to_goal = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if self.phase == "pour":
+            err_rot = abs(self.pour_tilt - tilt)
+        else:
+            # bringing: only a tilt beyond carry_tilt needs undoing; upright: all of it
+            err_rot = tilt if self.phase in ("upright", "done") else max(0.0, tilt - self.carry_tilt)
+        err = to_goal + 0.05 * err_rot
+        if self.phase == "pour":  # progress: tilting far enough, then the mug filling
+            err = to_goal + 0.05 * max(0.0, self.pour_tilt - tilt) + 0.5 * max(0.0, fill - poured)
+        done = self.phase == "done"
+        close = (self.phase == "bring" and radial < self.acceptable
+                 and self.acceptable_heights[0] < height < self.acceptable_heights[1]
+                 and tilt < self.carry_tilt)
+        if not steer:
+            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
+        twist, W = self._motion(obs.T_world_ee, T_tip[:3, 3], T_tip[:3, 2], goal, tilt, err_rot)
+        return Desire(twist, W, err, self.phase, done, close)
+
+    def _motion(self, T_world_ee: Array, p_tip: Array, z_b: Array, goal: Array, tilt: float,
+                excess: float) -> tuple[Array, Array]:
+        """The hand's twist towards ``goal`` for the opening and the weights of its
+        components (``excess``: the tilt to undo outside pouring)."""
         v_tip = _saturate(self.gain * (goal - p_tip), self.v_max)
         if self.phase == "pour":
-            axis = self._tilt_axis(obs.T_world_ee, z_b, tilt)  # further over, one way
+            axis = self._tilt_axis(T_world_ee, z_b, tilt)  # further over, one way
             w = axis * self.gain * (self.pour_tilt - tilt)
-            err_rot = abs(self.pour_tilt - tilt)
         else:
             self._axis = None
             back = np.cross(z_b, UP)  # rotating about it brings the bottle upright
             n = float(np.linalg.norm(back))
-            # bringing: only a tilt beyond carry_tilt needs undoing; upright: all of it
-            excess = tilt if self.phase in ("upright", "done") else max(0.0, tilt - self.carry_tilt)
             w = back / n * self.gain * excess if n > 1e-9 else np.zeros(3)
-            err_rot = excess
         w = _saturate(w, self.w_max)
         # the hand's twist that moves the opening so: v_ee = v_tip - w x (p_tip - p_ee)
-        v_ee = v_tip - np.cross(w, p_tip - obs.T_world_ee[:3, 3])
+        v_ee = v_tip - np.cross(w, p_tip - T_world_ee[:3, 3])
         W = np.zeros((6, 6))
         W[:3, :3] = np.eye(3) / self.v_max
         # spinning the bottle about its own axis does not matter
         W[3:, 3:] = (np.eye(3) - np.outer(z_b, z_b)) / self.w_max
-        err = float(np.linalg.norm(goal - p_tip)) + 0.05 * err_rot
-        if self.phase == "pour":  # progress: tilting far enough, then the mug filling
-            err = (float(np.linalg.norm(goal - p_tip)) + 0.05 * max(0.0, self.pour_tilt - tilt)
-                   + 0.5 * max(0.0, fill - poured))
-        done = self.phase == "done"
-        if done:
+        if self.phase == "done":
             v_ee, w = np.zeros(3), np.zeros(3)
-        close = (self.phase == "bring" and radial < self.acceptable
-                 and self.acceptable_heights[0] < height < self.acceptable_heights[1]
-                 and tilt < self.carry_tilt)
-        return Desire(np.concatenate([v_ee, w]), W, err, self.phase, done, close)
+        return np.concatenate([v_ee, w]), W
+
+    def _mug_inverse(self, T_mug: Array) -> Array:
+        """``T_mug_world``, worked out again only when the mug moved."""
+        key = T_mug.tobytes()
+        if self._inverse is None or self._inverse[0] != key:
+            self._inverse = (key, se3.invert_transform(T_mug))
+        return self._inverse[1]
 
     def settle(self) -> None:
         """Take the bottle as brought (it is close enough, see ``acceptable``): pour."""
@@ -191,14 +218,16 @@ class DrawerIntent:
     v_max: float = 0.10
     phase: str = "reach"
 
-    def desire(self, obs: Observation) -> Desire:
+    def desire(self, obs: Observation, steer: bool = True) -> Desire:
+        """What the hand should do now; with ``steer`` False (an observer judging
+        progress, which never steers) the twist and the weights are left zero."""
         H = obs.objects["drawer_handle"]  # the closed handle; x opens the drawer
-        axis = H[:3, 0]
         opening = float(obs.scene.get("opening", 0.0))
         target = float(obs.scene.get("target_opening", 0.2)) + self.overshoot
         attached = bool(obs.scene.get("attached", False))
-        handle = H[:3, 3] + opening * axis
-        p = obs.T_world_ee[:3, 3]
+        (a0, _, _, h0), (a1, _, _, h1), (a2, _, _, h2), _ = H.tolist()  # the axis, the handle
+        (_, _, _, x), (_, _, _, y), (_, _, _, z), _ = obs.T_world_ee.tolist()
+        d0, d1, d2 = h0 + opening * a0 - x, h1 + opening * a1 - y, h2 + opening * a2 - z  # to the handle
         if attached and self.phase == "reach":
             self.phase = "pull"
         if self.phase == "pull" and not attached:
@@ -206,19 +235,36 @@ class DrawerIntent:
         if opening >= target - self.overshoot + 1e-3 and self.phase == "pull":
             self.phase = "done"
         if self.phase == "reach":
+            err = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        else:
+            da = 0.0 + d0 * a0 + d1 * a1 + d2 * a2  # (summed as numpy's dot)
+            l0, l1, l2 = d0 - da * a0, d1 - da * a1, d2 - da * a2  # lateral
+            err = max(0.0, target - opening) + math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+        done = self.phase == "done"
+        if not steer:
+            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done)
+        return Desire(self._twist(H, opening, target, obs.T_world_ee[:3, 3], done), self._weights(),
+                      err, self.phase, done)
+
+    def _twist(self, H: Array, opening: float, target: float, p: Array, done: bool) -> Array:
+        """The hand's twist: to the handle, or along its axis while pulling."""
+        if done:
+            return np.zeros(6)
+        axis = H[:3, 0]
+        handle = H[:3, 3] + opening * axis
+        if self.phase == "reach":
             v = _saturate(self.gain * (handle - p), self.v_max)
-            err = float(np.linalg.norm(handle - p))
         else:
             lateral = handle - p - float((handle - p) @ axis) * axis
             along = max(0.0, target - opening)
             v = _saturate(self.gain * (lateral + min(along, 0.05) * axis), self.v_max)
-            err = along + float(np.linalg.norm(lateral))
+        return np.concatenate([v, np.zeros(3)])
+
+    def _weights(self) -> Array:
         W = np.zeros((6, 6))
         W[:3, :3] = np.eye(3) / self.v_max
         W[3:, 3:] = np.eye(3) * 0.1  # the hand's orientation hardly matters
-        done = self.phase == "done"
-        twist = np.zeros(6) if done else np.concatenate([v, np.zeros(3)])
-        return Desire(twist, W, err, self.phase, done)
+        return W
 
     def settle(self) -> None:
         """Nothing is tolerated short of the goal: the handle is grasped or not."""

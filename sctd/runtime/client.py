@@ -1,0 +1,68 @@
+"""Queries from the asking side: the daemon's ``skill`` queryable (the active skill's
+summary, a swap: ``sctd swap``, ``sctd skills swap``, the learner service) and any
+other queryable of the contract (``sctd train`` asks the learner).
+
+A session that has just opened has not yet heard of the queryables its peers declared,
+and a ``get`` sent then finds none and ends at once, unanswered. :func:`query` waits
+until a queryable matches the key (Zenoh's matching status), for at most ``find``
+seconds, before it asks.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import msgpack
+import zenoh
+
+from ..skill import Bundle
+from . import codec
+
+FIND = 5.0  # s to wait for a queryable to become known before giving up
+
+
+def reply_body(data: bytes) -> dict[str, Any]:
+    """A reply's msgpack map (``{error: ...}`` for anything else)."""
+    try:
+        body = msgpack.unpackb(data, raw=False)
+    except Exception:  # msgpack raises several unrelated types
+        return {"error": data.decode(errors="replace")}
+    return body if isinstance(body, dict) else {"error": str(body)}
+
+
+def query(session: zenoh.Session, key: str, payload: bytes | None = None, timeout: float = 10.0,
+          find: float = FIND) -> tuple[bool, dict[str, Any]] | None:
+    """One ``get`` on ``key`` once a queryable matches it: (ok, the reply's map; an error
+    reply's is ``{error}``, Zenoh's own timeout ``{error: "Timeout"}``), or None when no
+    queryable was known within ``find`` s or none replied."""
+    with session.declare_querier(key, timeout=timeout) as querier:
+        give_up = time.monotonic() + find
+        while not querier.matching_status.matching:  # type: ignore[attr-defined]
+            if time.monotonic() > give_up:
+                return None
+            time.sleep(0.02)
+        for reply in querier.get(payload=payload):
+            sample = reply.ok if reply.ok is not None else reply.err
+            if sample is not None:
+                return reply.ok is not None, reply_body(sample.payload.to_bytes())
+    return None
+
+
+def active_skill(session: zenoh.Session, keys: codec.Keys, timeout: float = 3.0,
+                 find: float = FIND) -> dict[str, Any] | None:
+    """The running daemon's skill summary (``sctd inspect --json`` plus ``state``), or
+    None when no daemon answers."""
+    got = query(session, keys.skill, None, timeout, find)
+    return got[1] if got is not None and got[0] else None
+
+
+def swap(session: zenoh.Session, keys: codec.Keys, bundle: Bundle, timeout: float = 10.0,
+         find: float = FIND) -> tuple[bool, dict[str, Any]]:
+    """Send ``bundle`` to the daemon: (swapped, its reply ``{ok, id, name, state}`` or
+    ``{error}``; when no daemon answers, ``{error, unanswered: True}``)."""
+    got = query(session, keys.skill, bundle.pack(), timeout, find)
+    if got is None:
+        return False, {"error": f"no daemon answered on {keys.skill} (none found within {find:g} s, "
+                                f"or no reply within {timeout:g} s)", "unanswered": True}
+    return got

@@ -1,0 +1,95 @@
+"""``sctd learner``: the learner service (``docs/learner.md``).
+
+- :mod:`.store`: demonstrations by task and trained skills by content id, on disk;
+- :mod:`.request`: the training request, checked field by field;
+- :mod:`.check`: the lockstep check before a swap;
+- :mod:`.service`: the Zenoh service (demonstrations in, requests answered, status).
+
+``python -m sctd_services.learner`` takes the same flags as ``sctd learner``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+
+from sctd.runtime.codec import DEFAULT_ROBOT
+from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+
+from .check import CheckSettings
+from .store import Store
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The learner's flags (``sctd learner``)."""
+    d = CheckSettings()
+    p.add_argument("--store", default=None, metavar="DIR",
+                   help="the store of demonstrations and skills (default $SCTD_STORE, else "
+                        "$XDG_DATA_HOME/sctd/store, else ~/.local/share/sctd/store)")
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    g = p.add_argument_group("the check before a swap (sctd eval --lockstep)")
+    g.add_argument("--trials", type=int, default=d.trials, help="lockstep trials (default %(default)s)")
+    g.add_argument("--floor", type=float, default=d.floor,
+                   help="lowest success rate that may be swapped in (default %(default)s)")
+    g.add_argument("--tolerance", type=float, default=d.tolerance,
+                   help="how much lower than the active skill's stored evaluation the new "
+                        "one's success rate may be (default %(default)s)")
+    g.add_argument("--seed", type=int, default=d.seed, help="the trials' first seed (default %(default)s)")
+    g.add_argument("--jobs", type=int, default=d.jobs,
+                   help="trial processes, kept warm (default %(default)s)")
+    p.add_argument("--nice", type=int, default=10,
+                   help="lower this process's (and its trials') CPU priority by this much, so "
+                        "training never competes with the daemon's tick (default %(default)s)")
+    add_zenoh_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the service until SIGINT/SIGTERM; exit code 2 for bad flags."""
+    from .check import trial_pool
+    from .service import Learner, Stopped, store_path
+
+    try:
+        settings = CheckSettings(args.trials, args.floor, args.tolerance, args.seed, args.jobs)
+        store = Store(store_path(args.store))
+    except (ValueError, OSError) as e:
+        print(f"sctd learner: {e}", file=sys.stderr)
+        return 2
+    if args.nice > 0:
+        os.nice(args.nice)
+    logging.basicConfig(level=logging.INFO, format="sctd learner: %(message)s", stream=sys.stderr)
+    stop = threading.Event()
+    learner: list[Learner] = []
+
+    def on_signal(*_: object) -> None:
+        stop.set()
+        if learner and learner[0].busy is not None:
+            raise Stopped  # in the service's thread: the request is answered, then we exit
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    pool = trial_pool(settings.jobs) if settings.jobs > 1 else None
+    try:
+        with session_from_args(args) as session, Learner(session, store, args.robot, settings, pool) as ln:
+            learner.append(ln)
+            tasks = ", ".join(f"{t} ({n})" for t, n in store.tasks().items()) or "none yet"
+            print(f"sctd learner: store {store.root}: demonstrations of {tasks}, "
+                  f"{len(store.skills())} skill(s); answering {ln.keys.learner}",
+                  file=sys.stderr, flush=True)
+            ln.serve(stop)
+    except Stopped:
+        print("sctd learner: stopped while serving a request", file=sys.stderr)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sctd_services.learner``."""
+    p = argparse.ArgumentParser(prog="sctd-learner", description=__doc__.split("\n\n")[0])
+    add_arguments(p)
+    return run(p.parse_args(argv))

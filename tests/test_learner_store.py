@@ -1,0 +1,182 @@
+"""The learner's store, its requests and its check's verdict, without processes; and
+the store as a place skill names resolve from (sctd.skill.catalog)."""
+
+from __future__ import annotations
+
+import json
+
+import msgpack
+import pytest
+
+from sctd.learn.demos import read_demo_csv
+from sctd.runtime import codec
+from sctd.skill import SkillError, bundle_from_file, load_skill
+from sctd.skill.catalog import find_skill, find_stored, shipped_folder, stored_skills
+from sctd_services.learner.check import CheckSettings, verdict
+from sctd_services.learner.request import RequestError, parse_request
+from sctd_services.learner.store import Store
+from tests.conftest import ROOT
+
+DEMO = ROOT / "skills" / "demos" / "pour" / "demo_00.csv"
+
+
+def _msg(name: str = "demo_000", task: str = "pour", shift: float = 0.0) -> codec.DemoMsg:
+    d = read_demo_csv(DEMO)
+    rows = [[float(t), *map(float, p)] for t, p in zip(d.t, d.poses, strict=True)]
+    rows[0][1] += shift
+    return codec.DemoMsg(task, name, "mug", rows)
+
+
+def test_a_stored_demonstration_reads_back_as_sent(tmp_path):
+    store = Store(tmp_path)
+    msg = _msg()
+    s = store.add_demo(msg, key="sctd/edan/demos/pour/demo_000")
+    assert not s.duplicate and s.path == tmp_path / "demos" / "pour" / "demo_000.csv"
+    [d] = store.load_demos("pour")
+    assert d.poses[:, 0].tolist() == pytest.approx([r[1] for r in msg.rows], abs=1e-9)
+    assert store.tasks() == {"pour": 1} and store.demo_object("pour", "demo_000") == "mug"
+
+
+def test_same_name_same_rows_is_one_demonstration_other_rows_are_kept_too(tmp_path):
+    store = Store(tmp_path)
+    store.add_demo(_msg())
+    assert store.add_demo(_msg()).duplicate
+    other = store.add_demo(_msg(shift=0.01))
+    assert not other.duplicate and other.name.startswith("demo_000-")
+    assert store.demo_names("pour") == ["demo_000", other.name]
+
+
+def test_unknown_demonstrations_are_named(tmp_path):
+    store = Store(tmp_path)
+    store.add_demo(_msg())
+    with pytest.raises(KeyError, match="demo_007"):
+        store.load_demos("pour", ["demo_000", "demo_007"])
+    with pytest.raises(KeyError, match="no demonstrations of task 'drawer'"):
+        store.load_demos("drawer")
+
+
+def test_a_killed_learners_leftovers_are_removed_and_ignored(tmp_path):
+    store = Store(tmp_path)
+    stored = store.add_skill(bundle_from_file(ROOT / "skills" / "pour.yaml"), {"task": "pour"})
+    half = tmp_path / "skills" / ".new-abc"
+    half.mkdir()
+    (half / "x.yaml").write_text("half")
+    (tmp_path / "demos" / "pour").mkdir()
+    (tmp_path / "demos" / "pour" / ".demo_001.csv.1234.tmp").write_text("t,x")
+    broken = tmp_path / "skills" / "0123456789abcdef"  # a folder without its record
+    broken.mkdir()
+    assert [s.id for s in stored_skills(tmp_path)] == [stored.id]
+    again = Store(tmp_path)
+    assert again.cleaned == 2 and not half.exists()
+    assert [s.id for s in again.skills()] == [stored.id]
+
+
+@pytest.fixture
+def store(private_store):
+    """The test run's store (``$SCTD_STORE``), emptied after the test."""
+    yield Store(private_store)
+    for sub in ("skills", "demos"):
+        for p in sorted((private_store / sub).rglob("*"), reverse=True):
+            p.rmdir() if p.is_dir() else p.unlink()
+
+
+def _stored_copy(store: Store, src: str, name: str, created: float):
+    b = bundle_from_file(ROOT / "skills" / src)
+    b = type(b)(name=f"{name}.yaml", yaml_text=b.yaml_text, files=b.files)
+    return store.add_skill(b, {"created": created, "task": "pour"})
+
+
+def test_names_resolve_path_then_store_then_shipped(store):
+    old = _stored_copy(store, "pour.yaml", "pour", created=1.0)
+    new = _stored_copy(store, "pour-linear.yaml", "pour", created=2.0)
+    assert find_skill("pour") == new.path  # the newest of the name, before the shipped one
+    assert find_skill(f"pour@{old.id}") == old.path
+    assert find_skill(old.id[:6]) == old.path  # an id prefix
+    assert find_skill(ROOT / "skills/pour.yaml") == ROOT / "skills/pour.yaml"  # a path wins
+    assert find_skill("drawer") == shipped_folder() / "drawer.yaml"
+    assert load_skill(find_skill(new.ref)).id == new.id  # the content id is the skill's id
+    with pytest.raises(SkillError, match="learner's store"):
+        find_skill("pour@ffffffff")
+
+
+def test_an_ambiguous_id_prefix_is_refused(store):
+    text = (ROOT / "skills" / "pour.yaml").read_text()
+    for sid in ("abcd1111aaaaaaaa", "abcd2222bbbbbbbb"):  # two entries, ids sharing "abcd"
+        folder = store.skills_dir / sid
+        folder.mkdir()
+        (folder / "p.yaml").write_text(text)
+        (folder / "record.json").write_text(json.dumps({"id": sid, "name": "p", "created": 1.0}))
+    with pytest.raises(SkillError, match="ambiguous id prefix: p@abcd1111aaaaaaaa, p@abcd2222bbbbbbbb"):
+        find_stored("abcd")
+    assert find_stored("abcd2").id == "abcd2222bbbbbbbb"
+    assert find_stored("abc") is None  # shorter than 4 characters: no prefix match
+
+
+def test_the_record_is_what_the_catalog_reads(store):
+    s = _stored_copy(store, "pour.yaml", "mine", created=5.0)
+    rec = store.update_record(s.id, {"evaluation": {"pour": {"success_rate": 1.0}}})
+    on_disk = json.loads((s.path.parent / "record.json").read_text())
+    assert on_disk == rec and on_disk["id"] == s.id and on_disk["name"] == "mine"
+    assert find_stored("mine").record["evaluation"]["pour"]["success_rate"] == 1.0
+
+
+# --- requests -------------------------------------------------------------------------
+
+def _req(**fields):
+    return msgpack.packb(fields)
+
+
+def test_a_request_reads_learns_flags_by_their_names():
+    r = parse_request(_req(task="pour", method="vf", params={"vf-combine": "weighted", "seed": 3,
+                                                           "vf_max_n": 40, "despike": False}))
+    assert r.params == {"vf_combine": "weighted", "random_state": 3, "vf_max_n": 40, "despike": False}
+    assert r.gate and r.swap and r.demos is None and r.skill_name == "pour-vf-learned"
+    lin = parse_request(_req(task="pour", method="linear", frames=["tip=0,0,0.12,0,0,0,1"]))
+    assert lin.frames == {"tip": [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]}
+
+
+@pytest.mark.parametrize("fields, where", [
+    ({"method": "vf"}, "task"),
+    ({"task": "pour"}, "method"),
+    ({"task": "pour", "method": "svm"}, "method"),
+    ({"task": "a/b", "method": "vf"}, "task"),
+    ({"task": "pour", "method": "vf", "colour": 1}, "colour"),
+    ({"task": "pour", "method": "vf", "params": {"no-despike": True}}, "params.no-despike"),
+    ({"task": "pour", "method": "vf", "params": {"smoothness": [1]}}, "params.smoothness"),
+    ({"task": "pour", "method": "vf", "frames": ["tip=0,0,0.12,0,0,0,1"]}, "frames"),
+    ({"task": "pour", "method": "linear", "frames": ["tip=0,0,0.12,0,0,0,2"]}, "frames"),
+    ({"task": "pour", "method": "vf", "demos": []}, "demos"),
+    ({"task": "pour", "method": "vf", "gate": "yes"}, "gate"),
+    ({"task": "pour", "method": "vf", "seed": -1}, "seed"),
+])
+def test_a_malformed_request_is_named_by_its_field(fields, where):
+    with pytest.raises(RequestError, match=f"^{where}: "):
+        parse_request(_req(**fields))
+
+
+def test_a_request_that_is_not_a_map_is_refused():
+    with pytest.raises(RequestError, match="<request>"):
+        parse_request(b"\xc1")
+
+
+# --- the verdict ----------------------------------------------------------------------
+
+def _ev(k: int, n: int = 10) -> dict:
+    return {"successes": k, "trials": n, "success_rate": k / n}
+
+
+def test_the_check_passes_at_the_floor_and_within_the_tolerance_of_the_active_skill():
+    s = CheckSettings(trials=10, floor=0.9, tolerance=0.1)
+    assert verdict(_ev(9), "pour", s, None)[0]
+    assert not verdict(_ev(8), "pour", s, None)[0]
+    assert verdict(_ev(9), "pour", s, _ev(10))[0]  # 0.9 >= 1.0 - 0.1
+    ok, why = verdict(_ev(9), "pour", CheckSettings(floor=0.5, tolerance=0.05), _ev(10))
+    assert not ok and "worse than the active skill's 1.00" in why
+    ok, why = verdict(None, "crank", s, None)
+    assert not ok and "no lockstep evaluation for task 'crank'" in why
+
+
+def test_check_settings_are_bounded():
+    for bad in ({"trials": 0}, {"floor": 1.5}, {"tolerance": -0.1}, {"jobs": 0}):
+        with pytest.raises(ValueError):
+            CheckSettings(**bad)
