@@ -281,3 +281,48 @@ def test_teach_refuses_while_a_daemon_commands_the_robot(tmp_path):
     assert not [t for t in targets if codec.decode_target(t).get("skill") == "sctd-teach"]
     assert not out.exists() or not list(out.iterdir())
     assert port_is_free(port)
+
+
+def _children(pid: int) -> list[int]:
+    """The pids of ``pid``'s children (every thread's list)."""
+    from pathlib import Path
+
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        out += [int(c) for c in (task / "children").read_text().split()]
+    return out
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    from pathlib import Path
+
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_teach_stops_what_it_started_on_sigterm(tmp_path):
+    """SIGTERM while teaching with --then-learn (a timeout's signal): sctd teach exits 143
+    and the simulator and learner it started are gone, their port freed."""
+    import os
+    import signal
+
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    proc = sctd("teach", "--scene", "pour", "--demos", "10", "--then-learn", "vf", "--swap",
+                "--out", str(tmp_path / "taught"), "--store", str(tmp_path / "store"),
+                "--listen", ep, "--logs", str(tmp_path / "logs"), log=tmp_path / "teach.log")
+    try:
+        assert wait_for(lambda: "attempt  1" in proc.output(), 180), proc.output()
+        started = _children(proc.p.pid)
+        assert len(started) >= 2, started  # the simulator and the learner
+        os.kill(proc.p.pid, signal.SIGTERM)
+        assert proc.p.wait(60) == 143, proc.output()
+    finally:
+        proc.stop()
+    assert wait_for(lambda: not any(_alive(c) for c in started), 10), \
+        [c for c in started if _alive(c)]
+    assert port_is_free(port)
