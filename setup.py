@@ -15,6 +15,6 @@ for name, folder in MAPPED.items():
 setup(
     packages=packages,
     package_dir=MAPPED,
-    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"],
+    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"], "sctd_services": ["input/maps/*.yaml"],
                   "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"]},
 )

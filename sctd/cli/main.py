@@ -48,7 +48,8 @@ class Command:
 
 # The optional libraries and the extra (pyproject.toml) that installs each.
 EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
-            "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev"}
+            "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev", "sdl2": "inputs",
+            "hid": "inputs", "brainflow": "inputs"}
 
 BENCHES: dict[str, Command] = {
     "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
@@ -97,6 +98,8 @@ COMMANDS: dict[str, Command] = {
     "teach": Command("show a task on the simulated arm N times, varied as a person would, and "
                      "record the demonstrations that succeed", "sctd.cli.teach",
                      "add_teach_arguments", "main_teach"),
+    "input": Command("bridge an input device (gamepad, SpaceMouse, EMG, keyboard) to "
+                     "sctd/<robot>/input/<name>", "sctd_services.input", "add_arguments", "run"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 
