@@ -64,6 +64,9 @@ BENCHES: dict[str, Command] = {
                      "add_bench_learn_arguments", "main_bench_learn"),
     "sim": Command("simulator real-time factor, step response and tracking",
                    "sctd.bench.sim", "add_bench_sim_arguments", "main_bench_sim"),
+    "input": Command("a stick moved on a virtual pad -> the daemon's target, next to a Zenoh echo; "
+                     "the EMG chain's processing latency", "sctd.bench.input",
+                     "add_bench_input_arguments", "main_bench_input"),
     "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
                     "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
 }

@@ -1,0 +1,191 @@
+"""``sctd bench input``: a device event to the daemon's target, next to a bare Zenoh
+echo of the same run; and the EMG chain's processing latency.
+
+Processes, on one free loopback port: ``sctd run`` (pour, 1 kHz), the kinematic
+stand-in robot and the echo of ``sctd bench latency``. This process holds SDL's virtual
+game controller (it exists only in the process that creates it) and runs the gamepad
+bridge on it, in one thread: at a random moment within each bridge period it moves the
+stick (an *event*), and at the period's deadline the bridge reads the pad and publishes.
+An event's latency is from the moment the stick moved to the arrival of the first
+target whose ``in_seq`` is at least the ``seq`` of the first message carrying the
+move. The bound is the bridge period + the daemon period + 2 x the echo's p99, measured
+in the same run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import random
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from sctd.bench import run_and_report
+from sctd.bench.latency import PING, PONG
+from sctd.cli.procs import Child, free_port
+from sctd.runtime import codec
+from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
+from sctd.runtime.zsession import session
+
+
+class _EventTimes:
+    """The pending event (its first carrying ``seq`` and the time it happened) and the
+    latencies of answered ones. Thread-safe: targets arrive on Zenoh's threads."""
+
+    def __init__(self) -> None:
+        self.histogram = Histogram()
+        self.lock = threading.Lock()
+        self.pending: tuple[int, float] | None = None
+        self.answered = 0
+        self.lost = 0
+
+    def wait_for(self, seq: int, t_event: float) -> None:
+        with self.lock:
+            if self.pending is not None:
+                self.lost += 1
+            self.pending = (seq, t_event)
+
+    def on_target(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic()
+        try:
+            in_seq = codec.decode_target(sample.payload.to_bytes())["in_seq"]
+        except codec.DecodeError:
+            return
+        with self.lock:
+            if self.pending is not None and in_seq is not None and in_seq >= self.pending[0]:
+                self.histogram.add(now - self.pending[1])
+                self.pending = None
+                self.answered += 1
+
+
+def _echo_rtt(s: zenoh.Session, seconds: float, rate: float = 200.0) -> dict[str, float]:
+    trips = RoundTrips()
+    with s.declare_subscriber(PONG, lambda m: trips.answered(int(m.payload.to_bytes()), time.monotonic())), \
+            s.declare_publisher(PING, express=True) as pub:
+        ticker = Ticker(1.0 / rate, spin=0.0)
+        trips.counting = False
+        start = time.monotonic()
+        k = 0
+        while (now := time.monotonic()) < start + seconds + 1.0:
+            ticker.wait()
+            trips.counting = now - start > 1.0
+            trips.sent(k)
+            pub.put(str(k).encode())
+            k += 1
+        time.sleep(0.2)
+    return trips.histogram.summary_ms()
+
+
+def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -> dict[str, Any]:
+    """Stick moves on a virtual pad, through the gamepad bridge to the daemon's targets
+    (see the module doc); the figures."""
+    from sctd_services.input.bridge import Bridge
+    from sctd_services.input.gamepad import Gamepad, VirtualPad
+    from sctd_services.input.mapping import shipped_mapping
+
+    rng = random.Random(seed)
+    keys = codec.Keys()
+    times = _EventTimes()
+    mapping = shipped_mapping("xbox")
+    enable = mapping.buttons["enable"]
+    with session(connect=[ep]) as s:
+        echo = _echo_rtt(s, 3.0)
+        with VirtualPad() as pad, s.declare_subscriber(keys.target, times.on_target), \
+                s.declare_publisher(keys.input("gamepad"), express=True) as pub:
+            assert enable is not None
+            pad.set_button(enable, True)
+            device = Gamepad().open(pad.selector, argparse.Namespace())
+            bridge = Bridge(device, mapping, 3, pub.put, log=lambda m: None)
+            period = 1.0 / bridge_rate
+            ticker = Ticker(period, spin=1e-4)
+            set_timer_slack(1)
+            sign, every, k = 1.0, max(2, round(0.1 / period)), 0
+            start = time.monotonic()
+            moved: float | None = None
+            try:
+                while time.monotonic() < start + seconds + 1.0:
+                    if k % every == 0 and time.monotonic() > start + 1.0:  # an event this period
+                        time.sleep(rng.uniform(0.0, 0.9) * period)
+                        sign = -sign
+                        pad.set_axis(0, 0.6 * sign)
+                        moved = time.monotonic()
+                    ticker.wait()
+                    u, _ = bridge.step()
+                    if moved is not None and u[0] * sign > 0.3:
+                        times.wait_for(bridge.seq, moved)
+                        moved = None
+                    k += 1
+                time.sleep(0.3)
+            finally:
+                bridge.zero()
+                device.close()
+    events = times.answered + times.lost + (times.pending is not None)
+    return {"bridge_rate_hz": bridge_rate, "events": events, "answered": times.answered,
+            "echo_rtt_ms": echo, "event_to_target_ms": times.histogram.summary_ms()}
+
+
+def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds: float,
+                    logdir: Path) -> dict[str, Any]:
+    """The processes of the module doc, the gamepad figures, then the EMG chain's."""
+    from sctd_services.input.emg import bench_processing
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with Child("sctd.cli.main", "run", "--skill", "pour", "--listen", ep, "--rate", str(rate),
+               log=logdir / "daemon.log") as daemon, \
+         Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
+        with session(connect=[ep]) as s:  # until the daemon publishes targets
+            sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
+            end = time.monotonic() + 30
+            while sub.try_recv() is None:
+                if time.monotonic() > end or not daemon.running():
+                    raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
+                time.sleep(0.05)
+            sub.undeclare()
+        pad = gamepad_events(ep, bridge_rate, seconds)
+    bound = 1e3 / bridge_rate + 1e3 / rate + 2 * pad["echo_rtt_ms"]["p99"]
+    emg = bench_processing(seconds=emg_seconds)
+    return {"gamepad": pad, "daemon_rate_hz": rate, "emg": emg,
+            "criteria": {"event_to_target_p99_ms": pad["event_to_target_ms"]["p99"],
+                         "bound_ms": round(bound, 3),
+                         "event_to_target_met": pad["event_to_target_ms"]["p99"] <= bound,
+                         "emg_p99_ms": emg["processing_ms"]["p99"],
+                         "emg_met": emg["processing_ms"]["p99"] <= 5.0}}
+
+
+def print_report(r: dict[str, Any]) -> None:
+    def row(name: str, h: dict) -> str:
+        return (f"  {name:34s} p50 {h['p50']:8.3f}   p99 {h['p99']:8.3f}   max {h['max']:8.3f}"
+                f"   (n={h['n']})")
+
+    g, c, e = r["gamepad"], r["criteria"], r["emg"]
+    mark = {True: "met", False: "NOT met"}
+    print(f"sctd bench input: virtual SDL pad -> gamepad bridge at {g['bridge_rate_hz']:g} Hz -> "
+          f"sctd run at {r['daemon_rate_hz']:g} Hz; {g['answered']} of {g['events']} events answered")
+    print("  all figures in ms")
+    print(row("stick moved -> target", g["event_to_target_ms"]))
+    print(row("bare Zenoh echo RTT", g["echo_rtt_ms"]))
+    print(f"  p99 <= bridge period + daemon period + 2 x echo p99 = {c['bound_ms']:.3f} ms: "
+          f"{mark[c['event_to_target_met']]}")
+    print(f"EMG chain ({e.get('board', 'synthetic')}, {e.get('rate_hz', '?')} Hz, "
+          f"{e.get('channels', '?')} channels, reads at {e.get('read_rate_hz', '?')} Hz):")
+    print(row("sample in -> command out", e["processing_ms"]))
+    print(f"  envelope filter group delay (not included): {e['group_delay_ms']:.1f} ms")
+    print(f"  p99 <= 5 ms: {mark[c['emg_met']]}")
+
+
+def add_bench_input_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bridge-rate", type=float, default=100.0, help="the gamepad bridge's rate, Hz")
+    p.add_argument("--rate", type=float, default=1000.0, help="the daemon's tick rate, Hz")
+    p.add_argument("--seconds", type=float, default=20.0, help="seconds of stick events")
+    p.add_argument("--emg-seconds", type=float, default=10.0, help="seconds of EMG signal processed")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def main_bench_input(args: argparse.Namespace) -> int:
+    return run_and_report("input", args, lambda logdir: run_input_bench(
+        args.bridge_rate, args.seconds, args.rate, args.emg_seconds, logdir), print_report)

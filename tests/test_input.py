@@ -1,0 +1,203 @@
+"""`sctd input`'s framework: the mapping file, the backend registry (built-ins and the
+``sctd.input`` entry points) and the bridge's safety rules (finite, bounded, zero with
+the deadman released while the device is gone and on exit)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+import textwrap
+import threading
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sctd.runtime import codec
+from sctd_services.input.bridge import RELEASED, Bridge
+from sctd_services.input.bridge import run as run_bridge
+from sctd_services.input.device import DeviceInfo, InputDevice, InputError, Reading, pick
+from sctd_services.input.mapping import (
+    AxisMap,
+    identity,
+    load_mapping,
+    parse_mapping,
+    shipped_mapping,
+)
+from sctd_services.input.registry import BUILTIN, get_backend
+from tests.conftest import ROOT
+
+
+def _doc(**over):
+    doc = {"version": 1, "axes": [{"source": 0}, {"source": 1, "invert": True, "deadband": 0.2},
+                                  {"source": [3, 2], "scale": 0.5}],
+           "buttons": {"mode": 4, "enable": 5, "escape": None}}
+    doc.update(over)
+    return doc
+
+
+def test_mapping_known_answers():
+    m = parse_mapping(_doc(), "t.yaml")
+    u, b = m.apply(Reading((0.5, 0.6, 0.2, 1.0), (0, 0, 0, 0, 1, 1)), 3)
+    assert u[0] == 0.5
+    assert u[1] == pytest.approx(-(0.6 - 0.2) / 0.8)  # inverted, rescaled from the band's edge
+    assert u[2] == pytest.approx(0.5 * (1.0 - 0.2))  # axis 3 minus axis 2, scaled
+    assert b == [1, 1, 0]  # mode (device 4), enable (device 5), escape unmapped
+    u, b = m.apply(Reading((0.0, 0.19, 0.0, 0.0), (0, 0, 0, 0, 0, 0)), 6)
+    assert u == [0.0] * 6 and b == [0, 0, 0]  # within the dead band; deadman released
+    # no enable button mapped: enable is held (the device has no deadman)
+    assert identity().apply(Reading((0.1, 0.2, 0.3)), 3) == ([0.1, 0.2, 0.3], [0, 1, 0])
+
+
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=0, max_size=8),
+       st.floats(0.0, 0.99), st.floats(-10, 10).filter(lambda s: abs(s) > 1e-3), st.booleans())
+def test_mapped_axes_are_finite_bounded_and_zero_in_the_band(axes, db, scale, invert):
+    m = AxisMap(0, 1, scale, invert, db)
+    x = m(tuple(axes))
+    assert math.isfinite(x) and -1.0 <= x <= 1.0
+    a0 = axes[0] if axes and math.isfinite(axes[0]) else 0.0
+    a1 = axes[1] if len(axes) > 1 and math.isfinite(axes[1]) else 0.0
+    if abs(max(-1.0, min(1.0, a0 - a1))) <= db:
+        assert x == 0.0
+
+
+@pytest.mark.parametrize(("over", "where"), [
+    ({"version": 2}, "version"),
+    ({"axes": []}, "axes"),
+    ({"axes": [{"source": -1}]}, "axes[0].source"),
+    ({"axes": [{"source": 0, "deadband": 1.0}]}, "axes[0].deadband"),
+    ({"axes": [{"source": 0, "scale": 0}]}, "axes[0].scale"),
+    ({"axes": [{"source": 0, "invert": "yes"}]}, "axes[0].invert"),
+    ({"axes": [{"source": 0, "gain": 2}]}, "axes[0].gain"),
+    ({"buttons": {"deadman": 3}}, "buttons.deadman"),
+    ({"buttons": {"enable": "A"}}, "buttons.enable"),
+    ({"colour": "red"}, "colour"),
+])
+def test_bad_mapping_files_name_the_field(over, where):
+    with pytest.raises(InputError) as e:
+        parse_mapping(_doc(**over), "my.yaml")
+    assert str(e.value).startswith(f"my.yaml: {where}: ")
+
+
+def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
+    for name in ("xbox", "spacemouse"):
+        m = shipped_mapping(name)
+        assert m.buttons.keys() == {"mode", "enable", "escape"}
+    assert shipped_mapping("xbox").buttons["enable"] is not None  # a pad has a deadman
+    f = tmp_path / "m.yaml"
+    f.write_text("version: 1\naxes: [{source: 2}]\n")
+    assert load_mapping(f).apply(Reading((0.0, 0.0, -0.4)), 3)[0] == [-0.4, 0.0, 0.0]
+    f.write_text("version: 1\naxes: [{source: 2}\n")
+    with pytest.raises(InputError, match=r"m\.yaml: not YAML"):
+        load_mapping(f)
+    with pytest.raises(InputError, match=r"nothere\.yaml"):
+        load_mapping(tmp_path / "nothere.yaml")
+
+
+def test_pick_by_index_or_name():
+    devs = [DeviceInfo(0, "Xbox Wireless Controller"), DeviceInfo(3, "PS5 DualSense")]
+    assert pick(devs, None, "gamepad").index == 0
+    assert pick(devs, "3", "gamepad").name == "PS5 DualSense"
+    assert pick(devs, "dualsense", "gamepad").index == 3
+    with pytest.raises(InputError, match=r"--device 'f310' matches none.*0: Xbox"):
+        pick(devs, "f310", "gamepad")
+    with pytest.raises(InputError, match="no device found"):
+        pick([], None, "gamepad")
+
+
+class _Scripted(InputDevice):
+    """A device that returns the readings it is given (None: unplugged; an exception:
+    raised by read)."""
+
+    name = "scripted"
+
+    def __init__(self, readings):
+        self.readings = list(readings)
+        self.closed = False
+
+    def read(self):
+        r = self.readings.pop(0) if self.readings else None
+        if isinstance(r, Exception):
+            raise r
+        return r
+
+    def close(self):
+        self.closed = True
+
+
+def test_bridge_publishes_zero_released_while_the_device_is_gone_and_on_exit():
+    sent: list[codec.InputMsg] = []
+    said: list[str] = []
+    dev = _Scripted([Reading((0.5, -0.5, 0.0), (0, 1)), None, RuntimeError("USB error"),
+                     Reading((float("nan"), 2.0, -3.0), (1, 1))])
+    m = parse_mapping({"version": 1, "axes": [{"source": 0}, {"source": 1}, {"source": 2}],
+                       "buttons": {"mode": 0, "enable": 1}}, "t")
+    br = Bridge(dev, m, 3, lambda p: sent.append(codec.decode_input(p)), log=said.append)
+    for _ in range(4):
+        br.step()
+    br.zero()
+    assert [s.seq for s in sent] == list(range(1, 8))
+    assert sent[0].u == (0.5, -0.5, 0.0) and sent[0].buttons == (0, 1, 0)
+    for s in (sent[1], sent[2], *sent[4:]):  # gone, failed, and the zeros on exit
+        assert s.u == (0.0, 0.0, 0.0) and list(s.buttons) == RELEASED
+    assert sent[3].u == (0.0, 1.0, -1.0) and sent[3].buttons == (1, 1, 0)  # finite, clipped
+    assert br.stats.errors == 1 and br.stats.disconnected == 2 and br.stats.connects == 2
+    assert said[0] == "scripted: connected" and "disconnected" in said[1]
+    assert "read failed: USB error" in said[2] and said[3] == "scripted: reconnected"
+
+
+def test_bridge_run_keeps_its_rate_bounds_and_ends_with_zero():
+    sent: list[codec.InputMsg] = []
+    stop = threading.Event()
+    dev = _Scripted([Reading((1.0, 0.0, 0.0))] * 1000)
+    br = Bridge(dev, identity(), 3, lambda p: sent.append(codec.decode_input(p)), log=lambda s: None)
+    with pytest.raises(ValueError, match="--rate"):
+        run_bridge(br, 10.0, stop)
+
+    def stop_after(b):
+        if b.seq >= 5:
+            stop.set()
+    run_bridge(br, 200.0, stop, stop_after)
+    assert [s.u[0] for s in sent[:5]] == [1.0] * 5
+    assert [s.u for s in sent[-3:]] == [(0.0, 0.0, 0.0)] * 3 and sent[-1].buttons == (0, 0, 0)
+
+
+def test_every_builtin_backend_loads_and_plug_ins_register_by_entry_point(tmp_path):
+    for name in BUILTIN:
+        b = get_backend(name)
+        assert b.name == name and b.help
+        assert b.missing() is None, (name, b.missing())  # make setup installs sctd[inputs]
+    with pytest.raises(InputError, match=r"unknown backend 'joy'.*gamepad, spacemouse"):
+        get_backend("joy")
+    # a plug-in: a distribution with an sctd.input entry point, on sys.path
+    pkg = tmp_path / "sctd_fakedev.py"
+    pkg.write_text(textwrap.dedent("""
+        from sctd_services.input.device import Backend, DeviceInfo, InputDevice, Reading
+
+        class Dev(InputDevice):
+            name = "fake one"
+            def read(self):
+                return Reading((0.25, 0.0, 0.0))
+
+        class Fake(Backend):
+            name, help = "fakedev", "a registered test backend"
+            def missing(self):
+                return None
+            def devices(self):
+                return [DeviceInfo(0, "fake one")]
+            def open(self, selector, args):
+                return Dev()
+    """))
+    dist = tmp_path / "sctd_fakedev-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: sctd-fakedev\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[sctd.input]\nfakedev = sctd_fakedev:Fake\n")
+    code = ("import sys; sys.path.insert(0, sys.argv[1]);"
+            "from sctd_services.input import registry, list_backends;"
+            "print(registry.backend_names()); print(registry.get_backend('fakedev').help);"
+            "list_backends()")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True,
+                         text=True, cwd=ROOT, timeout=120, check=True).stdout
+    assert "'fakedev']" in out and "a registered test backend" in out
+    assert "fakedev" in out and "0: fake one" in out
