@@ -201,3 +201,26 @@ def test_every_builtin_backend_loads_and_plug_ins_register_by_entry_point(tmp_pa
                          text=True, cwd=ROOT, timeout=120, check=True).stdout
     assert "'fakedev']" in out and "a registered test backend" in out
     assert "fakedev" in out and "0: fake one" in out
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "sctd.cli.main", "input", *args], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120, env={**__import__("os").environ,
+                                                                 "SDL_VIDEODRIVER": "dummy"})
+
+
+def test_cli_refuses_bad_flags_and_files_with_exit_2(tmp_path):
+    r = _cli("joy")
+    assert r.returncode == 2 and "unknown backend 'joy'" in r.stderr and "gamepad" in r.stderr
+    r = _cli()
+    assert r.returncode == 2 and "give a BACKEND or --list" in r.stderr
+    r = _cli("gamepad", "--rate", "5")
+    assert r.returncode == 2 and "--rate: between 20 and 1000 Hz, got 5" in r.stderr
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("version: 1\naxes: [{source: 0, deadband: 1.5}]\n")
+    r = _cli("gamepad", "--map", str(bad))
+    assert r.returncode == 2 and f"{bad}: axes[0].deadband: expected a number in [0, 1)" in r.stderr
+    r = _cli("--list")
+    assert r.returncode == 0, r.stderr
+    names = [ln.split()[0] for ln in r.stdout.splitlines() if ln and not ln[0].isspace()]
+    assert names[:4] == ["gamepad", "spacemouse", "emg", "keyboard"], r.stdout
