@@ -148,3 +148,37 @@ def test_a_user_who_pours_from_close_enough_is_not_stuck(tilting):
         if outcome is not None:
             break
     assert (outcome is None) if tilting else (outcome == "stuck"), (outcome, rec.reason)
+
+
+def _fake_trial(path, spec, seed, demos, keep, logdir):
+    """A trial that fails for odd seeds (no simulation)."""
+    return {"seed": seed, "outcome": "failure" if seed % 2 else "success", "reason": "", "time_s": 1.0,
+            "duration_s": 1.0, "spill": 0.0, "progress": 0.0, "mode_switches": 0, "switch_time_s": 0.0,
+            "effort": 0.0, "stuck_episodes": 0}
+
+
+@pytest.mark.parametrize("pooled", [False, True])
+def test_evaluate_stops_when_until_says_and_cancels_the_rest(tmp_path, pooled):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from sctd_services.eval.evaluate import evaluate
+
+    ents = entries([str(ROOT / "skills" / "pour.yaml")], baseline=False, workdir=tmp_path)
+    seen: list[int] = []
+
+    def two_failures(per_trial):
+        seen.append(len(per_trial))
+        return sum(t["outcome"] != "success" for t in per_trial) >= 2
+
+    pool = ThreadPoolExecutor(1) if pooled else None
+    try:
+        [res] = evaluate(ents, TaskSpec("pour"), 10, 0, job=_fake_trial, pool=pool, until=two_failures,
+                         logdir=tmp_path)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    assert [t["seed"] for t in res["per_trial"]] == [0, 1, 2, 3]  # seed 3 is the second failure
+    assert res["trials"] == 4 and res["planned"] == 10 and res["stopped_early"] is True
+    assert seen == [1, 2, 3, 4]
+    [full] = evaluate(ents, TaskSpec("pour"), 4, 0, job=_fake_trial, until=lambda p: False, logdir=tmp_path)
+    assert full["trials"] == 4 and full["stopped_early"] is False

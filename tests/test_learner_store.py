@@ -7,12 +7,14 @@ import json
 
 import msgpack
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sctd.learn.demos import read_demo_csv
 from sctd.runtime import codec
 from sctd.skill import SkillError, bundle_from_file, load_skill
 from sctd.skill.catalog import find_skill, find_stored, shipped_folder, stored_skills
-from sctd_services.learner.check import CheckSettings, verdict
+from sctd_services.learner.check import CheckSettings, failed_already, verdict
 from sctd_services.learner.request import RequestError, parse_request
 from sctd_services.learner.store import Store
 from tests.conftest import ROOT
@@ -174,6 +176,37 @@ def test_the_check_passes_at_the_floor_and_within_the_tolerance_of_the_active_sk
     assert not ok and "worse than the active skill's 1.00" in why
     ok, why = verdict(None, "crank", s, None)
     assert not ok and "no lockstep evaluation for task 'crank'" in why
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=12), st.sampled_from([0.5, 0.8, 0.9, 1.0]),
+       st.sampled_from([0.0, 0.1]), st.one_of(st.none(), st.integers(0, 10)))
+def test_an_early_stop_never_changes_the_verdict(outcomes, floor, tolerance, active_ok):
+    """Stopped at any prefix that failed_already calls a fail, the verdict on that prefix
+    fails, and so does the verdict on the whole sequence, whatever the rest holds; and a
+    sequence that passes is never stopped."""
+    s = CheckSettings(trials=len(outcomes), floor=floor, tolerance=tolerance)
+    active = None if active_ok is None else _ev(active_ok)
+    runs = [{"outcome": "success" if ok else "failure"} for ok in outcomes]
+    whole = verdict(_ev(sum(outcomes), len(outcomes)), "pour", s, active)[0]
+    for k in range(1, len(outcomes)):
+        if failed_already(runs[:k], s, active):
+            ev = {**_ev(sum(outcomes[:k]), k), "stopped_early": True, "planned": len(outcomes)}
+            ok, why = verdict(ev, "pour", s, active)
+            assert not ok and not whole and f"stopped after {k} of {len(outcomes)}" in why
+            best = [*outcomes[:k], *[True] * (len(outcomes) - k)]  # the rest all succeed
+            assert not verdict(_ev(sum(best), len(best)), "pour", s, active)[0]
+            break
+    if whole:
+        assert not any(failed_already(runs[:k], s, active) for k in range(1, len(outcomes) + 1))
+
+
+def test_a_check_stops_after_the_second_failure_of_ten_at_floor_0_9():
+    s = CheckSettings(trials=10, floor=0.9)
+    fail, ok = {"outcome": "failure"}, {"outcome": "success"}
+    assert not failed_already([fail], s, None)
+    assert failed_already([fail, ok, fail], s, None)
+    assert failed_already([fail], s, _ev(10)) is False  # 9/10 would still pass 1.0 - 0.1
+    assert failed_already([fail], CheckSettings(trials=10, floor=0.5, tolerance=0.0), _ev(10))
 
 
 def test_check_settings_are_bounded():

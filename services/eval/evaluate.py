@@ -112,12 +112,16 @@ def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
 def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: TrialJob = lockstep_job,
              jobs: int = 1, demos: str | None = None, keep: bool = False, logdir: Path | None = None,
              progress: Callable[[int, int, str], None] | None = None,
-             pool: Executor | None = None) -> list[dict[str, Any]]:
+             pool: Executor | None = None,
+             until: Callable[[list[dict[str, Any]]], bool] | None = None) -> list[dict[str, Any]]:
     """Run every entry's trials; one result map per entry (see :func:`summarise`).
 
     With ``jobs`` > 1 the trials run in that many spawned processes (lockstep trials are
     independent; real-time ones compete for the CPU and should run one at a time); a
     long-running caller (the learner service) passes its own warm ``pool`` instead.
+    ``until(per_trial)``, asked after each trial (in seed order), ends an entry's trials
+    early when it returns true: the trials not started are cancelled, and the entry's
+    result has ``planned`` (the trials asked for) and ``stopped_early``.
     """
     seeds = list(range(seed, seed + trials))
     total = len(ents) * trials
@@ -130,17 +134,25 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
             pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn")))
         for e in ents:
             args = [(str(e.path), spec, s, demos, keep, logdir / e.skill.name) for s in seeds]
-            if pool is not None:
-                runs = (f.result() for f in [pool.submit(job, *a) for a in args])
-            else:
-                runs = (job(*a) for a in args)
+            futures = [pool.submit(job, *a) for a in args] if pool is not None else []
+            runs = (f.result() for f in futures) if pool is not None else (job(*a) for a in args)
             per_trial: list[dict[str, Any]] = []
+            stopped = False
             for r in runs:
                 per_trial.append(r)
                 done += 1
                 if progress:
                     progress(done, total, e.label)
-            results.append(summarise(e, per_trial, spec.time_limit))
+                if until is not None and len(per_trial) < trials and until(per_trial):
+                    stopped = True
+                    for f in futures:
+                        f.cancel()  # the ones not started; a running one finishes unheard
+                    done += trials - len(per_trial)
+                    break
+            res = summarise(e, per_trial, spec.time_limit)
+            if until is not None:
+                res.update(planned=trials, stopped_early=stopped)
+            results.append(res)
     return results
 
 

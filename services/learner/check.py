@@ -57,18 +57,36 @@ def trial_pool(jobs: int) -> Executor:
     return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent)
 
 
+def failed_already(per_trial: list[dict[str, Any]], settings: CheckSettings,
+                   active: dict[str, Any] | None) -> bool:
+    """Whether the check's verdict is a fail whatever the trials not yet run give: even
+    if all of them succeeded, the success rate over ``settings.trials`` would be below
+    the floor (or below the active skill's rate minus the tolerance)."""
+    ok = sum(1 for t in per_trial if t["outcome"] == "success")
+    best = (ok + settings.trials - len(per_trial)) / settings.trials
+    need = settings.floor
+    if active is not None:
+        need = max(need, active["success_rate"] - settings.tolerance)
+    return best < need - 1e-9
+
+
 def evaluation(stored: StoredSkill, task: str, settings: CheckSettings, seed: int,
                pool: Executor | None,
-               progress: Callable[[int, int, str], None] | None = None) -> dict[str, Any]:
+               progress: Callable[[int, int, str], None] | None = None,
+               active: dict[str, Any] | None = None, stop_early: bool = True) -> dict[str, Any]:
     """``sctd eval --lockstep`` of a stored skill on ``task``: the figures of
     :func:`sctd_services.eval.evaluate.summarise` without the per-trial series, and the
-    table's rows."""
+    table's rows. With ``stop_early``, the trials end as soon as the verdict is a fail
+    whatever the rest would give (:func:`failed_already`; ``active``: the active skill's
+    evaluation the verdict compares with): a skill that passes always runs them all, so
+    its stored evaluation, a later check's baseline, is over every trial."""
     t0 = time.monotonic()
+    until = (lambda per_trial: failed_already(per_trial, settings, active)) if stop_early else None
     with tempfile.TemporaryDirectory(prefix="sctd-learner-check-") as work:
         ents = [replace(e, label=stored.ref)
                 for e in entries([str(stored.path)], baseline=False, workdir=Path(work))]
         [res] = evaluate(ents, TaskSpec(task), settings.trials, seed, jobs=settings.jobs,
-                         logdir=Path(work) / "logs", progress=progress, pool=pool)
+                         logdir=Path(work) / "logs", progress=progress, pool=pool, until=until)
     res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "spill")}
                         for t in res["per_trial"]]
     res.update(task=task, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
@@ -86,6 +104,8 @@ def verdict(ev: dict[str, Any] | None, task: str, settings: CheckSettings,
                        "send gate: false to swap it unchecked")
     rate = ev["success_rate"]
     got = f"{ev['successes']}/{ev['trials']} trials succeeded"
+    if ev.get("stopped_early"):
+        got += f" (stopped after {ev['trials']} of {ev['planned']}: the rest could not pass it)"
     if rate < settings.floor:
         return False, f"{got} ({rate:.2f} < the floor {settings.floor:.2f})"
     if active is not None and rate < active["success_rate"] - settings.tolerance - 1e-9:

@@ -279,11 +279,12 @@ class Learner:
         if req.task not in TASKS:
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
+        active = self._active_evaluation(req.task, exclude=stored.id)
         ev = evaluation(stored, req.task, self.settings, seed, self.pool,
-                        lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n))
+                        lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n),
+                        active=active)
         rec = self.store.update_record(stored.id, {"evaluation": {
             **stored.record.get("evaluation", {}), req.task: ev}})
-        active = self._active_evaluation(req.task, exclude=stored.id)
         passed, reason = verdict(ev, req.task, self.settings, active)
         self.store.update_record(stored.id, {"check": {"passed": passed, "reason": reason,
                                                       "evaluation": rec["evaluation"][req.task]}})
