@@ -223,8 +223,8 @@ class Keyboard(Backend):
         return None
 
     def devices(self) -> list[DeviceInfo]:
-        fd = sys.stdin.fileno() if sys.stdin is not None else -1
-        if fd < 0 or not os.isatty(fd):
+        fd = _stdin_fd()
+        if fd < 0:
             return []
         return [DeviceInfo(0, "terminal", os.ttyname(fd))]
 
@@ -238,9 +238,18 @@ class Keyboard(Backend):
             tracker = HoldTracker(args.key_hold, args.key_repeat_hold)
         except ValueError as e:
             raise InputError(f"keyboard: --key-hold/--key-repeat-hold: {e}") from e
-        fd = sys.stdin.fileno() if sys.stdin is not None else -1
-        if fd < 0 or not os.isatty(fd):
+        fd = _stdin_fd()
+        if fd < 0:
             raise InputError("keyboard: stdin is not a terminal: run sctd input keyboard in one")
         device = TerminalKeys(fd, tracker, speed)
         print(HELP, file=sys.stderr, flush=True)
         return device
+
+
+def _stdin_fd() -> int:
+    """stdin's file descriptor when it is a terminal, else -1."""
+    try:
+        fd = sys.stdin.fileno()
+    except (AttributeError, ValueError, OSError):  # None, closed, or replaced (pytest)
+        return -1
+    return fd if os.isatty(fd) else -1
