@@ -276,3 +276,86 @@ def test_fake_hid_end_to_end_publishes_six_axes_following_the_script(tmp_path):
     assert kinds() == ["a", "b", "gone", "back", "gone"], (kinds(), log)  # last: zero on exit
     assert [m.seq for m in seen] == sorted(m.seq for m in seen)
     assert "reconnected" in log
+
+
+class FakeHidModule:
+    """Stands in for the ``hid`` module: enumerate() and device() over a list of
+    attached devices (dicts as hidapi gives them), each with its pending reports."""
+
+    def __init__(self) -> None:
+        self.attached: list[dict] = []
+        self.reports: dict[bytes, list[bytes]] = {}
+        self.opened: list[FakeHidModule.Device] = []
+        mod = self
+
+        class Device:
+            def __init__(self) -> None:
+                self.path: bytes | None = None
+                self.nonblocking = 0
+                mod.opened.append(self)
+
+            def open_path(self, path: bytes) -> None:
+                if not any(d["path"] == path for d in mod.attached):
+                    raise OSError("open failed")
+                self.path = path
+
+            def set_nonblocking(self, v: int) -> None:
+                self.nonblocking = v
+
+            def read(self, size: int) -> list[int]:
+                if not any(d["path"] == self.path for d in mod.attached):
+                    raise OSError("read error")
+                pending = mod.reports.setdefault(self.path, [])
+                return list(pending.pop(0)) if pending else []
+
+            def close(self) -> None:
+                self.path = None
+
+        self.Device = Device
+
+    def enumerate(self, vid: int = 0, pid: int = 0) -> list[dict]:
+        return [d for d in self.attached if vid in (0, d["vendor_id"]) and pid in (0, d["product_id"])]
+
+    def device(self):
+        return self.Device()
+
+
+def hid_info(path: bytes, pid: int = 0xC635, serial: str = "S1", usage: tuple = (1, 8)) -> dict:
+    return {"path": path, "vendor_id": 0x256F, "product_id": pid, "serial_number": serial,
+            "product_string": "", "usage_page": usage[0], "usage": usage[1]}
+
+
+def test_devices_and_open_through_hidapi_reopen_by_serial_on_a_new_path(monkeypatch):
+    fake = FakeHidModule()
+    monkeypatch.setitem(sys.modules, "hid", fake)
+    fake.attached = [
+        {**hid_info(b"/dev/hidraw9"), "vendor_id": 0x046D, "product_id": 0xC52B},  # a receiver
+        hid_info(b"/dev/hidraw3", usage=(12, 1)),  # the Compact's consumer-control interface
+        hid_info(b"/dev/hidraw2"),
+    ]
+    b = SpaceMouse()
+    listed = b.devices()
+    assert [(d.index, d.name) for d in listed] == [(0, "SpaceMouse Compact")]
+    assert listed[0].detail == "256f:c635 /dev/hidraw2 serial S1"
+    dev = b.open("compact", argparse_ns())
+    assert fake.opened[-1].path == b"/dev/hidraw2" and fake.opened[-1].nonblocking == 1
+    fake.reports[b"/dev/hidraw2"] = [translation(0, 0, 350), buttons(0b10)]
+    r = dev.read()
+    assert r is not None and r.axes[2] == -1.0 and r.buttons == (0, 1)
+    fake.attached = []  # unplugged
+    assert dev.read() is None
+    fake.attached = [hid_info(b"/dev/hidraw5")]  # plugged back: another node, same serial
+    fake.reports[b"/dev/hidraw5"] = [rotation(0, 0, 350)]
+    assert wait_for(lambda: dev.read() is not None, 5)
+    r = dev.read()
+    assert fake.opened[-1].path == b"/dev/hidraw5"
+    assert r is not None and r.axes == (0.0, 0.0, 0.0, 0.0, 0.0, -1.0)
+    dev.close()
+    with pytest.raises(Exception, match=r"--device 'pro' matches none"):
+        b.open("pro", argparse_ns())
+
+
+def argparse_ns(**kw):
+    import argparse
+
+    return argparse.Namespace(fake_hid=None, **kw)

@@ -286,6 +286,13 @@ def _is_spacemouse(info: dict[str, Any]) -> bool:
     return (info.get("vendor_id"), info.get("product_id")) in MODELS
 
 
+def _not_motion(info: dict[str, Any]) -> bool:
+    """False for the interface that sends the motion: a device with several HID
+    interfaces is listed once per interface, its multi-axis controller (usage page 1,
+    usage 8) is the one to open. (A platform that reports no usage gives 0, 0 for all.)"""
+    return (info.get("usage_page"), info.get("usage")) not in ((1, 8), (0, 0), (None, None))
+
+
 class SpaceMouse(Backend):
     """3Dconnexion SpaceMouse devices through hidapi."""
 
@@ -308,10 +315,8 @@ class SpaceMouse(Backend):
         import hid
 
         found = [d for d in hid.enumerate() if _is_spacemouse(d)]
-        # A device with several HID interfaces is listed once per interface; its
-        # multi-axis controller (usage page 1, usage 8) is the one sending motion.
         seen: dict[tuple[Any, ...], dict[str, Any]] = {}
-        for d in sorted(found, key=lambda d: (d.get("usage_page"), d.get("usage")) != (1, 8)):
+        for d in sorted(found, key=_not_motion):
             seen.setdefault((d["vendor_id"], d["product_id"], d.get("serial_number")), d)
         return list(seen.values())
 
@@ -361,8 +366,9 @@ def _hid_opener(info: dict[str, Any]) -> Callable[[], HidHandle]:
                               info.get("path"))
 
     def opener() -> HidHandle:
-        now = [d for d in hid.enumerate(vid, pid)
-               if (serial and d.get("serial_number") == serial) or d.get("path") == path]
+        now = sorted((d for d in hid.enumerate(vid, pid)
+                      if (serial and d.get("serial_number") == serial) or d.get("path") == path),
+                     key=lambda d: (_not_motion(d), d.get("path") != path))
         if not now:
             raise OSError(f"{vid:04x}:{pid:04x} is not connected")
         h = hid.device()
