@@ -203,6 +203,16 @@ def test_bad_scripts_are_refused_naming_the_step(doc, message):
         parse_script(doc, "s.yaml")
 
 
+def test_bad_script_file_exits_2_naming_it(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("- {at: 0, axis: 9, value: 0}\n")
+    p = sctd("input", "gamepad", "--virtual-script", str(bad), "--connect",
+             f"tcp/127.0.0.1:{free_port()}", log=tmp_path / "b.log")
+    assert p.p.wait(60) == 2, p.output()
+    p.stop()
+    assert f"--virtual-script {bad}: [0]: axis: expected 0 to 5, got 9" in p.output()
+
+
 def test_script_steps_are_played_in_time_order():
     steps = parse_script([{"at": 2, "attach": True}, {"at": 1, "detach": True}], "s")
     assert [s.kind for s in steps] == ["detach", "attach"]

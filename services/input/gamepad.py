@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import os
+import sys
 import threading
 import time
 import warnings
@@ -233,6 +234,22 @@ class Gamepad(Backend):
                            help="more SDL controller mappings (gamecontrollerdb.txt lines) for pads "
                                 "SDL's built-in database does not know")
         group.add_argument("--virtual-script", metavar="FILE", help=argparse.SUPPRESS)
+
+    def run_special(self, args: argparse.Namespace) -> int | None:
+        """No job of its own: checks the files its flags name first, so a bad one exits 2
+        (a bad file) before any device is looked for."""
+        try:
+            mappings = getattr(args, "gamepad_mappings", None)
+            if mappings and not Path(mappings).is_file():
+                raise InputError(f"--gamepad-mappings {mappings}: no such file")
+            if getattr(args, "virtual_script", None):
+                from .virtual_pad import load_script
+
+                load_script(args.virtual_script)
+        except InputError as e:
+            print(f"sctd input: {e}", file=sys.stderr)
+            return 2
+        return None
 
     def missing(self) -> str | None:
         try:
