@@ -376,3 +376,10 @@ def test_scripted_pad_drives_the_daemon_and_unplugging_stops_it(tmp_path):
     d = moved(during)
     assert dominant(d) == (0, 1.0) and d[0] > 0.02, d
     assert_stops_within_watchdog(targets, right[-1])
+    # SIGTERM: the bridge's zeros (spaced past the daemon's ingress limit) reach the
+    # daemon, which holds on them at once rather than after its watchdog
+    zeros = {m.seq for m in inputs[-3:]}
+    on_zero = [t for t in targets if t["in_seq"] in zeros]
+    assert on_zero, "the daemon used none of the bridge's zeros on exit"
+    held = [t["pose"] for t in targets if t["seq"] >= on_zero[0]["seq"]]
+    assert all(np.allclose(p, held[0], atol=1e-12) for p in held), "moved after a zero"

@@ -28,6 +28,7 @@ from .mapping import Mapping
 MIN_RATE, MAX_RATE = 20.0, 1000.0
 RELEASED = [0, 0, 0]  # mode, enable (released), escape
 ZERO_ON_EXIT = 3  # zero messages published when the bridge stops
+ZERO_SPACING = 0.005  # s between them (see Bridge.zero)
 
 
 @dataclass
@@ -94,9 +95,15 @@ class Bridge:
         self._send(stamp, u, buttons)
         return u, buttons
 
-    def zero(self, count: int = ZERO_ON_EXIT) -> None:
-        """Publish zero with the deadman released ``count`` times (on exit)."""
-        for _ in range(count):
+    def zero(self, count: int = ZERO_ON_EXIT, spacing: float = ZERO_SPACING) -> None:
+        """Publish zero with the deadman released ``count`` times, ``spacing`` s apart (on
+        exit). Spaced, because the daemon's ingress limit (2000 Hz on ``input/**``) drops
+        a message that follows the previous one within 0.5 ms: zeros sent back to back
+        right after the last real message could all be dropped, leaving that message in
+        force until the daemon's 0.1 s watchdog."""
+        for k in range(count):
+            if k:
+                time.sleep(spacing)
             self._send(time.time(), [0.0] * self.n_axes, list(RELEASED))
 
     def _send(self, stamp: float, u: list[float], buttons: list[int]) -> None:
@@ -135,4 +142,4 @@ def run(bridge: Bridge, rate: float, stop: threading.Event,
             if on_tick is not None:
                 on_tick(bridge)
     finally:
-        bridge.zero()
+        bridge.zero(spacing=min(ZERO_SPACING, 1.0 / rate))
