@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -92,7 +92,7 @@ class Calibration:
             "normalisation": {"rest": self.normalisation.rest.tolist(),
                               "mvc": self.normalisation.mvc.tolist()},
             "mapping": {"matrix": m.matrix.tolist(), "bias": m.bias.tolist(), "deadzone": m.deadzone,
-                        "cocontraction": m.cocontraction},
+                        "cocontraction": m.cocontraction, "hold_s": m.hold_s},
             "created": self.created,
             "notes": list(self.notes),
         }
@@ -108,9 +108,10 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     largest phase median. The map is ridge regression from the activations to each
     phase's target (rest and co-contraction: 0). When co-contraction stands apart from
     every single-axis phase (the smallest activation across channels), a rule zeroes
-    it at half-way; the dead zone covers what rest leaves.
+    it from a third of the way up; the dead zone covers what rest leaves.
     """
     skip = round(settle_s * rate_hz)
+    filters = replace(filters, band_high_hz=filters.band_hz(rate_hz)[1])  # the file says which edge
     held = {}
     for p in phases:
         e = envelopes.get(p.name)
@@ -138,7 +139,8 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     single = [p.name for p in phases if any(p.target)]
     low_single = max(float(np.percentile(act[n][:, strong].min(axis=1), 90)) for n in single)
     co = float(np.median(act["co-contract"][:, strong].min(axis=1))) if "co-contract" in act else 0.0
-    cocontraction = 0.5 * (low_single + co) if co > 1.5 * low_single + 0.05 else None
+    # a third of the way up from the single contractions: a held co-contraction rarely dips below
+    cocontraction = low_single + (co - low_single) / 3.0 if co > 1.5 * low_single + 0.05 else None
     if cocontraction is None:
         notes.append("co-contraction does not stand apart from the single contractions: no "
                      "co-contraction rule, the map alone brings it near zero")
@@ -187,7 +189,8 @@ def load(path: str | Path) -> Calibration:
             raise ValueError(f"mapping.deadzone must be in [0, 1), got {deadzone}")
         mapping = AxisMap(matrix=_array(m["matrix"], (n, N_AXES), "mapping.matrix"),
                           bias=_array(m["bias"], (N_AXES,), "mapping.bias"), deadzone=deadzone,
-                          cocontraction=None if co is None else float(co))
+                          cocontraction=None if co is None else float(co),
+                          hold_s=float(m.get("hold_s", 0.3)))
     except KeyError as e:
         raise InputError(f"{where}: missing field {e}") from e
     except (TypeError, ValueError) as e:

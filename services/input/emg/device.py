@@ -27,11 +27,18 @@ class Processor:
         self.cal = cal
         self.chain = Chain(cal.filters, cal.rate_hz, len(cal.channels))
         self.u = np.zeros(N_AXES)
+        self.hold_n = round(cal.mapping.hold_s * cal.rate_hz)
+        self.seen = 0  # samples processed
+        self.zero_until = -1  # the last sample the co-contraction hold covers
 
     def __call__(self, raw: np.ndarray) -> np.ndarray:
         """The axes after the newest sample of ``raw`` (n >= 1, channels)."""
-        env = self.chain.envelope(raw)
-        self.u = self.cal.mapping(self.cal.normalisation(env[-1]))
+        a = self.cal.normalisation(self.chain.envelope(raw))
+        co = np.flatnonzero(self.cal.mapping.cocontracted(a))
+        if len(co):
+            self.zero_until = self.seen + int(co[-1]) + self.hold_n
+        self.seen += len(a)
+        self.u = np.zeros(N_AXES) if self.seen - 1 <= self.zero_until else self.cal.mapping(a[-1])
         return self.u
 
 

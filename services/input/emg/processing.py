@@ -117,26 +117,36 @@ class AxisMap:
         When every channel the matrix uses (a non-zero row) is active at least this
         much, all axes are 0 (None: no rule; the fitted matrix alone then maps
         co-contraction near zero).
+    hold_s : float
+        How long the co-contraction rule keeps the axes at 0 after it last held (one
+        channel's envelope dipping for a moment, or the muscles relaxing at different
+        speeds, must not move the arm); applied by the caller that knows the time
+        (:class:`~sctd_services.input.emg.device.Processor`).
     """
 
     matrix: np.ndarray
     bias: np.ndarray
     deadzone: float = 0.1
     cocontraction: float | None = None
-
+    hold_s: float = 0.3
     used: np.ndarray = field(init=False, repr=False)  # the channels with a non-zero row
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "used", np.flatnonzero(np.any(self.matrix != 0.0, axis=1)))
 
+    def cocontracted(self, activation: np.ndarray) -> np.ndarray:
+        """Whether the co-contraction rule holds, per sample (...,) of (..., n_channels)."""
+        if self.cocontraction is None:
+            return np.zeros(activation.shape[:-1], dtype=bool)
+        return np.asarray(np.min(activation[..., self.used], axis=-1) >= self.cocontraction)
+
     def __call__(self, activation: np.ndarray) -> np.ndarray:
-        """Axes (..., 3) of activations (..., n_channels)."""
+        """Axes (..., 3) of activations (..., n_channels), the co-contraction rule applied
+        sample by sample (without its hold)."""
         u = activation @ self.matrix + self.bias
         mag = np.abs(u)
         u = np.where(mag > self.deadzone, np.sign(u) * (mag - self.deadzone) / (1.0 - self.deadzone), 0.0)
-        if self.cocontraction is not None:
-            co = np.min(activation[..., self.used], axis=-1, keepdims=True) >= self.cocontraction
-            u = np.where(co, 0.0, u)
+        u = np.where(self.cocontracted(activation)[..., None], 0.0, u)
         return np.clip(u, -1.0, 1.0)
 
 
@@ -172,11 +182,15 @@ class Chain:
 
     def bandpass(self, raw: np.ndarray) -> np.ndarray:
         """Band-passed ``raw`` (n, channels), state carried to the next call."""
+        if raw.shape[0] == 0:
+            return np.zeros((0, self.n_channels))
         y, self.band_zi = sps.sosfilt(self.band_sos, raw, axis=0, zi=self.band_zi)
         return np.asarray(y)
 
     def envelope(self, raw: np.ndarray) -> np.ndarray:
         """Envelope (n, channels) of ``raw`` (n, channels): band-pass, rectify, low-pass."""
+        if raw.shape[0] == 0:
+            return np.zeros((0, self.n_channels))
         rect = np.abs(self.bandpass(raw))
         env, self.env_zi = sps.sosfilt(self.env_sos, rect, axis=0, zi=self.env_zi)
         return np.asarray(env)
