@@ -253,3 +253,18 @@ def test_bridge_publishes_the_file_s_contractions(calibration, tmp_path):
     after = u[np.flatnonzero(u[:, 1] < -0.2)[-1] + 1:]  # rest, co-contraction, rest, disconnected
     assert len(after) > 300 and np.all(np.abs(after) < 0.2), np.abs(after).max(axis=0)
     assert np.all(u[-3:] == 0.0)  # zero on exit
+
+
+def test_a_dip_in_a_held_co_contraction_keeps_the_axes_at_zero():
+    cal = fit(_envelopes(1), board="synthetic", channels=CHANNELS, rate_hz=FS, filters=Filters(),
+              settle_s=SETTLE_S)
+    assert cal.mapping.cocontraction is not None
+    assert not [n for n in cal.notes if n.startswith("phase")], cal.notes
+    x = contractions([("co-contract", 3.0), ("rest", 2.0)], FS, len(CHANNELS), 5)
+    x[round(1.5 * FS):round(1.6 * FS), 1] *= 0.05  # channel 2 (-x) drops out for 0.1 s
+    proc = Processor(cal)
+    u = np.array([proc(x[i:i + 2]).copy() for i in range(0, len(x), 2)])
+    assert np.all(u[round(0.5 * FS) // 2:] == 0.0)
+    # without the hold the dip moves +x: the rule alone is not what keeps it at zero
+    a = cal.normalisation(Chain(cal.filters, FS, len(CHANNELS)).envelope(x))
+    assert cal.mapping(a)[:, 0].max() > 0.3

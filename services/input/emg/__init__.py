@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
 from pathlib import Path
 
@@ -93,10 +94,6 @@ class Emg(Backend):
     def run_special(self, args: argparse.Namespace) -> int | None:
         if not getattr(args, "calibrate", False):
             return None
-        from .calibration import fit, save
-        from .guided import record
-        from .processing import Chain
-
         if not args.calibration:
             raise InputError("emg --calibrate: give --calibration FILE.json to write")
         path = Path(args.calibration)
@@ -106,6 +103,22 @@ class Emg(Backend):
             raise InputError(f"emg --calibrate: --phase-seconds {args.phase_seconds:g} must exceed "
                              f"--settle-seconds {args.settle_seconds:g}")
         filters = Filters(**{f.name: getattr(args, f"emg_{f.name}") for f in dataclasses.fields(Filters)})
+        # the bridge's handlers only set its stop event; here Ctrl-C must end the calibration
+        handlers = {s: signal.signal(s, _interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            return self._calibrate(args, path, filters)
+        except KeyboardInterrupt:
+            print(f"emg --calibrate: interrupted; {path} not written", file=sys.stderr)
+            return 130
+        finally:
+            for s, h in handlers.items():
+                signal.signal(s, h)
+
+    def _calibrate(self, args: argparse.Namespace, path: Path, filters: Filters) -> int:
+        from .calibration import fit, save
+        from .guided import record
+        from .processing import Chain
+
         source = _source(args)
         try:
             rows = _channels(args, source.emg_rows)
@@ -137,6 +150,10 @@ class Emg(Backend):
         say(f"wrote {path} (dead zone {cal.mapping.deadzone:.2f}, co-contraction rule "
             f"{'off' if cal.mapping.cocontraction is None else f'at {cal.mapping.cocontraction:.2f}'})")
         return 0
+
+
+def _interrupt(*_: object) -> None:
+    raise KeyboardInterrupt
 
 
 def _say(line: str) -> None:

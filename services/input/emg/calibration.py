@@ -148,6 +148,14 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     residual = np.abs(raw(np.vstack(quiet)))
     deadzone = float(np.clip(1.2 * np.percentile(residual.max(axis=1), 95), 0.05, 0.3))
     mapping = AxisMap(matrix=raw.matrix, bias=raw.bias, deadzone=deadzone, cocontraction=cocontraction)
+    for p in phases:
+        u = mapping(act[p.name]).mean(axis=0)
+        own = int(np.argmax(np.abs(p.target))) if any(p.target) else None
+        if own is not None and u[own] * p.target[own] < 0.5:
+            notes.append(f"phase {p.name} maps to only {u[own]:+.2f} on its axis: calibrate again "
+                         f"with a stronger or more distinct contraction")
+        elif own is None and np.max(np.abs(u)) > 0.1:
+            notes.append(f"phase {p.name} maps to {np.round(u, 2).tolist()}, not zero")
     return Calibration(board=board, channels=list(channels), rate_hz=rate_hz, filters=filters,
                        normalisation=norm, mapping=mapping,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), notes=notes)
