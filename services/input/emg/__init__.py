@@ -1,5 +1,6 @@
 """``sctd input emg``: surface EMG through BrainFlow (``docs/input-emg.md``).
 
+- :mod:`.filters`: the filter parameters (the file, the flags and the chain share them);
 - :mod:`.processing`: the causal chain on arrays (band-pass, rectification, envelope,
   normalisation, axis map), free of BrainFlow;
 - :mod:`.calibration`: the fit of a guided calibration and its JSON file;
@@ -21,7 +22,7 @@ import sys
 from pathlib import Path
 
 from ..device import Backend, DeviceInfo, InputDevice, InputError
-from .processing import Filters
+from .filters import Filters
 
 DEFAULT_CHANNELS = 8  # the board's first EMG channels when --channels is not given
 
