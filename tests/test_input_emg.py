@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -274,3 +275,30 @@ def test_a_dip_in_a_held_co_contraction_keeps_the_axes_at_zero():
     # without the hold the dip moves +x: the rule alone is not what keeps it at zero
     a = cal.normalisation(Chain(cal.filters, FS, len(CHANNELS)).envelope(x))
     assert cal.mapping(a)[:, 0].max() > 0.3
+
+
+def test_open_refuses_other_channels_and_streaming_boards(calibration):
+    path, _ = calibration
+    with pytest.raises(InputError, match=r"--channels 1,2 differ from the calibration's"):
+        Emg().open(None, _args("--calibration", str(path), "--channels", "1,2"))
+    with pytest.raises(InputError, match="streaming boards open network sockets"):
+        Emg().open(None, _args("--calibration", str(path), "--board", "STREAMING_BOARD"))
+
+
+def test_ctrl_c_ends_the_calibration_without_writing(tmp_path):
+    rec, out = tmp_path / "long.csv", tmp_path / "cal.json"
+    write_playback(str(rec), contractions([("rest", 60.0)], FS, len(CHANNELS), 4), CHANNELS, FS)
+    p = subprocess.Popen([sys.executable, "-m", "sctd_services.input", "emg", "--calibrate",
+                          "--board", "playback", "--board-file", str(rec), "--calibration", str(out)],
+                         stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, cwd=ROOT, start_new_session=True)
+    try:
+        assert wait_for(lambda: p.stdout is not None and "[1/8] rest" in p.stdout.readline(), timeout=30)
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=20)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130, err
+    assert "interrupted" in err and not out.exists()
