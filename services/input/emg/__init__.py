@@ -129,26 +129,25 @@ class Emg(Backend):
                 raise InputError(f"emg --calibrate: {e}") from e
             low, high = filters.band_hz(source.rate_hz)
             interactive = sys.stdin.isatty()
-            say = _say
-            say(f"emg calibration: board {source.name}, {source.rate_hz:g} Hz, channels "
+            _say(f"emg calibration: board {source.name}, {source.rate_hz:g} Hz, channels "
                 f"{','.join(map(str, rows))}; band-pass {low:g}-{high:g} Hz, envelope "
                 f"{filters.envelope_hz:g} Hz (group delay {chain.envelope_delay_s * 1e3:.1f} ms)")
             if not interactive:
-                say("stdin is not a terminal: the phases follow each other without waiting")
+                _say("stdin is not a terminal: the phases follow each other without waiting")
             envelopes = record(source, rows, chain, seconds=args.phase_seconds,
-                               interactive=interactive, say=say)
+                               interactive=interactive, say=_say)
         finally:
             source.close()
         cal = fit(envelopes, board=source.name, channels=rows, rate_hz=source.rate_hz,
                   filters=filters, settle_s=args.settle_seconds)
         for note in cal.notes:
-            say(f"note: {note}")
+            _say(f"note: {note}")
         skip = round(args.settle_seconds * source.rate_hz)
         for name, env in envelopes.items():
             u = cal.mapping(cal.normalisation(env[skip:])).mean(axis=0)
-            say(f"check: {name:<12} -> u " + " ".join(f"{x:+.2f}" for x in u))
+            _say(f"check: {name:<12} -> u " + " ".join(f"{x:+.2f}" for x in u))
         save(cal, path)
-        say(f"wrote {path} (dead zone {cal.mapping.deadzone:.2f}, co-contraction rule "
+        _say(f"wrote {path} (dead zone {cal.mapping.deadzone:.2f}, co-contraction rule "
             f"{'off' if cal.mapping.cocontraction is None else f'at {cal.mapping.cocontraction:.2f}'})")
         return 0
 
