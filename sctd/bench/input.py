@@ -83,8 +83,9 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
     """Stick moves on a virtual pad, through the gamepad bridge to the daemon's targets
     (see the module doc); the figures."""
     from sctd_services.input.bridge import Bridge
-    from sctd_services.input.gamepad import Gamepad, VirtualPad
+    from sctd_services.input.gamepad import Gamepad
     from sctd_services.input.mapping import shipped_mapping
+    from sctd_services.input.virtual_pad import VirtualPad
 
     rng = random.Random(seed)
     keys = codec.Keys()
@@ -93,11 +94,12 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
     enable = mapping.buttons["enable"]
     with session(connect=[ep]) as s:
         echo = _echo_rtt(s, 3.0)
-        with VirtualPad() as pad, s.declare_subscriber(keys.target, times.on_target), \
+        with VirtualPad(name="sctd bench pad") as pad, s.declare_subscriber(keys.target, times.on_target), \
                 s.declare_publisher(keys.input("gamepad"), express=True) as pub:
             assert enable is not None
             pad.set_button(enable, True)
-            device = Gamepad().open(pad.selector, argparse.Namespace())
+            device = Gamepad().open("sctd bench pad",
+                                    argparse.Namespace(gamepad_mappings=None, virtual_script=None))
             bridge = Bridge(device, mapping, 3, pub.put, log=lambda m: None)
             period = 1.0 / bridge_rate
             ticker = Ticker(period, spin=1e-4)
@@ -130,7 +132,7 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
 def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds: float,
                     logdir: Path) -> dict[str, Any]:
     """The processes of the module doc, the gamepad figures, then the EMG chain's."""
-    from sctd_services.input.emg import bench_processing
+    from sctd_services.input.emg.bench import bench_processing
 
     ep = f"tcp/127.0.0.1:{free_port()}"
     with Child("sctd.cli.main", "run", "--skill", "pour", "--listen", ep, "--rate", str(rate),
@@ -148,12 +150,12 @@ def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds
         pad = gamepad_events(ep, bridge_rate, seconds)
     bound = 1e3 / bridge_rate + 1e3 / rate + 2 * pad["echo_rtt_ms"]["p99"]
     emg = bench_processing(seconds=emg_seconds)
+    emg_p99 = emg["p99_ms"]
     return {"gamepad": pad, "daemon_rate_hz": rate, "emg": emg,
             "criteria": {"event_to_target_p99_ms": pad["event_to_target_ms"]["p99"],
                          "bound_ms": round(bound, 3),
                          "event_to_target_met": pad["event_to_target_ms"]["p99"] <= bound,
-                         "emg_p99_ms": emg["processing_ms"]["p99"],
-                         "emg_met": emg["processing_ms"]["p99"] <= 5.0}}
+                         "emg_p99_ms": emg_p99, "emg_met": emg_p99 <= 5.0}}
 
 
 def print_report(r: dict[str, Any]) -> None:
@@ -170,10 +172,11 @@ def print_report(r: dict[str, Any]) -> None:
     print(row("bare Zenoh echo RTT", g["echo_rtt_ms"]))
     print(f"  p99 <= bridge period + daemon period + 2 x echo p99 = {c['bound_ms']:.3f} ms: "
           f"{mark[c['event_to_target_met']]}")
-    print(f"EMG chain ({e.get('board', 'synthetic')}, {e.get('rate_hz', '?')} Hz, "
-          f"{e.get('channels', '?')} channels, reads at {e.get('read_rate_hz', '?')} Hz):")
-    print(row("sample in -> command out", e["processing_ms"]))
-    print(f"  envelope filter group delay (not included): {e['group_delay_ms']:.1f} ms")
+    print(f"EMG chain (BrainFlow playback board at {e['board_rate_hz']:g} Hz, read at "
+          f"{e['read_rate_hz']:g} Hz, {e['samples_per_read']:.1f} samples per read, {e['reads']:.0f} reads):")
+    print(f"  {'sample in -> command out':34s} p50 {e['p50_ms']:8.3f}   p99 {e['p99_ms']:8.3f}   "
+          f"max {e['max_ms']:8.3f}")
+    print(f"  envelope filter group delay (not included): {e['envelope_group_delay_ms']:.1f} ms")
     print(f"  p99 <= 5 ms: {mark[c['emg_met']]}")
 
 
