@@ -67,6 +67,10 @@ BENCHES: dict[str, Command] = {
     "input": Command("a stick moved on a virtual pad -> the daemon's target, next to a Zenoh echo; "
                      "the EMG chain's processing latency", "sctd.bench.input",
                      "add_bench_input_arguments", "main_bench_input"),
+    "multihost": Command("sctd across network namespaces (router, robot, runtime, input hosts): "
+                         "latency vs a Zenoh echo, reconnection after a router restart",
+                         "sctd.bench.multihost", "add_bench_multihost_arguments",
+                         "main_bench_multihost"),
     "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
                     "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
 }
