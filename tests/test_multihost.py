@@ -72,7 +72,7 @@ def test_router_restart_every_program_reconnects_and_the_runtime_holds(cluster):
         assert wait_for(lambda: any(m["mode"] == "running" and m["in_seq"] >= 0
                                     for m in _status(c, t_start)), 30), _logs(c)
         time.sleep(1.0)
-        before_input = max(m["in_seq"] for m in _status(c, t_start))
+        before_input = _status(c, t_start)[-1]["in_seq"]  # the steady input's seq by now
         assert c.router is not None
         c.router.kill()
         t_kill = time.time()
@@ -127,3 +127,4 @@ def test_robot_link_down_holds_within_the_state_timeout_and_recovers(cluster):
         assert held[0] == held[-1], f"targets published while the state was stale: {held[0]} -> {held[-1]}"
     finally:
         steady.stop()
+

@@ -37,6 +37,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+import msgpack
+import zenoh
+
+from sctd.runtime.zsession import make_config
+
 PREFIX = "sctd-"
 DEFAULT_SUBNET = "10.213.13.0/24"
 ROUTER_PORT = 7447
@@ -321,15 +326,51 @@ def router_config(listen: str) -> dict:
             "transport": {"shared_memory": {"enabled": False}}}
 
 
-def client_config(router: str) -> dict:
+def client_config(router: str, timeout_ms: int = -1) -> dict:
     """A Zenoh client of the router at ``router`` that retries forever (also after the
-    router restarts), multicast scouting off."""
+    router restarts), multicast scouting off. ``timeout_ms``: how long opening the
+    session waits for the router (-1: until it is there)."""
     retry = {"period_init_ms": 100, "period_max_ms": 500, "period_increase_factor": 2}
     return {"mode": "client",
-            "connect": {"endpoints": [router], "timeout_ms": -1, "exit_on_failure": False,
+            "connect": {"endpoints": [router], "timeout_ms": timeout_ms, "exit_on_failure": False,
                         "retry": retry},
             "scouting": {"multicast": {"enabled": False}},
             "transport": {"shared_memory": {"enabled": False}}}
+
+
+def tls_client_config(router: str, ca: Path, cert: Path | None = None,
+                      key: Path | None = None, timeout_ms: int = 3000) -> dict:
+    """A Zenoh client of the TLS router at ``router`` that trusts ``ca``, presenting the
+    certificate ``cert`` (private key ``key``) or, without them, none; opening the session
+    gives up waiting after ``timeout_ms`` (a refused client would wait forever)."""
+    conf = client_config(router, timeout_ms)
+    tls: dict = {"root_ca_certificate": str(ca), "verify_name_on_connect": True}
+    if cert is not None and key is not None:
+        tls.update(connect_certificate=str(cert), connect_private_key=str(key), enable_mtls=True)
+    conf["transport"]["link"] = {"protocols": ["tls"], "tls": tls}
+    return conf
+
+
+def sign_certificate(ca_dir: Path, name: str, out: Path) -> tuple[Path, Path]:
+    """A client certificate with common name ``name`` signed by the CA in ``ca_dir``
+    (``ca.pem``, ``ca-key.pem``), EC P-256, made with the openssl command line; the
+    (certificate, key) paths in ``out``."""
+    if shutil.which("openssl") is None:
+        raise RuntimeError("openssl: not found on PATH")
+    out.mkdir(parents=True, exist_ok=True)
+    cert, key, csr, ext = (out / f"{name}.pem", out / f"{name}-key.pem", out / f"{name}.csr",
+                           out / f"{name}.ext")
+    ext.write_text("basicConstraints=critical,CA:FALSE\nkeyUsage=critical,digitalSignature\n"
+                   "extendedKeyUsage=clientAuth\n")
+    for argv in (["req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
+                  "-subj", f"/CN={name}", "-keyout", str(key), "-out", str(csr)],
+                 ["x509", "-req", "-in", str(csr), "-CA", str(ca_dir / "ca.pem"), "-CAkey",
+                  str(ca_dir / "ca-key.pem"), "-CAcreateserial", "-CAserial", str(out / "ca.srl"),
+                  "-days", "30", "-extfile", str(ext), "-out", str(cert)]):
+        r = subprocess.run(["openssl", *argv], capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"openssl {argv[0]}: {r.stderr.strip()}")
+    return cert, key
 
 
 def write_config(path: Path, conf: dict) -> Path:
@@ -340,9 +381,15 @@ def write_config(path: Path, conf: dict) -> Path:
 
 # -- the probe program: Zenoh sessions inside a namespace
 
-def _open(config: str):
-    import zenoh
-    return zenoh.open(zenoh.Config.from_file(config))
+class _Refused(Exception):
+    """The session could not be opened (the router refused or is not there)."""
+
+
+def _open(config: str) -> zenoh.Session:
+    try:
+        return zenoh.open(zenoh.Config.from_file(config))
+    except zenoh.ZError as e:
+        raise _Refused(str(e)) from None
 
 
 def _stop_event() -> threading.Event:
@@ -363,19 +410,37 @@ def router_main(args: argparse.Namespace) -> int:
 
 
 def listen_main(args: argparse.Namespace) -> int:
-    """Count the samples arriving on each key expression for ``--seconds``; with
-    ``--first``, also the Unix time of the first one per key."""
-    import zenoh
+    """Count the samples arriving on each key expression for ``--seconds``, and the Unix
+    time of the first one per key. With ``--mark NAME`` only msgpack maps that have the
+    field NAME count, per value of that field (``marked``: value -> key -> count)."""
     counts = {k: 0 for k in args.key}
+    marked: dict[str, dict[str, int]] = {}
     first: dict[str, float] = {}
     lock = threading.Lock()
-    s = _open(args.config)
+    try:
+        s = _open(args.config)
+    except _Refused as e:
+        print(json.dumps({"ready": True, "refused": str(e)}), flush=True)
+        print(json.dumps({"counts": counts, "marked": marked, "first": first, "refused": str(e)}))
+        return 0
     subs = []
     for key in args.key:
         def on(sample: zenoh.Sample, key: str = key) -> None:
+            mark = None
+            if args.mark is not None:
+                try:
+                    msg = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+                except (ValueError, msgpack.UnpackException):
+                    return
+                if not isinstance(msg, dict) or args.mark not in msg:
+                    return
+                mark = str(msg[args.mark])
             with lock:
                 counts[key] += 1
                 first.setdefault(key, time.time())
+                if mark is not None:
+                    per_key = marked.setdefault(mark, {})
+                    per_key[key] = per_key.get(key, 0) + 1
         subs.append(s.declare_subscriber(key, on))
     print(json.dumps({"ready": True}), flush=True)
     stop = _stop_event()
@@ -383,7 +448,8 @@ def listen_main(args: argparse.Namespace) -> int:
     for sub in subs:
         sub.undeclare()
     s.close()
-    print(json.dumps({"counts": counts, "first": first}), flush=True)
+    with lock:
+        print(json.dumps({"counts": counts, "marked": marked, "first": first}), flush=True)
     return 0
 
 
@@ -391,8 +457,6 @@ def record_main(args: argparse.Namespace) -> int:
     """Write every sample on ``--key`` to ``--out`` as JSON lines ``{"key", "t",
     "msg"}`` (``t``: arrival, Unix time; ``msg``: the msgpack map, only ``--field``
     fields if given), until SIGTERM."""
-    import msgpack
-    import zenoh
     fields = set(args.field or ())
     lock = threading.Lock()
     out = open(args.out, "a", buffering=1)
@@ -410,7 +474,8 @@ def record_main(args: argparse.Namespace) -> int:
             out.write(line + "\n")
 
     stop = _stop_event()
-    s = _open(args.config)
+    limits = [(key, args.max_rate) for key in args.key] if args.max_rate else []
+    s = zenoh.open(make_config(config_file=args.config, rate_limits=limits))
     subs = [s.declare_subscriber(key, on) for key in args.key]
     stop.wait()
     for sub in subs:
@@ -423,28 +488,36 @@ def record_main(args: argparse.Namespace) -> int:
 
 def put_main(args: argparse.Namespace) -> int:
     """Put ``--n`` msgpack maps (``--payload`` JSON) on each ``--key``, ``--rate`` Hz."""
-    import msgpack
-    s = _open(args.config)
+    sent = {k: 0 for k in args.key}
+    try:
+        s = _open(args.config)
+    except _Refused as e:
+        print(json.dumps({"sent": sent, "tried": args.n * len(args.key), "refused": str(e)}))
+        return 0
     time.sleep(args.settle)  # let the declarations of the others reach this session
     payload = json.loads(args.payload)
-    sent = {k: 0 for k in args.key}
+    block = zenoh.CongestionControl.BLOCK
     for i in range(args.n):
         for key in args.key:
             msg = dict(payload, seq=i, stamp=time.time())
-            s.put(key, msgpack.packb(msg, use_bin_type=True))
+            # blocking, not dropped when a queue is full: the count must be what was sent
+            s.put(key, msgpack.packb(msg, use_bin_type=True), congestion_control=block)
             sent[key] += 1
         time.sleep(1.0 / args.rate)
     time.sleep(0.3)
     s.close()
-    print(json.dumps({"sent": sent}), flush=True)
+    print(json.dumps({"sent": sent, "tried": args.n * len(args.key)}), flush=True)
     return 0
 
 
 def query_main(args: argparse.Namespace) -> int:
     """One query on ``--key`` (msgpack ``--payload`` JSON, if any); how many ok and
     error replies arrived."""
-    import msgpack
-    s = _open(args.config)
+    try:
+        s = _open(args.config)
+    except _Refused as e:
+        print(json.dumps({"ok": 0, "err": 0, "refused": str(e)}))
+        return 0
     time.sleep(args.settle)
     kw = {} if args.payload is None else {"payload": msgpack.packb(json.loads(args.payload),
                                                                     use_bin_type=True)}
@@ -470,12 +543,16 @@ def _parser() -> argparse.ArgumentParser:
     lis.add_argument("--config", required=True)
     lis.add_argument("--key", action="append", required=True)
     lis.add_argument("--seconds", type=float, default=5.0)
+    lis.add_argument("--mark", default=None, help="count only msgpack maps with this field")
     lis.set_defaults(func=listen_main)
     rec = sub.add_parser("record", help="samples on keys to a JSON-lines file until SIGTERM")
     rec.add_argument("--config", required=True)
     rec.add_argument("--key", action="append", required=True)
     rec.add_argument("--field", action="append", help="keep only these fields (repeatable)")
     rec.add_argument("--out", required=True)
+    rec.add_argument("--max-rate", type=float, default=None,
+                     help="Hz: take at most this many samples per second of each key (Zenoh's "
+                          "downsampling, on arrival)")
     rec.set_defaults(func=record_main)
     put = sub.add_parser("put", help="put msgpack maps on keys")
     put.add_argument("--config", required=True)
