@@ -532,6 +532,46 @@ def query_main(args: argparse.Namespace) -> int:
     return 0
 
 
+# The echo runs on keys the roles may use, so it takes the same path through the router's
+# access control as input and target: the input role publishes ``input/**``, the runtime
+# role subscribes to it and publishes ``target``, which the input role may read. The robot
+# name ``echo`` keeps it apart from the robot's own keys.
+ECHO_PING = "sctd/echo/input/ping"
+ECHO_PONG = "sctd/echo/target"
+
+
+def echo_main(args: argparse.Namespace) -> int:
+    """Republish every ``ECHO_PING`` sample on ``ECHO_PONG`` until SIGTERM (run it in the
+    runtime's role)."""
+    stop = _stop_event()
+    with _open(args.config) as s, s.declare_publisher(ECHO_PONG, express=True) as pub, \
+            s.declare_subscriber(ECHO_PING, lambda sample: pub.put(sample.payload.to_bytes())):
+        print(json.dumps({"ready": True}), flush=True)
+        stop.wait()
+    return 0
+
+
+def ping_main(args: argparse.Namespace) -> int:
+    """Ping the echo ``--n`` times at ``--rate`` Hz (in the input's role); the round-trip
+    summary (ms) after ``--warmup`` pings."""
+    from sctd.runtime.timing import RoundTrips, Ticker
+    trips = RoundTrips()
+    with _open(args.config) as s, \
+            s.declare_subscriber(ECHO_PONG, lambda sample: trips.answered(
+                int(sample.payload.to_bytes()), time.monotonic())), \
+            s.declare_publisher(ECHO_PING, express=True) as pub:
+        time.sleep(args.settle)
+        ticker = Ticker(1.0 / args.rate, spin=0.0)
+        for seq in range(args.n):
+            ticker.wait()
+            trips.counting = seq >= args.warmup
+            trips.sent(seq)
+            pub.put(str(seq).encode())
+        time.sleep(0.3)
+    print(json.dumps({"echo_rtt_ms": trips.histogram.summary_ms(), "pongs": trips.answers}), flush=True)
+    return 0
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m sctd.bench.netns",
                                 description="Zenoh probes run inside a host's namespace")
@@ -569,6 +609,16 @@ def _parser() -> argparse.ArgumentParser:
     q.add_argument("--timeout", type=float, default=3.0)
     q.add_argument("--settle", type=float, default=1.0)
     q.set_defaults(func=query_main)
+    e = sub.add_parser("echo", help=f"republish {ECHO_PING} on {ECHO_PONG} until SIGTERM")
+    e.add_argument("--config", required=True)
+    e.set_defaults(func=echo_main)
+    pg = sub.add_parser("ping", help="round trips to the echo")
+    pg.add_argument("--config", required=True)
+    pg.add_argument("--n", type=int, default=5000)
+    pg.add_argument("--rate", type=float, default=500.0)
+    pg.add_argument("--warmup", type=int, default=500)
+    pg.add_argument("--settle", type=float, default=1.0)
+    pg.set_defaults(func=ping_main)
     return p
 
 
