@@ -270,8 +270,8 @@ def test_swaps_on_skill_swap_and_with_a_config_file_only_there(tmp_path):
     swap), refuses bundles naming skill/swap; `sctd swap` goes to skill/swap."""
     port = free_port()
     conf = tmp_path / "peer.json5"
-    conf.write_text('{mode: "peer", listen: {endpoints: ["tcp/127.0.0.1:%d"]}, '
-                    'scouting: {multicast: {enabled: false}}}' % port)
+    conf.write_text(f'{{mode: "peer", listen: {{endpoints: ["tcp/127.0.0.1:{port}"]}}, '
+                    'scouting: {multicast: {enabled: false}}}')
     proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--zenoh-config", str(conf),
                 log=tmp_path / "daemon.log")
     rig = Rig(port)
