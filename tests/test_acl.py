@@ -269,3 +269,42 @@ def test_intruder_delivers_nothing(sessions, tmp_path, kind):
     # the watcher (operator) still reaches the queryables: the denial is the stranger's
     assert answers(watcher, "skill/swap") == {"runtime"}
     del subs, qs
+
+
+def test_usrpwd_roles_by_user_name(tmp_path):
+    """With ``sctd certs --usrpwd`` the user name is the role: the input may publish input
+    and not target; a wrong password and no password are refused by the router."""
+    port = free_port()
+    r = subprocess.run([sys.executable, "-m", "sctd.cli.main", "certs", "--out",
+                        str(tmp_path / "tls"), "--router", f"tls/127.0.0.1:{port}", "--usrpwd"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    udir = tmp_path / "tls" / "zenoh" / "usrpwd"
+    assert (tmp_path / "tls" / "users.txt").stat().st_mode & 0o077 == 0
+    log = tmp_path / "router.log"
+    router = sctd("router", "--config", str(udir / "router.json5"), log=log)
+    ss = Sessions(tmp_path / "tls")
+    try:
+        assert wait_for(lambda: "listening on" in log.read_text(), 20), log.read_text()
+        got: Counter = Counter()
+        runtime = ss.config(zenoh.Config.from_file(str(udir / "sctd-runtime.json5")))
+        operator = ss.config(zenoh.Config.from_file(str(udir / "sctd-operator.json5")))
+        subs = counting(runtime, ["input/pad"], got, "runtime:")
+        subs += counting(operator, ["target", "input/pad"], got, "operator:")
+        user = ss.config(zenoh.Config.from_file(str(udir / "sctd-input.json5")))
+        time.sleep(0.5)
+        put_all(user, ["target", "input/pad"])
+        assert wait_for(lambda: got["runtime:input/pad"] >= N and got["operator:input/pad"] >= N,
+                        15), got
+        time.sleep(0.5)
+        assert got == {"runtime:input/pad": N, "operator:input/pad": N}
+        for password in ("wrong", None):
+            conf = zenoh.Config.from_file(str(udir / "sctd-runtime.json5"))
+            conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+            conf.insert_json5("connect/timeout_ms", "3000")
+            with pytest.raises(zenoh.ZError):
+                ss.config(conf)
+        del subs
+    finally:
+        ss.close()
+        assert router.stop() == 0, log.read_text()

@@ -16,10 +16,13 @@ from __future__ import annotations
 import ipaddress
 import json
 import os
+import secrets
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
+
+import zenoh
 
 from .errors import EXIT_OK, fail
 
@@ -54,6 +57,9 @@ def add_certs_arguments(p) -> None:
                    help="what the router listens on when it differs from --router "
                         "(e.g. tls/0.0.0.0:7448; repeatable)")
     p.add_argument("--days", type=int, default=825, help="validity of every certificate (days)")
+    p.add_argument("--usrpwd", action="store_true",
+                   help="also write zenoh/usrpwd/: user/password authentication (user = role) "
+                        "over TLS that checks the router only, and users.txt")
     p.add_argument("--force", action="store_true",
                    help="replace an existing CA (every certificate it signed stops working)")
 
@@ -82,6 +88,8 @@ def main_certs(args) -> int:
     except OSError as e:
         return fail("certs", f"{out}: {e}")
     written = render_configs(out, connect, listen)
+    if args.usrpwd:
+        written += render_usrpwd(out)
     print(f"CA and {len(ROLES) + 1} key pairs in {out}; Zenoh configs: "
           f"{', '.join(str(p) for p in written)}", flush=True)
     return EXIT_OK
@@ -145,5 +153,38 @@ def render_configs(out: Path, connect: list[str], listen: list[str]) -> list[Pat
         text = render((TEMPLATES / f"{name}.json5").read_text(), out, connect, listen)
         path = zdir / f"{name}.json5"
         path.write_text(text)
+        written.append(path)
+    return written
+
+
+def _private_text(path: Path, text: str) -> None:
+    path.touch(mode=0o600)
+    os.chmod(path, 0o600)
+    path.write_text(text)
+
+
+def render_usrpwd(out: Path) -> list[Path]:
+    """Write ``out/users.txt`` (one random password per role) and ``out/zenoh/usrpwd/``:
+    the router and role configs of ``out/zenoh/`` with user/password authentication in
+    place of client certificates (TLS still authenticates the router and encrypts).
+    The files hold passwords: mode 0600."""
+    udir = out / "zenoh" / "usrpwd"
+    udir.mkdir(exist_ok=True)
+    users = {role: secrets.token_urlsafe(24) for role in ROLES}
+    _private_text(out / "users.txt", "".join(f"{u}:{pw}\n" for u, pw in users.items()))
+    written = []
+    for name in ("router", *ROLES):
+        conf = zenoh.Config.from_file(str(out / "zenoh" / f"{name}.json5"))
+        conf.insert_json5("transport/link/tls/enable_mtls", "false")
+        if name == "router":
+            conf.insert_json5("transport/auth/usrpwd/dictionary_file",
+                              json.dumps(str(out / "users.txt")))
+        else:
+            conf.insert_json5("transport/link/tls/connect_certificate", "null")
+            conf.insert_json5("transport/link/tls/connect_private_key", "null")
+            conf.insert_json5("transport/auth/usrpwd/user", json.dumps(name))
+            conf.insert_json5("transport/auth/usrpwd/password", json.dumps(users[name]))
+        path = udir / f"{name}.json5"
+        _private_text(path, str(conf))
         written.append(path)
     return written
