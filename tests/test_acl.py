@@ -308,3 +308,28 @@ def test_usrpwd_roles_by_user_name(tmp_path):
     finally:
         ss.close()
         assert router.stop() == 0, log.read_text()
+
+
+def test_client_query_finds_the_queryable_only_where_allowed(sessions):
+    """``sctd.runtime.client.query`` waits for a matching queryable before its get: the
+    router's declarations reach the input (may ask ``skill``) and not the observer, and an
+    error reply passes like an answer."""
+    from sctd.runtime import client, codec
+
+    asked: Counter = Counter()
+    runtime = sessions.role("sctd-runtime")
+    qs = [runtime.declare_queryable(key("skill"), lambda q: (
+        asked.update(["skill"]), q.reply(q.key_expr, codec.pack({"skill": "pour"}))))]
+    qs.append(runtime.declare_queryable(key("skill/swap"), lambda q: (
+        asked.update(["skill/swap"]), q.reply_err(codec.pack({"error": "bad bundle"})))))
+    user, observer = sessions.role("sctd-input"), sessions.role("sctd-observer")
+    learner = sessions.role("sctd-learner")
+    assert client.query(user, key("skill"), find=10.0) == (True, {"skill": "pour", "v": 1})
+    refused = (False, {"error": "bad bundle", "v": 1})
+    assert client.query(learner, key("skill/swap"), b"x", find=10.0) == refused
+    assert client.query(observer, key("skill"), find=2.0) is None
+    assert client.query(observer, key("skill/swap"), b"x", find=2.0) is None
+    assert client.query(user, key("skill/swap"), b"x", find=2.0) is None
+    assert client.query(learner, key("skill"), find=2.0) is None
+    assert asked == Counter({"skill": 1, "skill/swap": 1})
+    del qs
