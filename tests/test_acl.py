@@ -333,3 +333,29 @@ def test_client_query_finds_the_queryable_only_where_allowed(sessions):
     assert client.query(learner, key("skill"), find=2.0) is None
     assert asked == Counter({"skill": 1, "skill/swap": 1})
     del qs
+
+
+def test_publisher_reaches_a_wildcard_subscriber(sessions):
+    """A Zenoh Publisher (as ``sctd sim`` and ``sctd run`` declare) sends only while it
+    knows a matching subscriber: the operator's ``sctd/**`` must be declared to the robot
+    even though the robot publishes only its own keys; the observer's ``sctd/**`` is
+    refused."""
+    got: Counter = Counter()
+    operator, observer = sessions.role("sctd-operator"), sessions.role("sctd-observer")
+    # a session delivers to all its matching subscribers whatever arrives, so the
+    # refused wildcard gets a session of its own
+    wide = sessions.role("sctd-observer")
+    subs = [operator.declare_subscriber("sctd/**", lambda s: got.update(["operator"])),
+            wide.declare_subscriber("sctd/**", lambda s: got.update(["observer"])),
+            observer.declare_subscriber(key("state"), lambda s: got.update(["observer:state"]))]
+    robot = sessions.role("sctd-robot")
+    pub = robot.declare_publisher(key("state"))
+    assert wait_for(lambda: pub.matching_status.matching, 15)
+    for _ in range(N):
+        pub.put(b"{}")
+        time.sleep(0.005)
+    assert wait_for(lambda: got["operator"] >= N and got["observer:state"] >= N, 15), got
+    time.sleep(0.5)
+    assert got == {"operator": N, "observer:state": N}
+    pub.undeclare()
+    del subs
