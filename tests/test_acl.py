@@ -47,7 +47,7 @@ SUB = {"sctd-runtime": {"input/pad", "state", "objects/cup"},
        "sctd-observer": {"target", "state", "status", "scene", "learner/status"}}
 ANSWER = {"sctd-runtime": {"skill", "skill/swap"}, "sctd-robot": {"sim/reset"},
           "sctd-learner": {"learner"}}
-QUERY = {"sctd-input": {"skill"}, "sctd-learner": {"skill/swap"},
+QUERY = {"sctd-input": {"skill"}, "sctd-learner": {"skill", "skill/swap"},
          "sctd-operator": {"skill", "skill/swap", "learner", "sim/reset"}}
 
 
@@ -330,8 +330,8 @@ def test_client_query_finds_the_queryable_only_where_allowed(sessions):
     assert client.query(observer, key("skill"), find=2.0) is None
     assert client.query(observer, key("skill/swap"), b"x", find=2.0) is None
     assert client.query(user, key("skill/swap"), b"x", find=2.0) is None
-    assert client.query(learner, key("skill"), find=2.0) is None
-    assert asked == Counter({"skill": 1, "skill/swap": 1})
+    assert client.query(learner, key("skill"), find=10.0) == (True, {"skill": "pour", "v": 1})
+    assert asked == Counter({"skill": 2, "skill/swap": 1})
     del qs
 
 
