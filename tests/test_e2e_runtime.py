@@ -255,3 +255,48 @@ def test_bad_skill_file_is_refused_at_start(tmp_path):
                 log=tmp_path / "d.log")
     assert proc.p.wait(30) == 2
     assert "bad.yaml: object: expected a non-empty string" in proc.output()
+
+
+def _reply(replies) -> tuple[bool, dict]:
+    assert len(replies) == 1, replies
+    r = replies[0]
+    sample = r.ok if r.ok is not None else r.err
+    return r.ok is not None, msgpack.unpackb(sample.payload.to_bytes(), raw=False)
+
+
+def test_swaps_on_skill_swap_and_with_a_config_file_only_there(tmp_path):
+    """`skill/swap` takes a bundle (and refuses an empty query); `skill` answers summaries
+    and, with --zenoh-config (a deployment: a policy can then tell a summary from a
+    swap), refuses bundles naming skill/swap; `sctd swap` goes to skill/swap."""
+    port = free_port()
+    conf = tmp_path / "peer.json5"
+    conf.write_text(f'{{mode: "peer", listen: {{endpoints: ["tcp/127.0.0.1:{port}"]}}, '
+                    'scouting: {multicast: {enabled: false}}}')
+    proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--zenoh-config", str(conf),
+                log=tmp_path / "daemon.log")
+    rig = Rig(port)
+    try:
+        assert wait_for(lambda: len(rig.targets) > 50, 20), proc.output()
+        old_id = rig.last()["skill"]
+        s = rig.session
+        drawer = bundle_from_file(ROOT / "skills" / "drawer.yaml")
+        ok, body = _reply(list(s.get(KEYS.skill, payload=drawer.pack(), timeout=10.0)))
+        assert not ok and "swaps go to sctd/edan/skill/swap" in body["error"]
+        ok, body = _reply(list(s.get(KEYS.skill, timeout=10.0)))
+        assert ok and body["id"] == old_id  # summaries still on skill
+        ok, body = _reply(list(s.get(KEYS.skill_swap, timeout=10.0)))
+        assert not ok and "send a bundle" in body["error"]
+        time.sleep(0.1)
+        assert rig.last()["skill"] == old_id
+        swap = sctd("swap", str(ROOT / "skills" / "drawer.yaml"), "--connect", f"tcp/127.0.0.1:{port}",
+                    log=tmp_path / "swap.log")
+        assert swap.p.wait(30) == 0, swap.output()
+        assert swap.output().strip().splitlines()[-1] == drawer.id
+        assert wait_for(lambda: rig.last()["skill"] == drawer.id, 5)
+        pour = bundle_from_file(ROOT / "skills" / "pour.yaml")
+        ok, body = _reply(list(s.get(KEYS.skill_swap, payload=pour.pack(), timeout=30.0)))
+        assert ok and body["id"] == pour.id == old_id
+        assert wait_for(lambda: rig.last()["skill"] == old_id, 5)
+    finally:
+        rig.close()
+        proc.stop()

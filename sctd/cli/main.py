@@ -107,6 +107,10 @@ COMMANDS: dict[str, Command] = {
                      "add_teach_arguments", "main_teach"),
     "input": Command("bridge an input device (gamepad, SpaceMouse, EMG, keyboard) to "
                      "sctd/<robot>/input/<name>", "sctd_services.input", "add_arguments", "run"),
+    "certs": Command("make a private CA, one key pair per role and each role's Zenoh config",
+                     "sctd.cli.certs", "add_certs_arguments", "main_certs"),
+    "router": Command("a Zenoh router (mutual TLS and the roles' access control with --config)",
+                      "sctd.cli.router", "add_router_arguments", "main_router"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 

@@ -90,7 +90,10 @@ def main_run(args: argparse.Namespace) -> int:
         return fail("run", f"cannot open Zenoh session: {e}")
     try:
         daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority,
-                        cpu=args.cpu, stop_event=stop)
+                        cpu=args.cpu, stop_event=stop,
+                        # wire contract v1: on the loopback defaults, bundles sent to the
+                        # skill key still swap; with a config file only skill/swap does
+                        swap_on_skill_key=args.zenoh_config is None)
         stats = daemon.run(args.duration)
     finally:
         close_session(session)

@@ -1,5 +1,6 @@
 """Queries from the asking side: the daemon's ``skill`` queryable (the active skill's
-summary, a swap: ``sctd swap``, ``sctd skills swap``, the learner service) and any
+summary) and ``skill/swap`` (a swap: ``sctd swap``, ``sctd skills swap``, the learner
+service), and any
 other queryable of the contract (``sctd train`` asks the learner).
 
 A session that has just opened has not yet heard of the queryables its peers declared,
@@ -61,8 +62,8 @@ def swap(session: zenoh.Session, keys: codec.Keys, bundle: Bundle, timeout: floa
          find: float = FIND) -> tuple[bool, dict[str, Any]]:
     """Send ``bundle`` to the daemon: (swapped, its reply ``{ok, id, name, state}`` or
     ``{error}``; when no daemon answers, ``{error, unanswered: True}``)."""
-    got = query(session, keys.skill, bundle.pack(), timeout, find)
+    got = query(session, keys.skill_swap, bundle.pack(), timeout, find)
     if got is None:
-        return False, {"error": f"no daemon answered on {keys.skill} (none found within {find:g} s, "
-                                f"or no reply within {timeout:g} s)", "unanswered": True}
+        return False, {"error": f"no daemon answered on {keys.skill_swap} (none found within "
+                                f"{find:g} s, or no reply within {timeout:g} s)", "unanswered": True}
     return got

@@ -76,6 +76,11 @@ class Keys:
         return f"{self.prefix}/skill"
 
     @property
+    def skill_swap(self) -> str:
+        """The swap queryable (a policy can allow summaries on ``skill`` and swaps apart)."""
+        return f"{self.prefix}/skill/swap"
+
+    @property
     def scene(self) -> str:
         return f"{self.prefix}/scene"
 

@@ -195,8 +195,9 @@ class Daemon:
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
                  spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
-                 stop_event: threading.Event | None = None):
+                 stop_event: threading.Event | None = None, swap_on_skill_key: bool = True):
         self.config = config
+        self.swap_on_skill_key = swap_on_skill_key
         self.session = session
         self.keys = codec.Keys(config.robot)
         self.controller = Controller(skill, config)
@@ -289,11 +290,17 @@ class Daemon:
     # --- the skill queryable (Zenoh's threads) ------------------------------------------
 
     def _on_skill_query(self, query: zenoh.Query) -> None:
+        self._on_query(query, self.keys.skill)
+
+    def _on_swap_query(self, query: zenoh.Query) -> None:
+        self._on_query(query, self.keys.skill_swap)
+
+    def _on_query(self, query: zenoh.Query, key: str) -> None:
         # The query ends (the asker stops waiting) when it is dropped: on leaving this
         # block, not whenever the last reference to it goes.
         with query:
             try:
-                self._answer_skill_query(query)
+                self._answer_skill_query(query, key)
             except Exception as e:  # every query gets a reply, whatever went wrong
                 log.exception("skill query failed")
                 self._refuse(query, f"<bundle>: {type(e).__name__}: {e}")
@@ -305,13 +312,25 @@ class Daemon:
         self._refused += 1
         query.reply_err(_reply({"error": error}))
 
-    def _answer_skill_query(self, query: zenoh.Query) -> None:
+    def _answer_skill_query(self, query: zenoh.Query, key: str) -> None:
+        """``skill``: the summary (and, with ``swap_on_skill_key``, a swap: wire contract
+        v1); ``skill/swap``: a swap only."""
         payload = query.payload
-        if payload is None or len(payload) == 0:
+        empty = payload is None or len(payload) == 0
+        if key == self.keys.skill and empty:
             summary = skill_summary(self.controller.skill)
             summary["state"] = self.controller.engine.state
-            query.reply(self.keys.skill, _reply(summary))
+            query.reply(key, _reply(summary))
             return
+        if empty:
+            self._refuse(query, f"<bundle>: {key} swaps skills: send a bundle (the summary is on "
+                                f"{self.keys.skill})")
+            return
+        if key == self.keys.skill and not self.swap_on_skill_key:
+            self._refuse(query, f"<bundle>: swaps go to {self.keys.skill_swap} (with a Zenoh "
+                                f"config, {self.keys.skill} answers summaries only)")
+            return
+        assert payload is not None
         if len(payload) > MAX_BUNDLE_BYTES:
             # refused before it is copied out of Zenoh's buffer
             self._refuse(query, f"<bundle>: bundle of {len(payload)} bytes exceeds {MAX_BUNDLE_BYTES}")
@@ -352,7 +371,7 @@ class Daemon:
                 if name not in objects:
                     inlet.sub.undeclare()
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
-        query.reply(self.keys.skill, _reply(
+        query.reply(key, _reply(
             {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}))
 
     def _install(self, pending: _Pending, now: float) -> None:
@@ -407,6 +426,7 @@ class Daemon:
         self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
         # no new swaps once the loop ends; one under way fails its wait and replies
         stack.enter_context(s.declare_queryable(keys.skill, self._on_skill_query))
+        stack.enter_context(s.declare_queryable(keys.skill_swap, self._on_swap_query))
         stack.callback(self.stop_event.set)
 
     def _close_inlets(self) -> None:
