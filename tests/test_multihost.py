@@ -8,12 +8,13 @@ Needs root (``ip netns add``). Without it the tests skip and say why, except in 
 from __future__ import annotations
 
 import os
+import subprocess
 import time
 
 import pytest
 
 from sctd.bench.multihost import Cluster
-from sctd.bench.netns import NamespaceError, can_make_namespaces, namespaces
+from sctd.bench.netns import Hosts, NamespaceError, can_make_namespaces, namespaces
 from sctd.runtime.controller import RuntimeConfig
 from tests.conftest import wait_for
 
@@ -44,6 +45,26 @@ def cluster(tmp_path_factory):
         run_id = c.hosts.run_id
         c.__exit__(None, None, None)
         assert namespaces(run_id) == [], f"namespaces left over: {namespaces(run_id)}"
+
+
+def test_hosts_clean_up_everything_after_an_exception(tmp_path):
+    why = can_make_namespaces()
+    if why is not None:
+        if os.environ.get("CI"):
+            pytest.fail(f"network namespaces cannot be made in CI: {why}")
+        pytest.skip(f"network namespaces cannot be made here: {why}")
+    hosts = Hosts(["a", "b"], tmp_path)
+    with pytest.raises(RuntimeError, match="a test failing inside"), hosts:
+        assert len(hosts.leftovers()) == 3  # a, b and the switch
+        sleeper = hosts.run("a", ["sleep", "300"], "sleep.log")
+        # a grandchild in its own session, which stopping the child does not reach
+        hosts.run("b", ["sh", "-c", "setsid sleep 300 & wait"], "orphan.log")
+        assert wait_for(lambda: len(subprocess.run(["ip", "netns", "pids", hosts.ns("b")],
+                                                   capture_output=True, text=True).stdout.split()) >= 2)
+        raise RuntimeError("a test failing inside the hosts")
+    assert hosts.leftovers() == []
+    assert sleeper.p.poll() is not None
+    assert subprocess.run(["ip", "link", "show", "br0"], capture_output=True).returncode != 0
 
 
 def _logs(c: Cluster) -> str:
@@ -128,3 +149,58 @@ def test_robot_link_down_holds_within_the_state_timeout_and_recovers(cluster):
     finally:
         steady.stop()
 
+
+@pytest.fixture(scope="module")
+def intrusion(cluster):
+    """What the intruders got through (``Cluster.intrude``), the runtime's swap counters
+    before and after, with the learner up and the input host sending."""
+    c = cluster
+    assert c.secure, "sctd certs / sctd router are missing: the cluster runs on plain TCP"
+    learner, steady = c.start_learner(), c.start_steady_input()
+    try:
+        assert wait_for(lambda: c.first(c.keys.learner_status), 60), _logs(c)
+        before = _status(c)[-1]["counters"]
+        result = c.intrude()
+        t_end = time.time()
+        assert wait_for(lambda: _status(c, t_end), 10), _logs(c)
+        after = _status(c, t_end)[-1]["counters"]
+        yield result, before, after
+    finally:
+        steady.stop()
+        learner.stop()
+
+
+def test_allowed_senders_and_queries_get_through(intrusion):
+    """The control: what the intruders fail at works for the roles that may do it, so a
+    0 below means refused, not lost."""
+    result, _, _ = intrusion
+    control = result["control"]
+    assert sum(control["delivered"].values()) == control["sent"] == control["tried"], control
+    assert control["summary"]["ok"] == 1, control  # the operator reads the skill summary
+    assert control["swap"]["ok"] + control["swap"]["err"] == 1, control  # the runtime answers
+    assert control["train"]["ok"] + control["train"]["err"] == 1, control  # the learner answers
+
+
+@pytest.mark.parametrize("who", ["no-certificate", "other-ca", "unlisted-name", "observer"])
+def test_intruder_delivers_nothing_and_cannot_swap_or_train(intrusion, who):
+    result, before, after = intrusion
+    got = result[who]
+    assert got["tried"] > 0
+    assert got["delivered"] == {}, f"{who} delivered {got['delivered']} of {got['tried']}"
+    for ask in ("swap-on-skill", "swap", "train"):
+        assert got[ask]["ok"] == got[ask]["err"] == 0, (who, ask, got[ask])
+    # the runtime refused only the operator's malformed bundle (the control), nothing else
+    control_swaps = result["control"]["swap"]["ok"] + result["control"]["swap"]["err"]
+    assert after["swaps"] == before["swaps"], (before, after)
+    assert after["swaps_refused"] - before["swaps_refused"] == control_swaps, (before, after)
+    received = {k.rsplit("edan/", 1)[1]: n for k, n in got["received"].items() if n}
+    if who == "observer":
+        # a tablet sees what the table allows it, and nothing else
+        assert set(received) <= {"target", "state", "status", "scene", "learner/status"}, received
+        assert {"target", "state", "status"} <= set(received), received
+    else:  # it reads nothing at all
+        assert received == {}, received
+    if who in ("no-certificate", "other-ca"):
+        assert got["refused"], got  # TLS did not let it in at all
+    # a certificate of our CA with a name that is no role connects (TLS is satisfied)
+    # and is denied everything by the access control: the checks above
