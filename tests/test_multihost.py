@@ -77,7 +77,7 @@ def _status(c: Cluster, since: float = 0.0) -> list[dict]:
 
 def test_pour_completes_across_hosts(cluster):
     c = cluster
-    report = c.user(90)
+    report = c.user(150)  # it stops when done (30-40 s here; ~100 s on a machine under load)
     assert report["done"] and report["final_state"] == "pour", report
     # the robot host's own verdict, as the observer host received it
     assert wait_for(lambda: any(r["msg"].get("success") for r in c.seen(c.keys.scene)), 10), \
