@@ -406,7 +406,7 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
                         "target after the router restart", robot, runtime)
             st = _wait(lambda t0=t0: c.first(c.keys.state, t0), 60,
                        "state after the router restart", robot)
-            reconnect.append({"router_ready_s": t_ready - t0, "target_s": tgt["t"] - t0,
+            reconnect.append({"router_open_s": t_ready - t0, "target_s": tgt["t"] - t0,
                               "state_s": st["t"] - t0})
             time.sleep(1.0)
         intrusion = None
@@ -438,7 +438,7 @@ def print_report(r: dict) -> None:
     print(row("input -> target (input->runtime)", r["latency_ms"]))
     print(row("Zenoh echo RTT (input<->runtime)", r["echo_rtt_ms"]))
     for i, x in enumerate(r["reconnect_s"], 1):
-        print(f"  router restart {i}: listening after {x['router_ready_s'] * 1e3:6.0f}, first target "
+        print(f"  router restart {i}: its session open after {x['router_open_s'] * 1e3:6.0f}, first target "
               f"after {x['target_s'] * 1e3:6.0f}, first state after {x['state_s'] * 1e3:6.0f} "
               "(from the router's process start)")
     if r["intrusion"]:
