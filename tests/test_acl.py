@@ -40,7 +40,7 @@ PUB = {"sctd-runtime": {"target", "status"},
        "sctd-learner": {"learner/status"}, "sctd-operator": set(), "sctd-observer": set()}
 SUB = {"sctd-runtime": {"input/pad", "state", "objects/cup"},
        "sctd-robot": {"target", "can"},
-       "sctd-input": {"target", "state", "scene", "status"},
+       "sctd-input": {"target", "state", "scene", "status", "objects/cup"},
        "sctd-recorder": {"state", "objects/cup", "scene"},
        "sctd-learner": {"demos/pour/d1", "status"},
        "sctd-operator": EVERY,

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import re
 import subprocess
 import sys
 import time
@@ -87,7 +86,6 @@ class Cluster:
         self.records = self.logdir / "observer.jsonl"
         self._configs: dict[str, Path] = {}
         self.intruder_configs: dict[str, Path] = {}
-        self.sight_granted = False
         self._seen: dict[str, list[dict[str, Any]]] = {}
         self._offset = 0
         self._router_starts = 0
@@ -138,7 +136,6 @@ class Cluster:
         observer."""
         tls = self._certs(self.logdir / "tls")
         self._configs["router"] = tls / "zenoh" / "router.json5"
-        self.sight_granted = _grant_input_sight(self._configs["router"])
         for role in CLIENT_ROLES:
             self._configs[role] = tls / "zenoh" / f"{role}.json5"
         other = self._certs(self.logdir / "other-ca")
@@ -307,28 +304,6 @@ class Cluster:
         return next(self.seen(key, since), None)
 
 
-def _grant_input_sight(router: Path) -> bool:
-    """Let ``sctd-input`` also subscribe ``objects/**`` in the rendered router policy,
-    if it may not already; True if the file was changed.
-
-    The simulated user stands in for a person, who sees the mug and the bottle; it reads
-    their poses where a person would look. A device bridge needs no such thing, and the
-    roles table does not grant it, so without this the simulated user never moves.
-    Only the input role's reading is widened; the intruders are not affected.
-    """
-    text = router.read_text()
-    out = []
-    changed = False
-    for line in text.splitlines(keepends=True):
-        if re.search(r'"id":\s*"sctd-input sub (ingress|egress)"', line) and "objects/**" not in line:
-            line = line.replace('"key_exprs": [', '"key_exprs": ["sctd/*/objects/**", ', 1)
-            changed = True
-        out.append(line)
-    if changed:
-        router.write_text("".join(out))
-    return changed
-
-
 def _each(flag: str, values: list[str]) -> list[str]:
     return [x for v in values for x in (flag, v)]
 
@@ -418,7 +393,7 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
         runtime.stop()
         stats = last_json(runtime.output())
     return {"hosts": {n: h.addr(n) for n in HOSTS}, "router": c.endpoint, "secure": c.secure,
-            "input_sight_granted": c.sight_granted, "seconds": seconds,
+            "seconds": seconds,
             "input_rate_hz": input_rate, "latency_ms": probe["latency_ms"],
             "echo_rtt_ms": ping["echo_rtt_ms"], "reconnect_s": reconnect,
             "intrusion": intrusion,
