@@ -60,16 +60,28 @@ def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
         assert a.outcome == "success" and b.outcome == "success", (a, b)
 
 
+def _real_time_trial(spec, seed, tmp_path, attempts: int = 3):
+    """A real-time trial that ran in real time: one whose simulation fell behind the wall
+    clock (``sim_rtf`` < 0.9: the machine was overloaded, and the daemon then holds on a
+    stale state, as it must) is not the comparison this test makes, and is run again, at
+    most ``attempts`` times; the last one counts whatever its rate."""
+    for k in range(attempts):
+        r = realtime.run_trial(POUR, spec, seed, logdir=tmp_path / f"rt{seed}-{k}")
+        if r.sim_rtf is not None and r.sim_rtf >= 0.9:
+            return r
+    return r
+
+
 def test_lockstep_and_real_time_agree(tmp_path):
     """Over 5 seeded trials, the same outcome in at least 4, and median times within 20 %
     (measured: 4-5 % apart in two runs of these seeds on this 2-core machine)."""
     spec = TaskSpec("pour")
     seeds = range(5)
     lock = [lockstep.run_trial(load_skill(POUR), spec, s) for s in seeds]
-    real = [realtime.run_trial(POUR, spec, s, logdir=tmp_path / f"rt{s}") for s in seeds]
+    real = [_real_time_trial(spec, s, tmp_path) for s in seeds]
     assert all(r.sim_rtf is None for r in lock) and all(r.sim_rtf and r.sim_rtf > 0 for r in real)
     same = sum(a.outcome == b.outcome for a, b in zip(lock, real, strict=True))
-    assert same >= 4, ([a.outcome for a in lock], [b.outcome for b in real])
+    assert same >= 4, ([a.outcome for a in lock], [(b.outcome, b.sim_rtf) for b in real])
     tl = [r.time_s for r in lock if r.time_s is not None]
     tr = [r.time_s for r in real if r.time_s is not None]
     assert tl and tr
