@@ -24,7 +24,7 @@ from typing import Any
 import zenoh
 
 from sctd.bench import run_and_report
-from sctd.bench.latency import PING, PONG
+from sctd.bench.latency import PING, PONG, wait_for_targets
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
@@ -139,14 +139,7 @@ def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds
                log=logdir / "daemon.log") as daemon, \
          Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
-        with session(connect=[ep]) as s:  # until the daemon publishes targets
-            sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
-            end = time.monotonic() + 30
-            while sub.try_recv() is None:
-                if time.monotonic() > end or not daemon.running():
-                    raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
-                time.sleep(0.05)
-            sub.undeclare()
+        wait_for_targets(ep, daemon, logdir)
         pad = gamepad_events(ep, bridge_rate, seconds)
     bound = 1e3 / bridge_rate + 1e3 / rate + 2 * pad["echo_rtt_ms"]["p99"]
     emg = bench_processing(seconds=emg_seconds)

@@ -161,6 +161,19 @@ def _last_json(text: str) -> dict | None:
     return None
 
 
+def wait_for_targets(ep: str, daemon: Child, logdir: Path, timeout: float = 30.0) -> None:
+    """Until the daemon started as ``daemon`` publishes targets on ``ep`` (RuntimeError
+    naming its log when it does not within ``timeout`` s or exits)."""
+    with session(connect=[ep]) as s:
+        sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
+        end = time.monotonic() + timeout
+        while sub.try_recv() is None:
+            if time.monotonic() > end or not daemon.running():
+                raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
+            time.sleep(0.05)
+        sub.undeclare()
+
+
 def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float,
                       rt_priority: int, logdir: Path, cpu: int | None = None) -> dict:
     """Run the processes described in the module doc; return all figures."""
@@ -174,14 +187,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
                log=logdir / "daemon.log") as daemon, \
          Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
-        with session(connect=[ep]) as s:  # wait until the daemon publishes targets
-            sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
-            end = time.monotonic() + 30
-            while sub.try_recv() is None:
-                if time.monotonic() > end or not daemon.running():
-                    raise RuntimeError(f"daemon produced no targets; see {logdir / 'daemon.log'}")
-                time.sleep(0.05)
-            sub.undeclare()
+        wait_for_targets(ep, daemon, logdir)
         probe = Child("sctd.bench.latency", "probe", "--connect", ep, "--rate", str(input_rate),
                       "--seconds", str(seconds))
         figures = _last_json(probe.communicate(timeout=total + 60))
