@@ -12,6 +12,19 @@ bottle rotates about its tip, about the ee's y axis, tilting its top towards the
 In the tip frame the pour is a rotation only; the ee moves on a sphere about the
 pour point (the truth ``sphere_centre``).
 
+``crank`` (object ``crank``: origin on the crank's vertical axis at the handle's height,
+z up; the handle starts on +x at the radius, 12-20 cm, drawn once per task from the
+seed). *reach*: translate to the handle from in front and above; *turn*: the hand,
+holding the handle, goes round the axis counter-clockwise (seen from above) by
+90-180 deg, turning with it (its yaw follows the crank), so the axis is fixed in the
+hand's frame. A fixed-axis rotation: the truth is a cylinder (``axis``, ``point``).
+
+``wipe`` (object ``table``: origin at the middle of the stroke, z up). *reach*:
+translate down to the table; *wipe*: an S-shaped stroke over it, ``y = A sin(2 pi x /
+L)`` over one wavelength ``L`` (25-30 cm) with ``A`` 5 cm, the same stroke in every
+demonstration up to +-5 mm: its direction swings by +-50 deg, none of the three
+shapes (the truth is ``general``).
+
 ``drawer`` (object ``drawer_handle``: origin at the grasp point of the *closed*
 drawer, x out of the drawer, z up; the frame stays where the closed handle was, so
 the pull shows as motion along +x). *reach*: translate to the handle from above and
@@ -40,8 +53,13 @@ Array = NDArray[np.float64]
 
 TIP_OFFSET = np.array([0.0, 0.0, 0.12])  # bottle tip in the ee frame (m)
 POUR_POINT = np.array([0.0, 0.0, 0.05])  # tip position while pouring, mug frame (m)
-TASKS = ("pour", "drawer")
-PHASES = {"pour": ("carry", "pour"), "drawer": ("reach", "pull")}
+TASKS = ("pour", "drawer", "crank", "wipe")
+PHASES = {"pour": ("carry", "pour"), "drawer": ("reach", "pull"), "crank": ("reach", "turn"),
+          "wipe": ("reach", "wipe")}
+OBJECTS = {"pour": "mug", "drawer": "drawer_handle", "crank": "crank", "wipe": "table"}
+FIELD_TRUTH = {"pour": ("translation", "sphere"), "drawer": ("translation", "translation"),
+               "crank": ("translation", "cylinder"), "wipe": ("translation", "general")}
+"""The kind of field each phase of a task is (``general``: none of the three shapes)."""
 
 
 @dataclass
@@ -176,6 +194,61 @@ def _drawer_demo(rng: np.random.Generator, rate: float) -> tuple:
     return t, poses, phase, info
 
 
+def _crank_demo(rng: np.random.Generator, rate: float, radius: float) -> tuple:
+    handle = np.array([radius, 0.0, 0.0])
+    start = handle + np.array([rng.uniform(0.15, 0.25), rng.uniform(-0.06, 0.06),
+                               rng.uniform(0.08, 0.14)])
+    turn = rng.uniform(np.pi / 2, np.pi)
+    v_reach = rng.uniform(0.08, 0.12)
+    omega = rng.uniform(0.4, 0.7)  # rad/s: 5-8 cm/s at the handle
+    d1 = float(np.linalg.norm(start - handle)) / v_reach
+    d2 = turn / omega
+    t, phase = _sample_times((d1, d2), rate)
+    # The hand faces the axis (ee x towards it) and keeps facing it as it turns.
+    R0 = _rot_z(np.pi)
+    poses = np.empty((len(t), 7))
+    for i, ti in enumerate(t):
+        if ti <= d1:
+            s = float(_carry_profile(np.array(ti / d1)))
+            p, R = start + s * (handle - start), R0
+        else:
+            a = float(_final_profile(np.array(min(1.0, (ti - d1) / d2)))) * turn
+            p, R = _rot_z(a) @ handle, _rot_z(a) @ R0
+        poses[i, :3] = p
+        poses[i, 3:] = se3.quaternion_from_matrix(R)
+    info = {"reach_direction": ((handle - start) / np.linalg.norm(handle - start)).tolist(),
+            "turn_angle": turn}
+    return t, poses, phase, info
+
+
+def _wipe_demo(rng: np.random.Generator, rate: float, length: float) -> tuple:
+    amp = 0.05
+    shift = rng.normal(0.0, 0.005, 3) * np.array([1.0, 1.0, 0.0])
+    x0 = np.array([-length / 2, 0.0, 0.0]) + shift
+    start = x0 + np.array([rng.uniform(-0.03, 0.0), rng.uniform(-0.02, 0.02), rng.uniform(0.18, 0.24)])
+    v_reach = rng.uniform(0.08, 0.12)
+    v_wipe = rng.uniform(0.06, 0.09)
+    # Arc length of one wavelength of the S, for a near-constant speed along it.
+    xs = np.linspace(0.0, length, 2001)
+    ys = amp * np.sin(2 * np.pi * xs / length)
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xs), np.diff(ys)))])
+    d1 = float(np.linalg.norm(x0 - start)) / v_reach
+    d2 = float(arc[-1]) / v_wipe
+    t, phase = _sample_times((d1, d2), rate)
+    poses = np.empty((len(t), 7))
+    poses[:, 3:] = [0.0, 0.0, 0.0, 1.0]
+    for i, ti in enumerate(t):
+        if ti <= d1:
+            s = float(_carry_profile(np.array(ti / d1)))
+            poses[i, :3] = start + s * (x0 - start)
+        else:
+            s = float(_final_profile(np.array(min(1.0, (ti - d1) / d2)))) * arc[-1]
+            x = float(np.interp(s, arc, xs))
+            poses[i, :3] = x0 + [x, amp * np.sin(2 * np.pi * x / length), 0.0]
+    info = {"reach_direction": ((x0 - start) / np.linalg.norm(x0 - start)).tolist()}
+    return t, poses, phase, info
+
+
 def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: float | None = None,
              outliers: float = 0.0, rate: float = 50.0, seed: int = 0,
              pour_jitter: float = 0.0) -> DemoSet:
@@ -205,12 +278,18 @@ def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: floa
         raise ValueError("need n_demos >= 1, rate > 0, noise >= 0, 0 <= outliers < 0.5")
     rng = np.random.default_rng(seed)
     rn = noise if rot_noise is None else rot_noise
+    radius = float(rng.uniform(0.12, 0.20)) if task == "crank" else 0.0
+    length = float(rng.uniform(0.25, 0.30)) if task == "wipe" else 0.0
     demos = []
     for k in range(n_demos):
         if task == "pour":
             t, clean, phase, info = _pour_demo(rng, rate, pour_jitter)
-        else:
+        elif task == "drawer":
             t, clean, phase, info = _drawer_demo(rng, rate)
+        elif task == "crank":
+            t, clean, phase, info = _crank_demo(rng, rate, radius)
+        else:
+            t, clean, phase, info = _wipe_demo(rng, rate, length)
         poses, rows = _corrupt(rng, clean, noise, rn, outliers)
         demos.append(GeneratedDemo(f"demo_{k:02d}.csv", t, poses, clean, phase, rows, info))
     if task == "pour":
@@ -221,9 +300,16 @@ def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: floa
                  "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
     else:
         dirs = np.array([d.info["reach_direction"] for d in demos])
-        truth = {"directions": {"reach": _unit_mean(dirs).tolist(), "pull": [1.0, 0.0, 0.0]}}
+        truth = {"directions": {"reach": _unit_mean(dirs).tolist()}}
+        if task == "drawer":
+            truth["directions"]["pull"] = [1.0, 0.0, 0.0]
+        elif task == "crank":
+            truth.update({"axis": [0.0, 0.0, 1.0], "point": [0.0, 0.0, 0.0], "radius": radius,
+                          "axis_ee_offset": [radius, 0.0, 0.0]})
+        else:
+            truth["length"] = length
     truth.update({
-        "task": task, "object": "mug" if task == "pour" else "drawer_handle",
+        "task": task, "object": OBJECTS[task], "fields": list(FIELD_TRUTH[task]),
         "phases": list(PHASES[task]),
         "labels": {d.name: d.phase.tolist() for d in demos},
         "outlier_rows": {d.name: d.outlier_rows.tolist() for d in demos},

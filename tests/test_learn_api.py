@@ -84,7 +84,8 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--vf-spacing", "--smooth", "--no-despike", "--alpha", "--beta", "--lambda", "--radius",
         "--max-n", "--C", "--cut", "--min-segment", "--axis-support", "--margin", "--dtw-align",
         "--n-fields", "--em-iterations", "--angle-sphere", "--angle-translation",
-        "--angle-cylinder", "--max-radius", "--chance-weight", "--min-v", "--max-d", "--k-s",
+        "--angle-cylinder", "--max-radius", "--chance-weight", "--selection", "--demo-tolerance",
+        "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
         "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine",
         "--max-linear-speed", "--max-angular-speed"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])

@@ -113,3 +113,82 @@ def test_drawer_two_translation_fields():
     for true in ds.truth["directions"].values():
         err = min(np.degrees(np.arccos(np.clip(d @ np.asarray(true), -1, 1))) for d in dirs)
         assert err < 5.0
+
+
+# --- model selection (issue 14): the field each phase of a generated task is ------------
+
+
+def _phase_kinds(task: str, seed: int, **kw):
+    """The learner's fields and, per phase of the generated task, the kind of field
+    most of its displacements were assigned to."""
+    ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
+    demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
+    res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=seed, **kw))
+    kinds = []
+    for phase in range(2):
+        votes: dict[str, int] = {}
+        for d in ds.demos:
+            fl = np.asarray(res.field_labels[d.name])
+            for i in fl[(d.phase == phase) & (fl >= 0)]:
+                t = res.learner.fields_[i].type
+                votes[t] = votes.get(t, 0) + 1
+        kinds.append(max(votes, key=votes.get) if votes else None)
+    return ds, res, tuple(kinds)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_crank_is_a_cylinder_about_its_axis_not_a_sphere(seed):
+    ds, res, kinds = _phase_kinds("crank", seed)
+    assert kinds == ("translation", "cylinder")
+    cyl = next(f for f in res.learner.fields_ if f.type == "cylinder")
+    assert np.degrees(np.arccos(abs(cyl.axis @ [0.0, 0.0, 1.0]))) < 3.0
+    assert np.hypot(*cyl.point[:2]) < 0.01  # on the vertical axis through the origin
+    assert not any(f.type == "sphere" for f in res.learner.fields_)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pour_stays_a_sphere_and_drawer_two_translations(seed):
+    assert _phase_kinds("pour", seed)[2] == ("translation", "sphere")
+    assert _phase_kinds("drawer", seed)[2] == ("translation", "translation")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_wipe_is_a_general_field_after_a_translation(seed):
+    _, res, kinds = _phase_kinds("wipe", seed)
+    assert kinds == ("translation", "general")
+    g = next(f for f in res.learner.fields_ if f.type == "general")
+    assert np.all(np.isfinite(g.centres)) and len(g.centres) == len(g.directions)
+
+
+def test_the_thesis_inlier_score_still_takes_the_crank_for_a_sphere():
+    """The known weakness the likelihood fixes: by inliers, some seed's crank has no
+    cylinder (a sphere centred on the axis fits at least as well)."""
+    found = [_phase_kinds("crank", s, selection="inliers")[2][1] for s in range(4)]
+    assert any(k != "cylinder" for k in found)
+
+
+def test_a_sphere_of_planted_arcs_about_random_axes_beats_every_cylinder():
+    rng = np.random.default_rng(3)
+    centre = np.array([0.05, -0.02, 0.1])
+    vf = VectorFieldLearner(n_fields=1, random_state=3).fit(_arcs(rng, centre, n_arcs=8))
+    assert vf.ransac_fields_[0].type == "sphere"
+    assert np.linalg.norm(vf.fields_[0].centre - centre) < 0.005
+
+
+def test_a_cylinder_of_planted_arcs_about_one_axis_beats_the_sphere():
+    rng = np.random.default_rng(4)
+    axis = np.array([0.0, 0.6, 0.8])
+    point = np.array([0.1, -0.2, 0.3])
+    trajs = []
+    e1 = np.cross(axis, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(axis, e1)
+    for _ in range(6):
+        r, h, a0 = rng.uniform(0.12, 0.2), rng.uniform(-0.05, 0.05), rng.uniform(0, 2 * np.pi)
+        a = a0 + np.linspace(0, 1.5, 30)
+        pts = point + h * axis + r * (np.cos(a)[:, None] * e1 + np.sin(a)[:, None] * e2)
+        trajs.append(pts + rng.normal(0, 0.0005, pts.shape))
+    vf = VectorFieldLearner(n_fields=1, random_state=4).fit(trajs)
+    f = vf.fields_[0]
+    assert f.type == "cylinder"
+    assert np.degrees(np.arccos(abs(f.axis @ axis))) < 2.0

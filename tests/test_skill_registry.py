@@ -35,7 +35,7 @@ def test_registries_hold_the_format_kinds_in_their_documented_order():
     assert MAPPINGS.names() == ("linear", "vector_field")
     assert CONSTRAINTS.names() == ("tilt_cone", "band", "box", "neighbour_orientation")
     assert TRANSITIONS.names() == ("hyperplane", "distance", "timeout", "force", "button")
-    assert FIELDS.names() == ("translation", "cylinder", "sphere")
+    assert FIELDS.names() == ("translation", "cylinder", "sphere", "general")
     for registry in (MAPPINGS, CONSTRAINTS, TRANSITIONS, FIELDS):
         assert all(registry[name].type == name for name in registry.names())
 
@@ -91,8 +91,8 @@ def test_an_unknown_type_lists_the_registered_ones():
         skill_from_bundle(Bundle("t.yaml", _doc({"type": "cage"}), {}))
     assert str(e.value) == ("t.yaml: states.s.active_constraints[0].type: expected one of "
                             "tilt_cone, band, box, neighbour_orientation, got 'cage'")
-    with pytest.raises(SkillError, match=r"m.json: fields\[0\].type: expected translation, cylinder or "
-                                         r"sphere, got 'torus'"):
+    with pytest.raises(SkillError, match=r"m.json: fields\[0\].type: expected translation, cylinder, "
+                                         r"sphere or general, got 'torus'"):
         Field.from_doc({"type": "torus"}, "fields[0]", "m.json")
 
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -38,13 +38,94 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from .. import se3
-from ..skill.fields import CylinderField, Field, SphereField, TranslationField
+from ..skill.fields import CylinderField, Field, GeneralField, SphereField, TranslationField
 from .params import hyperparameter
 
 Array = NDArray[np.float64]
 
-FIELD_TYPES = ("translation", "cylinder", "sphere")
+FIELD_TYPES = ("translation", "cylinder", "sphere", "general")
 SAMPLE_SIZE = {"translation": 1, "cylinder": 2, "sphere": 3}
+SELECTIONS = ("likelihood", "inliers")
+# Free parameters of each kind's direction model (BIC), besides its spread and share:
+# a direction; an axis and a point on it (in the plane normal to it); a centre.
+PARAMETERS = {"translation": 2, "cylinder": 4, "sphere": 3}
+PLANE_KINDS = ("sphere",)  # kinds that predict a plane of directions, not one direction
+LOG_4PI = math.log(4.0 * math.pi)  # -log density of a uniformly random direction
+
+
+def _log_normaliser(sigma: float, plane: bool) -> float:
+    """log Z of a direction density ``exp(-a^2 / (2 sigma^2)) / Z`` on the unit sphere,
+    ``a`` the angle to one direction (``plane`` False: a in [0, pi], area 2 pi sin a da)
+    or to a plane (True: a in [0, pi/2] either side, area 2 (2 pi cos a) da)."""
+    if plane:
+        a = np.linspace(0.0, math.pi / 2, 721)
+        z = 4.0 * math.pi * np.trapezoid(np.exp(-0.5 * (a / sigma) ** 2) * np.cos(a), a)
+    else:
+        a = np.linspace(0.0, math.pi, 1441)
+        z = 2.0 * math.pi * np.trapezoid(np.exp(-0.5 * (a / sigma) ** 2) * np.sin(a), a)
+    return math.log(float(z))
+
+
+def mixture_fit(angles: ArrayLike, planes: Sequence[bool], iterations: int = 10
+                ) -> tuple[float, Array, Array, Array]:
+    """How well fields' deviation ``angles`` (n, K) explain the data, against chance.
+
+    The directions are a mixture: a share ``eps_k`` follows field k (a normal spread
+    ``sigma_k`` of the angle about its direction, or about its plane when
+    ``planes[k]``), the rest is uniform on the sphere; shares and spreads are fitted by
+    EM. A plane takes in a band of directions, a direction only a cone: the density of
+    a field that predicts less is lower, so it gains less for each direction it
+    explains, whatever its inlier count.
+
+    Returns
+    -------
+    log_lr : float
+        Log-likelihood over the uniform-only model (nats; 0 when nothing is explained).
+    eps, sigma : ndarray, shape (K,)
+    responsibility : ndarray, shape (n, K)
+        Each direction's probability of following each field.
+    """
+    a = np.asarray(angles, dtype=float)
+    a = a.reshape(len(a), -1)
+    n, K = a.shape
+    if n == 0 or K == 0:
+        return 0.0, np.zeros(K), np.zeros(K), np.zeros((n, K))
+    lo, hi = math.radians(0.5), math.radians(60.0)
+    close = a < math.radians(20.0)
+    eps = np.clip(close.mean(axis=0) / max(1.0, float(close.mean(axis=0).sum()) / 0.95), 1e-3, 0.95)
+    sigma = np.array([min(hi, max(lo, math.sqrt(float(np.mean(a[close[:, k], k] ** 2)))))
+                      if close[:, k].any() else 0.3 for k in range(K)])
+    dof = np.array([1.0 if pl else 2.0 for pl in planes])  # an angle to a plane has 1 dimension
+    log_lr, r = 0.0, np.zeros((n, K))
+    for _ in range(iterations):
+        logz = np.array([_log_normaliser(float(sg), bool(pl)) for sg, pl in zip(sigma, planes, strict=True)])
+        log_in = np.log(eps) - 0.5 * (a / sigma) ** 2 - logz
+        log_out = math.log(max(1e-6, 1.0 - float(eps.sum()))) - LOG_4PI
+        m = np.maximum(log_in.max(axis=1), log_out)
+        log_mix = m + np.log(np.exp(log_in - m[:, None]).sum(axis=1) + np.exp(log_out - m))
+        log_lr = float(np.sum(log_mix) + n * LOG_4PI)
+        r = np.exp(log_in - log_mix[:, None])
+        w = r.sum(axis=0)
+        eps = np.maximum(1e-3, w / n)
+        if eps.sum() > 0.999:
+            eps *= 0.999 / eps.sum()
+        sigma = np.clip(np.sqrt((r * a**2).sum(axis=0) / np.maximum(dof * w, 1e-12)), lo, hi)
+    return log_lr, eps, sigma, r
+
+
+def point_log_ratios(angles: ArrayLike, plane: bool, eps: float, sigma: float) -> Array:
+    """Each direction's log-likelihood ratio (n,) under one field's mixture (share
+    ``eps``, spread ``sigma``) over uniform directions."""
+    a = np.asarray(angles, dtype=float)
+    log_in = math.log(eps) - 0.5 * (a / sigma) ** 2 - _log_normaliser(sigma, plane)
+    log_out = math.log(max(1e-6, 1.0 - eps)) - LOG_4PI
+    return np.logaddexp(log_in, log_out) + LOG_4PI
+
+
+def mixture_log_likelihood(angles: ArrayLike, plane: bool) -> tuple[float, float, float, Array]:
+    """:func:`mixture_fit` of one field: ``(log_lr, eps, sigma, responsibility (n,))``."""
+    log_lr, eps, sigma, r = mixture_fit(np.asarray(angles, dtype=float)[:, None], [plane])
+    return log_lr, float(eps[0]), float(sigma[0]), r[:, 0]
 
 
 def unit_vectors(points: ArrayLike, midpoints: bool = True) -> tuple[Array, Array]:
@@ -132,6 +213,57 @@ def cylinder_field(p: Array, v: Array, w: Array | None = None) -> Field | None:
     return CylinderField(point=c, axis=a)
 
 
+def general_field(p: Array, v: Array, w: Array | None = None, bandwidth: float = 0.02) -> Field | None:
+    """A general (non-parametric) field through the directions ``v`` at points ``p``:
+    one kernel centre per occupied cell of a grid of ``bandwidth / 2``, at the cell's
+    (weighted) mean point with its mean direction (cells whose directions cancel are
+    left out), so its size is bounded by the space the demonstrations cover, not by
+    how many points they have."""
+    w = np.ones(len(v)) if w is None else w
+    if len(p) == 0:
+        return None
+    cell = np.floor(p / (0.5 * bandwidth)).astype(np.int64)
+    _, inv = np.unique(cell, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    k = int(inv.max()) + 1
+    sw = np.bincount(inv, weights=w, minlength=k)
+    centres = np.stack([np.bincount(inv, weights=w * p[:, j], minlength=k) for j in range(3)], axis=1)
+    dirs = np.stack([np.bincount(inv, weights=w * v[:, j], minlength=k) for j in range(3)], axis=1)
+    ok = (sw > 1e-12) & (np.linalg.norm(dirs, axis=1) > 0.5 * sw)
+    if not ok.any():
+        return None
+    centres = centres[ok] / sw[ok, None]
+    dirs = dirs[ok] / np.linalg.norm(dirs[ok], axis=1, keepdims=True)
+    return GeneralField(centres=centres, directions=dirs, bandwidth=bandwidth)
+
+
+def held_out_angles(p: Array, v: Array, demo: NDArray[np.int64], bandwidth: float,
+                    support: tuple[Array, Array, NDArray[np.int64], Array] | None = None,
+                    k: int = 32) -> Array:
+    """Deviation angle of each direction ``v`` (n, 3) at ``p`` (n, 3) of demonstration
+    ``demo`` (n,) from what a general field of ``bandwidth`` predicts there when learned
+    on the *other* demonstrations' points of ``support`` (points, directions,
+    demonstrations and weights; default ``p``, ``v``, ``demo``, ones): the kernel mean
+    over its ``k`` nearest support points of other demonstrations. The general field's
+    likelihood is a cross-validated one, so it cannot explain a direction by itself.
+    pi/2 where no other demonstration is among the ``k`` nearest."""
+    sp, sv, sd, sw = (p, v, demo, np.ones(len(p))) if support is None else support
+    n = len(p)
+    if n == 0 or len(sp) < 2:
+        return np.full(n, np.pi / 2)
+    d, i = cKDTree(sp).query(p, k=min(k, len(sp)))
+    d, i = d.reshape(n, -1), i.reshape(n, -1)
+    other = sd[i] != demo[:, None]
+    dd = np.where(other, d, np.inf)
+    h = np.maximum(bandwidth, dd.min(axis=1, keepdims=True))
+    h = np.where(np.isfinite(h), h, 1.0)
+    wk = np.where(other, sw[i] * np.exp(-0.5 * (np.where(other, d, 0.0) / h) ** 2), 0.0)
+    g = np.einsum("nk,nkj->nj", wk, sv[i])
+    norm = np.linalg.norm(g, axis=1)
+    c = np.clip(np.sum(g * v, axis=1) / np.maximum(norm, 1e-12), -1.0, 1.0)
+    return np.where(norm > 1e-9, np.arccos(c), np.pi / 2)
+
+
 # The least-squares fit of each field kind (by its registry name) to points and vectors.
 ESTIMATORS: dict[str, Callable[[Array, Array, Array | None], Field | None]] = {
     "translation": lambda p, v, w: translation_field(v, w),
@@ -177,7 +309,25 @@ class VectorFieldLearner:
     refine_steps : int
         Least-squares refinements of each RANSAC winner.
     chance_weight : float
-        Weight of the chance-inlier correction when comparing field types.
+        Weight of the chance-inlier correction when comparing field types by inliers.
+    selection : {"likelihood", "inliers"}
+        How field types compete in each round of sequential RANSAC. ``likelihood``: by
+        the BIC of a mixture of the field's direction density and uniform directions
+        (:func:`mixture_log_likelihood`): a field that predicts a direction gains more
+        per point it explains than one that only predicts a plane, so a cylinder beats
+        the sphere that fits wherever it does, and the general field's
+        cross-validated likelihood competes with the shapes'. ``inliers``: the
+        thesis' MSAC inlier score with the chance correction (no general field).
+    demo_tolerance : float
+        A cylinder beats a sphere only where it explains their points better in all but
+        this share of the demonstrations (:meth:`_nested_winner`).
+    general_bandwidth : float
+        Kernel width (m) of the general field.
+    general_parameters : float
+        Free parameters per kernel centre of the general field in the BIC (the shapes
+        have 2-4 in all): the general field pays for the space it covers (one centre
+        per cell of half its bandwidth), so it is chosen only where the shapes cannot
+        explain the motion.
     pivot_spread : float
         A rotational field whose centre (or axis point) stays within this RMS distance
         (m) of one point of the hand over its inliers gets that point as its ``pivot``
@@ -220,6 +370,17 @@ class VectorFieldLearner:
     refine_steps: int = 2
     chance_weight: float = hyperparameter(
         0.5, "weight of the chance-inlier correction when comparing field types")
+    selection: str = hyperparameter(
+        "likelihood", "how field types compete: likelihood (BIC of each field's direction "
+        "density, with a general non-parametric field) or inliers (the thesis' MSAC score) "
+        "(default %(default)s)", choices=SELECTIONS)
+    demo_tolerance: float = hyperparameter(
+        0.1, "share of demonstrations a cylinder may explain worse than a sphere and still "
+        "be chosen over it (default %(default)s)")
+    general_bandwidth: float = hyperparameter(0.02, "general field kernel width (m)")
+    general_parameters: float = hyperparameter(
+        1.0, "free parameters per kernel centre of the general field in the BIC "
+        "(default %(default)s)")
     pivot_spread: float = 0.02
     random_state: int | None = hyperparameter(
         0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
@@ -254,6 +415,28 @@ class VectorFieldLearner:
         if kind == "sphere":
             return math.sin(thr) * 2.0 / 3.0
         return 0.5 * (1.0 - math.cos(thr)) * 0.5
+
+    def _estimate(self, kind: str, p: Array, v: Array, w: Array | None = None) -> Field | None:
+        if kind == "general":
+            return general_field(p, v, w, self.general_bandwidth)
+        return _estimate(kind, p, v, w)
+
+    def _field_angles(self, f: Field, p: Array, v: Array) -> Array:
+        """:meth:`_angles` over all the learner's points ``p``, ``v``; a general field's
+        held out: predicted from the other demonstrations' points near each one (a
+        general field fits its own points by construction)."""
+        if isinstance(f, GeneralField):
+            return held_out_angles(p, v, self.demo_index_, f.bandwidth,
+                                   support=self._general_support(f))
+        return self._angles(f, p, v)
+
+    def _general_support(self, f: GeneralField) -> tuple[Array, Array, NDArray[np.int64], Array]:
+        """The learner's points a general field stands for (those within a cell of one
+        of its centres), as a support for :func:`held_out_angles`."""
+        d, _ = cKDTree(f.centres).query(self.points_, k=1)
+        near = d <= f.bandwidth
+        return (self.points_[near], self.vectors_[near], self.demo_index_[near],
+                np.ones(int(near.sum())))
 
     def _inliers(self, f: Field, p: Array, v: Array) -> NDArray[np.bool_]:
         return self._angles(f, p, v) < self._threshold(f.type)
@@ -355,27 +538,126 @@ class VectorFieldLearner:
         self.sample_index_ = np.concatenate(order)
 
     def _sequential_ransac(self, rng: np.random.Generator) -> None:
-        """Algorithm 5: the best field of any type, its inliers removed, n_fields times."""
+        """Algorithm 5: the best field of any shape, its inliers removed, n_fields times;
+        then, by :attr:`selection` ``likelihood``, the general field may take the place
+        of the last fields (:meth:`_with_general`)."""
         p, v = self.points_, self.vectors_
         n = len(p)
         remaining = np.ones(n, dtype=bool)
-        self.ransac_fields_, self.ransac_inliers_ = [], []
+        self.ransac_fields_, self.ransac_inliers_, self.selection_ = [], [], []
         for _ in range(self.n_fields):
             idx = np.flatnonzero(remaining)
-            best = None
+            scored: list[tuple[Field, NDArray[np.bool_], float]] = []
             for kind in self.models:
-                f, inl, score = self._ransac(kind, p[idx], v[idx], rng)
-                if f is None:
+                if kind == "general":
                     continue
-                if best is None or score > best[2]:
-                    best = (f, inl, score)
-            if best is None or best[1].sum() < self.min_inliers:
+                f, inl, score = self._ransac(kind, p[idx], v[idx], rng)
+                if f is not None:
+                    scored.append((f, inl, score))
+            if not scored:
+                break
+            if self.selection == "likelihood":
+                best = scored[self._tournament([f for f, _, _ in scored], [m for _, m, _ in scored],
+                                               p[idx], v[idx], self.demo_index_[idx])]
+            else:
+                best = max(scored, key=lambda c: c[2])
+            if best[1].sum() < self.min_inliers:
                 break
             mask = np.zeros(n, dtype=bool)
             mask[idx[best[1]]] = True
             self.ransac_fields_.append(best[0])
             self.ransac_inliers_.append(mask)
             remaining &= ~mask
+        if self.selection == "likelihood" and "general" in self.models:
+            self._with_general()
+
+    def _evidence(self, f: Field, p: Array, v: Array) -> float:
+        """BIC score (higher is better, nats) of field ``f`` on points ``p`` with
+        directions ``v``: its mixture log-likelihood ratio over uniform directions
+        (:func:`mixture_fit`), less half its free parameters (direction model, spread,
+        share) times log n."""
+        log_lr = mixture_log_likelihood(self._angles(f, p, v), f.type in PLANE_KINDS)[0]
+        return log_lr - 0.5 * (PARAMETERS[f.type] + 2) * math.log(max(2, len(p)))
+
+    def _tournament(self, fields: list[Field], inliers: list[NDArray[np.bool_]], p: Array,
+                    v: Array, demo: NDArray[np.int64]) -> int:
+        """Which of a round's candidate fields (one per shape) is chosen: the larger
+        :meth:`_evidence` on the points left (in ``self.selection_``), once the cylinder
+        and the sphere have been compared on the points either of them explains (the
+        union of their inliers, :meth:`_nested_winner`) and the loser dropped.
+
+        Comparing on the points in question is what makes a cylinder win where it fits:
+        a sphere centred on its axis fits there as well, but the cylinder predicts a
+        direction, not a plane, and explains them more sharply."""
+        whole = [self._evidence(f, p, v) for f in fields]
+        self.selection_.append({f.type: round(w, 3) for f, w in zip(fields, whole, strict=True)})
+        kinds = [f.type for f in fields]
+        alive = list(range(len(fields)))
+        if "cylinder" in kinds and "sphere" in kinds:
+            c, s = kinds.index("cylinder"), kinds.index("sphere")
+            u = inliers[c] | inliers[s]
+            if u.any():
+                alive.remove(s if self._nested_winner(fields[c], fields[s], p[u], v[u], demo[u]) else c)
+        return max(alive, key=lambda i: whole[i])
+
+    def _nested_winner(self, cylinder: Field, sphere: Field, p: Array, v: Array,
+                       demo: NDArray[np.int64]) -> bool:
+        """Whether the cylinder rather than the sphere explains the points ``p``, ``v``
+        (of demonstrations ``demo``): a larger :meth:`_evidence` there and, since a
+        cylinder is a sphere whose rotation axis is fixed, a larger likelihood in all but
+        ``demo_tolerance`` of the demonstrations that have them (where the
+        demonstrations turned about different axes, a fixed axis would make some of
+        them impossible)."""
+        if self._evidence(cylinder, p, v) < self._evidence(sphere, p, v):
+            return False
+        per = []
+        for f in (cylinder, sphere):
+            th = self._angles(f, p, v)
+            plane = f.type in PLANE_KINDS
+            _, eps, sigma, _ = mixture_log_likelihood(th, plane)
+            per.append(point_log_ratios(th, plane, eps, sigma))
+        demos = [d for d in np.unique(demo) if np.sum(demo == d) >= self.coherence_run]
+        lost = sum(1 for d in demos if per[0][demo == d].sum() < per[1][demo == d].sum())
+        return lost <= self.demo_tolerance * len(demos)
+
+    def _with_general(self) -> None:
+        """Whole-model selection: the shapes found, against the first j of them plus a
+        general field on the points they leave (j = 0 .. found - 1), by the BIC of
+        the whole mixture; the general field's angles are held out (predicted from the
+        other demonstrations). Keeps the best, and the scores in ``model_scores_``."""
+        p, v, demo = self.points_, self.vectors_, self.demo_index_
+        fields, masks = list(self.ransac_fields_), list(self.ransac_inliers_)
+        angles = [self._angles(f, p, v) for f in fields]
+
+        def bic(cols: list[Array], kinds: list[str], general: tuple[GeneralField, ...] = ()
+                ) -> tuple[float, Array]:
+            log_lr, _, _, r = mixture_fit(np.stack(cols, axis=1), [k in PLANE_KINDS for k in kinds])
+            k = sum(PARAMETERS[t] for t in kinds if t != "general")
+            k += sum(self.general_parameters * len(g.centres) for g in general)
+            return log_lr - 0.5 * (k + 2 * len(kinds)) * math.log(max(2, len(p))), r
+
+        best_score, _ = bic(angles, [f.type for f in fields]) if fields else (0.0, None)
+        scores = {"+".join(f.type for f in fields) or "none": round(best_score, 3)}
+        best = None
+        for j in range(len(fields) - 1, -1, -1):
+            rest = ~np.any(masks[:j], axis=0) if j else np.ones(len(p), dtype=bool)
+            if rest.sum() < self.min_inliers:
+                continue
+            g = general_field(p[rest], v[rest], bandwidth=self.general_bandwidth)
+            if not isinstance(g, GeneralField):
+                continue
+            support = (p[rest], v[rest], demo[rest], np.ones(int(rest.sum())))
+            th = held_out_angles(p, v, demo, self.general_bandwidth, support=support)
+            kinds = [f.type for f in fields[:j]] + ["general"]
+            score, r = bic([*angles[:j], th], kinds, (g,))
+            scores["+".join(kinds)] = round(score, 3)
+            if score > best_score:
+                best_score, best = score, (j, g, (r[:, -1] > 0.5) & rest)
+        self.model_scores_ = scores
+        if best is not None:
+            j, g, inl = best
+            self.ransac_fields_ = fields[:j] + [g]
+            self.ransac_inliers_ = masks[:j] + [inl]
 
     def _coherent(self, assigned: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Spatio-temporal coherence: runs of >= coherence_run consecutive samples of
@@ -427,7 +709,7 @@ class VectorFieldLearner:
                     assigned = self._coherent(assigned)
                 if assigned.sum() < self.min_inliers or pi[m] < self.min_weight:
                     continue  # prune
-                g = _estimate(f.type, p[assigned], v[assigned], R[assigned, m])
+                g = self._estimate(f.type, p[assigned], v[assigned], R[assigned, m])
                 new_fields.append(g if g is not None else f)
                 new_sigma.append(sigma[m])
                 new_pi.append(pi[m])
@@ -451,7 +733,7 @@ class VectorFieldLearner:
         """Eq. 4.27: the deviation angles (n, k) and the responsibilities (n, k + 1; the
         last column the outliers, whose angles have the uniform density 1 / pi), from a
         half-normal likelihood of each field's deviation angle."""
-        TH = np.stack([self._angles(f, p, v) for f in fields], axis=1)
+        TH = np.stack([self._field_angles(f, p, v) for f in fields], axis=1)
         like = (2.0 / (sigma * math.sqrt(2 * math.pi))) * np.exp(-0.5 * (TH / sigma) ** 2)
         num = np.concatenate([like * pi, np.full((len(p), 1), pi0 / math.pi)], axis=1)
         return TH, num / num.sum(axis=1, keepdims=True)

@@ -18,6 +18,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scipy.spatial import cKDTree
+
 from .errors import SkillError
 from .registry import Registry, plain
 
@@ -90,6 +92,20 @@ class FieldReader:
     def pivot(self) -> Array | None:
         return None if self.fd.get("pivot") is None else self.vec("pivot")
 
+    def rows(self, key: str, max_rows: int) -> Array:
+        """A non-empty list of at most ``max_rows`` rows of 3 finite numbers (shape (n, 3))."""
+        v = self.fd.get(key)
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            a = np.zeros((0, 0))
+        if a.ndim != 2 or a.shape[1] != 3 or not 0 < len(a) <= max_rows:
+            raise self.fail(key, f"expected 1 to {max_rows} rows of 3 numbers, got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            row = int(np.argwhere(~np.isfinite(a))[0, 0])
+            raise self.fail(f"{key}[{row}]", "not finite")
+        return a
+
 
 @dataclass(frozen=True, kw_only=True)
 class Field(ABC):
@@ -134,6 +150,10 @@ class Field(ABC):
         if self.pivot is not None:
             out["pivot"] = plain(self.pivot)
         return out
+
+    def brief(self) -> dict[str, Any]:
+        """:meth:`summary` short enough for a person (a comment, ``sctd inspect``)."""
+        return self.summary()
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
@@ -346,6 +366,94 @@ class SphereField(Field):
         t = (d[0] - dn * n[0], d[1] - dn * n[1], d[2] - dn * n[2])  # tangent to the sphere
         x, y, z = _cross3(n, t)
         return t, (x / rho, y / rho, z / rho), centre
+
+
+GENERAL_MAX_CENTRES = 20000  # kernel centres of one general field in a model file
+GENERAL_NEIGHBOURS = 8  # centres a general field's direction is averaged over
+GENERAL_REUSE = 5e-4  # m: a single-point query reuses its neighbours this close to the last
+
+
+@FIELDS.register
+@dataclass(frozen=True, kw_only=True)
+class GeneralField(Field):
+    """A non-parametric field (the thesis' future work, Ch. 7: "a general model ... a
+    smoothed version of its neighbours"): at a point, the Gaussian-kernel mean
+    (Nadaraya-Watson) of the demonstrated unit ``directions`` (m, 3) at the
+    ``GENERAL_NEIGHBOURS`` nearest of its ``centres`` (m, 3), normalised.
+
+    ``bandwidth`` (m) is the kernel's width; further from the centres than that, it
+    widens to the nearest centre's distance, so the field stays defined (the nearest
+    demonstrations' direction) away from them. Evaluating it costs one KD-tree query,
+    O(log m); a single-point evaluation (the tick) reuses the last query's neighbours
+    while the point stays within ``GENERAL_REUSE`` of it, and weighs them exactly.
+    """
+
+    type: ClassVar[str] = "general"
+    centres: Array
+    directions: Array
+    bandwidth: float = 0.02
+
+    def __post_init__(self) -> None:
+        d = np.asarray(self.directions, dtype=float)
+        n = np.linalg.norm(d, axis=1, keepdims=True)
+        object.__setattr__(self, "directions", np.where(n > 1e-12, d / np.maximum(n, 1e-12), 0.0))
+        object.__setattr__(self, "_tree", cKDTree(np.asarray(self.centres, dtype=float)))
+        object.__setattr__(self, "_last", [None])  # (x, y, z, neighbour rows) of a vector3
+
+    @classmethod
+    def read(cls, r: FieldReader, common: dict[str, Any]) -> GeneralField:
+        centres = r.rows("centres", GENERAL_MAX_CENTRES)
+        directions = r.rows("directions", GENERAL_MAX_CENTRES)
+        if len(directions) != len(centres):
+            raise r.fail("directions", f"expected {len(centres)} rows (one per centre), "
+                         f"got {len(directions)}")
+        bandwidth = r.num("bandwidth", 0.02)
+        if bandwidth <= 0:
+            raise r.fail("bandwidth", "expected a width > 0 (m)")
+        return cls(**common, centres=centres, directions=directions, bandwidth=bandwidth)
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"bandwidth": self.bandwidth, "centres": plain(self.centres),
+                "directions": plain(self.directions)}
+
+    def brief(self) -> dict[str, Any]:
+        """The summary with the number of centres in place of the centres and directions."""
+        out = self.summary()
+        del out["directions"]
+        out["centres"] = len(self.centres)
+        return out
+
+    @property
+    def _k(self) -> int:
+        return min(GENERAL_NEIGHBOURS, len(self.centres))
+
+    def vectors(self, points: ArrayLike) -> Array:
+        p = np.atleast_2d(np.asarray(points, dtype=float))
+        d, i = self._tree.query(p, k=self._k)  # type: ignore[attr-defined]
+        d, i = d.reshape(len(p), -1), i.reshape(len(p), -1)
+        h = np.maximum(self.bandwidth, d[:, :1])
+        w = np.exp(-0.5 * (d / h) ** 2)
+        g = np.einsum("nk,nkj->nj", w, self.directions[i])
+        n = np.linalg.norm(g, axis=1, keepdims=True)
+        return np.where(n > 1e-9, g / np.maximum(n, 1e-9), 0.0)
+
+    def vector3(self, x: float, y: float, z: float) -> tuple[float, float, float]:
+        last = self._last[0]  # type: ignore[attr-defined]
+        if last is None or (x - last[0]) ** 2 + (y - last[1]) ** 2 + (z - last[2]) ** 2 > GENERAL_REUSE ** 2:
+            _, i = self._tree.query((x, y, z), k=self._k)  # type: ignore[attr-defined]
+            rows = [(c[0], c[1], c[2], v[0], v[1], v[2]) for c, v in
+                    zip(self.centres[np.atleast_1d(i)].tolist(),
+                        self.directions[np.atleast_1d(i)].tolist(), strict=True)]
+            last = self._last[0] = (x, y, z, rows)  # type: ignore[attr-defined]
+        rows = last[3]
+        d2 = [(x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2 for cx, cy, cz, _, _, _ in rows]
+        h2 = max(self.bandwidth * self.bandwidth, min(d2))
+        gx = gy = gz = 0.0
+        for r2, (_, _, _, vx, vy, vz) in zip(d2, rows, strict=True):
+            w = math.exp(-0.5 * r2 / h2)
+            gx, gy, gz = gx + w * vx, gy + w * vy, gz + w * vz
+        n = math.sqrt(gx * gx + gy * gy + gz * gz)
+        return (gx / n, gy / n, gz / n) if n > 1e-9 else (0.0, 0.0, 0.0)
 
 
 def sigmoid(x: float | Array, k: float) -> float | Array:

@@ -15,9 +15,9 @@ from .registry import plain
 
 
 def field_summary(f: Field) -> dict[str, Any]:
-    """One vector field as plain data (what ``fields`` in the summary and in a model
-    file hold)."""
-    return f.summary()
+    """One vector field as plain data, for a person: its summary, a general field's
+    centres counted rather than listed (a model file holds the whole summary)."""
+    return f.brief()
 
 
 def skill_summary(skill: Skill) -> dict[str, Any]:
@@ -29,7 +29,7 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
             for rel, model in m.models():
                 if rel not in seen:
                     seen.add(rel)
-                    fields.extend(f.summary() for f in model.fields)
+                    fields.extend(field_summary(f) for f in model.fields)
     return {
         "id": skill.id,
         "name": skill.name,
