@@ -244,7 +244,7 @@ def _wipe_demo(rng: np.random.Generator, rate: float, length: float) -> tuple:
         else:
             s = float(_final_profile(np.array(min(1.0, (ti - d1) / d2)))) * arc[-1]
             x = float(np.interp(s, arc, xs))
-            poses[i, :3] = x0 + [x, amp * np.sin(2 * np.pi * x / length), 0.0]
+            poses[i, :3] = x0 + np.array([x, amp * np.sin(2 * np.pi * x / length), 0.0])
     info = {"reach_direction": ((x0 - start) / np.linalg.norm(x0 - start)).tolist()}
     return t, poses, phase, info
 

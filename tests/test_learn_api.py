@@ -83,6 +83,7 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--method", "--out", "--frame", "--report", "--seed", "--object", "--quiet", "--spacing",
         "--vf-spacing", "--smooth", "--no-despike", "--alpha", "--beta", "--lambda", "--radius",
         "--max-n", "--C", "--cut", "--min-segment", "--axis-support", "--margin", "--dtw-align",
+        "--no-auto-frames",
         "--n-fields", "--em-iterations", "--angle-sphere", "--angle-translation",
         "--angle-cylinder", "--max-radius", "--chance-weight", "--selection", "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",

@@ -138,7 +138,7 @@ def _phase_kinds(task: str, seed: int, **kw):
 
 @pytest.mark.parametrize("seed", range(8))
 def test_crank_is_a_cylinder_about_its_axis_not_a_sphere(seed):
-    ds, res, kinds = _phase_kinds("crank", seed)
+    _, res, kinds = _phase_kinds("crank", seed)
     assert kinds == ("translation", "cylinder")
     cyl = next(f for f in res.learner.fields_ if f.type == "cylinder")
     assert np.degrees(np.arccos(abs(cyl.axis @ [0.0, 0.0, 1.0]))) < 3.0

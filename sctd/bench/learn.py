@@ -40,6 +40,7 @@ from ..learn import (
     learn_linear,
     learn_vector_fields,
 )
+from ..skill.fields import SphereField, TranslationField
 
 
 def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float = 1e6,
@@ -175,7 +176,7 @@ def _bench_vf_pour(pour: demogen.DemoSet, seed: int, n_seeds: int, out: dict[str
         t = time.perf_counter()
         vf = learn_vector_fields(demos_of(pour), learner=VectorFieldLearner(random_state=s))
         times.append(time.perf_counter() - t)
-        spheres = [f for f in vf.learner.fields_ if f.type == "sphere"]
+        spheres = [f for f in vf.learner.fields_ if isinstance(f, SphereField)]
         if spheres:
             c = min((f.centre for f in spheres), key=lambda c: np.linalg.norm(c - centre_true))
             centres.append(c)
@@ -198,7 +199,7 @@ def _bench_vf_drawer(drawer: demogen.DemoSet, seed: int, out: dict[str, Any]) ->
     t = time.perf_counter()
     vfd = learn_vector_fields(demos_of(drawer), learner=VectorFieldLearner(random_state=seed))
     out["vf_drawer_time_s"] = time.perf_counter() - t
-    dirs = [f.direction for f in vfd.learner.fields_ if f.type == "translation"]
+    dirs = [f.direction for f in vfd.learner.fields_ if isinstance(f, TranslationField)]
     out["drawer_fields"] = [f.type for f in vfd.learner.fields_]
     out["drawer_direction_error_deg"] = {
         k: (min(_angle(d, v) for d in dirs) if dirs else None)

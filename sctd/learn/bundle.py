@@ -78,6 +78,9 @@ def linear_skill_doc(result: LinearResult, name: str) -> dict[str, Any]:
 
 def _linear_header(result: LinearResult) -> str:
     lines = ["Learned skill (sctd learn --method linear). States:"]
+    for f in result.found_frames:
+        lines.insert(0, f"Frame {f.name} found in the demonstrations: {f.kind}, ee offset "
+                        f"{rounded(f.pose[:3], 4)}, spread {f.spread:.4f} m")
     for k, st in enumerate(result.learner.states_):
         axes = ", ".join(AXIS_NAMES[a] for a in st.label.axes)
         lines.append(f"  {state_name(k)}: {axes} in frame {st.label.frame}")

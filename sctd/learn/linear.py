@@ -374,6 +374,9 @@ class LinearIMLearner:
     dtw_align : bool
         Also make DTW-aligned displacements of different demonstrations neighbours in
         the smoothness term (:func:`dtw_edges`).
+    auto_frames : bool
+        Read by :func:`~sctd.learn.learn_linear`: without given frames, use the ones
+        found in the demonstrations (:func:`~sctd.learn.frames.automatic_frames`).
     random_state : int or None
         Seed for the SVM solver (flag ``--seed``).
 
@@ -405,6 +408,9 @@ class LinearIMLearner:
     margin: float = hyperparameter(0.005, "transition hysteresis (m)")
     dtw_align: bool = hyperparameter(
         False, "add DTW-aligned displacements of different demos as graph-cut neighbours")
+    auto_frames: bool = hyperparameter(
+        True, "without --frame, do not look for feature frames in the demonstrations (sphere "
+        "centres and cylinder axes fixed in the hand)", flag="--no-auto-frames")
     random_state: int | None = hyperparameter(
         0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
 

@@ -20,6 +20,7 @@ from .. import se3
 from ..skill import Skill, skill_from_bundle
 from .bundle import skill_bundle
 from .demos import Demo
+from .frames import automatic_frames, frames_to_use
 from .linear import LinearIMLearner, Progress
 from .preprocess import Preprocessing, preprocess, raw_labels
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
@@ -48,7 +49,9 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     ----------
     demos : list of Demo
     frames : mapping of name -> pose [x, y, z, qx, qy, qz, qw] (T_ee_frame), optional
-        Candidate feature frames besides ``ee``.
+        Candidate feature frames besides ``ee``. Without them (and with the learner's
+        ``auto_frames``), the frames the demonstrations turned about are found
+        (:func:`~sctd.learn.frames.automatic_frames`) and used instead.
     learner : LinearIMLearner, optional
         The (unfitted) estimator with its hyperparameters; it is fitted in place.
     preprocessing : Preprocessing, optional
@@ -59,7 +62,10 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     learner = LinearIMLearner() if learner is None else learner
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
     t0 = time.perf_counter()
-    pose_of = {k: np.asarray(v, dtype=float) for k, v in (frames or {}).items()}
+    found = []
+    if not frames and learner.auto_frames:
+        found = automatic_frames(demos, preprocessing, VectorFieldLearner(random_state=learner.random_state))
+    pose_of = frames_to_use(frames, found)
     prepared = preprocess(demos, preprocessing, preprocessing.spacing, learner.alpha,
                           translation_only=False)
     if progress:
@@ -70,7 +76,8 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     options = SkillOptions() if options is None else options
-    return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings)
+    return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings,
+                        found_frames=found)
 
 
 def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None = None,

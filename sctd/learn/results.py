@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from .frames import FoundFrame
 from .linear import LinearIMLearner
 from .params import get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
@@ -96,6 +97,7 @@ class LinearResult:
     learner: LinearIMLearner
     labels: dict[str, list[int]]  # demo -> state index per raw displacement
     timings: dict[str, float] = field(default_factory=dict)
+    found_frames: list[FoundFrame] = field(default_factory=list)  # found, not given (frames.py)
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name."""

@@ -18,6 +18,7 @@ def _linear_summary(result: LinearResult) -> dict[str, Any]:
     L = result.learner
     return {
         "frames": {k: rounded(v) for k, v in result.frames.items()},
+        "found_frames": [f.summary() for f in result.found_frames],
         "states": [{"name": state_name(k), "frame": st.label.frame,
                     "axes": [AXIS_NAMES[a] for a in st.label.axes], "support": st.support}
                    for k, st in enumerate(L.states_)],

@@ -544,7 +544,8 @@ class VectorFieldLearner:
         p, v = self.points_, self.vectors_
         n = len(p)
         remaining = np.ones(n, dtype=bool)
-        self.ransac_fields_, self.ransac_inliers_, self.selection_ = [], [], []
+        self.ransac_fields_, self.ransac_inliers_ = [], []
+        self.selection_: list[dict[str, float]] = []  # each round's shapes and their evidence
         for _ in range(self.n_fields):
             idx = np.flatnonzero(remaining)
             scored: list[tuple[Field, NDArray[np.bool_], float]] = []
@@ -632,7 +633,7 @@ class VectorFieldLearner:
         def bic(cols: list[Array], kinds: list[str], general: tuple[GeneralField, ...] = ()
                 ) -> tuple[float, Array]:
             log_lr, _, _, r = mixture_fit(np.stack(cols, axis=1), [k in PLANE_KINDS for k in kinds])
-            k = sum(PARAMETERS[t] for t in kinds if t != "general")
+            k = float(sum(PARAMETERS[t] for t in kinds if t != "general"))
             k += sum(self.general_parameters * len(g.centres) for g in general)
             return log_lr - 0.5 * (k + 2 * len(kinds)) * math.log(max(2, len(p))), r
 
@@ -656,8 +657,8 @@ class VectorFieldLearner:
         self.model_scores_ = scores
         if best is not None:
             j, g, inl = best
-            self.ransac_fields_ = fields[:j] + [g]
-            self.ransac_inliers_ = masks[:j] + [inl]
+            self.ransac_fields_ = [*fields[:j], g]
+            self.ransac_inliers_ = [*masks[:j], inl]
 
     def _coherent(self, assigned: NDArray[np.bool_]) -> NDArray[np.bool_]:
         """Spatio-temporal coherence: runs of >= coherence_run consecutive samples of

@@ -17,7 +17,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-
 from scipy.spatial import cKDTree
 
 from .errors import SkillError

@@ -161,6 +161,10 @@ def main_learn(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} ({sk['id']}): {len(sk['states'])} state(s), "
           f"{len(sk['transitions'])} transition(s), {len(summary.get('fields', []))} field(s) "
           f"in {summary['timings'].get('total', 0):.2f} s")
+    for f in summary.get("found_frames", []):
+        print(f"frame {f['name']} found in the demonstrations ({f['kind']} "
+              f"{'centre' if f['kind'] == 'sphere' else 'axis'}, ee offset "
+              f"[{', '.join(f'{x:.3f}' for x in f['pose'][:3])}], spread {f['spread'] * 1000:.1f} mm)")
     if args.report is not None:
         print(f"report in {args.report}")
     return 0
