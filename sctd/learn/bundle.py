@@ -91,46 +91,97 @@ def _linear_header(result: LinearResult) -> str:
     return "\n".join(lines)
 
 
-def vf_model(result: VectorFieldResult) -> VectorFieldModel:
-    """The model file's content: the fields and the demonstration points."""
+def vf_model(result: VectorFieldResult, fields: tuple[int, ...] | None = None) -> VectorFieldModel:
+    """The model file's content: the fields (all, or those indexed by ``fields``) and the
+    demonstration points (those the chosen fields explain)."""
     L = result.learner
     if not L.fields_:
         raise ValueError("no vector field was found in the demonstrations")
-    return VectorFieldModel(fields=tuple(L.fields_), points=L.points_,
-                            quaternions=L.quaternions_, responsibilities=L.responsibilities_)
+    if fields is None:
+        return VectorFieldModel(fields=tuple(L.fields_), points=L.points_,
+                                quaternions=L.quaternions_, responsibilities=L.responsibilities_)
+    sel = np.isin(L.assignment_, fields)
+    R = L.responsibilities_[sel][:, list(fields)]
+    s = R.sum(axis=1, keepdims=True)
+    R = np.where(s > 1e-12, R / np.maximum(s, 1e-12), 1.0 / len(fields))
+    return VectorFieldModel(fields=tuple(L.fields_[m] for m in fields), points=L.points_[sel],
+                            quaternions=L.quaternions_[sel], responsibilities=R)
 
 
-def vf_skill_doc(result: VectorFieldResult, name: str, model: str) -> dict[str, Any]:
-    """The skill document of a vector-field result: one state with a vector-field IM and
-    a neighbour-orientation AC, both referring to the model file ``model``."""
+def _vf_state(result: VectorFieldResult, model: str, fields: list) -> dict[str, Any]:
+    """One state of a vector-field skill: a vector-field IM and a neighbour-orientation AC
+    on the model file ``model`` (whose fields are ``fields``)."""
     p = result.field_options
     constraint: dict[str, Any] = {"type": "neighbour_orientation", "model": model, "frame": "ee",
                                   "max_n": p.vf_max_n, "max_d": p.max_d,
                                   "rotation_weight": p.vf_rotation_weight}
-    pivots = [f for f in result.learner.fields_ if f.pivot is not None]
+    pivots = [f for f in fields if f.pivot is not None]
     if pivots and p.vf_motion == "rigid":  # orientation pulled about the point the hand turned about
         constraint["pivot"] = rounded(max(pivots, key=lambda f: f.weight).pivot)
-    return {
-        "sctd_skill": 1, "name": name,
-        "description": (f"Learned by sctd learn --method vf from {len(result.prepared)} "
-                        "demonstrations (RANSAC + EM vector fields, neighbour orientation)."),
-        "object": result.options.object,
-        "limits": _limits(result),
-        "fsm": {"start": "default", "end": "default", "transitions": []},
-        "states": {"default": {
-            "input_mapping": [{"type": "vector_field", "model": model, "frame": "ee", "mode": "scale",
+    return {"input_mapping": [{"type": "vector_field", "model": model, "frame": "ee", "mode": "scale",
                                "combine": p.vf_combine, "min_v": p.min_v, "k_s": p.k_s,
                                "max_n": p.vf_max_n, "max_d": p.max_d, "motion": p.vf_motion}],
-            "active_constraints": [constraint]}},
-        "candidate_frames": result.learner.candidate_frames_,
+            "active_constraints": [constraint]}
+
+
+def vf_skill_doc(result: VectorFieldResult, name: str, model: str) -> dict[str, Any]:
+    """The skill document of a vector-field result. Blended (the thesis): one state
+    ``default`` with a vector-field IM and a neighbour-orientation AC on the model file
+    ``model``. Sequential (``result.plan``): one state per field, in the order the
+    demonstrations use them, each on its own model file (:func:`state_model_files`),
+    with hyperplane transitions both ways between consecutive ones."""
+    L, plan = result.learner, result.plan
+    doc: dict[str, Any] = {
+        "sctd_skill": 1, "name": name,
+        "description": (f"Learned by sctd learn --method vf from {len(result.prepared)} "
+                        "demonstrations (RANSAC + EM vector fields, neighbour orientation"
+                        + (", one state per field in the order they are used)." if plan.sequential
+                           else ").")),
+        "object": result.options.object,
+        "limits": _limits(result),
     }
+    if not plan.sequential:
+        doc["fsm"] = {"start": "default", "end": "default", "transitions": []}
+        doc["states"] = {"default": _vf_state(result, model, list(L.fields_))}
+    else:
+        files = state_model_files(result, model)
+        names = [state_name(k) for k in range(len(plan.order))]
+        transitions = []
+        for h in plan.transitions:
+            a, b = names[plan.order.index(h.source)], names[plan.order.index(h.target)]
+            n, o = rounded(h.normal, 6), round(float(h.offset), 6)
+            transitions.append({"from": a, "to": b, "type": "hyperplane", "frame": "ee",
+                                "normal": n, "offset": o, "margin": h.margin})
+            transitions.append({"from": b, "to": a, "type": "hyperplane", "frame": "ee",
+                                "normal": [-x for x in n], "offset": -o, "margin": h.margin})
+        doc["fsm"] = {"start": names[0], "end": names[-1], "min_dwell": 0.1, "transitions": transitions}
+        doc["states"] = {nm: _vf_state(result, rel, [L.fields_[m]])
+                         for nm, rel, m in zip(names, files, plan.order, strict=True)}
+    doc["candidate_frames"] = L.candidate_frames_
+    return doc
+
+
+def state_model_files(result: VectorFieldResult, model: str) -> list[str]:
+    """The model file of each state of a sequential vector-field skill: ``model`` with
+    the state's name before its suffix (``pour-vf.npz`` -> ``pour-vf-s0.npz``)."""
+    stem, dot, ext = model.rpartition(".")
+    return [f"{stem}-{state_name(k)}{dot}{ext}" for k in range(len(result.plan.order))]
 
 
 def _vf_header(result: VectorFieldResult) -> str:
     lines = ["Learned skill (sctd learn --method vf). Fields:"]
-    for f in result.learner.fields_:
+    plan = result.plan
+    for m, f in enumerate(result.learner.fields_):
         s = field_summary(f)
-        lines.append("  " + ", ".join(f"{k}={rounded(v, 4)}" for k, v in s.items()))
+        state = f"{state_name(plan.order.index(m))}: " if m in plan.order else ""
+        lines.append("  " + state + ", ".join(f"{k}={rounded(v, 4)}" for k, v in s.items()))
+    if plan.sequential:
+        for h in plan.transitions:
+            lines.append(f"  {state_name(plan.order.index(h.source))} -> "
+                         f"{state_name(plan.order.index(h.target))}: hyperplane on ee, training "
+                         f"accuracy {h.accuracy:.3f}")
+    else:
+        lines.append(f"  one state blends the fields ({plan.reason})")
     return "\n".join(lines)
 
 
@@ -147,6 +198,10 @@ def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
         text = _dump(linear_skill_doc(result, name), _linear_header(result))
         return Bundle(name=f"{name}.yaml", yaml_text=text, files={})
     rel = f"{name}.npz"
-    data = vector_field_model_to_bytes(vf_model(result), rel)
+    if result.plan.sequential:
+        files = {f: vector_field_model_to_bytes(vf_model(result, (m,)), f)
+                 for f, m in zip(state_model_files(result, rel), result.plan.order, strict=True)}
+    else:
+        files = {rel: vector_field_model_to_bytes(vf_model(result), rel)}
     text = _dump(vf_skill_doc(result, name, rel), _vf_header(result))
-    return Bundle(name=f"{name}.yaml", yaml_text=text, files={rel: data})
+    return Bundle(name=f"{name}.yaml", yaml_text=text, files=files)

@@ -25,6 +25,7 @@ from .linear import LinearIMLearner, Progress
 from .preprocess import Preprocessing, preprocess, raw_labels
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
 from .vf import VectorFieldLearner
+from .vfstates import StatePlan, plan_states
 
 METHODS = ("linear", "vf")
 STAGES: dict[str, tuple[str, ...]] = {
@@ -100,17 +101,31 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     t1 = time.perf_counter()
     learner.fit([p.poses[:, :3] for p in prepared], [p.poses[:, 3:] for p in prepared],
                 progress=progress)
+    field_options = VectorFieldOptions() if field_options is None else field_options
+    plan = StatePlan(reason="--vf-states blend")
+    if field_options.vf_states == "auto":
+        plan = plan_states(learner, random_state=learner.random_state)
+    state_of = {m: k for k, m in enumerate(plan.order)}
     labels, field_labels = {}, {}
     for k, p in enumerate(prepared):
         sel = learner.demo_index_ == k
         per = np.full(max(1, len(p.keep) - 1), -1, dtype=np.int64)
         per[learner.sample_index_[sel]] = learner.assignment_[sel]
         field_labels[p.name] = raw_labels(p, per)
-        labels[p.name] = [0] * (p.n_raw - 1)
+        labels[p.name] = _states_of(field_labels[p.name], state_of)
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     return VectorFieldResult(preprocessing, SkillOptions() if options is None else options,
-                             VectorFieldOptions() if field_options is None else field_options,
-                             prepared, learner, labels, field_labels, timings)
+                             field_options, prepared, learner, labels, field_labels, timings, plan)
+
+
+def _states_of(fields: list[int], state_of: dict[int, int]) -> list[int]:
+    """The state of each displacement from its field's (an outlier's: the state before it,
+    or the first)."""
+    out, last = [], 0
+    for m in fields:
+        last = state_of.get(m, last)
+        out.append(last)
+    return out
 
 
 def hyperparameter_fields(method: str) -> list[dataclasses.Field]:

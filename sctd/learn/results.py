@@ -18,10 +18,12 @@ from .linear import LinearIMLearner
 from .params import get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
 from .vf import VectorFieldLearner
+from .vfstates import StatePlan
 
 Array = NDArray[np.float64]
 
 VF_COMBINE = ("intent", "weighted", "most_probable")
+VF_STATES = ("auto", "blend")
 VF_MOTION = ("rigid", "translate")
 
 
@@ -66,6 +68,9 @@ class VectorFieldOptions:
     vf_motion : {"rigid", "translate"}
         Rotational fields turn the hand about their centre (rigid) or only move it
         (translate, the thesis).
+    vf_states : {"auto", "blend"}
+        Sequential fields become states (:func:`~sctd.learn.vfstates.plan_states`) or
+        all blend in one state (the thesis).
     """
 
     min_v: float = hyperparameter(0.1, "eq. 4.34 floor")
@@ -84,6 +89,10 @@ class VectorFieldOptions:
         "intent", "how fields' agreements combine: intent weighs them by the membership given "
         "the position and the command; weighted (eq. 4.32) and most_probable (eq. 4.31) by the "
         "position's alone (default %(default)s)", choices=VF_COMBINE)
+    vf_states: str = hyperparameter(
+        "blend", "auto: fields the demonstrations use one after the other, in separate places, "
+        "become states with hyperplane transitions between them; blend: one state blends all "
+        "fields, as in the thesis (default %(default)s)", choices=VF_STATES)
 
 
 @dataclass
@@ -117,6 +126,7 @@ class VectorFieldResult:
     labels: dict[str, list[int]]  # demo -> state index (0: one state) per raw displacement
     field_labels: dict[str, list[int]]  # demo -> field index (-1 outlier) per raw displacement
     timings: dict[str, float] = field(default_factory=dict)
+    plan: StatePlan = field(default_factory=StatePlan)  # the fields as states, or why not
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name."""

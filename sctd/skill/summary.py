@@ -29,7 +29,9 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
             for rel, model in m.models():
                 if rel not in seen:
                     seen.add(rel)
-                    fields.extend(field_summary(f) for f in model.fields)
+                    # With more than one state, each field names the (first) one it is in.
+                    named = {"state": s.name} if len(skill.states) > 1 else {}
+                    fields.extend(field_summary(f) | named for f in model.fields)
     return {
         "id": skill.id,
         "name": skill.name,
