@@ -401,3 +401,97 @@ def test_a_press_on_stale_input_does_nothing():
     old = Sample(1, 0.0, 0.0, u=(0, 0, 0), buttons=(1, 1, 0), presses=w.observe((1, 1, 0)))
     r = c.tick(0.5, 0.5, old, state(T_START, 0.5), Sample(0, 0.5, 0.5, F=world.F))
     assert r.state == "translate" and c.counters.presses == 0
+
+
+# --- stuck detection and escape (thesis Ch. 6.2) ------------------------------------------
+
+TRAP_YAML = """
+sctd_skill: 1
+name: trap
+object: mug
+limits: {max_linear_speed: 0.1, max_angular_speed: 0.5}
+fsm:
+  start: free
+  end: done
+  min_dwell: 0.0
+  transitions:
+    - {from: free, to: slide, type: hyperplane, normal: [1, 0, 0], offset: -0.01, margin: 0.0}
+    - {from: slide, to: done, type: hyperplane, normal: [0, 0, 1], offset: -0.3, margin: 0.0}
+states:
+  free: {input_mapping: [{type: linear, frame: ee, axes: [tx, ty, tz]}]}
+  slide: {input_mapping: [{type: linear, frame: ee, axes: [tx]}]}
+  done: {input_mapping: [{type: linear, frame: ee, axes: [tx, ty, tz]}]}
+"""
+
+
+def trap_skill():
+    from sctd.skill import Bundle, skill_from_bundle
+
+    return skill_from_bundle(Bundle("trap.yaml", TRAP_YAML, {}))
+
+
+def press_run(c, steps, t0, T_meas=None, dt=0.001):
+    """Tick with (u, buttons) per step; the robot follows the target unless T_meas."""
+    from sctd.runtime.controller import ButtonWatch
+
+    watch = getattr(c, "_test_watch", None) or ButtonWatch()
+    c._test_watch = watch
+    t, out = t0, []
+    for k, (u, buttons) in enumerate(steps):
+        meas = T_meas if T_meas is not None else (
+            c.T_world_target if c.T_world_target is not None else T_WORLD_MUG)
+        s = Sample(seq=int(t * 1e6) + k, stamp=t, received=t, u=tuple(u), buttons=buttons,
+                   presses=watch.observe(buttons))
+        out.append(c.tick(t, t, s, state(meas, t), obj(t)))
+        t += dt
+    return out, t
+
+
+def test_held_input_in_a_trap_counts_stuck_once_and_escape_returns():
+    """slide maps only x; its way on needs z. Pushing x in it for longer than stuck_after
+    is one stuck episode (status names the state); the targets are the same as with the
+    detector off; escape (button 2) returns to free."""
+    on, off = Controller(trap_skill(), RuntimeConfig(stuck_after=0.2)), \
+        Controller(trap_skill(), RuntimeConfig(stuck_after=0.0))
+    enable, escape = (0, 1, 0), (0, 1, 1)
+    go = [([1, 0, 0], enable)] * 150  # +x crosses free -> slide at x > 0.01 (0.1 m/s)
+    # y and z are not slide's axes: no push at all, never stuck
+    other = [([0, 1, 0], enable)] * 10 + [([0, 0, 1], enable)] * 500
+    push = [([-0.01, 0, 0], enable)] * 5 + [([0.5, 0, 0], enable)] * 300  # dead band, then x
+    for c in (on, off):
+        res, t = press_run(c, go + other, 0.0)
+        assert res[-1].state == "slide" and c.engine.previous == "free"
+        assert c.counters.stuck == 0 and c.stuck(t) is None
+        res, t = press_run(c, push, t)
+        assert res[-1].state == "slide"
+    assert on.counters.stuck == 1 and off.counters.stuck == 0 and off.stuck(t) is None
+    st = on.stuck(t)
+    assert st["state"] == "slide" and st["since"] >= 0.2
+    # detection only: the two controllers published the same targets
+    assert np.array_equal(on.T_world_target, off.T_world_target)
+    # released: the episode ends; escape returns to free and is counted
+    res, t = press_run(on, [([0, 0, 0], enable)] * 3 + [([0, 0, 0], escape)] * 2
+                       + [([0, 0, 0], enable)], t)
+    assert on.stuck(t) is None and res[-1].state == "free"
+    assert on.counters.escapes == 1 and on.counters.presses == 1 and on.engine.previous is None
+    # at the start of the path escape does nothing
+    res, t = press_run(on, [([0, 0, 0], escape), ([0, 0, 0], enable)], t)
+    assert res[-1].state == "free" and on.counters.escapes == 1 and on.counters.presses == 2
+    # the hand is still past free -> slide, which waits until it has been back once
+    res, t = press_run(on, [([-1, 0, 0], enable)] * 400, t)
+    assert all(r.state == "free" for r in res) and on.T_world_target[0, 3] < T_WORLD_MUG[0, 3] + 0.01
+    res, t = press_run(on, [([1, 0, 0], enable)] * 400, t)
+    assert res[-1].state == "slide" and on.engine.previous == "free"
+
+
+def test_held_input_against_a_wall_counts_stuck_progress_clears_it():
+    """pour's carry state: the arm is blocked (the measured pose stays); pushing towards
+    the mug makes no progress towards carry -> approach. Once the arm moves towards the
+    mug the episode ends."""
+    c = ctl(stuck_after=0.3)
+    blocked = T_START.copy()
+    res = run(c, [[1, 0, 0]] * 400, T_meas=blocked)
+    assert res[-1].state == "carry" and c.counters.stuck == 1
+    assert c.stuck(0.399)["state"] == "carry"
+    res = run(c, [[1, 0, 0]] * 50, t0=0.4)  # the arm follows the target again: progress
+    assert c.stuck(0.45) is None and c.counters.stuck == 1
