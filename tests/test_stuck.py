@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sctd import se3
 from sctd.skill import Bundle, SkillEngine, StuckDetector, Workspace, load_skill, skill_from_bundle
 
 ROOT = Path(__file__).resolve().parents[1]

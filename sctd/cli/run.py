@@ -23,7 +23,6 @@ from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP, add_arguments, flag_name, from_namespace
 
-
 ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (the rest must be > 0)
 
 

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from .linear import LinearIMLearner
 from .params import get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
+from .traps import TrapFinding
 from .vf import VectorFieldLearner
 
 Array = NDArray[np.float64]
@@ -96,6 +97,7 @@ class LinearResult:
     learner: LinearIMLearner
     labels: dict[str, list[int]]  # demo -> state index per raw displacement
     timings: dict[str, float] = field(default_factory=dict)
+    traps: list[TrapFinding] = field(default_factory=list)  # per transition (sctd.learn.traps)
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name."""

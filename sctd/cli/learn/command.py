@@ -161,6 +161,8 @@ def main_learn(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} ({sk['id']}): {len(sk['states'])} state(s), "
           f"{len(sk['transitions'])} transition(s), {len(summary.get('fields', []))} field(s) "
           f"in {summary['timings'].get('total', 0):.2f} s")
+    for note in summary.get("trap_notes", []):  # Ch. 6.2: states that trap the user
+        print(f"  {note}")
     if args.report is not None:
         print(f"report in {args.report}")
     return 0
