@@ -291,21 +291,21 @@ class Controller:
         if changed:
             self.counters.transitions += 1
             self.counters.escapes += engine.escaped
-        if not seeding:
-            self._move(u, F_meas)
-        self._watch(now, u if input_ok else (), F_meas, force)
+        # a (re-)seed tick moves nothing: no push, and the stuck watch restarts
+        self._watch(now, not seeding and self._move(u, F_meas), F_meas, force)
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
 
-    def _watch(self, now: float, u: tuple[float, ...], F_meas: se3.Flat, force: Array | None) -> None:
-        """Feed the stuck detector: held input (non-zero on the active state's axes)
-        and the measured pose's progress towards the state's transitions. It only
-        watches; nothing here changes the target."""
-        n = len(u)
+    def _watch(self, now: float, held: bool, F_meas: se3.Flat, force: Array | None) -> None:
+        """Feed the stuck detector: whether the input is held (pushed on the active
+        state's axes) and the measured pose's progress towards the state's transitions.
+        It only watches; nothing here changes the target."""
         det = self.stuck_detector
-        if not det.stuck_after or not any(u[j] for j in self.engine.input_axes if j < n):
+        if not held:
             det.release()
+            return
+        if not det.due(now):
             return
         engine = self.engine
         was = det.episodes
@@ -366,9 +366,11 @@ class Controller:
         return np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
                          r[6] * fx + r[7] * fy + r[8] * fz])
 
-    def _move(self, u: tuple[float, ...], F_meas: se3.Flat) -> None:
+    def _move(self, u: tuple[float, ...], F_meas: se3.Flat) -> bool:
         """Step the target by the active mappings' command for ``u``, bounded and refused
-        when it would grow the offset to the measured pose past the limit."""
+        when it would grow the offset to the measured pose past the limit. Returns
+        whether the user pushes (``u`` non-zero on the active state's axes), moved or
+        not."""
         cfg = self.config
         F_prev = self._T_obj_target
         if F_prev is None:
@@ -381,16 +383,17 @@ class Controller:
         n = len(u)
         mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
         if not mag > 0.0:  # zero (or, fail-closed, NaN): no step
-            return
+            return False
         mag = min(1.0, mag)
         F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
                            mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
         if F_new is F_prev:
-            return
+            return True
         if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
             self.counters.offset_limited += 1  # refused: the arm lags or is blocked
         elif not self._accept(F_new):
             self.counters.nonfinite_output += 1  # never publish a non-finite target
+        return True
 
     def _quiet(self, mode: str, in_seq: int) -> TickResult:
         """A tick that publishes nothing; the next target will be a (re-)seed."""

@@ -13,6 +13,7 @@ escape button (:meth:`sctd.skill.SkillEngine.escape`). No clocks: time is passed
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 
@@ -33,6 +34,8 @@ class StuckDetector:
         When the running episode's last progress was (s); None when not stuck.
     """
 
+    period = 0.01  # s between observations: progress is mm over tens of ms, not per tick
+
     def __init__(self, stuck_after: float):
         if not stuck_after >= 0.0:  # NaN fails too
             raise ValueError(f"stuck_after: expected a number >= 0, got {stuck_after!r}")
@@ -42,15 +45,23 @@ class StuckDetector:
         self._state = -1  # the state index the watch is for
         self._start: float | None = None  # the last progress (or the start of the push)
         self._low: list[float | None] = []  # each transition's lowest progress since then
+        self._due = -math.inf  # the next observation's time
 
     @property
     def stuck(self) -> bool:
         return self.since is not None
 
+    def due(self, now: float) -> bool:
+        """Whether a held tick at ``now`` is to be observed (at most one each
+        :attr:`period`, the first of a push at once): the caller skips measuring the
+        progress in between."""
+        return self.stuck_after > 0.0 and now >= self._due
+
     def release(self) -> None:
         """The input is not held (or the pose is not known): no watch, no episode."""
         self._start = None
         self.since = None
+        self._due = -math.inf
 
     def observe(self, now: float, state: int, progress: Sequence[float | None],
                 steps: Sequence[float]) -> bool:
@@ -72,6 +83,7 @@ class StuckDetector:
         if not progress or self.stuck_after == 0.0:
             self.release()
             return False
+        self._due = now + self.period
         if state != self._state or self._start is None or len(progress) != len(self._low):
             self._state, self._start, self._low = state, now, list(progress)
             self.since = None
