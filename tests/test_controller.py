@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd.runtime.controller import Controller, RuntimeConfig, Sample
-from sctd.skill import load_skill
+from sctd.runtime.controller import ButtonWatch, Controller, RuntimeConfig, Sample
+from sctd.skill import Bundle, load_skill, skill_from_bundle
+from tests.conftest import trap_skill_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 SKILL = load_skill(ROOT / "skills" / "pour.yaml")
@@ -405,29 +406,8 @@ def test_a_press_on_stale_input_does_nothing():
 
 # --- stuck detection and escape (thesis Ch. 6.2) ------------------------------------------
 
-TRAP_YAML = """
-sctd_skill: 1
-name: trap
-object: mug
-limits: {max_linear_speed: 0.1, max_angular_speed: 0.5}
-fsm:
-  start: free
-  end: done
-  min_dwell: 0.0
-  transitions:
-    - {from: free, to: slide, type: hyperplane, normal: [1, 0, 0], offset: -0.01, margin: 0.0}
-    - {from: slide, to: done, type: hyperplane, normal: [0, 0, 1], offset: -0.3, margin: 0.0}
-states:
-  free: {input_mapping: [{type: linear, frame: ee, axes: [tx, ty, tz]}]}
-  slide: {input_mapping: [{type: linear, frame: ee, axes: [tx]}]}
-  done: {input_mapping: [{type: linear, frame: ee, axes: [tx, ty, tz]}]}
-"""
-
-
 def trap_skill():
-    from sctd.skill import Bundle, skill_from_bundle
-
-    return skill_from_bundle(Bundle("trap.yaml", TRAP_YAML, {}))
+    return skill_from_bundle(Bundle("trap.yaml", trap_skill_yaml(0.01), {}))
 
 
 class Pad:
@@ -435,8 +415,6 @@ class Pad:
     a robot that follows the target."""
 
     def __init__(self, c):
-        from sctd.runtime.controller import ButtonWatch
-
         self.c, self.watch, self.t, self.seq = c, ButtonWatch(), 0.0, 0
 
     def run(self, steps):

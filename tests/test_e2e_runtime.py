@@ -19,7 +19,7 @@ import zenoh
 from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
-from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
+from tests.conftest import ROOT, free_port, port_is_free, sctd, trap_skill_yaml, wait_for
 
 KEYS = codec.Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
@@ -302,32 +302,12 @@ def test_swaps_on_skill_swap_and_with_a_config_file_only_there(tmp_path):
         proc.stop()
 
 
-TRAP_SKILL = """
-sctd_skill: 1
-name: trap
-object: mug
-limits: {max_linear_speed: 0.1, max_angular_speed: 0.5}
-fsm:
-  start: free
-  end: done
-  min_dwell: 0.0
-  transitions:
-    # START is at x = -0.25 in the mug's frame: 1 cm of +x enters slide
-    - {from: free, to: slide, type: hyperplane, normal: [1, 0, 0], offset: 0.24, margin: 0.0}
-    - {from: slide, to: done, type: hyperplane, normal: [0, 0, 1], offset: -0.5, margin: 0.0}
-states:
-  free: {input_mapping: [{type: linear, axes: [tx, ty, tz]}]}
-  slide: {input_mapping: [{type: linear, axes: [tx]}]}
-  done: {input_mapping: [{type: linear, axes: [tx, ty, tz]}]}
-"""
-
-
 def test_held_input_in_a_trap_is_stuck_in_status_and_escape_returns(tmp_path):
     """A state that maps only x while its way on needs z: holding x there is a stuck
     episode in status (counted once, the state named); escape (button 2) returns to the
     state before. Conditions on status contents only, however loaded the machine."""
     skill = tmp_path / "trap.yaml"
-    skill.write_text(TRAP_SKILL)
+    skill.write_text(trap_skill_yaml(-0.24))  # START is at x = -0.25 in the mug's frame
     port = free_port()
     proc = sctd("run", "--skill", str(skill), "--listen", f"tcp/127.0.0.1:{port}",
                 "--stuck-after", "0.3", log=tmp_path / "daemon.log")
