@@ -6,6 +6,11 @@ runtime calls, each tick, :meth:`SkillEngine.update` with the measured end-effec
 pose (transitions) and :meth:`SkillEngine.command` with the previous target and the
 user input (mappings, then constraints). Poses are :class:`~sctd.se3.Flat` transforms
 in the skill's object frame; no I/O, no clocks (time is passed in).
+
+The engine also keeps the path that led to the active state, so that an escape press
+returns along it (thesis Ch. 6.2: the way out of a state that traps the user), and
+measures the progress towards the active state's transitions for the runtime's
+:class:`~sctd.skill.stuck.StuckDetector`.
 """
 
 from __future__ import annotations
