@@ -19,7 +19,7 @@ from sctd.cli.procs import Child, free_port, port_is_free
 settings.register_profile("sctd", deadline=None)
 settings.load_profile("sctd")
 
-__all__ = ["ROOT", "Proc", "free_port", "port_is_free", "sctd", "wait_for"]
+__all__ = ["ROOT", "Proc", "free_port", "port_is_free", "sctd", "trap_skill_yaml", "wait_for"]
 
 ROOT = Path(__file__).resolve().parents[1]
 _live: list[subprocess.Popen] = []
@@ -76,3 +76,26 @@ def wait_for(pred, timeout: float = 10.0, interval: float = 0.02):
             return v
         time.sleep(interval)
     return pred()
+
+
+def trap_skill_yaml(enter_x: float) -> str:
+    """A skill that traps the user (thesis Ch. 6.2): ``free`` (x, y, z) enters ``slide``
+    at ``x > enter_x`` (m, the mug's frame); ``slide`` maps only x, while its way on to
+    ``done`` needs z."""
+    return f"""
+sctd_skill: 1
+name: trap
+object: mug
+limits: {{max_linear_speed: 0.1, max_angular_speed: 0.5}}
+fsm:
+  start: free
+  end: done
+  min_dwell: 0.0
+  transitions:
+    - {{from: free, to: slide, type: hyperplane, normal: [1, 0, 0], offset: {-enter_x}, margin: 0.0}}
+    - {{from: slide, to: done, type: hyperplane, normal: [0, 0, 1], offset: -0.5, margin: 0.0}}
+states:
+  free: {{input_mapping: [{{type: linear, axes: [tx, ty, tz]}}]}}
+  slide: {{input_mapping: [{{type: linear, axes: [tx]}}]}}
+  done: {{input_mapping: [{{type: linear, axes: [tx, ty, tz]}}]}}
+"""

@@ -92,3 +92,18 @@ def test_a_missing_optional_library_names_the_extra(argv, missing, extra):
     assert r.returncode == 2, r.stderr
     assert r.stderr.strip().splitlines()[-1] == (
         f"sctd {argv[0]}: needs {missing}, which is not installed: pip install 'sctd[{extra}]'"), r.stderr
+
+
+def test_stuck_after_takes_zero_for_never_and_refuses_negative():
+    import argparse
+
+    from sctd.cli.run import add_run_arguments, runtime_config
+
+    p = argparse.ArgumentParser()
+    add_run_arguments(p)
+    assert runtime_config(p.parse_args(["--skill", "pour"])).stuck_after == 5.0
+    assert runtime_config(p.parse_args(["--skill", "pour", "--stuck-after", "0"])).stuck_after == 0.0
+    with pytest.raises(ValueError, match="--stuck-after: must be >= 0"):
+        runtime_config(p.parse_args(["--skill", "pour", "--stuck-after", "-1"]))
+    with pytest.raises(ValueError, match="--rate: must be > 0"):
+        runtime_config(p.parse_args(["--skill", "pour", "--rate", "0"]))

@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd.runtime.controller import Controller, RuntimeConfig, Sample
-from sctd.skill import load_skill
+from sctd.runtime.controller import ButtonWatch, Controller, RuntimeConfig, Sample
+from sctd.skill import Bundle, load_skill, skill_from_bundle
+from tests.conftest import trap_skill_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 SKILL = load_skill(ROOT / "skills" / "pour.yaml")
@@ -401,3 +402,93 @@ def test_a_press_on_stale_input_does_nothing():
     old = Sample(1, 0.0, 0.0, u=(0, 0, 0), buttons=(1, 1, 0), presses=w.observe((1, 1, 0)))
     r = c.tick(0.5, 0.5, old, state(T_START, 0.5), Sample(0, 0.5, 0.5, F=world.F))
     assert r.state == "translate" and c.counters.presses == 0
+
+
+# --- stuck detection and escape (thesis Ch. 6.2) ------------------------------------------
+
+def trap_skill():
+    return skill_from_bundle(Bundle("trap.yaml", trap_skill_yaml(0.01), {}))
+
+
+class Pad:
+    """A controller driven by (u, buttons) steps through a ButtonWatch, 1 ms apart, with
+    a robot that follows the target."""
+
+    def __init__(self, c):
+        self.c, self.watch, self.t, self.seq = c, ButtonWatch(), 0.0, 0
+
+    def run(self, steps):
+        c, out = self.c, []
+        for u, buttons in steps:
+            meas = c.T_world_target if c.T_world_target is not None else T_WORLD_MUG
+            self.seq += 1
+            s = Sample(seq=self.seq, stamp=self.t, received=self.t, u=tuple(u), buttons=buttons,
+                       presses=self.watch.observe(buttons))
+            out.append(c.tick(self.t, self.t, s, state(meas, self.t), obj(self.t)))
+            self.t += 0.001
+        return out
+
+
+def test_held_input_in_a_trap_counts_stuck_once_and_escape_returns():
+    """slide maps only x; its way on needs z. Pushing x in it for longer than stuck_after
+    is one stuck episode (status names the state); the targets are the same as with the
+    detector off; escape (button 2) returns to free."""
+    on, off = Pad(Controller(trap_skill(), RuntimeConfig(stuck_after=0.2))), \
+        Pad(Controller(trap_skill(), RuntimeConfig(stuck_after=0.0)))
+    enable, escape = (0, 1, 0), (0, 1, 1)
+    go = [([1, 0, 0], enable)] * 150  # +x crosses free -> slide at x > 0.01 (0.1 m/s)
+    # y and z are not slide's axes: no push at all, never stuck
+    other = [([0, 1, 0], enable)] * 10 + [([0, 0, 1], enable)] * 500
+    push = [([-0.01, 0, 0], enable)] * 5 + [([0.5, 0, 0], enable)] * 300  # dead band, then x
+    for p in (on, off):
+        res = p.run(go + other)
+        assert res[-1].state == "slide" and p.c.engine.previous == "free"
+        assert p.c.counters.stuck == 0 and p.c.stuck(p.t) is None
+        res = p.run(push)
+        assert res[-1].state == "slide"
+    c = on.c
+    assert c.counters.stuck == 1 and off.c.counters.stuck == 0 and off.c.stuck(off.t) is None
+    st = c.stuck(on.t)
+    assert st["state"] == "slide" and st["since"] >= 0.2
+    # detection only: the two controllers published the same targets
+    assert np.array_equal(c.T_world_target, off.c.T_world_target)
+    # released: the episode ends; escape returns to free and is counted
+    res = on.run([([0, 0, 0], enable)] * 3 + [([0, 0, 0], escape)] * 2 + [([0, 0, 0], enable)])
+    assert c.stuck(on.t) is None and res[-1].state == "free"
+    assert c.counters.escapes == 1 and c.counters.presses == 1 and c.engine.previous is None
+    # at the start of the path escape does nothing
+    res = on.run([([0, 0, 0], escape), ([0, 0, 0], enable)])
+    assert res[-1].state == "free" and c.counters.escapes == 1 and c.counters.presses == 2
+    # the hand is still past free -> slide, which waits until it has been back once
+    res = on.run([([-1, 0, 0], enable)] * 400)
+    assert all(r.state == "free" for r in res) and c.T_world_target[0, 3] < T_WORLD_MUG[0, 3] + 0.01
+    res = on.run([([1, 0, 0], enable)] * 400)
+    assert res[-1].state == "slide" and c.engine.previous == "free"
+
+
+def test_held_input_against_a_wall_counts_stuck_progress_clears_it():
+    """pour's carry state: the arm is blocked (the measured pose stays); pushing towards
+    the mug makes no progress towards carry -> approach. Once the arm moves towards the
+    mug the episode ends."""
+    c = ctl(stuck_after=0.3)
+    blocked = T_START.copy()
+    res = run(c, [[1, 0, 0]] * 400, T_meas=blocked)
+    assert res[-1].state == "carry" and c.counters.stuck == 1
+    assert c.stuck(0.399)["state"] == "carry"
+    res = run(c, [[1, 0, 0]] * 50, t0=0.4)  # the arm follows the target again: progress
+    assert c.stuck(0.45) is None and c.counters.stuck == 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([-1.0, -0.4, 0.0, 0.3, 1.0]), st.sampled_from([0.0, 1.0]),
+                          st.sampled_from([(0, 1, 0), (0, 1, 1), (0, 0, 0)]), st.integers(1, 120)),
+                min_size=1, max_size=12))
+def test_the_stuck_detector_never_changes_a_target(events):
+    """Detection only: with the detector on (a short stuck_after) and off, any inputs,
+    escapes and deadman releases publish the same targets, states and modes."""
+    on, off = Pad(Controller(trap_skill(), RuntimeConfig(stuck_after=0.05))), \
+        Pad(Controller(trap_skill(), RuntimeConfig(stuck_after=0.0)))
+    steps = [((x, 0.0, z), b) for x, z, b, n in events for _ in range(n)]
+    for a, b in zip(on.run(steps), off.run(steps), strict=True):
+        assert (a.mode, a.state, a.pose) == (b.mode, b.state, b.pose)
+    assert off.c.counters.stuck == 0 and on.c.counters.escapes == off.c.counters.escapes

@@ -19,7 +19,7 @@ import zenoh
 from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
-from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
+from tests.conftest import ROOT, free_port, port_is_free, sctd, trap_skill_yaml, wait_for
 
 KEYS = codec.Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
@@ -297,6 +297,55 @@ def test_swaps_on_skill_swap_and_with_a_config_file_only_there(tmp_path):
         ok, body = _reply(list(s.get(KEYS.skill_swap, payload=pour.pack(), timeout=30.0)))
         assert ok and body["id"] == pour.id == old_id
         assert wait_for(lambda: rig.last()["skill"] == old_id, 5)
+    finally:
+        rig.close()
+        proc.stop()
+
+
+def test_held_input_in_a_trap_is_stuck_in_status_and_escape_returns(tmp_path):
+    """A state that maps only x while its way on needs z: holding x there is a stuck
+    episode in status (counted once, the state named); escape (button 2) returns to the
+    state before. Conditions on status contents only, however loaded the machine."""
+    skill = tmp_path / "trap.yaml"
+    skill.write_text(trap_skill_yaml(-0.24))  # START is at x = -0.25 in the mug's frame
+    port = free_port()
+    proc = sctd("run", "--skill", str(skill), "--listen", f"tcp/127.0.0.1:{port}",
+                "--stuck-after", "0.3", log=tmp_path / "daemon.log")
+    rig = Rig(port)
+    enable, escape = [0, 1, 0], [0, 1, 1]
+
+    def status():
+        with rig.lock:
+            return rig.status[-1] if rig.status else None
+
+    def push_until(u, buttons, pred, timeout=30.0):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            rig.seq += 1
+            rig.pub_in.put(codec.encode_input(rig.seq, time.time(), u, buttons))
+            s = status()
+            if s is not None and pred(s):
+                return s
+            time.sleep(0.005)
+        return None
+
+    try:
+        assert wait_for(lambda: len(rig.targets) > 50, 20), proc.output()
+        s = status()
+        assert s["state"] == "free" and s["stuck"] is None and s["counters"]["stuck"] == 0
+        assert push_until([1, 0, 0], enable, lambda s: s["state"] == "slide"), status()
+        s = push_until([1, 0, 0], enable, lambda s: s["stuck"] is not None)
+        assert s is not None, status()
+        assert s["stuck"]["state"] == "slide" and s["stuck"]["since"] >= 0.3
+        # (a robot thread stalled past the state timeout by load ends an episode early)
+        assert s["counters"]["stuck"] >= 1 and s["state"] == "slide"
+        # released: the episode ends; escape back to free
+        assert push_until([0, 0, 0], enable, lambda s: s["stuck"] is None), status()
+        s = push_until([0, 0, 0], escape, lambda s: s["state"] == "free")
+        assert s is not None, status()
+        assert s["counters"]["escapes"] == 1 and s["counters"]["stuck"] >= 1
+        assert push_until([0, 0, 0], enable, lambda s: s["mode"] == "running"), status()
+        assert status()["state"] == "free"  # the plane it is past does not take it back
     finally:
         rig.close()
         proc.stop()

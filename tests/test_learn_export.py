@@ -50,6 +50,9 @@ def test_learn_linear_writes_a_loadable_skill_and_report(pour_dir, tmp_path, cap
     rc = _learn([str(pour_dir), "--method", "linear", "--out", str(out), "--object", "mug",
                  "--frame", "tip=0,0,0.12,0,0,0,1", "--report", str(rep), "--quiet"])
     assert rc == 0, capsys.readouterr().err
+    # Ch. 6.2: s0 is no trap; s1 (ry about the tip) has no way back by motion, and says so
+    assert "s1 -> s0: no way back by motion" in capsys.readouterr().out
+    assert "s1 -> s0: no way back by motion" in out.read_text().split("sctd_skill")[0]
     skill = load_skill(out)
     assert skill.object == "mug" and [s.name for s in skill.states] == ["s0", "s1"]
     assert skill.states[1].input_mappings[0].frame == "tip"
@@ -64,6 +67,8 @@ def test_learn_linear_writes_a_loadable_skill_and_report(pour_dir, tmp_path, cap
     assert SUMMARY_HYPERPARAMETERS <= set(summary["hyperparameters"])  # both methods', as always
     assert summary["hyperparameters"]["seed"] == summary["hyperparameters"]["random_state"] == 0
     assert summary["skill"]["states"][0]["name"] == "s0"
+    (trap,) = summary["traps"]
+    assert trap["state"] == "s0" and not trap["trap"] and trap["added"] is None and not trap["way_back"]
     for fig in summary["figures"]:
         assert (rep / fig).stat().st_size > 1000
     # The runtime engine accepts it and moves the tip only by rotation in s1.

@@ -23,6 +23,8 @@ from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP, add_arguments, flag_name, from_namespace
 
+ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (the rest must be > 0)
+
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", required=True, help=SKILL_HELP)
@@ -52,8 +54,9 @@ def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
     config = from_namespace(RuntimeConfig, args)
     for f in fields(RuntimeConfig):
         value = getattr(config, f.name)
-        if isinstance(value, float) and not (value >= 0 if f.name == "deadband" else value > 0):
-            raise ValueError(f"{flag_name(f)}: must be {'>= 0' if f.name == 'deadband' else '> 0'}")
+        zero_ok = f.name in ZERO_ALLOWED
+        if isinstance(value, float) and not (value >= 0 if zero_ok else value > 0):
+            raise ValueError(f"{flag_name(f)}: must be {'>= 0' if zero_ok else '> 0'}")
     codec.Keys(config.robot)  # one key chunk
     return config
 

@@ -65,6 +65,7 @@ from .pipeline import (
 )
 from .preprocess import Prepared, Preprocessing
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
+from .traps import TrapError, TrapFinding
 from .vf import VectorFieldLearner, ransac_iterations, unit_vectors
 
 __all__ = [
@@ -80,6 +81,8 @@ __all__ = [
     "Preprocessing",
     "Progress",
     "SkillOptions",
+    "TrapError",
+    "TrapFinding",
     "VectorFieldLearner",
     "VectorFieldOptions",
     "VectorFieldResult",

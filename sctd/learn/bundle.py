@@ -88,7 +88,23 @@ def _linear_header(result: LinearResult) -> str:
         lines.append(f"  {state_name(h.source)} -> {state_name(h.target)}: hyperplane on "
                      f"{h.frame}, training accuracy {h.accuracy:.3f}, "
                      f"{'reachable' if h.reachable else 'NOT reachable by the IM'}")
+    lines += [f"  {line}" for line in trap_lines(result)]
     return "\n".join(lines)
+
+
+def trap_lines(result: LinearResult) -> list[str]:
+    """One line per trap the check fixed and per transition without a way back by
+    motion (sctd.learn.traps), for the skill's header and ``sctd learn``'s output."""
+    out = []
+    for f in result.traps:
+        a, b = state_name(f.state), state_name(f.target)
+        if f.added is not None:
+            out.append(f"{a} trapped the user (reach {f.reach:.2f} of the plane to {b}): "
+                       f"added {f.added}")
+        if not f.way_back:
+            out.append(f"{b} -> {a}: no way back by motion from where {b} is entered "
+                       "(escape, button 2, returns)")
+    return out
 
 
 def vf_model(result: VectorFieldResult, fields: tuple[int, ...] | None = None) -> VectorFieldModel:

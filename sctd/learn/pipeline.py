@@ -24,6 +24,7 @@ from .frames import automatic_frames, frames_to_use
 from .linear import LinearIMLearner, Progress
 from .preprocess import Preprocessing, preprocess, raw_labels
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
+from .traps import fix_traps
 from .vf import VectorFieldLearner
 from .vfstates import StatePlan, plan_states
 
@@ -59,6 +60,12 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     options : SkillOptions, optional
     progress : callable(str), optional
         Called with each stage of ``STAGES["linear"]`` as it ends.
+
+    Raises
+    ------
+    sctd.learn.traps.TrapError
+        A learned state traps the user (Ch. 6.2) and has no free input axis; one with a
+        free axis gets the missing DoF (``result.traps`` says which).
     """
     learner = LinearIMLearner() if learner is None else learner
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
@@ -72,12 +79,14 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     if progress:
         progress("preprocess")
     t1 = time.perf_counter()
-    learner.fit([se3.transform_from_pose(p.poses) for p in prepared],
-                {k: se3.transform_from_pose(v) for k, v in pose_of.items()}, progress=progress)
+    T_obj_ee: list[ArrayLike] = [se3.transform_from_pose(p.poses) for p in prepared]
+    learner.fit(T_obj_ee, {k: se3.transform_from_pose(v) for k, v in pose_of.items()},
+                progress=progress)
+    traps = fix_traps(learner, T_obj_ee)  # Ch. 6.2: a state that traps gets the missing DoF
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     options = SkillOptions() if options is None else options
-    return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings,
+    return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings, traps,
                         found_frames=found)
 
 

@@ -17,6 +17,7 @@ from .frames import FoundFrame
 from .linear import LinearIMLearner
 from .params import get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
+from .traps import TrapFinding
 from .vf import VectorFieldLearner
 from .vfstates import StatePlan
 
@@ -106,6 +107,7 @@ class LinearResult:
     learner: LinearIMLearner
     labels: dict[str, list[int]]  # demo -> state index per raw displacement
     timings: dict[str, float] = field(default_factory=dict)
+    traps: list[TrapFinding] = field(default_factory=list)  # per transition (sctd.learn.traps)
     found_frames: list[FoundFrame] = field(default_factory=list)  # found, not given (frames.py)
 
     def hyperparameters(self) -> dict[str, Any]:

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..skill import Skill
 from ..skill.summary import field_summary, skill_summary
-from .bundle import rounded, state_name
+from .bundle import rounded, state_name, trap_lines
 from .linear import AXIS_NAMES
 from .results import LinearResult, VectorFieldResult
 
@@ -26,6 +26,8 @@ def _linear_summary(result: LinearResult) -> dict[str, Any]:
                          "frame": h.frame, "accuracy": round(h.accuracy, 4),
                          "reachable": h.reachable, "candidates": h.candidates}
                         for h in L.transitions_],
+        "traps": [f.summary(state_name) for f in result.traps],
+        "trap_notes": trap_lines(result),
         "energy": {"initial": L.energy_initial_, "final": L.energy_},
         "graph_labels": {p.name: [L.labels_[j].name for j in f]
                          for p, f in zip(result.prepared, L.graph_labels_, strict=True)},

@@ -12,6 +12,7 @@ the points of consecutive fields, eq. 4.17), or says why they stay blended.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import NDArray
@@ -93,7 +94,7 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accurac
                                 f"{when.shape[0]} demonstrations")
     order = tuple(int(m) for m in np.argsort(np.nanmedian(when, axis=0)))
     timing = {}
-    for m0, m1 in zip(order, order[1:], strict=False):
+    for m0, m1 in pairwise(order):
         both = np.isfinite(when[:, m0]) & np.isfinite(when[:, m1])
         share = float(np.mean(when[both, m0] < when[both, m1])) if both.any() else 0.0
         timing[f"{m0}->{m1}"] = round(share, 3)
@@ -101,7 +102,7 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accurac
             return StatePlan(reason=f"field {m0} comes before field {m1} in only {share:.0%} of the "
                                     "demonstrations", timing=timing)
     transitions = []
-    for m0, m1 in zip(order, order[1:], strict=False):
+    for m0, m1 in pairwise(order):
         A, B = learner.points_[a == m0], learner.points_[a == m1]
         X = np.concatenate([A, B])
         y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])

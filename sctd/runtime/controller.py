@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
-from ..skill import Skill, SkillEngine
-from .codec import BUTTON_ENABLE
+from ..skill import Skill, SkillEngine, StuckDetector
+from .codec import BUTTON_ENABLE, BUTTON_ESCAPE
 from .safety import grows_offset, limit_step, sanitize_input
 
 Array = NDArray[np.float64]
@@ -59,6 +59,9 @@ class RuntimeConfig:
                                         "discontinuity before the target is re-seeded at the "
                                         "measured pose")
     status_rate: float = _setting(20.0, "Hz of the status messages")
+    stuck_after: float = _setting(5.0, "s of held input without progress towards any of the "
+                                       "active state's transitions that count as stuck "
+                                       "(status.stuck, counters.stuck; 0: never)")
 
     @property
     def period(self) -> float:
@@ -164,6 +167,8 @@ class Counters:
     state_discontinuity: int = 0
     reseeds: int = 0
     transitions: int = 0
+    escapes: int = 0
+    stuck: int = 0
     swaps: int = 0
     drops: dict[str, int] = field(default_factory=dict)
 
@@ -209,6 +214,7 @@ class Controller:
         self._T_obj_target: se3.Flat | None = None  # the target in the object frame
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
+        self.stuck_detector = StuckDetector(config.stuck_after)
         self._install(skill, now=0.0, keep_state=False)
 
     @property
@@ -229,6 +235,14 @@ class Controller:
         lim = skill.limits
         self.v_max = min(lim.max_linear_speed, self.config.max_linear_speed)
         self.w_max = min(lim.max_angular_speed, self.config.max_angular_speed)
+
+    def stuck(self, now: float) -> dict[str, object] | None:
+        """``status.stuck``: the state the user is stuck in and for how long (s) the held
+        input has made no progress, or None."""
+        since = self.stuck_detector.since
+        if since is None:
+            return None
+        return {"state": self.engine.state, "since": round(now - since, 3)}
 
     def swap(self, skill: Skill, now: float, engine: SkillEngine | None = None) -> None:
         """Replace the skill between two ticks; keep the active state if the new skill
@@ -258,6 +272,7 @@ class Controller:
         obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
         held = self._gate(now, state, state_ok, obj_ok, u, in_seq)
         if held is not None:
+            self.stuck_detector.release()  # where the hand is is not known or not moving
             return held
         assert state is not None and state.F is not None and obj is not None and obj.F is not None
         # The tick works in the object frame, where the skill is, on flat poses (12
@@ -271,14 +286,31 @@ class Controller:
         if seeding:
             self._seed(F_meas, now)
         force = None if state.wrench is None else self._force_in_object(state.wrench)
-        changed = self.engine.update(F_meas, now, force, pressed)
+        engine = self.engine
+        changed = engine.update(F_meas, now, force, pressed, BUTTON_ESCAPE)
         if changed:
             self.counters.transitions += 1
-        if not seeding:
-            self._move(u, F_meas)
+            self.counters.escapes += engine.escaped
+        # a (re-)seed tick moves nothing: no push, and the stuck watch restarts
+        self._watch(now, not seeding and self._move(u, F_meas), F_meas, force)
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
                           input_ok, self._pose)
+
+    def _watch(self, now: float, held: bool, F_meas: se3.Flat, force: Array | None) -> None:
+        """Feed the stuck detector: whether the input is held (pushed on the active
+        state's axes) and the measured pose's progress towards the state's transitions.
+        It only watches; nothing here changes the target."""
+        det = self.stuck_detector
+        if not held:
+            det.release()
+            return
+        if not det.due(now):
+            return
+        engine = self.engine
+        was = det.episodes
+        det.observe(now, engine.index, engine.progress(F_meas, now, force), engine.progress_steps)
+        self.counters.stuck += det.episodes - was
 
     def _gate(self, now: float, state: Sample | None, state_ok: bool, obj_ok: bool,
               u: tuple[float, ...], in_seq: int) -> TickResult | None:
@@ -334,9 +366,11 @@ class Controller:
         return np.array([r[0] * fx + r[1] * fy + r[2] * fz, r[3] * fx + r[4] * fy + r[5] * fz,
                          r[6] * fx + r[7] * fy + r[8] * fz])
 
-    def _move(self, u: tuple[float, ...], F_meas: se3.Flat) -> None:
+    def _move(self, u: tuple[float, ...], F_meas: se3.Flat) -> bool:
         """Step the target by the active mappings' command for ``u``, bounded and refused
-        when it would grow the offset to the measured pose past the limit."""
+        when it would grow the offset to the measured pose past the limit. Returns
+        whether the user pushes (``u`` non-zero on the active state's axes), moved or
+        not."""
         cfg = self.config
         F_prev = self._T_obj_target
         if F_prev is None:
@@ -349,16 +383,17 @@ class Controller:
         n = len(u)
         mag = math.sqrt(sum(u[j] * u[j] for j in self.engine.input_axes if j < n))
         if not mag > 0.0:  # zero (or, fail-closed, NaN): no step
-            return
+            return False
         mag = min(1.0, mag)
         F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
                            mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
         if F_new is F_prev:
-            return
+            return True
         if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
             self.counters.offset_limited += 1  # refused: the arm lags or is blocked
         elif not self._accept(F_new):
             self.counters.nonfinite_output += 1  # never publish a non-finite target
+        return True
 
     def _quiet(self, mode: str, in_seq: int) -> TickResult:
         """A tick that publishes nothing; the next target will be a (re-)seed."""

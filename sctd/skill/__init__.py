@@ -18,6 +18,7 @@ from .mappings import MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
 from .model import AXIS_NAMES, WORLD_OBJECT, Frame, Limits, Skill, State, VectorFieldModel
 from .modelfile import vector_field_model_from_bytes, vector_field_model_to_bytes
 from .registry import Registry
+from .stuck import StuckDetector
 from .summary import field_summary, skill_summary
 from .transitions import TRANSITIONS, Button, Distance, Force, Hyperplane, Timeout, Transition
 from .workspace import Workspace
@@ -50,6 +51,7 @@ __all__ = [
     "SkillError",
     "SphereField",
     "State",
+    "StuckDetector",
     "TiltCone",
     "Timeout",
     "Transition",

@@ -6,11 +6,17 @@ runtime calls, each tick, :meth:`SkillEngine.update` with the measured end-effec
 pose (transitions) and :meth:`SkillEngine.command` with the previous target and the
 user input (mappings, then constraints). Poses are :class:`~sctd.se3.Flat` transforms
 in the skill's object frame; no I/O, no clocks (time is passed in).
+
+The engine also keeps the path that led to the active state, so that an escape press
+returns along it (thesis Ch. 6.2: the way out of a state that traps the user), and
+measures the progress towards the active state's transitions for the runtime's
+:class:`~sctd.skill.stuck.StuckDetector`.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Sequence, Set
 
 import numpy as np
@@ -24,6 +30,8 @@ from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
+
+HISTORY = 64  # states remembered for escape (a path longer than that forgets its start)
 
 
 class SkillEngine:
@@ -40,6 +48,12 @@ class SkillEngine:
         self.workspace = Workspace(skill)
         self._out_of: list[list[Transition]] = [
             [t for t in skill.transitions if t.source == s.name] for s in skill.states]
+        # What the stuck detector watches: the transitions whose progress the pose
+        # measures (not buttons), none in the end state (the task is done there).
+        self._watched: list[tuple[Transition, ...]] = [
+            () if s.name == skill.end else tuple(t for t in out if math.isfinite(t.progress_step))
+            for s, out in zip(skill.states, self._out_of, strict=True)]
+        self._steps = [tuple(t.progress_step for t in w) for w in self._watched]
         self._axes: list[tuple[int, ...]] = []
         for s in skill.states:
             axes: set[int] = set()
@@ -48,6 +62,10 @@ class SkillEngine:
             self._axes.append(tuple(sorted(axes)))
         self.index = skill.state_index(skill.start)
         self.entered = 0.0
+        # The path that led to the active state (state indices, the newest last).
+        self.history: deque[int] = deque(maxlen=HISTORY)
+        self.escaped = False  # the last update's change was an escape
+        self._disarmed: set[int] = set()  # the active state's guards an escape disarmed
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -77,15 +95,26 @@ class SkillEngine:
         records it next to each command."""
         return self.workspace.membership
 
+    @property
+    def previous(self) -> str | None:
+        """The state the active one was entered from (where escape returns), or None."""
+        return self.skill.states[self.history[-1]].name if self.history else None
+
     def reset(self, now: float, state: str | None = None) -> None:
-        """Enter ``state`` (default: the start state) at time ``now``."""
-        self.index = self.skill.state_index(state or self.skill.start)
+        """Enter ``state`` (default: the start state) at time ``now``; a new path for
+        escape unless it is the active state already (a re-seed keeps its way back)."""
+        index = self.skill.state_index(state or self.skill.start)
+        if index != self.index:
+            self.history.clear()
+            self._disarmed = set()
+        self.index = index
         self.entered = now
 
     def update(self, F_obj_ee: Flat, now: float, force_obj: Array | None = None,
-               pressed: Set[int] = frozenset()) -> bool:
+               pressed: Set[int] = frozenset(), escape: int | None = None) -> bool:
         """Evaluate the active state's transitions on the measured pose; follow the first
-        that fires. Returns True when the state changed.
+        that fires. Returns True when the state changed (``escaped`` says whether by
+        escape).
 
         Parameters
         ----------
@@ -97,25 +126,70 @@ class SkillEngine:
             Measured force at the end-effector, in the object frame (N).
         pressed : set of int
             Input buttons pressed since the last update (rising edges).
+        escape : int, optional
+            The escape button: pressed while no button transition of the active state
+            takes it, it returns to the state the active one was entered from (thesis
+            Ch. 6.2: the way out of a state that traps the user); nothing at the start
+            of the path.
         """
+        self.escaped = False
         # A button press is an event, not a condition: it acts however long the state has
         # been active (the dwell only keeps geometric guards from chattering).
         if pressed:
             for t in self._out_of[self.index]:
                 if t.pressed(pressed):
                     return self._enter(t.target, now)
+            if escape is not None and escape in pressed and self.history:
+                return self._escape(now)
         elapsed = now - self.entered
         if elapsed < self.skill.min_dwell:
             return False
-        for t in self._out_of[self.index]:
+        disarmed = self._disarmed
+        for i, t in enumerate(self._out_of[self.index]):
             if t.fires(F_obj_ee, elapsed, force_obj, self.workspace):
-                return self._enter(t.target, now)
+                if i not in disarmed:
+                    return self._enter(t.target, now)
+            elif disarmed:
+                disarmed.discard(i)
         return False
 
-    def _enter(self, state: str, now: float) -> bool:
-        self.index = self.skill.state_index(state)
-        self.entered = now
+    def _escape(self, now: float) -> bool:
+        """Back to the state the active one was entered from. The guards that lead from
+        there to the state escaped from are disarmed until they have not held once: the
+        hand is still where it crossed them, and escape would otherwise be undone at the
+        next tick."""
+        left = self.state
+        self._enter(self.skill.states[self.history[-1]].name, now)
+        self.escaped = True
+        self._disarmed = {i for i, t in enumerate(self._out_of[self.index]) if t.target == left}
         return True
+
+    def _enter(self, state: str, now: float) -> bool:
+        index = self.skill.state_index(state)
+        if self.history and self.history[-1] == index:
+            self.history.pop()  # back the way it came: the path gets shorter
+        else:
+            self.history.append(self.index)
+        self.index = index
+        self.entered = now
+        self._disarmed = set()
+        return True
+
+    # --- progress (the stuck detector's view) -------------------------------------------
+
+    @property
+    def progress_steps(self) -> tuple[float, ...]:
+        """Each watched transition's ``progress_step`` (the order of :meth:`progress`)."""
+        return self._steps[self.index]
+
+    def progress(self, F_obj_ee: Flat, now: float, force_obj: Array | None = None
+                 ) -> list[float | None]:
+        """The progress towards each of the active state's watched transitions (those
+        the pose measures; none in the end state), for
+        :class:`~sctd.skill.stuck.StuckDetector`. Same parameters as :meth:`update`."""
+        elapsed = now - self.entered
+        ws = self.workspace
+        return [t.progress(F_obj_ee, elapsed, force_obj, ws) for t in self._watched[self.index]]
 
     # --- command -----------------------------------------------------------------------
 

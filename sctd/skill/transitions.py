@@ -70,6 +70,17 @@ class Transition(ABC):
         event, acting however long the state has been active."""
         return False
 
+    progress_step: ClassVar[float] = math.inf
+    """How much :meth:`progress` must grow to count as a step towards firing (its unit;
+    above the measurement's noise). Infinite for a kind that measures none."""
+
+    def progress(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> float | None:
+        """How close the guard is to firing, a number that grows towards it (the runtime's
+        stuck detector, :class:`~sctd.skill.stuck.StuckDetector`); None for a kind whose
+        way forward is not measured by the pose (a button). Same parameters as
+        :meth:`fires`."""
+        return None
+
 
 TRANSITIONS: Registry[Transition] = Registry("transition")
 
@@ -108,10 +119,17 @@ class Hyperplane(Transition):
         return {"frame": self.frame, "normal": plain(self.normal), "offset": self.offset,
                 "margin": self.margin}
 
+    progress_step: ClassVar[float] = 0.002  # m
+
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        return self.progress(F, elapsed, force, ws) > self.margin
+
+    def progress(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> float:
+        """The signed distance (m) of the frame's position from the plane, positive on
+        the ``target`` side: the SVM's decision value."""
         G = ws.frame_pose(F, self.frame)
         nx, ny, nz = self._normal3
-        return nx * G[9] + ny * G[10] + nz * G[11] + self.offset > self.margin
+        return nx * G[9] + ny * G[10] + nz * G[11] + self.offset
 
 
 @TRANSITIONS.register
@@ -148,14 +166,24 @@ class Distance(Transition):
         return {"frame": self.frame, "point": plain(self.point), "margin": self.margin,
                 self.direction: self.threshold}
 
+    progress_step: ClassVar[float] = 0.002  # m
+
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
-        G = ws.frame_pose(F, self.frame)
-        cx, cy, cz = self._point3
-        dx, dy, dz = G[9] - cx, G[10] - cy, G[11] - cz
-        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        d = self._distance(F, ws)
         if self.direction == "below":
             return d < self.threshold - self.margin
         return d > self.threshold + self.margin
+
+    def progress(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> float:
+        """The distance (m), negated for ``below``: it grows as the frame nears firing."""
+        d = self._distance(F, ws)
+        return -d if self.direction == "below" else d
+
+    def _distance(self, F: Flat, ws: Workspace) -> float:
+        G = ws.frame_pose(F, self.frame)
+        cx, cy, cz = self._point3
+        dx, dy, dz = G[9] - cx, G[10] - cy, G[11] - cz
+        return math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 @TRANSITIONS.register
@@ -174,8 +202,14 @@ class Timeout(Transition):
     def _parameters(self) -> dict[str, Any]:
         return {"after": self.after}
 
+    progress_step: ClassVar[float] = 0.0  # s: time alone carries it forward
+
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
         return elapsed >= self.after
+
+    def progress(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> float:
+        """The time in the state (s): a timeout is always on its way."""
+        return elapsed
 
 
 @TRANSITIONS.register
@@ -202,11 +236,17 @@ class Force(Transition):
         return {"above": self.above, "axis": None if self.axis is None else plain(self.axis),
                 "margin": self.margin}
 
+    progress_step: ClassVar[float] = 0.5  # N
+
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        f = self.progress(F, elapsed, force, ws)
+        return f is not None and f > self.above + self.margin
+
+    def progress(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> float | None:
+        """The measured force along the axis, or its norm (N); None without a force."""
         if force is None:
-            return False
-        f = float(np.dot(force, self.axis)) if self.axis is not None else float(np.linalg.norm(force))
-        return f > self.above + self.margin
+            return None
+        return float(np.dot(force, self.axis)) if self.axis is not None else float(np.linalg.norm(force))
 
 
 @TRANSITIONS.register

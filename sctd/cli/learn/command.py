@@ -165,6 +165,8 @@ def main_learn(args: argparse.Namespace) -> int:
         print(f"frame {f['name']} found in the demonstrations ({f['kind']} "
               f"{'centre' if f['kind'] == 'sphere' else 'axis'}, ee offset "
               f"[{', '.join(f'{x:.3f}' for x in f['pose'][:3])}], spread {f['spread'] * 1000:.1f} mm)")
+    for note in summary.get("trap_notes", []):  # Ch. 6.2: states that trap the user
+        print(f"  {note}")
     if args.report is not None:
         print(f"report in {args.report}")
     return 0
