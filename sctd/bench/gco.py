@@ -42,7 +42,7 @@ from ..learn import (
 )
 from ..learn.preprocess import preprocess
 
-GCO_INSTALL = "pip install gco-wrapper (or the extra: pip install -e '.[bench]')"
+GCO_INSTALL = "pip install gco-wrapper; it is in the dev extra"
 _GCO_TERM_RANGE = 2**20  # the largest scaled node term; GCO's capacities are int32
 
 

@@ -115,7 +115,8 @@ class _Potts:
     @classmethod
     def of(cls, U: Array, E: IntArray, w: Array, lam: float) -> _Potts:
         wl = lam * w
-        return cls(U, E, w, lam, wl, np.bincount(E.reshape(-1), np.repeat(wl, 2), len(U)))
+        degree = np.asarray(np.bincount(E.reshape(-1), np.repeat(wl, 2), len(U)), dtype=np.float64)
+        return cls(U, E, w, lam, wl, degree)
 
     def energy(self, f: IntArray) -> float:
         return energy(self.U, self.E, self.w, self.lam, f)
@@ -125,10 +126,11 @@ class _Potts:
         n, L = self.U.shape
         eu, ev = self.E[:, 0], self.E[:, 1]
         key = np.concatenate([eu * L + f[ev], ev * L + f[eu]])
-        return np.bincount(key, np.concatenate([self.wl, self.wl]), n * L).reshape(n, L)
+        N = np.bincount(key, np.concatenate([self.wl, self.wl]), n * L).reshape(n, L)
+        return np.asarray(N, dtype=np.float64)
 
 
-def _swap_candidates(problem: _Potts, f: IntArray, pairs: tuple[IntArray, IntArray]
+def _swap_candidates(problem: _Potts, f: IntArray, pairs: tuple[IntArray, ...]
                      ) -> NDArray[np.bool_]:
     """Which label pairs' swap moves might lower the energy (a cheap lower bound).
 
@@ -158,7 +160,7 @@ def _expansion_candidates(problem: _Potts, f: IntArray, labels: tuple[IntArray, 
     gain_pairwise = problem.degree - problem.neighbour_weight(f)[rows, f]
     profits = (U - U[rows, f][:, None] - gain_pairwise[:, None]) < 0
     profits[rows, f] = False
-    return profits.any(axis=0)[labels[0]]
+    return np.asarray(profits.any(axis=0))[labels[0]]
 
 
 def _label_pairs(L: int) -> tuple[IntArray, IntArray]:
