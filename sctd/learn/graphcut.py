@@ -130,6 +130,13 @@ class _Potts:
         return np.asarray(N, dtype=np.float64)
 
 
+def _problem(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
+             labels: ArrayLike | None) -> tuple[_Potts, IntArray]:
+    """The validated problem and the initial labelling."""
+    U, E, w, f = _check(unary, edges, weights, labels)
+    return _Potts.of(U, E, w, float(smoothness)), f
+
+
 def _swap_candidates(problem: _Potts, f: IntArray, pairs: tuple[IntArray, ...]
                      ) -> NDArray[np.bool_]:
     """Which label pairs' swap moves might lower the energy (a cheap lower bound).
@@ -195,10 +202,10 @@ class _Kind:
     move: Callable[[_Potts, IntArray, tuple[int, ...]], IntArray | None]
 
 
-def _descend(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
-             labels: ArrayLike | None, max_cycles: int, kind: _Kind) -> IntArray:
-    """Shared driver of both algorithms: cycle over the moves in order, keep each
-    proposal that lowers the energy, stop after a cycle without improvement.
+def _descend(problem: _Potts, f: IntArray, max_cycles: int, kind: _Kind) -> IntArray:
+    """Shared driver of both kinds of move: from the labelling ``f``, cycle over the
+    moves in order, keep each proposal that lowers the energy, stop after a cycle
+    without improvement (or ``max_cycles`` cycles).
 
     A move is not tried when it cannot lower the energy: when ``kind.candidates``
     rules it out for the current labelling, or when it already ran (accepted or not)
@@ -207,10 +214,9 @@ def _descend(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness:
     ``t`` at which the nodes labelled l last changed and ``tried_at[k]`` the ``t`` at
     which move k last ran.
     """
-    U, E, w, f = _check(unary, edges, weights, labels)
-    problem = _Potts.of(U, E, w, float(smoothness))
-    keys = kind.keys(U.shape[1])
-    changed_at = np.zeros(U.shape[1], dtype=np.int64)
+    L = problem.U.shape[1]
+    keys = kind.keys(L)
+    changed_at = np.zeros(L, dtype=np.int64)
     tried_at = np.full(len(keys[0]), -1, dtype=np.int64)
     t = 0
     best = problem.energy(f)
@@ -307,7 +313,13 @@ def alpha_beta_swap(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoo
     are Table A.1's ``t^alpha_p = D_p(alpha) + sum_{q not in P_ab} V(alpha, f_q)`` and
     whose neighbour links are ``V(alpha, beta) = smoothness * w_pq``. Cycles over all
     pairs repeat until no move lowers the energy. Each accepted move never raises the
-    energy.
+    energy, and the result is a local minimum with respect to every swap move.
+
+    The swap moves start from :func:`alpha_expansion`'s result for ``labels`` rather
+    than from ``labels`` itself: expansion reaches lower Potts minima (within twice the
+    optimum, Boykov et al. 2001) in far fewer cuts, and the swap cycles then only
+    polish it. On the learner's segmentation energies this ends at or below GCO's
+    swap from the same start (``sctd bench learn``).
 
     Parameters
     ----------
@@ -319,14 +331,16 @@ def alpha_beta_swap(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoo
     labels : array-like, shape (n,), optional
         Initial labelling; default the per-node argmin of ``unary``.
     max_cycles : int
-        Upper bound on full cycles over the label pairs.
+        Upper bound on full cycles over the labels (expansion), then over the label
+        pairs (swap).
 
     Returns
     -------
     ndarray, shape (n,) of int
         The labelling.
     """
-    return _descend(unary, edges, weights, smoothness, labels, max_cycles, _SWAP)
+    problem, f = _problem(unary, edges, weights, smoothness, labels)
+    return _descend(problem, _descend(problem, f, max_cycles, _EXPANSION), max_cycles, _SWAP)
 
 
 def alpha_expansion(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoothness: float,
@@ -341,4 +355,5 @@ def alpha_expansion(unary: ArrayLike, edges: ArrayLike, weights: ArrayLike, smoo
     -------
     ndarray, shape (n,) of int
     """
-    return _descend(unary, edges, weights, smoothness, labels, max_cycles, _EXPANSION)
+    problem, f = _problem(unary, edges, weights, smoothness, labels)
+    return _descend(problem, f, max_cycles, _EXPANSION)
