@@ -163,7 +163,9 @@ def test_swap_matches_independent_reference(seed):
     f1 = alpha_beta_swap(U, E, w, 0.3)
     f2 = reference_swap(U, E, w, 0.3)
     e1, e2 = energy(U, E, w, 0.3, f1), energy(U, E, w, 0.3, f2)
-    assert abs(e1 - e2) <= 0.01 * e2
+    assert e1 <= 1.01 * e2  # ours starts from alpha-expansion's minimum: it may end lower
+    # The independent swap finds no move that lowers our result.
+    assert energy(U, E, w, 0.3, reference_swap(U, E, w, 0.3, labels=f1)) >= e1 - _tol(e1)
 
 
 @pytest.mark.parametrize("make", [lambda s: segmentation_instance(s, "pour"),

@@ -148,7 +148,8 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
     drawer = demogen.generate("drawer", n_demos, noise=noise, outliers=outliers, seed=seed)
     _bench_vf_drawer(drawer, seed, out)
     out["swap_vs_reference"] = _bench_swap(lin, seed)
-    out["swap_max_rel_diff"] = max(abs(r["rel_diff"]) for r in out["swap_vs_reference"])
+    # One-sided: our swap starts from alpha-expansion's minimum and may end lower.
+    out["swap_max_rel_diff"] = max(r["rel_diff"] for r in out["swap_vs_reference"])
     out["swap_vs_gco"] = run_gco_bench(gco_instances, seed)
     return out
 
@@ -268,7 +269,7 @@ def format_bench(r: dict[str, Any]) -> str:
         f"vf drawer {r['vf_drawer_time_s']:.2f} s (scikit-learn import "
         f"{r['sklearn_import_s']:.2f} s not included) target <= 5 s",
         f"[{ok(r['swap_max_rel_diff'] <= 0.01)}] alpha-beta swap vs independent reference: "
-        f"max relative energy difference {r['swap_max_rel_diff']:.2e} target <= 1 %",
+        f"max relative energy excess {r['swap_max_rel_diff']:.2e} target <= 1 %",
     ]
     for row in r["swap_vs_reference"]:
         lines.append(f"      {row['case']:<13} n={row['nodes']:<4} L={row['labels']:<3} "
