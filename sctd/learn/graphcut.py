@@ -7,7 +7,10 @@ The energy of a labelling ``f`` (eqs. 4.13-4.16) is
 over edges ``e = (u, v)``. :func:`alpha_beta_swap` (Boykov, Veksler and Zabih 2001,
 Algorithm 8 of the thesis) and :func:`alpha_expansion` reach a local minimum with
 respect to swap and expansion moves; each move is one s-t minimum cut on PyMaxflow,
-with the move's graph built by vectorised numpy (no Python loop over edges).
+with the move's graph built by vectorised numpy (no Python loop over edges). The swap
+starts from the expansion's minimum. Moves that cannot lower the energy are not cut:
+those a per-node lower bound on their gain rules out, and those whose labels' nodes
+have not changed since they last ran (:func:`_descend`).
 
 Convention for the binary moves: a node in the source segment (segment 0) keeps its
 "0" choice, one in the sink segment takes the "1" choice. A node's terminal capacities
