@@ -5,12 +5,14 @@ cannot help, and match the independent reference swap and GCO's swap."""
 from __future__ import annotations
 
 import itertools
+import sys
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sctd.bench import gco as gco_bench
 from sctd.bench.gco import chain_instance, gco_swap, segmentation_instance
 from sctd.bench.learn import reference_swap
 from sctd.learn import alpha_beta_swap, alpha_expansion, energy
@@ -184,6 +186,20 @@ def test_swap_energy_matches_gco(make, seed):
     e_ours = energy(U, E, w, lam, alpha_beta_swap(U, E, w, lam))
     assert e_gco <= energy(U, E, w, lam, f0)  # the scaled integer problem is the same one
     assert e_ours <= 1.005 * e_gco
+
+
+def test_gco_bench_reports_both_or_says_gco_is_missing(monkeypatch):
+    r = gco_bench.run_gco_bench(2)
+    assert r["available"] and len(r["instances"]) == 2
+    assert r["energy_ratio_max"] == max(x["ours"] / x["gco"] for x in r["instances"])
+    lines = gco_bench.format_gco_bench(r)
+    assert len(lines) == 4 and "energy ours / GCO max" in lines[0]
+    monkeypatch.setitem(sys.modules, "gco", None)  # import gco raises ImportError
+    r = gco_bench.run_gco_bench(2)
+    assert not r["available"] and r["reason"].startswith("ModuleNotFoundError")
+    assert gco_bench.format_gco_bench(r) == [
+        f"[--- ] alpha-beta swap vs GCO: GCO not installed ({r['reason']}; "
+        f"{gco_bench.GCO_INSTALL})"]
 
 
 def test_smoothness_zero_is_argmin_and_large_is_constant():

@@ -20,8 +20,8 @@ Its time is reported twice: everything ``gco.cut_general_graph`` does (build the
 graph, set the initial labels one ctypes call per node, swap), as a caller pays it,
 and the swap alone.
 
-GCO is optional: :func:`run_gco_bench` returns ``{"available": False, ...}`` when
-``import gco`` fails.
+GCO is optional: :func:`run_gco_bench` returns ``{"available": False, "reason": ...}``
+when ``import gco`` fails.
 """
 
 from __future__ import annotations
@@ -142,12 +142,10 @@ def gco_swap(gco: Any, unary, edges, weights, smoothness: float, labels
 
 
 def _import_gco() -> Any:
-    """The ``gco`` module, or None. (Importing it sets ``numpy.int``, ``numpy.float`` and
+    """The ``gco`` module. (Importing it sets ``numpy.int``, ``numpy.float`` and
     ``numpy.bool`` to the builtins when numpy lacks them, for its own old code.)"""
-    try:
-        import gco
-    except ImportError:
-        return None
+    import gco
+
     return gco
 
 
@@ -167,9 +165,10 @@ def instances(n_instances: int, seed: int = 0) -> Iterator[tuple[str, int, Probl
 def run_gco_bench(n_instances: int = 20, seed: int = 0) -> dict[str, Any]:
     """Our swap and GCO's on ``n_instances`` segmentation-shaped instances
     (:func:`instances`). Ratios are ours / GCO's."""
-    gco = _import_gco()
-    if gco is None:
-        return {"available": False, "install": GCO_INSTALL}
+    try:
+        gco = _import_gco()
+    except (ImportError, OSError) as e:  # absent, or its compiled library will not load
+        return {"available": False, "reason": f"{type(e).__name__}: {e}", "install": GCO_INSTALL}
     rows = []
     for task, s, (U, E, w, lam) in instances(n_instances, seed):
         f0 = np.argmin(U, axis=1)
@@ -198,7 +197,7 @@ def format_gco_bench(r: dict[str, Any]) -> list[str]:
     """Report lines of :func:`run_gco_bench` with the issue's targets (energy <= GCO's
     x 1.005 on every instance, time <= 10 x GCO's), then one line per instance."""
     if not r["available"]:
-        return [f"[--- ] alpha-beta swap vs GCO: GCO not installed ({r['install']})"]
+        return [f"[--- ] alpha-beta swap vs GCO: GCO not installed ({r['reason']}; {r['install']})"]
     rows = r["instances"]
     ok_e, ok_t = r["energy_ratio_max"] <= 1.005, r["time_ratio_median"] <= 10
     lines = [
