@@ -163,13 +163,10 @@ def vf_skill_doc(result: VectorFieldResult, name: str, model: str) -> dict[str, 
         files = state_model_files(result, model)
         names = [state_name(k) for k in range(len(plan.order))]
         transitions = []
-        for h in plan.transitions:
+        for h in plan.transitions:  # on when the hand is where the demonstrations switched
             a, b = names[plan.order.index(h.source)], names[plan.order.index(h.target)]
-            n, o = rounded(h.normal, 6), round(float(h.offset), 6)
-            transitions.append({"from": a, "to": b, "type": "hyperplane", "frame": "ee",
-                                "normal": n, "offset": o, "margin": h.margin})
-            transitions.append({"from": b, "to": a, "type": "hyperplane", "frame": "ee",
-                                "normal": [-x for x in n], "offset": -o, "margin": h.margin})
+            transitions.append({"from": a, "to": b, "type": "distance", "frame": "ee",
+                                "point": rounded(h.point), "below": round(h.radius, 6), "margin": 0.0})
         doc["fsm"] = {"start": names[0], "end": names[-1], "min_dwell": 0.1, "transitions": transitions}
         doc["states"] = {nm: _vf_state(result, rel, [L.fields_[m]])
                          for nm, rel, m in zip(names, files, plan.order, strict=True)}
@@ -194,8 +191,10 @@ def _vf_header(result: VectorFieldResult) -> str:
     if plan.sequential:
         for h in plan.transitions:
             lines.append(f"  {state_name(plan.order.index(h.source))} -> "
-                         f"{state_name(plan.order.index(h.target))}: hyperplane on ee, training "
-                         f"accuracy {h.accuracy:.3f}")
+                         f"{state_name(plan.order.index(h.target))}: the hand within "
+                         f"{h.radius * 100:.1f} cm of {rounded(h.point, 3)}, where the "
+                         f"demonstrations switched ({h.spread * 100:.1f} cm RMS apart); escape "
+                         "(button 2) goes back")
     else:
         lines.append(f"  one state blends the fields ({plan.reason})")
     return "\n".join(lines)

@@ -113,7 +113,7 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     field_options = VectorFieldOptions() if field_options is None else field_options
     plan = StatePlan(reason="--vf-states blend")
     if field_options.vf_states == "auto":
-        plan = plan_states(learner, random_state=learner.random_state)
+        plan = plan_states(learner)
     state_of = {m: k for k, m in enumerate(plan.order)}
     labels, field_labels = {}, {}
     for k, p in enumerate(prepared):

@@ -1,12 +1,18 @@
 """Vector fields used one after the other become states (issue 14, item 3).
 
 The thesis blends all fields of a skill in one state (eqs. 4.31-4.32). Where the
-demonstrations use them in sequence -- reach, then pull -- and in separate places, a
-state per field with a transition between them tells the user which motion is on and
-keeps the fields from mixing where they meet (the end of a reach is the start of a
-pull). :func:`plan_states` decides from the fitted learner whether the fields are such a
-sequence and learns the transitions as the linear learner does (a linear SVM between
-the points of consecutive fields, eq. 4.17), or says why they stay blended.
+demonstrations use them in sequence -- reach the handle, then pull -- and switch from one
+to the next at one place, a state per field tells the user which motion is on and keeps
+the fields from mixing where they meet (the end of a reach is the start of a pull).
+:func:`plan_states` decides from the fitted learner whether the fields are such a
+sequence; each state's way on is a ``distance`` transition: the hand within reach of
+where the demonstrations switched. There is no way back by motion (a pull leads away
+from the handle); escape (button 2) returns to the previous state.
+
+A plane between the fields' points, as the linear learner learns (eq. 4.17), does not
+do here: the demonstrations only show the side of the plane they came from, and a hand
+that starts elsewhere (level with the handle, in front of it) can be on the far side of
+it before it has reached anything.
 """
 
 from __future__ import annotations
@@ -24,16 +30,15 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class FieldTransition:
-    """Fires from field ``source``'s state to ``target``'s when the ee position p (object
-    frame) has ``normal . p + offset > margin`` (unit ``normal``); ``accuracy`` the
-    SVM's balanced training accuracy."""
+    """Fires from field ``source``'s state to ``target``'s when the ee position (object
+    frame) is within ``radius`` of ``point``, where the demonstrations switched from
+    one to the other (``spread``: the RMS distance of their switch points from it)."""
 
     source: int
     target: int
-    normal: Array
-    offset: float
-    margin: float
-    accuracy: float
+    point: Array
+    radius: float
+    spread: float
 
 
 @dataclass(frozen=True)
@@ -52,8 +57,24 @@ class StatePlan:
         return len(self.order) > 1
 
 
-def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accuracy: float = 0.95,
-                C: float = 1000.0, margin: float = 0.005, random_state: int | None = 0) -> StatePlan:
+def _goes_back(labels: NDArray[np.int64], order: tuple[int, ...], min_run: int) -> bool:
+    """Whether one demonstration's field labels (in time; -1 outliers) return to a field
+    after the next one in ``order``: its runs of at least ``min_run`` points, in time,
+    out of order."""
+    runs: list[int] = []
+    start = 0
+    lab = labels[labels >= 0]
+    for i in range(1, len(lab) + 1):
+        if i == len(lab) or lab[i] != lab[start]:
+            if i - start >= min_run and (not runs or runs[-1] != lab[start]):
+                runs.append(int(lab[start]))
+            start = i
+    rank = [order.index(m) for m in runs]
+    return any(b < a for a, b in pairwise(rank)) or len(set(runs)) < len(runs)
+
+
+def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, max_spread: float = 0.03,
+                min_radius: float = 0.01) -> StatePlan:
     """Whether the fitted ``learner``'s fields are a sequence, and its transitions.
 
     Parameters
@@ -62,16 +83,14 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accurac
         Fitted.
     min_order : float
         In at least this share of the demonstrations that use both, each field's points
-        come (by their median time) before the next one's.
-    min_accuracy : float
-        The SVM between consecutive fields' points must separate them this well
-        (balanced training accuracy).
-    C, margin : float
-        The SVM penalty (eq. 4.17, on metres) and the transitions' hysteresis (m).
-    random_state : int or None
+        come (by their median time) before the next one's, and in as many no field is
+        used again after the next one (its runs of ``coherence_run`` points).
+    max_spread : float
+        The demonstrations' switch points from one field to the next (the first point of
+        the next) must lie within this RMS distance (m) of their median.
+    min_radius : float
+        The smallest radius (m) of a switch; otherwise twice the switch points' spread.
     """
-    from sklearn.svm import SVC
-
     K = len(learner.fields_)
     if K < 2:
         return StatePlan(reason="one field")
@@ -93,7 +112,12 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accurac
         return StatePlan(reason=f"field {int(np.argmin(used))} is used in {int(used.min())} of "
                                 f"{when.shape[0]} demonstrations")
     order = tuple(int(m) for m in np.argsort(np.nanmedian(when, axis=0)))
+    back = [k for k in np.unique(demo) if _goes_back(a[demo == k], order, learner.coherence_run)]
+    if len(back) > (1.0 - min_order) * when.shape[0]:
+        return StatePlan(reason=f"{len(back)} of {when.shape[0]} demonstrations go back to a field "
+                                "they left")
     timing = {}
+    transitions = []
     for m0, m1 in pairwise(order):
         both = np.isfinite(when[:, m0]) & np.isfinite(when[:, m1])
         share = float(np.mean(when[both, m0] < when[both, m1])) if both.any() else 0.0
@@ -101,19 +125,21 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, min_accurac
         if share < min_order:
             return StatePlan(reason=f"field {m0} comes before field {m1} in only {share:.0%} of the "
                                     "demonstrations", timing=timing)
-    transitions = []
-    for m0, m1 in pairwise(order):
-        A, B = learner.points_[a == m0], learner.points_[a == m1]
-        X = np.concatenate([A, B])
-        y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])
-        svm = SVC(kernel="linear", C=C, class_weight="balanced", max_iter=1_000_000,
-                  random_state=random_state).fit(X, y)
-        w, b = svm.coef_[0], float(svm.intercept_[0])
-        pred = X @ w + b
-        acc = 0.5 * (np.mean(pred[y < 0] < 0) + np.mean(pred[y > 0] > 0))
-        if acc < min_accuracy:
-            return StatePlan(reason=f"fields {m0} and {m1} overlap in space (a plane separates "
-                                    f"{acc:.0%} of their points)", timing=timing)
-        n = float(np.linalg.norm(w))
-        transitions.append(FieldTransition(m0, m1, w / n, b / n, margin, float(acc)))
+        switches = []
+        for k in np.flatnonzero(both):
+            # Where the next field starts: its first point after the bulk of the one before.
+            i1 = np.flatnonzero((demo == k) & (a == m1))
+            first = i1[t[i1] >= when[k, m0]]
+            if len(first):
+                switches.append(learner.points_[first[0]])
+        if not switches:
+            return StatePlan(reason=f"no demonstration switches from field {m0} to field {m1}",
+                             timing=timing)
+        S = np.array(switches)
+        centre = np.median(S, axis=0)
+        spread = float(np.sqrt(np.mean(np.sum((S - centre) ** 2, axis=1))))
+        if spread > max_spread:
+            return StatePlan(reason=f"the demonstrations switch from field {m0} to field {m1} in "
+                                    f"different places ({spread * 100:.1f} cm apart, RMS)", timing=timing)
+        transitions.append(FieldTransition(m0, m1, centre, max(min_radius, 2.0 * spread), spread))
     return StatePlan(order=order, transitions=tuple(transitions), timing=timing)
