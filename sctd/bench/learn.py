@@ -43,6 +43,7 @@ from ..learn import (
     learn_vector_fields,
 )
 from ..skill.fields import SphereField, TranslationField
+from .fields import format_field_bench, run_field_bench
 from .gco import format_gco_bench, run_gco_bench
 
 
@@ -136,7 +137,7 @@ def _angle(a, b) -> float:
 
 
 def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: float = 0.001,
-              n_seeds: int = 5, gco_instances: int = 20) -> dict[str, Any]:
+              n_seeds: int = 5, gco_instances: int = 20, field_seeds: int = 10) -> dict[str, Any]:
     """Run every benchmark; returns plain data (see module doc)."""
     out: dict[str, Any] = {"seed": seed, "n_demos": n_demos, "outliers": outliers, "noise": noise}
     t = time.perf_counter()
@@ -152,6 +153,8 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
     # One-sided: our swap starts from alpha-expansion's minimum and may end lower.
     out["swap_max_rel_diff"] = max(r["rel_diff"] for r in out["swap_vs_reference"])
     out["swap_vs_gco"] = run_gco_bench(gco_instances, seed)
+    if field_seeds > 0:
+        out["fields"] = run_field_bench(field_seeds, n_demos, noise, outliers)
     return out
 
 
@@ -278,6 +281,8 @@ def format_bench(r: dict[str, Any]) -> str:
                      f"ref={row['reference_swap']:.4f} expansion={row['expansion']:.4f} "
                      f"({row['swap_s']:.2f} s vs {row['reference_s']:.2f} s)")
     lines += format_gco_bench(r["swap_vs_gco"])
+    if "fields" in r:
+        lines += format_field_bench(r["fields"])
     return "\n".join(lines)
 
 
@@ -287,12 +292,16 @@ def add_bench_learn_arguments(parser: argparse.ArgumentParser) -> argparse.Argum
     parser.add_argument("--n-demos", type=int, default=10)
     parser.add_argument("--gco-instances", type=int, default=20,
                         help="energies on which the swap is compared with GCO's (default 20)")
+    parser.add_argument("--field-seeds", type=int, default=10,
+                        help="seeds of each generated task for the field types and the automatic "
+                        "frames (0: skip; default 10)")
     parser.add_argument("--json", action="store_true")
     return parser
 
 
 def main_bench_learn(args: argparse.Namespace) -> int:
     """Run ``sctd bench learn``: print the figures (or JSON)."""
-    r = run_bench(seed=args.seed, n_demos=args.n_demos, gco_instances=args.gco_instances)
+    r = run_bench(seed=args.seed, n_demos=args.n_demos, gco_instances=args.gco_instances,
+                  field_seeds=args.field_seeds)
     print(json.dumps(r, indent=1, default=float) if args.json else format_bench(r))
     return 0
