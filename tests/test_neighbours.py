@@ -142,7 +142,7 @@ def test_a_fetched_set_proves_its_answer_or_declines():
     centre = tuple(model.points[500].tolist())
     fetched = neighbours_module._Fetched(model, nb.tree, centre, 64)
     rows, d2 = fetched.nearest(centre, 5, 0.15)
-    assert np.array_equal(fetched.index[rows], direct(model, centre, 5, 0.15)[0])
+    assert [fetched.index[j] for j in rows] == direct(model, centre, 5, 0.15)[0].tolist()
     assert math.isclose(math.sqrt(d2[-1]), direct(model, centre, 5, 0.15)[1][-1], rel_tol=1e-9)
     away = (centre[0] + fetched.reach, centre[1], centre[2])
     assert fetched.nearest(away, 5, 0.15) is None

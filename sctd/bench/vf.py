@@ -71,8 +71,8 @@ def resized_skill(skill: str, n: int, folder: Path) -> str:
     resized to ``n`` points; the written YAML's path."""
     bundle = bundle_from_file(skill)
     loaded = load_skill(skill)
-    models = {rel: m for s in loaded.states for e in (*s.input_mappings, *s.active_constraints)
-              for rel, m in e.models()}
+    models = {rel: m for s in loaded.states for e in s.input_mappings for rel, m in e.models()}
+    models |= {rel: m for s in loaded.states for c in s.active_constraints for rel, m in c.models()}
     if not models:
         raise ValueError(f"{skill}: reads no vector-field model")
     folder.mkdir(parents=True, exist_ok=True)
@@ -96,10 +96,12 @@ def measure(skill: str, baseline: str, points: list[int], ticks: int, rounds: in
         for _ in range(rounds):
             for name, path in paths.items():
                 pooled[name].merge(tick_histogram(path, rate, ticks))
-    rows = [{"points": n, "tick_ms": pooled[str(n)].summary_ms()} for n in points]
     base = pooled["baseline"].summary_ms()
-    for row in rows:
-        row["p99_over_baseline"] = round(row["tick_ms"]["p99"] / base["p99"], 3) if base["p99"] else None
+    rows = []
+    for n in points:
+        h = pooled[str(n)].summary_ms()
+        rows.append({"points": n, "tick_ms": h,
+                     "p99_over_baseline": round(h["p99"] / base["p99"], 3) if base["p99"] else None})
     return {"skill": skill, "baseline": baseline, "baseline_tick_ms": base, "ticks": ticks,
             "rounds": rounds, "rate_hz": rate, "rows": rows}
 
@@ -109,7 +111,7 @@ def measure_daemon(skill: str, baseline: str, points: int, seconds: float,
     """The daemon's per-tick compute (``sctd bench latency``) with ``baseline`` and with
     ``skill`` resized to ``points``, one after the other."""
     vf = resized_skill(skill, points, logdir / f"skill-{points}")
-    out = {}
+    out: dict[str, dict[str, Any]] = {}
     for name, path in (("baseline", baseline), ("skill", vf)):
         r = run_latency_bench(path, 1000.0, seconds, 500.0, 10, logdir / name)
         out[name] = {"skill": path, "compute_ms": r["compute_ms"], "lateness_ms": r["lateness_ms"],

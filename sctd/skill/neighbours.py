@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 
@@ -13,6 +14,7 @@ from .model import VectorFieldModel
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
+Answer = tuple[list[int], list[float]]  # a query's answer: point indices, their weights
 
 POSE_CANDIDATES = 8  # points within max_d a pose query ranks, per neighbour it keeps
 
@@ -36,10 +38,11 @@ FETCHED_SETS = 4  # fetched sets kept (one per place the skill's frames query)
 class _Fetched:
     """The ``size`` points of the model nearest to ``centre`` (their rows of the model,
     in index order), and ``reach``: no other point is nearer to the centre than it
-    (infinite when these are all the model's points)."""
+    (infinite when these are all the model's points). What a query reads of them is
+    kept as Python lists: it reads a handful of them, where numpy's per-call cost would
+    dominate."""
 
-    __slots__ = ("centre", "index", "offsets", "quaternions", "reach", "responsibilities",
-                 "squares")
+    __slots__ = ("centre", "index", "quaternions", "reach", "responsibilities", "rows")
 
     def __init__(self, model: VectorFieldModel, tree: cKDTree, centre: Sequence[float], size: int):
         n = len(model.points)
@@ -51,15 +54,16 @@ class _Fetched:
             d, i = tree.query(self.centre, k=size + 1)
             index = np.sort(i[:size])
             self.reach = float(d[size])
-        self.index = index
-        # |x - p|^2 = |x - c|^2 - 2 (x - c).(p - c) + |p - c|^2: one product per query,
-        # on offsets from the centre (centimetres: no cancellation to speak of)
-        self.offsets = model.points[index] - self.centre
-        self.squares = np.einsum("ij,ij->i", self.offsets, self.offsets)
-        self.quaternions = model.quaternions[index]
-        self.responsibilities = model.responsibilities[index]
+        self.index: list[int] = index.tolist()
+        # |x - p|^2 - |p - c|^2 = |x - c|^2 - 2 (x - c).(p - c): one product per query
+        # of the rows [x - c, |x - c|^2] (offsets from the centre, centimetres: no
+        # cancellation to speak of) with (-2 (p - c), 1)
+        offsets = model.points[index] - self.centre
+        self.rows = np.column_stack([offsets, np.einsum("ij,ij->i", offsets, offsets)])
+        self.quaternions: list[list[float]] = model.quaternions[index].tolist()
+        self.responsibilities: list[list[float]] = model.responsibilities[index].tolist()
 
-    def nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[Index, Array] | None:
+    def nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[list[int], list[float]] | None:
         """Rows (into this set, nearest first, ties in index order) and squared distances
         of the up to ``k`` model points within ``max_d`` (strictly) of ``p``; None when
         this set cannot prove them to be the model's.
@@ -73,14 +77,13 @@ class _Fetched:
         left_out = self.reach - math.sqrt(vv)  # no point outside this set is nearer to p
         if left_out <= 0.0:
             return None
-        ranking = self.offsets @ np.array((-2.0 * vx, -2.0 * vy, -2.0 * vz))
-        ranking += self.squares  # |x - p|^2 - |p - c|^2
-        rows = np.argsort(ranking, kind="stable")[:k]  # nearest first, ties in index order
-        d2 = np.maximum(ranking[rows] + vv, 0.0)
-        if not d2[-1] < max_d * max_d:  # sorted: only the farthest may be too far
-            n = int(np.searchsorted(d2, max_d * max_d))
-            rows, d2 = rows[:n], d2[:n]
-        bound = math.sqrt(d2[-1]) if len(rows) == k else max_d
+        ranking = self.rows @ np.array((-2.0 * vx, -2.0 * vy, -2.0 * vz, 1.0))
+        order = np.argsort(ranking, kind="stable")[:k]  # nearest first, ties in index order
+        d2: list[float] = (ranking[order] + vv).tolist()
+        n = bisect.bisect_left(d2, max_d * max_d)  # those within max_d (sorted)
+        rows: list[int] = order[:n].tolist()
+        del d2[n:]
+        bound = math.sqrt(max(d2[-1], 0.0)) if n == k else max_d
         return (rows, d2) if bound < left_out else None
 
 
@@ -113,7 +116,8 @@ class Neighbours:
         self._fetched: list[_Fetched] = []  # the most recently used first
         self.queries = 0
         self.fetches = 0
-        self._mean_of: tuple[Array, Array] | None = None  # the answer _mean is of
+        self._quaternions: list[list[float]] = model.quaternions.tolist()
+        self._mean_of: Answer | None = None  # the answer _mean is of
         self._mean: tuple[float, float, float, float] | None = None
 
     def _reuse(self, key: tuple, p: Sequence[float], q: Sequence[float] | None = None):
@@ -137,7 +141,7 @@ class Neighbours:
         self.queries += 1
         return answer
 
-    def _nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[_Fetched, Index, Array]:
+    def _nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[_Fetched, list[int], list[float]]:
         """The fetched set that answers a query, and its answer (see
         :meth:`_Fetched.nearest`): the nearest kept set when it can, else one fetched
         around ``p`` (which always can: ``p`` is its centre)."""
@@ -157,7 +161,7 @@ class Neighbours:
         sets.insert(0, s)
         del sets[FETCHED_SETS:]
         answer = s.nearest(p, k, max_d)
-        if answer is None:  # only when max_d reaches past every fetched point: all of them
+        if answer is None:  # only for points tied with the reach: fetch them all
             s = _Fetched(self.model, self.tree, p, len(self.model.points))
             self.fetches += 1
             sets[0] = s
@@ -165,19 +169,19 @@ class Neighbours:
             assert answer is not None
         return s, *answer
 
-    def query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Index, Array]:
+    def query(self, p: Sequence[float], max_n: int, max_d: float) -> Answer:
         """Indices and distance weights of up to ``max_n`` points within ``max_d`` of the
         position ``p`` (3 floats, or shape (3,)), nearest first."""
         key = ("query", max_n, max_d)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._query(p, max_n, max_d))
 
-    def _query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Index, Array]:
+    def _query(self, p: Sequence[float], max_n: int, max_d: float) -> Answer:
         s, rows, d2 = self._nearest(p, max_n, max_d)
-        return s.index[rows], np.array(_weights(d2.tolist()))
+        return [s.index[j] for j in rows], _weights(d2)
 
     def query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
-                   rotation_weight: float) -> tuple[Index, Array]:
+                   rotation_weight: float) -> Answer:
         """Like :meth:`query`, but the ``max_n`` nearest in pose: of the points within
         ``max_d`` (at most ``POSE_CANDIDATES * max_n`` of them, the nearest), those with
         the smallest ``sqrt(|dp|^2 + (rotation_weight * angle)^2)`` to position ``p``
@@ -189,17 +193,21 @@ class Neighbours:
         return answer
 
     def _query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
-                    rotation_weight: float) -> tuple[Index, Array]:
+                    rotation_weight: float) -> Answer:
         s, rows, d2 = self._nearest(p, POSE_CANDIDATES * max_n, max_d)
-        if len(rows) == 0:
-            return s.index[rows], np.zeros(0)
-        c = np.abs(s.quaternions[rows] @ np.array(q))
-        turn = np.arccos(np.minimum(c, 1.0))  # half the angle
-        ranking = d2 + (2.0 * rotation_weight) ** 2 * (turn * turn)
-        best = np.argsort(ranking, kind="stable")[:max_n]
-        return s.index[rows[best]], np.array(_weights(ranking[best].tolist()))
+        qx, qy, qz, qw = q
+        w2 = (2.0 * rotation_weight) ** 2
+        best: list[tuple[float, int, int]] = []  # (distance in pose squared, position, row)
+        for pos, (j, r) in enumerate(zip(rows, d2, strict=True)):
+            if len(best) == max_n and r >= best[-1][0]:
+                break  # no farther point is nearer in pose (that distance is at least r)
+            x, y, z, w = s.quaternions[j]
+            half = math.acos(min(abs(x * qx + y * qy + z * qz + w * qw), 1.0))  # half the angle
+            bisect.insort(best, (r + w2 * (half * half), pos, j))
+            del best[max_n:]
+        return [s.index[j] for _, _, j in best], _weights([r for r, _, _ in best])
 
-    def mean_orientation(self, answer: tuple[Index, Array]) -> tuple[float, float, float, float] | None:
+    def mean_orientation(self, answer: Answer) -> tuple[float, float, float, float] | None:
         """The weighted mean quaternion (x, y, z, w; not normalised) of the points an
         answer of :meth:`query` or :meth:`query_pose` names (indices, weights), each
         taken in the first one's hemisphere; None for no points. Worked out once per
@@ -208,11 +216,11 @@ class Neighbours:
             return self._mean
         i, w = answer
         mean = None
-        if len(i):  # on floats: a handful of points, where numpy's per-call cost dominates
-            rows = self.model.quaternions[i].tolist()
+        if i:
+            rows = [self._quaternions[j] for j in i]
             x0, y0, z0, w0 = rows[0]
             gx = gy = gz = gw = 0.0
-            for wk, (x, y, z, qw) in zip(w.tolist(), rows, strict=True):
+            for wk, (x, y, z, qw) in zip(w, rows, strict=True):
                 if x * x0 + y * y0 + z * z0 + qw * w0 < 0.0:  # into the first one's hemisphere
                     wk = -wk
                 gx, gy, gz, gw = gx + wk * x, gy + wk * y, gz + wk * z, gw + wk * qw
@@ -229,19 +237,20 @@ class Neighbours:
 
     def _membership(self, p: Sequence[float], max_n: int, max_d: float) -> Array:
         s, rows, d2 = self._nearest(p, max_n, max_d)
-        if len(rows) == 0:
+        if not rows:
             return self.prior
         K = len(self.prior)
         r = [0.0] * K
-        for wk, resp in zip(_weights(d2.tolist()), s.responsibilities[rows].tolist(), strict=True):
-            for j in range(K):
-                r[j] += wk * resp[j]
+        for wk, j in zip(_weights(d2), rows, strict=True):
+            resp = s.responsibilities[j]
+            for f in range(K):
+                r[f] += wk * resp[f]
         total = math.fsum(r)
         return np.array([x / total for x in r]) if total > 1e-12 else self.prior
 
 
 def _weights(d2: list[float]) -> list[float]:
     """The normalised distance weights ``1 / (d + 1 mm)`` of squared distances ``d2``."""
-    w = [1.0 / (math.sqrt(x) + 1e-3) for x in d2]
+    w = [1.0 / (math.sqrt(max(x, 0.0)) + 1e-3) for x in d2]
     total = sum(w)
     return [x / total for x in w]
