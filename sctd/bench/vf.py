@@ -113,6 +113,7 @@ def measure_daemon(skill: str, baseline: str, points: int, seconds: float,
     vf = resized_skill(skill, points, logdir / f"skill-{points}")
     out: dict[str, dict[str, Any]] = {}
     for name, path in (("baseline", baseline), ("skill", vf)):
+        (logdir / name).mkdir(parents=True, exist_ok=True)
         r = run_latency_bench(path, 1000.0, seconds, 500.0, 10, logdir / name)
         out[name] = {"skill": path, "compute_ms": r["compute_ms"], "lateness_ms": r["lateness_ms"],
                      "late_ticks": r["late_ticks"], "ticks": r["ticks"]}
