@@ -164,13 +164,16 @@ def add_bench_vf_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baseline", default="skills/pour.yaml",
                    help="the hand-written skill timed next to it (default %(default)s)")
     p.add_argument("--points", type=_counts, default=[300, 1000, 5000, 20000],
-                   help="demonstration point counts, comma-separated (default 300,1000,5000,20000)")
+                   help="demonstration point counts, comma-separated: the skill's model files are "
+                        "resized to each (thinned, or densified along the demonstrations; "
+                        "docs/vf-tick.md) (default 300,1000,5000,20000)")
     p.add_argument("--ticks", type=int, default=3000, help="ticks per skill and round (default %(default)s)")
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds (default %(default)s)")
     p.add_argument("--daemon", type=float, default=0.0, metavar="SECONDS",
                    help="also run sctd bench latency this long with the baseline and with the skill "
                         "at --daemon-points (default: not)")
-    p.add_argument("--daemon-points", type=int, default=5000, help="(default %(default)s)")
+    p.add_argument("--daemon-points", type=int, default=5000,
+                   help="the skill's point count in the daemon run (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
