@@ -38,8 +38,8 @@ FETCHED_SETS = 4  # fetched sets kept (one per place the skill's frames query)
 class _Fetched:
     """The ``size`` points of the model nearest to ``centre`` (their rows of the model,
     in index order), and ``reach``: no other point is nearer to the centre than it
-    (infinite when these are all the model's points). The responsibilities are kept as
-    Python lists: a query reads a handful of them, where numpy's per-call cost would
+    (infinite when these are all the model's points). What a query reads of them is
+    kept as Python lists: it reads a handful of them, where numpy's per-call cost would
     dominate."""
 
     __slots__ = ("centre", "index", "quaternions", "reach", "responsibilities", "rows")
@@ -60,7 +60,7 @@ class _Fetched:
         # cancellation to speak of) with (-2 (p - c), 1)
         offsets = model.points[index] - self.centre
         self.rows = np.column_stack([offsets, np.einsum("ij,ij->i", offsets, offsets)])
-        self.quaternions = model.quaternions[index]
+        self.quaternions: list[list[float]] = model.quaternions[index].tolist()
         self.responsibilities: list[list[float]] = model.responsibilities[index].tolist()
 
     def nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[list[int], list[float]] | None:
@@ -78,11 +78,11 @@ class _Fetched:
         if left_out <= 0.0:
             return None
         ranking = self.rows @ np.array((-2.0 * vx, -2.0 * vy, -2.0 * vz, 1.0))
-        rows: list[int] = np.argsort(ranking, kind="stable")[:k].tolist()  # nearest first,
-        r = ranking.tolist()  # ties in index order
-        d2 = [r[j] + vv for j in rows]
+        order = np.argsort(ranking, kind="stable")[:k]  # nearest first, ties in index order
+        d2: list[float] = (ranking[order] + vv).tolist()
         n = bisect.bisect_left(d2, max_d * max_d)  # those within max_d (sorted)
-        del rows[n:], d2[n:]
+        rows: list[int] = order[:n].tolist()
+        del d2[n:]
         bound = math.sqrt(max(d2[-1], 0.0)) if n == k else max_d
         return (rows, d2) if bound < left_out else None
 
@@ -195,13 +195,17 @@ class Neighbours:
     def _query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
                     rotation_weight: float) -> Answer:
         s, rows, d2 = self._nearest(p, POSE_CANDIDATES * max_n, max_d)
-        if not rows:
-            return [], []
-        half = np.arccos(np.minimum(np.abs(s.quaternions[rows] @ np.array(q)), 1.0))  # half the angle
-        ranking = np.array(d2) + (2.0 * rotation_weight) ** 2 * (half * half)
-        best = np.argsort(ranking, kind="stable")[:max_n].tolist()  # ties in position order
-        r = ranking.tolist()
-        return [s.index[rows[j]] for j in best], _weights([r[j] for j in best])
+        qx, qy, qz, qw = q
+        w2 = (2.0 * rotation_weight) ** 2
+        best: list[tuple[float, int, int]] = []  # (distance in pose squared, position, row)
+        for pos, (j, r) in enumerate(zip(rows, d2, strict=True)):
+            if len(best) == max_n and r >= best[-1][0]:
+                break  # no farther point is nearer in pose (that distance is at least r)
+            x, y, z, w = s.quaternions[j]
+            half = math.acos(min(abs(x * qx + y * qy + z * qz + w * qw), 1.0))  # half the angle
+            bisect.insort(best, (r + w2 * (half * half), pos, j))
+            del best[max_n:]
+        return [s.index[j] for _, _, j in best], _weights([r for r, _, _ in best])
 
     def mean_orientation(self, answer: Answer) -> tuple[float, float, float, float] | None:
         """The weighted mean quaternion (x, y, z, w; not normalised) of the points an
