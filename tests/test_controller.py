@@ -282,6 +282,14 @@ def test_histogram_percentiles_and_clear():
     assert h.n == 0 and h.max == 0.0 and not any(h.counts) and h.percentile(99) == 0.0
     h.add(2e-5)
     assert abs(h.percentile(99) - 2e-5) < 2 * Histogram.BIN
+    # merged: the samples of both, as if added to one
+    other, both = Histogram(), Histogram()
+    for x in (1e-5, 3e-4, 2e-3):
+        other.add(x)
+        both.add(x)
+    both.add(2e-5)
+    h.merge(other)
+    assert h.counts == both.counts and h.n == both.n == 4 and h.max == both.max == 2e-3
 
 
 @given(st.lists(st.tuples(st.sampled_from(["still", "drift", "jump", "restart", "stale"]),

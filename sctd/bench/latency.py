@@ -118,13 +118,17 @@ def probe_main(argv: list[str]) -> int:
 
 
 def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> dict:
+    """:func:`tick_histogram`'s timings (ms) as a Histogram summary."""
+    return tick_histogram(skill_path, rate, n, paced).summary_ms()
+
+
+def tick_histogram(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> Histogram:
     """The daemon's per-tick control step, in this process and without Zenoh: the
     controller tick on a decoded state message (the daemon decodes its inputs ahead of
     each deadline, outside the compute it reports), with the skill, a robot that follows
     every target and a slowly sweeping input. Back to back (``paced=False``) the caches
     stay hot; ``paced=True`` sleeps to the next period between ticks as the daemon does,
-    which on some machines (virtual CPUs) makes each tick start cold. Timings (s), as a
-    Histogram summary."""
+    which on some machines (virtual CPUs) makes each tick start cold. Timings (s)."""
 
     cfg = RuntimeConfig(rate=rate)
     ctl = Controller(load_skill(skill_path), cfg)
@@ -148,7 +152,7 @@ def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = Fal
         t0 = time.perf_counter()
         ctl.tick(t, t, Sample(k, t, t, u=u), state, obj)
         h.add(time.perf_counter() - t0)
-    return h.summary_ms()
+    return h
 
 
 def _last_json(text: str) -> dict | None:

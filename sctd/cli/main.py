@@ -73,6 +73,9 @@ BENCHES: dict[str, Command] = {
                          "main_bench_multihost"),
     "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
                     "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
+    "vf": Command("a vector-field skill's tick cost against its number of demonstration points "
+                  "(300 to 20k), next to the hand-written pour; --daemon adds the daemon's",
+                  "sctd.bench.vf", "add_bench_vf_arguments", "main_bench_vf"),
 }
 
 COMMANDS: dict[str, Command] = {

@@ -62,6 +62,12 @@ class Histogram:
         if x > self.max:
             self.max = x
 
+    def merge(self, other: Histogram) -> None:
+        """Add ``other``'s samples to this one's."""
+        self.counts = [a + b for a, b in zip(self.counts, other.counts, strict=True)]
+        self.n += other.n
+        self.max = max(self.max, other.max)
+
     def clear(self) -> None:
         """Forget every sample (zeroing only the bins up to the largest one used)."""
         top = min(int(self.max / self.BIN) + 1, self.N)

@@ -50,10 +50,10 @@ def _cross3(a: Sequence[float], b: Sequence[float]) -> Vec3:
 
 def _pivot_centre(G: Sequence[float], pivot: Array) -> Vec3:
     """The position ``p + R pivot`` of a pivot on the frame with pose ``G`` (flat:
-    rotation R row-major, then position p). The product is numpy's: its rounding is
-    BLAS's, which floats do not reproduce."""
-    mx, my, mz = (np.array(G[:9]).reshape(3, 3) @ pivot).tolist()
-    return G[9] + mx, G[10] + my, G[11] + mz
+    rotation R row-major, then position p)."""
+    px, py, pz = pivot.tolist()
+    return (G[9] + G[0] * px + G[1] * py + G[2] * pz, G[10] + G[3] * px + G[4] * py + G[5] * pz,
+            G[11] + G[6] * px + G[7] * py + G[8] * pz)
 
 
 class FieldReader:

@@ -209,17 +209,27 @@ def intent_membership(P: Sequence[float], prior: Sequence[float], s: Sequence[fl
     return np.array([x / total for x in post]) if total > 1e-300 else np.array(P, dtype=float)
 
 
-def _rodrigues(x: float, y: float, z: float) -> Array:
-    """The rotation matrix (3, 3) of the rotation vector (x, y, z) (Rodrigues, on floats)."""
+def _rodrigues(x: float, y: float, z: float) -> tuple[float, ...]:
+    """The rotation matrix (row-major, 9 floats) of the rotation vector (x, y, z)
+    (Rodrigues)."""
     th = math.sqrt(x * x + y * y + z * z)
     if th < 1e-12:
-        return np.eye(3)
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
     kx, ky, kz = x / th, y / th, z / th
     c, s = math.cos(th), math.sin(th)
     v = 1.0 - c
-    return np.array([[c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
-                     [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
-                     [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v]])
+    return (c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s,
+            ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s,
+            kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v)
+
+
+def _product3(A: Sequence[float], B: Sequence[float]) -> tuple[float, ...]:
+    """``A @ B`` of two rotation matrices (row-major, their first nine entries)."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = A[:9]
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = B[:9]
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
 
 
 def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field]) -> Flat:
@@ -227,9 +237,8 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
     pose ``G``: the part of it along each rotational field (weighted by its membership
     ``P`` (K,)) as a rotation of the whole hand about the field's centre (sphere) or
     axis (cylinder), the rest as a translation
-    (:meth:`~sctd.skill.fields.Field.rigid_part`). The rotations' matrix products are
-    numpy's (their rounding is BLAS's), the rest is on floats."""
-    R_hand = None  # the hand's rotation once turned (3, 3)
+    (:meth:`~sctd.skill.fields.Field.rigid_part`). On floats (the tick)."""
+    R_hand: Sequence[float] = F  # the hand's rotation, row-major (its first nine entries)
     x, y, z = F[9], F[10], F[11]
     rx, ry, rz = d
     for k, f in enumerate(fields):
@@ -243,13 +252,13 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
         if not (t[0] or t[1] or t[2]):
             continue
         R = _rodrigues(*w)
-        R_hand = R @ (np.array(F[:9]).reshape(3, 3) if R_hand is None else R_hand)
-        m0, m1, m2 = (R @ np.array((x - c0, y - c1, z - c2))).tolist()
-        x, y, z = m0 + c0, m1 + c1, m2 + c2
+        R_hand = _product3(R, R_hand)
+        a0, a1, a2 = x - c0, y - c1, z - c2
+        x = R[0] * a0 + R[1] * a1 + R[2] * a2 + c0
+        y = R[3] * a0 + R[4] * a1 + R[5] * a2 + c1
+        z = R[6] * a0 + R[7] * a1 + R[8] * a2 + c2
         rx, ry, rz = rx - t[0], ry - t[1], rz - t[2]
-    if R_hand is None:
-        return (*F[:9], x + rx, y + ry, z + rz)
-    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R_hand.tolist()
+    r0, r1, r2, r3, r4, r5, r6, r7, r8 = R_hand[:9]
     return (r0, r1, r2, r3, r4, r5, r6, r7, r8, x + rx, y + ry, z + rz)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 
@@ -12,26 +13,98 @@ from scipy.spatial import cKDTree
 from .model import VectorFieldModel
 
 Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+Answer = tuple[list[int], list[float]]  # a query's answer: point indices, their weights
 
 POSE_CANDIDATES = 8  # points within max_d a pose query ranks, per neighbour it keeps
 
 # A neighbour query is reused while the frame stays this close to where it was made: well
 # below the spacing of the demonstrations' points (sampled at 50 Hz, 1-2 mm apart at the
 # demonstrated speeds), so the field does not change for it, and at the speed limits a
-# KD-tree query then runs every few ticks rather than every tick.
+# query is then answered every few ticks rather than every tick.
 REUSE_DISTANCE = 5e-4  # m
 REUSE_ANGLE = 5e-3  # rad (pose queries)
+
+# The points a KD-tree query fetches around the frame (at least; 4 per neighbour asked
+# for). A query is answered exactly from the fetched points while they provably hold its
+# answer, which at this many lasts millimetres to centimetres of motion: in the tick
+# benchmark's 4,000 ticks the tree (whose single-point query costs tens of microseconds
+# in Python) is asked 2 times with 1,000 points, 4 with 5,000 and about 30 with 20,000,
+# and answering from the fetched points costs the same whatever the model's size.
+FETCH_POINTS = 128
+FETCHED_SETS = 4  # fetched sets kept (one per place the skill's frames query)
+
+
+class _Fetched:
+    """The ``size`` points of the model nearest to ``centre`` (their rows of the model,
+    in index order), and ``reach``: no other point is nearer to the centre than it
+    (infinite when these are all the model's points). What a query reads of them is
+    kept as Python lists: it reads a handful of them, where numpy's per-call cost would
+    dominate."""
+
+    __slots__ = ("centre", "index", "quaternions", "reach", "responsibilities", "rows")
+
+    def __init__(self, model: VectorFieldModel, tree: cKDTree, centre: Sequence[float], size: int):
+        n = len(model.points)
+        self.centre = (float(centre[0]), float(centre[1]), float(centre[2]))
+        if size >= n:
+            index: Index = np.arange(n)
+            self.reach = math.inf
+        else:  # the size + 1 nearest: the last one's distance bounds every point left out
+            d, i = tree.query(self.centre, k=size + 1)
+            index = np.sort(i[:size])
+            self.reach = float(d[size])
+        self.index: list[int] = index.tolist()
+        # |x - p|^2 - |p - c|^2 = |x - c|^2 - 2 (x - c).(p - c): one product per query
+        # of the rows [x - c, |x - c|^2] (offsets from the centre, centimetres: no
+        # cancellation to speak of) with (-2 (p - c), 1)
+        offsets = model.points[index] - self.centre
+        self.rows = np.column_stack([offsets, np.einsum("ij,ij->i", offsets, offsets)])
+        self.quaternions: list[list[float]] = model.quaternions[index].tolist()
+        self.responsibilities: list[list[float]] = model.responsibilities[index].tolist()
+
+    def nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[list[int], list[float]] | None:
+        """Rows (into this set, nearest first, ties in index order) and squared distances
+        of the up to ``k`` model points within ``max_d`` (strictly) of ``p``; None when
+        this set cannot prove them to be the model's.
+
+        Every point left out is at least ``reach`` from the centre, so at least ``reach -
+        |p - centre|`` from ``p`` (triangle inequality): the answer is the model's when
+        its farthest distance, or ``max_d`` when it has fewer than ``k``, is smaller."""
+        c = self.centre
+        vx, vy, vz = p[0] - c[0], p[1] - c[1], p[2] - c[2]
+        vv = vx * vx + vy * vy + vz * vz
+        left_out = self.reach - math.sqrt(vv)  # no point outside this set is nearer to p
+        if left_out <= 0.0:
+            return None
+        ranking = self.rows @ np.array((-2.0 * vx, -2.0 * vy, -2.0 * vz, 1.0))
+        order = np.argsort(ranking, kind="stable")[:k]  # nearest first, ties in index order
+        d2: list[float] = (ranking[order] + vv).tolist()
+        n = bisect.bisect_left(d2, max_d * max_d)  # those within max_d (sorted)
+        rows: list[int] = order[:n].tolist()
+        del d2[n:]
+        bound = math.sqrt(max(d2[-1], 0.0)) if n == k else max_d
+        return (rows, d2) if bound < left_out else None
 
 
 class Neighbours:
     """KD-tree over a vector-field model's demonstration points (Ch. 4.2.5), with the
-    last answer to each kind of query kept for reuse (see ``REUSE_DISTANCE``).
+    last answer to each kind of query kept for reuse (see ``REUSE_DISTANCE``) and the
+    points around the frame fetched from the tree for answering (see
+    ``FETCH_POINTS``).
 
     Per-engine data: one per model file of a skill, shared by the elements that read it.
 
     Parameters
     ----------
     model : VectorFieldModel
+
+    Attributes
+    ----------
+    queries : int
+        Queries answered (the rest were reused).
+    fetches : int
+        KD-tree queries made (points fetched around the frame).
     """
 
     def __init__(self, model: VectorFieldModel):
@@ -40,8 +113,11 @@ class Neighbours:
         w = np.array([f.weight for f in model.fields], dtype=float)
         self.prior = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
         self._last: dict[tuple, tuple] = {}
-        self.queries = 0  # KD-tree queries made (the rest were reused)
-        self._mean_of: tuple[Array, Array] | None = None  # the answer _mean is of
+        self._fetched: list[_Fetched] = []  # the most recently used first
+        self.queries = 0
+        self.fetches = 0
+        self._quaternions: list[list[float]] = model.quaternions.tolist()
+        self._mean_of: Answer | None = None  # the answer _mean is of
         self._mean: tuple[float, float, float, float] | None = None
 
     def _reuse(self, key: tuple, p: Sequence[float], q: Sequence[float] | None = None):
@@ -65,28 +141,51 @@ class Neighbours:
         self.queries += 1
         return answer
 
-    def query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Array, Array]:
+    def _nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[_Fetched, list[int], list[float]]:
+        """The fetched set that answers a query, and its answer (see
+        :meth:`_Fetched.nearest`): the nearest kept set when it can, else one fetched
+        around ``p`` (which always can: ``p`` is its centre)."""
+        sets = self._fetched
+        if sets:
+            best = min(sets, key=lambda s: (p[0] - s.centre[0]) ** 2 + (p[1] - s.centre[1]) ** 2
+                       + (p[2] - s.centre[2]) ** 2)
+            answer = best.nearest(p, k, max_d)
+            if answer is not None:
+                if sets[0] is not best:
+                    sets.remove(best)
+                    sets.insert(0, best)
+                return best, *answer
+            sets.remove(best)  # outgrown: replaced by the one fetched here
+        s = _Fetched(self.model, self.tree, p, max(FETCH_POINTS, 4 * k))
+        self.fetches += 1
+        sets.insert(0, s)
+        del sets[FETCHED_SETS:]
+        answer = s.nearest(p, k, max_d)
+        if answer is None:  # only for points tied with the reach: fetch them all
+            s = _Fetched(self.model, self.tree, p, len(self.model.points))
+            self.fetches += 1
+            sets[0] = s
+            answer = s.nearest(p, k, max_d)
+            assert answer is not None
+        return s, *answer
+
+    def query(self, p: Sequence[float], max_n: int, max_d: float) -> Answer:
         """Indices and distance weights of up to ``max_n`` points within ``max_d`` of the
-        position ``p`` (3 floats, or shape (3,))."""
+        position ``p`` (3 floats, or shape (3,)), nearest first."""
         key = ("query", max_n, max_d)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._query(p, max_n, max_d))
 
-    def _query(self, p: Sequence[float], max_n: int, max_d: float) -> tuple[Array, Array]:
-        d, i = self.tree.query(p, k=max_n, distance_upper_bound=max_d)
-        d = np.atleast_1d(d)
-        i = np.atleast_1d(i)
-        ok = np.isfinite(d)
-        d, i = d[ok], i[ok]
-        w = 1.0 / (d + 1e-3)
-        return i, w / w.sum() if len(w) else w
+    def _query(self, p: Sequence[float], max_n: int, max_d: float) -> Answer:
+        s, rows, d2 = self._nearest(p, max_n, max_d)
+        return [s.index[j] for j in rows], _weights(d2)
 
     def query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
-                   rotation_weight: float) -> tuple[Array, Array]:
+                   rotation_weight: float) -> Answer:
         """Like :meth:`query`, but the ``max_n`` nearest in pose: of the points within
-        ``max_d`` (at most ``POSE_CANDIDATES * max_n`` of them), those with the smallest
-        ``sqrt(|dp|^2 + (rotation_weight * angle)^2)`` to position ``p`` and unit
-        quaternion ``q`` [x, y, z, w]."""
+        ``max_d`` (at most ``POSE_CANDIDATES * max_n`` of them, the nearest), those with
+        the smallest ``sqrt(|dp|^2 + (rotation_weight * angle)^2)`` to position ``p``
+        and unit quaternion ``q`` [x, y, z, w]."""
         key = ("pose", max_n, max_d, rotation_weight)
         answer = self._reuse(key, p, q)
         if answer is None:
@@ -94,21 +193,21 @@ class Neighbours:
         return answer
 
     def _query_pose(self, p: Sequence[float], q: Sequence[float], max_n: int, max_d: float,
-                    rotation_weight: float) -> tuple[Array, Array]:
-        d, i = self.tree.query(p, k=POSE_CANDIDATES * max_n, distance_upper_bound=max_d)
-        d, i = np.atleast_1d(d), np.atleast_1d(i)
-        ok = np.isfinite(d)
-        d, i = d[ok], i[ok]
-        if len(i) == 0:
-            return i, d
-        c = np.abs(self.model.quaternions[i] @ np.asarray(q, dtype=float))
-        angle = 2.0 * np.arccos(np.clip(c, 0.0, 1.0))
-        dist = np.sqrt(d * d + (rotation_weight * angle) ** 2)
-        best = np.argsort(dist, kind="stable")[:max_n]
-        w = 1.0 / (dist[best] + 1e-3)
-        return i[best], w / w.sum()
+                    rotation_weight: float) -> Answer:
+        s, rows, d2 = self._nearest(p, POSE_CANDIDATES * max_n, max_d)
+        qx, qy, qz, qw = q
+        w2 = (2.0 * rotation_weight) ** 2
+        best: list[tuple[float, int, int]] = []  # (distance in pose squared, position, row)
+        for pos, (j, r) in enumerate(zip(rows, d2, strict=True)):
+            if len(best) == max_n and r >= best[-1][0]:
+                break  # no farther point is nearer in pose (that distance is at least r)
+            x, y, z, w = s.quaternions[j]
+            half = math.acos(min(abs(x * qx + y * qy + z * qz + w * qw), 1.0))  # half the angle
+            bisect.insort(best, (r + w2 * (half * half), pos, j))
+            del best[max_n:]
+        return [s.index[j] for _, _, j in best], _weights([r for r, _, _ in best])
 
-    def mean_orientation(self, answer: tuple[Array, Array]) -> tuple[float, float, float, float] | None:
+    def mean_orientation(self, answer: Answer) -> tuple[float, float, float, float] | None:
         """The weighted mean quaternion (x, y, z, w; not normalised) of the points an
         answer of :meth:`query` or :meth:`query_pose` names (indices, weights), each
         taken in the first one's hemisphere; None for no points. Worked out once per
@@ -117,10 +216,14 @@ class Neighbours:
             return self._mean
         i, w = answer
         mean = None
-        if len(i):
-            q = self.model.quaternions[i]
-            q = q * np.where(q @ q[0] < 0.0, -1.0, 1.0)[:, None]  # one hemisphere
-            gx, gy, gz, gw = (w @ q).tolist()
+        if i:
+            rows = [self._quaternions[j] for j in i]
+            x0, y0, z0, w0 = rows[0]
+            gx = gy = gz = gw = 0.0
+            for wk, (x, y, z, qw) in zip(w, rows, strict=True):
+                if x * x0 + y * y0 + z * z0 + qw * w0 < 0.0:  # into the first one's hemisphere
+                    wk = -wk
+                gx, gy, gz, gw = gx + wk * x, gy + wk * y, gz + wk * z, gw + wk * qw
             mean = (gx, gy, gz, gw)
         self._mean_of, self._mean = answer, mean
         return mean
@@ -133,9 +236,21 @@ class Neighbours:
         return answer if answer is not None else self._keep(key, p, None, self._membership(p, max_n, max_d))
 
     def _membership(self, p: Sequence[float], max_n: int, max_d: float) -> Array:
-        i, w = self._query(p, max_n, max_d)
-        if len(i) == 0:
+        s, rows, d2 = self._nearest(p, max_n, max_d)
+        if not rows:
             return self.prior
-        r = w @ self.model.responsibilities[i]
-        s = r.sum()
-        return r / s if s > 1e-12 else self.prior
+        K = len(self.prior)
+        r = [0.0] * K
+        for wk, j in zip(_weights(d2), rows, strict=True):
+            resp = s.responsibilities[j]
+            for f in range(K):
+                r[f] += wk * resp[f]
+        total = math.fsum(r)
+        return np.array([x / total for x in r]) if total > 1e-12 else self.prior
+
+
+def _weights(d2: list[float]) -> list[float]:
+    """The normalised distance weights ``1 / (d + 1 mm)`` of squared distances ``d2``."""
+    w = [1.0 / (math.sqrt(max(x, 0.0)) + 1e-3) for x in d2]
+    total = sum(w)
+    return [x / total for x in w]
