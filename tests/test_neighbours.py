@@ -146,3 +146,43 @@ def test_a_fetched_set_proves_its_answer_or_declines():
     assert math.isclose(math.sqrt(d2[-1]), direct(model, centre, 5, 0.15)[1][-1], rel_tol=1e-9)
     away = (centre[0] + fetched.reach, centre[1], centre[2])
     assert fetched.nearest(away, 5, 0.15) is None
+
+
+# --- answers worked out ahead between ticks (Neighbours.refresh) -------------------------
+
+
+@settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 1000), st.floats(1e-5, 4e-4))
+def test_refreshed_answers_are_answers_made_within_reuse_of_the_query(seed, step):
+    model = random_model(seed, 600)
+    nb = Neighbours(model)
+    for p, q in walk(seed, model, 60, step):
+        i, w = nb.query(p, 5, 0.05)
+        anchor, _, _ = nb._last[("query", 5, 0.05)]
+        assert math.dist(anchor, p) <= neighbours_module.REUSE_DISTANCE
+        ei, ed = direct(model, anchor, 5, 0.05)
+        assert list(i) == list(ei)
+        np.testing.assert_allclose(w, weights(ed), rtol=1e-9)
+        pi, pw = nb.query_pose(p, q, 5, 0.05, 0.1)
+        anchor, q_anchor, _ = nb._last[("pose", 5, 0.05, 0.1)]
+        ei, ew = direct_pose(model, anchor, q_anchor, 5, 0.05, 0.1)
+        assert list(pi) == list(ei)
+        np.testing.assert_allclose(pw, ew, rtol=1e-9)
+        np.testing.assert_allclose(m := nb.membership(p, 5, 0.05),
+                                   direct_membership(model, nb.prior, nb._last[("membership", 5, 0.05)][0],
+                                                     5, 0.05), rtol=1e-9)
+        assert abs(float(np.sum(m)) - 1.0) < 1e-9
+        nb.refresh()
+
+
+def test_at_the_speed_limit_the_queries_themselves_work_nothing_out():
+    """0.1 mm per tick (0.1 m/s at 1 kHz): after the first answer, every answer is worked
+    out by refresh between ticks, none by the tick's own query."""
+    model = random_model(3, 2000)
+    nb = Neighbours(model)
+    for k, (p, _) in enumerate(walk(3, model, 400, 1e-4)):
+        nb.membership(p, 5, 0.05)
+        if k == 0:
+            assert nb.queries == 1
+        nb.refresh()
+    assert nb.queries == 1 and nb.refreshes > 10

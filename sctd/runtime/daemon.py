@@ -454,6 +454,9 @@ class Daemon:
             self._account(window, lateness, done - now, state)
             if done >= window.next_status:
                 send(self._window_status(window, ticker, done))
+            # After the target is out: the neighbour answers the next tick would work out
+            # (vector-field skills), so that the tick itself reuses them.
+            self.controller.engine.workspace.refresh()
 
     def _before_tick(self) -> None:
         """Between two ticks: install a swapped-in skill, then drain the inputs."""

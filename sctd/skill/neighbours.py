@@ -5,6 +5,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +23,9 @@ POSE_CANDIDATES = 8  # points within max_d a pose query ranks, per neighbour it 
 # below the spacing of the demonstrations' points (sampled at 50 Hz, 1-2 mm apart at the
 # demonstrated speeds), so the field does not change for it, and at the speed limits a
 # query is then answered every few ticks rather than every tick.
+REFRESH_LEAD = 0.5  # refresh: an answer is worked out ahead once a query is this share of the
+# reuse distance (or angle) from where it was made: at the speed limits (0.1 mm, 0.5 mrad per
+# 1 ms tick) the next question is then well within reuse of the new answer
 REUSE_DISTANCE = 5e-4  # m
 REUSE_ANGLE = 5e-3  # rad (pose queries)
 
@@ -113,7 +117,9 @@ class Neighbours:
         w = np.array([f.weight for f in model.fields], dtype=float)
         self.prior = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
         self._last: dict[tuple, tuple] = {}
+        self._asked: dict[tuple, tuple] = {}  # per kind of query: where it was last asked
         self._fetched: list[_Fetched] = []  # the most recently used first
+        self.refreshes = 0  # answers worked out ahead by refresh
         self.queries = 0
         self.fetches = 0
         self._quaternions: list[list[float]] = model.quaternions.tolist()
@@ -140,6 +146,37 @@ class Neighbours:
         self._last[key] = (tuple(p), q, answer)
         self.queries += 1
         return answer
+
+    def refresh(self, lead: float = REFRESH_LEAD) -> int:
+        """Work out ahead, between ticks, the answers the next tick would otherwise work
+        out itself: every kind of query whose last question has moved more than
+        ``lead`` of the reuse distance (or angle) from where its kept answer was made is
+        answered anew where it was last asked. The next question (a tick's motion
+        away) then falls within the reuse distance of it. What a query returns is as
+        documented (an answer made within the reuse distance and angle of it); only
+        when the work is done changes. Returns how many answers were worked out."""
+        done = 0
+        for key, (p, q) in self._asked.items():
+            last = self._last.get(key)
+            if last is not None:
+                (x, y, z), q_last, _ = last
+                near = (p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2 <= (lead * REUSE_DISTANCE) ** 2
+                if near and q is not None:
+                    c = abs(q[0] * q_last[0] + q[1] * q_last[1] + q[2] * q_last[2] + q[3] * q_last[3])
+                    near = 2.0 * math.acos(min(1.0, c)) <= lead * REUSE_ANGLE
+                if near:
+                    continue
+            kind, *args = key
+            if kind == "query":
+                answer: Any = self._query(p, *args)
+            elif kind == "pose":
+                answer = self._query_pose(p, q, *args)
+            else:
+                answer = self._membership(p, *args)
+            self._last[key] = (tuple(p), None if q is None else tuple(q), answer)
+            done += 1
+        self.refreshes += done
+        return done
 
     def _nearest(self, p: Sequence[float], k: int, max_d: float) -> tuple[_Fetched, list[int], list[float]]:
         """The fetched set that answers a query, and its answer (see
@@ -173,6 +210,7 @@ class Neighbours:
         """Indices and distance weights of up to ``max_n`` points within ``max_d`` of the
         position ``p`` (3 floats, or shape (3,)), nearest first."""
         key = ("query", max_n, max_d)
+        self._asked[key] = (tuple(p), None)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._query(p, max_n, max_d))
 
@@ -187,6 +225,7 @@ class Neighbours:
         the smallest ``sqrt(|dp|^2 + (rotation_weight * angle)^2)`` to position ``p``
         and unit quaternion ``q`` [x, y, z, w]."""
         key = ("pose", max_n, max_d, rotation_weight)
+        self._asked[key] = (tuple(p), tuple(q))
         answer = self._reuse(key, p, q)
         if answer is None:
             answer = self._keep(key, p, tuple(q), self._query_pose(p, q, max_n, max_d, rotation_weight))
@@ -232,6 +271,7 @@ class Neighbours:
         """P(F | p): neighbours' EM responsibilities, distance-weighted (the prior when
         no demonstration point is near)."""
         key = ("membership", max_n, max_d)
+        self._asked[key] = (tuple(p), None)
         answer = self._reuse(key, p)
         return answer if answer is not None else self._keep(key, p, None, self._membership(p, max_n, max_d))
 

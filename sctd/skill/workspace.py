@@ -100,6 +100,11 @@ class Workspace:
         self.scale = 1.0
         self.membership: Array | None = None
 
+    def refresh(self) -> int:
+        """:meth:`Neighbours.refresh` of every model file's neighbours (between ticks);
+        how many answers were worked out ahead."""
+        return sum(n.refresh() for n in self.neighbours.values())
+
     def frame_pose(self, F: Flat, frame: str) -> Flat:
         """Pose of the end-effector-attached ``frame`` for the ee pose F (F itself for a
         frame that is not on the end-effector)."""

@@ -87,6 +87,7 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
             seq += 1
             inp = Sample(seq, t, t, u=u, buttons=b, presses=buttons.observe(b))
         res = ctl.tick(t, t, inp, state, obj_sample)
+        ctl.engine.workspace.refresh()  # the neighbour answers worked out ahead, as the daemon does
         mode = res.state
         if res.pose is not None and guard.admit(res.pose, t, F, not sim.arm.controller.holding):
             sim.set_target(res.pose, t)
