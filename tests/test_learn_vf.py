@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sctd.bench.fields import phase_kinds
 from sctd.learn import Demo, VectorFieldLearner, learn_vector_fields, ransac_iterations
 from sctd.learn.vf import cylinder_field, sphere_field
 from sctd_sim import demogen
@@ -124,16 +125,7 @@ def _phase_kinds(task: str, seed: int, **kw):
     ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=seed, **kw))
-    kinds = []
-    for phase in range(2):
-        votes: dict[str, int] = {}
-        for d in ds.demos:
-            fl = np.asarray(res.field_labels[d.name])
-            for i in fl[(d.phase == phase) & (fl >= 0)]:
-                t = res.learner.fields_[i].type
-                votes[t] = votes.get(t, 0) + 1
-        kinds.append(max(votes, key=votes.get) if votes else None)
-    return ds, res, tuple(kinds)
+    return ds, res, phase_kinds(ds, res)
 
 
 @pytest.mark.parametrize("seed", range(8))
