@@ -46,7 +46,7 @@ from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.codec import DEFAULT_ROBOT
 from sctd.runtime.timing import Ticker
-from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)  # the CSV header: the learner's columns (sctd.learn.demos)
 MIN_ROWS = codec.MIN_DEMO_ROWS  # sctd.learn.demos.MIN_SAMPLES: the learner refuses shorter ones
@@ -307,7 +307,7 @@ class Take:
         assert rec.object_name is not None and task is not None
         self.key = rec.keys.demos(task, name)
         rec.session.put(self.key, codec.encode_demo(task, name, rec.object_name, self.rows),
-                        congestion_control=zenoh.CongestionControl.BLOCK)
+                        congestion_control=zenoh.CongestionControl.BLOCK, encoding=MSGPACK)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -28,7 +28,7 @@ import zenoh
 from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.timing import RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .user import INTENTS, PROFILES, Observation, SimulatedUser
 
@@ -58,7 +58,8 @@ class UserClient:
             self._stack.enter_context(session.declare_subscriber(key, callback))
         for name in OBJECTS[user.task]:
             self._stack.enter_context(session.declare_subscriber(k.objects(name), self._on_object))
-        self.pub = self._stack.enter_context(session.declare_publisher(k.input(device), express=True))
+        self.pub = self._stack.enter_context(session.declare_publisher(k.input(device), express=True,
+                                                                                    encoding=MSGPACK))
         self.seq = 0
 
     def __enter__(self) -> UserClient:

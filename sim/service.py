@@ -52,7 +52,7 @@ import zenoh
 from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
-from sctd.runtime.zsession import session_from_args
+from sctd.runtime.zsession import MSGPACK, session_from_args
 
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
@@ -204,7 +204,8 @@ class SimService:
         session, k, drop = self.session, self.keys, zenoh.CongestionControl.DROP
 
         def publisher(key: str, **kw: Any) -> zenoh.Publisher:
-            return stack.enter_context(session.declare_publisher(key, congestion_control=drop, **kw))
+            return stack.enter_context(session.declare_publisher(key, congestion_control=drop,
+                                                                 encoding=MSGPACK, **kw))
 
         self.sub_target = stack.enter_context(
             session.declare_subscriber(k.target, zenoh.handlers.RingChannel(16)))
@@ -252,9 +253,10 @@ class SimService:
                 if t is None:
                     error = f"the simulation loop did not reach a cycle boundary in {RESET_WAIT:g} s"
             if error is not None:
-                query.reply_err(codec.pack({"error": error}))
+                query.reply_err(codec.pack({"error": error}), encoding=MSGPACK)
                 return
-            query.reply(self.keys.sim_reset, codec.pack({"ok": True, "scene": scene, "t": t}))
+            query.reply(self.keys.sim_reset, codec.pack({"ok": True, "scene": scene, "t": t}),
+                        encoding=MSGPACK)
 
     def _reset_on_loop(self) -> float | None:
         """Hand a reset to the loop and wait for it: its simulated time, or None (the

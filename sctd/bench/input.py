@@ -28,7 +28,7 @@ from sctd.bench.latency import PING, PONG, wait_for_targets
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import session
+from sctd.runtime.zsession import MSGPACK, TEXT, session
 
 
 class _EventTimes:
@@ -64,7 +64,7 @@ class _EventTimes:
 def _echo_rtt(s: zenoh.Session, seconds: float, rate: float = 200.0) -> dict[str, float]:
     trips = RoundTrips()
     with s.declare_subscriber(PONG, lambda m: trips.answered(int(m.payload.to_bytes()), time.monotonic())), \
-            s.declare_publisher(PING, express=True) as pub:
+            s.declare_publisher(PING, express=True, encoding=TEXT) as pub:
         ticker = Ticker(1.0 / rate, spin=0.0)
         trips.counting = False
         start = time.monotonic()
@@ -95,7 +95,7 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
     with session(connect=[ep]) as s:
         echo = _echo_rtt(s, 3.0)
         with VirtualPad(name="sctd bench pad") as pad, s.declare_subscriber(keys.target, times.on_target), \
-                s.declare_publisher(keys.input("gamepad"), express=True) as pub:
+                s.declare_publisher(keys.input("gamepad"), express=True, encoding=MSGPACK) as pub:
             assert enable is not None
             pad.set_button(enable, True)
             device = Gamepad().open("sctd bench pad",

@@ -31,7 +31,7 @@ from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
 from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
+from sctd.runtime.zsession import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
 from sctd.skill import load_skill
 
 PING = "sctd/bench/ping"
@@ -45,7 +45,7 @@ def echo_main(argv: list[str]) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
     signal.signal(signal.SIGINT, lambda *a: stop.set())
-    with session_from_args(args) as s, s.declare_publisher(PONG, express=True) as pub, \
+    with session_from_args(args) as s, s.declare_publisher(PONG, express=True, encoding=TEXT) as pub, \
             s.declare_subscriber(PING, lambda sample: pub.put(sample.payload.to_bytes())):
         stop.wait()
     return 0
@@ -105,8 +105,8 @@ def probe_main(argv: list[str]) -> int:
 
     with session_from_args(args) as s, \
             s.declare_subscriber(PONG, on_pong), s.declare_subscriber(keys.target, on_target), \
-            s.declare_publisher(PING, express=True) as pub_ping, \
-            s.declare_publisher(keys.input("bench"), express=True) as pub_in:
+            s.declare_publisher(PING, express=True, encoding=TEXT) as pub_ping, \
+            s.declare_publisher(keys.input("bench"), express=True, encoding=MSGPACK) as pub_in:
         _send_phase(echo, args.rate, args.echo_seconds + args.warmup, args.warmup,
                     lambda k: pub_ping.put(str(k).encode()))
         _send_phase(latency, args.rate, args.seconds + args.warmup, args.warmup,

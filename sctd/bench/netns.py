@@ -40,7 +40,7 @@ from typing import IO
 import msgpack
 import zenoh
 
-from sctd.runtime.zsession import make_config
+from sctd.runtime.zsession import MSGPACK, TEXT, make_config
 
 PREFIX = "sctd-"
 DEFAULT_SUBNET = "10.213.13.0/24"
@@ -501,7 +501,7 @@ def put_main(args: argparse.Namespace) -> int:
         for key in args.key:
             msg = dict(payload, seq=i, stamp=time.time())
             # blocking, not dropped when a queue is full: the count must be what was sent
-            s.put(key, msgpack.packb(msg, use_bin_type=True), congestion_control=block)
+            s.put(key, msgpack.packb(msg, use_bin_type=True), congestion_control=block, encoding=MSGPACK)
             sent[key] += 1
         time.sleep(1.0 / args.rate)
     time.sleep(0.3)
@@ -544,7 +544,7 @@ def echo_main(args: argparse.Namespace) -> int:
     """Republish every ``ECHO_PING`` sample on ``ECHO_PONG`` until SIGTERM (run it in the
     runtime's role)."""
     stop = _stop_event()
-    with _open(args.config) as s, s.declare_publisher(ECHO_PONG, express=True) as pub, \
+    with _open(args.config) as s, s.declare_publisher(ECHO_PONG, express=True, encoding=TEXT) as pub, \
             s.declare_subscriber(ECHO_PING, lambda sample: pub.put(sample.payload.to_bytes())):
         print(json.dumps({"ready": True}), flush=True)
         stop.wait()
@@ -559,7 +559,7 @@ def ping_main(args: argparse.Namespace) -> int:
     with _open(args.config) as s, \
             s.declare_subscriber(ECHO_PONG, lambda sample: trips.answered(
                 int(sample.payload.to_bytes()), time.monotonic())), \
-            s.declare_publisher(ECHO_PING, express=True) as pub:
+            s.declare_publisher(ECHO_PING, express=True, encoding=TEXT) as pub:
         time.sleep(args.settle)
         ticker = Ticker(1.0 / args.rate, spin=0.0)
         for seq in range(args.n):

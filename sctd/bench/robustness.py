@@ -36,7 +36,7 @@ import zenoh
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
-from sctd.runtime.zsession import add_zenoh_arguments, session, session_from_args
+from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session, session_from_args
 from sctd.skill import Bundle, bundle_from_file
 
 KEYS = codec.Keys()
@@ -119,13 +119,14 @@ def flood_main(argv: list[str]) -> int:
         t0 = time.monotonic()
         end = t0 + args.seconds
         if args.kind == "garbage":
-            pub = s.declare_publisher(KEYS.input("flood"))
+            pub = s.declare_publisher(KEYS.input("flood"), encoding=MSGPACK)
             blob = os.urandom(args.size)
             while time.monotonic() < end and not stop.is_set():
                 pub.put(blob)
                 sent += 1
         elif args.kind == "valid":
-            pub = s.declare_publisher(KEYS.input("flood"), congestion_control=zenoh.CongestionControl.DROP)
+            pub = s.declare_publisher(KEYS.input("flood"), congestion_control=zenoh.CongestionControl.DROP,
+                                     encoding=MSGPACK)
             batch: list[bytes] = []
             while not stop.is_set():
                 if sent % 2000 == 0:  # fresh stamps, so every message is valid on arrival
@@ -137,7 +138,8 @@ def flood_main(argv: list[str]) -> int:
                 sent += 1
         else:
             for k in range(args.names):
-                s.put(KEYS.objects(f"flood{k}"), codec.encode_object(k, time.time(), [0, 0, 0, 0, 0, 0, 1]))
+                s.put(KEYS.objects(f"flood{k}"), codec.encode_object(k, time.time(), [0, 0, 0, 0, 0, 0, 1]),
+                      encoding=MSGPACK)
                 sent += 1
         seconds = time.monotonic() - t0
         time.sleep(0.2)
@@ -293,7 +295,7 @@ class _Phases:
             assert st is not None
             pose = list(st["pose"])
             pose[0] += 1.0
-            self.s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose))
+            self.s.put(KEYS.state, codec.encode_state(st["seq"] + 1, time.time(), pose), encoding=MSGPACK)
             time.sleep(0.1)
             if jumps() > before:
                 break

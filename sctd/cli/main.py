@@ -114,6 +114,10 @@ COMMANDS: dict[str, Command] = {
                      "sctd.cli.certs", "add_certs_arguments", "main_certs"),
     "router": Command("a Zenoh router (mutual TLS and the roles' access control with --config)",
                       "sctd.cli.router", "add_router_arguments", "main_router"),
+    "echo": Command("print the samples on a key, decoded (msgpack), like ros2 topic echo",
+                    "sctd.cli.echo", "add_echo_arguments", "main_echo"),
+    "hz": Command("each key's sample rate and interval spread, like ros2 topic hz", "sctd.cli.echo",
+                  "add_hz_arguments", "main_hz"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 

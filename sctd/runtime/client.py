@@ -19,6 +19,7 @@ import zenoh
 
 from ..skill import Bundle
 from . import codec
+from .zsession import MSGPACK
 
 FIND = 5.0  # s to wait for a queryable to become known before giving up
 
@@ -43,7 +44,7 @@ def query(session: zenoh.Session, key: str, payload: bytes | None = None, timeou
             if time.monotonic() > give_up:
                 return None
             time.sleep(0.02)
-        for reply in querier.get(payload=payload):
+        for reply in querier.get(payload=payload, encoding=None if payload is None else MSGPACK):
             sample = reply.ok if reply.ok is not None else reply.err
             if sample is not None:
                 return reply.ok is not None, reply_body(sample.payload.to_bytes())

@@ -40,6 +40,7 @@ from .controller import ButtonWatch, Controller, RuntimeConfig, Sample
 from .safety import StateWatch
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 from .worker import BundleWorker
+from .zsession import MSGPACK
 
 log = logging.getLogger("sctd.run")
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
@@ -310,7 +311,7 @@ class Daemon:
         (``text`` reads ``<file>: <field>: <problem>``) and is counted."""
         log.warning("refused skill: %s", error)
         self._refused += 1
-        query.reply_err(_reply({"error": error}))
+        query.reply_err(_reply({"error": error}), encoding=MSGPACK)
 
     def _answer_skill_query(self, query: zenoh.Query, key: str) -> None:
         """``skill``: the summary (and, with ``swap_on_skill_key``, a swap: wire contract
@@ -320,7 +321,7 @@ class Daemon:
         if key == self.keys.skill and empty:
             summary = skill_summary(self.controller.skill)
             summary["state"] = self.controller.engine.state
-            query.reply(key, _reply(summary))
+            query.reply(key, _reply(summary), encoding=MSGPACK)
             return
         if empty:
             self._refuse(query, f"<bundle>: {key} swaps skills: send a bundle (the summary is on "
@@ -372,7 +373,7 @@ class Daemon:
                     inlet.sub.undeclare()
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
         query.reply(key, _reply(
-            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}))
+            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}), encoding=MSGPACK)
 
     def _install(self, pending: _Pending, now: float) -> None:
         """On the tick thread, between two ticks: the new skill and its object rings."""
@@ -419,9 +420,10 @@ class Daemon:
         self._object_inlets = {} if obj == WORLD_OBJECT else {obj: self._object_inlet(obj)}
         self._inlets = self._base_inlets + tuple(self._object_inlets.values())
         pub_target = stack.enter_context(s.declare_publisher(
-            keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP))
+            keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP,
+            encoding=MSGPACK))
         pub_status = stack.enter_context(s.declare_publisher(
-            keys.status, congestion_control=zenoh.CongestionControl.DROP))
+            keys.status, congestion_control=zenoh.CongestionControl.DROP, encoding=MSGPACK))
         self._publisher = stack.enter_context(_Publisher(pub_target, pub_status, self.rt_priority))
         self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
         # no new swaps once the loop ends; one under way fails its wait and replies

@@ -26,6 +26,13 @@ HUB = "tcp/127.0.0.1:7447"
 _RETRY = '{"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}'
 
 
+# What every sctd publication declares it carries (Zenoh ``Encoding``), so generic Zenoh
+# tools know: the wire contract's messages are msgpack (docs/wire-contract.md); the
+# benchmarks' ping/pong are text.
+MSGPACK = zenoh.Encoding("application/msgpack")
+TEXT = zenoh.Encoding.TEXT_PLAIN
+
+
 def check_loopback(endpoint: str) -> None:
     """Refuse endpoints that are not TCP on a loopback IP literal (127.0.0.0/8 or
     ``[::1]``), with a port: names are not accepted, since a name can resolve anywhere

@@ -18,7 +18,7 @@ import sys
 import threading
 
 from sctd.runtime.codec import DEFAULT_ROBOT
-from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .device import Backend, InputError
 from .registry import backend_names, get_backend
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         from sctd.runtime import codec
 
         key = codec.Keys(args.robot).input(name)
-        pub = session.declare_publisher(key)
+        pub = session.declare_publisher(key, encoding=MSGPACK)
         bridge = Bridge(device, mapping, args.axes, pub.put)
         print(f"sctd input: {backend.name} {device.name!r} -> {key} at {args.rate:g} Hz, "
               f"mapping {mapping.origin}", file=sys.stderr, flush=True)

@@ -38,6 +38,7 @@ import zenoh
 from sctd.learn import DemoError, learn, skill_bundle
 from sctd.learn.summary import plain, summary_dict
 from sctd.runtime import client, codec
+from sctd.runtime.zsession import MSGPACK
 from sctd.skill import SkillError, bundle_from_file, skill_from_bundle, skill_summary
 from sctd.skill.catalog import StoredSkill, store_folder
 
@@ -122,7 +123,8 @@ class Learner:
     def __enter__(self) -> Learner:
         with contextlib.ExitStack() as stack:
             s = self.session
-            self._status = stack.enter_context(s.declare_publisher(self.keys.learner_status))
+            self._status = stack.enter_context(
+                s.declare_publisher(self.keys.learner_status, encoding=MSGPACK))
             stack.enter_context(s.declare_subscriber(f"{self.keys.prefix}/demos/**", self._on_demo))
             self.queries = stack.enter_context(
                 s.declare_queryable(self.keys.learner, zenoh.handlers.FifoChannel(64)))
@@ -211,13 +213,13 @@ class Learner:
         except Stopped:
             self._refuse(query, f"the learner was stopped while {self.stage}")
             raise
-        query.reply(self.keys.learner, codec.pack(_jsonable(out.reply())))
+        query.reply(self.keys.learner, codec.pack(_jsonable(out.reply())), encoding=MSGPACK)
 
     def _refuse(self, query: zenoh.Query, error: str) -> None:
         self.counters["requests_refused"] += 1
         self.say("error", error=error)
         log.warning("refused request: %s", error)
-        query.reply_err(codec.pack({"error": error}))
+        query.reply_err(codec.pack({"error": error}), encoding=MSGPACK)
 
     def handle(self, req: Request) -> _Outcome:
         """Train, store, check and swap (see the module docstring); raises on a request

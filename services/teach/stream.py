@@ -38,6 +38,7 @@ from sctd import se3
 from sctd.runtime import codec
 from sctd.runtime.safety import limit_step, separation
 from sctd.runtime.timing import Ticker
+from sctd.runtime.zsession import MSGPACK
 
 from ..record import Recorder
 from .motion import Motion
@@ -122,7 +123,8 @@ class Teacher:
     def __enter__(self) -> Teacher:
         with contextlib.ExitStack() as stack:
             self.pub = stack.enter_context(self.session.declare_publisher(
-                self.keys.target, congestion_control=zenoh.CongestionControl.DROP, express=True))
+                self.keys.target, congestion_control=zenoh.CongestionControl.DROP, express=True,
+                encoding=MSGPACK))
             stack.enter_context(self.session.declare_subscriber(self.keys.status, self._on_status))
             self._decls = stack.pop_all()
         return self
@@ -265,7 +267,7 @@ class Teacher:
             An error reply, or none within ``timeout`` s.
         """
         replies = self.session.get(self.keys.sim_reset, payload=codec.pack({"scene": scene}),
-                                   timeout=timeout)
+                                   encoding=MSGPACK, timeout=timeout)
         got: list[zenoh.Reply] = []
 
         def answered() -> bool:

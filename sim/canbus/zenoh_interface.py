@@ -131,7 +131,7 @@ class ZenohBus(can.BusABC):
                  listen: str | Sequence[str] | None = None, zenoh_config: str | None = None,
                  receive_own_messages: bool = False, session: zenoh.Session | None = None,
                  **kwargs: Any) -> None:
-        from sctd.runtime.zsession import close_session, open_session
+        from sctd.runtime.zsession import MSGPACK, close_session, open_session
 
         self.channel = channel = str(channel if channel is not None else "edan")
         self.channel_info = f"Zenoh {can_key(channel)}"
@@ -145,7 +145,7 @@ class ZenohBus(can.BusABC):
                 session = open_session(_endpoints(listen), _endpoints(connect), zenoh_config)
                 stack.callback(close_session, session)  # bounded: see sctd.runtime.zsession
             self._session = session
-            self._pub = session.declare_publisher(self.key,
+            self._pub = session.declare_publisher(self.key, encoding=MSGPACK,
                                                   congestion_control=zenoh.CongestionControl.BLOCK)
             stack.callback(_undeclare_quietly, self._pub)
             self._sub = session.declare_subscriber(self.key, self._on_sample,
