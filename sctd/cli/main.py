@@ -49,7 +49,7 @@ class Command:
 # The optional libraries and the extra (pyproject.toml) that installs each.
 EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
             "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev", "sdl2": "inputs",
-            "hid": "inputs", "brainflow": "inputs"}
+            "hid": "inputs", "brainflow": "inputs", "mcap": "logs"}
 
 BENCHES: dict[str, Command] = {
     "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
@@ -118,6 +118,11 @@ COMMANDS: dict[str, Command] = {
                     "sctd.cli.echo", "add_echo_arguments", "main_echo"),
     "hz": Command("each key's sample rate and interval spread, like ros2 topic hz", "sctd.cli.echo",
                   "add_hz_arguments", "main_hz"),
+    "log": Command("record the contract's keys (targets, status, input, state, objects, scene) "
+                   "into an MCAP file Foxglove opens", "sctd.cli.log", "add_log_arguments", "main_log"),
+    "replay": Command("publish a log's observation keys again (state, objects, scene, status; "
+                      "--all: also target, input, can), never over a live daemon or robot",
+                      "sctd.cli.log", "add_replay_arguments", "main_replay"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 
