@@ -16,10 +16,10 @@ import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sctd.runtime import ros
-from sctd.runtime.zsession import close_session
+from sctd.runtime import codec, ros
+from sctd.runtime.zsession import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
-from tests.test_e2e_runtime import Rig
+from tests.test_e2e_runtime import KEYS, Rig
 
 # Published RIHS01 hashes of the Jazzy interfaces (as `ros2 topic info -v` prints them,
 # found in other projects' sources: docs/ros2.md).
@@ -56,7 +56,7 @@ def test_namespaces_are_checked_and_normalized():
     assert ros.topic_name("/", "joy") == "/joy"
     assert ros.topic_name("/a/b", "joy") == "/a/b/joy"
     for bad in ("/1x", "/a b", "/a-b", "/ä"):
-        with pytest.raises(ros.RosError, match="not a ROS name"):
+        with pytest.raises(ValueError, match="not a ROS name"):
             ros.check_namespace(bad)
 
 
@@ -275,3 +275,54 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
     s = _status_with(rig, lambda s: s["ros"]["joy_dropped"].get("bad_cdr", 0) >= 1
                      and s["ros"]["joy_dropped"].get("nonfinite", 0) >= 1)
     assert s["ros"]["joy_received"] > 0 and s["ros"]["target_pose_sent"] > 0
+
+
+def test_sim_publishes_its_ee_pose_as_the_state_pose(tmp_path):
+    port = free_port()
+    sim = sctd("sim", "--scene", "pour", "--listen", f"tcp/127.0.0.1:{port}", "--ros",
+               "--ros-namespace", "/lab/sctd", "--ros-domain", "4", log=tmp_path / "sim.log")
+    session = open_session(connect=[f"tcp/127.0.0.1:{port}"])
+    states: dict[float, list[float]] = {}
+    poses: list[bytes] = []
+    lock = threading.Lock()
+
+    def on_state(s: zenoh.Sample) -> None:
+        m = codec.decode_state(s.payload.to_bytes())
+        with lock:
+            states[round(m.stamp, 6)] = m.pose
+
+    def on_pose(s: zenoh.Sample) -> None:
+        with lock:
+            poses.append(s.payload.to_bytes())
+
+    subs = [session.declare_subscriber(KEYS.state, on_state),
+            session.declare_subscriber(ros.data_key(4, "/lab/sctd/ee_pose", ros.POSE_STAMPED), on_pose)]
+    try:
+        assert wait_for(lambda: len(poses) > 20, 90), sim.output()
+        with lock:
+            got = [ros.decode_pose_stamped(p) for p in poses]
+            known = dict(states)
+        same = [(pose, known[round(stamp, 6)]) for stamp, _, pose in got if round(stamp, 6) in known]
+        assert len(same) >= len(got) // 2 and same
+        for pose, state_pose in same:
+            assert np.allclose(pose, state_pose, rtol=0, atol=1e-12)
+        assert {frame for _, frame, _ in got} == {"world"}
+    finally:
+        for sub in subs:
+            sub.undeclare()
+        close_session(session)
+        assert sim.stop() == 0, sim.output()
+
+
+@pytest.mark.parametrize(("flags", "message"), [
+    (["--ros-namespace", "/1x"], "--ros-namespace"),
+    (["--ros-domain", "300"], "--ros-domain"),
+    (["--ros-rate", "0"], "--ros-rate"),
+    (["--ros-joy-map", "/nonexistent/map.yaml"], "/nonexistent/map.yaml"),
+])
+def test_bad_ros_flags_are_refused_naming_the_flag(tmp_path, flags, message):
+    proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen",
+                f"tcp/127.0.0.1:{free_port()}", "--ros", *flags, log=tmp_path / "run.log")
+    assert proc.p.wait(60) == 2, proc.output()
+    assert message in proc.output()
+    proc.stop()

@@ -18,6 +18,7 @@ import zenoh
 from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, ingress_limits
+from ..runtime.ros_options import add_ros_arguments, check_ros_arguments
 from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill
@@ -47,17 +48,6 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="input mapping file for the Joy axes and buttons (docs/input.md; default: "
                         "the shipped xbox map, which matches the joy package's game_controller_node)")
     add_zenoh_arguments(p)
-
-
-def add_ros_arguments(p: argparse.ArgumentParser, what: str) -> None:
-    """``--ros``, ``--ros-domain``, ``--ros-namespace``, ``--ros-rate`` (docs/ros2.md)."""
-    g = p.add_argument_group("ROS 2 over rmw_zenoh (docs/ros2.md; the ros extra)")
-    g.add_argument("--ros", action="store_true", help=f"be a ROS 2 (Jazzy, rmw_zenoh) node: {what}")
-    g.add_argument("--ros-domain", type=int, default=0, help="ROS domain id (default %(default)s)")
-    g.add_argument("--ros-namespace", default="/sctd", help="namespace of the node and its topics "
-                   "(default %(default)s)")
-    g.add_argument("--ros-rate", type=float, default=100.0,
-                   help="most pose messages per second on ROS (default %(default)s)")
 
 
 def _joy_map(path: str | None) -> Any:
@@ -122,6 +112,7 @@ def main_run(args: argparse.Namespace) -> int:
     try:
         skill = load_skill(find_skill(args.skill))
         config = runtime_config(args)
+        check_ros_arguments(args)
     except (SkillError, ValueError) as e:
         return fail("run", str(e))
     n_cpus = os.cpu_count() or 1
@@ -137,9 +128,8 @@ def main_run(args: argparse.Namespace) -> int:
         with ExitStack() as stack:
             try:
                 ros = _runtime_ros(args, session, config)
-            except ImportError as e:
-                return fail("run", f"--ros needs the ros extra (pip install 'sctd[ros]'): {e}")
-            except (ValueError, RuntimeError, OSError, zenoh.ZError) as e:  # InputError: RuntimeError
+            # the mapping file's InputError is a RuntimeError
+            except (ImportError, ValueError, RuntimeError, OSError, zenoh.ZError) as e:
                 return fail("run", f"--ros: {e}")
             if ros is not None:
                 stack.enter_context(ros)

@@ -35,6 +35,7 @@ import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
 from . import codec
+from .ros_options import check_namespace
 from .zsession import MSGPACK
 
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
@@ -72,17 +73,6 @@ def _split_type(type_name: str) -> tuple[str, str, str]:
 def type_hash(type_name: str) -> str:
     """The RIHS01 type hash (REP-2011) of a Jazzy message type, ``RIHS01_<64 hex>``."""
     return str(STORE.hash_rihs01(type_name))
-
-
-def check_namespace(ns: str) -> str:
-    """A ROS namespace (``/``-separated names of letters, digits and ``_``, not starting
-    with a digit), normalized to a leading ``/`` and no trailing one."""
-    ns = "/" + ns.strip("/")
-    for part in ns.split("/")[1:]:
-        if part and not (part.replace("_", "a").isalnum() and part.isascii() and not part[0].isdigit()):
-            raise RosError(f"--ros-namespace {ns!r}: {part!r} is not a ROS name "
-                           "(letters, digits and _, not starting with a digit)")
-    return ns
 
 
 def topic_name(namespace: str, name: str) -> str:
@@ -243,7 +233,7 @@ class RosNode:
 
     def __init__(self, session: zenoh.Session, name: str, namespace: str = "/sctd",
                  domain: int = 0):
-        if not 0 <= domain <= 232:
+        if not 0 <= domain <= 232:  # what rmw accepts (DDS port arithmetic)
             raise RosError(f"--ros-domain {domain}: expected 0 to 232")
         self.session, self.name, self.domain = session, name, domain
         self.namespace = check_namespace(namespace)
@@ -378,6 +368,33 @@ class RuntimeRos:
         self._input.undeclare()
 
     def __enter__(self) -> RuntimeRos:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class SimRos:
+    """What ``sctd sim --ros`` adds: node ``sctd_sim`` publishing the measured end
+    effector on ``<namespace>/ee_pose`` at most ``rate`` Hz (:meth:`ee`, from the
+    simulator's loop: one CDR encoding and put per ROS message)."""
+
+    def __init__(self, session: zenoh.Session, namespace: str = "/sctd", domain: int = 0,
+                 rate: float = 100.0):
+        self.node = RosNode(session, "sctd_sim", namespace, domain)
+        try:
+            self.ee_pose = PoseOut(self.node.publisher("ee_pose", POSE_STAMPED), rate)
+        except BaseException:
+            self.node.close()
+            raise
+
+    def ee(self, stamp: float, pose: Sequence[float]) -> None:
+        self.ee_pose.offer(stamp, pose)
+
+    def close(self) -> None:
+        self.node.close()
+
+    def __enter__(self) -> SimRos:
         return self
 
     def __exit__(self, *exc: object) -> None:
