@@ -14,7 +14,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[learn,sim,dev,view,inputs,logs]'
+	$(BIN)/python -m pip install --quiet -e '.[learn,sim,dev,view,inputs,logs,ros]'
 	touch $(STAMP)
 
 demo: setup

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from sctd.runtime.codec import DEFAULT_ROBOT
+from sctd.runtime.ros_options import add_ros_arguments
 from sctd.runtime.zsession import add_zenoh_arguments
 
 from .guard import add_limit_arguments
@@ -54,4 +55,6 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
                    help="port of the --view page on 127.0.0.1 (default 0: a free one; the URL "
                         "is printed)")
     p.add_argument("--json", action="store_true", help="print the final summary as JSON on stdout")
+    add_ros_arguments(p, "the measured end effector as geometry_msgs/msg/PoseStamped on "
+                         "<namespace>/ee_pose")
     add_zenoh_arguments(p)

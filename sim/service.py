@@ -51,6 +51,7 @@ import zenoh
 
 from sctd import se3
 from sctd.runtime import codec
+from sctd.runtime.ros_options import check_ros_arguments
 from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
 from sctd.runtime.zsession import MSGPACK, session_from_args
 
@@ -158,8 +159,10 @@ class SimService:
 
     def __init__(self, session: zenoh.Session, sim, robot: str = codec.DEFAULT_ROBOT,
                  state_rate: float = 1000.0, object_rate: float = 50.0, scene_rate: float = 10.0,
-                 viewer=None, limits: TargetLimits | None = None, stamp_check: bool = True) -> None:
+                 viewer=None, limits: TargetLimits | None = None, stamp_check: bool = True,
+                 ros=None) -> None:
         self.session = session
+        self.ros = ros  # sctd.runtime.ros.SimRos (--ros): ee(stamp, pose), rate-limited
         self.sim = sim
         self.keys = codec.Keys(robot)
         self.rate = 1.0 / sim.dt
@@ -336,9 +339,12 @@ class SimService:
         if n % self.every_state == 0:
             m = sim.state_message()
             self._F_measured = se3.flat_from_pose(m["pose"])
-            self.pub_state.put(codec.encode_state(self.seq, time.time(), m["pose"], q=m["q"],
+            now = time.time()
+            self.pub_state.put(codec.encode_state(self.seq, now, m["pose"], q=m["q"],
                                                   dq=m["dq"], wrench=m["wrench"]))
             self.seq += 1
+            if self.ros is not None:
+                self.ros.ee(now, m["pose"])
         if n % self.every_object == 0:
             now = time.time()
             for name, pose in sim.objects().items():
@@ -446,6 +452,7 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
     """
     faults = parse_faults(args.faults) if args.faults else None
     codec.Keys(args.robot)
+    check_ros_arguments(args)
     if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
         raise ValueError("rates must be positive")
     limits = limits_from_args(args)
@@ -504,9 +511,15 @@ def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Set
         scene=scene, q0=q0, rate=args.rate, faults=settings.faults, channel=settings.channel,
         bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout))
     session = stack.enter_context(session_from_args(args))
+    ros = None
+    if args.ros:
+        from sctd.runtime.ros import SimRos
+
+        ros = stack.enter_context(SimRos(session, args.ros_namespace, args.ros_domain,
+                                         args.ros_rate))
     service = stack.enter_context(SimService(
         session, sim, args.robot, args.state_rate, args.object_rate, args.scene_rate, viewer,
-        settings.limits, not args.no_stamp_check))
+        settings.limits, not args.no_stamp_check, ros))
     if viewer is not None:
         viewer.setup(sim)
     # Everything alive now lives as long as the loop (Pinocchio, Zenoh, and with

@@ -9,6 +9,7 @@ import os
 import signal
 import sys
 import threading
+from contextlib import ExitStack
 from dataclasses import fields
 from typing import Any
 
@@ -17,6 +18,7 @@ import zenoh
 from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, ingress_limits
+from ..runtime.ros_options import add_ros_arguments, check_ros_arguments
 from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill
@@ -40,7 +42,37 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                         "e.g. isolcpus)")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--stats-json", action="store_true", help="print final statistics as JSON on exit")
+    add_ros_arguments(p, "the target as geometry_msgs/msg/PoseStamped on <namespace>/target_pose "
+                         "and sensor_msgs/msg/Joy taken as input from <namespace>/joy")
+    p.add_argument("--ros-joy-map", metavar="FILE", default=None,
+                   help="input mapping file for the Joy axes and buttons (docs/input.md; default: "
+                        "the shipped xbox map, which matches the joy package's game_controller_node)")
     add_zenoh_arguments(p)
+
+
+def _joy_map(path: str | None) -> Any:
+    """``(axes, buttons) -> (u [6], [mode, enable, escape])`` through the mapping file
+    ``path`` (default: the shipped xbox map)."""
+    from sctd_services.input.device import Reading
+    from sctd_services.input.mapping import load_mapping, shipped_mapping
+
+    mapping = load_mapping(path) if path else shipped_mapping("xbox")
+
+    def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int]]:
+        return mapping.apply(Reading(axes, buttons), 6)
+    return apply
+
+
+def _runtime_ros(args: argparse.Namespace, session: zenoh.Session, config: RuntimeConfig) -> Any:
+    """The daemon's ROS side (``--ros``); None without it. Joy input is put on the
+    daemon's own device key (``ros`` when it follows any device)."""
+    if not args.ros:
+        return None
+    from ..runtime import ros
+
+    device = "ros" if config.device == "*" else config.device
+    return ros.RuntimeRos(session, codec.Keys(config.robot).input(device), _joy_map(args.ros_joy_map),
+                          args.ros_namespace, args.ros_domain, args.ros_rate)
 
 
 def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
@@ -80,6 +112,7 @@ def main_run(args: argparse.Namespace) -> int:
     try:
         skill = load_skill(find_skill(args.skill))
         config = runtime_config(args)
+        check_ros_arguments(args)
     except (SkillError, ValueError) as e:
         return fail("run", str(e))
     n_cpus = os.cpu_count() or 1
@@ -92,12 +125,20 @@ def main_run(args: argparse.Namespace) -> int:
     except (ValueError, zenoh.ZError) as e:
         return fail("run", f"cannot open Zenoh session: {e}")
     try:
-        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6, rt_priority=args.rt_priority,
-                        cpu=args.cpu, stop_event=stop,
-                        # wire contract v1: on the loopback defaults, bundles sent to the
-                        # skill key still swap; with a config file only skill/swap does
-                        swap_on_skill_key=args.zenoh_config is None)
-        stats = daemon.run(args.duration)
+        with ExitStack() as stack:
+            try:
+                ros = _runtime_ros(args, session, config)
+            # the mapping file's InputError is a RuntimeError
+            except (ImportError, ValueError, RuntimeError, OSError, zenoh.ZError) as e:
+                return fail("run", f"--ros: {e}")
+            if ros is not None:
+                stack.enter_context(ros)
+            daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6,
+                            rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
+                            # wire contract v1: on the loopback defaults, bundles sent to the
+                            # skill key still swap; with a config file only skill/swap does
+                            swap_on_skill_key=args.zenoh_config is None, ros=ros)
+            stats = daemon.run(args.duration)
     finally:
         close_session(session)
     if args.stats_json:

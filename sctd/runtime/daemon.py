@@ -77,12 +77,14 @@ class _Publisher(threading.Thread):
     reaches a remote subscriber writes to the socket (tens of us, with a long tail),
     which would otherwise count against every tick. Runs at one FIFO priority below the
     tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq)``, a
-    status map (dict), or None to stop."""
+    status map (dict), or None to stop. With ``ros`` (``--ros``), each target is also
+    offered to ``ros.target(stamp, pose)`` (CDR, rate-limited) after its own put."""
 
-    def __init__(self, target: Any, status: Any, rt_priority: int):
+    def __init__(self, target: Any, status: Any, rt_priority: int, ros: Any = None):
         super().__init__(name="sctd-publisher", daemon=True)
         self.target = target
         self.status = status
+        self.ros = ros
         self.rt_priority = rt_priority
         self.queue: queue.SimpleQueue[tuple | dict | None] = queue.SimpleQueue()
         self.put_time = Histogram()  # target puts
@@ -99,6 +101,12 @@ class _Publisher(threading.Thread):
             t0 = time.monotonic()
             self.target.put(encode(*item))
             self.put_time.add(time.monotonic() - t0)
+            if self.ros is not None:
+                try:
+                    self.ros.target(item[1], item[2])
+                except Exception:  # the ROS copy must never cost the targets
+                    log.exception("publishing the ROS target pose failed; ROS output stopped")
+                    self.ros = None
 
     def close(self) -> None:
         self.queue.put(None)
@@ -196,8 +204,10 @@ class Daemon:
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
                  spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
-                 stop_event: threading.Event | None = None, swap_on_skill_key: bool = True):
+                 stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
+                 ros: Any = None):
         self.config = config
+        self.ros = ros  # sctd.runtime.ros.RuntimeRos (--ros): target poses out, its status
         self.swap_on_skill_key = swap_on_skill_key
         self.session = session
         self.keys = codec.Keys(config.robot)
@@ -424,7 +434,8 @@ class Daemon:
             encoding=MSGPACK))
         pub_status = stack.enter_context(s.declare_publisher(
             keys.status, congestion_control=zenoh.CongestionControl.DROP, encoding=MSGPACK))
-        self._publisher = stack.enter_context(_Publisher(pub_target, pub_status, self.rt_priority))
+        self._publisher = stack.enter_context(_Publisher(pub_target, pub_status, self.rt_priority,
+                                                         self.ros))
         self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
         # no new swaps once the loop ends; one under way fails its wait and replies
         stack.enter_context(s.declare_queryable(keys.skill, self._on_skill_query))
@@ -523,7 +534,7 @@ class Daemon:
         def age(sample: Sample | None) -> float | None:
             return None if sample is None else round(now - sample.received, 6)
 
-        return {
+        status: dict[str, Any] = {
             "stamp": time.time(),
             "skill": ctl.skill.id,
             "skill_name": ctl.skill.name,
@@ -567,3 +578,6 @@ class Daemon:
                 "swaps_refused": self._refused,
             },
         }
+        if self.ros is not None:
+            status["ros"] = self.ros.stats()
+        return status
