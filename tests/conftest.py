@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -41,6 +42,12 @@ class Proc(Child):
 
 def sctd(*args: str, log: Path) -> Proc:
     return Proc("sctd.cli.main", *args, log=log)
+
+
+def run_sctd(*args: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
+    """``sctd ARGS`` run to its end (killed after ``timeout``), output captured."""
+    return subprocess.run([sys.executable, "-m", "sctd.cli.main", *args], cwd=ROOT,
+                          capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture(autouse=True, scope="session")

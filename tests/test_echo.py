@@ -14,13 +14,8 @@ import zenoh
 from sctd.cli.echo import Rates, decode, full_key
 from sctd.runtime import codec
 
-from .conftest import ROOT, wait_for
+from .conftest import ROOT, run_sctd, wait_for
 from .test_e2e_runtime import KEYS, daemon  # noqa: F401  (the fixture)
-
-
-def _cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "sctd.cli.main", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 def test_keys_values_and_payloads_decode():
@@ -55,7 +50,7 @@ def test_echo_and_hz_on_the_daemons_target(daemon):  # noqa: F811
     sub2 = rig.session.declare_subscriber(KEYS.status, lambda s: stat.append(str(s.encoding)))
     try:
         ep = f"tcp/127.0.0.1:{port}"
-        out = _cli("echo", "target", "--json", "--count", "3", "--connect", ep)
+        out = run_sctd("echo", "target", "--json", "--count", "3", "--connect", ep)
         assert out.returncode == 0, out.stderr
         lines = [json.loads(x) for x in out.stdout.splitlines()]
         assert len(lines) == 3
@@ -65,7 +60,7 @@ def test_echo_and_hz_on_the_daemons_target(daemon):  # noqa: F811
             assert all(math.isfinite(x) for x in d["value"]["pose"])
         seqs = [d["value"]["seq"] for d in lines]
         assert seqs == sorted(seqs) and len(set(seqs)) == 3
-        hz = _cli("hz", "target", "--json", "--timeout", "3", "--connect", ep)
+        hz = run_sctd("hz", "target", "--json", "--timeout", "3", "--connect", ep)
         assert hz.returncode == 0, hz.stderr
         reports = [json.loads(x) for x in hz.stdout.splitlines()]
         last = reports[-1]["sctd/edan/target"]

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 import threading
 import time
 
@@ -20,13 +18,8 @@ from sctd.cli.log import kind_of, read_log, schema
 from sctd.runtime import codec
 from sctd.runtime.zsession import open_session
 
-from .conftest import ROOT, free_port, wait_for
+from .conftest import free_port, run_sctd, wait_for
 from .test_e2e_runtime import KEYS, daemon  # noqa: F401  (the fixture)
-
-
-def _cli(*args: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "sctd.cli.main", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 def test_kinds_and_schemas():
@@ -54,7 +47,7 @@ def logged(daemon, tmp_path):  # noqa: F811
     t = threading.Thread(target=inputs, daemon=True)
     t.start()
     try:
-        out = _cli("log", "--mcap", str(path), "--duration", "3", "--connect", f"tcp/127.0.0.1:{port}")
+        out = run_sctd("log", "--mcap", str(path), "--duration", "3", "--connect", f"tcp/127.0.0.1:{port}")
     finally:
         done.set()
         t.join()
@@ -85,7 +78,7 @@ def test_the_log_holds_every_contract_key_as_json_with_its_schema(logged):
 
 def test_replay_refuses_over_a_live_daemon(logged):
     path, port = logged
-    out = _cli("replay", str(path), "--connect", f"tcp/127.0.0.1:{port}")
+    out = run_sctd("replay", str(path), "--connect", f"tcp/127.0.0.1:{port}")
     assert out.returncode == 1 and "live program" in out.stderr
 
 
@@ -120,13 +113,13 @@ def test_replay_publishes_observations_and_commands_only_with_all(tmp_path):
                 s.declare_subscriber(KEYS.target, on("target"))]
         try:
             time.sleep(0.5)
-            out = _cli("replay", str(path), "--speed", "4", "--connect", f"tcp/127.0.0.1:{port}")
+            out = run_sctd("replay", str(path), "--speed", "4", "--connect", f"tcp/127.0.0.1:{port}")
             assert out.returncode == 0, out.stderr
             assert wait_for(lambda: len(got["state"]) == 20, 10), (out.stderr, len(got["state"]))
             assert got["target"] == []
             assert {e for e, _ in got["state"]} == {"application/msgpack"}
             assert [m["seq"] for _, m in got["state"]] == list(range(20))
-            out = _cli("replay", str(path), "--all", "--connect", f"tcp/127.0.0.1:{port}")
+            out = run_sctd("replay", str(path), "--all", "--connect", f"tcp/127.0.0.1:{port}")
             assert out.returncode == 0, out.stderr
             assert wait_for(lambda: len(got["target"]) == 20, 10), (out.stderr, len(got["target"]))
         finally:

@@ -136,23 +136,25 @@ def test_pose_out_is_rate_limited(monkeypatch):
 
 # --- a real daemon --------------------------------------------------------------------
 
-def _router(port: int) -> zenoh.Session:
+def _session(mode: str, endpoints: str, port: int) -> zenoh.Session:
+    """A loopback session in ``mode`` listening on or connecting to ``port``
+    (``endpoints``: ``listen`` or ``connect``), multicast and shared memory off."""
     conf = zenoh.Config()
-    conf.insert_json5("mode", '"router"')
-    conf.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5(f"{endpoints}/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("transport/shared_memory/enabled", "false")
     return zenoh.open(conf)
+
+
+def _router(port: int) -> zenoh.Session:
+    """The router a ROS system runs (rmw_zenohd holds tcp/127.0.0.1:7447), on ``port``."""
+    return _session("router", "listen", port)
 
 
 def _client(port: int) -> zenoh.Session:
     """A client of the router, as a ROS node with rmw_zenoh is of rmw_zenohd."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")
-    return zenoh.open(conf)
+    return _session("client", "connect", port)
 
 
 class RosSide:

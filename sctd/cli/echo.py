@@ -103,10 +103,11 @@ def add_hz_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
 
 
-def _until(args: argparse.Namespace, done: threading.Event) -> None:
-    """Wait for ``done``, Ctrl-C or SIGTERM, or ``--timeout``."""
+def wait_until(done: threading.Event, seconds: float) -> None:
+    """Wait for ``done``, Ctrl-C or SIGTERM, or ``seconds`` (0: no limit); SIGTERM sets
+    ``done``."""
     signal.signal(signal.SIGTERM, lambda *_: done.set())
-    end = time.monotonic() + args.timeout if args.timeout > 0 else math.inf
+    end = time.monotonic() + seconds if seconds > 0 else math.inf
     try:
         while not done.wait(min(0.1, max(0.0, end - time.monotonic()))):
             if time.monotonic() >= end:
@@ -137,7 +138,7 @@ def main_echo(args: argparse.Namespace) -> int:
                 done.set()
 
     with session_from_args(args) as s, s.declare_subscriber(key, on_sample):
-        _until(args, done)
+        wait_until(done, args.timeout)
     return EXIT_OK
 
 
@@ -193,7 +194,7 @@ def main_hz(args: argparse.Namespace) -> int:
     with session_from_args(args) as s, s.declare_subscriber(key, on_sample):
         t = threading.Thread(target=reporter, daemon=True)
         t.start()
-        _until(args, done)
+        wait_until(done, args.timeout)
         done.set()
         t.join(2.0)
     return EXIT_OK

@@ -31,7 +31,7 @@ import zenoh
 from ..runtime import codec
 from ..runtime.codec import DEFAULT_ROBOT, Keys
 from ..runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
-from .echo import decode
+from .echo import decode, wait_until
 from .errors import EXIT_FAILED, EXIT_OK, fail
 
 OBSERVATIONS = ("state", "objects", "scene", "status")  # replayed by default
@@ -125,17 +125,6 @@ class McapLog:
         self.fh.close()
 
 
-def _until(stop: threading.Event, seconds: float) -> None:
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    end = time.monotonic() + seconds if seconds > 0 else math.inf
-    try:
-        while not stop.wait(min(0.1, max(0.0, end - time.monotonic()))):
-            if time.monotonic() >= end:
-                break
-    except KeyboardInterrupt:
-        pass
-
-
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mcap", required=True, type=Path, metavar="FILE", help="the MCAP file to write")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="the robot name (default %(default)s)")
@@ -170,7 +159,7 @@ def main_log(args: argparse.Namespace) -> int:
     try:
         with session_from_args(args) as s, s.declare_subscriber(f"{prefix}/**", on_sample):
             print(f"sctd log: {prefix}/** -> {args.mcap}", file=sys.stderr, flush=True)
-            _until(stop, args.duration)
+            wait_until(stop, args.duration)
     finally:
         samples.put(None)
         t.join()
