@@ -8,7 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd.runtime.controller import ButtonWatch, Controller, RuntimeConfig, Sample
+from sctd.runtime.arbiter import InputArbiter
+from sctd.runtime.codec import InputMsg
+from sctd.runtime.controller import Controller, RuntimeConfig, Sample
 from sctd.skill import Bundle, load_skill, skill_from_bundle
 from tests.conftest import trap_skill_yaml
 
@@ -18,12 +20,33 @@ T_WORLD_MUG = se3.transform_from_pose([0.6, 0.1, 0.75, 0, 0, 0, 1])
 T_START = se3.transform_from_pose([0.3, 0.3, 1.0, 0, 0, 0, 1])
 
 
-def ctl(**cfg):
-    return Controller(SKILL, RuntimeConfig(**cfg))
+class Fed:
+    """A Controller fed through one device's input arbiter, as the tick driver feeds it:
+    ``tick`` takes an input message with its arrival time (:func:`inp`), offered once."""
+
+    def __init__(self, c: Controller):
+        self.c = c
+        cfg = c.config
+        self.arbiter = InputArbiter(cfg.input_timeout, cfg.deadband, cfg.stamp_check, c.counters)
+        self._last = None
+
+    def __getattr__(self, name):
+        return getattr(self.c, name)
+
+    def tick(self, now, wall, msg, state, obj):
+        if msg is not None and msg is not self._last:
+            self._last = msg
+            self.arbiter.offer("pad", msg[0], msg[1])
+        return self.c.tick(now, wall, self.arbiter.select(now, wall), state, obj)
 
 
-def inp(u, t, seq=1, wall=None):
-    return Sample(seq=seq, stamp=t if wall is None else wall, received=t, u=tuple(u))
+def ctl(skill=SKILL, **cfg):
+    return Fed(Controller(skill, RuntimeConfig(**cfg)))
+
+
+def inp(u, t, seq=1, wall=None, buttons=()):
+    """An input message sent at ``wall`` (default ``t``) that arrived at ``t``."""
+    return InputMsg(seq, t if wall is None else wall, tuple(u), tuple(buttons)), t
 
 
 def state(T, t, epoch=0, since=0.0):
@@ -80,7 +103,7 @@ def test_watchdog_stale_input_stops_motion():
     r = c.tick(t, t, inp([1, 0, 0], 0.009), state(T, t), obj(t))
     assert r.mode == "stopped" and np.array_equal(r.T_world_target, T)
     # A fresh arrival with an old sender stamp is stale too.
-    r = c.tick(t, t, Sample(seq=99, stamp=t - 0.5, received=t, u=(1, 0, 0)), state(T, t), obj(t))
+    r = c.tick(t, t, inp([1, 0, 0], t, seq=99, wall=t - 0.5), state(T, t), obj(t))
     assert np.array_equal(r.T_world_target, T) and c.counters.stale_input >= 1
 
 
@@ -302,8 +325,8 @@ def test_every_published_target_is_a_bounded_step_or_the_measured_pose(events):
     one, or (right after a re-seed) the measured pose; zero input never moves it."""
     from sctd.runtime.safety import StateWatch
 
-    cfg = RuntimeConfig(reseed_after=0.005, state_timeout=0.002)
-    c = Controller(SKILL, cfg)
+    c = ctl(reseed_after=0.005, state_timeout=0.002)
+    cfg = c.config
     last_state = None
     watch = StateWatch(cfg.state_jump, cfg.state_jump_rotation)
     T_meas, seq, t = T_START.copy(), 0, 0.0
@@ -353,15 +376,13 @@ def test_state_watch_flags_jumps_turns_and_restarts():
 
 def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
     """skills/teleop.yaml: button 0 toggles translate/rotate (rising edge, counted per
-    message by ButtonWatch); enable (button 1) = 0 makes the command zero."""
-    from sctd.runtime.controller import ButtonWatch
+    message by the arbiter); enable (button 1) = 0 makes the command zero."""
     from sctd.skill import WORLD_OBJECT
 
     teleop = load_skill(ROOT / "skills" / "teleop.yaml")
     assert teleop.object == WORLD_OBJECT
-    c = Controller(teleop, RuntimeConfig())
+    c = ctl(teleop)
     world = Sample(0, 0.0, 0.0, F=se3.flat_from_transform(np.eye(4)))
-    watch = ButtonWatch()
     T = T_START.copy()
     seq = 0
 
@@ -369,8 +390,7 @@ def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
         nonlocal seq, T
         seq += 1
         world.received = world.stamp = t
-        s = Sample(seq, t, t, u=tuple(u), buttons=buttons, presses=watch.observe(buttons))
-        r = c.tick(t, t, s, state(T, t), world)
+        r = c.tick(t, t, inp(u, t, seq, buttons=buttons), state(T, t), world)
         T = r.T_world_target
         return r
 
@@ -401,13 +421,10 @@ def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
 
 
 def test_a_press_on_stale_input_does_nothing():
-    from sctd.runtime.controller import ButtonWatch
-
-    c = Controller(load_skill(ROOT / "skills" / "teleop.yaml"), RuntimeConfig())
+    c = ctl(load_skill(ROOT / "skills" / "teleop.yaml"))
     world = Sample(0, 0.0, 0.0, F=se3.flat_from_transform(np.eye(4)))
-    w = ButtonWatch()
     c.tick(0.0, 0.0, None, state(T_START, 0.0), world)
-    old = Sample(1, 0.0, 0.0, u=(0, 0, 0), buttons=(1, 1, 0), presses=w.observe((1, 1, 0)))
+    old = inp((0, 0, 0), 0.0, buttons=(1, 1, 0))
     r = c.tick(0.5, 0.5, old, state(T_START, 0.5), Sample(0, 0.5, 0.5, F=world.F))
     assert r.state == "translate" and c.counters.presses == 0
 
@@ -419,19 +436,18 @@ def trap_skill():
 
 
 class Pad:
-    """A controller driven by (u, buttons) steps through a ButtonWatch, 1 ms apart, with
-    a robot that follows the target."""
+    """A controller driven by (u, buttons) steps through the input arbiter, 1 ms apart,
+    with a robot that follows the target."""
 
     def __init__(self, c):
-        self.c, self.watch, self.t, self.seq = c, ButtonWatch(), 0.0, 0
+        self.c, self.t, self.seq = Fed(c), 0.0, 0
 
     def run(self, steps):
         c, out = self.c, []
         for u, buttons in steps:
             meas = c.T_world_target if c.T_world_target is not None else T_WORLD_MUG
             self.seq += 1
-            s = Sample(seq=self.seq, stamp=self.t, received=self.t, u=tuple(u), buttons=buttons,
-                       presses=self.watch.observe(buttons))
+            s = inp(u, self.t, self.seq, buttons=buttons)
             out.append(c.tick(self.t, self.t, s, state(meas, self.t), obj(self.t)))
             self.t += 0.001
         return out

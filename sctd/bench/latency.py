@@ -25,11 +25,11 @@ from pathlib import Path
 
 import zenoh
 
-from sctd import se3
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
-from sctd.runtime.controller import Controller, RuntimeConfig, Sample
+from sctd.runtime.controller import RuntimeConfig
+from sctd.runtime.driver import TickDriver
 from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
 from sctd.runtime.zsession import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
 from sctd.skill import load_skill
@@ -123,37 +123,37 @@ def tick_baseline(skill_path: str, rate: float, n: int = 2000, paced: bool = Fal
 
 
 def tick_histogram(skill_path: str, rate: float, n: int = 2000, paced: bool = False) -> Histogram:
-    """The daemon's per-tick control step, in this process and without Zenoh: the
-    controller tick on a decoded state message (the daemon decodes its inputs ahead of
-    each deadline, outside the compute it reports), with the skill, a robot that follows
-    every target and a slowly sweeping input; between ticks, untimed, the neighbour
-    answers worked out ahead as the daemon does after each target. Back to back (``paced=False``) the caches
-    stay hot; ``paced=True`` sleeps to the next period between ticks as the daemon does,
-    which on some machines (virtual CPUs) makes each tick start cold. Timings (s)."""
+    """The daemon's per-tick control step, in this process and without Zenoh: the tick
+    driver the daemon runs, fed one state, object pose and input message a period (taken
+    ahead of each deadline, outside the compute it reports, as the daemon's drain does),
+    with the skill, a robot that follows every target and a slowly sweeping input; its
+    between-ticks work untimed. Back to back (``paced=False``) the caches stay hot;
+    ``paced=True`` sleeps to the next period between ticks as the daemon does, which on
+    some machines (virtual CPUs) makes each tick start cold. Timings (s)."""
 
     cfg = RuntimeConfig(rate=rate)
-    ctl = Controller(load_skill(skill_path), cfg)
-    F_obj = se3.flat_from_pose([0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0])
+    skill = load_skill(skill_path)
+    drv = TickDriver(skill, cfg)
+    pose_obj = [0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0]
     pose_ee = [0.35, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
     q = [0.1] * 7
     h = Histogram()
     set_timer_slack(1)
     ticker = Ticker(cfg.period, spin=1e-4)
-    obj = Sample(0, 0.0, 0.0, F=F_obj)
     for k in range(n):
         if paced:
             ticker.wait()
         t = k * cfg.period
         u = (0.6 * math.sin(k * 0.001), 0.6 * math.cos(k * 0.00065), 0.3 * math.sin(k * 0.00035))
-        pose = ctl._pose if ctl._pose is not None else pose_ee
-        data = codec.encode_state(k, t, pose, q=q, dq=q, wrench=[0.0] * 6)
-        obj.received = obj.stamp = t
-        m = codec.decode_state(data)
-        state = Sample(m.seq, m.stamp, t, F=se3.flat_from_pose(m.pose), wrench=m.wrench)
+        pose = drv.controller._pose if drv.controller._pose is not None else pose_ee
+        # the messages of one period, drained and decoded ahead of the deadline (untimed)
+        drv.receive("state", "", codec.encode_state(k, t, pose, q=q, dq=q, wrench=[0.0] * 6), t)
+        drv.receive("object", skill.object, codec.encode_object(k, t, pose_obj), t)
+        drv.receive("input", "bench", codec.encode_input(k, t, u), t)
         t0 = time.perf_counter()
-        ctl.tick(t, t, Sample(k, t, t, u=u), state, obj)
+        drv.tick(t, t)
         h.add(time.perf_counter() - t0)
-        ctl.engine.workspace.refresh()  # between ticks, as the daemon does (not timed)
+        drv.after_tick()  # between ticks (not timed)
     return h
 
 

@@ -46,7 +46,8 @@ _STAMPED = {"seq": _INT, "stamp": {"type": "number", "description": "sender's Un
             "v": _INT}
 SCHEMAS: dict[str, dict[str, Any]] = {
     "target": {"properties": {**_STAMPED, "pose": _POSE, "state": {"type": "string"},
-                              "skill": {"type": "string"}, "in_seq": _INT},
+                              "skill": {"type": "string"}, "in_seq": _INT,
+                              "in_device": {"type": "string"}},
                "required": ["seq", "stamp", "pose"]},
     "state": {"properties": {**_STAMPED, "pose": _POSE, "q": {"type": "array", "items": _NUM},
                              "dq": {"type": "array", "items": _NUM},
@@ -54,7 +55,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
               "required": ["seq", "stamp", "pose"]},
     "objects": {"properties": {**_STAMPED, "pose": _POSE}, "required": ["seq", "stamp", "pose"]},
     "input": {"properties": {**_STAMPED, "u": {"type": "array", "items": _NUM},
-                             "buttons": {"type": "array", "items": _INT}},
+                             "buttons": {"type": "array", "items": _INT},
+                             "stop": {"type": "integer", "description": "1: halt every device's motion"}},
               "required": ["seq", "stamp", "u"]},
     "status": {"properties": {"state": {"type": "string"}, "mode": {"type": "string"},
                               "skill": {"type": "string"}, "counters": {"type": "object"}}},

@@ -175,6 +175,7 @@ class InputMsg(NamedTuple):
     stamp: float
     u: tuple[float, ...]  # may hold non-finite values: the runtime treats those as zero
     buttons: tuple[int, ...] = ()  # 0/1 by position; () when the message has none
+    stop: bool = False  # the sender asks every device's motion to halt (wire contract: stop)
 
 
 class StateMsg(NamedTuple):
@@ -213,7 +214,8 @@ def _joints(obj: dict, key: str) -> list[float] | None:
 
 def decode_input(data: bytes) -> InputMsg:
     """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers), optional buttons
-    (at most MAX_BUTTONS values 0 or 1 by position: 0 mode switch, 1 enable, 2 escape)."""
+    (at most MAX_BUTTONS values 0 or 1 by position: 0 mode switch, 1 enable, 2 escape)
+    and optional ``stop`` (0/1 or a bool; absent: 0)."""
     _size(data, MAX_INPUT_BYTES)
     obj = unpack_map(data)
     u = _floats(obj, "u", (3, 6))
@@ -224,7 +226,10 @@ def decode_input(data: bytes) -> InputMsg:
                 x is True or x is False or (type(x) is int and x in (0, 1)) for x in b):
             raise DecodeError("bad_buttons", f"expected at most {MAX_BUTTONS} values 0 or 1")
         buttons = tuple(int(x) for x in b)
-    return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u), buttons)
+    stop = obj.get("stop", 0)
+    if not (stop is True or stop is False or (type(stop) is int and stop in (0, 1))):
+        raise DecodeError("bad_stop", "expected 0 or 1")
+    return InputMsg(_int(obj, "seq"), _stamp(obj), tuple(u), buttons, bool(stop))
 
 
 def decode_state(data: bytes) -> StateMsg:
@@ -253,10 +258,13 @@ def decode_object(data: bytes) -> ObjectMsg:
 
 
 def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...],
-                 buttons: list[int] | tuple[int, ...] | None = None) -> bytes:
+                 buttons: list[int] | tuple[int, ...] | None = None, stop: bool = False) -> bytes:
+    """An input message; ``stop`` is written only when set (readers default it to 0)."""
     msg: dict[str, Any] = {"seq": seq, "stamp": stamp, "u": [float(x) for x in u]}
     if buttons is not None:
         msg["buttons"] = [int(bool(x)) for x in buttons]
+    if stop:
+        msg["stop"] = 1
     return pack(msg)
 
 
@@ -277,9 +285,11 @@ def encode_object(seq: int, stamp: float, pose: list[float]) -> bytes:
 
 
 def encode_target(seq: int, stamp: float, pose: list[float], state: str, skill: str,
-                  in_seq: int) -> bytes:
+                  in_seq: int, in_device: str = "") -> bytes:
+    """A target: ``in_seq`` and ``in_device`` name the input message the tick followed
+    (the owning device's newest, else the newest of any device; -1 and "" for none)."""
     return pack({"seq": seq, "stamp": stamp, "pose": pose, "state": state, "skill": skill,
-                 "in_seq": in_seq})
+                 "in_seq": in_seq, "in_device": in_device})
 
 
 def decode_target(data: bytes) -> dict[str, Any]:

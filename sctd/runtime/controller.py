@@ -1,23 +1,24 @@
 """The pure part of the runtime tick (DESIGN §7 steps 1-6): no I/O, no clocks.
 
-:class:`Controller` turns the newest input, state and object samples into the next
-target pose, applying the skill (transitions, mappings, constraints) and the safety
-limits. The daemon (:mod:`sctd.runtime.daemon`) feeds it from Zenoh and publishes what
-it returns; tests drive it directly.
+:class:`Controller` turns the command the input arbiter chose and the newest state and
+object samples into the next target pose, applying the skill (transitions, mappings,
+constraints) and the safety limits. :class:`~sctd.runtime.driver.TickDriver` feeds it
+(messages in, targets out) for the daemon, the lockstep evaluation and the benches.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine, StuckDetector
-from .codec import BUTTON_ENABLE, BUTTON_ESCAPE
-from .safety import grows_offset, limit_step, sanitize_input
+from .arbiter import Command
+from .codec import BUTTON_ESCAPE
+from .safety import grows_offset, limit_step
 
 Array = NDArray[np.float64]
 
@@ -76,41 +77,17 @@ class Sample:
     world; ``pose`` the object's pose as received (to tell an unchanged pose). A state
     also carries the :class:`~sctd.runtime.safety.StateWatch` verdict on its stream:
     ``epoch`` (discontinuities before it) and ``since`` (arrival of the first state of
-    its continuous run).
+    its continuous run). (Input messages have their own slots: :mod:`.arbiter`.)
     """
 
     seq: int
     stamp: float
     received: float
     F: se3.Flat | None = None
-    u: tuple[float, ...] = ()
     wrench: list[float] | None = None
     pose: list[float] | None = None
     epoch: int = 0
     since: float = 0.0
-    buttons: tuple[int, ...] = ()
-    presses: tuple[int, ...] = ()  # input: rising edges per button so far (ButtonWatch)
-
-
-class ButtonWatch:
-    """Rising edges of input buttons, counted message by message (so that a press is not
-    lost when a tick sees only the newest of several messages)."""
-
-    def __init__(self) -> None:
-        self._last: tuple[int, ...] = ()
-        self.presses: tuple[int, ...] = ()
-
-    def observe(self, buttons: tuple[int, ...]) -> tuple[int, ...]:
-        """Take one message's buttons; the press counts so far."""
-        last, counts = self._last, list(self.presses)
-        if len(counts) < len(buttons):
-            counts += [0] * (len(buttons) - len(counts))
-        for i, b in enumerate(buttons):
-            if b and not (i < len(last) and last[i]):
-                counts[i] += 1
-        self._last = buttons
-        self.presses = tuple(counts)
-        return self.presses
 
 
 class _Target:
@@ -141,12 +118,13 @@ class TickResult:
     ``stopped`` (no valid input: the target stays) and ``running`` publish.
     """
 
-    __slots__ = ("_target", "in_seq", "input_ok", "mode", "pose", "state", "state_changed")
+    __slots__ = ("_target", "device", "in_seq", "input_ok", "mode", "pose", "state", "state_changed")
 
-    def __init__(self, mode: str, target: _Target | None, state: str, in_seq: int,
+    def __init__(self, mode: str, target: _Target | None, state: str, cmd: Command,
                  state_changed: bool = False, input_ok: bool = False,
                  pose: list[float] | None = None):
-        self.mode, self._target, self.state, self.in_seq = mode, target, state, in_seq
+        self.mode, self._target, self.state = mode, target, state
+        self.in_seq, self.device = cmd.in_seq, cmd.device
         self.state_changed, self.input_ok, self.pose = state_changed, input_ok, pose
 
     @property
@@ -160,6 +138,9 @@ class Counters:
     stale_input: int = 0
     disabled_input: int = 0
     presses: int = 0
+    ignored_input: int = 0  # messages of a device that did not own the motion, not at rest
+    ignored_presses: int = 0  # presses of a device while another owned the motion
+    stops: int = 0  # stop requests (rising edges, any device)
     stale_state: int = 0
     stale_object: int = 0
     nonfinite_output: int = 0
@@ -174,6 +155,10 @@ class Counters:
 
     def drop(self, reason: str) -> None:
         self.drops[reason] = self.drops.get(reason, 0) + 1
+
+    def as_dict(self) -> dict[str, int]:
+        """The counts (``status.counters``); the drops apart (``status.dropped``)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "drops"}
 
 
 class Controller:
@@ -200,8 +185,6 @@ class Controller:
         self.counters = Counters()
         self._target: _Target | None = None
         self.mode = "waiting"
-        self.last_in_seq = -1
-        self._presses: tuple[int, ...] = ()  # press counts of the input already acted on
         self._pose: list[float] | None = None
         self._publishing = False  # the last tick published: the next may step from its target
         self._fault = False
@@ -251,7 +234,7 @@ class Controller:
         self._install(skill, now, keep_state=True, engine=engine)
         self.counters.swaps += 1
 
-    def tick(self, now: float, wall: float, inp: Sample | None, state: Sample | None,
+    def tick(self, now: float, wall: float, cmd: Command, state: Sample | None,
              obj: Sample | None) -> TickResult:
         """One control step.
 
@@ -260,17 +243,18 @@ class Controller:
         now : float
             Monotonic time (s) of this tick; arrival times of samples are on this clock.
         wall : float
-            Unix time (s), for the sender-stamp checks (input, state, objects).
-        inp, state, obj : Sample or None
-            Newest input, robot state (ee pose in world) and task-object pose (in world).
+            Unix time (s), for the sender-stamp checks (state, objects).
+        cmd : Command
+            The input this tick follows (:meth:`.arbiter.InputArbiter.select`): already
+            zero when stale, disabled, not finite or from no device owning the motion.
+        state, obj : Sample or None
+            Newest robot state (ee pose in world) and task-object pose (in world).
         """
         cfg = self.config
-        u, input_ok = self._command(now, wall, inp)
-        in_seq = inp.seq if inp is not None else -1
-        pressed = self._pressed(inp, input_ok)
+        u, input_ok, pressed = cmd.u, cmd.ok, cmd.pressed
         state_ok = self._fresh("state", state, now, wall, cfg.state_timeout)
         obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
-        held = self._gate(now, state, state_ok, obj_ok, u, in_seq)
+        held = self._gate(now, state, state_ok, obj_ok, u, cmd)
         if held is not None:
             self.stuck_detector.release()  # where the hand is is not known or not moving
             return held
@@ -294,7 +278,7 @@ class Controller:
         # a (re-)seed tick moves nothing: no push, and the stuck watch restarts
         self._watch(now, not seeding and self._move(u, F_meas), F_meas, force)
         self.mode = "running" if input_ok else "stopped"
-        return TickResult(self.mode, self._target, self.engine.state, in_seq, changed,
+        return TickResult(self.mode, self._target, self.engine.state, cmd, changed,
                           input_ok, self._pose)
 
     def _watch(self, now: float, held: bool, F_meas: se3.Flat, force: Array | None) -> None:
@@ -313,7 +297,7 @@ class Controller:
         self.counters.stuck += det.episodes - was
 
     def _gate(self, now: float, state: Sample | None, state_ok: bool, obj_ok: bool,
-              u: tuple[float, ...], in_seq: int) -> TickResult | None:
+              u: tuple[float, ...], cmd: Command) -> TickResult | None:
         """The tick's result when it may not step (a stale state or object, a fault not
         yet cleared), else None. A fault clears after ``reseed_after`` s of continuous
         state with zero input and a fresh object; the target then re-seeds."""
@@ -325,20 +309,20 @@ class Controller:
             # robot holds on its own stale-target rule) and the target will resume from
             # the measured pose.
             return self._quiet("fault" if self._fault else "hold" if self._target is not None
-                               else "waiting", in_seq)
+                               else "waiting", cmd)
         assert state is not None
         if self._fault:
             if not obj_ok or now - state.since < self.config.reseed_after or any(u):
-                return self._quiet("fault", in_seq)
+                return self._quiet("fault", cmd)
             self._fault = False
             self._publishing = False
         if not obj_ok:
             # Stale object pose, fresh state: the target stays where it is in the world
             # (it does not need the object to stay put); without one there is nothing.
             if not self._publishing:
-                return self._quiet("hold" if self._target is not None else "waiting", in_seq)
+                return self._quiet("hold" if self._target is not None else "waiting", cmd)
             self.mode = "hold"
-            return TickResult("hold", self._target, self.engine.state, in_seq, pose=self._pose)
+            return TickResult("hold", self._target, self.engine.state, cmd, pose=self._pose)
         return None
 
     def _object_moved(self, F: se3.Flat) -> None:
@@ -395,11 +379,11 @@ class Controller:
             self.counters.nonfinite_output += 1  # never publish a non-finite target
         return True
 
-    def _quiet(self, mode: str, in_seq: int) -> TickResult:
+    def _quiet(self, mode: str, cmd: Command) -> TickResult:
         """A tick that publishes nothing; the next target will be a (re-)seed."""
         self.mode = mode
         self._publishing = False
-        return TickResult(mode, None, self.engine.state, in_seq)
+        return TickResult(mode, None, self.engine.state, cmd)
 
     def _fresh(self, kind: str, sample: Sample | None, now: float, wall: float,
                timeout: float) -> bool:
@@ -446,43 +430,3 @@ class Controller:
         self._T_obj_target = F
         self._target = _Target(o, F)
         return True
-
-    def _pressed(self, inp: Sample | None, fresh: bool) -> frozenset[int]:
-        """Buttons pressed since the last tick (rising edges of a fresh input; presses on
-        a stale or disabled one are dropped)."""
-        if inp is None or not inp.presses or inp.presses == self._presses:
-            return frozenset()
-        last = self._presses
-        self._presses = inp.presses
-        if not fresh:
-            return frozenset()
-        new = frozenset(i for i, n in enumerate(inp.presses)  # enable is held, not pressed
-                        if i != BUTTON_ENABLE and n > (last[i] if i < len(last) else 0))
-        self.counters.presses += len(new)
-        return new
-
-    def _command(self, now: float, wall: float, inp: Sample | None) -> tuple[tuple[float, ...], bool]:
-        """The user command this tick: zero when missing, stale, not finite or not enabled
-        (``buttons[1] == 0``)."""
-        cfg = self.config
-        if inp is None:
-            return (0.0, 0.0, 0.0), False
-        stale = now - inp.received > cfg.input_timeout or (
-            cfg.stamp_check and abs(wall - inp.stamp) > cfg.input_timeout
-        )
-        if stale:
-            if inp.seq != self.last_in_seq:
-                self.counters.stale_input += 1
-                self.last_in_seq = inp.seq
-            return (0.0,) * len(inp.u), False
-        b = inp.buttons
-        if len(b) > BUTTON_ENABLE and not b[BUTTON_ENABLE]:  # the deadman is released
-            if inp.seq != self.last_in_seq:
-                self.counters.disabled_input += 1
-                self.last_in_seq = inp.seq
-            return (0.0,) * len(inp.u), False
-        u, ok = sanitize_input(inp.u, cfg.deadband)
-        if not ok and inp.seq != self.last_in_seq:
-            self.counters.nonfinite_input += 1
-        self.last_in_seq = inp.seq
-        return u, ok

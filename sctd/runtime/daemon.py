@@ -26,27 +26,24 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import msgpack
 import zenoh
 
-from .. import se3
-from ..skill import WORLD_OBJECT, Skill, SkillEngine, SkillError, skill_summary
+from ..skill import Skill, SkillEngine, SkillError, skill_summary
 from ..skill.loader import MAX_BUNDLE_BYTES
 from . import codec
-from .controller import ButtonWatch, Controller, RuntimeConfig, Sample
-from .safety import StateWatch
+from .controller import RuntimeConfig
+from .driver import TickDriver
+from .ingress import Ingress, Inlet
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 from .worker import BundleWorker
 from .zsession import MSGPACK
 
 log = logging.getLogger("sctd.run")
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
-# Ring depths: messages a tick can take from each key; more in one period are lost in
-# the ring (newest wins), which only happens under a flood.
-INPUT_DEPTH, STATE_DEPTH, OBJECT_DEPTH = 2, 3, 2
 DRAIN_LEAD = 2.5e-4  # s before each deadline the inputs are drained and decoded
 # Messages on the runtime's input keys larger than this never reach it: Zenoh's
 # low-pass filter drops them on arrival, so what the rings hold is bounded in bytes too.
@@ -57,26 +54,21 @@ INGRESS_CEILING = 16 * 1024 * 1024
 SWITCH_INTERVAL = 2e-4
 
 
-# Messages per second the runtime takes on its input keys (input devices together, the
-# state, objects together), well above what they send (input 100-500 Hz, state 1 kHz,
-# objects 50 Hz); Zenoh drops the excess on arrival, so a flood never reaches the rings.
-INGRESS_RATES = {"input": 2000.0, "state": 4000.0, "objects": 2000.0}
-
-
 def ingress_limits(robot: str) -> dict[str, Any]:
-    """``size_limits`` and ``rate_limits`` (see :func:`~sctd.runtime.zsession.make_config`)
-    of a daemon's session."""
+    """``size_limits`` (see :func:`~sctd.runtime.zsession.make_config`) of a daemon's
+    session: puts larger than :data:`INGRESS_CEILING` on the keys it reads are dropped on
+    arrival. There is no rate limit: Zenoh's downsampling keeps the first message of an
+    interval and drops the rest, which could be a release (the rings bound floods)."""
     k = codec.Keys(robot)
-    keys = {"input": k.input("**"), "state": k.state, "objects": k.objects("**")}
-    return {"size_limits": [(key, INGRESS_CEILING) for key in keys.values()],
-            "rate_limits": [(keys[name], hz) for name, hz in INGRESS_RATES.items()]}
+    keys = (k.input("**"), k.state, k.objects("**"))
+    return {"size_limits": [(key, INGRESS_CEILING) for key in keys]}
 
 
 class _Publisher(threading.Thread):
     """Encodes and publishes targets and status off the tick thread: a Zenoh put that
     reaches a remote subscriber writes to the socket (tens of us, with a long tail),
     which would otherwise count against every tick. Runs at one FIFO priority below the
-    tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq)``, a
+    tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq, in_device)``, a
     status map (dict), or None to stop. With ``ros`` (``--ros``), each target is also
     offered to ``ros.target(stamp, pose)`` (CDR, rate-limited) after its own put."""
 
@@ -120,25 +112,14 @@ class _Publisher(threading.Thread):
         self.close()
 
 
-class _Inlet:
-    """One subscription the tick drains: a ring of ``depth`` samples, the size limit of
-    its messages, the drop-reason prefix, and ``take(data, key, now)`` for each one."""
-
-    __slots__ = ("depth", "kind", "limit", "sub", "take")
-
-    def __init__(self, session: zenoh.Session, key: str, depth: int, limit: int, kind: str,
-                 take):
-        self.sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
-        self.depth, self.limit, self.kind, self.take = depth, limit, kind, take
-
-
 @dataclass
 class _Pending:
     skill: Skill
     engine: SkillEngine
-    objects: dict[str, _Inlet]
+    objects: dict[str, Inlet]
     done: threading.Event
     state: str = ""
+    retired: list[Inlet] = field(default_factory=list)  # object rings the new skill does not use
 
 
 def _reply(body: dict[str, Any]) -> bytes:
@@ -211,7 +192,8 @@ class Daemon:
         self.swap_on_skill_key = swap_on_skill_key
         self.session = session
         self.keys = codec.Keys(config.robot)
-        self.controller = Controller(skill, config)
+        self.driver = TickDriver(skill, config)
+        self.controller = self.driver.controller
         self.spin = spin
         self.rt_priority = rt_priority
         self.cpu = cpu
@@ -222,81 +204,19 @@ class Daemon:
         self._recent_lateness = Histogram()  # the current RECENT-second window
         self._recent_compute = Histogram()
         self._recent: dict[str, Any] | None = None  # summaries of the last whole window
-        self._objects: dict[str, Sample] = {}
         self._pending: _Pending | None = None
         self._lock = threading.Lock()
         self._swap_lock = threading.Lock()
         self._refused = 0  # bundles refused by the skill queryable
-        self.target_seq = 0
-        self._input: Sample | None = None
-        self._state: Sample | None = None
-        self._watch = StateWatch(config.state_jump, config.state_jump_rotation)
-        self._buttons = ButtonWatch()
-        self._world = Sample(0, 0.0, 0.0, F=se3.flat_from_pose([0, 0, 0, 0, 0, 0, 1]))
         self._window_targets = 0
         self._window_compute_max = 0.0
         self._publisher: _Publisher | None = None
         self._worker: BundleWorker | None = None
-        self._inlets: tuple[_Inlet, ...] = ()
-        self._base_inlets: tuple[_Inlet, ...] = ()  # input and state
-        self._object_inlets: dict[str, _Inlet] = {}
-        self._trash: list[Any] = []  # oversized samples, released after the control step
+        self.ingress: Ingress | None = None
 
-    # --- inputs (drained and decoded on the tick thread) --------------------------------
-
-    def _drop(self, reason: str) -> None:
-        self.controller.counters.drop(reason)
-
-    def _drain(self, now: float) -> None:
-        """Take what arrived since the last tick: sizes checked before a payload is
-        copied, every message decoded, the newest valid sample of each key kept."""
-        for inlet in self._inlets:
-            sub = inlet.sub
-            for _ in range(inlet.depth):
-                sample = sub.try_recv()
-                if sample is None:
-                    break
-                payload = sample.payload
-                if len(payload) > inlet.limit:
-                    self._drop(f"{inlet.kind}_too_large")
-                    # freeing megabytes takes a while: after the control step, not here
-                    self._trash.append(sample)
-                    continue
-                try:
-                    inlet.take(payload.to_bytes(), sample.key_expr, now)
-                except codec.DecodeError as e:
-                    self._drop(f"{inlet.kind}_{e.reason}")
-                except Exception:  # a bug must cost one message, not the daemon
-                    log.exception("decoding a message on %s failed", sample.key_expr)
-                    self._drop("decoder_error")
-
-    def _take_input(self, data: bytes, key: Any, now: float) -> None:
-        m = codec.decode_input(data)
-        presses = self._buttons.observe(m.buttons) if m.buttons else self._buttons.presses
-        self._input = Sample(m.seq, m.stamp, now, u=m.u, buttons=m.buttons, presses=presses)
-
-    def _take_state(self, data: bytes, key: Any, now: float) -> None:
-        m = codec.decode_state(data)
-        if m.wrench_nonfinite:
-            self._drop("state_nonfinite_wrench")
-        F = se3.flat_from_pose(m.pose)
-        if self._watch.observe(m.seq, F, now):
-            self.controller.counters.state_discontinuity += 1
-        self._state = Sample(m.seq, m.stamp, now, F=F, wrench=m.wrench, epoch=self._watch.epoch,
-                             since=self._watch.since)
-
-    def _take_object(self, data: bytes, key: Any, now: float) -> None:
-        name = str(key).rsplit("/", 1)[-1]
-        m = codec.decode_object(data)
-        # A pose that has not changed keeps its flat transform (the same tuple), so that
-        # the controller's object-frame caches stay valid for a still object.
-        prev = self._objects.get(name)
-        F = prev.F if prev is not None and prev.pose == m.pose else se3.flat_from_pose(m.pose)
-        self._objects[name] = Sample(m.seq, m.stamp, now, F=F, pose=m.pose)
-
-    def _object_inlet(self, name: str) -> _Inlet:
-        return _Inlet(self.session, self.keys.objects(name), OBJECT_DEPTH, codec.MAX_OBJECT_BYTES,
-                      "object", self._take_object)
+    @property
+    def target_seq(self) -> int:
+        return self.driver.target_seq
 
     # --- the skill queryable (Zenoh's threads) ------------------------------------------
 
@@ -357,10 +277,9 @@ class Daemon:
             except SkillError as e:
                 self._refuse(query, str(e))
                 return
-            old = self._object_inlets
-            objects = {} if skill.object == WORLD_OBJECT else {
-                skill.object: old[skill.object] if skill.object in old
-                else self._object_inlet(skill.object)}
+            ingress = self.ingress
+            assert ingress is not None
+            objects = ingress.object_inlets(skill.object)
             pending = _Pending(skill, engine, objects, threading.Event())
             with self._lock:
                 self._pending = pending
@@ -373,25 +292,22 @@ class Daemon:
                     if self._pending is pending:
                         self._pending = None
                 for name, inlet in objects.items():
-                    if name not in old:
-                        inlet.sub.undeclare()
+                    if ingress.objects.get(name) is not inlet:
+                        inlet.close()
                 self._refuse(query, "<bundle>: the daemon stopped or did not reach a tick boundary "
                                     "in 5 s")
                 return
-            for name, inlet in old.items():  # the tick no longer drains these
-                if name not in objects:
-                    inlet.sub.undeclare()
+            for inlet in pending.retired:  # the tick no longer drains these
+                inlet.close()
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
         query.reply(key, _reply(
             {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}), encoding=MSGPACK)
 
     def _install(self, pending: _Pending, now: float) -> None:
         """On the tick thread, between two ticks: the new skill and its object rings."""
-        self.controller.swap(pending.skill, now, pending.engine)
-        self._object_inlets = pending.objects
-        self._inlets = self._base_inlets + tuple(pending.objects.values())
-        for name in [n for n in self._objects if n not in pending.objects]:
-            del self._objects[name]
+        self.driver.swap(pending.skill, now, pending.engine)
+        assert self.ingress is not None
+        pending.retired = self.ingress.use_objects(pending.objects)
         pending.state = self.controller.engine.state
         pending.done.set()
 
@@ -417,18 +333,11 @@ class Daemon:
         keys, s = self.keys, self.session
         self._worker = stack.enter_context(BundleWorker())
         stack.callback(setattr, self, "_worker", None)
-        self._base_inlets = (
-            _Inlet(s, keys.input(self.config.device), INPUT_DEPTH, codec.MAX_INPUT_BYTES, "input",
-                   self._take_input),
-            _Inlet(s, keys.state, STATE_DEPTH, codec.MAX_STATE_BYTES, "state", self._take_state),
-        )
-        stack.callback(self._close_inlets)
         # Only the objects the active skill needs, by name: a wildcard would let any number
         # of names cost memory, and a ring per wildcard would lose the task object's
         # updates whenever another object publishes.
-        obj = self.controller.skill.object
-        self._object_inlets = {} if obj == WORLD_OBJECT else {obj: self._object_inlet(obj)}
-        self._inlets = self._base_inlets + tuple(self._object_inlets.values())
+        self.ingress = Ingress(s, keys, self.driver, self.config.device)
+        stack.callback(self.ingress.close)
         pub_target = stack.enter_context(s.declare_publisher(
             keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP,
             encoding=MSGPACK))
@@ -442,13 +351,9 @@ class Daemon:
         stack.enter_context(s.declare_queryable(keys.skill_swap, self._on_swap_query))
         stack.callback(self.stop_event.set)
 
-    def _close_inlets(self) -> None:
-        for inlet in (*self._base_inlets, *self._object_inlets.values()):
-            inlet.sub.undeclare()
-
     def _loop(self, ticker: Ticker, end: float | None) -> None:
         """The tick loop: drain ahead of each deadline, step at it, account after it."""
-        assert self._publisher is not None
+        assert self._publisher is not None and self.ingress is not None
         send = self._publisher.queue.put
         t0 = time.monotonic()
         window = _Window(t0, self.controller.engine.state, next_status=t0, recent_start=t0)
@@ -462,14 +367,13 @@ class Daemon:
                 break
             state = self._step(now, send)
             done = time.monotonic()
-            if self._trash:
-                self._trash.clear()
             self._account(window, lateness, done - now, state)
             if done >= window.next_status:
                 send(self._window_status(window, ticker, done))
-            # After the target is out: the neighbour answers the next tick would work out
-            # (vector-field skills), so that the tick itself reuses them.
-            self.controller.engine.workspace.refresh()
+            # After the target is out: the work the next tick would otherwise do itself
+            # (vector-field neighbour answers), new devices' rings, freeing big samples.
+            self.driver.after_tick()
+            self.ingress.after_tick()
 
     def _before_tick(self) -> None:
         """Between two ticks: install a swapped-in skill, then drain the inputs."""
@@ -478,21 +382,16 @@ class Daemon:
             with self._lock:
                 self._pending = None
             self._install(pending, time.monotonic())
-        self._drain(time.monotonic())
+        assert self.ingress is not None
+        self.ingress.drain(time.monotonic())
 
     def _step(self, now: float, send: Any) -> str:
         """The control step at the deadline ``now``; queues the target, returns the state."""
         wall = time.time()
-        ctl = self.controller
-        if ctl.skill.object == WORLD_OBJECT:  # always there, always fresh
-            obj_sample: Sample | None = self._world
-            self._world.received, self._world.stamp = now, wall
-        else:
-            obj_sample = self._objects.get(ctl.skill.object)
-        res = ctl.tick(now, wall, self._input, self._state, obj_sample)
+        res = self.driver.tick(now, wall)
         if res.pose is not None:
-            self.target_seq += 1
-            send((self.target_seq, wall, res.pose, res.state, ctl.skill.id, res.in_seq))
+            send((self.driver.target_seq, wall, res.pose, res.state, self.controller.skill.id,
+                  res.in_seq, res.device))
             self._window_targets += 1
         return res.state
 
@@ -529,10 +428,12 @@ class Daemon:
     def status(self, ticker: Ticker, now: float, window: float) -> dict[str, Any]:
         ctl = self.controller
         c = ctl.counters
-        obj = self._objects.get(ctl.skill.object)
+        drv = self.driver
+        obj = drv.objects.get(ctl.skill.object)
+        last = drv.inputs.last
 
-        def age(sample: Sample | None) -> float | None:
-            return None if sample is None else round(now - sample.received, 6)
+        def age(received: float | None) -> float | None:
+            return None if received is None else round(now - received, 6)
 
         status: dict[str, Any] = {
             "stamp": time.time(),
@@ -554,29 +455,14 @@ class Daemon:
             "publish_ms": self._publisher.put_time.summary_ms() if self._publisher else None,
             "compute_max_window_ms": round(self._window_compute_max * 1e3, 4),
             "recent_ms": self._recent,
-            "input_age": age(self._input),
-            "state_age": age(self._state),
-            "object_age": age(obj),
-            "in_seq": self._input.seq if self._input is not None else -1,
+            "input_age": age(last.received if last is not None else None),
+            "state_age": age(drv.state.received if drv.state is not None else None),
+            "object_age": age(obj.received if obj is not None else None),
+            "in_seq": last.msg.seq if last is not None and last.msg is not None else -1,
+            "input": drv.inputs.summary(),
             "vf_scale": ctl.engine.last_scale,
             "dropped": dict(c.drops),
-            "counters": {
-                "nonfinite_input": c.nonfinite_input,
-                "stale_input": c.stale_input,
-                "disabled_input": c.disabled_input,
-                "presses": c.presses,
-                "stale_state": c.stale_state,
-                "stale_object": c.stale_object,
-                "nonfinite_output": c.nonfinite_output,
-                "offset_limited": c.offset_limited,
-                "state_discontinuity": c.state_discontinuity,
-                "reseeds": c.reseeds,
-                "transitions": c.transitions,
-                "escapes": c.escapes,
-                "stuck": c.stuck,
-                "swaps": c.swaps,
-                "swaps_refused": self._refused,
-            },
+            "counters": {**c.as_dict(), "swaps_refused": self._refused},
         }
         if self.ros is not None:
             status["ros"] = self.ros.stats()

@@ -1,0 +1,294 @@
+"""Several input devices, one motion: per-device newest samples, buttons and the
+ownership rule of the wire contract (docs/wire-contract.md, "Several devices"). Pure:
+no I/O, no clocks; times are arguments.
+
+Every arriving input message is offered here, in arrival order (:meth:`InputArbiter.offer`);
+each tick asks once for the command it follows (:meth:`InputArbiter.select`). The rule:
+
+- a message is **at rest** when its command is zero (after the dead band), not finite,
+  or its deadman (``buttons[1]``) is released; a device is at rest when its newest
+  message is, and **stale** when that message is older than the input timeout;
+- the device that first sends a message not at rest, while no device owns the motion,
+  owns it until its newest message is at rest or stale;
+- meanwhile another device's messages not at rest are ignored and counted
+  (``ignored_input``), and that device is **disarmed**: it must send a message at rest
+  before it can take the motion (no takeover by a stick that was already deflected);
+- a message with ``stop`` set, from any device, ends the ownership and disarms every
+  device; while any device's fresh newest message holds ``stop``, nobody takes the
+  motion; afterwards the motion resumes only from a device that sent a message at rest
+  and then pushes again;
+- button presses (rising edges) are counted per device on every message; a tick acts on
+  a device's presses when its newest message is fresh and enabled and it owns the
+  motion or nobody does (others are counted as ``ignored_presses``).
+
+At most ``max_devices`` device names are tracked; a new name when the table is full
+takes the place of a device that is armed, owns nothing and has been silent for
+``evict_after`` s, or is dropped and counted (``input_devices_full``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from .codec import BUTTON_ENABLE, InputMsg
+from .safety import sanitize_input
+
+MAX_DEVICES = 64  # device names one daemon tracks at once
+EVICT_AFTER = 10.0  # s a device must be silent before a new name may take its place
+
+
+class ButtonWatch:
+    """Rising edges of one device's buttons, counted message by message (so that a press
+    is not lost when a tick sees only the newest of several messages)."""
+
+    __slots__ = ("_last", "presses")
+
+    def __init__(self) -> None:
+        self._last: tuple[int, ...] = ()
+        self.presses: tuple[int, ...] = ()
+
+    def observe(self, buttons: tuple[int, ...]) -> tuple[int, ...]:
+        """Take one message's buttons; the press counts so far."""
+        last, counts = self._last, list(self.presses)
+        if len(counts) < len(buttons):
+            counts += [0] * (len(buttons) - len(counts))
+        for i, b in enumerate(buttons):
+            if b and not (i < len(last) and last[i]):
+                counts[i] += 1
+        self._last = buttons
+        self.presses = tuple(counts)
+        return self.presses
+
+
+class Command(NamedTuple):
+    """What a tick follows: the command ``u`` (clipped, dead band applied; zeros when no
+    device drives the motion), whether the input behind it is fresh, enabled and finite
+    (``ok``), the ``seq`` and device of that input (-1 and "" for none), and the buttons
+    pressed since the last tick that act on it."""
+
+    u: tuple[float, ...]
+    ok: bool
+    in_seq: int
+    device: str
+    pressed: frozenset[int]
+
+
+NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
+
+
+class _Device:
+    """One device's newest message and its standing under the rule."""
+
+    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "msg", "name", "order",
+                 "received", "rest", "run_start", "stale_seq", "stop", "u")
+
+    def __init__(self, name: str):
+        self.name = name
+        self.msg: InputMsg | None = None
+        self.received = 0.0  # arrival of the newest message (the receiver's clock)
+        self.order = 0  # arrival number of the newest message (all devices count together)
+        self.u: tuple[float, ...] = ()  # its command (clipped, dead band applied)
+        self.finite = True
+        self.enabled = True
+        self.rest = True
+        self.stop = False  # the newest message holds stop
+        self.armed = True
+        self.run_start = 0  # arrival number of the first message of the current push
+        self.buttons = ButtonWatch()
+        self.acted: tuple[int, ...] = ()  # press counts already acted on (or dropped)
+        self.stale_seq = -1  # the newest message already counted as stale
+
+
+class InputArbiter:
+    """Per-device input slots and the ownership rule (module doc).
+
+    Parameters
+    ----------
+    input_timeout : float
+        Seconds after which a device's newest message is stale (by arrival and, with
+        ``stamp_check``, by its sender stamp against ``wall``).
+    deadband : float
+        Per-axis dead band of the command.
+    counters
+        The runtime's counters (``Counters``): input drops and events are counted there.
+    """
+
+    def __init__(self, input_timeout: float, deadband: float, stamp_check: bool, counters,
+                 max_devices: int = MAX_DEVICES, evict_after: float = EVICT_AFTER):
+        self.input_timeout = input_timeout
+        self.deadband = deadband
+        self.stamp_check = stamp_check
+        self.counters = counters
+        self.max_devices = max_devices
+        self.evict_after = evict_after
+        self.devices: dict[str, _Device] = {}
+        self.owner: _Device | None = None
+        self.last: _Device | None = None  # the device heard last
+        self._arrivals = 0
+        self._pending: list[_Device] = []  # armed devices that pushed while nobody owned
+        self._pressing: list[_Device] = []  # devices with presses not yet seen by a tick
+        self._stopping: set[_Device] = set()  # devices whose newest message holds stop
+
+    # --- every message, as it arrives ----------------------------------------------------
+
+    def offer(self, name: str, m: InputMsg, now: float) -> bool:
+        """Take one input message from device ``name`` that arrived at ``now``. Returns
+        False when it was dropped (the device table is full)."""
+        d = self.devices.get(name)
+        if d is None:
+            d = self._admit(name, now)
+            if d is None:
+                self.counters.drop("input_devices_full")
+                return False
+        self._arrivals += 1
+        d.msg, d.received, d.order = m, now, self._arrivals
+        self.last = d
+        u, finite = sanitize_input(m.u, self.deadband)
+        b = m.buttons
+        enabled = not (len(b) > BUTTON_ENABLE and not b[BUTTON_ENABLE])
+        if not finite:
+            self.counters.nonfinite_input += 1
+        elif not enabled:
+            self.counters.disabled_input += 1
+        was_rest = d.rest
+        d.u, d.finite, d.enabled = u, finite, enabled
+        d.rest = not (finite and enabled and any(u))
+        if b:
+            if d.buttons.observe(b) != d.acted and d not in self._pressing:
+                self._pressing.append(d)
+        self._take_stop(d, m.stop)
+        if d.rest:
+            d.armed = True
+            if d is self.owner:
+                self.owner = None
+            return True
+        if was_rest:
+            d.run_start = d.order
+        owner = self.owner
+        if owner is d:
+            return True
+        if owner is not None or self._stopping:
+            self._ignore(d)
+        elif d.armed and d not in self._pending:
+            self._pending.append(d)
+        return True
+
+    def _take_stop(self, d: _Device, stop: bool) -> None:
+        if stop and not d.stop:  # a new stop: every device must come to rest and push again
+            self.counters.stops += 1
+            self.owner = None
+            for other in self.devices.values():
+                other.armed = False
+            self._pending.clear()
+        d.stop = stop
+        if stop:
+            self._stopping.add(d)
+        else:
+            self._stopping.discard(d)
+
+    def _ignore(self, d: _Device) -> None:
+        d.armed = False
+        self.counters.ignored_input += 1
+
+    def _admit(self, name: str, now: float) -> _Device | None:
+        """A new device's slot, making room when the table is full (module doc)."""
+        if len(self.devices) >= self.max_devices:
+            old = next((d for d in self.devices.values() if d.armed and d is not self.owner
+                        and d is not self.last and now - d.received >= self.evict_after), None)
+            if old is None:
+                return None
+            del self.devices[old.name]
+            self._stopping.discard(old)
+            if old in self._pressing:
+                self._pressing.remove(old)
+        d = self.devices[name] = _Device(name)
+        return d
+
+    # --- once per tick --------------------------------------------------------------------
+
+    def fresh(self, d: _Device, now: float, wall: float) -> bool:
+        """Whether ``d``'s newest message is within the input timeout (arrival and, with
+        the stamp check, its sender stamp)."""
+        m = d.msg
+        assert m is not None
+        timeout = self.input_timeout
+        return now - d.received <= timeout and (not self.stamp_check or abs(wall - m.stamp) <= timeout)
+
+    def select(self, now: float, wall: float) -> Command:
+        """The command this tick follows (module doc): the owner's newest message, or a
+        zero command. Decides ownership among the devices that pushed since the last tick
+        and collects the presses that act."""
+        owner = self.owner
+        if owner is not None and not self.fresh(owner, now, wall):
+            self._count_stale(owner)
+            owner = self.owner = None
+        if self._stopping and not any(self.fresh(d, now, wall) for d in self._stopping):
+            self._stopping.clear()  # stops that went stale no longer hold (the disarm stays)
+        if owner is None and self._pending:
+            owner = self._elect(now, wall)
+        pressed = self._presses(now, wall) if self._pressing else frozenset()
+        if owner is not None:
+            m = owner.msg
+            assert m is not None
+            return Command(owner.u, True, m.seq, owner.name, pressed)
+        d = self.last
+        if d is None:
+            return NO_INPUT
+        m = d.msg
+        assert m is not None
+        ok = d.finite and d.enabled and self.fresh(d, now, wall)
+        if not ok:
+            self._count_stale(d, now, wall)
+        return Command((0.0,) * len(d.u), ok, m.seq, d.name, pressed)
+
+    def _elect(self, now: float, wall: float) -> _Device | None:
+        """The pending device that pushed first takes the motion; the others that push
+        still are ignored (they must come to rest first)."""
+        live = [d for d in self._pending if not d.rest and d.armed and self.fresh(d, now, wall)]
+        self._pending.clear()
+        if not live or self._stopping:
+            for d in live:
+                self._ignore(d)
+            return None
+        first = min(live, key=lambda d: d.run_start)
+        for d in live:
+            if d is not first:
+                self._ignore(d)
+        self.owner = first
+        return first
+
+    def _presses(self, now: float, wall: float) -> frozenset[int]:
+        """Presses since the last tick that act (module doc); the others are dropped."""
+        pressed: set[int] = set()
+        owner = self.owner
+        for d in self._pressing:
+            counts, last = d.buttons.presses, d.acted
+            d.acted = counts
+            new = [i for i, n in enumerate(counts)  # enable is held, not pressed
+                   if i != BUTTON_ENABLE and n > (last[i] if i < len(last) else 0)]
+            if not new or not (d.enabled and d.finite and self.fresh(d, now, wall)):
+                continue
+            if owner is not None and d is not owner:
+                self.counters.ignored_presses += len(new)
+                continue
+            pressed.update(new)
+        self._pressing.clear()
+        self.counters.presses += len(pressed)
+        return frozenset(pressed)
+
+    def _count_stale(self, d: _Device, now: float | None = None, wall: float | None = None) -> None:
+        """Count ``d``'s newest message once as stale (when it is)."""
+        m = d.msg
+        assert m is not None
+        if now is not None and wall is not None and self.fresh(d, now, wall):
+            return
+        if m.seq != d.stale_seq:
+            d.stale_seq = m.seq
+            self.counters.stale_input += 1
+
+    def summary(self) -> dict[str, object]:
+        """``status.input``: the device owning the motion (None), the number of devices
+        tracked, and whether a stop holds."""
+        return {"owner": self.owner.name if self.owner is not None else None,
+                "devices": len(self.devices),
+                "stop": bool(self._stopping)}

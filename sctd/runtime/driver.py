@@ -1,0 +1,136 @@
+"""The tick driver: decoded messages in, the tick's target and events out. Pure: no I/O,
+no clocks, no threads; every time is an argument.
+
+One path from messages to targets (DESIGN §3, §7). The daemon (:mod:`.daemon`) feeds
+it from its Zenoh rings; the lockstep evaluation and the benches feed it from the
+simulation; so the check that gates a skill runs the code that will run it. A feeder
+does, in this order:
+
+1. offer each message as it arrives, in arrival order, with its arrival time
+   (:meth:`TickDriver.receive` for bytes off the wire, or :meth:`take_input`,
+   :meth:`take_state`, :meth:`take_object` for decoded messages): inputs go to their
+   device's slot, with button edges and the ownership rule judged on every message
+   (:mod:`.arbiter`); every state goes through the continuity watch
+   (:class:`~.safety.StateWatch`); the task object's pose is kept (an unchanged pose
+   keeps its flat transform, so that the controller's object caches stay valid);
+2. at the deadline, :meth:`TickDriver.tick` (the arbiter's command, the newest state
+   and object pose, the controller's step); publish what it returns;
+3. after the target is out, :meth:`TickDriver.after_tick` (the work a vector-field tick
+   would otherwise do itself, done between ticks).
+"""
+
+from __future__ import annotations
+
+from .. import se3
+from ..skill import WORLD_OBJECT, Skill, SkillEngine
+from . import codec
+from .arbiter import MAX_DEVICES, InputArbiter
+from .controller import Controller, Counters, RuntimeConfig, Sample, TickResult
+from .safety import StateWatch
+
+_WORLD_F = se3.flat_from_pose([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+
+
+class TickDriver:
+    """The runtime's tick between messages and targets (module doc).
+
+    Parameters
+    ----------
+    skill : Skill
+    config : RuntimeConfig
+    max_devices : int
+        Input device names tracked at once (:mod:`.arbiter`).
+    """
+
+    def __init__(self, skill: Skill, config: RuntimeConfig, max_devices: int = MAX_DEVICES):
+        self.config = config
+        self.controller = Controller(skill, config)
+        self.counters: Counters = self.controller.counters
+        self.inputs = InputArbiter(config.input_timeout, config.deadband, config.stamp_check,
+                                   self.counters, max_devices)
+        self.watch = StateWatch(config.state_jump, config.state_jump_rotation)
+        self.state: Sample | None = None
+        self.objects: dict[str, Sample] = {}
+        self._world = Sample(0, 0.0, 0.0, F=_WORLD_F)
+        self.target_seq = 0  # targets published so far
+
+    @property
+    def skill(self) -> Skill:
+        return self.controller.skill
+
+    @property
+    def engine(self) -> SkillEngine:
+        return self.controller.engine
+
+    # --- messages, as they arrive ---------------------------------------------------------
+
+    def receive(self, kind: str, name: str, data: bytes, now: float) -> None:
+        """One message off the wire: ``kind`` ``input`` (``name``: the device), ``state``
+        or ``object`` (``name``: the object). Decoded and validated here; a malformed one
+        is dropped and counted as ``<kind>_<reason>`` (``status.dropped``)."""
+        try:
+            if kind == "input":
+                self.take_input(name, codec.decode_input(data), now)
+            elif kind == "state":
+                self.take_state(codec.decode_state(data), now)
+            else:
+                self.take_object(name, codec.decode_object(data), now)
+        except codec.DecodeError as e:
+            self.counters.drop(f"{kind}_{e.reason}")
+
+    def take_input(self, device: str, m: codec.InputMsg, now: float) -> None:
+        """An input message from ``device`` (:meth:`.arbiter.InputArbiter.offer`)."""
+        self.inputs.offer(device, m, now)
+
+    def take_state(self, m: codec.StateMsg, now: float) -> None:
+        """A robot state: judged for continuity, kept as the newest."""
+        if m.wrench_nonfinite:
+            self.counters.drop("state_nonfinite_wrench")
+        F = se3.flat_from_pose(m.pose)
+        if self.watch.observe(m.seq, F, now):
+            self.counters.state_discontinuity += 1
+        self.state = Sample(m.seq, m.stamp, now, F=F, wrench=m.wrench, epoch=self.watch.epoch,
+                            since=self.watch.since)
+
+    def take_object(self, name: str, m: codec.ObjectMsg, now: float) -> None:
+        """An object's pose; kept when it is the active skill's task object."""
+        if name != self.controller.skill.object:
+            return
+        prev = self.objects.get(name)
+        # An unchanged pose keeps its flat transform (the same tuple): the controller's
+        # object-frame caches stay valid for a still object.
+        F = prev.F if prev is not None and prev.pose == m.pose else se3.flat_from_pose(m.pose)
+        self.objects[name] = Sample(m.seq, m.stamp, now, F=F, pose=m.pose)
+
+    # --- the tick -------------------------------------------------------------------------
+
+    def object_sample(self, now: float, wall: float) -> Sample | None:
+        """The active skill's task object as the tick sees it (the world is always there
+        and always fresh)."""
+        obj = self.controller.skill.object
+        if obj == WORLD_OBJECT:
+            self._world.received, self._world.stamp = now, wall
+            return self._world
+        return self.objects.get(obj)
+
+    def tick(self, now: float, wall: float) -> TickResult:
+        """One control step at the deadline ``now`` (monotonic, the arrival times' clock)
+        and ``wall`` (Unix time, for the sender-stamp checks). When the result has a
+        ``pose``, it is target number :attr:`target_seq`."""
+        cmd = self.inputs.select(now, wall)
+        res = self.controller.tick(now, wall, cmd, self.state, self.object_sample(now, wall))
+        if res.pose is not None:
+            self.target_seq += 1
+        return res
+
+    def after_tick(self) -> None:
+        """Between ticks, after the target is out: the neighbour answers the next
+        vector-field tick would work out, worked out now (its own result is unchanged)."""
+        self.controller.engine.workspace.refresh()
+
+    def swap(self, skill: Skill, now: float, engine: SkillEngine | None = None) -> None:
+        """Replace the skill between two ticks (:meth:`.controller.Controller.swap`);
+        object poses the new skill does not use are forgotten."""
+        self.controller.swap(skill, now, engine)
+        for name in [n for n in self.objects if n != skill.object]:
+            del self.objects[name]

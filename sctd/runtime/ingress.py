@@ -1,0 +1,210 @@
+"""What the daemon reads, drained by the tick thread into the tick driver.
+
+Every key the runtime reads arrives in a Zenoh ring channel that Zenoh's own threads
+fill without Python (newest wins: a full ring loses its oldest message, never the
+newest), so a flood costs the tick only the few messages it drains. The tick drains
+each ring once per period, ahead of its deadline, checks each message's size before
+copying it, and hands it to :meth:`~sctd.runtime.driver.TickDriver.receive`. Nothing
+drops a message on arrival by rate: a rate limit keeps the first message of an interval
+and drops the rest, and the rest may be a release.
+
+Input devices each get a ring of their own, so that a device flooding its key can never
+push another device's newest message out. Names are learned from a catch-all ring on
+``input/*``: a message from a name without a ring is taken from there, and the device's
+ring is declared after that tick; the next drain takes what arrived meanwhile from both
+rings once (by payload) and from then on reads the device from its own ring. Messages
+of further names are dropped and counted as ``input_devices_full`` (the arbiter decides
+which names it tracks; a ring follows its table).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import zenoh
+
+from ..skill import WORLD_OBJECT
+from . import codec
+from .driver import TickDriver
+
+log = logging.getLogger("sctd.run")
+
+# Ring depths: the messages one drain can take from each ring; more in one period are
+# coalesced in the ring (the oldest lost, the newest kept), which only happens when a
+# sender exceeds its rate.
+DEVICE_DEPTH = 4  # one input device (bridges send 20-1000 Hz)
+ANY_DEPTH = 8  # the catch-all input ring: new names, and every device's copy to skip
+STATE_DEPTH = 4  # the robot state (1 kHz)
+OBJECT_DEPTH = 2  # one object's pose (perception 30-100 Hz)
+
+
+class Inlet:
+    """One ring the tick drains: its subscription, depth, the size limit of its messages,
+    the message kind (``input``, ``state``, ``object``) and the name passed along (the
+    device or the object)."""
+
+    __slots__ = ("depth", "kind", "limit", "name", "sub")
+
+    def __init__(self, session: zenoh.Session, key: str, depth: int, limit: int, kind: str,
+                 name: str = ""):
+        self.sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(depth))
+        self.depth, self.limit, self.kind, self.name = depth, limit, kind, name
+
+    def close(self) -> None:
+        self.sub.undeclare()
+
+
+def object_inlet(session: zenoh.Session, keys: codec.Keys, name: str) -> Inlet:
+    return Inlet(session, keys.objects(name), OBJECT_DEPTH, codec.MAX_OBJECT_BYTES, "object", name)
+
+
+class Ingress:
+    """The daemon's rings (module doc), drained into ``driver``.
+
+    Parameters
+    ----------
+    session : zenoh.Session
+    keys : codec.Keys
+    driver : TickDriver
+    device : str
+        ``*`` to follow every device (names learned as they appear), or one device name.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: codec.Keys, driver: TickDriver, device: str = "*"):
+        self.session, self.keys, self.driver = session, keys, driver
+        self.state = Inlet(session, keys.state, STATE_DEPTH, codec.MAX_STATE_BYTES, "state")
+        self.any: Inlet | None = None
+        self.devices: dict[str, Inlet] = {}  # key -> the device's own ring
+        if device == "*":
+            self.any = Inlet(session, keys.input("*"), ANY_DEPTH, codec.MAX_INPUT_BYTES, "input")
+        else:
+            self.devices[keys.input(device)] = self._device_inlet(device)
+        self._wanted: list[str] = []  # names heard on the catch-all, to get a ring after the tick
+        self._joining: dict[str, Inlet] = {}  # rings declared since the last drain
+        self.objects: dict[str, Inlet] = {}
+        obj = driver.skill.object
+        if obj != WORLD_OBJECT:
+            self.objects[obj] = object_inlet(session, keys, obj)
+        self.trash: list[Any] = []  # oversized samples, released after the control step
+
+    def _device_inlet(self, name: str) -> Inlet:
+        return Inlet(self.session, self.keys.input(name), DEVICE_DEPTH, codec.MAX_INPUT_BYTES,
+                     "input", name)
+
+    # --- the drain (tick thread, ahead of each deadline) ----------------------------------
+
+    def drain(self, now: float) -> None:
+        """Take what arrived since the last drain, ring by ring, into the driver."""
+        if self.any is not None:
+            self._drain_any(now)
+        for inlet in self.devices.values():
+            self._drain(inlet, now)
+        self._drain(self.state, now)
+        for inlet in self.objects.values():
+            self._drain(inlet, now)
+
+    def _drain(self, inlet: Inlet, now: float) -> None:
+        sub = inlet.sub
+        for _ in range(inlet.depth):
+            sample = sub.try_recv()
+            if sample is None:
+                break
+            self._take(inlet.kind, inlet.name, sample, inlet.limit, now)
+
+    def _take(self, kind: str, name: str, sample: Any, limit: int, now: float) -> bytes | None:
+        """Size-check, copy and hand one sample to the driver; its bytes (None when it
+        was too large)."""
+        payload = sample.payload
+        if len(payload) > limit:
+            self.driver.counters.drop(f"{kind}_too_large")
+            self.trash.append(sample)  # freeing megabytes takes a while: after the tick
+            return None
+        data = payload.to_bytes()
+        try:
+            self.driver.receive(kind, name, data, now)
+        except Exception:  # a bug must cost one message, not the daemon
+            log.exception("decoding a message on %s failed", sample.key_expr)
+            self.driver.counters.drop("decoder_error")
+        return data
+
+    def _drain_any(self, now: float) -> None:
+        """The catch-all input ring: messages of devices without a ring of their own yet
+        (learning their names), skipping the copies of those that have one. A device
+        whose ring was declared since the last drain is taken from both once, in arrival
+        order: first what only the catch-all has, then its own ring."""
+        assert self.any is not None
+        joining = self._joining
+        seen: dict[str, set[bytes]] = {}
+        batches: dict[str, list[Any]] = {}
+        for key, inlet in joining.items():  # what arrived after its ring existed
+            batch = batches[key] = []
+            for _ in range(inlet.depth):
+                sample = inlet.sub.try_recv()
+                if sample is None:
+                    break
+                batch.append(sample)
+            seen[key] = {s.payload.to_bytes() for s in batch if len(s.payload) <= inlet.limit}
+        sub, devices = self.any.sub, self.devices
+        for _ in range(ANY_DEPTH):
+            sample = sub.try_recv()
+            if sample is None:
+                break
+            key = str(sample.key_expr)
+            if key in devices:
+                continue
+            if key in seen:
+                if len(sample.payload) <= codec.MAX_INPUT_BYTES and sample.payload.to_bytes() in seen[key]:
+                    continue
+                self._take("input", joining[key].name, sample, codec.MAX_INPUT_BYTES, now)
+                continue
+            name = key.rsplit("/", 1)[-1]
+            self._take("input", name, sample, codec.MAX_INPUT_BYTES, now)
+            if name not in self._wanted and name in self.driver.inputs.devices:
+                self._wanted.append(name)  # the arbiter took it in: its own ring after the tick
+        for key, inlet in joining.items():
+            for sample in batches[key]:
+                self._take("input", inlet.name, sample, inlet.limit, now)
+            devices[key] = inlet
+        joining.clear()
+
+    # --- between ticks ------------------------------------------------------------------
+
+    def after_tick(self) -> None:
+        """After the target is out: rings for the device names heard on the catch-all,
+        and the oversized samples released."""
+        if self.trash:
+            self.trash.clear()
+        if not self._wanted:
+            return
+        known = set(self.driver.inputs.devices)
+        for key in [k for k, inlet in self.devices.items() if inlet.name not in known]:
+            self.devices.pop(key).close()  # the arbiter made room: its ring goes too
+        for name in self._wanted:
+            if name in known:
+                self._joining[self.keys.input(name)] = self._device_inlet(name)
+        self._wanted.clear()
+
+    # --- swaps ----------------------------------------------------------------------------
+
+    def object_inlets(self, obj: str) -> dict[str, Inlet]:
+        """The object rings a skill on ``obj`` needs, reusing the current one (called on
+        the query's thread; installed by :meth:`use_objects` between ticks)."""
+        if obj == WORLD_OBJECT:
+            return {}
+        inlet = self.objects.get(obj)
+        return {obj: inlet if inlet is not None else object_inlet(self.session, self.keys, obj)}
+
+    def use_objects(self, objects: dict[str, Inlet]) -> list[Inlet]:
+        """Drain ``objects`` from now on (tick thread); returns the rings no longer
+        drained, for the caller to close off the tick thread."""
+        old = [inlet for name, inlet in self.objects.items() if name not in objects]
+        self.objects = objects
+        return old
+
+    def close(self) -> None:
+        for inlet in (self.state, self.any, *self.devices.values(), *self._joining.values(),
+                      *self.objects.values()):
+            if inlet is not None:
+                inlet.close()
+        self.devices, self._joining, self.objects = {}, {}, {}
