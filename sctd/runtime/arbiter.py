@@ -2,24 +2,32 @@
 ownership rule of the wire contract (docs/wire-contract.md, "Several devices"). Pure:
 no I/O, no clocks; times are arguments.
 
-Every arriving input message is offered here, in arrival order (:meth:`InputArbiter.offer`);
-each tick asks once for the command it follows (:meth:`InputArbiter.select`). The rule:
+Every arriving input message is offered here, in arrival order per device
+(:meth:`InputArbiter.offer`); each tick asks once for the command it follows
+(:meth:`InputArbiter.select`). The rule:
 
 - a message is **at rest** when its command is zero (after the dead band), not finite,
   or its deadman (``buttons[1]``) is released; a device is at rest when its newest
   message is, and **stale** when that message is older than the input timeout;
-- the device that first sends a message not at rest, while no device owns the motion,
-  owns it until its newest message is at rest or stale;
-- meanwhile another device's messages not at rest are ignored and counted
-  (``ignored_input``), and that device is **disarmed**: it must send a message at rest
-  before it can take the motion (no takeover by a stick that was already deflected);
-- a message with ``stop`` set, from any device, ends the ownership and disarms every
-  device; while any device's fresh newest message holds ``stop``, nobody takes the
-  motion; afterwards the motion resumes only from a device that sent a message at rest
+- while no device owns the motion, the device whose push (a message not at rest) began
+  first takes it at the next tick; it owns the motion until its newest message is at
+  rest or stale;
+- a device that pushes while another owns the motion is ignored and counted
+  (``ignored_input``) and **disarmed**: it must send a message at rest before it can
+  take the motion (no takeover by a stick that was already deflected);
+- a message with ``stop`` set, from any device, ends the ownership at the next tick and
+  disarms every device; while any device's fresh newest message holds ``stop``, nobody
+  takes the motion; afterwards the motion resumes only from a device that came to rest
   and then pushes again;
 - button presses (rising edges) are counted per device on every message; a tick acts on
-  a device's presses when its newest message is fresh and enabled and it owns the
-  motion or nobody does (others are counted as ``ignored_presses``).
+  a device's presses when its newest message is fresh and enabled and the device owns
+  the motion or nobody does (others are counted as ``ignored_presses``).
+
+Ownership changes only at a tick, and what a message does depends on its own device's
+messages and the owner the last tick left: messages of different devices that arrive
+between two ticks have no order the receiver can know (a daemon drains them ring by
+ring), and the outcome does not depend on the order they are offered in. Two pushes
+that begin between the same two ticks are ordered by arrival time, then by name.
 
 At most ``max_devices`` device names are tracked; a new name when the table is full
 takes the place of a device that is armed, owns nothing and has been silent for
@@ -79,21 +87,20 @@ NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
 class _Device:
     """One device's newest message and its standing under the rule."""
 
-    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "msg", "name", "order",
-                 "received", "rest", "run_start", "stale_seq", "stop", "u")
+    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "msg", "name", "received",
+                 "rest", "run_start", "stale_seq", "stop", "u")
 
     def __init__(self, name: str):
         self.name = name
         self.msg: InputMsg | None = None
         self.received = 0.0  # arrival of the newest message (the receiver's clock)
-        self.order = 0  # arrival number of the newest message (all devices count together)
         self.u: tuple[float, ...] = ()  # its command (clipped, dead band applied)
         self.finite = True
         self.enabled = True
         self.rest = True
         self.stop = False  # the newest message holds stop
         self.armed = True
-        self.run_start = 0  # arrival number of the first message of the current push
+        self.run_start = 0.0  # arrival of the first message of the current push
         self.buttons = ButtonWatch()
         self.acted: tuple[int, ...] = ()  # press counts already acted on (or dropped)
         self.stale_seq = -1  # the newest message already counted as stale
@@ -124,7 +131,7 @@ class InputArbiter:
         self.devices: dict[str, _Device] = {}
         self.owner: _Device | None = None
         self.last: _Device | None = None  # the device heard last
-        self._arrivals = 0
+        self._stop_requested = False
         self._pending: list[_Device] = []  # armed devices that pushed while nobody owned
         self._pressing: list[_Device] = []  # devices with presses not yet seen by a tick
         self._stopping: set[_Device] = set()  # devices whose newest message holds stop
@@ -133,16 +140,21 @@ class InputArbiter:
 
     def offer(self, name: str, m: InputMsg, now: float) -> bool:
         """Take one input message from device ``name`` that arrived at ``now``. Returns
-        False when it was dropped (the device table is full)."""
+        False when it was dropped (the device table is full).
+
+        What a message does depends only on its own device's messages and on the owner
+        as the last tick left it, so messages of different devices arriving between two
+        ticks may be offered in any order: ownership changes only at :meth:`select`."""
         d = self.devices.get(name)
         if d is None:
             d = self._admit(name, now)
             if d is None:
                 self.counters.drop("input_devices_full")
                 return False
-        self._arrivals += 1
-        d.msg, d.received, d.order = m, now, self._arrivals
-        self.last = d
+        d.msg, d.received = m, now
+        last = self.last
+        if last is None or now > last.received or (now == last.received and name >= last.name):
+            self.last = d
         u, finite = sanitize_input(m.u, self.deadband)
         b = m.buttons
         enabled = not (len(b) > BUTTON_ENABLE and not b[BUTTON_ENABLE])
@@ -156,14 +168,19 @@ class InputArbiter:
         if b:
             if d.buttons.observe(b) != d.acted and d not in self._pressing:
                 self._pressing.append(d)
-        self._take_stop(d, m.stop)
+        if m.stop and not d.stop:
+            self.counters.stops += 1
+            self._stop_requested = True
+        d.stop = m.stop
+        if m.stop:
+            self._stopping.add(d)
+        else:
+            self._stopping.discard(d)
         if d.rest:
-            d.armed = True
-            if d is self.owner:
-                self.owner = None
+            d.armed = True  # back at rest: it may take the motion with its next push
             return True
         if was_rest:
-            d.run_start = d.order
+            d.run_start = now
         owner = self.owner
         if owner is d:
             return True
@@ -172,19 +189,6 @@ class InputArbiter:
         elif d.armed and d not in self._pending:
             self._pending.append(d)
         return True
-
-    def _take_stop(self, d: _Device, stop: bool) -> None:
-        if stop and not d.stop:  # a new stop: every device must come to rest and push again
-            self.counters.stops += 1
-            self.owner = None
-            for other in self.devices.values():
-                other.armed = False
-            self._pending.clear()
-        d.stop = stop
-        if stop:
-            self._stopping.add(d)
-        else:
-            self._stopping.discard(d)
 
     def _ignore(self, d: _Device) -> None:
         d.armed = False
@@ -216,11 +220,18 @@ class InputArbiter:
 
     def select(self, now: float, wall: float) -> Command:
         """The command this tick follows (module doc): the owner's newest message, or a
-        zero command. Decides ownership among the devices that pushed since the last tick
-        and collects the presses that act."""
+        zero command. Applies a stop, releases an owner at rest or stale, decides
+        ownership among the devices that pushed since the last tick, and collects the
+        presses that act."""
+        if self._stop_requested:  # every device must come to rest and push again
+            self._stop_requested = False
+            self.owner = None
+            for d in self.devices.values():
+                d.armed = False
+            self._pending.clear()
         owner = self.owner
-        if owner is not None and not self.fresh(owner, now, wall):
-            self._count_stale(owner)
+        if owner is not None and (owner.rest or not self.fresh(owner, now, wall)):
+            self._count_stale(owner, now, wall)
             owner = self.owner = None
         if self._stopping and not any(self.fresh(d, now, wall) for d in self._stopping):
             self._stopping.clear()  # stops that went stale no longer hold (the disarm stays)
@@ -231,18 +242,19 @@ class InputArbiter:
             m = owner.msg
             assert m is not None
             return Command(owner.u, True, m.seq, owner.name, pressed)
-        d = self.last
-        if d is None:
+        last = self.last
+        if last is None:
             return NO_INPUT
-        m = d.msg
+        m = last.msg
         assert m is not None
-        ok = d.finite and d.enabled and self.fresh(d, now, wall)
+        ok = last.finite and last.enabled and self.fresh(last, now, wall)
         if not ok:
-            self._count_stale(d, now, wall)
-        return Command((0.0,) * len(d.u), ok, m.seq, d.name, pressed)
+            self._count_stale(last, now, wall)
+        return Command((0.0,) * len(last.u), ok, m.seq, last.name, pressed)
 
     def _elect(self, now: float, wall: float) -> _Device | None:
-        """The pending device that pushed first takes the motion; the others that push
+        """The pending device whose push began first (then by name: messages between two
+        ticks have no order across devices) takes the motion; the others that push
         still are ignored (they must come to rest first)."""
         live = [d for d in self._pending if not d.rest and d.armed and self.fresh(d, now, wall)]
         self._pending.clear()
@@ -250,7 +262,7 @@ class InputArbiter:
             for d in live:
                 self._ignore(d)
             return None
-        first = min(live, key=lambda d: d.run_start)
+        first = min(live, key=lambda d: (d.run_start, d.name))
         for d in live:
             if d is not first:
                 self._ignore(d)

@@ -361,39 +361,44 @@ class Daemon:
             ahead = ticker.due - DRAIN_LEAD - time.monotonic()
             if ahead > 0.0:
                 time.sleep(ahead)
-            self._before_tick()
+            self._before_tick(time.monotonic())
             now, lateness = ticker.wait()
             if end is not None and now >= end:
                 break
-            state = self._step(now, send)
+            state = self._step(now, time.time(), send)
             done = time.monotonic()
             self._account(window, lateness, done - now, state)
             if done >= window.next_status:
                 send(self._window_status(window, ticker, done))
-            # After the target is out: the work the next tick would otherwise do itself
-            # (vector-field neighbour answers), new devices' rings, freeing big samples.
-            self.driver.after_tick()
-            self.ingress.after_tick()
+            self._after_tick()
 
-    def _before_tick(self) -> None:
-        """Between two ticks: install a swapped-in skill, then drain the inputs."""
+    def _before_tick(self, now: float) -> None:
+        """Ahead of a deadline (``now``: monotonic): install a swapped-in skill, then
+        drain the inputs."""
         pending = self._pending
         if pending is not None:
             with self._lock:
                 self._pending = None
-            self._install(pending, time.monotonic())
+            self._install(pending, now)
         assert self.ingress is not None
-        self.ingress.drain(time.monotonic())
+        self.ingress.drain(now)
 
-    def _step(self, now: float, send: Any) -> str:
-        """The control step at the deadline ``now``; queues the target, returns the state."""
-        wall = time.time()
+    def _step(self, now: float, wall: float, send: Any) -> str:
+        """The control step at the deadline ``now`` (monotonic; ``wall``: Unix time);
+        queues the target, returns the state."""
         res = self.driver.tick(now, wall)
         if res.pose is not None:
             send((self.driver.target_seq, wall, res.pose, res.state, self.controller.skill.id,
                   res.in_seq, res.device))
             self._window_targets += 1
         return res.state
+
+    def _after_tick(self) -> None:
+        """After the target is out: the work the next tick would otherwise do itself
+        (vector-field neighbour answers), new devices' rings, freeing big samples."""
+        assert self.ingress is not None
+        self.driver.after_tick()
+        self.ingress.after_tick()
 
     def _account(self, window: _Window, lateness: float, compute: float, state: str) -> None:
         self.lateness.add(lateness)

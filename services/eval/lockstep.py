@@ -16,7 +16,7 @@ from typing import Any
 
 from sctd import se3
 from sctd.runtime import codec
-from sctd.runtime.controller import RuntimeConfig
+from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
 from sctd.skill import Skill
 from sctd_services.user import Observation, SimulatedUser
@@ -43,7 +43,8 @@ def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None
 
 
 def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list | None) -> TrialResult:
-    drv = TickDriver(skill, RuntimeConfig())
+    feed = Feed(TickDriver(skill, RuntimeConfig()))
+    drv = feed.driver
     user = SimulatedUser(spec.task, spec.axes, spec.profile, seed=seed)
     rec = TrialRecorder(spec.task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
@@ -60,12 +61,11 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
         t = sim.t
         m = sim.state_message()
         pose = m["pose"]
-        drv.take_state(state_msg(k, t, m), t)
+        feed.state(k, t, m)
         if k % every_object == 0:
             poses = sim.objects()
             objects = {n: se3.transform_from_pose(p) for n, p in poses.items()}
-            for name, p in poses.items():
-                drv.take_object(name, codec.ObjectMsg(k, t, p), t)
+            feed.objects(k, t, poses)
         if k % every_scene == 0:
             scene = sim.scene_outcome()
         if k % every_user == 0:
@@ -76,9 +76,8 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
                 break
             u, b = user.step(t, obs)
             seq += 1
-            drv.take_input(USER_DEVICE, input_msg(seq, t, u, b), t)
-        res = drv.tick(t, t)
-        drv.after_tick()
+            feed.input(USER_DEVICE, seq, t, u, b)
+        res = feed.tick(t)
         mode = res.state
         F = drv.state.F if drv.state is not None else None
         assert F is not None
@@ -91,15 +90,44 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
     return rec.result(demos)
 
 
+class Feed:
+    """What lockstep hands the tick driver (the daemon's drain without the wire): each
+    message with its arrival time, then the tick and its between-ticks work. Messages
+    take no time here: they arrive at the simulated time they are sent."""
+
+    def __init__(self, driver: TickDriver):
+        self.driver = driver
+
+    def state(self, seq: int, t: float, m: dict[str, Any]) -> None:
+        """The simulator's state (:meth:`Simulation.state_message`)."""
+        self.driver.take_state(state_msg(seq, t, m), t)
+
+    def objects(self, seq: int, t: float, poses: dict[str, list[float]]) -> None:
+        """The simulator's object poses (:meth:`Simulation.objects`)."""
+        for name, p in poses.items():
+            self.driver.take_object(name, codec.ObjectMsg(seq, t, p), t)
+
+    def input(self, device: str, seq: int, t: float, u: tuple[float, ...], buttons: tuple[int, ...],
+              stop: bool = False) -> None:
+        """One input device's message."""
+        self.driver.take_input(device, input_msg(seq, t, u, buttons, stop), t)
+
+    def tick(self, t: float) -> TickResult:
+        res = self.driver.tick(t, t)
+        self.driver.after_tick()
+        return res
+
+
 def state_msg(seq: int, t: float, m: dict[str, Any]) -> codec.StateMsg:
     """The simulator's state (:meth:`Simulation.state_message`) as the runtime decodes it
     off the wire (``q`` and ``dq`` are not read by the tick)."""
     return codec.StateMsg(seq, t, m["pose"], m["wrench"])
 
 
-def input_msg(seq: int, t: float, u: tuple[float, ...], buttons: tuple[int, ...]) -> codec.InputMsg:
-    """The user's input as the runtime decodes it off the wire."""
-    return codec.InputMsg(seq, t, tuple(float(x) for x in u), tuple(int(x) for x in buttons))
+def input_msg(seq: int, t: float, u: tuple[float, ...], buttons: tuple[int, ...],
+              stop: bool = False) -> codec.InputMsg:
+    """An input message as the runtime decodes it off the wire."""
+    return codec.InputMsg(seq, t, tuple(float(x) for x in u), tuple(int(x) for x in buttons), stop)
 
 
 def limited(skill: Skill, limits) -> Skill:
