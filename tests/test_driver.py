@@ -68,7 +68,8 @@ class FakeSession:
 
     def arrive(self, key: str, data: bytes):
         for sub in self.subs:
-            if sub.live and (sub.key == key or (sub.key.endswith("/*") and key.rsplit("/", 1)[0] == sub.key[:-2])):
+            wild = sub.key.endswith("/*") and key.rsplit("/", 1)[0] == sub.key[:-2]
+            if sub.live and (sub.key == key or wild):
                 sub.ring.append(_Sample(key, data))
 
 

@@ -5,6 +5,7 @@ with their seq, in_seq and in_device; status counters), never on the test's cloc
 
 from __future__ import annotations
 
+import itertools
 import threading
 import time
 
@@ -156,7 +157,7 @@ def test_the_first_device_to_push_owns_the_motion(rig):
         during = rig.targets[first:]
         ignored = rig.status.get("counters", {}).get("ignored_input", 0)
     assert {m["in_device"] for m in during} == {"A"}
-    steps = [b["pose"][0] - a["pose"][0] for a, b in zip(during, during[1:], strict=False)
+    steps = [b["pose"][0] - a["pose"][0] for a, b in itertools.pairwise(during)
              if b["seq"] == a["seq"] + 1]
     full = 0.1 * 0.001  # pour's carry state: 0.1 m/s, u0 along the mug's x (world x)
     assert sum(abs(s - full) < 1e-9 for s in steps) >= 0.9 * len(steps)
