@@ -281,3 +281,34 @@ def test_once_every_device_is_at_rest_or_stale_the_target_does_not_change(messag
             assert r.pose == prev, f"moved at tick {rig.k} with every device at rest or stale"
         if r.pose is not None:
             prev = list(r.pose)
+
+
+def test_enabling_again_with_the_stick_deflected_does_not_restart_motion():
+    """Zero-start: the owner releases its deadman mid-push (motion stops at once);
+    pressing it again with the stick still deflected moves nothing until the stick has
+    been centred; a device whose deadman is released with the stick centred may push
+    again at once."""
+    rig = Rig()
+    for _ in range(10):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    rig.send("A", [1, 0, 0], OFF)
+    rig.tick()
+    held = rig.x()
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() == held and rig.drv.inputs.owner is None
+    rig.send("A", [0, 0, 0])
+    rig.tick()
+    for _ in range(5):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() > held
+    rig.send("A", [0, 0, 0], OFF)
+    rig.tick()
+    moved = rig.x()
+    rig.send("A", [1, 0, 0])
+    rig.tick()
+    rig.tick()
+    assert rig.x() > moved

@@ -83,8 +83,13 @@ def test_bad_mapping_files_name_the_field(over, where):
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     for name in ("xbox", "spacemouse"):
         m = shipped_mapping(name)
-        assert m.buttons.keys() == {"mode", "enable", "escape"}
+        assert m.buttons.keys() == {"mode", "enable", "escape", "stop"}
     assert shipped_mapping("xbox").buttons["enable"] is not None  # a pad has a deadman
+    # the pad's Y (SDL button 3) is stop: the message's stop field, not a button position
+    xbox = shipped_mapping("xbox")
+    held = Reading((0.0,) * 6, (0, 0, 0, 1) + (0,) * 7)
+    assert xbox.stop(held) and not xbox.stop(Reading((0.0,) * 6, (0,) * 11))
+    assert xbox.apply(held, 3)[1] == [0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
     f = tmp_path / "m.yaml"
     f.write_text("version: 1\naxes: [{source: 2}]\n")
     assert load_mapping(f).apply(Reading((0.0, 0.0, -0.4)), 3)[0] == [-0.4, 0.0, 0.0]

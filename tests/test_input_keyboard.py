@@ -103,14 +103,17 @@ def test_hold_times_must_be_ordered():
 
 def test_reading_from_keys_signs_speed_buttons_and_opposites():
     r = reading_from_keys({"right", "up", "pageup"}, 1.0, 5.0)
-    assert r.axes == (1.0, 1.0, 1.0) and r.buttons == (0, 0, 0) and r.stamp == 5.0
+    assert r.axes == (1.0, 1.0, 1.0) and r.buttons == (0, 0, 0, 0) and r.stamp == 5.0
     assert reading_from_keys({"left", "down", "s"}, 0.5, 0.0).axes == (-0.5, -0.5, -0.5)
     assert reading_from_keys({"up", "down", "w", "pagedown"}, 1.0, 0.0).axes == (0.0, 0.0, 0.0)
     assert reading_from_keys({"w", "pageup"}, 1.0, 0.0).axes == (0.0, 0.0, 1.0)  # clipped
-    assert reading_from_keys({" "}, 1.0, 0.0).buttons == (1, 0, 0)
-    assert reading_from_keys({"m", "e", "x"}, 1.0, 0.0).buttons == (1, 0, 1)
-    u, b = shipped_mapping("keyboard").apply(reading_from_keys({"e", "left"}, 1.0, 0.0), 6)
+    assert reading_from_keys({" "}, 1.0, 0.0).buttons == (1, 0, 0, 0)
+    assert reading_from_keys({"m", "e", "q"}, 1.0, 0.0).buttons == (1, 0, 1, 0)
+    keyboard = shipped_mapping("keyboard")
+    u, b = keyboard.apply(reading_from_keys({"e", "left"}, 1.0, 0.0), 6)
     assert u == [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0] and b == [0, 1, 1]  # enable held: no deadman
+    assert keyboard.stop(reading_from_keys({"x"}, 1.0, 0.0))  # x: the message's stop field
+    assert not keyboard.stop(reading_from_keys({"e"}, 1.0, 0.0))
 
 
 # --- the backend ----------------------------------------------------------------------

@@ -9,8 +9,11 @@ figure comes from what the daemon publishes: its targets (by ``seq``, with their
 counters) and its resident memory (``/proc``).
 
 Phases: quiet; the fastest valid-input flood one client can send; a 10 MB garbage
-flood; poses on 50k distinct object names; 20 malformed bundles; good swaps; one state
-1 m away with zero input.
+flood; poses on 50k distinct object names; zero input on 50k distinct device names; 20
+malformed bundles; good swaps; one state 1 m away with zero input; a release sent
+0.2 ms after the last push (``python -m sctd.bench.robustness devices release``); two
+devices 0.2 ms apart, one pushing, the other sending zeros, pushing back, releasing its
+deadman, then a stop (``devices two``).
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from sctd.skill import Bundle, bundle_from_file
 
 KEYS = codec.Keys()
 SWAPS = 10
+PUSH = [0.0, 1.0, 0.0]  # the devices' push: the pour skill's u1, sideways to the mug
 
 
 # --- what the phases send ---------------------------------------------------------------
@@ -102,10 +106,11 @@ def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
 
 def flood_main(argv: list[str]) -> int:
     """A flooder: ``garbage`` (10 MB messages on input), ``valid`` (the fastest stream
-    of valid zero-input messages this process can put) or ``objects`` (valid poses on
-    ``--names`` distinct object names). Prints ``{"sent": n, "seconds": s}``."""
+    of valid zero-input messages this process can put), ``objects`` (valid poses on
+    ``--names`` distinct object names) or ``inputs`` (zero input on ``--names`` distinct
+    device names). Prints ``{"sent": n, "seconds": s}``."""
     p = argparse.ArgumentParser(prog="sctd-bench-flood")
-    p.add_argument("kind", choices=("garbage", "valid", "objects"))
+    p.add_argument("kind", choices=("garbage", "valid", "objects", "inputs"))
     p.add_argument("--seconds", type=float, default=5.0)
     p.add_argument("--size", type=int, default=10 * 1024 * 1024)
     p.add_argument("--names", type=int, default=50_000)
@@ -136,14 +141,116 @@ def flood_main(argv: list[str]) -> int:
                     batch = [codec.encode_input(sent + k, now, (0.0, 0.0, 0.0)) for k in range(2000)]
                 pub.put(batch[sent % 2000])
                 sent += 1
-        else:
+        elif args.kind == "objects":
             for k in range(args.names):
                 s.put(KEYS.objects(f"flood{k}"), codec.encode_object(k, time.time(), [0, 0, 0, 0, 0, 0, 1]),
+                      encoding=MSGPACK)
+                sent += 1
+        else:  # zero input on --names distinct device names
+            for k in range(args.names):
+                s.put(KEYS.input(f"flood{k}"), codec.encode_input(1, time.time(), [0.0, 0.0, 0.0]),
                       encoding=MSGPACK)
                 sent += 1
         seconds = time.monotonic() - t0
         time.sleep(0.2)
     print(json.dumps({"sent": sent, "seconds": round(seconds, 3)}), flush=True)
+    return 0
+
+
+def _busy_until(t: float) -> None:
+    """Wait to the monotonic time ``t``: sleep to 0.5 ms before it, then spin (the
+    sub-millisecond offsets between devices need it)."""
+    while time.monotonic() < t - 5e-4:
+        time.sleep(2e-4)
+    while time.monotonic() < t:
+        pass
+
+
+class _Devices:
+    """Input devices ``A`` and ``B`` of one process, each ``put`` stamped and counted."""
+
+    def __init__(self, s: zenoh.Session):
+        self.pubs = {n: s.declare_publisher(KEYS.input(n), express=True, encoding=MSGPACK) for n in "AB"}
+        self.seq = {"A": 0, "B": 0}
+
+    def send(self, name: str, u: list[float], buttons=(0, 1, 0), stop: bool = False) -> tuple[int, float]:
+        self.seq[name] += 1
+        self.pubs[name].put(codec.encode_input(self.seq[name], time.time(), u, buttons, stop))
+        return self.seq[name], time.time()
+
+    def paced(self, seconds: float, step) -> None:
+        """``step()`` at 1 kHz on absolute deadlines for ``seconds``."""
+        due = time.monotonic()
+        for _ in range(round(seconds * 1000)):
+            due += 1e-3
+            _busy_until(due)
+            step()
+
+
+def devices_main(argv: list[str]) -> int:
+    """Input devices as the audit drove them (prints what was sent as JSON):
+
+    - ``release``: A pushes along u1 with enable held at 1 kHz for 0.6 s, then sends its
+      release 0.2 ms after the last push and falls silent; ``--trials`` times, the
+      direction alternating, 0.5 s apart;
+    - ``two``: A pushes +u1 alone for 50 ms; then, each millisecond, B's message 0.2 ms
+      before A's: B zeros, B pushing -u1, B's deadman released (0.3 s each); then B's
+      stop (0.2 s) while A keeps pushing, and 0.2 s more; A comes to rest and pushes
+      again (0.3 s). The sub-phases' start and end wall times are printed.
+
+    (u1 moves the pour skill's bottle sideways to the mug, well inside the arm's reach.)
+    """
+    p = argparse.ArgumentParser(prog="sctd-bench-devices")
+    p.add_argument("kind", choices=("release", "two"))
+    p.add_argument("--trials", type=int, default=5)
+    add_zenoh_arguments(p)
+    args = p.parse_args(argv)
+    out: dict[str, Any] = {}
+    with session_from_args(args) as s:
+        dev = _Devices(s)
+        time.sleep(1.0)  # routes to the daemon
+        dev.paced(0.2, lambda: dev.send("A", [0.0, 0.0, 0.0]))
+        if args.kind == "release":
+            out["releases"] = []
+            for k in range(args.trials):
+                u = [0.0, 1.0 if k % 2 == 0 else -1.0, 0.0]
+                last = [0.0]
+
+                def push(u=u, last=last) -> None:
+                    dev.send("A", u)
+                    last[0] = time.monotonic()
+
+                dev.paced(0.6, push)
+                _busy_until(last[0] + 2e-4)
+                seq, sent = dev.send("A", [0.0, 0.0, 0.0])
+                out["releases"].append({"seq": seq, "sent": sent})
+                time.sleep(0.5)
+        else:
+            def both(u_b, buttons=(0, 1, 0), stop=False):
+                def step() -> None:
+                    dev.send("B", u_b, buttons, stop)
+                    _busy_until(time.monotonic() + 2e-4)
+                    dev.send("A", PUSH)
+                return step
+
+            phases: list[tuple[str, float, Any]] = [
+                ("A alone", 0.05, lambda: dev.send("A", PUSH)),
+                ("B zeros", 0.3, both([0.0, 0.0, 0.0])),
+                ("B pushes back", 0.3, both([-x for x in PUSH])),
+                ("B deadman released", 0.3, both([0.0, 0.0, 0.0], (0, 0, 0))),
+                ("B stop", 0.2, both([0.0, 0.0, 0.0], stop=True)),
+                ("after stop", 0.2, both([0.0, 0.0, 0.0])),
+                ("A at rest", 0.02, lambda: dev.send("A", [0.0, 0.0, 0.0])),
+                ("A pushes again", 0.3, lambda: dev.send("A", PUSH)),
+            ]
+            out["phases"] = []
+            for name, seconds, step in phases:
+                t0 = time.time()
+                dev.paced(seconds, step)
+                out["phases"].append({"name": name, "start": t0, "end": time.time()})
+            dev.paced(0.1, lambda: dev.send("A", [0.0, 0.0, 0.0]))
+        time.sleep(0.3)
+    print(json.dumps(out), flush=True)
     return 0
 
 
@@ -156,7 +263,7 @@ class _Watch:
 
     def __init__(self, s: zenoh.Session):
         self.lock = threading.Lock()
-        self.targets: list[tuple[int, float, list[float], str]] = []
+        self.targets: list[tuple[int, float, list[float], str, int, str]] = []
         self.status: dict | None = None
         self.windows: list[tuple[float, dict]] = []  # (bench time, recent_ms)
         self.state: dict | None = None
@@ -175,7 +282,8 @@ class _Watch:
     def _on_target(self, sample: zenoh.Sample) -> None:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
         with self.lock:
-            self.targets.append((m["seq"], m["stamp"], m["pose"][:3], m["skill"]))
+            self.targets.append((m["seq"], m["stamp"], m["pose"][:3], m["skill"], m["in_seq"],
+                                 m.get("in_device", "")))
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
@@ -264,6 +372,15 @@ class _Phases:
         got = json.loads(lines[-1]) if lines else {"sent": 0, "seconds": 0.0}
         return {"sent": got["sent"], "sent_per_s": round(got["sent"] / max(got["seconds"], 1e-9))}
 
+    def devices(self, kind: str) -> dict:
+        with Child("sctd.bench.robustness", "devices", kind, "--connect", self.hub,
+                   log=self.logdir / f"devices-{kind}.log") as f:
+            f.p.wait(timeout=120)
+        lines = [ln for ln in f.output().splitlines() if ln.startswith("{")]
+        if not lines:
+            raise RuntimeError(f"the devices client printed nothing; see {self.logdir}")
+        return {"devices_sent": json.loads(lines[-1])}
+
     def bad_bundles(self) -> dict:
         replies = errors = 0
         for _name, payload in malformed_bundles(self.skills):
@@ -323,9 +440,37 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
         for name, run in (("quiet", ph.quiet), ("valid_flood", lambda: ph.flood("valid")),
                           ("garbage_flood", lambda: ph.flood("garbage")),
                           ("object_names", lambda: ph.flood("objects", "--names", "50000")),
+                          ("input_names", lambda: ph.flood("inputs", "--names", "50000")),
                           ("bad_bundles", ph.bad_bundles), ("good_swaps", ph.swaps),
-                          ("far_state", ph.far_state)):
+                          ("far_state", ph.far_state), ("release", lambda: ph.devices("release")),
+                          ("two_devices", lambda: ph.devices("two"))):
             out[name] = _phase(w, pid, run)
+    return out
+
+
+def _releases(phase: dict) -> list[dict]:
+    """Per release: targets that followed it (``in_seq`` its seq), how far they are from
+    the first of them (mm), and the wall time from sending it to that first target."""
+    out = []
+    for rel in phase["devices_sent"]["releases"]:
+        after = [t for t in phase["targets"] if t[5] == "A" and t[4] == rel["seq"]]
+        moved = max((math.dist(t[2], after[0][2]) for t in after), default=None)
+        out.append({"targets": len(after), "moved_mm": None if moved is None else round(moved * 1e3, 6),
+                     "release_to_target_ms": round((after[0][1] - rel["sent"]) * 1e3, 3) if after else None})
+    return out
+
+
+def _device_phases(phase: dict) -> list[dict]:
+    """Per sub-phase of the two devices: the share of targets that followed A, the
+    targets' speed (mm/s, over the sub-phase less its first 20 ms), what B's pushes cost."""
+    out = []
+    for sub in phase["devices_sent"]["phases"]:
+        tg = [t for t in phase["targets"] if sub["start"] + 0.02 <= t[1] <= sub["end"]]
+        speed = (math.dist(tg[-1][2], tg[0][2]) / (tg[-1][1] - tg[0][1]) * 1e3
+                 if len(tg) > 1 and tg[-1][1] > tg[0][1] else None)
+        out.append({"name": sub["name"], "targets": len(tg),
+                    "driven_by_A": round(sum(t[5] == "A" for t in tg) / len(tg), 4) if tg else None,
+                    "speed_mm_s": None if speed is None else round(speed, 2)})
     return out
 
 
@@ -341,9 +486,14 @@ def summarise(r: dict) -> dict:
     tg = far.pop("targets")
     steps = [math.dist(a[2], b[2]) / (b[0] - a[0]) for a, b in itertools.pairwise(tg)]
     far["max_step_per_tick_mm"] = round(max(steps) * 1e3, 6) if steps else None
+    rel = r["release"]
+    rel["trials"] = _releases(rel)
+    two = r["two_devices"]
+    two["phases"] = _device_phases(two)
     for phase in r.values():
         if isinstance(phase, dict):
             phase.pop("targets", None)
+            phase.pop("devices_sent", None)
     q = r["quiet"]["lateness_p99_ms_worst_window"] or 0.0
     vf = r["valid_flood"]["lateness_p99_ms_worst_window"] or 0.0
     g = r["garbage_flood"]
@@ -353,12 +503,33 @@ def summarise(r: dict) -> dict:
         "valid flood: lateness p99 <= 0.5 ms": vf <= 0.5,
         "valid flood: lateness p99 <= 2 x quiet (or within one 5 us bin)": vf <= max(2 * q, q + 0.005),
         "50k object names: RSS growth <= 5 MB": r["object_names"]["rss_growth_kib"] <= 5 * 1024,
+        "50k device names: RSS growth <= 5 MB": r["input_names"]["rss_growth_kib"] <= 5 * 1024,
         "20 malformed bundles: 20 error replies": r["bad_bundles"]["error_replies"] == 20,
         "good swaps: no gap between targets over 2 ms": (sw["max_gap_at_swaps_ms"] or 99) <= 2.0,
         "state 1 m away, zero input: no step above the bound":
             far["max_step_per_tick_mm"] is not None and far["max_step_per_tick_mm"] <= bound_m * 1e3,
+        **_device_criteria(rel["trials"], {p["name"]: p for p in two["phases"]}),
     }
     return r
+
+
+def _device_criteria(trials: list[dict], sub: dict[str, dict]) -> dict[str, bool]:
+    full = 100.0  # mm/s: the pour skill's 0.1 m/s at full input
+    pushed = ("B zeros", "B pushes back", "B deadman released")
+    return {
+        "release 0.2 ms after the last push: no target moves after it (every trial)":
+            all(t["targets"] > 0 and t["moved_mm"] == 0.0 for t in trials),
+        "release: reaches a target within 2 ms of being sent (every trial)":
+            all(t["release_to_target_ms"] is not None and t["release_to_target_ms"] <= 2.0 for t in trials),
+        "two devices: A drives every target while both send":
+            all(sub[n]["driven_by_A"] == 1.0 for n in pushed),
+        "two devices: A at full speed whatever B sends (within 5 %)":
+            all(sub[n]["speed_mm_s"] is not None and abs(sub[n]["speed_mm_s"] - full) <= 0.05 * full
+                for n in pushed),
+        "two devices: B's stop halts A until A rests and pushes again":
+            sub["after stop"]["speed_mm_s"] == 0.0
+            and (sub["A pushes again"]["speed_mm_s"] or 0.0) >= 0.95 * full,
+    }
 
 
 def print_report(r: dict) -> None:
@@ -369,12 +540,12 @@ def print_report(r: dict) -> None:
             "rss_growth_kib")
     print("  phase            " + "  ".join(f"{c.replace('_ms', '').replace('lateness_', 'late ')[:16]:>16s}"
                                          for c in cols))
-    for name in ("quiet", "valid_flood", "garbage_flood", "object_names", "bad_bundles", "good_swaps",
-                 "far_state"):
+    for name in ("quiet", "valid_flood", "garbage_flood", "object_names", "input_names", "bad_bundles",
+                 "good_swaps", "far_state", "release", "two_devices"):
         ph = r[name]
         vals = "  ".join(f"{'-' if ph.get(c) is None else ph[c]!s:>16s}" for c in cols)
         print(f"  {name:16s} {vals}")
-    for name in ("valid_flood", "garbage_flood", "object_names"):
+    for name in ("valid_flood", "garbage_flood", "object_names", "input_names"):
         print(f"  {name}: sent {r[name]['sent']} ({r[name]['sent_per_s']}/s); dropped {r[name]['dropped']}")
     b = r["bad_bundles"]
     print(f"  bad_bundles: {b['bundles']} sent, {b['replies']} replies, {b['error_replies']} errors; "
@@ -386,6 +557,14 @@ def print_report(r: dict) -> None:
     f = r["far_state"]
     print(f"  far_state: counters {f['counters']}; largest target step per tick "
           f"{f['max_step_per_tick_mm']} mm (bound 0.1 mm)")
+    for k, t in enumerate(r["release"]["trials"]):
+        print(f"  release {k}: {t['targets']} targets followed it, moved {t['moved_mm']} mm after it; "
+              f"sent -> first such target {t['release_to_target_ms']} ms")
+    c = r["two_devices"]["counters"]
+    print("  two devices (B's message 0.2 ms before A's each ms): " + "; ".join(
+        f"{p['name']}: {p['speed_mm_s']} mm/s, A drove {p['driven_by_A']}"
+        for p in r["two_devices"]["phases"]))
+    print(f"  two devices: ignored_input {c.get('ignored_input', 0)}, stops {c.get('stops', 0)}")
     mark = {True: "met", False: "NOT met"}
     for k, v in r["criteria"].items():
         print(f"  {k}: {mark[v]}")
@@ -406,5 +585,8 @@ def main_robustness(args: argparse.Namespace) -> int:
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "flood":
         sys.exit(flood_main(sys.argv[2:]))
-    print("usage: python -m sctd.bench.robustness flood garbage|valid|objects [...]", file=sys.stderr)
+    if len(sys.argv) > 1 and sys.argv[1] == "devices":
+        sys.exit(devices_main(sys.argv[2:]))
+    print("usage: python -m sctd.bench.robustness flood garbage|valid|objects [...] | devices release|two",
+          file=sys.stderr)
     sys.exit(2)

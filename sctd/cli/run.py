@@ -51,15 +51,16 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _joy_map(path: str | None) -> Any:
-    """``(axes, buttons) -> (u [6], [mode, enable, escape])`` through the mapping file
-    ``path`` (default: the shipped xbox map)."""
+    """``(axes, buttons) -> (u [6], [mode, enable, escape], stop)`` through the mapping
+    file ``path`` (default: the shipped xbox map)."""
     from sctd_services.input.device import Reading
     from sctd_services.input.mapping import load_mapping, shipped_mapping
 
     mapping = load_mapping(path) if path else shipped_mapping("xbox")
 
-    def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int]]:
-        return mapping.apply(Reading(axes, buttons), 6)
+    def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int], bool]:
+        reading = Reading(axes, buttons)
+        return (*mapping.apply(reading, 6), mapping.stop(reading))
     return apply
 
 

@@ -13,12 +13,14 @@ Every arriving input message is offered here, in arrival order per device
   first takes it at the next tick; it owns the motion until its newest message is at
   rest or stale;
 - a device that pushes while another owns the motion is ignored and counted
-  (``ignored_input``) and **disarmed**: it must send a message at rest before it can
-  take the motion (no takeover by a stick that was already deflected);
+  (``ignored_input``) and **disarmed**: it must send a zero command before it can take
+  the motion (no takeover by a stick that was already deflected); so must a device
+  whose deadman was released, or whose reading was not finite, with the stick
+  deflected (zero-start: enabling again alone never restarts motion);
 - a message with ``stop`` set, from any device, ends the ownership at the next tick and
   disarms every device; while any device's fresh newest message holds ``stop``, nobody
-  takes the motion; afterwards the motion resumes only from a device that came to rest
-  and then pushes again;
+  takes the motion; afterwards the motion resumes only from a device that sent a zero
+  command and then pushes again;
 - button presses (rising edges) are counted per device on every message; a tick acts on
   a device's presses when its newest message is fresh and enabled and the device owns
   the motion or nobody does (others are counted as ``ignored_presses``).
@@ -177,7 +179,10 @@ class InputArbiter:
         else:
             self._stopping.discard(d)
         if d.rest:
-            d.armed = True  # back at rest: it may take the motion with its next push
+            # Zero-start: only a centred stick re-arms a device. Releasing the deadman (or
+            # a broken, non-finite reading) with the stick deflected disarms it, so that
+            # enabling again alone never restarts motion.
+            d.armed = finite and not any(u)
             return True
         if was_rest:
             d.run_start = now

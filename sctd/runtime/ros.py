@@ -324,7 +324,7 @@ class JoyIn:
             self.on_joy(axes, buttons)
 
 
-JoyMap = Callable[[tuple[float, ...], tuple[int, ...]], tuple[list[float], list[int]]]
+JoyMap = Callable[[tuple[float, ...], tuple[int, ...]], tuple[list[float], list[int], bool]]
 
 
 class RuntimeRos:
@@ -351,9 +351,9 @@ class RuntimeRos:
             raise
 
     def _on_joy(self, axes: tuple[float, ...], buttons: tuple[int, ...]) -> None:
-        u, roles = self.joy_map(axes, buttons)
+        u, roles, stop = self.joy_map(axes, buttons)
         self._seq += 1
-        self._input.put(codec.encode_input(self._seq, time.time(), u, roles))
+        self._input.put(codec.encode_input(self._seq, time.time(), u, roles, stop))
 
     def target(self, stamp: float, pose: Sequence[float]) -> None:
         self.target_pose.offer(stamp, pose)

@@ -86,29 +86,31 @@ class Bridge:
                 self.log(f"{self.device.name or 'device'}: read failed: {e}")
             reading = None
         self._connection(reading is not None)
+        stop = False
         if reading is None:
             u, buttons = [0.0] * self.n_axes, list(RELEASED)
             self.stats.disconnected += 1
         else:
             u, buttons = self.mapping.apply(reading, self.n_axes)
+            stop = self.mapping.stop(reading)
         self.last_reading = reading
-        self._send(stamp, u, buttons)
+        self._send(stamp, u, buttons, stop)
         return u, buttons
 
     def zero(self, count: int = ZERO_ON_EXIT, spacing: float = ZERO_SPACING) -> None:
         """Publish zero with the deadman released ``count`` times, ``spacing`` s apart (on
-        exit). Spaced, because the daemon's ingress limit (2000 Hz on ``input/**``) drops
-        a message that follows the previous one within 0.5 ms: zeros sent back to back
-        right after the last real message could all be dropped, leaving that message in
-        force until the daemon's 0.1 s watchdog."""
+        exit). Spaced, so that a receiver that rate-limits its input (sctd daemons before
+        per-device input slots dropped a message within 0.5 ms of the previous one) still
+        gets one of them rather than keeping the last real message in force until its
+        0.1 s watchdog."""
         for k in range(count):
             if k:
                 time.sleep(spacing)
             self._send(time.time(), [0.0] * self.n_axes, list(RELEASED))
 
-    def _send(self, stamp: float, u: list[float], buttons: list[int]) -> None:
+    def _send(self, stamp: float, u: list[float], buttons: list[int], stop: bool = False) -> None:
         self.seq += 1
-        self.publish(codec.encode_input(self.seq, stamp, u, buttons))
+        self.publish(codec.encode_input(self.seq, stamp, u, buttons, stop))
         self.stats.published += 1
         self.last = (u, buttons)
 

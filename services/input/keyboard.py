@@ -33,13 +33,13 @@ AXIS_KEYS: dict[str, tuple[int, float]] = {
     "w": (2, 1.0), "pageup": (2, 1.0),
     "s": (2, -1.0), "pagedown": (2, -1.0),
 }
-BUTTON_KEYS: dict[str, int] = {" ": 0, "m": 0, "e": 2}  # 0 mode, 2 escape
-N_BUTTONS = 3
+BUTTON_KEYS: dict[str, int] = {" ": 0, "m": 0, "e": 2, "x": 3}  # 0 mode, 2 escape, 3 stop
+N_BUTTONS = 4
 ESCAPES = {b"[A": "up", b"[B": "down", b"[C": "right", b"[D": "left",
            b"OA": "up", b"OB": "down", b"OC": "right", b"OD": "left",  # application mode
            b"[5~": "pageup", b"[6~": "pagedown"}
 HELP = ("keyboard: arrows move x (left/right) and y (up/down), w/s or PageUp/PageDown move z; "
-        "space or m: mode; e: escape; Ctrl-C quits. No deadman (enable held); a key holds "
+        "space or m: mode; e: escape; x: stop; Ctrl-C quits. No deadman (enable held); a key holds "
         "while it auto-repeats.")
 
 

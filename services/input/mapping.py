@@ -1,5 +1,5 @@
 """The mapping file: which device axis drives each output axis (scale, inversion, dead
-band) and which device buttons are ``mode``, ``enable`` and ``escape``
+band) and which device buttons are ``mode``, ``enable``, ``escape`` and ``stop``
 (``docs/input.md``).
 
 ::
@@ -9,14 +9,15 @@ band) and which device buttons are ``mode``, ``enable`` and ``escape``
       - {source: 0}                            # device axis 0 as it is
       - {source: 1, invert: true, deadband: 0.1}
       - {source: [5, 4], scale: 0.8}           # axis 5 minus axis 4 (two triggers)
-    buttons: {mode: 0, enable: null, escape: 1}
+    buttons: {mode: 0, enable: null, escape: 1, stop: 3}
 
 An output axis is ``clip(scale * s * d(x), -1, 1)`` with ``s`` = -1 when inverted and
 ``d`` the dead band rescaled so the output still starts from zero at its edge:
 ``d(x) = sign(x) (|x| - b) / (1 - b)`` for ``|x| > b``, else 0. A button names a device
 button by its number, or null: ``enable: null`` publishes enable held (the device has
-no deadman), ``mode``/``escape`` null never press them. The published ``buttons`` are
-by the wire contract's positions: ``[mode, enable, escape]``.
+no deadman), ``mode``/``escape``/``stop`` null (or absent) never press them. The
+published ``buttons`` are by the wire contract's positions: ``[mode, enable, escape]``;
+``stop`` is published as the message's ``stop`` field (it halts every device's motion).
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ from .device import InputError, Reading
 
 VERSION = 1
 ROLES = ("mode", "enable", "escape")  # the wire contract's button positions 0, 1, 2
+STOP = "stop"  # the wire contract's stop field
+KNOWN = (*ROLES, STOP)
 MAX_AXES = 6
 
 
@@ -77,6 +80,10 @@ class Mapping:
         u += [0.0] * (n_axes - len(u))
         return u, [self._button(reading.buttons, r) for r in ROLES]
 
+    def stop(self, reading: Reading) -> bool:
+        """Whether the button mapped to ``stop`` is held (never, when none is)."""
+        return bool(self._button(reading.buttons, STOP))
+
     def _button(self, buttons: tuple[int, ...], role: str) -> int:
         i = self.buttons.get(role)
         if i is None:
@@ -86,7 +93,7 @@ class Mapping:
 
 def identity(n_axes: int = MAX_AXES) -> Mapping:
     """Device axis k to output axis k; no buttons mapped (enable held)."""
-    return Mapping(tuple(AxisMap(k) for k in range(n_axes)), dict.fromkeys(ROLES), "identity")
+    return Mapping(tuple(AxisMap(k) for k in range(n_axes)), dict.fromkeys(KNOWN), "identity")
 
 
 def parse_mapping(doc: Any, origin: str) -> Mapping:
@@ -107,12 +114,12 @@ def parse_mapping(doc: Any, origin: str) -> Mapping:
     axes = tuple(_axis(a, f"axes[{k}]", bad) for k, a in enumerate(raw_axes))
     raw_buttons = doc.get("buttons", {}) or {}
     if not isinstance(raw_buttons, dict):
-        raise bad("buttons", "expected a map of mode, enable, escape to button numbers or null")
+        raise bad("buttons", "expected a map of mode, enable, escape, stop to button numbers or null")
     for k in raw_buttons:
-        if k not in ROLES:
-            raise bad(f"buttons.{k}", f"unknown role (known: {', '.join(ROLES)})")
+        if k not in KNOWN:
+            raise bad(f"buttons.{k}", f"unknown role (known: {', '.join(KNOWN)})")
     buttons: dict[str, int | None] = {}
-    for role in ROLES:
+    for role in KNOWN:
         v = raw_buttons.get(role)
         if v is not None and (type(v) is not int or v < 0):
             raise bad(f"buttons.{role}", f"expected a button number >= 0 or null, got {v!r}")
