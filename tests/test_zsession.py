@@ -1,11 +1,12 @@
 """Session defaults: loopback IP literals only without a config file; the runtime's
-ingress limits are Zenoh filters that Zenoh accepts."""
+ingress limits are Zenoh filters that Zenoh accepts, and no rate limit touches what the
+runtime reads."""
 
 import json
 
 import pytest
 
-from sctd.runtime.daemon import ingress_limits
+from sctd.runtime.daemon import check_no_rate_limit, ingress_limits
 from sctd.runtime.zsession import check_loopback, make_config
 
 
@@ -26,15 +27,17 @@ def test_anything_else_is_refused_without_a_config_file(endpoint):
         check_loopback(endpoint)
 
 
-def test_ingress_limits_become_zenoh_filters(tmp_path):
+def test_ingress_limits_become_zenoh_filters_and_nothing_limits_the_rate(tmp_path):
+    """The daemon's session drops oversized puts on arrival and rate-limits nothing: a
+    downsampling rule keeps the first message of an interval, and the rest may be a
+    release. A config file that rate-limits what the daemon reads is refused."""
     conf = make_config(listen=["tcp/127.0.0.1:0"], **ingress_limits("edan"))
     lpf = json.loads(conf.get_json("low_pass_filter"))
-    ds = json.loads(conf.get_json("downsampling"))
     assert {k for f in lpf for k in f["key_exprs"]} == {"sctd/edan/input/**", "sctd/edan/state",
                                                          "sctd/edan/objects/**"}
     assert all(f["flows"] == ["ingress"] and f["size_limit"] == 16 << 20 for f in lpf)
-    assert {r["rules"][0]["key_expr"]: r["rules"][0]["freq"] for r in ds} == {
-        "sctd/edan/input/**": 2000.0, "sctd/edan/state": 4000.0, "sctd/edan/objects/**": 2000.0}
+    assert not json.loads(conf.get_json("downsampling") or "[]")
+    check_no_rate_limit(conf, "edan")
     # a config file's own filters are kept, ours added
     f = tmp_path / "z.json5"
     f.write_text(json.dumps({"mode": "peer", "low_pass_filter": [
@@ -42,3 +45,30 @@ def test_ingress_limits_become_zenoh_filters(tmp_path):
     conf = make_config(config_file=f, **ingress_limits("edan"))
     ids = [x["id"] for x in json.loads(conf.get_json("low_pass_filter"))]
     assert ids[0] == "mine" and len(ids) == 4
+    check_no_rate_limit(conf, "edan")
+
+
+def _rule(name, key, flows=("ingress",)):
+    r = {"id": name, "messages": ["put"], "rules": [{"key_expr": key, "freq": 500.0}]}
+    if flows is not None:
+        r["flows"] = list(flows)
+    return r
+
+
+@pytest.mark.parametrize("rule, refused", [
+    (_rule("input", "sctd/edan/input/**"), True),
+    (_rule("all", "**", flows=None), True),  # no flows: both ways
+    (_rule("state", "sctd/*/state"), True),
+    (_rule("out", "sctd/edan/input/**", flows=("egress",)), False),
+    (_rule("other", "sctd/edan/status"), False),
+    (_rule("robot", "sctd/other/input/*"), False),
+])
+def test_a_config_that_rate_limits_what_the_daemon_reads_is_refused(tmp_path, rule, refused):
+    f = tmp_path / "z.json5"
+    f.write_text(json.dumps({"mode": "peer", "downsampling": [rule]}))
+    conf = make_config(config_file=f, **ingress_limits("edan"))
+    if refused:
+        with pytest.raises(ValueError, match=f"downsampling: {rule['id']}: rate-limits"):
+            check_no_rate_limit(conf, "edan")
+    else:
+        check_no_rate_limit(conf, "edan")

@@ -17,9 +17,9 @@ import zenoh
 
 from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
-from ..runtime.daemon import Daemon, ingress_limits
+from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
 from ..runtime.ros_options import add_ros_arguments, check_ros_arguments
-from ..runtime.zsession import add_zenoh_arguments, close_session, open_session, session_from_args
+from ..runtime.zsession import add_zenoh_arguments, close_session, make_config, session_from_args
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
@@ -121,8 +121,9 @@ def main_run(args: argparse.Namespace) -> int:
         return fail("run", f"--cpu: {args.cpu}: this machine has CPUs 0-{n_cpus - 1}")
     stop = _stop_on_signals()
     try:
-        session = open_session(args.listen, args.connect, args.zenoh_config,
-                               **ingress_limits(config.robot))
+        conf = make_config(args.listen, args.connect, args.zenoh_config, **ingress_limits(config.robot))
+        check_no_rate_limit(conf, config.robot)
+        session = zenoh.open(conf)
     except (ValueError, zenoh.ZError) as e:
         return fail("run", f"cannot open Zenoh session: {e}")
     try:

@@ -18,6 +18,7 @@ draining its inputs and the control step.
 from __future__ import annotations
 
 import gc
+import json
 import logging
 import os
 import queue
@@ -62,6 +63,34 @@ def ingress_limits(robot: str) -> dict[str, Any]:
     k = codec.Keys(robot)
     keys = (k.input("**"), k.state, k.objects("**"))
     return {"size_limits": [(key, INGRESS_CEILING) for key in keys]}
+
+
+def check_no_rate_limit(conf: zenoh.Config, robot: str) -> None:
+    """Refuse a session config (a ``--zenoh-config`` file's) that rate-limits what the
+    daemon reads: Zenoh's downsampling keeps the first message of an interval and drops
+    the rest, and the rest may be a release or a stop.
+
+    Raises
+    ------
+    ValueError
+        Naming the rule and the key it would limit.
+    """
+    try:
+        rules = json.loads(conf.get_json("downsampling")) or []
+    except (zenoh.ZError, ValueError):
+        rules = []
+    k = codec.Keys(robot)
+    read = [zenoh.KeyExpr(x) for x in (k.input("**"), k.state, k.objects("**"))]
+    for r in rules:
+        if "ingress" not in (r.get("flows") or ["ingress"]) or "put" not in (r.get("messages") or ["put"]):
+            continue  # (no flows: both ways)
+        for rule in r.get("rules") or []:
+            key = zenoh.KeyExpr(rule["key_expr"])
+            hit = next((x for x in read if x.intersects(key)), None)
+            if hit is not None:
+                raise ValueError(
+                    f"downsampling: {r.get('id', '(no id)')}: rate-limits {hit} on arrival, which "
+                    f"would drop a release or a stop; remove it (the runtime's rings bound floods)")
 
 
 class _Publisher(threading.Thread):
