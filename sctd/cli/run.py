@@ -122,7 +122,13 @@ def main_run(args: argparse.Namespace) -> int:
     stop = _stop_on_signals()
     try:
         conf = make_config(args.listen, args.connect, args.zenoh_config, **ingress_limits(config.robot))
+    except (ValueError, zenoh.ZError) as e:
+        return fail("run", f"cannot open Zenoh session: {e}")
+    try:
         check_no_rate_limit(conf, config.robot)
+    except ValueError as e:
+        return fail("run", f"{args.zenoh_config}: {e}")
+    try:
         session = zenoh.open(conf)
     except (ValueError, zenoh.ZError) as e:
         return fail("run", f"cannot open Zenoh session: {e}")
