@@ -1,5 +1,5 @@
 """Package discovery: ``sim/`` installs as ``sctd_sim``, ``services/`` as
-``sctd_services`` (DESIGN §3 wants non-generic import names) and ``skills/`` as the
+``sctd_services`` (import names that cannot collide with other packages) and ``skills/`` as the
 package data ``sctd_skills`` (the shipped skills, their model files and
 demonstrations, found by name: ``sctd run --skill pour``); metadata is in
 pyproject.toml."""

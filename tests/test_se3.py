@@ -46,7 +46,7 @@ def test_quaternion_product_matches_matrix_product(q1, q2):
 
 @given(poses(), st.lists(st.floats(-0.2, 0.2), min_size=6, max_size=6))
 def test_displacement_round_trip(pose, d6):
-    """apply_displacement and displacement_from_transforms are inverse (DESIGN §4)."""
+    """apply_displacement and displacement_from_transforms are inverse (docs/skill-format.md)."""
     T = se3.transform_from_pose(pose)
     T2 = se3.apply_displacement(T, d6)
     assert np.allclose(se3.displacement_from_transforms(T, T2), d6, atol=1e-9)

@@ -163,7 +163,7 @@ def one_state(mapping, constraints=(), frames=None, limits=None):
        st.sampled_from(["ee", "tip"]))
 @settings(max_examples=60, deadline=None)
 def test_linear_mapping_reproduces_identified_displacement(u, axes, frame):
-    """Applying an IM is the displacement M u of its frame (DESIGN §4 round trip), and
+    """Applying an IM is the displacement M u of its frame (the round trip of docs/skill-format.md), and
     the least-squares command recovers u from that displacement (eq. 4.6)."""
     eng = engine_for(one_state({"type": "linear", "frame": frame, "axes": axes}))
     T = se3.transform_from_pose([0.1, -0.2, 0.3, *se3.quaternion_from_rotvec([0.3, -0.2, 0.5])])

@@ -1,4 +1,4 @@
-"""The pure part of the runtime tick (DESIGN §7 steps 1-6): no I/O, no clocks.
+"""The pure part of the runtime tick (the skill and the safety limits): no I/O, no clocks.
 
 :class:`Controller` turns the command the input arbiter chose and the newest state and
 object samples into the next target pose, applying the skill (transitions, mappings,

@@ -1,4 +1,4 @@
-"""``sctd run``: the fixed-rate daemon (DESIGN §7) wired to Zenoh.
+"""``sctd run``: the fixed-rate daemon wired to Zenoh.
 
 Threads: the tick runs on the main thread and reads its inputs itself. Input, state and
 the active skill's object poses arrive in Zenoh ring channels (newest wins, filled by

@@ -1,7 +1,7 @@
 """The tick driver: decoded messages in, the tick's target and events out. Pure: no I/O,
 no clocks, no threads; every time is an argument.
 
-One path from messages to targets (DESIGN §3, §7). The daemon (:mod:`.daemon`) feeds
+One path from messages to targets (docs/architecture.md). The daemon (:mod:`.daemon`) feeds
 it from its Zenoh rings; the lockstep evaluation and the benches feed it from the
 simulation; so the check that gates a skill runs the code that will run it. A feeder
 does, in this order:

@@ -1,4 +1,4 @@
-"""Safety limits applied last in every tick (DESIGN §7 step 6). Pure numpy.
+"""Safety limits applied last in every tick. Pure numpy.
 
 These are the daemon's own guarantees, independent of what a skill asks for: per-tick
 steps bounded by the maximum speeds (scaled by how far the user pushes), steps that

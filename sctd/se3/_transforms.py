@@ -1,7 +1,7 @@
 """Rigid transforms: poses [x, y, z, qx, qy, qz, qw] <-> 4x4 matrices, the tf-norm,
 and the displacement convention shared by the runtime and the learner.
 
-Displacement convention (DESIGN.md section 4)
+Displacement convention (docs/skill-format.md)
 ---------------------------------------------
 The thesis writes a displacement once right-multiplied (eq. 4.2, in the moving frame)
 and once left-multiplied (eqs. 4.3-4.4, in the fixed frame); Algorithm 2 applies the
