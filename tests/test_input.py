@@ -94,7 +94,7 @@ def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     f.write_text("version: 1\naxes: [{source: 2}]\n")
     assert load_mapping(f).apply(Reading((0.0, 0.0, -0.4)), 3)[0] == [-0.4, 0.0, 0.0]
     f.write_text("version: 1\naxes: [{source: 2}\n")
-    with pytest.raises(InputError, match=r"m\.yaml: not YAML"):
+    with pytest.raises(InputError, match=r"m\.yaml: line 3: invalid YAML"):
         load_mapping(f)
     with pytest.raises(InputError, match=r"nothere\.yaml"):
         load_mapping(tmp_path / "nothere.yaml")

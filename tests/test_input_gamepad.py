@@ -72,7 +72,7 @@ def test_xbox_map_numbering_is_sdls():
         (sdl2.SDL_CONTROLLER_AXIS_TRIGGERRIGHT, sdl2.SDL_CONTROLLER_AXIS_TRIGGERLEFT, False)]
     assert m.buttons == {"mode": sdl2.SDL_CONTROLLER_BUTTON_A,
                          "enable": sdl2.SDL_CONTROLLER_BUTTON_RIGHTSHOULDER,
-                         "escape": sdl2.SDL_CONTROLLER_BUTTON_B}
+                         "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
 
 
 def test_bridge_with_the_xbox_map_publishes_the_stick_and_deadman(pad):

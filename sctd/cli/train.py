@@ -12,8 +12,7 @@ import json
 import sys
 from typing import Any
 
-import yaml
-
+from ..files import FileError, parse_yaml
 from ..runtime import client, codec
 from ..runtime.zsession import add_zenoh_arguments, session_from_args
 from .errors import EXIT_FAILED, EXIT_OK, fail
@@ -56,8 +55,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
 def _value(text: str) -> Any:
     """A hyperparameter's value as YAML reads a scalar: 0.005, 3, true, intent."""
     try:
-        v = yaml.safe_load(text)
-    except yaml.YAMLError:
+        v = parse_yaml(text, "--param")
+    except FileError:
         return text
     return v if isinstance(v, bool | int | float | str) else text
 

@@ -18,8 +18,8 @@ from typing import Any
 
 import msgpack
 import numpy as np
-import yaml
 
+from ..files import FileError, inside, parse_yaml, read_bytes, read_text
 from .constraints import CONSTRAINTS
 from .errors import SkillError
 from .mappings import MAPPINGS
@@ -95,21 +95,24 @@ class Bundle:
 
 
 def bundle_from_file(path: str | Path) -> Bundle:
-    """Read a skill YAML and every model file it references (relative to the YAML)."""
+    """Read a skill YAML and every model file it references (relative to the YAML):
+    regular files only, resolved (symlinks included) inside the YAML's folder, at most
+    :data:`MAX_BUNDLE_BYTES` together, read no further than that (:mod:`sctd.files`)."""
     path = Path(path)
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SkillError(str(path), "", f"cannot read ({exc.strerror})") from None
-    doc = _parse_yaml(str(path), text)
-    files: dict[str, bytes] = {}
-    for where, rel in _model_references(doc):
-        check_relative(str(path), where, rel)
-        target = path.parent / rel
-        try:
-            files[rel] = target.read_bytes()
-        except OSError as exc:
-            raise SkillError(str(path), where, f"model file {rel!r}: {exc.strerror}") from None
+        text = read_text(path, MAX_BUNDLE_BYTES)
+        doc = _parse_yaml(str(path), text)
+        files: dict[str, bytes] = {}
+        left = MAX_BUNDLE_BYTES - len(text.encode())
+        for where, rel in _model_references(doc):
+            check_relative(str(path), where, rel)
+            # the model file, after symlinks, must be inside the skill's folder
+            target = inside(path.parent / rel, path.parent, str(path), where)
+            if rel not in files:
+                files[rel] = read_bytes(target, max(left, 0), str(path), f"{where}: model file {rel!r}")
+                left -= len(files[rel])
+    except FileError as e:
+        raise SkillError(e.file, e.where, e.problem) from None
     return Bundle(name=str(path), yaml_text=text, files=files)
 
 
@@ -127,41 +130,11 @@ def skill_from_bundle(bundle: Bundle) -> Skill:
 # --- parsing --------------------------------------------------------------------------
 
 
-class _StrictLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
-    """Safe YAML (libyaml's parser where present) that refuses duplicate mapping keys:
-    plain YAML loaders keep the last of two equal keys, silently."""
-
-
-def _mapping_without_duplicates(loader: Any, node: yaml.MappingNode, deep: bool = False) -> Any:
-    loader.flatten_mapping(node)
-    seen = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=True)
-        try:
-            duplicate = key in seen
-            seen.add(key)
-        except TypeError:  # unhashable: construct_mapping names it
-            continue
-        if duplicate:
-            raise yaml.constructor.ConstructorError(
-                "while constructing a mapping", node.start_mark, f"duplicate key {key!r}",
-                key_node.start_mark)
-    return loader.construct_mapping(node, deep=deep)
-
-
-_StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
-                              _mapping_without_duplicates)
-
-
 def _parse_yaml(file: str, text: str) -> Any:
     try:
-        return yaml.load(text, Loader=_StrictLoader)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else ""
-        raise SkillError(file, where, f"invalid YAML ({getattr(exc, 'problem', exc)})") from None
-    except RecursionError:
-        raise SkillError(file, "", "invalid YAML (nested too deeply)") from None
+        return parse_yaml(text, file)
+    except FileError as e:
+        raise SkillError(e.file, e.where, e.problem) from None
 
 
 def _model_references(doc: Any) -> list[tuple[str, str]]:

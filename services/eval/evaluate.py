@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from sctd.files import parse_yaml
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
 from sctd.skill.catalog import shipped_folder
@@ -56,7 +57,7 @@ def task_of(skills: list[Skill], task: str | None) -> str:
 def with_limits(path: Path, limits: Limits, directory: Path) -> Path:
     """A copy of the skill file at ``path`` (and its model files) with other limits."""
     bundle = bundle_from_file(path)
-    doc = yaml.safe_load(bundle.yaml_text)
+    doc = parse_yaml(bundle.yaml_text, bundle.name)
     doc["limits"] = {"max_linear_speed": limits.max_linear_speed,
                      "max_angular_speed": limits.max_angular_speed}
     directory.mkdir(parents=True, exist_ok=True)

@@ -28,7 +28,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import yaml
+from sctd.files import FileError, load_yaml, parse_yaml
 
 from .device import InputError, Reading
 
@@ -154,18 +154,17 @@ def _axis(a: Any, where: str, bad) -> AxisMap:
 
 
 def load_mapping(path: str | Path) -> Mapping:
-    """The mapping file ``path``; InputError naming the file and the field."""
+    """The mapping file ``path`` (a regular file of at most 1 MiB, strict YAML: a duplicate
+    key, such as two ``enable``, is refused); InputError naming the file and the field."""
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text())
-    except OSError as e:
-        raise InputError(f"{p}: {e.strerror or e}") from e
-    except yaml.YAMLError as e:
-        raise InputError(f"{p}: not YAML: {e}") from e
+        doc = load_yaml(p)
+    except FileError as e:
+        raise InputError(str(e)) from None
     return parse_mapping(doc, str(p))
 
 
 def shipped_mapping(name: str) -> Mapping:
     """A mapping shipped in ``sctd_services/input/maps`` (``xbox``, ``spacemouse``)."""
     f = resources.files("sctd_services.input").joinpath("maps", f"{name}.yaml")
-    return parse_mapping(yaml.safe_load(f.read_text()), f"maps/{name}.yaml")
+    return parse_mapping(parse_yaml(f.read_text(), f"maps/{name}.yaml"), f"maps/{name}.yaml")

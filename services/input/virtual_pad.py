@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
+from sctd.files import FileError, load_yaml
 
 from .device import InputError
 
@@ -240,11 +240,9 @@ def load_script(path: str | Path) -> list[Step]:
     """The script file ``path`` (YAML or JSON); InputError naming the file and step."""
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text())
-    except OSError as e:
-        raise InputError(f"--virtual-script {p}: {e.strerror or e}") from e
-    except yaml.YAMLError as e:
-        raise InputError(f"--virtual-script {p}: not YAML or JSON: {e}") from e
+        doc = load_yaml(p, file=f"--virtual-script {p}")
+    except FileError as e:
+        raise InputError(str(e)) from None
     return parse_script(doc, f"--virtual-script {p}")
 
 
