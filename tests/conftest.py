@@ -33,8 +33,8 @@ class Proc(Child):
         super().__init__(module, *args, log=log, cwd=ROOT)
         _live.append(self.p)
 
-    def stop(self, timeout: float = 10.0) -> int:
-        rc = super().stop(timeout)
+    def stop(self, timeout: float = 10.0, sig: int = signal.SIGTERM) -> int:
+        rc = super().stop(timeout, sig)
         if self.p in _live:
             _live.remove(self.p)
         return rc

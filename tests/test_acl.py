@@ -20,7 +20,9 @@ import pytest
 import zenoh
 
 from sctd.cli.certs import ROLES
-from tests.conftest import free_port, sctd, wait_for
+from sctd.cli.errors import EXIT_FORCED, EXIT_OK
+from sctd.runtime.zsession import close_session
+from tests.conftest import Proc, free_port, sctd, wait_for
 
 N = 20
 ROBOT = "edan"
@@ -74,7 +76,18 @@ def pki(tmp_path):
             (tmp_path / "router.log").read_text()
         yield out
     finally:
-        assert router.stop() == 0, (tmp_path / "router.log").read_text()
+        stopped(router, tmp_path / "router.log")
+
+
+def stopped(router: Proc, log: Path) -> None:
+    """Stop ``sctd router`` with SIGTERM and check how it ended: by itself, with 0 (its
+    session closed) or 3 (Zenoh did not close it within 2 s; the router says so and
+    exits without it). What these tests check is the access control, so either is
+    fine here (``tests/test_router.py`` tells them apart); a router that had to be
+    killed (-9) is not."""
+    rc = router.stop()
+    assert rc in (EXIT_OK, EXIT_FORCED), (rc, log.read_text())
+    assert (rc == EXIT_FORCED) == ("did not close" in log.read_text()), (rc, log.read_text())
 
 
 class Sessions:
@@ -94,7 +107,7 @@ class Sessions:
 
     def close(self) -> None:
         for s in self.open:
-            s.close()
+            close_session(s)
 
 
 @pytest.fixture
@@ -257,17 +270,24 @@ def test_intruder_delivers_nothing(sessions, tmp_path, kind):
             sessions.config(conf)
         return
     intruder = sessions.config(conf)
-    time.sleep(0.5)
+    # Barriers instead of sleeps: a link carries its messages in order, so once the
+    # watcher's query is answered the router has the watcher's subscriptions (declared
+    # before the query on the same link) and the runtime's queryable.
+    assert wait_for(lambda: answers(watcher, "skill/swap") == {"runtime"}, 15)
+    asked_before = Counter(asked)
     put_all(intruder, EVERY)
     put_all(control, ["state"])
+    # (the router takes the intruder's puts before its queries, which have ended here)
     replies = {k: answers(intruder, k) for k in ("skill/swap", "learner", "skill")}
     assert wait_for(lambda: got["state"] >= N, 15), got
-    time.sleep(0.5)
+    asked_by_intruder = Counter(asked) - asked_before
+    # The watcher reaches the queryables still (the denial is the stranger's), and the
+    # answer comes over the router's link to the watcher after whatever the router had
+    # forwarded of the intruder's puts: the counts below are final.
+    assert answers(watcher, "skill/swap") == {"runtime"}
     assert {k: got[k] for k in EVERY} == {k: N if k == "state" else 0 for k in EVERY}
     assert replies == {"skill/swap": set(), "learner": set(), "skill": set()}
-    assert sum(asked.values()) == 0, asked
-    # the watcher (operator) still reaches the queryables: the denial is the stranger's
-    assert answers(watcher, "skill/swap") == {"runtime"}
+    assert not asked_by_intruder, asked_by_intruder
     del subs, qs
 
 
@@ -307,7 +327,7 @@ def test_usrpwd_roles_by_user_name(tmp_path):
         del subs
     finally:
         ss.close()
-        assert router.stop() == 0, log.read_text()
+        stopped(router, log)
 
 
 def test_client_query_finds_the_queryable_only_where_allowed(sessions):

@@ -42,6 +42,7 @@ from sctd.bench.netns import (
     tls_client_config,
     write_config,
 )
+from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.runtime import codec
 
 HOSTS = ("router", "robot", "runtime", "input", "learner", "observer", "intruder")
@@ -61,9 +62,9 @@ N_PER_KEY = 20
 
 
 def secure_available() -> bool:
-    """True when this sctd has ``sctd certs`` and ``sctd router`` (mutual TLS and the
-    roles' access control); else the cluster runs on plain TCP."""
-    return all(importlib.util.find_spec(m) is not None for m in ("sctd.cli.certs", "sctd.cli.router"))
+    """True when this sctd has ``sctd certs`` (mutual TLS and the roles' access control);
+    else the cluster runs on plain TCP."""
+    return importlib.util.find_spec("sctd.cli.certs") is not None
 
 
 class Cluster:
@@ -154,16 +155,18 @@ class Cluster:
 
     # -- programs
     def start_router(self) -> Process:
-        """The router (again, after a restart: each start logs to its own file)."""
+        """``sctd router`` with the router's config (again, after a restart: each start
+        logs to its own file); it prints ``listening on`` once its session is open."""
         self._router_starts += 1
-        log = f"router-{self._router_starts}.log"
-        if self.secure:
-            self.router = self.hosts.python("router", "sctd.cli.main", "router", "--config",
-                                            str(self.config("router")), log=log)
-        else:
-            self.router = self.hosts.python("router", "sctd.bench.netns", "router", "--config",
-                                            str(self.config("router")), log=log)
+        self.router = self.hosts.python("router", "sctd.cli.main", "router", "--config",
+                                        str(self.config("router")), log=f"router-{self._router_starts}.log")
         return self.router
+
+    def stop_router(self) -> int | None:
+        """Stop the router with SIGTERM (SIGKILL after 10 s); its exit code (None when no
+        router was started): ``sctd router`` exits 0 when its session closed and 3
+        (``EXIT_FORCED``) when Zenoh did not close it within 2 s, -9 only if killed."""
+        return None if self.router is None else self.router.stop()
 
     def start_learner(self) -> Process:
         return self.hosts.python("learner", "sctd.cli.main", "learner", "--store",
@@ -342,10 +345,6 @@ def _wait(pred, seconds: float, what: str, *procs: Process):
     raise RuntimeError(f"{what}: not within {seconds:.0f} s")
 
 
-def _ready_line(c: Cluster) -> str:
-    return "listening on" if c.secure else '"router"'
-
-
 def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restarts: int = 3) -> dict:
     """Latency across the hosts vs an echo; reconnection after router restarts; what
     the intruders got through (with the secured configs)."""
@@ -368,14 +367,15 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
                        "--seconds", str(seconds), "--echo-seconds", "0.1", *c._zargs("input"),
                        timeout=seconds + 90)
         steady = c.start_steady_input()
-        reconnect = []
+        reconnect: list[dict[str, float]] = []
+        killed: list[int] = []  # each killed router's exit code (-9)
         for _ in range(restarts):
             assert c.router is not None
-            c.router.kill()
+            killed.append(c.router.kill())
             time.sleep(2.0)
             t0 = time.time()
             router = c.start_router()
-            _wait(lambda r=router: _ready_line(c) in r.output(), 30, "the restarted router", router)
+            _wait(lambda r=router: "listening on" in r.output(), 30, "the restarted router", router)
             t_ready = time.time()
             tgt = _wait(lambda t0=t0: c.first(c.keys.target, t0), 60,
                         "target after the router restart", robot, runtime)
@@ -392,10 +392,12 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
         steady.stop()
         runtime.stop()
         stats = last_json(runtime.output())
+        stopped = c.stop_router()  # 0 its session closed, 3 forced after 2 s (sctd router)
     return {"hosts": {n: h.addr(n) for n in HOSTS}, "router": c.endpoint, "secure": c.secure,
             "seconds": seconds,
             "input_rate_hz": input_rate, "latency_ms": probe["latency_ms"],
             "echo_rtt_ms": ping["echo_rtt_ms"], "reconnect_s": reconnect,
+            "router_exit": {"killed": killed, "stopped": stopped},
             "intrusion": intrusion,
             "daemon": None if stats is None else {k: stats.get(k) for k in
                                                   ("ticks", "late_ticks", "skipped_ticks", "counters")}}
@@ -416,6 +418,10 @@ def print_report(r: dict) -> None:
         print(f"  router restart {i}: its session open after {x['router_open_s'] * 1e3:6.0f}, first target "
               f"after {x['target_s'] * 1e3:6.0f}, first state after {x['state_s'] * 1e3:6.0f} "
               "(from the router's process start)")
+    ex = r["router_exit"]
+    how = {EXIT_OK: "its session closed", EXIT_FORCED: "forced: its session did not close in 2 s"}
+    print(f"  router exit codes: {ex['killed']} when killed for the restarts, {ex['stopped']} when "
+          f"stopped at the end ({how.get(ex['stopped'], 'it did not end by itself')})")
     if r["intrusion"]:
         print(f"  {'intruder':16s} {'delivered':>14s} {'reads':>7s} {'swap':>5s} {'train':>6s}  session")
         for name, x in r["intrusion"].items():

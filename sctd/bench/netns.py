@@ -14,8 +14,9 @@ clash; :func:`sweep_stale` deletes the namespaces of runs whose process is gone 
 killed with SIGKILL cannot clean up after itself).
 
 The module is also the probe program the tests and ``sctd bench multihost`` run inside
-a namespace (``python -m sctd.bench.netns router|listen|put|query ...``), each printing
-one JSON line; see :func:`main`.
+a namespace (``python -m sctd.bench.netns listen|record|put|query|echo|ping ...``), each
+printing JSON lines; see :func:`main`. The router in a namespace is ``sctd router``
+itself, with the plain config of :func:`router_config` or the one ``sctd certs`` wrote.
 """
 
 from __future__ import annotations
@@ -136,13 +137,15 @@ class Process:
         return self.p.poll() is None
 
     def kill(self) -> int:
-        """SIGKILL at once (a host that crashes or loses power)."""
+        """SIGKILL at once (a host that crashes or loses power); the exit code (-9 unless
+        it had ended already)."""
         if self.p.poll() is None:
             os.killpg(self.p.pid, signal.SIGKILL)
         return self.p.wait()
 
     def stop(self, timeout: float = 10.0) -> int:
-        """SIGTERM, then SIGKILL after ``timeout`` s; the exit code."""
+        """SIGTERM, then SIGKILL after ``timeout`` s; the exit code (-9 when it had to be
+        killed)."""
         if self.p.poll() is None:
             self.p.send_signal(signal.SIGTERM)
             try:
@@ -399,16 +402,6 @@ def _stop_event() -> threading.Event:
     return stop
 
 
-def router_main(args: argparse.Namespace) -> int:
-    """A Zenoh router session from ``--config``, until SIGTERM."""
-    stop = _stop_event()
-    s = _open(args.config)
-    print(json.dumps({"router": str(s.zid())}), flush=True)
-    stop.wait()
-    s.close()
-    return 0
-
-
 def listen_main(args: argparse.Namespace) -> int:
     """Count the samples arriving on each key expression for ``--seconds``, and the Unix
     time of the first one per key. With ``--mark NAME`` only msgpack maps that have the
@@ -576,9 +569,6 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m sctd.bench.netns",
                                 description="Zenoh probes run inside a host's namespace")
     sub = p.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("router", help="a Zenoh router session until SIGTERM")
-    r.add_argument("--config", required=True)
-    r.set_defaults(func=router_main)
     lis = sub.add_parser("listen", help="count samples per key")
     lis.add_argument("--config", required=True)
     lis.add_argument("--key", action="append", required=True)

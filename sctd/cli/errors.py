@@ -10,7 +10,11 @@ file and field parts when there are some: a skill loader error already reads
       stopped on an error, a benchmark whose criteria are not met)
 2     bad arguments or bad input (an unknown flag, a malformed skill, a missing
       file): nothing was started, or it was stopped before it moved anything
+3     stopped on request, but a resource did not close within its bound and the
+      process exited without it (``sctd router``: its Zenoh session, after 2 s)
 ====  ==========================================================================
+
+Every ``--help`` lists 0, 1 and 2; a command that can also end with 3 says so in its own.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from typing import Any, NoReturn
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+EXIT_FORCED = 3
 
 EXIT_CODES = ("exit codes: 0 done; 1 the job ran and did not succeed; "
               "2 bad arguments or input (nothing was started)")

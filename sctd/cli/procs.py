@@ -120,10 +120,11 @@ class Child:
             out = b""
         return (out or b"").decode(errors="replace")
 
-    def stop(self, timeout: float = 10.0) -> int:
-        """SIGTERM, wait up to ``timeout`` s, then SIGKILL the child's process group."""
+    def stop(self, timeout: float = 10.0, sig: int = signal.SIGTERM) -> int:
+        """``sig`` (SIGTERM), wait up to ``timeout`` s, then SIGKILL the child's process
+        group; the exit code (``-9`` when it had to be killed)."""
         if self.p.poll() is None:
-            self.p.send_signal(signal.SIGTERM)
+            self.p.send_signal(sig)
             try:
                 self.p.wait(timeout)
             except subprocess.TimeoutExpired:
