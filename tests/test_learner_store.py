@@ -213,3 +213,24 @@ def test_check_settings_are_bounded():
     for bad in ({"trials": 0}, {"floor": 1.5}, {"tolerance": -0.1}, {"jobs": 0}):
         with pytest.raises(ValueError):
             CheckSettings(**bad)
+
+
+# --- skipping the check is the operator's decision --------------------------------------
+
+def test_a_request_cannot_skip_the_check_unless_the_operator_allows_it(store):
+    """gate: false is refused by a learner started without --allow-unchecked; where it is
+    allowed, the skill is 'not checked' in the reply and the record, never 'passed'."""
+    from sctd_services.learner.request import Request
+    from sctd_services.learner.service import Learner
+
+    req = Request(task="pour", method="vf", gate=False)
+    with pytest.raises(RequestError, match="gate: false: this learner checks every skill"):
+        Learner(None, store, settings=CheckSettings()).handle(req)  # type: ignore[arg-type]
+    s = _stored_copy(store, "pour.yaml", "unchecked", created=1.0)
+    learner = Learner(None, store, settings=CheckSettings(allow_unchecked=True))  # type: ignore[arg-type]
+    ev, passed, reason = learner._check(req, s)
+    assert ev is None and passed is None and reason.startswith("not checked")
+    assert find_stored("unchecked").record["check"] == {"passed": None, "checked": False, "reason": reason}
+    swapped, why, _ = learner._swap(s, Request(task="pour", method="vf", gate=False, swap=False), passed,
+                                    reason)
+    assert not swapped and "not checked" in why

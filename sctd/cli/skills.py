@@ -61,7 +61,8 @@ def _stored_row(s: StoredSkill) -> dict[str, Any]:
     rec = s.record
     ev = {task: f"{e['successes']}/{e['trials']}" for task, e in rec.get("evaluation", {}).items()}
     return {**row, "name": s.name, "ref": s.ref, "task": rec.get("task"), "created": s.created,
-            "demos": len(rec.get("demos", [])), "evaluation": ev}
+            "demos": len(rec.get("demos", [])), "evaluation": ev,
+            "checked": bool(ev)}
 
 
 def main_skills(args: argparse.Namespace) -> int:
@@ -81,7 +82,7 @@ def main_skills(args: argparse.Namespace) -> int:
         where = r["path"]
         if r["source"] == "store":
             made = time.strftime("%Y-%m-%d %H:%M", time.localtime(r["created"]))
-            checks = ", ".join(f"{t} {v}" for t, v in r["evaluation"].items()) or "not checked"
+            checks = ", ".join(f"{t} {v}" for t, v in r["evaluation"].items()) or "NOT CHECKED"
             where = f"{made}, {r['demos']} demos, {checks}; {where}"
         print(f"{r['name']:22s} {r['id'] or '-':18s} {r['object'] or '-':15s} "
               f"{r['method'] or r.get('error', '-'):22s} {r['source']} ({where})")

@@ -37,7 +37,8 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="the check's first trial seed (default: "
                                                           "the learner's)")
     p.add_argument("--no-gate", dest="gate", action="store_false",
-                   help="swap without the lockstep check")
+                   help="swap without the lockstep check (only where the learner was started with "
+                        "--allow-unchecked; refused otherwise)")
     p.add_argument("--no-swap", dest="swap", action="store_false",
                    help="train, check and store; do not swap")
     p.add_argument("--robot", default=codec.DEFAULT_ROBOT,
@@ -135,5 +136,7 @@ def _print_reply(body: dict[str, Any], as_json: bool, swap: bool) -> int:
         for row in (body.get("evaluation") or {}).get("table", []):
             print(f"  {row}")
         print(f"  stored as {body.get('path')}")
+    if body.get("checked") is False and not as_json:
+        print("  NOT CHECKED: the learner's operator lets requests skip the check")
     done = body.get("swapped") if swap else body.get("passed")
     return EXIT_OK if done else EXIT_FAILED

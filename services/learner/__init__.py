@@ -41,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=d.seed, help="the trials' first seed (default %(default)s)")
     g.add_argument("--jobs", type=int, default=d.jobs,
                    help="trial processes, kept warm (default %(default)s)")
+    g.add_argument("--allow-unchecked", action="store_true",
+                   help="let a request skip the check (gate: false; its skill is swapped in "
+                        "unchecked and stored as such); without it such a request is refused")
     p.add_argument("--nice", type=int, default=10,
                    help="lower this process's (and its trials') CPU priority by this much, so "
                         "training never competes with the daemon's tick (default %(default)s)")
@@ -53,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     from .service import Learner, Stopped, store_path
 
     try:
-        settings = CheckSettings(args.trials, args.floor, args.tolerance, args.seed, args.jobs)
+        settings = CheckSettings(args.trials, args.floor, args.tolerance, args.seed, args.jobs,
+                                 args.allow_unchecked)
         store = Store(store_path(args.store))
     except (ValueError, OSError) as e:
         print(f"sctd learner: {e}", file=sys.stderr)

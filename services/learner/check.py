@@ -28,13 +28,15 @@ TASKS = tuple(INTENTS)
 class CheckSettings:
     """How a new skill is checked: ``trials`` lockstep trials from ``seed``; it passes
     with a success rate of at least ``floor`` and, when the active skill has a stored
-    evaluation on the task, no lower than that minus ``tolerance``."""
+    evaluation on the task, no lower than that minus ``tolerance``. Only with
+    ``allow_unchecked`` (set by whoever starts the learner) may a request skip it."""
 
     trials: int = 10
     floor: float = 0.9
     tolerance: float = 0.1
     seed: int = 0
     jobs: int = 2
+    allow_unchecked: bool = False  # requests may skip the check (gate: false): the operator's call
 
     def __post_init__(self) -> None:
         if self.trials < 1 or self.jobs < 1 or self.seed < 0:

@@ -70,7 +70,7 @@ class _Outcome:
     """A request's result as it is replied."""
 
     stored: StoredSkill
-    passed: bool  # the check passed (or was not asked for)
+    passed: bool | None  # the check passed; None: not checked (gate: false, allowed by the operator)
     swapped: bool
     reason: str
     summary: dict[str, Any]
@@ -85,7 +85,7 @@ class _Outcome:
         s = self.stored
         report = {k: v for k, v in self.report.items() if k not in PER_SAMPLE}
         return {"id": s.id, "name": s.name, "ref": s.ref, "passed": self.passed,
-                "swapped": self.swapped,
+                "checked": self.passed is not None, "swapped": self.swapped,
                 "reason": self.reason, "summary": self.summary, "report": report,
                 "evaluation": self.evaluation, "timings": self.timings, "daemon": self.daemon,
                 "path": str(s.path)}
@@ -224,6 +224,9 @@ class Learner:
     def handle(self, req: Request) -> _Outcome:
         """Train, store, check and swap (see the module docstring); raises on a request
         that cannot be served (unknown demonstrations, a skill that does not load)."""
+        if not req.gate and not self.settings.allow_unchecked:
+            raise RequestError("gate", "false: this learner checks every skill before a swap (its "
+                                       "operator can start it with --allow-unchecked)")
         t0 = time.monotonic()
         self.busy = {"task": req.task, "method": req.method, "since": time.time()}
         try:
@@ -274,10 +277,14 @@ class Learner:
                                          f"{sorted(map(str, objects))}: name the object")
         return str(objects.pop())
 
-    def _check(self, req: Request, stored: StoredSkill) -> tuple[dict[str, Any] | None, bool, str]:
-        """The lockstep check (with the gate on): its evaluation, whether it passed, why."""
+    def _check(self, req: Request, stored: StoredSkill) -> tuple[dict[str, Any] | None, bool | None, str]:
+        """The lockstep check (with the gate on): its evaluation, whether it passed (None:
+        not checked), why."""
         if not req.gate:
-            return None, True, "not checked (gate: false)"
+            reason = "not checked (gate: false, allowed by the learner's operator)"
+            self.store.update_record(stored.id, {"check": {"passed": None, "checked": False,
+                                                          "reason": reason}})
+            return None, None, reason
         if req.task not in TASKS:
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
@@ -306,9 +313,9 @@ class Learner:
         """The daemon's active skill summary, or None when no daemon answers."""
         return client.active_skill(self.session, self.keys, DAEMON_TIMEOUT, find=1.0)
 
-    def _swap(self, stored: StoredSkill, req: Request, passed: bool,
+    def _swap(self, stored: StoredSkill, req: Request, passed: bool | None,
               reason: str) -> tuple[bool, str, dict[str, Any] | None]:
-        if not passed:
+        if passed is False:
             return False, f"kept the active skill: {reason}", None
         if not req.swap:
             return False, f"stored, not swapped (swap: false); check: {reason}", None
