@@ -150,8 +150,8 @@ def test_demo_round_trips():
 
 
 @pytest.mark.parametrize(("mutate", "reason", "detail"), [
-    (lambda d: d.update(task="a/b"), "bad_task", "key chunk"),
-    (lambda d: d.update(name=""), "bad_name", "key chunk"),
+    (lambda d: d.update(task="a/b"), "bad_task", "not in names"),
+    (lambda d: d.update(name=""), "bad_name", "non-empty name"),
     (lambda d: d.update(columns=["t", "x"]), "bad_columns", "expected"),
     (lambda d: d.update(rows=_demo_rows(9)), "bad_rows", "at least 10"),
     (lambda d: d["rows"][4].pop(), "bad_rows", "row 4: expected 8 numbers"),

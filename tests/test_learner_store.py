@@ -234,3 +234,22 @@ def test_a_request_cannot_skip_the_check_unless_the_operator_allows_it(store):
     swapped, why, _ = learner._swap(s, Request(task="pour", method="vf", gate=False, swap=False), passed,
                                     reason)
     assert not swapped and "not checked" in why
+
+
+@pytest.mark.parametrize("bad", [".", "..", ".h", "a\x00b", "a/b", "x" * 65, "", "a b", "sub\\dir"])
+def test_names_that_are_paths_are_refused_everywhere(store, bad):
+    """A demonstration named '..' wrote into the store's root; a task '..' trained on its
+    files; a NUL name ended in a traceback. Names are names: in the message, the request
+    and so the store."""
+    msg = _msg()
+    for field in ("name", "task", "object"):
+        data = codec.encode_demo(*(bad if f == field else getattr(msg, f if f != "object" else "object")
+                                   for f in ("task", "name", "object")), msg.rows)
+        with pytest.raises(codec.DecodeError) as e:
+            codec.decode_demo(data)
+        assert e.value.reason == f"bad_{field}"
+    for field, value in (("task", bad), ("demos", [bad]), ("name", bad), ("object", bad)):
+        fields = {"task": "pour", "method": "vf", field: value}
+        with pytest.raises(RequestError, match=f"^{field}: "):
+            parse_request(_req(**fields))
+    assert not list(store.root.glob("**/*.csv"))

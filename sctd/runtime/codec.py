@@ -315,10 +315,33 @@ class DemoMsg(NamedTuple):
     rows: list[list[float]]  # t, x, y, z, qx, qy, qz, qw: the ee in the object's frame
 
 
+MAX_NAME = 64  # characters of a task, demonstration, object or skill name
+_NOT_IN_NAMES = frozenset("/\\*$?#@ ")
+
+
+def name_problem(x: object) -> str:
+    """What is wrong with ``x`` as a name that becomes a key chunk and a file name (a
+    task, a demonstration, an object, a skill): "" when nothing is. A name is 1 to
+    :data:`MAX_NAME` printable characters, none of ``/ \\ * $ ? # @`` or spaces, and
+    does not start with a dot (``.``, ``..`` and hidden files are not names)."""
+    if not isinstance(x, str) or not x:
+        return f"expected a non-empty name, got {repr(x)[:40]}"
+    if len(x) > MAX_NAME:
+        return f"a name of {len(x)} characters, at most {MAX_NAME}"
+    if x.startswith("."):
+        return f"{x[:40]!r} starts with a dot"
+    bad = next((c for c in x if c in _NOT_IN_NAMES or not c.isprintable()), None)
+    if bad is not None:
+        return f"{x[:40]!r} has {bad!r} (not in names: / \\ * $ ? # @, spaces, control characters)"
+    return ""
+
+
 def _chunk(obj: dict, key: str) -> str:
     x = obj.get(key)
-    if not isinstance(x, str) or not x or any(c in x for c in "/*$?#"):
-        raise DecodeError(f"bad_{key}", f"expected a non-empty key chunk, got {repr(x)[:40]}")
+    problem = name_problem(x)
+    if problem:
+        raise DecodeError(f"bad_{key}", problem)
+    assert isinstance(x, str)
     return x
 
 

@@ -44,8 +44,9 @@ class Request:
 
 
 def _chunk(value: Any, where: str) -> str:
-    if not isinstance(value, str) or not value or any(c in value for c in "/*$?#@ "):
-        raise RequestError(where, f"expected a name without / * $ ? # @ or spaces, got {value!r}")
+    problem = codec.name_problem(value)
+    if problem:
+        raise RequestError(where, problem)
     return value
 
 
