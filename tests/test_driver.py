@@ -107,7 +107,7 @@ def record_stream(skill_path: Path, ticks: int):
         for _, kind, args in (m for m in msgs if m[0] == k):
             _feed(feed, kind, args)
         r = feed.tick(t)
-        targets.append((k, r.pose, r.in_seq, r.device, r.state, r.mode))
+        targets.append((k, r.pose, r.in_seq, r.device, r.state, r.mode, r.seed))
         if r.pose is not None:
             pose = list(r.pose)
     return skill, msgs, targets
@@ -130,14 +130,14 @@ def replay_lockstep(skill, msgs, ticks):
         for kind, args in by_tick.get(k, []):
             _feed(feed, kind, args)
         r = feed.tick(k * PERIOD)
-        out.append((k, r.pose, r.in_seq, r.device, r.state, r.mode))
+        out.append((k, r.pose, r.in_seq, r.device, r.state, r.mode, r.seed))
     return out, feed.driver.counters
 
 
 def replay_daemon(skill, msgs, ticks):
     """The daemon's own methods around its tick: drain (ingress into the driver), step,
     after-tick; the messages as bytes in its rings, arriving before each drain. Returns
-    what it published, by tick: ``(tick, pose, in_seq, device, state)``."""
+    what it published, by tick: ``(tick, pose, in_seq, device, state, seed)``."""
     fake = FakeSession()
     daemon = Daemon(skill, fake, RuntimeConfig())  # type: ignore[arg-type]
     daemon.ingress = Ingress(fake, KEYS, daemon.driver)  # type: ignore[arg-type]
@@ -155,8 +155,8 @@ def replay_daemon(skill, msgs, ticks):
         daemon._before_tick(t)
         daemon._step(t, t, sent.append)
         daemon._after_tick()
-        # a queued target: (seq, stamp, pose, state, skill id, in_seq, in_device)
-        out += [(k, item[2], item[5], item[6], item[3]) for item in sent[before:]]
+        # a queued target: (seq, stamp, pose, state, skill id, in_seq, in_device, seed)
+        out += [(k, item[2], item[5], item[6], item[3], item[7]) for item in sent[before:]]
         assert [item[0] for item in sent[before:]] == list(range(before + 1, len(sent) + 1))
     return out, daemon.driver.counters
 
@@ -188,14 +188,15 @@ def test_the_daemon_and_lockstep_give_the_same_targets_to_the_bit(skill):
     lock, lock_counters = replay_lockstep(sk, msgs, ticks)
     assert lock == recorded  # the lockstep path is deterministic
     daemon, daemon_counters = replay_daemon(sk, msgs, ticks)
-    lock_published = [(k, pose, in_seq, device, state) for k, pose, in_seq, device, state, _ in lock
-                      if pose is not None]
+    lock_published = [(k, pose, in_seq, device, state, seed)
+                      for k, pose, in_seq, device, state, _, seed in lock if pose is not None]
     assert daemon == lock_published
     moved = {tuple(p[:3]) for _, p, *_ in lock_published}
+    assert sum(t[-1] for t in lock_published) >= 2  # the first target and the re-seed
     assert len(moved) > 200  # the stream really moves the target
     # the stream exercised what it is meant to: two devices, the ignored push, the stop,
     # the press, the injected jump and its re-seed
-    assert {d for *_, d, _ in lock_published} == {"user", "second"}
+    assert {t[3] for t in lock_published} == {"user", "second"}
     c = lock_counters
     assert c.ignored_input > 0 and c.stops == 1 and c.presses >= 1
     assert c.state_discontinuity == 2 and c.reseeds >= 1  # the jump away and back

@@ -263,7 +263,7 @@ class _Watch:
 
     def __init__(self, s: zenoh.Session):
         self.lock = threading.Lock()
-        self.targets: list[tuple[int, float, list[float], str, int, str]] = []
+        self.targets: list[tuple[int, float, list[float], str, int, str, bool]] = []
         self.status: dict | None = None
         self.windows: list[tuple[float, dict]] = []  # (bench time, recent_ms)
         self.state: dict | None = None
@@ -283,7 +283,7 @@ class _Watch:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
         with self.lock:
             self.targets.append((m["seq"], m["stamp"], m["pose"][:3], m["skill"], m["in_seq"],
-                                 m.get("in_device", "")))
+                                 m.get("in_device", ""), bool(m.get("seed"))))
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         m = msgpack.unpackb(sample.payload.to_bytes(), raw=False)
@@ -448,17 +448,14 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
     return out
 
 
-HOLD_GAP = 0.05  # s between two targets that means the daemon held (stale state) in between
-
-
 def _steps(targets: list) -> tuple[float, float]:
     """Distance (m) the target moved from tick to tick, and the time (s) those ticks
-    span, over consecutive published targets only: after a hold (no target for
-    :data:`HOLD_GAP`, the robot's state went stale on a loaded host) the daemon re-seeds
-    at the measured pose, which is not input moving the target."""
+    span, over consecutive published targets only, leaving out the steps into a
+    re-seed (``seed`` targets: the measured pose, published when the robot's state came
+    back after going stale, as it does on a loaded host; that is not input moving it)."""
     moved = span = 0.0
     for a, b in itertools.pairwise(targets):
-        if b[0] == a[0] + 1 and b[1] - a[1] < HOLD_GAP:
+        if b[0] == a[0] + 1 and not b[6]:
             moved += math.dist(a[2], b[2])
             span += b[1] - a[1]
     return moved, span

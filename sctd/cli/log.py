@@ -47,7 +47,8 @@ _STAMPED = {"seq": _INT, "stamp": {"type": "number", "description": "sender's Un
 SCHEMAS: dict[str, dict[str, Any]] = {
     "target": {"properties": {**_STAMPED, "pose": _POSE, "state": {"type": "string"},
                               "skill": {"type": "string"}, "in_seq": _INT,
-                              "in_device": {"type": "string"}},
+                              "in_device": {"type": "string"},
+                              "seed": {"type": "boolean", "description": "the measured pose: a (re-)seed"}},
                "required": ["seq", "stamp", "pose"]},
     "state": {"properties": {**_STAMPED, "pose": _POSE, "q": {"type": "array", "items": _NUM},
                              "dq": {"type": "array", "items": _NUM},

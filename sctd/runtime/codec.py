@@ -285,11 +285,16 @@ def encode_object(seq: int, stamp: float, pose: list[float]) -> bytes:
 
 
 def encode_target(seq: int, stamp: float, pose: list[float], state: str, skill: str,
-                  in_seq: int, in_device: str = "") -> bytes:
+                  in_seq: int, in_device: str = "", seed: bool = False) -> bytes:
     """A target: ``in_seq`` and ``in_device`` name the input message the tick followed
-    (the owning device's newest, else the newest of any device; -1 and "" for none)."""
-    return pack({"seq": seq, "stamp": stamp, "pose": pose, "state": state, "skill": skill,
-                 "in_seq": in_seq, "in_device": in_device})
+    (the owning device's newest, else the newest of any device; -1 and "" for none);
+    ``seed`` (written only when set) marks a target that is the measured pose (the first
+    after the state came back or a fault cleared), not a step of the previous one."""
+    msg = {"seq": seq, "stamp": stamp, "pose": pose, "state": state, "skill": skill,
+           "in_seq": in_seq, "in_device": in_device}
+    if seed:
+        msg["seed"] = True
+    return pack(msg)
 
 
 def decode_target(data: bytes) -> dict[str, Any]:

@@ -118,14 +118,16 @@ class TickResult:
     ``stopped`` (no valid input: the target stays) and ``running`` publish.
     """
 
-    __slots__ = ("_target", "device", "in_seq", "input_ok", "mode", "pose", "state", "state_changed")
+    __slots__ = ("_target", "device", "in_seq", "input_ok", "mode", "pose", "seed", "state",
+                 "state_changed")
 
     def __init__(self, mode: str, target: _Target | None, state: str, cmd: Command,
                  state_changed: bool = False, input_ok: bool = False,
-                 pose: list[float] | None = None):
+                 pose: list[float] | None = None, seed: bool = False):
         self.mode, self._target, self.state = mode, target, state
         self.in_seq, self.device = cmd.in_seq, cmd.device
         self.state_changed, self.input_ok, self.pose = state_changed, input_ok, pose
+        self.seed = seed  # the target is the measured pose: a (re-)seed, not a step
 
     @property
     def T_world_target(self) -> Array | None:
@@ -279,7 +281,7 @@ class Controller:
         self._watch(now, not seeding and self._move(u, F_meas), F_meas, force)
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, cmd, changed,
-                          input_ok, self._pose)
+                          input_ok, self._pose, seeding)
 
     def _watch(self, now: float, held: bool, F_meas: se3.Flat, force: Array | None) -> None:
         """Feed the stuck detector: whether the input is held (pushed on the active

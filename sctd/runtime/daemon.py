@@ -97,7 +97,8 @@ class _Publisher(threading.Thread):
     """Encodes and publishes targets and status off the tick thread: a Zenoh put that
     reaches a remote subscriber writes to the socket (tens of us, with a long tail),
     which would otherwise count against every tick. Runs at one FIFO priority below the
-    tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq, in_device)``, a
+    tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq, in_device,
+    seed)``, a
     status map (dict), or None to stop. With ``ros`` (``--ros``), each target is also
     offered to ``ros.target(stamp, pose)`` (CDR, rate-limited) after its own put."""
 
@@ -418,7 +419,7 @@ class Daemon:
         res = self.driver.tick(now, wall)
         if res.pose is not None:
             send((self.driver.target_seq, wall, res.pose, res.state, self.controller.skill.id,
-                  res.in_seq, res.device))
+                  res.in_seq, res.device, res.seed))
             self._window_targets += 1
         return res.state
 
