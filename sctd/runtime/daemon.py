@@ -99,7 +99,8 @@ class _Publisher(threading.Thread):
     which would otherwise count against every tick. Runs at one FIFO priority below the
     tick. Queue items: a target's ``(seq, stamp, pose, state, skill id, in_seq, in_device,
     seed)``, a
-    status map (dict), or None to stop. With ``ros`` (``--ros``), each target is also
+    status map (dict), a list of samples to drop (freeing them takes time), or None to
+    stop. With ``ros`` (``--ros``), each target is also
     offered to ``ros.target(stamp, pose)`` (CDR, rate-limited) after its own put."""
 
     def __init__(self, target: Any, status: Any, rt_priority: int, ros: Any = None):
@@ -108,7 +109,7 @@ class _Publisher(threading.Thread):
         self.status = status
         self.ros = ros
         self.rt_priority = rt_priority
-        self.queue: queue.SimpleQueue[tuple | dict | None] = queue.SimpleQueue()
+        self.queue: queue.SimpleQueue[tuple | dict | list | None] = queue.SimpleQueue()
         self.put_time = Histogram()  # target puts
 
     def run(self) -> None:
@@ -119,6 +120,9 @@ class _Publisher(threading.Thread):
         while (item := q.get()) is not None:
             if isinstance(item, dict):
                 self.status.put(codec.pack(item))
+                continue
+            if isinstance(item, list):  # the tick's oversized samples: dropped here
+                del item
                 continue
             t0 = time.monotonic()
             self.target.put(encode(*item))
@@ -429,6 +433,10 @@ class Daemon:
         assert self.ingress is not None
         self.driver.after_tick()
         self.ingress.after_tick()
+        if self.ingress.trash:
+            trash = self.ingress.take_trash()
+            if self._publisher is not None:  # oversized samples, dropped on its thread
+                self._publisher.queue.put(trash)
 
     def _account(self, window: _Window, lateness: float, compute: float, state: str) -> None:
         self.lateness.add(lateness)

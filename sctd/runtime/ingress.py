@@ -86,7 +86,7 @@ class Ingress:
         obj = driver.skill.object
         if obj != WORLD_OBJECT:
             self.objects[obj] = object_inlet(session, keys, obj)
-        self.trash: list[Any] = []  # oversized samples, released after the control step
+        self.trash: list[Any] = []  # oversized samples: freed off the tick thread (take_trash)
 
     def _device_inlet(self, name: str) -> Inlet:
         return Inlet(self.session, self.keys.input(name), DEVICE_DEPTH, codec.MAX_INPUT_BYTES,
@@ -118,7 +118,7 @@ class Ingress:
         payload = sample.payload
         if len(payload) > limit:
             self.driver.counters.drop(f"{kind}_too_large")
-            self.trash.append(sample)  # freeing megabytes takes a while: after the tick
+            self.trash.append(sample)  # freeing megabytes takes a while: not on the tick thread
             return None
         data = payload.to_bytes()
         try:
@@ -171,10 +171,7 @@ class Ingress:
     # --- between ticks ------------------------------------------------------------------
 
     def after_tick(self) -> None:
-        """After the target is out: rings for the device names heard on the catch-all,
-        and the oversized samples released."""
-        if self.trash:
-            self.trash.clear()
+        """After the target is out: rings for the device names heard on the catch-all."""
         if not self._wanted:
             return
         known = set(self.driver.inputs.devices)
@@ -184,6 +181,12 @@ class Ingress:
             if name in known:
                 self._joining[self.keys.input(name)] = self._device_inlet(name)
         self._wanted.clear()
+
+    def take_trash(self) -> list[Any]:
+        """The oversized samples drained since the last call, for another thread to drop
+        (freeing a 10 MB payload costs about a millisecond)."""
+        trash, self.trash = self.trash, []
+        return trash
 
     # --- swaps ----------------------------------------------------------------------------
 
