@@ -26,7 +26,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import yaml
 
@@ -58,6 +58,26 @@ def inside(path: str | Path, folder: str | Path, file: str, where: str = "") -> 
     if real != root and root not in real.parents:
         raise FileError(file, where, f"{os.fspath(path)!r} resolves outside {os.fspath(folder)!r}")
     return real
+
+
+def open_regular(path: str | Path, limit: int, file: str | None = None, where: str = "") -> BinaryIO:
+    """A regular file of at most ``limit`` bytes, opened for reading (for files read as
+    a stream: the caller bounds what it keeps)."""
+    name = os.fspath(path) if file is None else file
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as e:
+        raise FileError(name, where, f"cannot open ({e.strerror})") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise FileError(name, where, f"{_kind(st.st_mode)}, not a regular file")
+        if st.st_size > limit:
+            raise FileError(name, where, f"{st.st_size} bytes, more than the {limit} allowed")
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def read_bytes(path: str | Path, limit: int, file: str | None = None, where: str = "") -> bytes:

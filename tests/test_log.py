@@ -8,10 +8,13 @@ import json
 import math
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import pytest
 import zenoh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from sctd.cli.log import kind_of, read_log, schema
@@ -127,3 +130,126 @@ def test_replay_publishes_observations_and_commands_only_with_all(tmp_path):
                 sub.undeclare()
     finally:
         s.close()
+
+
+# --- a log file is input like any other: checked as it is read ---------------------------
+
+def _log_file(path, n=20):
+    from sctd.cli.log import McapLog
+
+    log = McapLog(path)
+    t = 1_800_000_000.0
+    for k in range(n):
+        log.add(KEYS.state, "state", codec.encode_state(k, t + k * 0.01, [0.1, 0, 0.5, 0, 0, 0, 1]),
+                t + k * 0.01)
+    log.close()
+    return path
+
+
+@given(st.integers(0, 10**9), st.integers(0, 7))
+@settings(max_examples=60, deadline=None)
+def test_a_flipped_bit_is_an_error_or_changes_nothing(tmp_path_factory, where, bit):
+    """The audit flipped single bits: 5 of 40 replayed with changed values. With the
+    CRCs checked a flip is refused, or lands where it changes no message."""
+    from sctd.cli.log import LogError, log_messages
+
+    path = _log_file(tmp_path_factory.mktemp("flip") / "a.mcap")
+    good = list(log_messages(path))
+    data = bytearray(path.read_bytes())
+    data[where % len(data)] ^= 1 << bit
+    path.write_bytes(bytes(data))
+    try:
+        got = list(log_messages(path))
+    except LogError as e:
+        assert str(e).startswith(str(path))
+    else:
+        assert got == good
+
+
+def _raw_mcap(path, *records):
+    """An MCAP file of a header, ``records`` (mcap record objects) and a footer."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer, Header
+    from mcap.writer import MCAP0_MAGIC
+
+    b = RecordBuilder()
+    b.write(MCAP0_MAGIC)
+    Header(profile="", library="test").write(b)
+    for r in records:
+        r.write(b)
+    DataEnd(0).write(b)
+    Footer(0, 0, 0).write(b)
+    b.write(MCAP0_MAGIC)
+    path.write_bytes(b.end())
+    return path
+
+
+def _schema():
+    from mcap.records import Schema
+
+    return Schema(id=1, name="s", encoding="jsonschema", data=b"{}")
+
+
+def _channel(topic):
+    from mcap.records import Channel
+
+    return Channel(id=1, topic=topic, message_encoding="json", metadata={}, schema_id=1)
+
+
+def _message(data):
+    from mcap.records import Message
+
+    return Message(channel_id=1, log_time=0, data=data, publish_time=0, sequence=1)
+
+
+@pytest.mark.parametrize("topic", ["sctd/edan/state/**", "sctd/edan/state//x", "sctd/*/state",
+                                   "sctd/edan/objects", "other/edan/state", "sctd/../state"])
+def test_topics_that_are_not_keys_of_the_contract_are_refused(tmp_path, topic):
+    from sctd.cli.log import LogError, log_messages
+
+    path = _raw_mcap(tmp_path / "t.mcap", _schema(), _channel(topic),
+                     _message(b'{"seq": 1, "stamp": 1.0, "pose": [0,0,0,0,0,0,1]}'))
+    with pytest.raises(LogError, match="topic"):
+        list(log_messages(path))
+
+
+@pytest.mark.parametrize("body, what", [(b"[1, 2]", "expected a JSON map, got list"),
+                                        (b"null", "expected a JSON map, got NoneType"),
+                                        (b"{", "not JSON")])
+def test_a_body_that_is_not_a_json_map_is_refused(tmp_path, body, what):
+    from sctd.cli.log import LogError, log_messages
+
+    path = _raw_mcap(tmp_path / "b.mcap", _schema(), _channel(KEYS.state), _message(body))
+    with pytest.raises(LogError, match=f"message 1: {what}"):
+        list(log_messages(path))
+
+
+def test_a_zstd_bomb_is_refused_without_inflating_it(tmp_path):
+    """A few kB of zstd that claims, or inflates to, hundreds of megabytes."""
+    import resource
+
+    import zstandard
+    from mcap.records import Chunk
+
+    from sctd.cli.log import MAX_CHUNK, LogError, log_messages
+
+    bomb = zstandard.ZstdCompressor(level=19).compress(b"\0" * (300 << 20))
+    assert len(bomb) < 20_000
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    for declared, what in ((300 << 20, f"more than the {MAX_CHUNK} allowed"),
+                           (1000, "unpacks to other than its 1000 bytes")):
+        path = _raw_mcap(tmp_path / "bomb.mcap", Chunk(compression="zstd", data=bomb, message_end_time=0,
+                                                       message_start_time=0, uncompressed_crc=0,
+                                                       uncompressed_size=declared))
+        with pytest.raises(LogError, match=what):
+            list(log_messages(path))
+    grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
+    assert grown_mb < 50
+
+
+def test_a_device_is_no_log(tmp_path):
+    from sctd.cli.log import LogError, log_messages
+
+    with pytest.raises(LogError, match="/dev/zero: a character device"):
+        list(log_messages(Path("/dev/zero")))
+    assert len(list(log_messages(_log_file(tmp_path / "ok.mcap")))) == 20

@@ -7,7 +7,9 @@ kind of key, so Foxglove (and any MCAP reader) decodes it. ``log_time`` is when 
 sample arrived, ``publish_time`` the sender's ``stamp`` when it has one.
 
 ``replay`` publishes a log's observation keys (state, objects, scene, status) again,
-msgpack as the contract has them, with their original spacing divided by ``--speed``;
+msgpack as the contract has them, with their original spacing divided by ``--speed``,
+after checking the file as it streams it (:func:`log_messages`: CRCs, bounded chunks,
+keys of the contract only, JSON maps);
 ``target``, ``input`` and ``can`` only with ``--all``, and never while a live daemon or
 robot answers on the same prefix: it refuses to start when one does, and stops when one
 appears (a sample on a replayed key it did not send).
@@ -16,6 +18,7 @@ appears (a sample on a replayed key it did not send).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import queue
@@ -23,11 +26,13 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import zenoh
 
+from ..files import FileError, open_regular
 from ..runtime import codec
 from ..runtime.codec import DEFAULT_ROBOT, Keys
 from ..runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
@@ -99,7 +104,7 @@ class McapLog:
         from mcap.writer import Writer
 
         self.fh = path.open("wb")
-        self.writer = Writer(self.fh)
+        self.writer = Writer(self.fh, enable_data_crcs=True)  # replay checks every byte it reads
         self.writer.start(profile="", library="sctd log")
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
@@ -174,18 +179,134 @@ def main_log(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def read_log(path: Path) -> list[tuple[str, int, dict[str, Any]]]:
-    """Every message of an ``sctd log`` file as (key, log time in ns, value), in log
-    time order."""
-    from mcap.reader import make_reader
+MAX_LOG_BYTES = 64 * 1024**3  # an sctd log file; it is read as a stream, chunk by chunk
+MAX_CHUNK = 64 * 1024 * 1024  # one MCAP chunk, unpacked (sctd log writes ~1 MB chunks)
+MAX_MESSAGE = 1024 * 1024  # one message's JSON (a contract message is under 64 KiB)
 
-    out = []
-    with path.open("rb") as fh:
-        for _schema, channel, message in make_reader(fh).iter_messages(log_time_order=True):
-            if channel.message_encoding != "json":
-                continue
-            out.append((channel.topic, message.log_time, json.loads(message.data)))
-    return out
+
+class LogError(ValueError):
+    """A log file replay will not read: ``file: where: problem``."""
+
+
+def _contract_key(topic: str) -> str:
+    """What is wrong with ``topic`` as a key of the wire contract ("" when nothing is):
+    ``sctd/<robot>/<kind>`` or ``sctd/<robot>/<kind>/<name>`` with a robot and a name
+    that are names (no wildcards, no empty chunks)."""
+    parts = topic.split("/")
+    if len(parts) not in (3, 4) or parts[0] != "sctd":
+        return "not sctd/<robot>/<kind>[/<name>]"
+    for chunk in parts[1:2] + parts[3:]:
+        problem = codec.name_problem(chunk)
+        if problem:
+            return problem
+    kind = parts[2]
+    if kind not in (*RECORDED, "can") or (len(parts) == 4) != (kind in ("objects", "input")):
+        return f"{kind!r} is not a key the log records here"
+    return ""
+
+
+def _unpack(chunk: Any, file: str, where: str) -> Any:
+    """A chunk with its records unpacked, bounded before and while unpacking (a few kB of
+    zstd can claim, or inflate to, gigabytes) and its CRC checked."""
+    import io
+
+    import zstandard
+
+    if chunk.uncompressed_size > MAX_CHUNK:
+        raise LogError(f"{file}: {where}: a chunk of {chunk.uncompressed_size} bytes unpacked, "
+                       f"more than the {MAX_CHUNK} allowed")
+    if chunk.compression == "zstd":
+        reader = zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data))
+        data = reader.read(chunk.uncompressed_size + 1)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        raise LogError(f"{file}: {where}: compression {chunk.compression!r} (sctd log writes zstd)")
+    if len(data) != chunk.uncompressed_size:
+        raise LogError(f"{file}: {where}: a chunk that unpacks to other than its "
+                       f"{chunk.uncompressed_size} bytes")
+    return dataclasses.replace(chunk, compression="", data=data)
+
+
+def log_messages(path: Path) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """Every message of an ``sctd log`` file as (key, log time in ns, value), in file
+    order (the order they were logged), checked as it is read:
+
+    - a regular file, read as a stream; every record at most :data:`MAX_CHUNK` bytes and
+      every chunk unpacked no further than its declared size (at most the same);
+    - every chunk's and the data section's CRC (a flipped bit is an error, not a value;
+      ``sctd log`` writes both), and a data section that ends (the summary after it is
+      not read: the messages are all before it);
+    - every topic a key of the contract (no wildcards, no empty chunks) and every value
+      a JSON map of at most :data:`MAX_MESSAGE` bytes.
+
+    Raises
+    ------
+    LogError
+        ``file: where: problem`` (``where``: the record or message's number).
+    """
+    from mcap.records import Channel, Chunk, DataEnd, Message
+    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+
+    file = str(path)
+    try:
+        fh = open_regular(path, MAX_LOG_BYTES, file)
+    except FileError as e:
+        raise LogError(str(e)) from None
+    channels: dict[int, str] = {}
+    n = 0
+    where = "the header"
+    ended = False
+    with fh:
+        try:
+            for k, record in enumerate(StreamReader(fh, validate_crcs=True, emit_chunks=True,
+                                                    record_size_limit=MAX_CHUNK).records):
+                where = f"record {k}"
+                records = breakup_chunk(_unpack(record, file, where), validate_crc=True) \
+                    if isinstance(record, Chunk) else [record]
+                if isinstance(record, DataEnd):  # its CRC checked: every message is read
+                    ended = True
+                    break
+                for r in records:
+                    if isinstance(r, Channel):
+                        problem = _contract_key(r.topic)
+                        if problem:
+                            raise LogError(f"{file}: {where}: topic {r.topic!r}: {problem}")
+                        channels[r.id] = r.topic if r.message_encoding == "json" else ""
+                    elif isinstance(r, Message):
+                        n += 1
+                        topic = channels.get(r.channel_id)
+                        if topic is None:
+                            raise LogError(f"{file}: message {n}: channel {r.channel_id} was never declared")
+                        if topic:
+                            yield topic, r.log_time, _value(r.data, file, n)
+        except CRCValidationError as e:
+            raise LogError(f"{file}: {where}: CRC {e.actual:#010x}, the record says "
+                           f"{e.expected:#010x}: the file is damaged") from None
+        except LogError:
+            raise
+        except Exception as e:  # the mcap reader and zstd raise many kinds on a bad file
+            raise LogError(f"{file}: {where}: not an MCAP file sctd can read ({type(e).__name__}: "
+                           f"{str(e)[:120]})") from None
+    if not ended:
+        raise LogError(f"{file}: {where}: the data section has no end (the file is cut short or damaged)")
+
+
+def _value(data: bytes, file: str, n: int) -> dict[str, Any]:
+    if len(data) > MAX_MESSAGE:
+        raise LogError(f"{file}: message {n}: {len(data)} bytes, more than the {MAX_MESSAGE} allowed")
+    try:
+        value = json.loads(data)
+    except (ValueError, RecursionError):
+        raise LogError(f"{file}: message {n}: not JSON") from None
+    if not isinstance(value, dict):
+        raise LogError(f"{file}: message {n}: expected a JSON map, got {type(value).__name__}")
+    return value
+
+
+def read_log(path: Path) -> list[tuple[str, int, dict[str, Any]]]:
+    """Every message of an ``sctd log`` file (:func:`log_messages`), as a list."""
+    return list(log_messages(path))
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -223,25 +344,31 @@ def main_replay(args: argparse.Namespace) -> int:
         return fail("replay", "needs mcap, which is not installed: pip install 'sctd[logs]'")
     if not args.speed > 0:
         return fail("replay", f"--speed: expected a number > 0, got {args.speed}")
-    try:
-        messages = read_log(args.file)
-    except Exception as e:  # the mcap reader raises many types on a bad file
-        return fail("replay", f"{args.file}: not an sctd MCAP log ({type(e).__name__}: {e})")
     kinds = OBSERVATIONS + (COMMANDS if args.all else ())
-    plan = []
-    for key, t, value in messages:
-        parts = key.split("/")
-        if len(parts) < 3 or parts[0] != "sctd" or parts[2] not in kinds:
-            continue
-        if args.robot is not None:
-            parts[1] = args.robot
-        plan.append(("/".join(parts), t, value))
-    if not plan:
+
+    def plan() -> Iterator[tuple[str, int, dict[str, Any]]]:
+        """The messages to replay, under ``--robot``'s prefix when given (a stream: the
+        file is read twice, once to know what it holds, once to replay it)."""
+        for key, t, value in log_messages(args.file):
+            parts = key.split("/")
+            if parts[2] not in kinds:
+                continue
+            if args.robot is not None:
+                parts[1] = args.robot
+            yield "/".join(parts), t, value
+
+    if args.robot is not None and codec.name_problem(args.robot):
+        return fail("replay", f"--robot: {codec.name_problem(args.robot)}")
+    try:
+        held = {(k.split("/")[1], k.split("/")[2]) for k, _, _ in plan()}
+    except LogError as e:
+        return fail("replay", str(e))
+    if not held:
         return fail("replay", f"{args.file}: nothing to replay ({', '.join(kinds)})")
-    prefixes = sorted({"/".join(k.split("/")[:2]) for k, _, _ in plan})
+    prefixes = sorted({f"sctd/{robot}" for robot, _ in held})
     watched = [f"{p}/{k}" for p in prefixes for k in ("target", "state")] + [
         f"{p}/{k}/**" if k in ("objects", "input") else f"{p}/{k}"
-        for p in prefixes for k in sorted({key.split("/")[2] for key, _, _ in plan})]
+        for p in prefixes for k in sorted({kind for _, kind in held})]
     stop = threading.Event()
     foreign: list[str] = []
     with session_from_args(args) as s:
@@ -262,10 +389,11 @@ def main_replay(args: argparse.Namespace) -> int:
                 for k in sorted(set(watched))]
         pubs: dict[str, zenoh.Publisher] = {}
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        t0, start = plan[0][1], time.monotonic()
+        t0, start = None, time.monotonic()
         sent = 0
         try:
-            for key, t, value in plan:
+            for key, t, value in plan():
+                t0 = t if t0 is None else t0
                 due = start + (t - t0) / 1e9 / args.speed
                 if stop.wait(max(0.0, due - time.monotonic())):
                     break
@@ -275,6 +403,8 @@ def main_replay(args: argparse.Namespace) -> int:
                 sent += 1
         except KeyboardInterrupt:
             pass
+        except LogError as e:  # changed on disk between the two readings
+            return fail("replay", str(e))
         finally:
             for sub in subs:
                 sub.undeclare()
