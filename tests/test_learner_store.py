@@ -253,3 +253,27 @@ def test_names_that_are_paths_are_refused_everywhere(store, bad):
         with pytest.raises(RequestError, match=f"^{field}: "):
             parse_request(_req(**fields))
     assert not list(store.root.glob("**/*.csv"))
+
+
+def test_a_demonstration_has_at_most_max_rows_and_a_task_at_most_its_quota(tmp_path, monkeypatch):
+    """One legal 15.6 MB message of 1.2 million rows became a 118 MB CSV and a 1.1 GB
+    learner; 1,200 demonstrations under distinct names were all stored."""
+    from sctd_services.learner import store as store_module
+
+    rows = [[float(k), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] for k in range(codec.MAX_DEMO_ROWS + 1)]
+    data = codec.encode_demo("pour", "long", "mug", rows)
+    with pytest.raises(codec.DecodeError, match=f"more than {codec.MAX_DEMO_ROWS} rows") as e:
+        codec.decode_demo(data)
+    assert e.value.reason == "bad_rows"
+    s = Store(tmp_path / "store")
+    monkeypatch.setattr(store_module, "MAX_DEMOS_PER_TASK", 3)
+    for k in range(3):
+        s.add_demo(_msg(f"d{k}", shift=0.001 * k))
+    with pytest.raises(store_module.StoreFull, match="holds 3 demonstrations, the most a task may hold"):
+        s.add_demo(_msg("d3", shift=0.01))
+    assert s.add_demo(_msg("d0")).duplicate  # a duplicate needs no room
+    s.add_demo(_msg("d0", task="drawer"))  # other tasks have their own
+    monkeypatch.setattr(store_module, "MAX_DEMOS_PER_TASK", 1000)
+    monkeypatch.setattr(store_module, "MAX_TASK_BYTES", 3 * (s.demos_dir / "pour" / "d0.csv").stat().st_size)
+    with pytest.raises(store_module.StoreFull, match="bytes of demonstrations"):
+        s.add_demo(_msg("d9", shift=0.02))

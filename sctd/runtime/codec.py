@@ -110,10 +110,16 @@ def pack(msg: dict[str, Any]) -> bytes:
     return msgpack.packb(msg, use_bin_type=True)
 
 
-def unpack_map(data: bytes) -> dict[str, Any]:
-    """Decode bytes to a msgpack map or raise DecodeError('not_msgpack' / 'not_map')."""
+def unpack_map(data: bytes, max_array_len: int = -1) -> dict[str, Any]:
+    """Decode bytes to a msgpack map or raise DecodeError('not_msgpack' / 'not_map');
+    ``max_array_len`` bounds every array while it is unpacked (memory): a longer one is
+    DecodeError('too_long')."""
     try:
-        obj = msgpack.unpackb(data, raw=False, strict_map_key=False)
+        obj = msgpack.unpackb(data, raw=False, strict_map_key=False, max_array_len=max_array_len)
+    except ValueError as e:
+        if "exceeds max_array_len" in str(e):
+            raise DecodeError("too_long", str(e)) from None
+        raise DecodeError("not_msgpack") from None
     except Exception:  # msgpack raises ExtraData, FormatError, ValueError, ...
         raise DecodeError("not_msgpack") from None
     if not isinstance(obj, dict):
@@ -308,7 +314,8 @@ def decode_target(data: bytes) -> dict[str, Any]:
 # --- demonstrations (sctd/<robot>/demos/<task>/<name>) ----------------------------------
 
 DEMO_COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
-MAX_DEMO_BYTES = 16 * 1024 * 1024  # ~200k rows: over half an hour at 100 Hz
+MAX_DEMO_BYTES = 16 * 1024 * 1024  # a message's bytes
+MAX_DEMO_ROWS = 100_000  # rows of one demonstration: over 16 minutes at 100 Hz
 MIN_DEMO_ROWS = 10  # what the learner needs (sctd.learn.demos.MIN_SAMPLES)
 DEMO_QUAT_TOLERANCE = 1e-3  # as the learner's CSV reader
 
@@ -359,11 +366,17 @@ def encode_demo(task: str, name: str, object_name: str, rows: list[list[float]])
 
 def decode_demo(data: bytes) -> DemoMsg:
     """``sctd/<robot>/demos/<task>/<name>``: task, name, object, columns (exactly
-    :data:`DEMO_COLUMNS`) and at least :data:`MIN_DEMO_ROWS` rows of 8 finite numbers,
+    :data:`DEMO_COLUMNS`) and :data:`MIN_DEMO_ROWS` to :data:`MAX_DEMO_ROWS` rows (bounded
+    while unpacking) of 8 finite numbers,
     ``t`` strictly increasing, quaternions unit. A bad row is named by its index
     (``bad_rows: row 12: ...``)."""
     _size(data, MAX_DEMO_BYTES)
-    obj = unpack_map(data)
+    try:
+        obj = unpack_map(data, max_array_len=MAX_DEMO_ROWS)
+    except DecodeError as e:
+        if e.reason == "too_long":
+            raise DecodeError("bad_rows", f"more than {MAX_DEMO_ROWS} rows ({e})") from None
+        raise
     task, name, object_name = _chunk(obj, "task"), _chunk(obj, "name"), _chunk(obj, "object")
     if obj.get("columns") != list(DEMO_COLUMNS):
         raise DecodeError("bad_columns", f"expected {list(DEMO_COLUMNS)}")

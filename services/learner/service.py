@@ -44,7 +44,7 @@ from sctd.skill.catalog import StoredSkill, store_folder
 
 from .check import TASKS, CheckSettings, evaluation, verdict
 from .request import Request, RequestError, parse_request, request_map
-from .store import Store
+from .store import Store, StoreFull
 
 log = logging.getLogger("sctd.learner")
 
@@ -172,6 +172,11 @@ class Learner:
             row = re.search(r"\brow (\d+)", str(e))
             self.say("rejected", key=key, name=name, reason=e.reason, detail=str(e),
                      row=int(row.group(1)) if row else None)
+            log.warning("refused demonstration %s: %s", key, e)
+            return
+        except StoreFull as e:
+            self.counters["rejected"] += 1
+            self.say("rejected", key=key, name=name, reason=e.reason, detail=str(e), row=None)
             log.warning("refused demonstration %s: %s", key, e)
             return
         except OSError as e:

@@ -32,6 +32,16 @@ from sctd.skill import Bundle
 from sctd.skill.catalog import RECORD, StoredSkill, read_record, stored_skills
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)
+MAX_DEMOS_PER_TASK = 1000  # demonstrations one task may hold
+MAX_TASK_BYTES = 256 * 1024 * 1024  # their CSVs together
+
+
+class StoreFull(ValueError):
+    """A demonstration the store has no room for: ``reason`` (a short tag) and what."""
+
+    def __init__(self, reason: str, detail: str):
+        self.reason = reason
+        super().__init__(detail)
 
 
 def _hidden(name: str) -> bool:
@@ -101,12 +111,16 @@ class Store:
     def add_demo(self, msg: codec.DemoMsg, key: str = "") -> StoredDemo:
         """Store a decoded demonstration under its task and name. The same name with the
         same rows is a duplicate (stored once); the same name with other rows is kept
-        too, as ``<name>-<hash>``: nothing a recorder sent is lost."""
+        too, as ``<name>-<hash>``: nothing a recorder sent is lost. A task holds at most
+        :data:`MAX_DEMOS_PER_TASK` demonstrations and :data:`MAX_TASK_BYTES` of them
+        (``StoreFull`` past them)."""
         folder = self.demos_dir / msg.task
         folder.mkdir(parents=True, exist_ok=True)
         text = csv_text(msg.rows)
         name = msg.name
         path = folder / f"{name}.csv"
+        if not path.exists():
+            self._room_for(msg.task, len(text))
         if path.exists():
             if path.read_text() == text:
                 return StoredDemo(msg.task, name, path, msg.object, duplicate=True)
@@ -119,6 +133,18 @@ class Store:
         _write_atomic(folder / f"{name}.json", json.dumps(meta, indent=1).encode())
         _write_atomic(path, text.encode())  # the CSV last: a listed demonstration is complete
         return StoredDemo(msg.task, name, path, msg.object)
+
+    def _room_for(self, task: str, size: int) -> None:
+        """StoreFull when a new demonstration of ``size`` bytes would take ``task`` past
+        :data:`MAX_DEMOS_PER_TASK` or :data:`MAX_TASK_BYTES`."""
+        csvs = [p for p in (self.demos_dir / task).glob("*.csv") if not _hidden(p.name)]
+        if len(csvs) >= MAX_DEMOS_PER_TASK:
+            raise StoreFull("task_full", f"task {task!r} holds {len(csvs)} demonstrations, the most "
+                                         f"a task may hold ({MAX_DEMOS_PER_TASK})")
+        used = sum(p.stat().st_size for p in csvs)
+        if used + size > MAX_TASK_BYTES:
+            raise StoreFull("task_full", f"task {task!r} holds {used} bytes of demonstrations; "
+                                         f"{size} more would pass the {MAX_TASK_BYTES} allowed")
 
     def tasks(self) -> dict[str, int]:
         """Demonstrations per task."""
