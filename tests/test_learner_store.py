@@ -277,3 +277,36 @@ def test_a_demonstration_has_at_most_max_rows_and_a_task_at_most_its_quota(tmp_p
     monkeypatch.setattr(store_module, "MAX_TASK_BYTES", 3 * (s.demos_dir / "pour" / "d0.csv").stat().st_size)
     with pytest.raises(store_module.StoreFull, match="bytes of demonstrations"):
         s.add_demo(_msg("d9", shift=0.02))
+
+
+@pytest.mark.parametrize("method, name, value", [
+    ("vf", "vf_spacing", -1), ("vf", "vf_spacing", 0), ("vf", "vf_spacing", 1e-7),
+    ("vf", "n_fields", 10**7), ("linear", "max_n", 10**9), ("vf", "min_inliers", -1),
+    ("linear", "radius", 0), ("vf", "em_iterations", 10**9), ("vf", "smooth", 10**9),
+    ("vf", "n_fields", True), ("linear", "alpha", "abc"), ("vf", "selection", "best"),
+    ("vf", "seed", -1), ("linear", "lambda", -0.5),
+])
+def test_hyperparameters_out_of_range_are_refused_naming_the_field(method, name, value):
+    """The audit trained and stored vf_spacing -1, n_fields 1e7, max_n 1e9, min_inliers
+    -1 and radius 0; em_iterations 1e9 never replied and smooth 1e9 grew the learner to
+    4 GB; 'abc' failed with a message naming no field, and n_fields: true trained."""
+    with pytest.raises(RequestError, match=f"^params.{name}: "):
+        parse_request(_req(task="pour", method=method, params={name: value}))
+
+
+def test_every_hyperparameter_declares_its_values_and_its_default_is_one_of_them():
+    import dataclasses
+
+    from sctd.learn import HyperparameterError, learn
+    from sctd.learn.params import param_problem
+    from sctd.learn.pipeline import _PARTS
+
+    for method, parts in _PARTS.items():
+        for part in parts:
+            for f in dataclasses.fields(part):
+                if f.init:
+                    default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+                    assert param_problem(f, default) == "", (method, part.__name__, f.name)
+    with pytest.raises(HyperparameterError, match="^em_iterations: ") as e:
+        learn([], "vf", em_iterations=10**9)  # refused before any work (no demonstrations needed)
+    assert e.value.name == "em_iterations"

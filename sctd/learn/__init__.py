@@ -53,10 +53,11 @@ from .linear import (
     selection_matrices,
     selection_matrix,
 )
-from .params import get_params, hyperparameter
+from .params import HyperparameterError, get_params, hyperparameter
 from .pipeline import (
     METHODS,
     STAGES,
+    check_hyperparameters,
     hyperparameter_names,
     learn,
     learn_linear,
@@ -74,6 +75,7 @@ __all__ = [
     "STAGES",
     "Demo",
     "DemoError",
+    "HyperparameterError",
     "IMLabel",
     "LinearIMLearner",
     "LinearResult",
@@ -88,6 +90,7 @@ __all__ = [
     "VectorFieldResult",
     "alpha_beta_swap",
     "alpha_expansion",
+    "check_hyperparameters",
     "dtw",
     "energy",
     "get_params",

@@ -44,7 +44,7 @@ from scipy.spatial import cKDTree
 from .. import se3
 from .demos import dtw
 from .graphcut import alpha_beta_swap, alpha_expansion, energy
-from .params import hyperparameter
+from .params import SEED, Flag, Interval, OneOf, hyperparameter
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -394,25 +394,28 @@ class LinearIMLearner:
     timings_ : dict
     """
 
-    alpha: float = hyperparameter(0.4, "tf-norm m/rad (eq. 4.9)")
-    beta: float = hyperparameter(0.01, "cost per DoF (eq. 4.14)")
-    smoothness: float = hyperparameter(0.005, "smoothness (eq. 4.16)", flag="--lambda")
-    radius: float = hyperparameter(0.04, "neighbour radius (m)")
-    max_n: int = hyperparameter(10, "spatial neighbours")
-    C: float = hyperparameter(1000.0, "SVM penalty (eq. 4.17)")
+    alpha: float = hyperparameter(0.4, "tf-norm m/rad (eq. 4.9)", valid=Interval(0, 10, open="low"))
+    beta: float = hyperparameter(0.01, "cost per DoF (eq. 4.14)", valid=Interval(0, 10))
+    smoothness: float = hyperparameter(0.005, "smoothness (eq. 4.16)", flag="--lambda",
+                                       valid=Interval(0, 10))
+    radius: float = hyperparameter(0.04, "neighbour radius (m)", valid=Interval(0.001, 1))
+    max_n: int = hyperparameter(10, "spatial neighbours", valid=Interval(1, 100, integer=True))
+    C: float = hyperparameter(1000.0, "SVM penalty (eq. 4.17)", valid=Interval(0, 1e6, open="low"))
     cut: str = hyperparameter("swap", "graph-cut move (alpha-beta swap or alpha-expansion)",
-                              choices=CUTS)
-    min_segment: int = hyperparameter(3, "shortest run kept (displacements)")
+                              choices=CUTS, valid=OneOf(CUTS))
+    min_segment: int = hyperparameter(3, "shortest run kept (displacements)",
+                                      valid=Interval(1, 1000, integer=True))
     axis_support: float = hyperparameter(
-        0.08, "share of a state's net motion an axis needs to be in its IM")
-    margin: float = hyperparameter(0.005, "transition hysteresis (m)")
+        0.08, "share of a state's net motion an axis needs to be in its IM", valid=Interval(0, 1))
+    margin: float = hyperparameter(0.005, "transition hysteresis (m)", valid=Interval(0, 0.1))
     dtw_align: bool = hyperparameter(
-        False, "add DTW-aligned displacements of different demos as graph-cut neighbours")
+        False, "add DTW-aligned displacements of different demos as graph-cut neighbours",
+        valid=Flag())
     auto_frames: bool = hyperparameter(
         True, "without --frame, do not look for feature frames in the demonstrations (sphere "
-        "centres and cylinder axes fixed in the hand)", flag="--no-auto-frames")
+        "centres and cylinder axes fixed in the hand)", flag="--no-auto-frames", valid=Flag())
     random_state: int | None = hyperparameter(
-        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
+        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED", valid=SEED)
 
     def fit(self, T_obj_ee: list[ArrayLike], frames: dict[str, ArrayLike] | None = None,
             progress: Progress | None = None) -> LinearIMLearner:

@@ -22,6 +22,7 @@ from .bundle import skill_bundle
 from .demos import Demo
 from .frames import automatic_frames, frames_to_use
 from .linear import LinearIMLearner, Progress
+from .params import HyperparameterError, check_params, param_problem
 from .preprocess import Preprocessing, preprocess, raw_labels
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
 from .traps import fix_traps
@@ -69,6 +70,9 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     """
     learner = LinearIMLearner() if learner is None else learner
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
+    options = SkillOptions() if options is None else options
+    for part in (preprocessing, learner, options):
+        check_params(part)  # before any work: a value out of range is named, not trained
     t0 = time.perf_counter()
     found = []
     if not frames and learner.auto_frames:
@@ -85,7 +89,6 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     traps = fix_traps(learner, T_obj_ee)  # Ch. 6.2: a state that traps gets the missing DoF
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
-    options = SkillOptions() if options is None else options
     return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings, traps,
                         found_frames=found)
 
@@ -102,6 +105,10 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     """
     learner = VectorFieldLearner() if learner is None else learner
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
+    options = SkillOptions() if options is None else options
+    field_options = VectorFieldOptions() if field_options is None else field_options
+    for part in (preprocessing, learner, options, field_options):
+        check_params(part)  # before any work: a value out of range is named, not trained
     t0 = time.perf_counter()
     prepared = preprocess(demos, preprocessing, preprocessing.vf_spacing, 0.0,
                           translation_only=True)
@@ -110,7 +117,6 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     t1 = time.perf_counter()
     learner.fit([p.poses[:, :3] for p in prepared], [p.poses[:, 3:] for p in prepared],
                 progress=progress)
-    field_options = VectorFieldOptions() if field_options is None else field_options
     plan = StatePlan(reason="--vf-states blend")
     if field_options.vf_states == "auto":
         plan = plan_states(learner)
@@ -157,12 +163,30 @@ def _check_method(method: str) -> str:
     return method
 
 
-def _parts(method: str, hyperparameters: dict[str, Any]) -> list[Any]:
-    """One object per part of ``method``, each given the hyperparameters it has."""
-    unknown = set(hyperparameters) - set(hyperparameter_names(method))
+def check_hyperparameters(method: str, hyperparameters: Mapping[str, Any]) -> None:
+    """Each value one its field allows (:mod:`sctd.learn.params`).
+
+    Raises
+    ------
+    TypeError
+        A hyperparameter the method does not have.
+    HyperparameterError
+        A value out of its field's range or of the wrong type, naming the field.
+    """
+    fields = {f.name: f for f in hyperparameter_fields(method)}
+    unknown = set(hyperparameters) - set(fields)
     if unknown:
         raise TypeError(f"unknown hyperparameter(s) for method {method!r}: "
                         f"{', '.join(sorted(unknown))} (see sctd.learn.hyperparameter_names)")
+    for name, value in hyperparameters.items():
+        problem = param_problem(fields[name], value)
+        if problem:
+            raise HyperparameterError(name, problem)
+
+
+def _parts(method: str, hyperparameters: dict[str, Any]) -> list[Any]:
+    """One object per part of ``method``, each given the hyperparameters it has."""
+    check_hyperparameters(method, hyperparameters)
     return [part(**{f.name: hyperparameters[f.name] for f in dataclasses.fields(part)
                     if f.init and f.name in hyperparameters})
             for part in _PARTS[method]]

@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .demos import Demo, smooth_poses, spike_mask, subsample_by_distance
-from .params import hyperparameter
+from .params import Flag, Interval, hyperparameter
 
 Array = NDArray[np.float64]
 
@@ -35,10 +35,13 @@ class Preprocessing:
         Drop isolated gross outliers (a Hampel filter, :func:`spike_mask`).
     """
 
-    spacing: float = hyperparameter(0.02, "tf-norm sample spacing for linear IMs (m)")
-    vf_spacing: float = hyperparameter(0.015, "sample spacing for vector fields (m)")
-    smooth: int = hyperparameter(5, "moving-average window (samples)")
-    despike: bool = hyperparameter(True, "keep isolated outlier samples", flag="--no-despike")
+    spacing: float = hyperparameter(0.02, "tf-norm sample spacing for linear IMs (m)",
+                                    valid=Interval(0.001, 0.5))
+    vf_spacing: float = hyperparameter(0.015, "sample spacing for vector fields (m)",
+                                       valid=Interval(0.001, 0.5))
+    smooth: int = hyperparameter(5, "moving-average window (samples)", valid=Interval(1, 101, integer=True))
+    despike: bool = hyperparameter(True, "keep isolated outlier samples", flag="--no-despike",
+                                   valid=Flag())
 
 
 @dataclass

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from .frames import FoundFrame
 from .linear import LinearIMLearner
-from .params import get_params, hyperparameter
+from .params import Interval, OneOf, Text, get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
 from .traps import TrapFinding
 from .vf import VectorFieldLearner
@@ -42,9 +42,11 @@ class SkillOptions:
         rad/s at full input.
     """
 
-    object: str = hyperparameter("object", "task object name (the skill frame)")
-    max_linear_speed: float = hyperparameter(0.10, "m/s at full input (default %(default)s)")
-    max_angular_speed: float = hyperparameter(0.50, "rad/s at full input (default %(default)s)")
+    object: str = hyperparameter("object", "task object name (the skill frame)", valid=Text())
+    max_linear_speed: float = hyperparameter(0.10, "m/s at full input (default %(default)s)",
+                                             valid=Interval(0, 1, open="low"))
+    max_angular_speed: float = hyperparameter(0.50, "rad/s at full input (default %(default)s)",
+                                              valid=Interval(0, 3, open="low"))
 
 
 @dataclass(frozen=True)
@@ -74,26 +76,26 @@ class VectorFieldOptions:
         all blend in one state (the thesis).
     """
 
-    min_v: float = hyperparameter(0.1, "eq. 4.34 floor")
-    max_d: float = hyperparameter(0.15, "neighbour distance (m)")
-    k_s: float = hyperparameter(0.5, "sigmoid k (eq. 4.33)")
-    vf_max_n: int = hyperparameter(5, "neighbours at run time")
+    min_v: float = hyperparameter(0.1, "eq. 4.34 floor", valid=Interval(0, 1))
+    max_d: float = hyperparameter(0.15, "neighbour distance (m)", valid=Interval(0, 1, open="low"))
+    k_s: float = hyperparameter(0.5, "sigmoid k (eq. 4.33)", valid=Interval(-1, 1, open="both"))
+    vf_max_n: int = hyperparameter(5, "neighbours at run time", valid=Interval(1, 100, integer=True))
     vf_motion: str = hyperparameter(
         "rigid", "rigid: motion along a sphere or cylinder field turns the hand about its "
         "centre or axis; translate: only moves it, as in the thesis (default %(default)s)",
-        choices=VF_MOTION)
+        choices=VF_MOTION, valid=OneOf(VF_MOTION))
     vf_rotation_weight: float = hyperparameter(
         0.1, "m per rad: the neighbour-orientation constraint takes the demonstration points "
         "nearest in pose (position and orientation) rather than in position alone (0, the "
-        "thesis) (default %(default)s)")
+        "thesis) (default %(default)s)", valid=Interval(0, 10))
     vf_combine: str = hyperparameter(
         "intent", "how fields' agreements combine: intent weighs them by the membership given "
         "the position and the command; weighted (eq. 4.32) and most_probable (eq. 4.31) by the "
-        "position's alone (default %(default)s)", choices=VF_COMBINE)
+        "position's alone (default %(default)s)", choices=VF_COMBINE, valid=OneOf(VF_COMBINE))
     vf_states: str = hyperparameter(
         "blend", "auto: fields the demonstrations use one after the other, in separate places, "
         "become states with hyperplane transitions between them; blend: one state blends all "
-        "fields, as in the thesis (default %(default)s)", choices=VF_STATES)
+        "fields, as in the thesis (default %(default)s)", choices=VF_STATES, valid=OneOf(VF_STATES))
 
 
 @dataclass

@@ -39,7 +39,7 @@ from scipy.spatial import cKDTree
 
 from .. import se3
 from ..skill.fields import CylinderField, Field, GeneralField, SphereField, TranslationField
-from .params import hyperparameter
+from .params import SEED, Flag, Interval, OneOf, hyperparameter
 
 Array = NDArray[np.float64]
 
@@ -352,38 +352,40 @@ class VectorFieldLearner:
     timings_ : dict
     """
 
-    n_fields: int = hyperparameter(2, "RANSAC fields n_R")
-    em_iterations: int = hyperparameter(5, "EM iterations")
-    angle_sphere: float = hyperparameter(15.0, "degrees")
-    angle_translation: float = hyperparameter(25.0, "degrees")
-    angle_cylinder: float = hyperparameter(20.0, "degrees")
-    models: tuple[str, ...] = FIELD_TYPES
-    p_success: float = 0.99
-    outlier_ratio: float = 0.7
-    min_inliers: int = 10
-    min_weight: float = 0.05
-    coherence: bool = True
-    coherence_run: int = 3
-    coherence_radius: float = 0.05
-    min_radius: float = 0.02
-    max_radius: float = hyperparameter(0.3, "largest sphere/cylinder radius (m)")
-    refine_steps: int = 2
+    n_fields: int = hyperparameter(2, "RANSAC fields n_R", valid=Interval(1, 10, integer=True))
+    em_iterations: int = hyperparameter(5, "EM iterations", valid=Interval(1, 100, integer=True))
+    angle_sphere: float = hyperparameter(15.0, "degrees", valid=Interval(0, 90, open="low"))
+    angle_translation: float = hyperparameter(25.0, "degrees", valid=Interval(0, 90, open="low"))
+    angle_cylinder: float = hyperparameter(20.0, "degrees", valid=Interval(0, 90, open="low"))
+    models: tuple[str, ...] = hyperparameter(FIELD_TYPES, valid=OneOf(FIELD_TYPES, subset=True))
+    p_success: float = hyperparameter(0.99, valid=Interval(0.5, 1, open="high"))
+    outlier_ratio: float = hyperparameter(0.7, valid=Interval(0, 0.99))
+    min_inliers: int = hyperparameter(10, valid=Interval(3, 100_000, integer=True))
+    min_weight: float = hyperparameter(0.05, valid=Interval(0, 1))
+    coherence: bool = hyperparameter(True, valid=Flag())
+    coherence_run: int = hyperparameter(3, valid=Interval(1, 1000, integer=True))
+    coherence_radius: float = hyperparameter(0.05, valid=Interval(0, 1))
+    min_radius: float = hyperparameter(0.02, valid=Interval(0, 1))
+    max_radius: float = hyperparameter(0.3, "largest sphere/cylinder radius (m)",
+                                       valid=Interval(0, 5, open="low"))
+    refine_steps: int = hyperparameter(2, valid=Interval(0, 20, integer=True))
     chance_weight: float = hyperparameter(
-        0.5, "weight of the chance-inlier correction when comparing field types")
+        0.5, "weight of the chance-inlier correction when comparing field types", valid=Interval(0, 10))
     selection: str = hyperparameter(
         "likelihood", "how field types compete: likelihood (BIC of each field's direction "
         "density, with a general non-parametric field) or inliers (the thesis' MSAC score) "
-        "(default %(default)s)", choices=SELECTIONS)
+        "(default %(default)s)", choices=SELECTIONS, valid=OneOf(SELECTIONS))
     demo_tolerance: float = hyperparameter(
         0.1, "share of demonstrations a cylinder may explain worse than a sphere and still "
-        "be chosen over it (default %(default)s)")
-    general_bandwidth: float = hyperparameter(0.02, "general field kernel width (m)")
+        "be chosen over it (default %(default)s)", valid=Interval(0, 1))
+    general_bandwidth: float = hyperparameter(0.02, "general field kernel width (m)",
+                                              valid=Interval(0.001, 1))
     general_parameters: float = hyperparameter(
         1.0, "free parameters per kernel centre of the general field in the BIC "
-        "(default %(default)s)")
-    pivot_spread: float = 0.02
+        "(default %(default)s)", valid=Interval(0, 100))
+    pivot_spread: float = hyperparameter(0.02, valid=Interval(0, 1))
     random_state: int | None = hyperparameter(
-        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED")
+        0, "random seed (default %(default)s)", flag="--seed", metavar="SEED", valid=SEED)
 
     # --- helpers ----------------------------------------------------------------------
 

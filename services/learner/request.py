@@ -8,7 +8,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from sctd.learn import METHODS, hyperparameter_names
+from sctd.learn import METHODS, HyperparameterError, check_hyperparameters, hyperparameter_names
 from sctd.learn.pipeline import hyperparameter_fields
 from sctd.runtime import codec
 
@@ -100,6 +100,11 @@ def _params(value: Any, method: str) -> dict[str, Any]:
         if not isinstance(v, bool | int | float | str) or (isinstance(v, float) and not math.isfinite(v)):
             raise RequestError(f"params.{k}", f"expected a finite number, a string or a bool, got {v!r}")
         out[name] = v
+    try:
+        check_hyperparameters(method, out)
+    except HyperparameterError as e:
+        alias = next(k for k in value if aliases.get(str(k).lstrip("-")) == e.name)
+        raise RequestError(f"params.{alias}", e.problem) from None
     return out
 
 

@@ -22,6 +22,7 @@ from ...learn import (
     METHODS,
     STAGES,
     DemoError,
+    HyperparameterError,
     LinearIMLearner,
     LinearResult,
     Preprocessing,
@@ -35,9 +36,10 @@ from ...learn import (
     read_demo_csv,
     read_demos,
 )
+from ...learn.pipeline import hyperparameter_fields
 from ...skill import SkillError
 from ..errors import fail
-from ..options import add_arguments, from_namespace
+from ..options import add_arguments, flag_name, from_namespace
 from .report import write_report, write_skill
 
 
@@ -155,6 +157,9 @@ def main_learn(args: argparse.Namespace) -> int:
     """Run ``sctd learn``; 0 on success, 2 on bad input (message on stderr)."""
     try:
         summary = run_learn(args)
+    except HyperparameterError as exc:  # named by its flag
+        field = next((f for f in hyperparameter_fields(args.method) if f.name == exc.name), None)
+        return fail("learn", f"{flag_name(field) if field else exc.name}: {exc.problem}")
     except (DemoError, SkillError, ValueError) as exc:
         return fail("learn", str(exc))
     sk = summary["skill"]
