@@ -307,6 +307,6 @@ def test_every_hyperparameter_declares_its_values_and_its_default_is_one_of_them
                 if f.init:
                     default = f.default_factory() if f.default is dataclasses.MISSING else f.default
                     assert param_problem(f, default) == "", (method, part.__name__, f.name)
-    with pytest.raises(HyperparameterError, match="^em_iterations: ") as e:
+    with pytest.raises(HyperparameterError, match=r"^em_iterations: ") as e:
         learn([], "vf", em_iterations=10**9)  # refused before any work (no demonstrations needed)
     assert e.value.name == "em_iterations"

@@ -44,6 +44,9 @@ class DemoError(ValueError):
         where = file if row is None else f"{file}: row {row} (line {row + 1})"
         super().__init__(f"{where}: {reason}")
 
+    def __reduce__(self) -> tuple:  # it crosses a process (the learner trains in a child)
+        return type(self), (self.file, self.row, self.reason)
+
 
 @dataclass(frozen=True)
 class Demo:

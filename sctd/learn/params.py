@@ -143,6 +143,9 @@ class HyperparameterError(ValueError):
         self.name, self.problem = name, problem
         super().__init__(f"{name}: {problem}")
 
+    def __reduce__(self) -> tuple:  # it crosses a process (the learner trains in a child)
+        return type(self), (self.name, self.problem)
+
 
 def check_params(obj: Any) -> None:
     """Every hyperparameter of a dataclass estimator or option set is one its field

@@ -22,6 +22,7 @@ from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
 
 from .check import CheckSettings
 from .store import Store
+from .training import TrainingLimits
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,6 +45,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--allow-unchecked", action="store_true",
                    help="let a request skip the check (gate: false; its skill is swapped in "
                         "unchecked and stored as such); without it such a request is refused")
+    t = TrainingLimits()
+    g = p.add_argument_group("each training (a child process)")
+    g.add_argument("--train-timeout", type=float, default=t.timeout,
+                   help="s a training may take before it is stopped and refused (default %(default)s)")
+    g.add_argument("--train-memory-mb", type=int, default=t.memory // 1024**2,
+                   help="MB of address space a training may use (default %(default)s)")
     p.add_argument("--nice", type=int, default=10,
                    help="lower this process's (and its trials') CPU priority by this much, so "
                         "training never competes with the daemon's tick (default %(default)s)")
@@ -54,10 +61,12 @@ def run(args: argparse.Namespace) -> int:
     """Run the service until SIGINT/SIGTERM; exit code 2 for bad flags."""
     from .check import trial_pool
     from .service import Learner, Stopped, store_path
+    from .training import Trainer
 
     try:
         settings = CheckSettings(args.trials, args.floor, args.tolerance, args.seed, args.jobs,
                                  args.allow_unchecked)
+        limits = TrainingLimits(args.train_memory_mb * 1024**2, args.train_timeout)
         store = Store(store_path(args.store))
     except (ValueError, OSError) as e:
         print(f"sctd learner: {e}", file=sys.stderr)
@@ -77,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     pool = trial_pool(settings.jobs) if settings.jobs > 1 else None
     try:
-        with session_from_args(args) as session, Learner(session, store, args.robot, settings, pool) as ln:
+        with session_from_args(args) as session, \
+                Learner(session, store, args.robot, settings, pool, Trainer(limits)) as ln:
             learner.append(ln)
             tasks = ", ".join(f"{t} ({n})" for t, n in store.tasks().items()) or "none yet"
             print(f"sctd learner: store {store.root}: demonstrations of {tasks}, "

@@ -35,7 +35,7 @@ from typing import Any
 
 import zenoh
 
-from sctd.learn import DemoError, learn, skill_bundle
+from sctd.learn import DemoError, skill_bundle
 from sctd.learn.summary import plain, summary_dict
 from sctd.runtime import client, codec
 from sctd.runtime.zsession import MSGPACK
@@ -45,6 +45,7 @@ from sctd.skill.catalog import StoredSkill, store_folder
 from .check import TASKS, CheckSettings, evaluation, verdict
 from .request import Request, RequestError, parse_request, request_map
 from .store import Store, StoreFull
+from .training import Trainer, TrainingError
 
 log = logging.getLogger("sctd.learner")
 
@@ -108,12 +109,14 @@ class Learner:
     """
 
     def __init__(self, session: zenoh.Session, store: Store, robot: str = codec.DEFAULT_ROBOT,
-                 settings: CheckSettings | None = None, pool: Executor | None = None) -> None:
+                 settings: CheckSettings | None = None, pool: Executor | None = None,
+                 trainer: Trainer | None = None) -> None:
         self.session = session
         self.store = store
         self.keys = codec.Keys(robot)
         self.settings = settings or CheckSettings()
         self.pool = pool
+        self.trainer = trainer or Trainer()
         self.counters: Counter[str] = Counter()
         self.busy: dict[str, Any] | None = None
         self.stage = "idle"  # what the service's thread is doing, for status and errors
@@ -150,6 +153,7 @@ class Learner:
 
     def __exit__(self, *exc: object) -> None:
         self._stack.close()
+        self.trainer.close()
 
     def say(self, event: str, **fields: Any) -> None:
         """One status message ``{event, stamp, ...}`` on ``learner/status``."""
@@ -208,7 +212,7 @@ class Learner:
         try:
             req = parse_request(b"" if payload is None else payload.to_bytes())
             out = self.handle(req)
-        except (RequestError, DemoError, SkillError, KeyError, TypeError, ValueError) as e:
+        except (RequestError, DemoError, SkillError, TrainingError, KeyError, TypeError, ValueError) as e:
             self._refuse(query, str(e).strip("'\""))
             return
         except Exception as e:  # every request gets a reply, whatever went wrong
@@ -261,9 +265,15 @@ class Learner:
         names = [d.name.rsplit(".", 1)[0] for d in demos]
         obj = req.object or self._object_of(req.task, names)
         self.say("training", task=req.task, method=req.method, demos=len(demos), stage="start")
-        result = learn(demos, req.method, frames=req.frames or None,
-                       progress=lambda stage: self.say("training", task=req.task, stage=stage),
-                       **{"object": obj, **req.params})
+        doing = self.stage
+
+        def on_stage(stage: str) -> None:
+            self.stage = f"{doing}, after {stage}"
+            self.say("training", task=req.task, stage=stage)
+
+        # in a child process: capped memory and time, a lower priority (.training)
+        result = self.trainer.train(demos, req.method, req.frames or None, {"object": obj, **req.params},
+                                    on_stage)
         bundle = skill_bundle(result, req.skill_name)
         skill = skill_from_bundle(bundle)  # a learned skill the runtime would refuse is an error
         report = _jsonable(summary_dict(result, skill, str(self.store.demos_dir / req.task),
