@@ -1,5 +1,6 @@
 """A short coverage-guided fuzz run of every decoder (the full one is `sctd bench fuzz`):
-only the documented errors may escape (DecodeError, FrameDecodeError, SkillError)."""
+only the documented errors may escape (DecodeError, FrameDecodeError, SkillError, FileError,
+InputError, LogError)."""
 
 import pytest
 

@@ -1,15 +1,18 @@
 """``sctd bench fuzz``: coverage-guided fuzzing (atheris, libFuzzer) of everything that
 decodes bytes from outside: the wire decoders, the CAN frame mirror, the skill bundle
-unpacker, the skill YAML loader and the vector-field model files.
+unpacker, the skill YAML loader, the vector-field model files, and the file loaders (the
+strict YAML reader every file goes through, input mapping files, ``sctd log`` files as
+``sctd replay`` reads them).
 
-Each target has one documented error (``DecodeError``, ``FrameDecodeError``,
-``SkillError``): any other exception escaping a decoder is a crash, which atheris
-reports with the input that caused it, and the target fails. Each target runs in its own
-process (``python -m sctd.bench.fuzz TARGET -runs=N``: libFuzzer exits the process when
-it is done), seeded with valid messages and the shipped skills, and instruments only
-sctd's own modules. Those are imported inside the functions that build the seeds and
-harnesses, not at the top of this module: atheris instruments a module only when it is
-first imported within ``atheris.instrument_imports()``.
+Each target has its documented errors (``DecodeError``, ``FrameDecodeError``,
+``SkillError``, ``FileError`` and ``InputError``, ``LogError``): any other exception
+escaping a decoder is a crash, which atheris reports with the input that caused it, and
+the target fails. Each target runs in its own process (``python -m sctd.bench.fuzz
+TARGET -runs=N``: libFuzzer exits the process when it is done), seeded with valid
+messages and the shipped skills, and instruments only sctd's own modules. Those are
+imported inside the functions that build the seeds and harnesses, not at the top of this
+module: atheris instruments a module only when it is first imported within
+``atheris.instrument_imports()``.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 TARGETS = ("input", "state", "object", "target", "demo", "can", "bundle", "skill_yaml", "model_npz",
-           "model_json")
+           "model_json", "yaml", "map", "mcap")
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -52,6 +55,12 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
     if target == "can":
         return [msgpack.packb({"v": 1, "frames": [[1.0, 0x80, False, 0, b""],
                                                   [1.0, 0x101, False, 8, b"\x01" * 8]]})]
+    if target in ("yaml", "map"):
+        maps = ROOT / "services" / "input" / "maps"
+        return [p.read_bytes() for p in sorted(maps.glob("*.yaml"))] + (
+            [p.read_bytes() for p in sorted(skills.glob("*.yaml"))] if target == "yaml" else [])
+    if target == "mcap":
+        return [_log_seed()]
     from ..skill import bundle_from_file
 
     bundles = [bundle_from_file(p) for p in sorted(skills.glob("*.yaml"))]
@@ -69,9 +78,58 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
     raise ValueError(f"unknown fuzz target {target!r} (known: {', '.join(TARGETS)})")
 
 
+def _log_seed() -> bytes:
+    """A small ``sctd log`` file: states, a target, an object and an input."""
+    from ..cli.log import McapLog
+    from ..runtime import codec
+
+    keys = codec.Keys()
+    pose = [0.4, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
+    with tempfile.TemporaryDirectory() as d:
+        log = McapLog(Path(d) / "seed.mcap")
+        for k in range(5):
+            log.add(keys.state, "state", codec.encode_state(k, 1.0 + k, pose), 1.0 + k)
+        log.add(keys.target, "target", codec.encode_target(1, 2.0, pose, "carry", "abc", 3), 2.0)
+        log.add(keys.objects("mug"), "objects", codec.encode_object(1, 2.0, pose), 2.0)
+        log.add(keys.input("pad"), "input", codec.encode_input(1, 2.0, [0.1, 0.0, 0.0], [0, 1, 0]), 2.0)
+        log.close()
+        return (Path(d) / "seed.mcap").read_bytes()
+
+
+def _file_harness(target: str) -> Callable[[bytes], None]:
+    """The file loaders' targets: ``yaml`` (sctd.files), ``map``, ``mcap``."""
+    from ..files import FileError, decode_text, parse_yaml
+
+    if target == "mcap":
+        import io
+
+        from ..cli.log import LogError, read_messages
+
+        def one_mcap(data: bytes) -> None:
+            try:
+                for _ in read_messages(io.BytesIO(data), "fuzz.mcap"):
+                    pass
+            except LogError:
+                pass
+        return one_mcap
+    from sctd_services.input.device import InputError
+    from sctd_services.input.mapping import parse_mapping
+
+    def one_file(data: bytes) -> None:
+        try:
+            doc = parse_yaml(decode_text(data, "fuzz.yaml"), "fuzz.yaml")
+            if target == "map":
+                parse_mapping(doc, "fuzz.yaml")
+        except (FileError, InputError):
+            pass
+    return one_file
+
+
 def _harness(target: str) -> Callable[[bytes], None]:
     """``test_one_input(data)`` for a target: its documented error is caught, anything
     else escapes (a crash)."""
+    if target in ("yaml", "map", "mcap"):
+        return _file_harness(target)
     if target in ("input", "state", "object", "target", "demo"):
         from ..runtime import codec
 
@@ -124,7 +182,7 @@ def _harness(target: str) -> Callable[[bytes], None]:
 def _instrumented(target: str) -> Callable[[bytes], None]:
     import atheris
 
-    with atheris.instrument_imports(include=["sctd", "sctd_sim"]):
+    with atheris.instrument_imports(include=["sctd", "sctd_sim", "sctd_services"]):
         return _harness(target)
 
 

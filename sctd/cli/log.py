@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import zenoh
 
@@ -245,49 +245,54 @@ def log_messages(path: Path) -> Iterator[tuple[str, int, dict[str, Any]]]:
     LogError
         ``file: where: problem`` (``where``: the record or message's number).
     """
-    from mcap.records import Channel, Chunk, DataEnd, Message
-    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
-
     file = str(path)
     try:
         fh = open_regular(path, MAX_LOG_BYTES, file)
     except FileError as e:
         raise LogError(str(e)) from None
+    with fh:
+        yield from read_messages(fh, file)
+
+
+def read_messages(fh: IO[bytes], file: str) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """:func:`log_messages` on an open stream (``file`` names it in errors)."""
+    from mcap.records import Channel, Chunk, DataEnd, Message
+    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+
     channels: dict[int, str] = {}
     n = 0
     where = "the header"
     ended = False
-    with fh:
-        try:
-            for k, record in enumerate(StreamReader(fh, validate_crcs=True, emit_chunks=True,
-                                                    record_size_limit=MAX_CHUNK).records):
-                where = f"record {k}"
-                records = breakup_chunk(_unpack(record, file, where), validate_crc=True) \
-                    if isinstance(record, Chunk) else [record]
-                if isinstance(record, DataEnd):  # its CRC checked: every message is read
-                    ended = True
-                    break
-                for r in records:
-                    if isinstance(r, Channel):
-                        problem = _contract_key(r.topic)
-                        if problem:
-                            raise LogError(f"{file}: {where}: topic {r.topic!r}: {problem}")
-                        channels[r.id] = r.topic if r.message_encoding == "json" else ""
-                    elif isinstance(r, Message):
-                        n += 1
-                        topic = channels.get(r.channel_id)
-                        if topic is None:
-                            raise LogError(f"{file}: message {n}: channel {r.channel_id} was never declared")
-                        if topic:
-                            yield topic, r.log_time, _value(r.data, file, n)
-        except CRCValidationError as e:
-            raise LogError(f"{file}: {where}: CRC {e.actual:#010x}, the record says "
-                           f"{e.expected:#010x}: the file is damaged") from None
-        except LogError:
-            raise
-        except Exception as e:  # the mcap reader and zstd raise many kinds on a bad file
-            raise LogError(f"{file}: {where}: not an MCAP file sctd can read ({type(e).__name__}: "
-                           f"{str(e)[:120]})") from None
+    try:
+        for k, record in enumerate(StreamReader(fh, validate_crcs=True, emit_chunks=True,
+                                                record_size_limit=MAX_CHUNK).records):
+            where = f"record {k}"
+            records = breakup_chunk(_unpack(record, file, where), validate_crc=True) \
+                if isinstance(record, Chunk) else [record]
+            if isinstance(record, DataEnd):  # its CRC checked: every message is read
+                ended = True
+                break
+            for r in records:
+                if isinstance(r, Channel):
+                    problem = _contract_key(r.topic)
+                    if problem:
+                        raise LogError(f"{file}: {where}: topic {r.topic!r}: {problem}")
+                    channels[r.id] = r.topic if r.message_encoding == "json" else ""
+                elif isinstance(r, Message):
+                    n += 1
+                    topic = channels.get(r.channel_id)
+                    if topic is None:
+                        raise LogError(f"{file}: message {n}: channel {r.channel_id} was never declared")
+                    if topic:
+                        yield topic, r.log_time, _value(r.data, file, n)
+    except CRCValidationError as e:
+        raise LogError(f"{file}: {where}: CRC {e.actual:#010x}, the record says "
+                       f"{e.expected:#010x}: the file is damaged") from None
+    except LogError:
+        raise
+    except Exception as e:  # the mcap reader and zstd raise many kinds on a bad file
+        raise LogError(f"{file}: {where}: not an MCAP file sctd can read ({type(e).__name__}: "
+                       f"{str(e)[:120]})") from None
     if not ended:
         raise LogError(f"{file}: {where}: the data section has no end (the file is cut short or damaged)")
 
