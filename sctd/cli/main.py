@@ -59,6 +59,9 @@ BENCHES: dict[str, Command] = {
                           "main_robustness"),
     "fuzz": Command("coverage-guided fuzzing of every decoder, the bundle unpacker and the skill "
                     "loader (atheris)", "sctd.bench.fuzz", "add_fuzz_arguments", "main_fuzz"),
+    "hostile": Command("hostile files to the commands that read them, hostile requests and "
+                       "demonstrations to the learner next to the daemon", "sctd.bench.hostile",
+                       "add_hostile_arguments", "main_hostile"),
     "learn": Command("learning figures on generated demonstrations (accuracy, centre error, "
                      "directions, time, graph-cut energy)", "sctd.bench.learn",
                      "add_bench_learn_arguments", "main_bench_learn"),
