@@ -13,7 +13,7 @@ flood; poses on 50k distinct object names; zero input on 50k distinct device nam
 malformed bundles; good swaps; one state 1 m away with zero input; a release sent
 0.2 ms after the last push (``python -m sctd.bench.robustness devices release``); two
 devices 0.2 ms apart, one pushing, the other sending zeros, pushing back, releasing its
-deadman, then a stop (``devices two``).
+deadman, then a stop (``devices two``); 8 MiB bundles swapped in once a second.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
+import numpy as np
 import zenoh
 
 from sctd.bench import run_and_report
@@ -41,6 +42,7 @@ from sctd.cli.procs import Child, free_port
 from sctd.runtime import codec
 from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session, session_from_args
 from sctd.skill import Bundle, bundle_from_file
+from sctd.skill.loader import MAX_BUNDLE_BYTES
 
 KEYS = codec.Keys()
 SWAPS = 10
@@ -102,6 +104,26 @@ def malformed_bundles(skills: Path) -> list[tuple[str, bytes]]:
         ("7 MB yaml (parsed)", yaml(long_description(200_000))),
         ("10 MB yaml (too big)", yaml(long_description(300_000))),
     ]
+
+
+def big_bundle(skills: Path, seed: int, size: int = MAX_BUNDLE_BYTES - 4096) -> Bundle:
+    """The shipped ``pour-vf`` skill with its model grown to a packed bundle of about
+    ``size`` bytes (at most the limit): each demonstration point repeated with 0.5 mm of
+    noise (quaternions 1e-3, normalised), stored uncompressed. ``seed`` makes bundles
+    that differ (other ids) and behave alike."""
+    vf = bundle_from_file(skills / "pour-vf.yaml")
+    rel = next(iter(vf.files))
+    with np.load(io.BytesIO(vf.files[rel]), allow_pickle=False) as z:
+        fields, P, Q, R = z["fields"], z["points"], z["quaternions"], z["responsibilities"]
+    room = size - len(Bundle(vf.name, vf.yaml_text, {rel: b""}).pack()) - 2048  # 2 kB: the npz's own
+    n = room // (8 * (P.shape[1] + Q.shape[1] + R.shape[1]))
+    rng = np.random.default_rng(seed)
+    i = np.arange(n) % len(P)
+    Q2 = Q[i] + rng.normal(scale=1e-3, size=(n, 4))
+    buf = io.BytesIO()
+    np.savez(buf, fields=fields, points=P[i] + rng.normal(scale=5e-4, size=(n, 3)),
+             quaternions=Q2 / np.linalg.norm(Q2, axis=1)[:, None], responsibilities=R[i])
+    return Bundle(vf.name, vf.yaml_text, {rel: buf.getvalue()})
 
 
 def flood_main(argv: list[str]) -> int:
@@ -419,6 +441,28 @@ class _Phases:
         time.sleep(max(2.0, self.seconds / 2))
         return {}
 
+    def big_swaps(self) -> dict:
+        """An 8 MiB bundle swapped in once a second (two that differ, in turn) for the
+        length of a flood (as many one-second windows as the quiet phase has, so the two
+        compare), each on the second's mark; then the pour skill back."""
+        bundles = [big_bundle(self.skills, seed).pack() for seed in (1, 2)]
+        ok, windows, took = 0, [], []
+        n = max(3, round(self.seconds))
+        due = time.monotonic()
+        for k in range(n):
+            due += 1.0
+            time.sleep(max(0.0, due - time.monotonic()))
+            t0 = time.time()
+            got = list(self.s.get(KEYS.skill_swap, payload=bundles[k % 2], timeout=30.0))
+            took.append(time.time() - t0)
+            windows.append((t0, t0 + took[-1] + 0.005))
+            ok += sum(1 for r in got if r.ok is not None)
+        back = bundle_from_file(self.skills / "pour.yaml").pack()
+        list(self.s.get(KEYS.skill_swap, payload=back, timeout=30.0))
+        took.sort()
+        return {"swaps": n, "ok_replies": ok, "bundle_bytes": len(bundles[0]), "windows": windows,
+                "reply_s_median": round(took[len(took) // 2], 3), "reply_s_max": round(took[-1], 3)}
+
 
 def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
     hub = f"tcp/127.0.0.1:{free_port()}"
@@ -443,7 +487,7 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
                           ("input_names", lambda: ph.flood("inputs", "--names", "50000")),
                           ("bad_bundles", ph.bad_bundles), ("good_swaps", ph.swaps),
                           ("far_state", ph.far_state), ("release", lambda: ph.devices("release")),
-                          ("two_devices", lambda: ph.devices("two"))):
+                          ("two_devices", lambda: ph.devices("two")), ("big_swaps", ph.big_swaps)):
             out[name] = _phase(w, pid, run)
     return out
 
@@ -488,6 +532,23 @@ def _device_phases(phase: dict) -> list[dict]:
     return out
 
 
+def _summarise_big_swaps(big: dict) -> None:
+    """The largest gap between targets from each 8 MiB query to its reply."""
+    tg, windows = big["targets"], big.pop("windows")
+    gaps = [b[1] - a[1] for a, b in itertools.pairwise(tg)
+            if b[0] == a[0] + 1 and any(t0 <= a[1] <= t1 for t0, t1 in windows)]
+    big["max_gap_at_swaps_ms"] = round(max(gaps) * 1e3, 3) if gaps else None
+
+
+def _big_swaps_met(big: dict, quiet: dict) -> bool:
+    """Every 8 MiB bundle swapped, and the tick's lateness meanwhile within 0.1 ms (p99
+    of the worst one-second window) and 0.5 ms (max) of the same run's quiet phase."""
+    p99, q99 = big["lateness_p99_ms_worst_window"], quiet["lateness_p99_ms_worst_window"]
+    top, q_top = big["lateness_max_ms"], quiet["lateness_max_ms"]
+    return (big["ok_replies"] == big["swaps"] and None not in (p99, q99, top, q_top)
+            and p99 <= q99 + 0.1 and top <= q_top + 0.5)
+
+
 def summarise(r: dict) -> dict:
     """The figures and their targets; drops the raw target lists."""
     bound_m = 0.1 * 1e-3  # the pour skill: 0.1 m/s per 1 kHz tick
@@ -496,6 +557,7 @@ def summarise(r: dict) -> dict:
     gaps = [b[1] - a[1] for a, b in itertools.pairwise(tg)
             if b[0] == a[0] + 1 and any(t0 <= a[1] <= t1 for t0, t1 in windows)]
     sw["max_gap_at_swaps_ms"] = round(max(gaps) * 1e3, 3) if gaps else None
+    _summarise_big_swaps(r["big_swaps"])
     far = r["far_state"]
     tg = far.pop("targets")
     steps = [math.dist(a[2], b[2]) / (b[0] - a[0]) for a, b in itertools.pairwise(tg)]
@@ -523,6 +585,8 @@ def summarise(r: dict) -> dict:
         "state 1 m away, zero input: no step above the bound":
             far["max_step_per_tick_mm"] is not None and far["max_step_per_tick_mm"] <= bound_m * 1e3,
         **_device_criteria(rel["trials"], {p["name"]: p for p in two["phases"]}),
+        "8 MiB swaps each second: all swapped, lateness p99 <= quiet + 0.1 ms, max <= quiet + 0.5 ms":
+            _big_swaps_met(r["big_swaps"], r["quiet"]),
     }
     return r
 
@@ -556,7 +620,7 @@ def print_report(r: dict) -> None:
     print("  phase            " + "  ".join(f"{c.replace('_ms', '').replace('lateness_', 'late ')[:16]:>16s}"
                                          for c in cols))
     for name in ("quiet", "valid_flood", "garbage_flood", "object_names", "input_names", "bad_bundles",
-                 "good_swaps", "far_state", "release", "two_devices"):
+                 "good_swaps", "far_state", "release", "two_devices", "big_swaps"):
         ph = r[name]
         vals = "  ".join(f"{'-' if ph.get(c) is None else ph[c]!s:>16s}" for c in cols)
         print(f"  {name:16s} {vals}")
@@ -580,6 +644,13 @@ def print_report(r: dict) -> None:
         f"{p['name']}: {p['speed_mm_s']} mm/s, A drove {p['driven_by_A']}"
         for p in r["two_devices"]["phases"]))
     print(f"  two devices: ignored_input {c.get('ignored_input', 0)}, stops {c.get('stops', 0)}")
+    big, quiet = r["big_swaps"], r["quiet"]
+    print(f"  big_swaps: {big['ok_replies']} of {big['swaps']} bundles of {big['bundle_bytes']} bytes "
+          f"swapped, one a second; replies after {big['reply_s_median']} s (median), "
+          f"{big['reply_s_max']} s (max); largest gap between targets from each query to its reply: "
+          f"{big['max_gap_at_swaps_ms']} ms; lateness p99 (worst window) "
+          f"{big['lateness_p99_ms_worst_window']} ms (quiet {quiet['lateness_p99_ms_worst_window']} ms), "
+          f"max {big['lateness_max_ms']} ms (quiet {quiet['lateness_max_ms']} ms)")
     mark = {True: "met", False: "NOT met"}
     for k, v in r["criteria"].items():
         print(f"  {k}: {mark[v]}")

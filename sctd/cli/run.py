@@ -19,7 +19,13 @@ from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
 from ..runtime.ros_options import add_ros_arguments, check_ros_arguments
-from ..runtime.zsession import add_zenoh_arguments, close_session, make_config, session_from_args
+from ..runtime.zsession import (
+    SessionSettings,
+    add_zenoh_arguments,
+    close_session,
+    make_config,
+    session_from_args,
+)
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
@@ -145,7 +151,8 @@ def main_run(args: argparse.Namespace) -> int:
                             rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
                             # wire contract v1: on the loopback defaults, bundles sent to the
                             # skill key still swap; with a config file only skill/swap does
-                            swap_on_skill_key=args.zenoh_config is None, ros=ros)
+                            swap_on_skill_key=args.zenoh_config is None, ros=ros,
+                            settings=SessionSettings.from_args(args))
             stats = daemon.run(args.duration)
     finally:
         close_session(session)

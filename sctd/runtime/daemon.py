@@ -8,11 +8,14 @@ each ring, checks each message's size before copying it, decodes and validates i
 counts every malformed one, and keeps the newest valid sample; at the deadline the
 control step runs on them. (Decoding costs far more after a 1 ms sleep than in a hot
 loop; done ahead of the deadline it delays no tick, and one that overruns the lead
-shows as lateness.) A hot-swap bundle is validated in a child process
-(:mod:`sctd.runtime.worker`), compiled on the query's thread, handed over through a
-one-slot mailbox and installed between two ticks; the query is answered after the swap.
-Targets and status are encoded and put by a publisher thread, so the tick's own work is
-draining its inputs and the control step.
+shows as lateness.) The skill queryables are served by a child process, the skill
+server (:mod:`sctd.runtime.skillserver`), so that no bundle's bytes are ever in this
+process: it receives, validates and hands over each swapped-in skill (its model arrays
+read without long GIL holds), which is compiled here on a thread of its own, handed over
+through a one-slot mailbox and installed between two ticks; the replaced skill is freed
+on that thread too, and the query is answered after the swap. Targets and status are
+encoded and put by a publisher thread, so the tick's own work is draining its inputs and
+the control step.
 """
 
 from __future__ import annotations
@@ -30,18 +33,17 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-import msgpack
 import zenoh
 
 from ..skill import Skill, SkillEngine, SkillError, skill_summary
-from ..skill.loader import MAX_BUNDLE_BYTES
 from . import codec
 from .controller import RuntimeConfig
 from .driver import TickDriver
 from .ingress import Ingress, Inlet
+from .skillserver import ServerOptions, SkillServer
 from .timing import Histogram, Ticker, set_realtime, set_timer_slack
-from .worker import BundleWorker
-from .zsession import MSGPACK
+from .worker import WHERE
+from .zsession import MSGPACK, SessionSettings
 
 log = logging.getLogger("sctd.run")
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
@@ -53,6 +55,10 @@ INGRESS_CEILING = 16 * 1024 * 1024
 # How long another Python thread may keep the GIL from the tick (CPython's default is
 # 5 ms): the tick waits at most about this when it wakes while a query is handled.
 SWITCH_INTERVAL = 2e-4
+SERVER_WAIT = 20.0  # s the start waits for the skill server to serve the skill queryables
+# How long after a deadline the tick has published its target and sleeps until the next
+# drain: a swap's longer GIL holds start then, with most of a period ahead of them.
+AFTER_TICK = 3e-4
 
 
 def ingress_limits(robot: str) -> dict[str, Any]:
@@ -154,11 +160,7 @@ class _Pending:
     done: threading.Event
     state: str = ""
     retired: list[Inlet] = field(default_factory=list)  # object rings the new skill does not use
-
-
-def _reply(body: dict[str, Any]) -> bytes:
-    """A skill-queryable reply (summary, swap result or error) as a msgpack map."""
-    return msgpack.packb(body, use_bin_type=True)
+    replaced: tuple[Skill, SkillEngine] | None = None  # freed off the tick thread
 
 
 @dataclass
@@ -215,16 +217,20 @@ class Daemon:
     stop_event : threading.Event, optional
         Set to stop; pass one set by signal handlers installed before the daemon exists
         (a stop requested while starting then ends :meth:`run` at once).
+    settings : SessionSettings
+        What ``session`` was opened from: the skill server's session is opened from
+        them (:func:`~sctd.runtime.zsession.outbound_config`).
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
                  spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
                  stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
-                 ros: Any = None):
+                 ros: Any = None, settings: SessionSettings | None = None):
         self.config = config
         self.ros = ros  # sctd.runtime.ros.RuntimeRos (--ros): target poses out, its status
         self.swap_on_skill_key = swap_on_skill_key
         self.session = session
+        self.settings = settings if settings is not None else SessionSettings()
         self.keys = codec.Keys(config.robot)
         self.driver = TickDriver(skill, config)
         self.controller = self.driver.controller
@@ -245,74 +251,57 @@ class Daemon:
         self._window_targets = 0
         self._window_compute_max = 0.0
         self._publisher: _Publisher | None = None
-        self._worker: BundleWorker | None = None
+        self.skill_server: SkillServer | None = None
         self.ingress: Ingress | None = None
+        self._ticker: Ticker | None = None  # the running loop's (the swap times its work by it)
 
     @property
     def target_seq(self) -> int:
         return self.driver.target_seq
 
-    # --- the skill queryable (Zenoh's threads) ------------------------------------------
+    # --- the skill queryables (served by the skill server; answered on its threads) -----
 
-    def _on_skill_query(self, query: zenoh.Query) -> None:
-        self._on_query(query, self.keys.skill)
+    def _summary(self) -> dict[str, Any]:
+        """The active skill's summary and FSM state (the ``skill`` queryable's answer)."""
+        summary = skill_summary(self.controller.skill)
+        summary["state"] = self.controller.engine.state
+        return summary
 
-    def _on_swap_query(self, query: zenoh.Query) -> None:
-        self._on_query(query, self.keys.skill_swap)
-
-    def _on_query(self, query: zenoh.Query, key: str) -> None:
-        # The query ends (the asker stops waiting) when it is dropped: on leaving this
-        # block, not whenever the last reference to it goes.
-        with query:
-            try:
-                self._answer_skill_query(query, key)
-            except Exception as e:  # every query gets a reply, whatever went wrong
-                log.exception("skill query failed")
-                self._refuse(query, f"<bundle>: {type(e).__name__}: {e}")
-
-    def _refuse(self, query: zenoh.Query, error: str) -> None:
-        """Every refusal, whatever its cause, is one error reply ``{"error": text}``
-        (``text`` reads ``<file>: <field>: <problem>``) and is counted."""
+    def _count_refusal(self, error: str) -> None:
+        """Every refusal of the skill queryables, whatever its cause, is counted."""
         log.warning("refused skill: %s", error)
         self._refused += 1
-        query.reply_err(_reply({"error": error}), encoding=MSGPACK)
 
-    def _answer_skill_query(self, query: zenoh.Query, key: str) -> None:
-        """``skill``: the summary (and, with ``swap_on_skill_key``, a swap: wire contract
-        v1); ``skill/swap``: a swap only."""
-        payload = query.payload
-        empty = payload is None or len(payload) == 0
-        if key == self.keys.skill and empty:
-            summary = skill_summary(self.controller.skill)
-            summary["state"] = self.controller.engine.state
-            query.reply(key, _reply(summary), encoding=MSGPACK)
+    def _between_ticks(self) -> None:
+        """Return just after the next tick has published its target, when the tick thread
+        sleeps for most of a period: the swap's steps that hold the GIL for a while
+        (unpickling the skill, a KD-tree build's start, freeing the replaced skill) begin
+        there, so that they end before the tick wakes again. At once when not ticking."""
+        ticker = self._ticker
+        if ticker is None or self.stop_event.is_set():
             return
-        if empty:
-            self._refuse(query, f"<bundle>: {key} swaps skills: send a bundle (the summary is on "
-                                f"{self.keys.skill})")
-            return
-        if key == self.keys.skill and not self.swap_on_skill_key:
-            self._refuse(query, f"<bundle>: swaps go to {self.keys.skill_swap} (with a Zenoh "
-                                f"config, {self.keys.skill} answers summaries only)")
-            return
-        assert payload is not None
-        if len(payload) > MAX_BUNDLE_BYTES:
-            # refused before it is copied out of Zenoh's buffer
-            self._refuse(query, f"<bundle>: bundle of {len(payload)} bytes exceeds {MAX_BUNDLE_BYTES}")
-            return
+        wait = ticker.due + AFTER_TICK - time.monotonic()
+        if wait > 0.0:
+            time.sleep(min(wait, ticker.period + AFTER_TICK))
+
+    def _swap(self, skill: Skill) -> str:
+        """Install a validated skill at a tick boundary: its engine (KD-trees release the
+        GIL) and object rings are made here, off the tick thread, and so is the replaced
+        skill freed, each step begun between two ticks. Returns the FSM state the swap
+        landed in.
+
+        Raises
+        ------
+        SkillError
+            The daemon is not running, or did not reach a tick boundary in 5 s.
+        """
         with self._swap_lock:  # one swap at a time
-            worker = self._worker
-            if worker is None:
-                self._refuse(query, "<bundle>: the daemon is not running")
-                return
-            try:
-                skill = worker.skill(payload.to_bytes())
-                engine = SkillEngine(skill)  # KD-tree builds release the GIL
-            except SkillError as e:
-                self._refuse(query, str(e))
-                return
             ingress = self.ingress
-            assert ingress is not None
+            if ingress is None or self.stop_event.is_set():
+                raise SkillError(WHERE, "", "the daemon is not running")
+            self._between_ticks()
+            engine = SkillEngine(skill)
+            self._between_ticks()
             objects = ingress.object_inlets(skill.object)
             pending = _Pending(skill, engine, objects, threading.Event())
             with self._lock:
@@ -328,17 +317,18 @@ class Daemon:
                 for name, inlet in objects.items():
                     if ingress.objects.get(name) is not inlet:
                         inlet.close()
-                self._refuse(query, "<bundle>: the daemon stopped or did not reach a tick boundary "
-                                    "in 5 s")
-                return
+                raise SkillError(WHERE, "", "the daemon stopped or did not reach a tick boundary in 5 s")
+            self._between_ticks()
             for inlet in pending.retired:  # the tick no longer drains these
                 inlet.close()
+            pending.replaced = None
         log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
-        query.reply(key, _reply(
-            {"ok": True, "id": skill.id, "name": skill.name, "state": pending.state}), encoding=MSGPACK)
+        return pending.state
 
     def _install(self, pending: _Pending, now: float) -> None:
-        """On the tick thread, between two ticks: the new skill and its object rings."""
+        """On the tick thread, between two ticks: the new skill and its object rings. The
+        replaced skill and engine are kept for the swapping thread to free."""
+        pending.replaced = (self.controller.skill, self.controller.engine)
         self.driver.swap(pending.skill, now, pending.engine)
         assert self.ingress is not None
         pending.retired = self.ingress.use_objects(pending.objects)
@@ -350,13 +340,13 @@ class Daemon:
     def run(self, duration: float | None = None) -> dict[str, Any]:
         """Tick until :meth:`stop` (or ``duration`` seconds); returns final statistics.
 
-        Everything the run opens (the bundle worker, the subscriptions, publishers and
-        queryable, the publisher thread, the process' real-time settings) is entered on
-        one exit stack, so a failure at any point releases what was opened before it.
+        Everything the run opens (the skill server, the subscriptions and publishers, the
+        publisher thread, the process' real-time settings) is entered on one exit stack,
+        so a failure at any point releases what was opened before it.
         """
         with ExitStack() as stack:
             self._open(stack)
-            ticker = Ticker(self.config.period, spin=self.spin)
+            ticker = self._ticker = Ticker(self.config.period, spin=self.spin)
             log.info("running skill %s@%s for robot %s at %.0f Hz", self.controller.skill.name,
                      self.controller.skill.id, self.config.robot, self.config.rate)
             self._loop(ticker, None if duration is None else time.monotonic() + duration)
@@ -365,8 +355,12 @@ class Daemon:
     def _open(self, stack: ExitStack) -> None:
         """Declare and start what a run needs; each is closed by ``stack`` (in reverse)."""
         keys, s = self.keys, self.session
-        self._worker = stack.enter_context(BundleWorker())
-        stack.callback(setattr, self, "_worker", None)
+        # Started before the tick thread's own settings (its threads set theirs); a swap
+        # it hands over waits for the loop (and the ingress) to start.
+        self.skill_server = stack.enter_context(SkillServer(
+            ServerOptions(self.config.robot, self.settings, self.swap_on_skill_key, str(s.zid())),
+            self._summary, self._swap, self._count_refusal, self.stop_event, self._between_ticks,
+            self.rt_priority))
         # Only the objects the active skill needs, by name: a wildcard would let any number
         # of names cost memory, and a ring per wildcard would lose the task object's
         # updates whenever another object publishes.
@@ -380,10 +374,20 @@ class Daemon:
         self._publisher = stack.enter_context(_Publisher(pub_target, pub_status, self.rt_priority,
                                                          self.ros))
         self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
-        # no new swaps once the loop ends; one under way fails its wait and replies
-        stack.enter_context(s.declare_queryable(keys.skill, self._on_skill_query))
-        stack.enter_context(s.declare_queryable(keys.skill_swap, self._on_swap_query))
+        # no new swaps once the loop ends; one under way fails its wait and is refused
         stack.callback(self.stop_event.set)
+        self._wait_for_skill_server()
+
+    def _wait_for_skill_server(self) -> None:
+        """Until the skill server serves the skill queryables, a stop is asked for, or
+        :data:`SERVER_WAIT` s have passed (then the loop ticks without them for now)."""
+        assert self.skill_server is not None
+        give_up = time.monotonic() + SERVER_WAIT
+        while not self.skill_server.wait_ready(0.05) and not self.stop_event.is_set():
+            if time.monotonic() > give_up:
+                log.warning("the skill queryables are not served yet (%g s); ticking anyway",
+                            SERVER_WAIT)
+                return
 
     def _loop(self, ticker: Ticker, end: float | None) -> None:
         """The tick loop: drain ahead of each deadline, step at it, account after it."""

@@ -1,35 +1,36 @@
-"""Skill bundles validated in a separate process, so that no bundle stalls the tick.
+"""Skill bundles validated in a separate process, the containment boundary for
+hostile bundles.
 
 Unpacking, YAML parsing and validation of a hot-swap bundle are pure-Python work that
-holds the GIL for as long as they run (seconds for a large YAML): in the daemon's
-process they would delay every SCHED_FIFO tick that falls in that time. They run in a
-child process instead (``python -m sctd.runtime.worker``), which also contains what a
-hostile bundle can do: a nesting too deep for the parser, a model file that inflates
-to gigabytes (the child's address space is capped), a parser that crashes or hangs
-(the child is replaced). The daemon receives the validated
+holds the GIL for as long as they run (seconds for a large YAML), and a hostile bundle
+can do worse: a nesting too deep for the parser, a model file that inflates to
+gigabytes, a parser that crashes or hangs. They run in a process of their own
+(``python -m sctd.runtime.worker``), started by the daemon's skill server
+(:mod:`sctd.runtime.skillserver`): its address space is capped, and when it crashes or
+takes too long it is replaced and the bundle refused. The caller receives the validated
 :class:`~sctd.skill.Skill`, or the error that names what is wrong.
 
-The child is a plain subprocess (not :mod:`multiprocessing`, which would re-import the
-daemon's main module in it) reading length-prefixed bundles on stdin and writing
-length-prefixed results on stdout; it exits when stdin closes, so it never outlives
-the daemon.
+The validator is a plain subprocess (not :mod:`multiprocessing`, which would re-import
+its parent's main module in it) receiving bundles and sending results on its end of a
+socket pair, as :mod:`sctd.runtime.frames` messages (a skill's model arrays travel out
+of band, not copied into a pickle); it exits when the other end closes, so it never
+outlives its parent.
 """
 
 from __future__ import annotations
 
 import os
 import pickle
-import select
-import struct
+import socket
 import subprocess
 import sys
 import threading
-from typing import IO, Any
+from typing import Any
 
 from ..skill import Skill, SkillError
+from . import frames
 
 WHERE = "<bundle>"
-_HEADER = struct.Struct("!Q")
 
 
 class BundleWorker:
@@ -38,7 +39,8 @@ class BundleWorker:
     Parameters
     ----------
     timeout : float
-        Seconds a bundle may take; a slower one is refused and the child replaced.
+        Seconds a bundle may take (to be taken, and to be answered); a slower one is
+        refused and the child replaced.
     memory : int
         Bytes of address space the child may add to what it holds after start-up; a
         bundle needing more is refused.
@@ -49,14 +51,19 @@ class BundleWorker:
         self.memory = memory
         self._lock = threading.Lock()  # one bundle at a time
         self._proc: subprocess.Popen | None = None
+        self._sock: socket.socket | None = None
         self._closed = False
         self._spawn()
 
     def _spawn(self) -> None:
-        self._proc = subprocess.Popen(
-            [sys.executable, "-m", "sctd.runtime.worker", str(self.memory)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-            close_fds=True)
+        ours, theirs = frames.pair()
+        with theirs:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "sctd.runtime.worker", str(self.memory), str(theirs.fileno())],
+                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                pass_fds=[theirs.fileno()])
+        ours.settimeout(self.timeout)
+        self._sock = ours
 
     def _replace(self) -> None:
         self._kill()
@@ -64,16 +71,16 @@ class BundleWorker:
             self._spawn()
 
     def _kill(self) -> None:
-        proc = self._proc
+        proc, sock = self._proc, self._sock
         if proc is not None:
             proc.kill()
             proc.wait()
-            for f in (proc.stdin, proc.stdout):
-                if f is not None:
-                    f.close()
+        if sock is not None:
+            sock.close()
 
     def skill(self, payload: bytes) -> Skill:
-        """Validate a packed bundle (``Bundle.pack``) in the child.
+        """Validate a packed bundle (``Bundle.pack``) in the child. The skill's arrays
+        are views of memory maps (:func:`sctd.runtime.frames.receive`).
 
         Raises
         ------
@@ -82,25 +89,26 @@ class BundleWorker:
             or crashes the parser.
         """
         with self._lock:
-            proc = self._proc
-            if self._closed or proc is None:
+            if self._proc is not None and self._proc.poll() is not None and not self._closed:
+                self._replace()  # it died while idle: not this bundle's doing
+            proc, sock = self._proc, self._sock
+            if self._closed or proc is None or sock is None:
                 raise SkillError(WHERE, "", "the validating process is stopped")
-            assert proc.stdin is not None and proc.stdout is not None
             try:
-                proc.stdin.write(_HEADER.pack(len(payload)))
-                proc.stdin.write(payload)
-                proc.stdin.flush()
-                data = _read_message(proc.stdout, self.timeout)
+                frames.send(sock, pickle.PickleBuffer(payload))
+                kind, value = frames.receive(sock)  # written by our own child
             except TimeoutError:
                 self._replace()
                 raise SkillError(WHERE, "", f"validation took longer than {self.timeout:g} s") from None
-            except (EOFError, OSError, ValueError):
-                code = proc.poll()
+            except (EOFError, OSError, ValueError, pickle.UnpicklingError):
+                try:  # its end closes as it exits: its exit code follows
+                    code: int | None = proc.wait(1.0)
+                except subprocess.TimeoutExpired:
+                    code = None
                 self._replace()
                 if self._closed:
                     raise SkillError(WHERE, "", "the validating process was stopped") from None
                 raise SkillError(WHERE, "", f"the validating process died (exit code {code})") from None
-            kind, value = pickle.loads(data)  # written by our own child
         if kind == "ok":
             return value
         error = SkillError(WHERE, "", value) if kind == "raw" else value
@@ -118,34 +126,13 @@ class BundleWorker:
             proc.kill()  # a pure validator: nothing to lose
         with self._lock:
             self._kill()
-            self._proc = None
+            self._proc = self._sock = None
 
     def __enter__(self) -> BundleWorker:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _read_message(f: IO[bytes], timeout: float) -> bytes:
-    """One length-prefixed message from a pipe, waiting at most ``timeout`` s for it."""
-    fd = f.fileno()
-    ready, _, _ = select.select([fd], [], [], timeout)
-    if not ready:
-        raise TimeoutError
-    header = _read_exactly(fd, _HEADER.size)
-    return _read_exactly(fd, _HEADER.unpack(header)[0])
-
-
-def _read_exactly(fd: int, n: int) -> bytes:
-    parts = []
-    while n > 0:
-        chunk = os.read(fd, min(n, 1 << 20))
-        if not chunk:
-            raise EOFError
-        parts.append(chunk)
-        n -= len(chunk)
-    return b"".join(parts)
 
 
 def compile_bundle(payload: bytes) -> tuple[str, Any]:
@@ -177,20 +164,16 @@ def _limit_memory(extra: int) -> None:
 
 
 def main(argv: list[str]) -> int:
-    """The child's loop: bundles on stdin, ``compile_bundle`` results on stdout, until
-    stdin closes."""
-    _limit_memory(int(argv[0]) if argv else 2 << 30)
-    fd_in, out = sys.stdin.buffer.fileno(), sys.stdout.buffer
+    """The child's loop: bundles in, ``compile_bundle`` results out, on the socket
+    ``argv[1]``, until its other end closes."""
+    _limit_memory(int(argv[0]))
+    sock = frames.from_fd(int(argv[1]))
     while True:
         try:
-            header = _read_exactly(fd_in, _HEADER.size)
-            payload = _read_exactly(fd_in, _HEADER.unpack(header)[0])
-        except (EOFError, OSError):
+            payload = frames.receive(sock)
+        except (EOFError, OSError, ValueError):
             return 0
-        result = pickle.dumps(compile_bundle(payload), protocol=pickle.HIGHEST_PROTOCOL)
-        out.write(_HEADER.pack(len(result)))
-        out.write(result)
-        out.flush()
+        frames.send(sock, compile_bundle(bytes(payload)))
 
 
 if __name__ == "__main__":

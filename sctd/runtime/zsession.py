@@ -9,6 +9,11 @@ So programs started in any order find each other, a plain Zenoh client that conn
 ``tcp/127.0.0.1:7447`` reaches them, and they reconnect after any of them restarts.
 ``--listen`` / ``--connect`` replace the respective endpoint lists (tests use free
 ports); ``--zenoh-config FILE`` replaces all of this for multi-host use.
+
+A helper process that acts for a program on the network (the daemon's skill server,
+:mod:`sctd.runtime.skillserver`) opens its session from the same settings with
+:func:`outbound_config`: it connects where the program connects and listens, and listens
+nowhere itself.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import json
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import zenoh
@@ -98,6 +104,70 @@ def make_config(listen: Sequence[str] | None = None, connect: Sequence[str] | No
     conf.insert_json5("connect/retry", _RETRY)
     _add_ingress_limits(conf, size_limits, rate_limits)
     return conf
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """What a program's session is opened from: ``--listen``, ``--connect`` and
+    ``--zenoh-config`` (None: not given)."""
+
+    listen: tuple[str, ...] | None = None
+    connect: tuple[str, ...] | None = None
+    config_file: str | None = None
+
+    @classmethod
+    def from_args(cls, args) -> SessionSettings:
+        def endpoints(v: Sequence[str] | None) -> tuple[str, ...] | None:
+            return None if v is None else tuple(v)
+        return cls(endpoints(args.listen), endpoints(args.connect),
+                   None if args.zenoh_config is None else str(args.zenoh_config))
+
+
+def outbound_config(settings: SessionSettings) -> zenoh.Config:
+    """The config of a session that joins the network a session opened from
+    ``settings`` joins, and listens nowhere: the same config (mode, scouting, TLS,
+    access credentials), with the endpoints that session listens on added to those it
+    connects to (an unspecified address as loopback, ``0.0.0.0`` as ``127.0.0.1`` and
+    ``[::]`` as ``[::1]``; port 0, an ephemeral port, left out: gossip scouting finds
+    it) and no listen endpoint. Such a session reaches every peer that listens and,
+    through routers and through the peers it connects to, every client; a peer that
+    listens nowhere and is connected to nothing but the program cannot reach it."""
+    conf = make_config(settings.listen, settings.connect, settings.config_file)
+    targets: list[str] = []
+    listened = [_as_target(ep) for ep in _endpoints(conf, "listen/endpoints")]
+    for ep in [*listened, *_endpoints(conf, "connect/endpoints")]:
+        if ep is not None and ep not in targets:
+            targets.append(ep)
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("connect/endpoints", json.dumps(targets))
+    return conf
+
+
+def _endpoints(conf: zenoh.Config, key: str) -> list[str]:
+    """A config's endpoint list (a list, or one list per mode: the config's mode's)."""
+    try:
+        value = json.loads(conf.get_json(key))
+        if isinstance(value, dict):
+            value = value.get(json.loads(conf.get_json("mode")) or "peer")
+    except (zenoh.ZError, ValueError):
+        return []
+    return [ep for ep in value if isinstance(ep, str)] if isinstance(value, list) else []
+
+
+_UNSPECIFIED = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]"}
+
+
+def _as_target(endpoint: str) -> str | None:
+    """A listen endpoint as an endpoint to connect to it on this host (None: port 0)."""
+    cut = min((i for i in (endpoint.find("?"), endpoint.find("#")) if i >= 0), default=len(endpoint))
+    locator, rest = endpoint[:cut], endpoint[cut:]
+    proto, slash, address = locator.partition("/")
+    host, colon, port = address.rpartition(":")
+    if not slash or not colon or not port.isdigit():
+        return endpoint  # no host:port (a unix socket path): as it is
+    if int(port) == 0:
+        return None
+    return f"{proto}/{_UNSPECIFIED.get(host, host)}:{port}{rest}"
 
 
 def _config_list(conf: zenoh.Config, key: str) -> list:

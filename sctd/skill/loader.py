@@ -30,9 +30,9 @@ from .transitions import TRANSITIONS, Transition
 
 FORMAT_VERSION = 1
 BUNDLE_FORMAT = "sctd-skill-bundle"
-# A packed bundle's largest size. The runtime copies a hot-swap payload once while it
-# holds the GIL (0.25-1 ms per MB on the development VM), so this bounds what a swap can
-# cost the tick; a vector-field model of 20k demonstration points is 1.4 MB compressed.
+# A packed bundle's largest size: what one hot-swap query may carry. The runtime's skill
+# server copies it, validates it and hands the skill on, each in memory and time that
+# grow with it; a vector-field model of 20k demonstration points is 1.4 MB compressed.
 MAX_BUNDLE_BYTES = 8 * 1024 * 1024
 MAX_TEXT = 10_000  # characters of a skill's name or description
 

@@ -122,7 +122,6 @@ class Neighbours:
         self.refreshes = 0  # answers worked out ahead by refresh
         self.queries = 0
         self.fetches = 0
-        self._quaternions: list[list[float]] = model.quaternions.tolist()
         self._mean_of: Answer | None = None  # the answer _mean is of
         self._mean: tuple[float, float, float, float] | None = None
 
@@ -256,7 +255,9 @@ class Neighbours:
         i, w = answer
         mean = None
         if i:
-            rows = [self._quaternions[j] for j in i]
+            # the answer's few rows only: the whole model as a list would be built with
+            # the GIL held (100 ms for 100k points, in the daemon while it swaps)
+            rows: list[list[float]] = self.model.quaternions[i].tolist()
             x0, y0, z0, w0 = rows[0]
             gx = gy = gz = gw = 0.0
             for wk, (x, y, z, qw) in zip(w, rows, strict=True):
