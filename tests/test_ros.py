@@ -268,6 +268,10 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
     _status_with(rig, lambda s: s["counters"]["disabled_input"] > 0)
     assert np.allclose(rig.last()["pose"][:3], start[:3], atol=1e-9)
     held = [0] * 10 + [1]
+    # zero-start: the deadman pressed with the stick still deflected moves nothing ...
+    side.drive([0.8, 0, 0, 0, 0, 0], held, 0.3)
+    assert np.allclose(rig.last()["pose"][:3], start[:3], atol=1e-9)
+    side.drive([0.0, 0, 0, 0, 0, 0], held, 0.05)  # ... until the stick has been centred
     side.drive([0.8, 0, 0, 0, 0, 0], held, 1.0)
     assert wait_for(lambda: rig.last()["pose"][0] - start[0] > 0.01, 20), (rig.last(), start)
     moved = np.subtract(rig.last()["pose"][:3], start[:3])
