@@ -56,8 +56,11 @@ def test_malformed_files_name_file_row_and_reason(tmp_path, text, row, reason):
 
 
 def test_missing_file_and_directory(tmp_path):
-    with pytest.raises(DemoError, match="cannot read"):
+    with pytest.raises(DemoError, match=r"cannot open \(No such file"):
         read_demo_csv(tmp_path / "nope.csv")
+    for device in ("/dev/zero", "/dev/urandom"):  # refused before a byte is read
+        with pytest.raises(DemoError, match="a character device, not a regular file"):
+            read_demo_csv(device)
     with pytest.raises(DemoError, match="not a directory"):
         read_demos(tmp_path / "nope")
     with pytest.raises(DemoError, match="no demonstration files"):

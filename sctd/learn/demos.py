@@ -16,9 +16,11 @@ tf-norm (Ch. 5.1).
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -26,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import uniform_filter1d
 
 from .. import se3
+from ..files import FileError, open_regular
 
 Array = NDArray[np.float64]
 
@@ -68,6 +71,26 @@ class Demo:
         return len(self.t)
 
 
+MAX_DEMO_FILE_BYTES = 64 * 1024 * 1024  # a demonstration's CSV: 100,000 rows are about 9 MB
+MAX_DEMO_ROWS = 100_000  # over 16 minutes at 100 Hz (as the wire contract's demonstrations)
+
+
+def _rows(name: str, reader: Any, quat_tolerance: float) -> list[list[float]]:
+    cols, width = _columns(name, next(reader, None))
+    rows: list[list[float]] = []
+    for k, rec in enumerate(reader, start=1):
+        if not rec or all(not x.strip() for x in rec):
+            continue
+        if len(rows) >= MAX_DEMO_ROWS:
+            raise DemoError(name, k, f"more than {MAX_DEMO_ROWS} rows")
+        vals = _row(name, k, rec, cols, width, quat_tolerance)
+        if rows and vals[0] <= rows[-1][0]:
+            raise DemoError(name, k, f"time {vals[0]} does not increase "
+                            f"(previous row has {rows[-1][0]})")
+        rows.append(vals)
+    return rows
+
+
 def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
                   quat_tolerance: float = QUAT_TOLERANCE) -> Demo:
     """Read and validate one demonstration CSV.
@@ -85,21 +108,16 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
     path = Path(path)
     name = str(path)
     try:
-        fh = path.open(newline="")
-    except OSError as exc:
-        raise DemoError(name, None, f"cannot read ({exc.strerror})") from None
-    with fh:
-        reader = csv.reader(fh)
-        cols, width = _columns(name, next(reader, None))
-        rows: list[list[float]] = []
-        for k, rec in enumerate(reader, start=1):
-            if not rec or all(not x.strip() for x in rec):
-                continue
-            vals = _row(name, k, rec, cols, width, quat_tolerance)
-            if rows and vals[0] <= rows[-1][0]:
-                raise DemoError(name, k, f"time {vals[0]} does not increase "
-                                f"(previous row has {rows[-1][0]})")
-            rows.append(vals)
+        raw = open_regular(path, MAX_DEMO_FILE_BYTES, name)
+    except FileError as exc:
+        raise DemoError(name, None, exc.problem) from None
+    with io.TextIOWrapper(raw, encoding="utf-8", errors="strict", newline="") as fh:
+        try:
+            rows = _rows(name, csv.reader(fh), quat_tolerance)
+        except UnicodeDecodeError as exc:
+            raise DemoError(name, None, f"not UTF-8 text (byte {exc.start} of a block)") from None
+        except csv.Error as exc:
+            raise DemoError(name, None, f"not a CSV file ({exc})") from None
     if len(rows) < min_samples:
         raise DemoError(name, len(rows) or None,
                         f"too few samples: {len(rows)} rows, need at least {min_samples}")

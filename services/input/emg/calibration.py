@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from sctd.files import MAX_YAML_BYTES, FileError, read_text
+
 from ..device import InputError
 from .processing import N_AXES, AxisMap, Filters, Normalisation, envelope_sos, fit_axis_map, group_delay_s
 
@@ -169,11 +171,11 @@ def load(path: str | Path) -> Calibration:
     """The calibration file at ``path``; InputError naming the file and the field."""
     where = f"calibration {path}"
     try:
-        obj = json.loads(Path(path).read_text())
-    except OSError as e:
-        raise InputError(f"{where}: cannot read: {e.strerror}") from e
-    except json.JSONDecodeError as e:
-        raise InputError(f"{where}: not JSON: {e}") from e
+        obj = json.loads(read_text(path, MAX_YAML_BYTES, where))
+    except FileError as e:
+        raise InputError(str(e)) from None
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise InputError(f"{where}: not JSON: {e}") from None
     if not isinstance(obj, dict) or obj.get("version") != VERSION:
         got = obj.get("version") if isinstance(obj, dict) else obj
         raise InputError(f"{where}: version must be {VERSION}, got {got!r}")
