@@ -5,13 +5,15 @@ Files: each hostile file goes to the command that reads it, as its own process (
 mapping files to ``sctd input keyboard --map``, skill files and folders to ``sctd
 inspect`` and ``sctd swap``, logs to ``sctd replay``); the figures are its exit code,
 the first line it printed, whether that line quotes the file's content, and its peak
-resident memory (``wait4``'s rusage).
+resident memory (the process' own ``VmHWM``).
 
-The learner: next to ``sctd sim --scene pour``, ``sctd run`` and ``sctd learner`` (a
-private store), training requests with hyperparameters out of range, a skipped check,
+The learner: training requests with hyperparameters out of range, a skipped check and
 names that are paths, and demonstrations that are too long, misnamed or over a task's
-quota; the figures are what the learner replied or said on its status, and the daemon's
-lateness while it is attacked against the same run's quiet phase.
+quota; the figures are what the learner replied or said on its status.
+
+All of it next to ``sctd sim --scene pour``, ``sctd run`` and ``sctd learner`` (a
+private store), with the daemon's worst lateness window over a quiet phase, while the
+tools read the files, and while the learner is attacked.
 """
 
 from __future__ import annotations
@@ -233,7 +235,10 @@ def _demo(task: str, name: str, rows: int) -> bytes:
     return codec.encode_demo(task, name, "mug", [[0.01 * k, 0.3, 0.0, 0.05, 0, 0, 0, 1] for k in range(rows)])
 
 
-def learner_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
+def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
+    """The daemon, simulator and learner running; a quiet window, then the hostile files
+    to the tools (:func:`files_phase`), then the learner attacked; the daemon's lateness
+    over each."""
     keys = codec.Keys()
     hub = f"tcp/127.0.0.1:{free_port()}"
     store = d / "store"
@@ -262,7 +267,11 @@ def learner_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
             time.sleep(0.1)
         time.sleep(2.0)  # past the start-up's first seconds
         quiet = _lateness(status, lock, seconds)
-        t_attack = time.monotonic()
+        k0 = len(status)
+        files = files_phase(d)
+        files_changed = _flips_changed(d / "logs")
+        tools = _windows(status, lock, k0)
+        k0 = len(status)
         replies = []
         for what, over in BAD_REQUESTS:
             req = {"task": "pour", "method": "vf", **over}
@@ -283,11 +292,12 @@ def learner_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
         end = time.monotonic() + 120
         while handled() < sent and time.monotonic() < end:
             time.sleep(0.2)
-        attacked = _lateness(status, lock, max(1.0, seconds - (time.monotonic() - t_attack)))
+        attacked = _windows(status, lock, k0)
         sub.undeclare()
     stored = sum(1 for e in events if e.get("event") == "stored")
     rejected = [e for e in events if e.get("event") == "rejected"]
-    return {"requests": replies, "demos_stored": stored,
+    return {"files": files, "flips_changed": files_changed, "lateness_tools": tools,
+            "requests": replies, "demos_stored": stored,
             "demos_rejected": {r: sum(1 for e in rejected if e.get("reason") == r)
                                for r in sorted({str(e.get("reason")) for e in rejected})},
             "quota_stored": len(list((store / "demos" / "quota").glob("*.csv"))),
@@ -296,15 +306,20 @@ def learner_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
 
 def _lateness(status: list[dict], lock: threading.Lock, seconds: float) -> dict[str, float]:
     """The daemon's worst one-second lateness window over the next ``seconds``."""
-    t0 = time.monotonic()
     with lock:
         k0 = len(status)
     time.sleep(seconds)
+    return _windows(status, lock, k0, settle=0.0)
+
+
+def _windows(status: list[dict], lock: threading.Lock, k0: int, settle: float = 1.2) -> dict[str, float]:
+    """The worst one-second lateness window the daemon reported from status ``k0`` on
+    (after ``settle`` s, so that the last second's window is in)."""
+    time.sleep(settle)
     with lock:
         windows = [m["recent_ms"]["lateness"] for m in status[k0:] if m.get("recent_ms")]
     return {"p99_ms": max((w["p99"] for w in windows), default=0.0),
-            "max_ms": max((w["max"] for w in windows), default=0.0),
-            "seconds": round(time.monotonic() - t0, 1)}
+            "max_ms": max((w["max"] for w in windows), default=0.0), "windows": len(windows)}
 
 
 # --- the report ----------------------------------------------------------------------
@@ -313,12 +328,10 @@ def _lateness(status: list[dict], lock: threading.Lock, seconds: float) -> dict[
 def run_hostile(seconds: float, logdir: Path) -> dict[str, Any]:
     with tempfile.TemporaryDirectory(prefix="sctd-hostile-") as tmp:
         d = Path(tmp)
-        out: dict[str, Any] = {"files": files_phase(d)}
-        out["flips_changed"] = _flips_changed(d / "logs")
-        out["learner"] = learner_phase(d, seconds, logdir)
+        lr = attack_phase(d, seconds, logdir)
+    out: dict[str, Any] = {"files": lr.pop("files"), "flips_changed": lr.pop("flips_changed"), "learner": lr}
     files = [r for rows in out["files"].values() for r in rows]
     flips = [r for r in out["files"]["logs"] if r["what"].startswith("bit flip")]
-    lr = out["learner"]
     out["criteria"] = {
         "every hostile file refused with exit 2, no traceback":
             all(r["exit"] == 2 and not r["traceback"] for r in files if not r["what"].startswith("bit flip")),
@@ -329,7 +342,7 @@ def run_hostile(seconds: float, logdir: Path) -> dict[str, Any]:
         "every bad request refused naming its field": all(r["refused"] for r in lr["requests"]),
         "no demonstration over 100,000 rows, misnamed or past the quota stored":
             lr["quota_stored"] <= 1000 and lr["demos_stored"] <= 1000,
-        "daemon lateness p99 while attacked within 0.1 ms of quiet":
+        "daemon lateness p99 while the learner is attacked within 0.1 ms of quiet":
             lr["lateness_attacked"]["p99_ms"] <= lr["lateness_quiet"]["p99_ms"] + 0.1,
     }
     return out
@@ -355,9 +368,11 @@ def print_report(r: dict[str, Any]) -> None:
         print(f"    {row['what']:22s} {'refused' if row['refused'] else 'ACCEPTED'}: {row['said']}")
     print(f"  demonstrations: stored {lr['demos_stored']}, rejected {lr['demos_rejected']}; "
           f"task 'quota' holds {lr['quota_stored']} of 1,200 sent")
-    q, a = lr["lateness_quiet"], lr["lateness_attacked"]
-    print(f"  daemon lateness, worst 1 s window: quiet p99 {q['p99_ms']} ms (max {q['max_ms']}), "
-          f"attacked p99 {a['p99_ms']} ms (max {a['max_ms']})")
+    q, t, a = lr["lateness_quiet"], lr["lateness_tools"], lr["lateness_attacked"]
+    print(f"  daemon lateness, worst 1 s window: quiet p99 {q['p99_ms']} ms (max {q['max_ms']}); "
+          f"while the tools read the files p99 {t['p99_ms']} ms (max {t['max_ms']}, {t['windows']} s: "
+          f"{len(r['files']['maps']) + len(r['files']['skills']) + len(r['files']['logs'])} sctd "
+          f"processes on a 2-core host); learner attacked p99 {a['p99_ms']} ms (max {a['max_ms']})")
     mark = {True: "met", False: "NOT met"}
     for k, v in r["criteria"].items():
         print(f"  {k}: {mark[v]}")
