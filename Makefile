@@ -1,4 +1,5 @@
-# Two commands on a fresh machine: `make demo` runs the main job, `make test` the tests.
+# Two commands on a fresh machine: `make demo` runs the main job, `make test` the fast
+# tests (in-process, a few minutes); `make test-all` runs every test, as CI does.
 # The virtualenv is created once in .venv and reused (pin, for the simulator, is a
 # ~700 MB wheel set); `make setup` re-installs when pyproject.toml or setup.py change.
 
@@ -7,7 +8,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: setup demo teach test lint bench clean
+.PHONY: setup demo teach test test-all lint bench clean
 
 setup: $(STAMP)
 
@@ -25,8 +26,20 @@ demo: setup
 teach: setup
 	$(BIN)/sctd teach --scene pour --then-learn vf --swap --out $$(mktemp -d)/pour-taught
 
+# The tiers (tests/tiers.py): the fast tier is every test not marked slow; it starts no
+# process, and runs on $(JOBS) workers. test-all runs the rest too: what may run side by side on $(JOBS) workers (one
+# module per worker, so a module's shared daemon stays in one place), then the realtime
+# tests alone, on a machine that nothing else in the suite is using.
+JOBS ?= 2
+PYTEST := $(BIN)/python -m pytest -q
+
 test: setup
-	$(BIN)/python -m pytest -q
+	$(PYTEST) -m "not slow" -n $(JOBS)
+
+test-all: setup
+	$(PYTEST) -m "not realtime" -n $(JOBS) --dist loadfile; a=$$?; \
+	$(PYTEST) -m realtime -p no:xdist; b=$$?; \
+	test $$a -eq 0 -a $$b -eq 0
 
 lint: setup
 	$(BIN)/ruff check .

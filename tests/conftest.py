@@ -13,7 +13,10 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
+from sctd.cli import procs
 from sctd.cli.procs import Child, free_port, port_is_free
+
+pytest_plugins = ["pytester", "tests.tiers"]
 
 # No per-example deadline: the suite runs on loaded machines (CI, two suites at once),
 # where a deadline measures the machine, not the code.
@@ -23,6 +26,21 @@ settings.load_profile("sctd")
 __all__ = ["ROOT", "Proc", "free_port", "port_is_free", "sctd", "trap_skill_yaml", "wait_for"]
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _port_slice() -> None:
+    """Under pytest-xdist, each worker (and every program it starts) draws its loopback
+    ports from a slice of the range of its own: two workers never get the same port."""
+    worker, count = os.environ.get("PYTEST_XDIST_WORKER"), os.environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if not worker or not count or os.environ.get("SCTD_PORT_RANGE"):
+        return
+    n, m = int(worker.removeprefix("gw")), int(count)
+    bottom, top = procs._port_range()
+    size = (top - bottom + 1) // m
+    os.environ["SCTD_PORT_RANGE"] = f"{bottom + n * size}-{bottom + (n + 1) * size - 1}"
+
+
+_port_slice()
 _live: list[subprocess.Popen] = []
 
 

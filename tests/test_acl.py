@@ -24,6 +24,8 @@ from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.runtime.zsession import close_session
 from tests.conftest import Proc, free_port, sctd, wait_for
 
+pytestmark = pytest.mark.slow  # routers and clients as processes
+
 N = 20
 ROBOT = "edan"
 # every published key of the wire contract, and the role that owns it

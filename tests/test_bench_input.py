@@ -8,7 +8,11 @@ import math
 import subprocess
 import sys
 
+import pytest
+
 from tests.conftest import ROOT
+
+pytestmark = pytest.mark.slow  # runs sctd bench as a process
 
 
 def test_bench_input_answers_every_stick_event_and_reports_the_emg_chain(tmp_path):

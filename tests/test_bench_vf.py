@@ -59,6 +59,7 @@ def test_a_resized_skill_loads_and_runs(tmp_path, model):
     assert all(np.isfinite(F))
 
 
+@pytest.mark.slow
 def test_bench_vf_reports_every_point_count_next_to_the_baseline():
     out = subprocess.run([sys.executable, "-m", "sctd.cli.main", "bench", "vf", "--points", "100,700",
                           "--ticks", "60", "--rounds", "1", "--json"],
@@ -72,6 +73,7 @@ def test_bench_vf_reports_every_point_count_next_to_the_baseline():
         assert h["n"] == 60 and 0 < h["p50"] <= h["p99"] <= h["max"]
 
 
+@pytest.mark.slow
 def test_bench_vf_names_a_bad_point_list():
     out = subprocess.run([sys.executable, "-m", "sctd.cli.main", "bench", "vf", "--points", "100,x"],
                          capture_output=True, text=True, cwd=ROOT, timeout=60)

@@ -40,6 +40,7 @@ def test_every_command_builds_its_parser(name):
         build_parser([name])
 
 
+@pytest.mark.slow
 def test_help_lists_every_command_and_the_exit_codes():
     r = _sctd("--help")
     assert r.returncode == 0
@@ -51,6 +52,7 @@ def test_help_lists_every_command_and_the_exit_codes():
         assert name in r.stdout
 
 
+@pytest.mark.slow
 def test_run_inspect_and_swap_never_load_the_learners_or_the_simulator():
     code = ("from sctd.cli.main import build_parser\n"
             "build_parser(['run', '--skill', 'skills/pour.yaml'])\n"
@@ -59,6 +61,7 @@ def test_run_inspect_and_swap_never_load_the_learners_or_the_simulator():
     assert _modules_after(code) == []
 
 
+@pytest.mark.slow
 def test_a_bad_flag_value_exits_2_in_the_common_style():
     r = _sctd("learn", "skills/demos/pour", "--out", "/nonexistent/x.yaml", "--lambda", "x")
     assert r.returncode == 2
@@ -68,6 +71,7 @@ def test_a_bad_flag_value_exits_2_in_the_common_style():
     assert r.stderr.strip().endswith("sctd run: --rate: must be > 0"), r.stderr
 
 
+@pytest.mark.slow
 def test_a_malformed_skill_exits_2_naming_file_and_field(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text((ROOT / "skills" / "pour.yaml").read_text().replace("max_linear_speed: 0.10",
@@ -84,6 +88,7 @@ def test_a_malformed_skill_exits_2_naming_file_and_field(tmp_path):
     (["learn", "skills/demos/pour", "--out", "x.yaml"], "maxflow", "learn"),  # on import
     (["sim", "--duration", "1"], "pinocchio", "sim"),  # imported once the service starts
 ])
+@pytest.mark.slow
 def test_a_missing_optional_library_names_the_extra(argv, missing, extra):
     code = (f"import sys; sys.modules[{missing!r}] = None\n"  # import of it raises ModuleNotFoundError
             "from sctd.cli.main import main\n"

@@ -35,6 +35,7 @@ def _subject(pem: Path, *ext: str) -> str:
     return r.stdout
 
 
+@pytest.mark.slow
 def test_certs_one_key_pair_per_role_signed_by_the_ca(tmp_path, capsys):
     out = tmp_path / "tls"
     assert main(["certs", "--out", str(out), "--host", "robot-pc.local", "--ip", "10.8.0.1",
@@ -67,6 +68,7 @@ def test_certs_one_key_pair_per_role_signed_by_the_ca(tmp_path, capsys):
     assert (out / "ca.pem").read_text() != ca
 
 
+@pytest.mark.slow
 def test_certs_without_openssl_or_when_it_fails(tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("PATH", str(tmp_path))
     assert main(["certs", "--out", str(tmp_path / "a")]) == 2

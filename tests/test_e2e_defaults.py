@@ -6,10 +6,13 @@ from __future__ import annotations
 import json
 
 import msgpack
+import pytest
 import zenoh
 
 from sctd.runtime import codec
 from tests.conftest import ROOT, port_is_free, sctd, wait_for
+
+pytestmark = pytest.mark.slow  # the daemon and its peers as processes
 
 
 def plain_client(endpoint: str) -> zenoh.Session:

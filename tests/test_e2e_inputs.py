@@ -17,7 +17,7 @@ from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # the release within 2 ticks of a live daemon
 
 KEYS = codec.Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]

@@ -1,8 +1,9 @@
 """End to end: `sctd run` as a real process on a free loopback port, driven over Zenoh.
 
 A fake robot in the test follows each target exactly and publishes state and the mug;
-the test publishes input and reads target/status. Timing assertions are loose
-(behaviour, not speed: the benchmarks measure speed).
+the test publishes input and reads target/status. Verdicts rest on what the daemon
+reports (its counts, seq numbers and stamps), never on the test's clock; the benchmarks
+measure speed.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
 from tests.conftest import ROOT, free_port, port_is_free, sctd, trap_skill_yaml, wait_for
+
+pytestmark = pytest.mark.slow  # the daemon as a process
 
 KEYS = codec.Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
@@ -95,14 +98,17 @@ class Rig:
         close_session(self.session)
 
 
-@pytest.fixture
-def daemon(tmp_path):
+@pytest.fixture(scope="module")
+def daemon(tmp_path_factory):
+    """One daemon for the tests below, which leave it as they found it: the pour skill,
+    no input held (the last one swaps back)."""
     port = free_port()
     proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen",
-                f"tcp/127.0.0.1:{port}", "--rate", "1000", log=tmp_path / "daemon.log")
+                f"tcp/127.0.0.1:{port}", "--rate", "1000",
+                log=tmp_path_factory.mktemp("daemon") / "daemon.log")
     rig = Rig(port)
     try:
-        assert wait_for(lambda: len(rig.targets) > 50, 20), (
+        assert wait_for(lambda: len(rig.targets) > 50 and rig.status, 20), (
             f"{len(rig.targets)} targets, {len(rig.status)} status messages, last status "
             f"{rig.status[-1] if rig.status else None}; daemon log: {proc.output()}")
         yield proc, rig, port
@@ -111,26 +117,49 @@ def daemon(tmp_path):
         proc.stop()
 
 
+def _newest_status(rig: Rig) -> dict:
+    with rig.lock:
+        return rig.status[-1]
+
+
+def _targets_after(rig: Rig, seq: int) -> bool:
+    """The rig has a target published at or after ``seq`` (the daemon's own count)."""
+    return bool(rig.targets) and rig.last()["seq"] >= seq
+
+
 def test_targets_at_rate_and_zero_input_holds(daemon):
+    """Judged on the daemon's own reports: its status counts the ticks and the targets it
+    published, its stamps say when; never the test's clock."""
     _proc, rig, _ = daemon
-    t0 = time.monotonic()
-    time.sleep(2.0)
-    got = rig.targets_since(t0)
-    assert len(got) > 0.5 * 2000, f"{len(got)} targets in 2 s at 1 kHz"
+    first = _newest_status(rig)
+    # two thousand targets later, by the daemon's count
+    assert wait_for(lambda: _newest_status(rig)["targets"] >= first["targets"] + 2000, 60), (
+        first, _newest_status(rig))
+    last = _newest_status(rig)
+    with rig.lock:
+        got = [m for _, m in rig.targets if first["targets"] <= m["seq"] <= last["targets"]]
     seqs = [m["seq"] for m in got]
-    assert seqs == sorted(seqs)
+    assert seqs == sorted(set(seqs)), "targets arrive in order, each once"
+    # Published on loopback with congestion control DROP: nearly all of them arrive.
+    assert len(got) >= 0.5 * (last["targets"] - first["targets"]), len(got)
     poses = np.array([m["pose"] for m in got])
     assert np.allclose(poses, START, atol=1e-9), "no input: the target must not move"
     assert {m["state"] for m in got} == {"carry"}
-    status = rig.status[-1]
+    # Every period of the daemon's clock is a tick or a skipped tick, and it never ticks
+    # faster than its rate.
+    periods = (last["stamp"] - first["stamp"]) * last["rate"]
+    done = (last["ticks"] - first["ticks"]) + (last["skipped_ticks"] - first["skipped_ticks"])
+    assert abs(done - periods) <= 0.02 * periods + 10, (done, periods)
+    assert last["targets"] <= last["ticks"]
     # no input: stopped (or hold, when this loaded machine delays the test's robot thread
     # past the 0.1 s state timeout), never running
     modes = {m["mode"] for m in rig.status[-20:]}
     assert "running" not in modes and "stopped" in modes, modes
-    assert status["skill_name"] == "pour"
-    assert status["ticks"] > 0 and "p99" in status["lateness_ms"] and "p99" in status["compute_ms"]
-    recent = status["recent_ms"]  # the daemon has run for more than a second
-    assert 500 < recent["compute"]["n"] <= 1100 and recent["compute"]["n"] < status["compute_ms"]["n"]
+    assert last["skill_name"] == "pour"
+    assert last["ticks"] > 0 and "p99" in last["lateness_ms"] and "p99" in last["compute_ms"]
+    recent = last["recent_ms"]  # the daemon has run for more than a second
+    assert 0 < recent["compute"]["n"] <= 1.01 * last["rate"]
+    assert recent["compute"]["n"] < last["compute_ms"]["n"]
     assert recent["lateness"]["p50"] <= recent["lateness"]["max"]
 
 
@@ -181,6 +210,7 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
         msgpack.packb({"seq": 1, "stamp": time.time(), "u": [1, 0]}),
         msgpack.packb({"seq": 1, "stamp": time.time(), "u": ["a", 0, 0]}),
     ]
+    status0 = _newest_status(rig)
     for _ in range(10):
         for raw in bad:
             rig.send(None, raw=raw)
@@ -189,7 +219,11 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
         time.sleep(0.002)
         rig.send([float("inf"), 0.0, 0.0])
         time.sleep(0.002)
-    time.sleep(0.3)
+    # the daemon has read the last of them (its seq is the newest it reports), and
+    # published targets after
+    assert wait_for(lambda: _newest_status(rig)["in_seq"] == rig.seq, 10), _newest_status(rig)
+    assert wait_for(lambda: _targets_after(rig, _newest_status(rig)["targets"]), 10)
+    assert _newest_status(rig)["counters"]["nonfinite_input"] >= status0["counters"]["nonfinite_input"] + 20
     assert np.allclose(rig.last()["pose"], before, atol=1e-9)  # (a re-seed rounds)
     assert proc.p.poll() is None, "a malformed message must never be fatal"
     assert wait_for(lambda: sum(v for k, v in rig.status[-1]["dropped"].items()
@@ -217,7 +251,7 @@ def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
         err = msgpack.unpackb(replies[0].err.payload.to_bytes(), raw=False)["error"]
         assert err
     assert "max_angle" in err and ">= 0.0" in err
-    time.sleep(0.1)
+    assert wait_for(lambda: _targets_after(rig, _newest_status(rig)["targets"]), 10)
     assert rig.last()["skill"] == old_id
     # The summary query.
     reply = next(iter(session.get(KEYS.skill, timeout=5.0)))
@@ -231,6 +265,11 @@ def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
     assert new_id == bundle_from_file(ROOT / "skills" / "drawer.yaml").id
     assert wait_for(lambda: rig.last()["skill"] == new_id, 5)
     assert rig.last()["state"] == "reach"
+    # back to the pour, for whoever uses this daemon next
+    pour = bundle_from_file(ROOT / "skills" / "pour.yaml")
+    replies = list(session.get(KEYS.skill_swap, payload=pour.pack(), timeout=30.0))
+    assert len(replies) == 1 and replies[0].ok is not None
+    assert wait_for(lambda: rig.last()["skill"] == old_id, 5)
 
 
 def test_swap_cli_refuses_invalid_file_locally(tmp_path):
@@ -288,7 +327,7 @@ def test_swaps_on_skill_swap_and_with_a_config_file_only_there(tmp_path):
         assert ok and body["id"] == old_id  # summaries still on skill
         ok, body = _reply(list(s.get(KEYS.skill_swap, timeout=10.0)))
         assert not ok and "send a bundle" in body["error"]
-        time.sleep(0.1)
+        assert wait_for(lambda: _targets_after(rig, _newest_status(rig)["targets"]), 10)
         assert rig.last()["skill"] == old_id
         swap = sctd("swap", str(ROOT / "skills" / "drawer.yaml"), "--connect", f"tcp/127.0.0.1:{port}",
                     log=tmp_path / "swap.log")

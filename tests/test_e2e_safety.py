@@ -17,6 +17,7 @@ import time
 
 import msgpack
 import numpy as np
+import pytest
 import zenoh
 
 from sctd.bench.robustness import malformed_bundles
@@ -24,6 +25,8 @@ from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
 from tests.conftest import ROOT, Proc, free_port, sctd, wait_for
+
+pytestmark = pytest.mark.slow  # the daemon and the simulator as processes
 
 KEYS = codec.Keys("edan")
 POUR = str(ROOT / "skills" / "pour.yaml")

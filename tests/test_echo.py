@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import msgpack
+import pytest
 import zenoh
 
 from sctd.cli.echo import Rates, decode, full_key
@@ -42,6 +43,7 @@ def test_rates_over_a_window():
     assert abs(rep["rate_hz"] - 3 / 0.4) < 1e-9
 
 
+@pytest.mark.slow
 def test_echo_and_hz_on_the_daemons_target(daemon):  # noqa: F811
     _, rig, port = daemon
     seen: list[str] = []
@@ -72,6 +74,7 @@ def test_echo_and_hz_on_the_daemons_target(daemon):  # noqa: F811
         sub2.undeclare()
 
 
+@pytest.mark.slow
 def test_a_plain_text_sample_is_shown_as_text(daemon):  # noqa: F811
     _, rig, port = daemon
     proc = subprocess.Popen([sys.executable, "-m", "sctd.cli.main", "echo", "sctd/edan/note", "--json",

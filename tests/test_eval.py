@@ -49,6 +49,7 @@ def _renamed_and_permuted(tmp_path):
     return out
 
 
+@pytest.mark.slow
 def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
     path = _renamed_and_permuted(tmp_path)
     skill = load_skill(path)
@@ -72,6 +73,8 @@ def _real_time_trial(spec, seed, tmp_path, attempts: int = 3):
     return r
 
 
+@pytest.mark.slow
+@pytest.mark.realtime
 def test_lockstep_and_real_time_agree(tmp_path):
     """Over 5 seeded trials, the same outcome in at least 4, and median times within 20 %
     (measured: 4-5 % apart in two runs of these seeds on this 2-core machine)."""
@@ -106,6 +109,7 @@ def test_baseline_runs_with_the_assisted_skills_limits(tmp_path):
     assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf.npz").exists()
 
 
+@pytest.mark.slow
 def test_eval_cli_json_is_one_object(tmp_path):
     """With --json, stdout is one JSON object and nothing else (the table and the
     progress bar go to stderr); --report writes the same object and the figures."""

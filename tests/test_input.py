@@ -168,6 +168,7 @@ def test_bridge_run_keeps_its_rate_bounds_and_ends_with_zero():
     assert [s.u for s in sent[-3:]] == [(0.0, 0.0, 0.0)] * 3 and sent[-1].buttons == (0, 0, 0)
 
 
+@pytest.mark.slow
 def test_every_builtin_backend_loads_and_plug_ins_register_by_entry_point(tmp_path):
     for name in BUILTIN:
         b = get_backend(name)
@@ -214,6 +215,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
                                                                  "SDL_VIDEODRIVER": "dummy"})
 
 
+@pytest.mark.slow
 def test_cli_refuses_bad_flags_and_files_with_exit_2(tmp_path):
     r = _cli("joy")
     assert r.returncode == 2 and "unknown backend 'joy'" in r.stderr and "gamepad" in r.stderr

@@ -184,6 +184,7 @@ def calibration(tmp_path_factory):
     return out, r.stdout
 
 
+@pytest.mark.slow
 def test_calibrate_through_the_playback_board_maps_each_contraction_to_its_axis(calibration):
     path, said = calibration
     for p in PHASES:
@@ -194,6 +195,7 @@ def test_calibrate_through_the_playback_board_maps_each_contraction_to_its_axis(
     _assert_each_contraction_on_its_axis(_phase_means(cal, 12))
 
 
+@pytest.mark.slow
 def test_calibrate_refuses_to_overwrite_without_force(calibration):
     path, _ = calibration
     args = _args("--calibrate", "--board", "synthetic", "--calibration", str(path))
@@ -201,6 +203,7 @@ def test_calibrate_refuses_to_overwrite_without_force(calibration):
         Emg().run_special(args)
 
 
+@pytest.mark.slow
 def test_synthetic_board_reads_within_range_and_opens_no_socket(calibration):
     path, _ = calibration
     before = _sockets()
@@ -216,6 +219,7 @@ def test_synthetic_board_reads_within_range_and_opens_no_socket(calibration):
     assert u.shape == (50, 3) and np.all(np.isfinite(u)) and np.all(np.abs(u) <= 1.0)
 
 
+@pytest.mark.slow
 def test_no_calibration_exits_1_saying_to_calibrate():
     r = subprocess.run([sys.executable, "-m", "sctd_services.input", "emg", "--board", "synthetic"],
                        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60, cwd=ROOT)
@@ -223,6 +227,7 @@ def test_no_calibration_exits_1_saying_to_calibrate():
     assert "emg: no calibration" in r.stderr and "--calibrate" in r.stderr
 
 
+@pytest.mark.slow
 def test_bridge_publishes_the_file_s_contractions(calibration, tmp_path):
     path, _ = calibration
     timeline = [("rest", 3.0), ("+x", 2.0), ("rest", 1.5), ("-y", 2.0), ("rest", 1.5),
@@ -277,6 +282,7 @@ def test_a_dip_in_a_held_co_contraction_keeps_the_axes_at_zero():
     assert cal.mapping(a)[:, 0].max() > 0.3
 
 
+@pytest.mark.slow
 def test_open_refuses_other_channels_and_streaming_boards(calibration):
     path, _ = calibration
     with pytest.raises(InputError, match=r"--channels 1,2 differ from the calibration's"):
@@ -285,6 +291,7 @@ def test_open_refuses_other_channels_and_streaming_boards(calibration):
         Emg().open(None, _args("--calibration", str(path), "--board", "STREAMING_BOARD"))
 
 
+@pytest.mark.slow
 def test_ctrl_c_ends_the_calibration_without_writing(tmp_path):
     rec, out = tmp_path / "long.csv", tmp_path / "cal.json"
     write_playback(str(rec), contractions([("rest", 60.0)], FS, len(CHANNELS), 4), CHANNELS, FS)

@@ -35,6 +35,7 @@ def pad():
         yield p
 
 
+@pytest.mark.slow
 def test_virtual_pad_reads_normalised_through_the_controller_api(pad):
     with Gamepad().open(None, NO_FLAGS) as dev:
         assert dev.name == NAME and dev.axes == 6 and dev.buttons >= 15
@@ -59,6 +60,7 @@ def test_virtual_pad_reads_normalised_through_the_controller_api(pad):
         assert r is not None and r.axes[5] == 0.0 and [k for k, b in enumerate(r.buttons) if b] == [10]
 
 
+@pytest.mark.slow
 def test_xbox_map_numbering_is_sdls():
     """The shipped map's sources and buttons are SDL's game-controller enums."""
     import sdl2
@@ -75,6 +77,7 @@ def test_xbox_map_numbering_is_sdls():
                          "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
 
 
+@pytest.mark.slow
 def test_bridge_with_the_xbox_map_publishes_the_stick_and_deadman(pad):
     sent: list[bytes] = []
     with Gamepad().open(None, NO_FLAGS) as dev:
@@ -88,6 +91,7 @@ def test_bridge_with_the_xbox_map_publishes_the_stick_and_deadman(pad):
     assert list(held.u) == pytest.approx([0.0, 1.0, 0.0]) and held.buttons == (0, 1, 0)
 
 
+@pytest.mark.slow
 def test_unplugged_pad_reads_none_and_is_reopened_by_itself(pad):
     with Gamepad().open(NAME, NO_FLAGS) as dev:
         pad.set_axis(0, 1.0)
@@ -105,6 +109,7 @@ def test_unplugged_pad_reads_none_and_is_reopened_by_itself(pad):
             assert dev.read().axes[2] == pytest.approx(-0.5, abs=1e-4)
 
 
+@pytest.mark.slow
 def test_selector_errors_name_the_devices(pad):
     g = Gamepad()
     with pytest.raises(InputError, match=f"--device 'nosuch' matches none of the devices \\(0: {NAME}\\)"):
@@ -115,6 +120,7 @@ def test_selector_errors_name_the_devices(pad):
         assert dev.name == NAME
 
 
+@pytest.mark.slow
 def test_no_pad_is_an_error_and_a_joystick_without_mapping_is_listed_but_refused():
     g = Gamepad()
     with pytest.raises(InputError, match="gamepad: no device found"):
@@ -136,6 +142,7 @@ def test_no_pad_is_an_error_and_a_joystick_without_mapping_is_listed_but_refused
         sdl_release()
 
 
+@pytest.mark.slow
 def test_mappings_file_makes_a_joystick_a_controller(tmp_path):
     sdl = sdl_acquire()
     try:
@@ -162,6 +169,7 @@ def test_mappings_file_makes_a_joystick_a_controller(tmp_path):
         Gamepad().open(None, argparse.Namespace(gamepad_mappings=str(tmp_path / "nope.txt")))
 
 
+@pytest.mark.slow
 def test_script_plays_on_the_pad_opened_like_a_real_one(tmp_path):
     script = tmp_path / "s.yaml"
     script.write_text("- {at: 0.0, button: 10, pressed: 1}\n- {at: 0.5, axis: 1, value: -1.0}\n"
@@ -203,6 +211,7 @@ def test_bad_scripts_are_refused_naming_the_step(doc, message):
         parse_script(doc, "s.yaml")
 
 
+@pytest.mark.slow
 def test_bad_script_file_exits_2_naming_it(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("- {at: 0, axis: 9, value: 0}\n")
@@ -218,6 +227,7 @@ def test_script_steps_are_played_in_time_order():
     assert [s.kind for s in steps] == ["detach", "attach"]
 
 
+@pytest.mark.slow
 def test_list_names_the_gamepad_backend_and_sees_no_pad(tmp_path):
     env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
     out = subprocess.run([sys.executable, "-m", "sctd_services.input", "--list"], cwd=ROOT, env=env,
@@ -331,6 +341,7 @@ def assert_stops_within_watchdog(targets: list[dict], last_moving_input: codec.I
             f"moved {steps[-1][1]['stamp'] - last_moving_input.stamp:.3f} s after the last input")
 
 
+@pytest.mark.slow
 def test_scripted_pad_drives_the_daemon_and_unplugging_stops_it(tmp_path):
     port = free_port()
     script = tmp_path / "pad.yaml"

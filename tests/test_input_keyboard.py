@@ -136,6 +136,7 @@ def test_backend_refuses_bad_flags_and_a_stdin_that_is_not_a_terminal():
         b.open(None, args())
 
 
+@pytest.mark.slow
 def test_list_shows_the_terminal_when_stdin_is_one():
     master, slave = os.openpty()
     try:
@@ -151,6 +152,7 @@ def test_list_shows_the_terminal_when_stdin_is_one():
 
 # --- on a pseudo-terminal -------------------------------------------------------------
 
+@pytest.mark.slow
 def test_keyboard_on_a_pty_holds_while_repeating_then_zero_and_restores_the_terminal(tmp_path):
     master, slave = os.openpty()
     before = termios.tcgetattr(slave)

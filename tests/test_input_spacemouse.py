@@ -212,6 +212,7 @@ def test_backend_needs_hidapi_and_lists_none_here():
     assert b.devices() == []  # no 3Dconnexion device (and no /dev/hidraw) on this machine
 
 
+@pytest.mark.slow
 def test_list_names_spacemouse_with_no_device_and_keyboard():
     out = subprocess.run([sys.executable, "-m", "sctd_services.input", "--list"], cwd=ROOT,
                          capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
@@ -222,6 +223,7 @@ def test_list_names_spacemouse_with_no_device_and_keyboard():
     assert any(line.startswith("keyboard ") for line in lines)
 
 
+@pytest.mark.slow
 def test_fake_hid_end_to_end_publishes_six_axes_following_the_script(tmp_path):
     a = (175, -175, 350, -350, 0, 35)  # -> 0.5, 0.5, -1, -1, 0, -0.1 (y, z, ry, rz flip)
     b = (0, 350, 0, 0, 350, 0)

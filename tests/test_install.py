@@ -25,6 +25,8 @@ from sctd.runtime import codec
 from sctd.runtime.zsession import close_session, open_session
 from tests.conftest import ROOT, free_port, wait_for
 
+pytestmark = pytest.mark.slow  # builds the wheel and installs it in a fresh virtualenv
+
 IGNORE = shutil.ignore_patterns(".venv", ".git", "build", "*.egg-info", "__pycache__", ".pytest_cache",
                                 ".mypy_cache", ".ruff_cache", ".hypothesis", "out")
 

@@ -20,7 +20,9 @@ from sctd.runtime.zsession import open_session
 from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
 
 KEYS = codec.Keys("edan")
-pytestmark = pytest.mark.timeout(900)  # three trainings and their checks on a loaded 2-core machine
+# the learner, the daemon and the simulator as processes; three trainings and their
+# checks on a loaded 2-core machine
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]
 DEMOS = ROOT / "skills" / "demos" / "drawer"
 
 

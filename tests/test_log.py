@@ -58,6 +58,7 @@ def logged(daemon, tmp_path):  # noqa: F811
     return path, port
 
 
+@pytest.mark.slow
 def test_the_log_holds_every_contract_key_as_json_with_its_schema(logged):
     path, _ = logged
     with path.open("rb") as fh:
@@ -79,12 +80,14 @@ def test_the_log_holds_every_contract_key_as_json_with_its_schema(logged):
         assert len(seqs) > 100 and seqs == sorted(seqs)
 
 
+@pytest.mark.slow
 def test_replay_refuses_over_a_live_daemon(logged):
     path, port = logged
     out = run_sctd("replay", str(path), "--connect", f"tcp/127.0.0.1:{port}")
     assert out.returncode == 1 and "live program" in out.stderr
 
 
+@pytest.mark.slow
 def test_replay_publishes_observations_and_commands_only_with_all(tmp_path):
     # A log written without a daemon (its keys as a recorded run would have them).
     from sctd.cli.log import McapLog

@@ -20,6 +20,8 @@ from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.runtime.controller import RuntimeConfig
 from tests.conftest import wait_for
 
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # network namespaces, a process per host
+
 STATE_TIMEOUT_S = RuntimeConfig().state_timeout
 RATE_HZ = RuntimeConfig().rate
 OBSERVER_HZ = 100.0  # the observer keeps at most this many samples a second of each key

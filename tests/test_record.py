@@ -68,6 +68,7 @@ def test_publish_final_never_overwrites(tmp_path):
     assert (tmp_path / "demo_000.csv").read_text() == "keep me"
 
 
+@pytest.mark.slow
 def test_record_until_sigint_against_a_fake_robot(tmp_path):
     """A robot that moves the ee along world +x in front of a turned object: rows are
     in the object frame (x decreasing), t from 0; SIGINT finishes the file; a second
@@ -130,6 +131,7 @@ def test_record_until_sigint_against_a_fake_robot(tmp_path):
     assert port_is_free(port)
 
 
+@pytest.mark.slow
 def test_record_from_the_sim_with_the_announced_task_object(tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"

@@ -225,6 +225,7 @@ def _status_with(rig: Rig, pred, timeout: float = 20.0) -> dict:
     return found[-1]
 
 
+@pytest.mark.slow
 def test_target_pose_is_the_target_with_rmw_zenohs_attachment_and_tokens(ros_daemon):
     _proc, rig, side = ros_daemon
     with rig.lock:
@@ -259,6 +260,7 @@ def test_target_pose_is_the_target_with_rmw_zenohs_attachment_and_tokens(ros_dae
     assert gids == {ros.gid(pub)}
 
 
+@pytest.mark.slow
 def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_daemon):
     _proc, rig, side = ros_daemon
     start = rig.last()["pose"]
@@ -283,6 +285,7 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
     assert s["ros"]["joy_received"] > 0 and s["ros"]["target_pose_sent"] > 0
 
 
+@pytest.mark.slow
 def test_sim_publishes_its_ee_pose_as_the_state_pose(tmp_path):
     port = free_port()
     sim = sctd("sim", "--scene", "pour", "--listen", f"tcp/127.0.0.1:{port}", "--ros",
@@ -326,6 +329,7 @@ def test_sim_publishes_its_ee_pose_as_the_state_pose(tmp_path):
     (["--ros-rate", "0"], "--ros-rate"),
     (["--ros-joy-map", "/nonexistent/map.yaml"], "/nonexistent/map.yaml"),
 ])
+@pytest.mark.slow
 def test_bad_ros_flags_are_refused_naming_the_flag(tmp_path, flags, message):
     proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen",
                 f"tcp/127.0.0.1:{free_port()}", "--ros", *flags, log=tmp_path / "run.log")

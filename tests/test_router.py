@@ -22,6 +22,8 @@ from sctd.cli.router import CLOSE_WAIT
 from sctd.runtime.zsession import close_session
 from tests.conftest import free_port, run_sctd, sctd, wait_for
 
+pytestmark = pytest.mark.slow  # sctd router as a process
+
 # listening again and again (a port another socket holds): how the loopback defaults do it
 RETRY = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 2}
 

@@ -65,6 +65,7 @@ def test_two_buses_talk_over_zenoh():
         assert isinstance(a, ZenohBus) and a.dropped == 0
 
 
+@pytest.mark.slow
 def test_can_logger_watches_a_running_sim_and_frames_reach_its_bus(tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"

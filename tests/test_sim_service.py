@@ -69,6 +69,7 @@ def test_parse_faults():
         parse_faults("drop=2")
 
 
+@pytest.mark.slow
 def test_sim_publishes_follows_targets_and_counts_malformed_ones(tmp_path):
     proc, port = start_sim(tmp_path, "--scene", "pour")
     try:
@@ -136,6 +137,7 @@ def test_sim_publishes_follows_targets_and_counts_malformed_ones(tmp_path):
     assert port_is_free(port)
 
 
+@pytest.mark.slow
 def test_sim_rejects_bad_flags(tmp_path):
     proc = sctd("sim", "--faults", "explode=1", log=tmp_path / "bad.log")
     assert proc.p.wait(60) == 2
@@ -143,6 +145,7 @@ def test_sim_rejects_bad_flags(tmp_path):
     proc.stop()
 
 
+@pytest.mark.slow
 def test_demo_with_the_sim_opens_the_drawer(tmp_path):
     """`sctd demo --skill skills/drawer.yaml` on the Pinocchio sim reaches `pull`; a watcher
     on the scene key sees the drawer open."""
@@ -176,6 +179,7 @@ def _demo_port(text: str) -> int | None:
     return None
 
 
+@pytest.mark.slow
 def test_socketcan_bus_is_optional_and_refused_clearly_when_absent(tmp_path):
     """The joint bus uses a kernel socketcan interface only when asked and present;
     `auto` falls back to the in-process virtual bus."""
@@ -221,6 +225,7 @@ def _turn(w: Watcher, pub: zenoh.Publisher, R_goal, hold: float = 0.0) -> None:
     raise AssertionError(f"the hand did not turn there: {n:.3f} rad to go")
 
 
+@pytest.mark.slow
 def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_path):
     """`sim/reset`: a malformed request (not a map, a mistyped field, another scene's)
     gets an error reply and changes nothing; a valid one puts the scene's task state back

@@ -181,6 +181,7 @@ def test_view_flags_are_checked(monkeypatch, capsys):
 
 
 # -- as a real process -------------------------------------------------------------------
+@pytest.mark.slow
 def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tmp_path):
     """`sctd sim --scene pour --view`: the URL is printed, the page answers on 127.0.0.1
     only, the scene follows the arm driven over Zenoh, and SIGTERM stops it all."""
@@ -222,6 +223,7 @@ def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tm
     assert port_is_free(port) and listeners(port) == []
 
 
+@pytest.mark.slow
 def test_view_port_option_and_sigint(tmp_path):
     """`--view-port P` serves on exactly 127.0.0.1:P; a second sim asking for P is refused
     (exit 2); SIGINT stops the first one cleanly and frees P."""

@@ -97,7 +97,7 @@ def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
     g = scene_geometry(task)
     lim, guard = StreamLimits(), TargetLimits()
     assert lim.max_speed < guard.max_target_speed and lim.max_turn < guard.max_target_angular_speed
-    for n in range(1, 6):
+    for n in (1, 3, 5):  # demonstrations of one seed, each drawn anew
         p = plan_demonstration(g, 3, n)
         first, second = task_motions(p, g)
         A, B = _samples(first), _samples(second)
@@ -186,6 +186,7 @@ def _check_taught(out, published, task, obj, n):
     return demos
 
 
+@pytest.mark.slow
 def test_teach_pour_keeps_two_and_discards_the_spilling_one(tmp_path):
     """`sctd teach --scene pour --demos 2 --mistake 2` (its own simulator): attempt 2 spills
     and is discarded, neither written nor published; attempts 1 and 3 are kept."""
@@ -214,6 +215,7 @@ def test_teach_pour_keeps_two_and_discards_the_spilling_one(tmp_path):
     assert port_is_free(port)
 
 
+@pytest.mark.slow
 def test_teach_drawer_joins_a_running_simulator(tmp_path):
     """`sctd teach --scene drawer --connect EP` joins a running `sctd sim` (one for pour is
     refused there, exit 2); the mistaken attempt 1 never grasps the handle and is
@@ -252,6 +254,7 @@ def test_teach_drawer_joins_a_running_simulator(tmp_path):
     assert port_is_free(port)
 
 
+@pytest.mark.slow
 def test_teach_refuses_while_a_daemon_commands_the_robot(tmp_path):
     """A shared-control daemon's status on sctd/edan/status: sctd teach exits 2 saying so,
     before it publishes a single target, and writes nothing."""
@@ -304,6 +307,7 @@ def _alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
+@pytest.mark.slow
 def test_teach_stops_what_it_started_on_sigterm(tmp_path):
     """SIGTERM while teaching with --then-learn (a timeout's signal): sctd teach exits 143
     and the simulator and learner it started are gone, their port freed."""

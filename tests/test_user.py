@@ -174,6 +174,7 @@ def test_user_learns_from_the_input_held_between_two_observations():
     assert np.allclose(user._applied(0.2, 0.3), [0.0, -1.0])
 
 
+@pytest.mark.slow
 def test_user_client_exits_1_when_no_target_arrives():
     """Alone on a loopback port, the Zenoh client drives for its duration, sees no
     target and says so with exit code 1 (it used to exit 0 whatever happened)."""

@@ -29,6 +29,21 @@ def _ephemeral_range() -> tuple[int, int]:
         return 32768, 60999  # Linux's default
 
 
+def _port_range() -> tuple[int, int]:
+    given = os.environ.get("SCTD_PORT_RANGE", "")
+    if given:
+        try:
+            low, high = (int(x) for x in given.split("-"))
+        except ValueError:
+            raise ValueError(f"SCTD_PORT_RANGE: {given!r} is not LOW-HIGH") from None
+        if not 1024 <= low < high <= 65535:
+            raise ValueError(f"SCTD_PORT_RANGE: {given!r} is not within 1024-65535")
+        return low, high
+    low, _high = _ephemeral_range()
+    top = min(low, 65536) - 1
+    return max(10000, top - 15000), top
+
+
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago, and that nothing else will
     be given in the meantime.
@@ -39,11 +54,14 @@ def free_port() -> int:
     any ephemeral allocation can take it, e.g. a test's own session listening on
     ``tcp/127.0.0.1:0``, which then connects to itself while the child retries its
     listen forever. A port is not handed out twice by one process.
+
+    ``SCTD_PORT_RANGE=LOW-HIGH`` narrows the draw, so that processes running side by
+    side (the test suite's parallel workers, and the programs they start) can never be
+    handed the same port.
     """
-    low, _high = _ephemeral_range()
-    top = min(low, 65536) - 1
-    bottom = max(10000, top - 15000)
-    if top - bottom < 1000:  # an unusual range: fall back to the kernel's choice
+    bottom, top = _port_range()
+    if top - bottom < 1000 and not os.environ.get("SCTD_PORT_RANGE"):
+        # an unusual ephemeral range: fall back to the kernel's choice
         with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
             s.bind(("127.0.0.1", 0))
             return s.getsockname()[1]
