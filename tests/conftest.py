@@ -82,15 +82,32 @@ def private_store(tmp_path_factory):
         os.environ["SCTD_STORE"] = old
 
 
-@pytest.fixture(autouse=True)
-def no_leaked_processes():
-    yield
-    leaked = [p for p in _live if p.poll() is None]
+def _reap(since: set[int]) -> list[subprocess.Popen]:
+    """Kill the children started after ``since`` (their pids) that still run."""
+    leaked = [p for p in _live if p.pid not in since and p.poll() is None]
     for p in leaked:
         os.killpg(p.pid, signal.SIGKILL)
         p.wait()
-    _live.clear()
-    assert not leaked, f"test left {len(leaked)} process(es) running"
+    _live[:] = [p for p in _live if p.pid in since and p.poll() is None]
+    return leaked
+
+
+@pytest.fixture(autouse=True, scope="module")
+def no_processes_left_by_the_module():
+    """A module's shared processes (a module-scoped daemon) are stopped by the end of
+    the module."""
+    yield
+    leaked = _reap(set())
+    assert not leaked, f"the module left {len(leaked)} process(es) running: {[p.args for p in leaked]}"
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_processes():
+    """A test stops what it started (a module's shared processes are not its own)."""
+    before = {p.pid for p in _live}
+    yield
+    leaked = _reap(before)
+    assert not leaked, f"test left {len(leaked)} process(es) running: {[p.args for p in leaked]}"
 
 
 def wait_for(pred, timeout: float = 10.0, interval: float = 0.02):

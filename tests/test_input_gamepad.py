@@ -358,7 +358,15 @@ def test_scripted_pad_drives_the_daemon_and_unplugging_stops_it(tmp_path):
         assert wait_for(lambda: len(rig.inputs_where(pushed(0))) >= 50, 40), bridge.output()
         rc = bridge.stop()
         assert rc == 0, bridge.output()
-        time.sleep(0.5)  # the daemon's targets after the last input
+
+        def past_the_last_input(ticks: int) -> bool:
+            """The daemon published ``ticks`` targets that follow the bridge's last input
+            (past the 0.1 s watchdog at 1 kHz)."""
+            with rig.lock:
+                last = rig.inputs[-1].seq
+                return sum(t["in_seq"] == last for t in rig.targets) >= ticks
+
+        assert wait_for(lambda: past_the_last_input(150), 20)
     finally:
         if bridge is not None:
             bridge.stop()

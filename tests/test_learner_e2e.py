@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import signal
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -128,7 +127,8 @@ def test_taught_demonstrations_are_stored_trained_checked_and_swapped(tmp_path, 
                            log="slow.log")
     assert rc == 1 and not slow["passed"] and not slow["swapped"], out
     assert slow["evaluation"]["successes"] == 0 and "kept the active skill" in slow["reason"]
-    time.sleep(0.5)
+    seen = len(watch.status)
+    assert wait_for(lambda: len(watch.status) > seen + 2, 10)  # statuses after the reply
     assert watch.skill() == reply["id"]
 
     # a second good skill, then a rollback to the first one by its reference
@@ -154,8 +154,8 @@ def test_kill_9_while_checking_leaves_the_daemon_ticking(tmp_path, loop):
         procs["learner"].p.send_signal(signal.SIGKILL)
         procs["learner"].p.wait(10)
         ticks = len(watch.status)
-        time.sleep(1.0)
-        assert len(watch.status) > ticks + 5 and watch.status[-1]["mode"] in ("stopped", "running")
+        assert wait_for(lambda: len(watch.status) > ticks + 5, 10), "the daemon goes on"
+        assert watch.status[-1]["mode"] in ("stopped", "running")
         assert watch.skill() == skill  # the daemon keeps its skill
         # a restarted learner finds its store: the demonstrations and the trained skill
         procs["learner"] = sctd(*learner_args, log=tmp_path / "learner2.log")
