@@ -1,6 +1,5 @@
-"""Feature frames found in the demonstrations feed the linear learner (issue 14, item
-4): the pour's bottle tip and the crank's axis are found with no --frame; given frames
-still win."""
+"""Feature frames found in the demonstrations feed the linear learner: the pour's
+bottle tip and the crank's axis are found with no --frame; given frames still win."""
 
 from __future__ import annotations
 

@@ -116,7 +116,7 @@ def test_drawer_two_translation_fields():
         assert err < 5.0
 
 
-# --- model selection (issue 14): the field each phase of a generated task is ------------
+# --- model selection: the field each phase of a generated task is -----------------------
 
 
 def _phase_kinds(task: str, seed: int, **kw):

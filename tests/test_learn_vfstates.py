@@ -1,4 +1,4 @@
-"""Sequential vector fields become states (issue 14, item 3): a state per field in the
+"""Sequential vector fields become states: a state per field in the
 order the demonstrations use them, on when the hand is where they switched."""
 
 from __future__ import annotations

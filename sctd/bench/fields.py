@@ -1,4 +1,4 @@
-"""Learning beyond the thesis (issue 14): which field each phase of a generated task is,
+"""Learning beyond the thesis: which field each phase of a generated task is,
 against the thesis' inlier score in the same run; centre and axis errors; automatic
 feature frames against given ones; learning times.
 

@@ -1,4 +1,4 @@
-"""Learning benchmark: the figures issue 3 asks for, on generated demonstrations.
+"""Learning benchmark: segmentation, fit and speed figures on generated demonstrations.
 
 ``run_bench(seed=0, n_demos=10) -> dict`` and ``format_bench(result) -> str``; run as
 ``sctd bench learn [--seed N] [--n-demos N] [--json]``. It prints figures; it asserts

@@ -1,4 +1,4 @@
-"""Vector fields used one after the other become states (issue 14, item 3).
+"""Vector fields used one after the other become states.
 
 The thesis blends all fields of a skill in one state (eqs. 4.31-4.32). Where the
 demonstrations use them in sequence -- reach the handle, then pull -- and switch from one

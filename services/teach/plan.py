@@ -1,7 +1,7 @@
 """What each demonstration will be: the variation a person shows, seeded (pure numpy).
 
 A person teaching a task by hand never shows it twice the same way. Between
-demonstrations (the ranges of :class:`Variation`, issue 11) the hand starts elsewhere
+demonstrations (the ranges of :class:`Variation`) the hand starts elsewhere
 (within +-10 cm of the scene's start, each axis), its path bends through a different
 via point, it moves faster or slower (+-30 %), and a pour tilts the bottle about an
 axis turned by up to +-0.3 rad of yaw from facing the mug, with the opening 3-6 cm
