@@ -52,7 +52,15 @@ class Watch:
             s.undeclare()
 
 
+def _learner_listens(session) -> None:
+    """Until the learner's subscription has reached this session: a put before it would
+    be lost (Zenoh keeps nothing for a subscriber it does not know yet)."""
+    with session.declare_publisher(KEYS.demos("drawer", "probe")) as pub:
+        assert wait_for(lambda: pub.matching_status.matching, 30), "the learner subscribes to demos"
+
+
 def _publish_demos(session) -> list[str]:
+    _learner_listens(session)
     names = []
     for d in read_demos(DEMOS):
         name = Path(d.name).stem

@@ -3,8 +3,8 @@
 - ``slow``: the test starts processes or network namespaces, runs in real time, installs
   or fuzzes. ``make test`` leaves these out; ``make test-all`` runs everything.
 - ``realtime``: a slow test whose verdict depends on the machine keeping time (tick
-  lateness, rates measured against a live daemon). ``make test-all`` runs these alone,
-  after the parallel part, never beside another test.
+  lateness, rates measured against a live daemon). ``make test-all`` runs the slow tier
+  one test at a time, so these never run beside another test.
 
 A test not marked ``slow`` that starts a process (``subprocess``, ``multiprocessing``,
 ``os.fork``, ``os.posix_spawn``, a pty) fails at the call that starts it, with the call

@@ -5,13 +5,15 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from .model import VectorFieldModel
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
@@ -112,6 +114,8 @@ class Neighbours:
     """
 
     def __init__(self, model: VectorFieldModel):
+        from scipy.spatial import cKDTree  # here: 0.6 s to import, and only vector fields need it
+
         self.model = model
         self.tree = cKDTree(model.points)
         w = np.array([f.weight for f in model.fields], dtype=float)
