@@ -317,7 +317,9 @@ def _windows(status: list[dict], lock: threading.Lock, k0: int, settle: float = 
     (after ``settle`` s, so that the last second's window is in)."""
     time.sleep(settle)
     with lock:
-        windows = [m["recent_ms"]["lateness"] for m in status[k0:] if m.get("recent_ms")]
+        reports = [m["recent_ms"]["lateness"] for m in status[k0:] if m.get("recent_ms")]
+    # every status report (10 a second) repeats the newest whole window's summary
+    windows = [w for k, w in enumerate(reports) if k == 0 or w != reports[k - 1]]
     return {"p99_ms": max((w["p99"] for w in windows), default=0.0),
             "max_ms": max((w["max"] for w in windows), default=0.0), "windows": len(windows)}
 
