@@ -82,7 +82,7 @@ class VirtualPad:
     """
 
     def __init__(self, name: str = NAME):
-        from .gamepad import sdl_acquire, sdl_release
+        from .sdl import sdl_acquire, sdl_release
 
         self.name = name
         self._sdl = sdl_acquire()
