@@ -1,5 +1,5 @@
 """`sctd bench input` runs end to end and reports what it measured (its figures are for
-the README; the suite asserts no times)."""
+docs/benchmarks.md; the suite asserts no times)."""
 
 from __future__ import annotations
 
