@@ -146,6 +146,7 @@ def test_sim_rejects_bad_flags(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.realtime  # a whole drawer trial with the simulator at the wall clock's pace
 def test_demo_with_the_sim_opens_the_drawer(tmp_path):
     """`sctd demo --skill skills/drawer.yaml` on the Pinocchio sim reaches `pull`; a watcher
     on the scene key sees the drawer open."""
