@@ -27,10 +27,12 @@ teach: setup
 	$(BIN)/sctd teach --scene pour --then-learn vf --swap --out $$(mktemp -d)/pour-taught
 
 # The tiers (tests/tiers.py): the fast tier is every test not marked slow; it starts no
-# process, and runs on $(JOBS) workers. test-all then runs the slow tier in one process,
-# one test at a time: its tests start daemons, simulators and routers that use more
-# than a core between them, and two of them side by side on this 2-core machine are
-# slower than one after the other (measured: 20.6 min against 16) and miss deadlines.
+# process, and runs on $(JOBS) workers. test-all runs every test that does not need the
+# wall clock to itself on $(JOBS) workers too, a module to a worker (--dist loadscope:
+# a module's shared daemon is started once), and then the tests marked realtime in one
+# process, one at a time: they compare what runs at the wall clock's pace (a trial, a
+# router restart across hosts), and two of them side by side on this 2-core machine
+# miss deadlines they are there to keep.
 JOBS ?= 2
 PYTEST := $(BIN)/python -m pytest -q
 
@@ -38,8 +40,8 @@ test: setup
 	$(PYTEST) -m "not slow" -n $(JOBS)
 
 test-all: setup
-	$(PYTEST) -m "not slow" -n $(JOBS); a=$$?; \
-	$(PYTEST) -m slow -p no:xdist --durations=20; b=$$?; \
+	$(PYTEST) -m "not realtime" -n $(JOBS) --dist loadscope --durations=15; a=$$?; \
+	$(PYTEST) -m realtime -p no:xdist --durations=5; b=$$?; \
 	test $$a -eq 0 -a $$b -eq 0
 
 lint: setup

@@ -54,11 +54,13 @@ def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
     path = _renamed_and_permuted(tmp_path)
     skill = load_skill(path)
     assert {s.name for s in skill.states} == {"mode_0", "mode_1", "mode_2"}
-    spec = TaskSpec("pour")
-    for seed in (0, 1):
-        a = lockstep.run_trial(load_skill(POUR), spec, seed)
-        b = lockstep.run_trial(skill, spec, seed)
-        assert a.outcome == "success" and b.outcome == "success", (a, b)
+    # One seed: the same person pours with either file, and about as fast (measured:
+    # 18.2 s and 18.4 s; the user reads the permuted mapping, so the inputs, and with
+    # them the times, differ a little)
+    a = lockstep.run_trial(load_skill(POUR), TaskSpec("pour"), 0)
+    b = lockstep.run_trial(skill, TaskSpec("pour"), 0)
+    assert a.outcome == "success" and b.outcome == "success", (a, b)
+    assert a.time_s is not None and b.time_s is not None and abs(a.time_s - b.time_s) <= 0.1 * a.time_s, (a, b)
 
 
 def _real_time_trial(spec, seed, tmp_path, attempts: int = 3):
@@ -76,15 +78,20 @@ def _real_time_trial(spec, seed, tmp_path, attempts: int = 3):
 @pytest.mark.slow
 @pytest.mark.realtime
 def test_lockstep_and_real_time_agree(tmp_path):
-    """Over 5 seeded trials, the same outcome in at least 4, and median times within 20 %
-    (measured: 4-5 % apart in two runs of these seeds on this 2-core machine)."""
+    """Over 3 seeded trials, the same outcome in at least 2, and median times within 20 %
+    (measured: 4-5 % apart over seeds 0-4 on this 2-core machine). Both paths run the
+    same tick (:class:`~sctd.runtime.driver.TickDriver`, pinned to the bit by
+    ``tests/test_driver.py``); what this compares is the rest: the simulator at the wall
+    clock's pace, three processes and Zenoh between them. The seeds are the three of 0-5
+    with the shortest pours (15-16 s, where 0, 1 and 4 take 18 s): real-time trials cost
+    their length in wall-clock time."""
     spec = TaskSpec("pour")
-    seeds = range(5)
+    seeds = (2, 3, 5)
     lock = [lockstep.run_trial(load_skill(POUR), spec, s) for s in seeds]
     real = [_real_time_trial(spec, s, tmp_path) for s in seeds]
     assert all(r.sim_rtf is None for r in lock) and all(r.sim_rtf and r.sim_rtf > 0 for r in real)
     same = sum(a.outcome == b.outcome for a, b in zip(lock, real, strict=True))
-    assert same >= 4, ([a.outcome for a in lock], [(b.outcome, b.sim_rtf) for b in real])
+    assert same >= 2, ([a.outcome for a in lock], [(b.outcome, b.sim_rtf) for b in real])
     tl = [r.time_s for r in lock if r.time_s is not None]
     tr = [r.time_s for r in real if r.time_s is not None]
     assert tl and tr
@@ -114,7 +121,7 @@ def test_eval_cli_json_is_one_object(tmp_path):
     """With --json, stdout is one JSON object and nothing else (the table and the
     progress bar go to stderr); --report writes the same object and the figures."""
     proc = subprocess.run([sys.executable, "-m", "sctd.cli.main", "eval", "--skill", str(POUR),
-                           "--trials", "2", "--lockstep", "--jobs", "1", "--json",
+                           "--trials", "1", "--lockstep", "--jobs", "1", "--json",
                            "--report", str(tmp_path / "rep")],
                           capture_output=True, text=True, timeout=600, cwd=ROOT, check=False)
     assert proc.returncode == 0, proc.stderr
@@ -125,7 +132,7 @@ def test_eval_cli_json_is_one_object(tmp_path):
                 "dtw", "mode_switches_mean", "switch_time_s_mean", "effort_mean", "stuck", "limits",
                 "per_trial"):
         assert key in r, key
-    assert doc["task"] == "pour" and r["trials"] == 2 and len(r["per_trial"]) == 2
+    assert doc["task"] == "pour" and r["trials"] == 1 and len(r["per_trial"]) == 1
     assert r["skill"] == str(POUR)
     assert r["successes"] == sum(t["outcome"] == "success" for t in r["per_trial"])
     assert json.loads((tmp_path / "rep" / "evaluation.json").read_text())["results"][0]["id"] == r["id"]
