@@ -14,7 +14,7 @@ two recorders never clobber each other), so a demonstration file only ever appea
 complete. A recording shorter than the learner's minimum (10 rows) is discarded.
 
 The finished demonstration is also published on ``sctd/<robot>/demos/<task>/<name>``
-(:func:`sctd.runtime.codec.encode_demo`: the same rows as the file, ``name`` its stem,
+(:func:`sctd.wire.codec.encode_demo`: the same rows as the file, ``name`` its stem,
 ``task`` from ``--task``, else the scene the simulator announces, else the object), so a
 learner on another host gets it.
 
@@ -43,10 +43,9 @@ from typing import Any, TextIO
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.codec import DEFAULT_ROBOT
-from sctd.runtime.timing import Ticker
-from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
+from sctd.timing import Ticker
+from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)  # the CSV header: the learner's columns (sctd.learn.demos)
 MIN_ROWS = codec.MIN_DEMO_ROWS  # sctd.learn.demos.MIN_SAMPLES: the learner refuses shorter ones
@@ -102,7 +101,7 @@ class Recorder:
     def __init__(self, session: zenoh.Session, robot: str, object_name: str | None,
                  task: str | None = None) -> None:
         self.session = session
-        self.keys = codec.Keys(robot)
+        self.keys = Keys(robot)
         self.object_name = object_name
         self.state: codec.StateMsg | None = None
         self.objects: dict[str, list[float]] = {}

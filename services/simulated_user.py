@@ -26,9 +26,9 @@ from typing import Any
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.timing import RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
+from sctd.timing import RoundTrips, Ticker, set_timer_slack
+from sctd.wire import Keys, codec
+from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .user import INTENTS, PROFILES, Observation, SimulatedUser
 
@@ -43,7 +43,7 @@ class UserClient:
     def __init__(self, session: zenoh.Session, user: SimulatedUser, robot: str = "edan",
                  device: str = "simuser", warmup: float = 0.5):
         self.user = user
-        self.keys = codec.Keys(robot)
+        self.keys = Keys(robot)
         self.lock = threading.Lock()
         self.latency = RoundTrips()
         self.warmup = warmup
@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     # The hand's pose at 250 Hz is plenty for a person deciding at 100 Hz: Zenoh drops the
     # rest of the state's 1 kHz on arrival, leaving the CPU to the simulator and the daemon
     # (the targets, whose in_seq the latency measurement needs, all arrive).
-    with session_from_args(args, rate_limits=[(codec.Keys(args.robot).state, 250.0)]) as session, \
+    with session_from_args(args, rate_limits=[(Keys(args.robot).state, 250.0)]) as session, \
             UserClient(session, user, args.robot, args.device, args.warmup) as client:
         elapsed = _drive(client, args, stop)
     report = _report(client, args, elapsed)

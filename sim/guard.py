@@ -4,16 +4,37 @@ follows a target only when it is near where the arm is and implies a speed it co
 take, and never one stamped before the simulator started.
 
 Pure Python on flat poses (:mod:`sctd.se3`); the ``sctd sim`` service and the kinematic
-stand-in robot both use it.
+stand-in robot both use it. Its distance and angle between poses are its own, written
+apart from the daemon's safety code (:mod:`sctd.runtime.safety`) and pinned by tests of
+their own: a check on the runtime that shared the runtime's code would not be
+independent of it. ``make lint`` forbids the simulator to import the runtime.
 """
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field, fields
 
 from sctd import se3
-from sctd.runtime.safety import separated, separation
+
+
+def distance_and_angle(F_a: se3.Flat, F_b: se3.Flat) -> tuple[float, float]:
+    """Distance (m) between the origins of two flat poses (row-major rotation, then
+    translation) and the angle (rad, in [0, pi]) of the rotation between them.
+
+    The angle of ``M = R_a^T R_b`` is ``atan2(|vee(M - M^T)| / 2, (tr M - 1) / 2)``:
+    sine and cosine together, accurate near 0 and near pi alike.
+    """
+    a, b = F_a, F_b
+    # M[i][j] = sum_k R_a[k][i] * R_b[k][j]; only the trace and the skew part are needed
+    def m(i: int, j: int) -> float:
+        return a[i] * b[j] + a[3 + i] * b[3 + j] + a[6 + i] * b[6 + j]
+    trace = m(0, 0) + m(1, 1) + m(2, 2)
+    sx, sy, sz = m(2, 1) - m(1, 2), m(0, 2) - m(2, 0), m(1, 0) - m(0, 1)
+    angle = math.atan2(0.5 * math.sqrt(sx * sx + sy * sy + sz * sz), 0.5 * (trace - 1.0))
+    dx, dy, dz = b[9] - a[9], b[10] - a[10], b[11] - a[11]
+    return math.sqrt(dx * dx + dy * dy + dz * dz), angle
 
 
 def _limit(default: float, help: str):
@@ -88,7 +109,8 @@ class TargetGuard:
         reason = None
         if self.stamp_check and stamp < self.started:
             reason = "before_start"
-        elif separated(F, F_measured, lim.max_target_offset, lim.max_target_offset_rotation):
+        elif _beyond(distance_and_angle(F, F_measured), lim.max_target_offset,
+                     lim.max_target_offset_rotation):
             reason = "offset"
         elif following and self._last is not None:
             F_prev, stamp_prev = self._last
@@ -96,8 +118,8 @@ class TargetGuard:
                 reason = "out_of_order"
             else:
                 dt = max(stamp - stamp_prev, self.period)
-                d, angle = separation(F_prev, F)
-                if d > lim.max_target_speed * dt or angle > lim.max_target_angular_speed * dt:
+                if _beyond(distance_and_angle(F_prev, F), lim.max_target_speed * dt,
+                           lim.max_target_angular_speed * dt):
                     reason = "speed"
         if reason is not None:
             self.rejected[reason] += 1
@@ -109,3 +131,7 @@ class TargetGuard:
     @property
     def total_rejected(self) -> int:
         return sum(self.rejected.values())
+
+
+def _beyond(d_angle: tuple[float, float], max_distance: float, max_angle: float) -> bool:
+    return d_angle[0] > max_distance or d_angle[1] > max_angle

@@ -21,10 +21,9 @@ import numpy as np
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.safety import interpolate
-from sctd.runtime.timing import Ticker, set_timer_slack
-from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+from sctd.timing import Ticker, set_timer_slack
+from sctd.wire import Keys, codec
+from sctd.wire.session import add_zenoh_arguments, session_from_args
 
 from .guard import TargetGuard, TargetLimits
 
@@ -64,6 +63,17 @@ def kinematic_scene(name: str) -> KinematicScene:
     raise ValueError(f"unknown scene {name!r} (pour, drawer)")
 
 
+def towards(T_a: np.ndarray, T_b: np.ndarray, s: float) -> np.ndarray:
+    """The pose a fraction ``s`` of the way from ``T_a`` to ``T_b`` (4x4): the origin on
+    the straight line, the orientation ``R_a exp(s log(R_a^T R_b))``. The stand-in
+    robot's own motion, apart from the runtime's step limiting."""
+    R_a, R_b = T_a[:3, :3], T_b[:3, :3]
+    T = np.eye(4)
+    T[:3, :3] = R_a @ se3.matrix_from_rotvec(s * se3.rotvec_from_matrix(R_a.T @ R_b))
+    T[:3, 3] = T_a[:3, 3] + s * (T_b[:3, 3] - T_a[:3, 3])
+    return T
+
+
 class KinematicRobot:
     """Per-cycle model: the ee pose relaxes towards the target with time constant tau.
 
@@ -86,7 +96,7 @@ class KinematicRobot:
     def step(self, dt: float) -> None:
         if self.T_world_target is not None:
             a = 1.0 - math.exp(-dt / self.tau)
-            self.T_world_ee = interpolate(self.T_world_ee, self.T_world_target, a)
+            self.T_world_ee = towards(self.T_world_ee, self.T_world_target, a)
         if self._handle0 is not None:
             d = self.T_world_ee[:3, 3] - self._handle0[:3, 3]
             if not self.grasped and np.linalg.norm(d) < self.grasp_radius:
@@ -120,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="sctd-kinematic", description=__doc__.split("\n\n")[0])
     add_arguments(p)
     args = p.parse_args(argv)
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
     robot = KinematicRobot(kinematic_scene(args.scene), tau=args.tau)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 
-from sctd.runtime.codec import DEFAULT_ROBOT
-from sctd.runtime.ros_options import add_ros_arguments
-from sctd.runtime.zsession import add_zenoh_arguments
+from sctd.wire import DEFAULT_ROBOT
+from sctd.wire.ros_options import add_ros_arguments
+from sctd.wire.session import add_zenoh_arguments
 
 from .guard import add_limit_arguments
 

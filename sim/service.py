@@ -50,10 +50,10 @@ import can
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.ros_options import check_ros_arguments
-from sctd.runtime.timing import Histogram, Ticker, set_timer_slack
-from sctd.runtime.zsession import MSGPACK, session_from_args
+from sctd.timing import Histogram, Ticker, set_timer_slack
+from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire.ros_options import check_ros_arguments
+from sctd.wire.session import MSGPACK, session_from_args
 
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
@@ -157,14 +157,14 @@ class SimService:
         Refuse targets stamped before the service started.
     """
 
-    def __init__(self, session: zenoh.Session, sim, robot: str = codec.DEFAULT_ROBOT,
+    def __init__(self, session: zenoh.Session, sim, robot: str = DEFAULT_ROBOT,
                  state_rate: float = 1000.0, object_rate: float = 50.0, scene_rate: float = 10.0,
                  viewer=None, limits: TargetLimits | None = None, stamp_check: bool = True,
                  ros=None) -> None:
         self.session = session
-        self.ros = ros  # sctd.runtime.ros.SimRos (--ros): ee(stamp, pose), rate-limited
+        self.ros = ros  # sctd.wire.ros.SimRos (--ros): ee(stamp, pose), rate-limited
         self.sim = sim
-        self.keys = codec.Keys(robot)
+        self.keys = Keys(robot)
         self.rate = 1.0 / sim.dt
         self.every_state = max(1, round(self.rate / state_rate))
         self.every_object = max(1, round(self.rate / object_rate))
@@ -451,7 +451,7 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
         A bad flag, with the message ``sctd sim`` prints.
     """
     faults = parse_faults(args.faults) if args.faults else None
-    codec.Keys(args.robot)
+    Keys(args.robot)
     check_ros_arguments(args)
     if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
         raise ValueError("rates must be positive")
@@ -513,7 +513,7 @@ def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Set
     session = stack.enter_context(session_from_args(args))
     ros = None
     if args.ros:
-        from sctd.runtime.ros import SimRos
+        from sctd.wire.ros import SimRos
 
         ros = stack.enter_context(SimRos(session, args.ros_namespace, args.ros_domain,
                                          args.ros_rate))

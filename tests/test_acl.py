@@ -21,7 +21,7 @@ import zenoh
 
 from sctd.cli.certs import ROLES
 from sctd.cli.errors import EXIT_FORCED, EXIT_OK
-from sctd.runtime.zsession import close_session
+from sctd.wire.session import close_session
 from tests.conftest import Proc, free_port, sctd, wait_for
 
 pytestmark = pytest.mark.slow  # routers and clients as processes
@@ -333,10 +333,10 @@ def test_usrpwd_roles_by_user_name(tmp_path):
 
 
 def test_client_query_finds_the_queryable_only_where_allowed(sessions):
-    """``sctd.runtime.client.query`` waits for a matching queryable before its get: the
+    """``sctd.wire.client.query`` waits for a matching queryable before its get: the
     router's declarations reach the input (may ask ``skill``) and not the observer, and an
     error reply passes like an answer."""
-    from sctd.runtime import client, codec
+    from sctd.wire import client, codec
 
     asked: Counter = Counter()
     runtime = sessions.role("sctd-runtime")

@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd.runtime.arbiter import InputArbiter
-from sctd.runtime.codec import InputMsg, StateMsg
 from sctd.runtime.controller import Counters, RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.skill import load_skill
+from sctd.wire.codec import InputMsg, StateMsg
 
 ROOT = Path(__file__).resolve().parents[1]
 TELEOP = load_skill(ROOT / "skills" / "teleop.yaml")  # world frame, translate on axes 0-2

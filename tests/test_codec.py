@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sctd.runtime import codec
+from sctd.wire import codec
 
 POSE = [0.1, -0.2, 0.3, 0.0, 0.0, 0.6, 0.8]
 

@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 
 from sctd import se3
 from sctd.runtime.arbiter import InputArbiter
-from sctd.runtime.codec import InputMsg
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
 from sctd.skill import Bundle, load_skill, skill_from_bundle
+from sctd.wire.codec import InputMsg
 from tests.conftest import trap_skill_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -294,7 +294,7 @@ def test_moving_object_without_input_never_moves_the_target():
 
 
 def test_histogram_percentiles_and_clear():
-    from sctd.runtime.timing import Histogram
+    from sctd.timing import Histogram
     h = Histogram()
     for k in range(1, 101):
         h.add(k * 1e-5)  # 0.01 .. 1 ms

@@ -11,7 +11,7 @@ import zenoh
 
 from sctd.cli.certs import ROLES, ROUTER
 from sctd.cli.main import main
-from sctd.runtime.zsession import HUB
+from sctd.wire.session import HUB
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy" / "zenoh"
 

@@ -10,17 +10,17 @@ from pathlib import Path
 import pytest
 
 from sctd import se3
-from sctd.runtime import codec
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.daemon import Daemon
 from sctd.runtime.driver import TickDriver
 from sctd.runtime.ingress import ANY_DEPTH, DEVICE_DEPTH, Ingress
 from sctd.skill import load_skill
+from sctd.wire import Keys, codec
 from sctd_services.eval.lockstep import Feed
 
 ROOT = Path(__file__).resolve().parents[1]
 PERIOD = 1e-3
-KEYS = codec.Keys()
+KEYS = Keys()
 
 
 # --- a Zenoh session as the daemon's ingress sees it: rings filled by "arrivals" --------

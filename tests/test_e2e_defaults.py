@@ -9,7 +9,7 @@ import msgpack
 import pytest
 import zenoh
 
-from sctd.runtime import codec
+from sctd.wire import Keys
 from tests.conftest import ROOT, port_is_free, sctd, wait_for
 
 pytestmark = pytest.mark.slow  # the daemon and its peers as processes
@@ -30,7 +30,7 @@ def test_default_run_is_reachable_on_7447(tmp_path):
         assert wait_for(lambda: not port_is_free(7447), 20), proc.output()
         with plain_client("tcp/127.0.0.1:7447") as s:
             def summary():
-                for reply in s.get(codec.Keys().skill, timeout=2.0):
+                for reply in s.get(Keys().skill, timeout=2.0):
                     if reply.ok is not None:
                         return msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
                 return None

@@ -13,13 +13,13 @@ import msgpack
 import pytest
 import zenoh
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # the release within 2 ticks of a live daemon
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
 START = [0.35, 0.25, 0.90, 0, 0, 0, 1]
 ENABLE = [0, 1, 0]

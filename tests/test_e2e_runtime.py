@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 import zenoh
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
+from sctd.wire import Keys, codec
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, port_is_free, sctd, trap_skill_yaml, wait_for
 
 pytestmark = pytest.mark.slow  # the daemon as a process
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
 START = [0.35, 0.25, 0.90, 0, 0, 0, 1]
 

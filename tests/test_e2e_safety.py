@@ -21,14 +21,14 @@ import pytest
 import zenoh
 
 from sctd.bench.robustness import malformed_bundles
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import bundle_from_file
+from sctd.wire import Keys, codec
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, Proc, free_port, sctd, wait_for
 
 pytestmark = pytest.mark.slow  # the daemon and the simulator as processes
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 POUR = str(ROOT / "skills" / "pour.yaml")
 BOUND = 0.1 * 0.001 * (1 + 1e-9) + 1e-12  # the pour skill's 0.1 m/s, per 1 kHz tick
 

@@ -13,7 +13,7 @@ import pytest
 import zenoh
 
 from sctd.cli.echo import Rates, decode, full_key
-from sctd.runtime import codec
+from sctd.wire import codec
 
 from .conftest import ROOT, run_sctd, wait_for
 from .test_e2e_runtime import KEYS, daemon  # noqa: F401  (the fixture)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sctd import se3
-from sctd.runtime import codec
+from sctd.wire import codec
 from sctd_services.input.device import InputError
 from sctd_services.input.emg import guided
 from sctd_services.input.emg.bench import bench_processing

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sctd.runtime import codec
+from sctd.wire import codec
 from sctd_services.input.bridge import RELEASED, Bridge
 from sctd_services.input.bridge import run as run_bridge
 from sctd_services.input.device import DeviceInfo, InputDevice, InputError, Reading, pick

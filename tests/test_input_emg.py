@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire.session import close_session, open_session
 from sctd_services.input.device import InputError
 from sctd_services.input.emg import Emg
 from sctd_services.input.emg.board import write_playback
@@ -246,7 +246,7 @@ def test_bridge_publishes_the_file_s_contractions(calibration, tmp_path):
 
     s = open_session(listen=[ep])
     try:
-        sub = s.declare_subscriber(codec.Keys(codec.DEFAULT_ROBOT).input("emg"), on_sample)
+        sub = s.declare_subscriber(Keys(DEFAULT_ROBOT).input("emg"), on_sample)
         log = tmp_path / "bridge.log"
         with Proc("sctd_services.input", "emg", "--board", "playback", "--board-file", str(rec),
                   "--calibration", str(path), "--connect", ep, log=log) as bridge:

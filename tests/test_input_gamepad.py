@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 import zenoh
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import close_session, open_session
 from sctd_services.input.bridge import Bridge
 from sctd_services.input.device import InputError
 from sctd_services.input.gamepad import Gamepad, sdl_acquire, sdl_release
@@ -240,7 +240,7 @@ def test_list_names_the_gamepad_backend_and_sees_no_pad(tmp_path):
 
 # --- end to end -------------------------------------------------------------------------
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 T_WORLD_MUG = [0.6, 0.0, 0.78, 0, 0, 0, 1]
 START = [0.35, 0.25, 0.90, 0, 0, 0, 1]
 WATCHDOG = 0.1  # sctd run's default input timeout, s

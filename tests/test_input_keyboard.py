@@ -15,8 +15,8 @@ import time
 
 import pytest
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire.session import close_session, open_session
 from sctd_services.input.device import InputError
 from sctd_services.input.keyboard import (
     HELP,
@@ -173,7 +173,7 @@ def test_keyboard_on_a_pty_holds_while_repeating_then_zero_and_restores_the_term
     log = tmp_path / "keyboard.log"
     child = None
     try:
-        sub = s.declare_subscriber(codec.Keys(codec.DEFAULT_ROBOT).input("keyboard"), on_sample)
+        sub = s.declare_subscriber(Keys(DEFAULT_ROBOT).input("keyboard"), on_sample)
         with open(log, "wb") as out:
             # Hold times far longer than the writes' spacing, so a loaded machine's
             # delays do not drop the key between repeats.

@@ -12,8 +12,8 @@ import time
 
 import pytest
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire.session import close_session, open_session
 from sctd_services.input.bridge import Bridge
 from sctd_services.input.mapping import shipped_mapping
 from sctd_services.input.spacemouse import (
@@ -263,7 +263,7 @@ def test_fake_hid_end_to_end_publishes_six_axes_following_the_script(tmp_path):
 
     s = open_session(listen=[ep])
     try:
-        sub = s.declare_subscriber(codec.Keys(codec.DEFAULT_ROBOT).input("spacemouse"), on_sample)
+        sub = s.declare_subscriber(Keys(DEFAULT_ROBOT).input("spacemouse"), on_sample)
         with Proc("sctd_services.input", "spacemouse", "--fake-hid", str(script), "--axes", "6",
                   "--connect", ep, log=tmp_path / "input.log") as child:
             wait_for(lambda: "back" in kinds(), 40)

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import pytest
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, wait_for
 
 pytestmark = pytest.mark.slow  # builds the wheel and installs it in a fresh virtualenv
@@ -118,7 +118,7 @@ def test_installed_daemon_runs_a_shipped_skill_by_name(installed, tmp_path):
     try:
         session = open_session(connect=[ep])
         seen: list[dict] = []
-        sub = session.declare_subscriber(codec.Keys("edan").status,
+        sub = session.declare_subscriber(Keys("edan").status,
                                          lambda s: seen.append(codec.unpack_map(s.payload.to_bytes())))
         assert wait_for(lambda: seen, timeout=60.0), "no status from the installed daemon"
         status = seen[-1]

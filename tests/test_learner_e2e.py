@@ -14,11 +14,11 @@ from pathlib import Path
 import pytest
 
 from sctd.learn.demos import read_demos
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import open_session
 from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 # the learner, the daemon and the simulator as processes; three trainings and their
 # checks on a loaded 2-core machine
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(900)]

@@ -11,9 +11,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sctd.learn.demos import read_demo_csv
-from sctd.runtime import codec
 from sctd.skill import SkillError, bundle_from_file, load_skill
 from sctd.skill.catalog import find_skill, find_stored, shipped_folder, stored_skills
+from sctd.wire import codec
 from sctd_services.learner.check import CheckSettings, failed_already, verdict
 from sctd_services.learner.request import RequestError, parse_request
 from sctd_services.learner.store import Store

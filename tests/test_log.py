@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from sctd.cli.log import kind_of, read_log, schema
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import codec
+from sctd.wire.session import open_session
 
 from .conftest import free_port, run_sctd, wait_for
 from .test_e2e_runtime import KEYS, daemon  # noqa: F401  (the fixture)

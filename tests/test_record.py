@@ -15,13 +15,13 @@ import pytest
 from sctd import se3
 from sctd.learn import demos
 from sctd.learn.demos import MIN_SAMPLES, read_demo_csv, read_demos
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import open_session
 from sctd_services import record
 from sctd_services.record import MIN_ROWS, publish_final, row_from_poses
 from tests.conftest import free_port, port_is_free, sctd, wait_for
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 YAW180 = [0.0, 0.0, 1.0, 0.0]  # object x towards the robot (world -x), z up
 
 

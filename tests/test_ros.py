@@ -16,8 +16,8 @@ import zenoh
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sctd.runtime import codec, ros
-from sctd.runtime.zsession import close_session, open_session
+from sctd.wire import codec, ros
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 from tests.test_e2e_runtime import KEYS, Rig
 

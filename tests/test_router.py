@@ -19,7 +19,7 @@ import zenoh
 
 from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.cli.router import CLOSE_WAIT
-from sctd.runtime.zsession import close_session
+from sctd.wire.session import close_session
 from tests.conftest import free_port, run_sctd, sctd, wait_for
 
 pytestmark = pytest.mark.slow  # sctd router as a process

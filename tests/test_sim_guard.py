@@ -8,7 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd_sim.guard import TargetGuard, TargetLimits
+from sctd.runtime.safety import separation
+from sctd_sim.guard import TargetGuard, TargetLimits, distance_and_angle
+from sctd_sim.kinematic import towards
 
 ARM = [0.4, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
 F_ARM = se3.flat_from_pose(ARM)
@@ -77,3 +79,44 @@ def test_steps_within_the_limits_are_always_followed(directions, speed):
         F_meas = se3.flat_from_pose(pose)  # the arm follows
         assert g.admit(pose, t, F_meas, following=True)
     assert g.total_rejected == 0 and math.isfinite(t) and np.isfinite(pose).all()
+
+
+# The guard's own distance and angle: known answers, and agreement with the runtime's
+# (written apart: two implementations that agree on random poses pin each other).
+
+def test_distance_and_angle_known_answers():
+    F = se3.flat_from_pose([1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0])
+    G = se3.flat_from_pose([4.0, 6.0, 3.0, *se3.quaternion_from_rotvec([0.0, 0.0, 0.3]).tolist()])
+    d, angle = distance_and_angle(F, G)
+    assert d == 5.0 and math.isclose(angle, 0.3, rel_tol=1e-12)
+    assert distance_and_angle(F, F) == (0.0, 0.0)
+    # a half turn, where a cosine alone loses its accuracy
+    H = se3.flat_from_pose([1.0, 2.0, 3.0, *se3.quaternion_from_rotvec([0.0, math.pi - 1e-7, 0.0]).tolist()])
+    assert math.isclose(distance_and_angle(F, H)[1], math.pi - 1e-7, abs_tol=1e-9)
+
+
+@given(st.lists(st.floats(-1.0, 1.0), min_size=12, max_size=12), st.floats(0.0, math.pi))
+def test_distance_and_angle_agree_with_the_runtime_and_are_symmetric(xs, angle):
+    axis = np.array(xs[3:6]) + np.array([0.0, 0.0, 1e-3])
+    w = angle * axis / np.linalg.norm(axis)
+    F = se3.flat_from_pose([*xs[:3], *se3.quaternion_from_rotvec(xs[6:9]).tolist()])
+    R = se3.matrix_from_rotvec(xs[6:9]) @ se3.matrix_from_rotvec(w)
+    G = se3.flat_from_pose([*xs[9:12], *se3.quaternion_from_matrix(R).tolist()])
+    d, a = distance_and_angle(F, G)
+    assert math.isclose(a, angle, abs_tol=1e-6)
+    assert np.allclose((d, a), distance_and_angle(G, F), rtol=0.0, atol=1e-12)
+    d_rt, a_rt = separation(F, G)
+    assert math.isclose(d, d_rt, abs_tol=1e-12) and math.isclose(a, a_rt, abs_tol=2e-6)
+
+
+@given(st.lists(st.floats(-1.0, 1.0), min_size=12, max_size=12), st.floats(0.0, 1.0))
+def test_the_stand_in_robot_moves_along_the_way_it_should(xs, s):
+    T_a = se3.transform_from_pose([*xs[:3], *se3.quaternion_from_rotvec(xs[3:6]).tolist()])
+    T_b = se3.transform_from_pose([*xs[6:9], *se3.quaternion_from_rotvec(xs[9:12]).tolist()])
+    T = towards(T_a, T_b, s)
+    d_ab, a_ab = distance_and_angle(se3.flat_from_transform(T_a), se3.flat_from_transform(T_b))
+    d_a, a_a = distance_and_angle(se3.flat_from_transform(T_a), se3.flat_from_transform(T))
+    d_b, a_b = distance_and_angle(se3.flat_from_transform(T), se3.flat_from_transform(T_b))
+    assert math.isclose(d_a, s * d_ab, abs_tol=1e-9) and math.isclose(d_b, (1 - s) * d_ab, abs_tol=1e-9)
+    assert math.isclose(a_a, s * a_ab, abs_tol=1e-6) and math.isclose(a_b, (1 - s) * a_ab, abs_tol=1e-6)
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-12) and np.all(T[3] == [0, 0, 0, 1])

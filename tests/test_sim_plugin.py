@@ -11,8 +11,8 @@ import can
 import msgpack
 import pytest
 
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys
+from sctd.wire.session import open_session
 from sctd_sim.canbus.zenoh_interface import (
     FrameDecodeError,
     ZenohBus,
@@ -74,7 +74,7 @@ def test_can_logger_watches_a_running_sim_and_frames_reach_its_bus(tmp_path):
     try:
         with open_session(connect=[ep]) as s:
             scenes: list[dict] = []
-            sub = s.declare_subscriber(codec.Keys().scene, lambda smp: scenes.append(
+            sub = s.declare_subscriber(Keys().scene, lambda smp: scenes.append(
                 msgpack.unpackb(smp.payload.to_bytes(), raw=False)))
             assert wait_for(lambda: scenes, 60), sim.output()
             logger = Proc("can.logger", "-i", "sctd", "-c", "edan", "--bus-kwargs", f"connect={ep}",

@@ -17,12 +17,12 @@ import pytest
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import open_session
 from sctd_sim.service import parse_faults
 from tests.conftest import ROOT, Proc, free_port, port_is_free, sctd, wait_for
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 
 
 class Watcher:

@@ -27,8 +27,8 @@ from websockets.sync.client import connect
 from websockets.typing import Subprotocol
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import open_session
 from sctd_sim import service
 from sctd_sim.simulation import Simulation
 from sctd_sim.view import ViewerUnavailable, ViserView, open_viewer, wxyz_from_pose
@@ -200,12 +200,12 @@ def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tm
 
         with open_session(connect=[f"tcp/127.0.0.1:{zport}"]) as s:
             states: list[codec.StateMsg] = []
-            sub = s.declare_subscriber(codec.Keys("edan").state,
+            sub = s.declare_subscriber(Keys("edan").state,
                                        lambda smp: states.append(codec.decode_state(smp.payload.to_bytes())))
             assert wait_for(lambda: states, 30), proc.output()
             p0 = list(states[-1].pose)
             goal = [p0[0], p0[1], p0[2] + 0.04, *p0[3:]]
-            pub = s.declare_publisher(codec.Keys("edan").target)
+            pub = s.declare_publisher(Keys("edan").target)
             for k in range(200):
                 pub.put(codec.encode_target(k, time.time(), goal, "test", "test", -1))
                 time.sleep(0.005)

@@ -17,13 +17,13 @@ import msgpack
 import pytest
 
 from sctd.bench.robustness import big_bundle
-from sctd.runtime import client, codec
-from sctd.runtime.zsession import close_session, open_session
 from sctd.skill import Bundle, bundle_from_file, skill_from_bundle, skill_summary
 from sctd.skill.loader import MAX_BUNDLE_BYTES
+from sctd.wire import Keys, client, codec
+from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 pytestmark = pytest.mark.slow
 
 

@@ -13,8 +13,8 @@ import pytest
 
 from sctd import se3
 from sctd.learn.demos import read_demos
-from sctd.runtime import codec
-from sctd.runtime.zsession import open_session
+from sctd.wire import Keys, codec
+from sctd.wire.session import open_session
 from sctd_services.teach import (
     MISTAKE_OFF_AXIS,
     StreamLimits,
@@ -31,7 +31,7 @@ from sctd_services.teach import (
 from sctd_sim.guard import TargetLimits
 from tests.conftest import free_port, port_is_free, sctd, wait_for
 
-KEYS = codec.Keys("edan")
+KEYS = Keys("edan")
 TIP = np.array([0.0, 0.0, 0.12])
 
 

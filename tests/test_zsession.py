@@ -8,7 +8,7 @@ import json
 import pytest
 
 from sctd.runtime.daemon import check_no_rate_limit, ingress_limits
-from sctd.runtime.zsession import SessionSettings, check_loopback, make_config, outbound_config
+from sctd.wire.session import SessionSettings, check_loopback, make_config, outbound_config
 
 
 @pytest.mark.parametrize("endpoint", ["tcp/127.0.0.1:7447", "tcp/127.1.2.3:0", "tcp/[::1]:7447"])

@@ -37,7 +37,7 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
     """Valid inputs a target starts from (libFuzzer mutates them)."""
     import msgpack
 
-    from ..runtime import codec
+    from ..wire import codec
 
     pose = [0.4, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
     if target == "input":
@@ -81,9 +81,9 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
 def _log_seed() -> bytes:
     """A small ``sctd log`` file: states, a target, an object and an input."""
     from ..cli.log import McapLog
-    from ..runtime import codec
+    from ..wire import Keys, codec
 
-    keys = codec.Keys()
+    keys = Keys()
     pose = [0.4, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
     with tempfile.TemporaryDirectory() as d:
         log = McapLog(Path(d) / "seed.mcap")
@@ -131,7 +131,7 @@ def _harness(target: str) -> Callable[[bytes], None]:
     if target in ("yaml", "map", "mcap"):
         return _file_harness(target)
     if target in ("input", "state", "object", "target", "demo"):
-        from ..runtime import codec
+        from ..wire import codec
 
         decode = {"input": codec.decode_input, "state": codec.decode_state,
                   "object": codec.decode_object, "target": codec.decode_target,

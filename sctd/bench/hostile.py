@@ -31,8 +31,8 @@ import msgpack
 
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
-from sctd.runtime import codec
-from sctd.runtime.zsession import MSGPACK, session
+from sctd.wire import Keys, codec
+from sctd.wire.session import MSGPACK, session
 
 ROOT = Path(__file__).resolve().parents[2]
 MAX_RSS_MB = 300.0  # the most any command may take on any of these inputs
@@ -239,7 +239,7 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
     """The daemon, simulator and learner running; a quiet window, then the hostile files
     to the tools (:func:`files_phase`), then the learner attacked; the daemon's lateness
     over each."""
-    keys = codec.Keys()
+    keys = Keys()
     hub = f"tcp/127.0.0.1:{free_port()}"
     store = d / "store"
     status: list[dict] = []

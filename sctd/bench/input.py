@@ -26,9 +26,9 @@ import zenoh
 from sctd.bench import run_and_report
 from sctd.bench.latency import PING, PONG, wait_for_targets
 from sctd.cli.procs import Child, free_port
-from sctd.runtime import codec
-from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import MSGPACK, TEXT, session
+from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack
+from sctd.wire import Keys, codec
+from sctd.wire.session import MSGPACK, TEXT, session
 
 
 class _EventTimes:
@@ -88,7 +88,7 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
     from sctd_services.input.virtual_pad import VirtualPad
 
     rng = random.Random(seed)
-    keys = codec.Keys()
+    keys = Keys()
     times = _EventTimes()
     mapping = shipped_mapping("xbox")
     enable = mapping.buttons["enable"]

@@ -27,12 +27,12 @@ import zenoh
 
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
-from sctd.runtime import codec
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
-from sctd.runtime.timing import Histogram, RoundTrips, Ticker, set_timer_slack
-from sctd.runtime.zsession import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
 from sctd.skill import load_skill
+from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack
+from sctd.wire import Keys, codec
+from sctd.wire.session import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
 
 PING = "sctd/bench/ping"
 PONG = "sctd/bench/pong"
@@ -89,7 +89,7 @@ def _sweep(k: int) -> list[float]:
 def probe_main(argv: list[str]) -> int:
     """The echo round trip, then the input -> target latency; prints both as JSON."""
     args = _probe_parser().parse_args(argv)
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
     set_timer_slack(1)
     echo, latency = RoundTrips(), RoundTrips()
 
@@ -171,7 +171,7 @@ def wait_for_targets(ep: str, daemon: Child, logdir: Path, timeout: float = 30.0
     """Until the daemon started as ``daemon`` publishes targets on ``ep`` (RuntimeError
     naming its log when it does not within ``timeout`` s or exits)."""
     with session(connect=[ep]) as s:
-        sub = s.declare_subscriber(codec.Keys().target, zenoh.handlers.RingChannel(1))
+        sub = s.declare_subscriber(Keys().target, zenoh.handlers.RingChannel(1))
         end = time.monotonic() + timeout
         while sub.try_recv() is None:
             if time.monotonic() > end or not daemon.running():

@@ -43,7 +43,7 @@ from sctd.bench.netns import (
     write_config,
 )
 from sctd.cli.errors import EXIT_FORCED, EXIT_OK
-from sctd.runtime import codec
+from sctd.wire import Keys
 
 HOSTS = ("router", "robot", "runtime", "input", "learner", "observer", "intruder")
 ROLE_OF_HOST = {"router": "sctd-router", "robot": "sctd-robot", "runtime": "sctd-runtime",
@@ -80,7 +80,7 @@ class Cluster:
 
     def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None):
         self.logdir = Path(logdir)
-        self.keys = codec.Keys(robot)
+        self.keys = Keys(robot)
         self.hosts = Hosts(HOSTS, self.logdir)
         self.secure = secure_available() if secure is None else secure
         self.router: Process | None = None

@@ -41,7 +41,7 @@ from typing import IO
 import msgpack
 import zenoh
 
-from sctd.runtime.zsession import MSGPACK, TEXT, make_config
+from sctd.wire.session import MSGPACK, TEXT, make_config
 
 PREFIX = "sctd-"
 DEFAULT_SUBNET = "10.213.13.0/24"
@@ -547,7 +547,7 @@ def echo_main(args: argparse.Namespace) -> int:
 def ping_main(args: argparse.Namespace) -> int:
     """Ping the echo ``--n`` times at ``--rate`` Hz (in the input's role); the round-trip
     summary (ms) after ``--warmup`` pings."""
-    from sctd.runtime.timing import RoundTrips, Ticker
+    from sctd.timing import RoundTrips, Ticker
     trips = RoundTrips()
     with _open(args.config) as s, \
             s.declare_subscriber(ECHO_PONG, lambda sample: trips.answered(

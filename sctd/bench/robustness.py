@@ -39,12 +39,12 @@ import zenoh
 
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
-from sctd.runtime import codec
-from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session, session_from_args
 from sctd.skill import Bundle, bundle_from_file
 from sctd.skill.loader import MAX_BUNDLE_BYTES
+from sctd.wire import Keys, codec
+from sctd.wire.session import MSGPACK, add_zenoh_arguments, session, session_from_args
 
-KEYS = codec.Keys()
+KEYS = Keys()
 SWAPS = 10
 PUSH = [0.0, 1.0, 0.0]  # the devices' push: the pour skill's u1, sideways to the mug
 

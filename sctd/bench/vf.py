@@ -25,9 +25,9 @@ import numpy as np
 
 from sctd.bench.latency import run_latency_bench, tick_histogram
 from sctd.cli.errors import fail
-from sctd.runtime.timing import Histogram
 from sctd.skill import VectorFieldModel, load_skill, vector_field_model_to_bytes
 from sctd.skill.loader import bundle_from_file
+from sctd.timing import Histogram
 
 DEMO_GAP = 0.05  # m: consecutive points farther apart than this belong to different demonstrations
 

@@ -20,10 +20,10 @@ from typing import Any
 
 import zenoh
 
-from ..runtime import codec
-from ..runtime.zsession import session as zsession
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
+from ..wire import Keys, codec
+from ..wire.session import session as zsession
 from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP
 from .procs import Child, free_port
@@ -62,7 +62,7 @@ class _Watch:
     reports (printed as they happen) and the simulator's last scene message. A context
     manager owning its two subscriptions."""
 
-    def __init__(self, session: zenoh.Session, keys: codec.Keys):
+    def __init__(self, session: zenoh.Session, keys: Keys):
         self.t0 = time.monotonic()
         self.state: str | None = None
         self.targets = 0
@@ -111,7 +111,7 @@ def _drive(args: argparse.Namespace, task: str, ep: str, logdir: Path) -> tuple[
             Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
                   log=logdir / "robot.log") as robot, \
             zsession(connect=[ep]) as session, \
-            _Watch(session, codec.Keys("edan")) as watch:
+            _Watch(session, Keys("edan")) as watch:
         report = None
         if not watch.wait_for_targets(30.0, daemon, robot):
             fail("demo", "no targets within 30 s; see the logs", EXIT_FAILED)

@@ -24,8 +24,8 @@ from typing import Any
 import msgpack
 import zenoh
 
-from ..runtime.codec import DEFAULT_ROBOT, Keys
-from ..runtime.zsession import add_zenoh_arguments, session_from_args
+from ..wire import DEFAULT_ROBOT, Keys
+from ..wire.session import add_zenoh_arguments, session_from_args
 from .errors import EXIT_OK
 
 

@@ -23,8 +23,8 @@ from typing import Any
 import zenoh
 
 from sctd import se3
-from sctd.runtime import codec
-from sctd.runtime.zsession import session
+from sctd.wire import Keys, codec
+from sctd.wire.session import session
 from sctd_services.eval.evaluate import read_demo_poses
 from sctd_services.eval.trial import TaskSpec, TrialRecorder, TrialResult
 from sctd_services.simulated_user import OBJECTS
@@ -42,7 +42,7 @@ WATCH_INGRESS = 250.0  # Hz
 
 class _Watcher:
     def __init__(self, s: zenoh.Session, task: str):
-        k = codec.Keys()
+        k = Keys()
         self.lock = threading.Lock()
         self.T_world_ee: Any = None
         self.objects: dict[str, Any] = {}
@@ -118,7 +118,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     def ep() -> str:
         return f"tcp/127.0.0.1:{free_port()}"
 
-    keys = codec.Keys()
+    keys = Keys()
     first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start
     obs: Observation | None = None
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:

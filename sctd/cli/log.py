@@ -33,9 +33,8 @@ from typing import IO, Any
 import zenoh
 
 from ..files import FileError, open_regular
-from ..runtime import codec
-from ..runtime.codec import DEFAULT_ROBOT, Keys
-from ..runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
+from ..wire import DEFAULT_ROBOT, Keys, codec
+from ..wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 from .echo import decode, wait_until
 from .errors import EXIT_FAILED, EXIT_OK, fail
 

@@ -8,7 +8,7 @@ machine only). The same files are meant for ``zenohd -c FILE`` in production (un
 here: zenohd is not installable from our registries).
 
 Stopping is bounded: on SIGINT/SIGTERM the session is closed from a helper thread
-(:func:`sctd.runtime.zsession.close_session`) and waited for at most :data:`CLOSE_WAIT`
+(:func:`sctd.wire.session.close_session`) and waited for at most :data:`CLOSE_WAIT`
 s, and then the process ends at once (``os._exit``) with 0 when the session closed in
 time and :data:`~sctd.cli.errors.EXIT_FORCED` (3) when it did not. The interpreter's
 own shutdown is skipped on purpose: it would wait for a session still closing
@@ -29,7 +29,7 @@ from typing import NoReturn
 
 import zenoh
 
-from sctd.runtime.zsession import HUB, close_session
+from sctd.wire.session import HUB, close_session
 
 from .errors import EXIT_CODES, EXIT_FAILED, EXIT_FORCED, EXIT_OK, fail
 

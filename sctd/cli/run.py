@@ -15,19 +15,19 @@ from typing import Any
 
 import zenoh
 
-from ..runtime import client, codec
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
-from ..runtime.ros_options import add_ros_arguments, check_ros_arguments
-from ..runtime.zsession import (
+from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
+from ..skill.catalog import find_skill
+from ..wire import Keys, client
+from ..wire.ros_options import add_ros_arguments, check_ros_arguments
+from ..wire.session import (
     SessionSettings,
     add_zenoh_arguments,
     close_session,
     make_config,
     session_from_args,
 )
-from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
-from ..skill.catalog import find_skill
 from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP, add_arguments, flag_name, from_namespace
 
@@ -75,10 +75,10 @@ def _runtime_ros(args: argparse.Namespace, session: zenoh.Session, config: Runti
     daemon's own device key (``ros`` when it follows any device)."""
     if not args.ros:
         return None
-    from ..runtime import ros
+    from ..wire import ros
 
     device = "ros" if config.device == "*" else config.device
-    return ros.RuntimeRos(session, codec.Keys(config.robot).input(device), _joy_map(args.ros_joy_map),
+    return ros.RuntimeRos(session, Keys(config.robot).input(device), _joy_map(args.ros_joy_map),
                           args.ros_namespace, args.ros_domain, args.ros_rate)
 
 
@@ -96,7 +96,7 @@ def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
         zero_ok = f.name in ZERO_ALLOWED
         if isinstance(value, float) and not (value >= 0 if zero_ok else value > 0):
             raise ValueError(f"{flag_name(f)}: must be {'>= 0' if zero_ok else '> 0'}")
-    codec.Keys(config.robot)  # one key chunk
+    Keys(config.robot)  # one key chunk
     return config
 
 
@@ -228,7 +228,7 @@ def main_swap(args: argparse.Namespace) -> int:
         Bundle.unpack(payload)  # the size limit too
     except SkillError as e:
         return fail("swap", str(e))
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
     with session_from_args(args) as session:
         ok, body = client.swap(session, keys, bundle, args.timeout)
     if ok:

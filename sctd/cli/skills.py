@@ -10,8 +10,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ..runtime import client, codec
-from ..runtime.zsession import add_zenoh_arguments, session_from_args
 from ..skill import SkillError, bundle_from_file, load_skill, skill_summary
 from ..skill.catalog import (
     StoredSkill,
@@ -21,6 +19,8 @@ from ..skill.catalog import (
     store_folder,
     stored_skills,
 )
+from ..wire import DEFAULT_ROBOT, Keys, client
+from ..wire.session import add_zenoh_arguments, session_from_args
 from .errors import EXIT_FAILED, EXIT_OK, fail
 from .options import SKILL_HELP
 from .run import main_inspect
@@ -37,7 +37,7 @@ def add_skills_arguments(p: argparse.ArgumentParser) -> None:
                           description="put a stored skill into the running daemon")
     swap.add_argument("ref", metavar="REF", help="a stored skill: NAME@ID, ID (or a prefix of 4+ "
                                                  "characters), or NAME (the newest)")
-    swap.add_argument("--robot", default=codec.DEFAULT_ROBOT,
+    swap.add_argument("--robot", default=DEFAULT_ROBOT,
                       help="key prefix sctd/<robot> (default %(default)s)")
     swap.add_argument("--timeout", type=float, default=40.0,
                       help="s to wait for the daemon's reply (default %(default)s)")
@@ -101,7 +101,7 @@ def main_skills_swap(args: argparse.Namespace) -> int:
     except SkillError as e:
         return fail("skills swap", str(e))
     with session_from_args(args) as session:
-        ok, body = client.swap(session, codec.Keys(args.robot), bundle, args.timeout)
+        ok, body = client.swap(session, Keys(args.robot), bundle, args.timeout)
     if not ok:
         return fail("skills swap", body.get("error", str(body)), EXIT_FAILED)
     print(f"{stored.ref}: swapped into the daemon (state {body.get('state')})")

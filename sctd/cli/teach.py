@@ -36,7 +36,7 @@ from sctd_services.teach import (
     teach,
 )
 
-from ..runtime.zsession import add_zenoh_arguments, session
+from ..wire.session import add_zenoh_arguments, session
 from .errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from .options import add_arguments, from_namespace
 from .procs import Child, free_port

@@ -26,8 +26,8 @@ import zenoh
 from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
 
-from ..runtime import client, codec
 from ..skill.catalog import shipped_folder
+from ..wire import Keys, client, codec
 from .procs import Child
 
 METHODS = ("linear", "vf")
@@ -62,7 +62,7 @@ class _Watch:
     """The learner's status (stored names by key, the newest state) and the daemon's
     status and targets (for the gap across the swap)."""
 
-    def __init__(self, s: zenoh.Session, keys: codec.Keys) -> None:
+    def __init__(self, s: zenoh.Session, keys: Keys) -> None:
         self.stored: dict[str, str] = {}  # published key -> the name the learner stored it as
         self.learner_up = threading.Event()
         self.skill: str | None = None
@@ -111,7 +111,7 @@ def start_learner(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse.
     """The learner service as a child (store, check trials), running before teaching
     starts; the watch on it and the daemon."""
     store = args.store or str(logdir / "store")
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
     watch = _Watch(s, keys)
     stack.callback(watch.close)
     t0 = time.monotonic()
@@ -125,7 +125,7 @@ def start_learner(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse.
     return watch
 
 
-def _demo_names(watch: _Watch, keys: codec.Keys, scene: str, kept: list[Any]) -> list[str]:
+def _demo_names(watch: _Watch, keys: Keys, scene: str, kept: list[Any]) -> list[str]:
     """The names the learner stored the kept demonstrations as (it renames one whose name
     it already has with other rows)."""
     wanted = [keys.demos(scene, a.name) for a in kept]
@@ -141,7 +141,7 @@ def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse
     for the demonstrations just taught, the swap confirmed on the daemon's status; the
     learner's reply, with ``last_demo_to_swap_s`` and ``swap_gap_ms`` added."""
     t_last = time.monotonic()
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
     names = _demo_names(watch, keys, scene, kept)
     if args.swap:
         stack.enter_context(Child("sctd.cli.main", "run", "--skill", START_SKILL[scene], "--robot",

@@ -13,8 +13,8 @@ import sys
 from typing import Any
 
 from ..files import FileError, parse_yaml
-from ..runtime import client, codec
-from ..runtime.zsession import add_zenoh_arguments, session_from_args
+from ..wire import DEFAULT_ROBOT, Keys, client, codec
+from ..wire.session import add_zenoh_arguments, session_from_args
 from .errors import EXIT_FAILED, EXIT_OK, fail
 
 DEFAULT_TIMEOUT = 120.0
@@ -41,7 +41,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                         "--allow-unchecked; refused otherwise)")
     p.add_argument("--no-swap", dest="swap", action="store_false",
                    help="train, check and store; do not swap")
-    p.add_argument("--robot", default=codec.DEFAULT_ROBOT,
+    p.add_argument("--robot", default=DEFAULT_ROBOT,
                    help="key prefix sctd/<robot> (default %(default)s)")
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT,
                    help="s to wait for the learner's reply (default %(default)s; training and the "
@@ -97,7 +97,7 @@ def main_train(args: argparse.Namespace) -> int:
         req = request_of(args)
     except ValueError as e:
         return fail("train", str(e))
-    keys = codec.Keys(args.robot)
+    keys = Keys(args.robot)
 
     def on_status(sample: Any) -> None:
         try:

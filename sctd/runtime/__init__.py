@@ -1,8 +1,5 @@
-"""The runtime: fixed-rate loop, Zenoh wiring, wire codec, safety limits."""
+"""The runtime: the tick driver, the daemon's loop and Zenoh wiring, safety limits."""
 
-from .codec import Keys
 from .controller import Controller, RuntimeConfig, Sample, TickResult
-from .zsession import make_config, open_session
 
-__all__ = ["Controller", "Keys", "RuntimeConfig", "Sample", "TickResult", "make_config",
-           "open_session"]
+__all__ = ["Controller", "RuntimeConfig", "Sample", "TickResult"]

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from .codec import BUTTON_ENABLE, InputMsg
+from ..wire.codec import BUTTON_ENABLE, InputMsg
 from .safety import sanitize_input
 
 MAX_DEVICES = 64  # device names one daemon tracks at once

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine, StuckDetector
+from ..wire.codec import BUTTON_ESCAPE
 from .arbiter import Command
-from .codec import BUTTON_ESCAPE
 from .safety import grows_offset, limit_step
 
 Array = NDArray[np.float64]

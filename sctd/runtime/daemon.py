@@ -36,14 +36,14 @@ from typing import Any
 import zenoh
 
 from ..skill import Skill, SkillEngine, SkillError, skill_summary
-from . import codec
+from ..timing import Histogram, Ticker, set_realtime, set_timer_slack
+from ..wire import Keys, codec
+from ..wire.session import MSGPACK, SessionSettings
 from .controller import RuntimeConfig
 from .driver import TickDriver
 from .ingress import Ingress, Inlet
 from .skillserver import ServerOptions, SkillServer
-from .timing import Histogram, Ticker, set_realtime, set_timer_slack
 from .worker import WHERE
-from .zsession import MSGPACK, SessionSettings
 
 log = logging.getLogger("sctd.run")
 RECENT = 1.0  # s: the window of the status' recent lateness and compute percentiles
@@ -62,11 +62,11 @@ AFTER_TICK = 3e-4
 
 
 def ingress_limits(robot: str) -> dict[str, Any]:
-    """``size_limits`` (see :func:`~sctd.runtime.zsession.make_config`) of a daemon's
+    """``size_limits`` (see :func:`~sctd.wire.session.make_config`) of a daemon's
     session: puts larger than :data:`INGRESS_CEILING` on the keys it reads are dropped on
     arrival. There is no rate limit: Zenoh's downsampling keeps the first message of an
     interval and drops the rest, which could be a release (the rings bound floods)."""
-    k = codec.Keys(robot)
+    k = Keys(robot)
     keys = (k.input("**"), k.state, k.objects("**"))
     return {"size_limits": [(key, INGRESS_CEILING) for key in keys]}
 
@@ -85,7 +85,7 @@ def check_no_rate_limit(conf: zenoh.Config, robot: str) -> None:
         rules = json.loads(conf.get_json("downsampling")) or []
     except (zenoh.ZError, ValueError):
         rules = []
-    k = codec.Keys(robot)
+    k = Keys(robot)
     read = [zenoh.KeyExpr(x) for x in (k.input("**"), k.state, k.objects("**"))]
     for r in rules:
         if "ingress" not in (r.get("flows") or ["ingress"]) or "put" not in (r.get("messages") or ["put"]):
@@ -219,7 +219,7 @@ class Daemon:
         (a stop requested while starting then ends :meth:`run` at once).
     settings : SessionSettings
         What ``session`` was opened from: the skill server's session is opened from
-        them (:func:`~sctd.runtime.zsession.outbound_config`).
+        them (:func:`~sctd.wire.session.outbound_config`).
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
@@ -227,11 +227,11 @@ class Daemon:
                  stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
                  ros: Any = None, settings: SessionSettings | None = None):
         self.config = config
-        self.ros = ros  # sctd.runtime.ros.RuntimeRos (--ros): target poses out, its status
+        self.ros = ros  # sctd.wire.ros.RuntimeRos (--ros): target poses out, its status
         self.swap_on_skill_key = swap_on_skill_key
         self.session = session
         self.settings = settings if settings is not None else SessionSettings()
-        self.keys = codec.Keys(config.robot)
+        self.keys = Keys(config.robot)
         self.driver = TickDriver(skill, config)
         self.controller = self.driver.controller
         self.spin = spin

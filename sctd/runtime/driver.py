@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from .. import se3
 from ..skill import WORLD_OBJECT, Skill, SkillEngine
-from . import codec
+from ..wire import codec
 from .arbiter import MAX_DEVICES, InputArbiter
 from .controller import Controller, Counters, RuntimeConfig, Sample, TickResult
 from .safety import StateWatch

@@ -25,7 +25,7 @@ from typing import Any
 import zenoh
 
 from ..skill import WORLD_OBJECT
-from . import codec
+from ..wire import Keys, codec
 from .driver import TickDriver
 
 log = logging.getLogger("sctd.run")
@@ -55,7 +55,7 @@ class Inlet:
         self.sub.undeclare()
 
 
-def object_inlet(session: zenoh.Session, keys: codec.Keys, name: str) -> Inlet:
+def object_inlet(session: zenoh.Session, keys: Keys, name: str) -> Inlet:
     return Inlet(session, keys.objects(name), OBJECT_DEPTH, codec.MAX_OBJECT_BYTES, "object", name)
 
 
@@ -65,13 +65,13 @@ class Ingress:
     Parameters
     ----------
     session : zenoh.Session
-    keys : codec.Keys
+    keys : Keys
     driver : TickDriver
     device : str
         ``*`` to follow every device (names learned as they appear), or one device name.
     """
 
-    def __init__(self, session: zenoh.Session, keys: codec.Keys, driver: TickDriver, device: str = "*"):
+    def __init__(self, session: zenoh.Session, keys: Keys, driver: TickDriver, device: str = "*"):
         self.session, self.keys, self.driver = session, keys, driver
         self.state = Inlet(session, keys.state, STATE_DEPTH, codec.MAX_STATE_BYTES, "state")
         self.any: Inlet | None = None

@@ -9,7 +9,7 @@ run. So the payload is never in the daemon's process. Its child, the skill serve
 and ``sctd/<robot>/skill/swap``, on a Zenoh session of its own:
 
 - opened from the daemon's own ``--listen`` / ``--connect`` / ``--zenoh-config``
-  settings (:func:`~sctd.runtime.zsession.outbound_config`), listening nowhere: it
+  settings (:func:`~sctd.wire.session.outbound_config`), listening nowhere: it
   connects where the daemon connects and listens, and so acts on the network as the
   daemon (same mode, credentials and certificates: an access policy that lets the
   daemon answer these keys lets its skill server answer them);
@@ -61,9 +61,10 @@ import zenoh
 
 from ..skill import Skill, SkillError
 from ..skill.loader import MAX_BUNDLE_BYTES
-from . import codec, frames
+from ..wire import Keys
+from ..wire.session import MSGPACK, SessionSettings, close_session, outbound_config
+from . import frames
 from .worker import WHERE, BundleWorker
-from .zsession import MSGPACK, SessionSettings, close_session, outbound_config
 
 log = logging.getLogger("sctd.skillserver")
 
@@ -344,7 +345,7 @@ class _Link:
 class _Queries:
     """The two queryables' handlers (on Zenoh's threads, in the skill server)."""
 
-    def __init__(self, keys: codec.Keys, link: _Link, worker: BundleWorker, swap_on_skill_key: bool):
+    def __init__(self, keys: Keys, link: _Link, worker: BundleWorker, swap_on_skill_key: bool):
         self.keys, self.link, self.worker = keys, link, worker
         self.swap_on_skill_key = swap_on_skill_key
         self._swap_lock = threading.Lock()
@@ -438,7 +439,7 @@ def main(argv: list[str]) -> int:
     except (ValueError, zenoh.ZError) as e:
         log.error("cannot open Zenoh session: %s", e)
         return 1
-    keys = codec.Keys(opts.robot)
+    keys = Keys(opts.robot)
     try:
         with BundleWorker() as worker:
             queries = _Queries(keys, link, worker, opts.swap_on_skill_key)

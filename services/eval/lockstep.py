@@ -15,10 +15,10 @@ from __future__ import annotations
 from typing import Any
 
 from sctd import se3
-from sctd.runtime import codec
 from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
 from sctd.skill import Skill
+from sctd.wire import codec
 from sctd_services.user import Observation, SimulatedUser
 from sctd_sim.guard import TargetGuard, TargetLimits
 from sctd_sim.simulation import Simulation, trial_scene

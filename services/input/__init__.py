@@ -17,8 +17,8 @@ import signal
 import sys
 import threading
 
-from sctd.runtime.codec import DEFAULT_ROBOT
-from sctd.runtime.zsession import MSGPACK, add_zenoh_arguments, session_from_args
+from sctd.wire import DEFAULT_ROBOT
+from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .device import Backend, InputError
 from .registry import backend_names, get_backend
@@ -123,9 +123,9 @@ def run(args: argparse.Namespace) -> int:
     except InputError as e:
         return _fail(str(e))
     with device, session_from_args(args) as session:
-        from sctd.runtime import codec
+        from sctd.wire import Keys
 
-        key = codec.Keys(args.robot).input(name)
+        key = Keys(args.robot).input(name)
         pub = session.declare_publisher(key, encoding=MSGPACK)
         bridge = Bridge(device, mapping, args.axes, pub.put)
         print(f"sctd input: {backend.name} {device.name!r} -> {key} at {args.rate:g} Hz, "

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from sctd.runtime import codec
+from sctd.wire import codec
 
 from .device import InputDevice, Reading
 from .mapping import Mapping
@@ -131,7 +131,7 @@ class Bridge:
 def run(bridge: Bridge, rate: float, stop: threading.Event,
         on_tick: Callable[[Bridge], None] | None = None) -> None:
     """Step ``bridge`` at ``rate`` Hz until ``stop`` is set; zero on the way out."""
-    from sctd.runtime.timing import Ticker, set_timer_slack
+    from sctd.timing import Ticker, set_timer_slack
 
     if not MIN_RATE <= rate <= MAX_RATE:
         raise ValueError(f"--rate: between {MIN_RATE:g} and {MAX_RATE:g} Hz, got {rate:g}")

@@ -17,8 +17,8 @@ import signal
 import sys
 import threading
 
-from sctd.runtime.codec import DEFAULT_ROBOT
-from sctd.runtime.zsession import add_zenoh_arguments, session_from_args
+from sctd.wire import DEFAULT_ROBOT
+from sctd.wire.session import add_zenoh_arguments, session_from_args
 
 from .check import CheckSettings
 from .store import Store

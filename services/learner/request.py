@@ -10,7 +10,7 @@ from typing import Any
 
 from sctd.learn import METHODS, HyperparameterError, check_hyperparameters, hyperparameter_names
 from sctd.learn.pipeline import hyperparameter_fields
-from sctd.runtime import codec
+from sctd.wire import codec
 
 FIELDS = ("task", "method", "object", "frames", "params", "demos", "gate", "name", "swap", "seed",
           "v")

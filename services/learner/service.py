@@ -3,7 +3,7 @@
 Zenoh (docs/wire-contract.md, docs/learner.md):
 
 - subscribes ``sctd/<robot>/demos/**``: every demonstration is decoded and validated on
-  arrival (:func:`sctd.runtime.codec.decode_demo`) and stored by task; a malformed one
+  arrival (:func:`sctd.wire.codec.decode_demo`) and stored by task; a malformed one
   is refused with its name, row and reason on ``sctd/<robot>/learner/status``, nothing
   stored;
 - answers ``sctd/<robot>/learner`` (the request: :mod:`.request`): trains with
@@ -37,10 +37,10 @@ import zenoh
 
 from sctd.learn import DemoError, skill_bundle
 from sctd.learn.summary import plain, summary_dict
-from sctd.runtime import client, codec
-from sctd.runtime.zsession import MSGPACK
 from sctd.skill import SkillError, bundle_from_file, skill_from_bundle, skill_summary
 from sctd.skill.catalog import StoredSkill, store_folder
+from sctd.wire import DEFAULT_ROBOT, Keys, client, codec
+from sctd.wire.session import MSGPACK
 
 from .check import TASKS, CheckSettings, evaluation, verdict
 from .request import Request, RequestError, parse_request, request_map
@@ -108,12 +108,12 @@ class Learner:
         Where the check's trials run (default: in this process, one after the other).
     """
 
-    def __init__(self, session: zenoh.Session, store: Store, robot: str = codec.DEFAULT_ROBOT,
+    def __init__(self, session: zenoh.Session, store: Store, robot: str = DEFAULT_ROBOT,
                  settings: CheckSettings | None = None, pool: Executor | None = None,
                  trainer: Trainer | None = None) -> None:
         self.session = session
         self.store = store
-        self.keys = codec.Keys(robot)
+        self.keys = Keys(robot)
         self.settings = settings or CheckSettings()
         self.pool = pool
         self.trainer = trainer or Trainer()

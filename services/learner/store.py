@@ -27,9 +27,9 @@ from typing import Any
 
 from sctd.learn.demos import Demo, read_demo_csv
 from sctd.learn.summary import plain
-from sctd.runtime import codec
 from sctd.skill import Bundle
 from sctd.skill.catalog import RECORD, StoredSkill, read_record, stored_skills
+from sctd.wire import codec
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)
 MAX_DEMOS_PER_TASK = 1000  # demonstrations one task may hold

@@ -36,7 +36,7 @@ import zenoh
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.runtime.codec import DEFAULT_ROBOT
+from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
 from .motion import Motion, move, task_motions, upright

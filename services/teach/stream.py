@@ -35,10 +35,10 @@ import zenoh
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.runtime import codec
 from sctd.runtime.safety import limit_step, separation
-from sctd.runtime.timing import Ticker
-from sctd.runtime.zsession import MSGPACK
+from sctd.timing import Ticker
+from sctd.wire import codec
+from sctd.wire.session import MSGPACK
 
 from ..record import Recorder
 from .motion import Motion

@@ -22,7 +22,7 @@ Key and payload
     Samples that do not decode are dropped and counted (:attr:`ZenohBus.dropped`).
 
 Sessions follow sctd's defaults (TCP on loopback, no multicast scouting, see
-:mod:`sctd.runtime.zsession`); ``connect``, ``listen`` (an endpoint, a list, or a
+:mod:`sctd.wire.session`); ``connect``, ``listen`` (an endpoint, a list, or a
 comma-separated string) and ``zenoh_config`` (a json5 file) change them.
 """
 
@@ -131,7 +131,7 @@ class ZenohBus(can.BusABC):
                  listen: str | Sequence[str] | None = None, zenoh_config: str | None = None,
                  receive_own_messages: bool = False, session: zenoh.Session | None = None,
                  **kwargs: Any) -> None:
-        from sctd.runtime.zsession import MSGPACK, close_session, open_session
+        from sctd.wire.session import MSGPACK, close_session, open_session
 
         self.channel = channel = str(channel if channel is not None else "edan")
         self.channel_info = f"Zenoh {can_key(channel)}"
@@ -143,7 +143,7 @@ class ZenohBus(can.BusABC):
         with contextlib.ExitStack() as stack:
             if session is None:
                 session = open_session(_endpoints(listen), _endpoints(connect), zenoh_config)
-                stack.callback(close_session, session)  # bounded: see sctd.runtime.zsession
+                stack.callback(close_session, session)  # bounded: see sctd.wire.session
             self._session = session
             self._pub = session.declare_publisher(self.key, encoding=MSGPACK,
                                                   congestion_control=zenoh.CongestionControl.BLOCK)

@@ -1,4 +1,5 @@
-"""Wire contract v1: key expressions and msgpack payloads (docs/wire-contract.md).
+"""Wire contract v1: the msgpack payloads (docs/wire-contract.md; the keys are in
+:mod:`sctd.wire.keys`).
 
 Decoders validate everything and raise :class:`DecodeError` with a short reason that
 the runtime counts per reason; they never raise anything else on bad bytes.
@@ -10,13 +11,11 @@ the contract can be extended without breaking readers.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import msgpack
 
 WIRE_VERSION = 1
-DEFAULT_ROBOT = "edan"
 
 # Largest payloads the runtime decodes (bytes), checked before anything is copied or
 # decoded; larger ones are dropped and counted as ``<kind>_too_large``. A v1 input is
@@ -37,71 +36,6 @@ class DecodeError(ValueError):
     def __init__(self, reason: str, detail: str = ""):
         self.reason = reason
         super().__init__(f"{reason}: {detail}" if detail else reason)
-
-
-@dataclass(frozen=True)
-class Keys:
-    """The key expressions of one robot (``sctd/<robot>/...``)."""
-
-    robot: str = DEFAULT_ROBOT
-
-    def __post_init__(self) -> None:
-        if not self.robot or any(c in self.robot for c in "/*$?#"):
-            raise ValueError(f"robot name {self.robot!r} must be a single key chunk")
-
-    @property
-    def prefix(self) -> str:
-        return f"sctd/{self.robot}"
-
-    def input(self, device: str = "*") -> str:
-        return f"{self.prefix}/input/{device}"
-
-    @property
-    def state(self) -> str:
-        return f"{self.prefix}/state"
-
-    def objects(self, name: str = "*") -> str:
-        return f"{self.prefix}/objects/{name}"
-
-    @property
-    def target(self) -> str:
-        return f"{self.prefix}/target"
-
-    @property
-    def status(self) -> str:
-        return f"{self.prefix}/status"
-
-    @property
-    def skill(self) -> str:
-        return f"{self.prefix}/skill"
-
-    @property
-    def skill_swap(self) -> str:
-        """The swap queryable (a policy can allow summaries on ``skill`` and swaps apart)."""
-        return f"{self.prefix}/skill/swap"
-
-    @property
-    def scene(self) -> str:
-        return f"{self.prefix}/scene"
-
-    def demos(self, task: str = "*", name: str = "*") -> str:
-        """``sctd/<robot>/demos/<task>/<name>``: finished demonstrations (the recorder)."""
-        return f"{self.prefix}/demos/{task}/{name}"
-
-    @property
-    def learner(self) -> str:
-        """``sctd/<robot>/learner``: the learner service's training queryable."""
-        return f"{self.prefix}/learner"
-
-    @property
-    def learner_status(self) -> str:
-        """``sctd/<robot>/learner/status``: what the learner stored, refused, is doing."""
-        return f"{self.prefix}/learner/status"
-
-    @property
-    def sim_reset(self) -> str:
-        """``sctd/<robot>/sim/reset``: the simulator's scene reset (a sim-only queryable)."""
-        return f"{self.prefix}/sim/reset"
 
 
 def pack(msg: dict[str, Any]) -> bytes:

@@ -18,8 +18,8 @@ import msgpack
 import zenoh
 
 from ..skill import Bundle
-from . import codec
-from .zsession import MSGPACK
+from . import Keys
+from .session import MSGPACK
 
 FIND = 5.0  # s to wait for a queryable to become known before giving up
 
@@ -51,7 +51,7 @@ def query(session: zenoh.Session, key: str, payload: bytes | None = None, timeou
     return None
 
 
-def active_skill(session: zenoh.Session, keys: codec.Keys, timeout: float = 3.0,
+def active_skill(session: zenoh.Session, keys: Keys, timeout: float = 3.0,
                  find: float = FIND) -> dict[str, Any] | None:
     """The running daemon's skill summary (``sctd inspect --json`` plus ``state``), or
     None when no daemon answers."""
@@ -59,7 +59,7 @@ def active_skill(session: zenoh.Session, keys: codec.Keys, timeout: float = 3.0,
     return got[1] if got is not None and got[0] else None
 
 
-def swap(session: zenoh.Session, keys: codec.Keys, bundle: Bundle, timeout: float = 10.0,
+def swap(session: zenoh.Session, keys: Keys, bundle: Bundle, timeout: float = 10.0,
          find: float = FIND) -> tuple[bool, dict[str, Any]]:
     """Send ``bundle`` to the daemon: (swapped, its reply ``{ok, id, name, state}`` or
     ``{error}``; when no daemon answers, ``{error, unanswered: True}``)."""

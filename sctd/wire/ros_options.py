@@ -1,5 +1,5 @@
 """The ``--ros`` flags of ``sctd run`` and ``sctd sim`` (docs/ros2.md), defined once and
-without loading rosbags: :mod:`sctd.runtime.ros` is imported only when ``--ros`` is given."""
+without loading rosbags: :mod:`sctd.wire.ros` is imported only when ``--ros`` is given."""
 
 from __future__ import annotations
 

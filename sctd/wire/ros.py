@@ -36,7 +36,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from . import codec
 from .ros_options import check_namespace
-from .zsession import MSGPACK
+from .session import MSGPACK
 
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 JOY = "sensor_msgs/msg/Joy"

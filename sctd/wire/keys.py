@@ -1,0 +1,73 @@
+"""Wire contract v1: the key expressions of one robot, ``sctd/<robot>/...``
+(docs/wire-contract.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+DEFAULT_ROBOT = "edan"
+
+
+@dataclass(frozen=True)
+class Keys:
+    """The key expressions of one robot (``sctd/<robot>/...``)."""
+
+    robot: str = DEFAULT_ROBOT
+
+    def __post_init__(self) -> None:
+        if not self.robot or any(c in self.robot for c in "/*$?#"):
+            raise ValueError(f"robot name {self.robot!r} must be a single key chunk")
+
+    @property
+    def prefix(self) -> str:
+        return f"sctd/{self.robot}"
+
+    def input(self, device: str = "*") -> str:
+        return f"{self.prefix}/input/{device}"
+
+    @property
+    def state(self) -> str:
+        return f"{self.prefix}/state"
+
+    def objects(self, name: str = "*") -> str:
+        return f"{self.prefix}/objects/{name}"
+
+    @property
+    def target(self) -> str:
+        return f"{self.prefix}/target"
+
+    @property
+    def status(self) -> str:
+        return f"{self.prefix}/status"
+
+    @property
+    def skill(self) -> str:
+        return f"{self.prefix}/skill"
+
+    @property
+    def skill_swap(self) -> str:
+        """The swap queryable (a policy can allow summaries on ``skill`` and swaps apart)."""
+        return f"{self.prefix}/skill/swap"
+
+    @property
+    def scene(self) -> str:
+        return f"{self.prefix}/scene"
+
+    def demos(self, task: str = "*", name: str = "*") -> str:
+        """``sctd/<robot>/demos/<task>/<name>``: finished demonstrations (the recorder)."""
+        return f"{self.prefix}/demos/{task}/{name}"
+
+    @property
+    def learner(self) -> str:
+        """``sctd/<robot>/learner``: the learner service's training queryable."""
+        return f"{self.prefix}/learner"
+
+    @property
+    def learner_status(self) -> str:
+        """``sctd/<robot>/learner/status``: what the learner stored, refused, is doing."""
+        return f"{self.prefix}/learner/status"
+
+    @property
+    def sim_reset(self) -> str:
+        """``sctd/<robot>/sim/reset``: the simulator's scene reset (a sim-only queryable)."""
+        return f"{self.prefix}/sim/reset"
