@@ -13,6 +13,7 @@ from __future__ import annotations
 import ctypes
 import math
 import os
+import signal
 import threading
 import time
 
@@ -181,3 +182,24 @@ class RoundTrips:
         """Forget the send times (between phases: late answers then count nothing)."""
         with self._lock:
             self._sent.clear()
+
+
+STOP_POLL = 0.1  # s between a waiting main thread's looks for a stop signal
+
+
+def wait_until(done: threading.Event, seconds: float = 0.0) -> None:
+    """Wait in the main thread for ``done``, Ctrl-C or SIGTERM, or ``seconds`` (0: no
+    limit); SIGTERM sets ``done``.
+
+    The wait wakes every :data:`STOP_POLL` s: the kernel may hand a signal to any thread
+    that does not block it, often one of Zenoh's, and Python runs the handler only when
+    the main thread runs, never while it is blocked on an event without a timeout.
+    """
+    signal.signal(signal.SIGTERM, lambda *_: done.set())
+    end = time.monotonic() + seconds if seconds > 0 else math.inf
+    try:
+        while not done.wait(min(STOP_POLL, max(0.0, end - time.monotonic()))):
+            if time.monotonic() >= end:
+                break
+    except KeyboardInterrupt:
+        pass

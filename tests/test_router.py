@@ -9,9 +9,12 @@ Loopback only: the routers listen on free 127.0.0.1 ports, never on 7447.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import json
+import os
 import signal
 import socket
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -71,6 +74,37 @@ def test_router_stopped_by_a_signal_closes_its_session_and_exits_0(tmp_path, sig
         rc = router.stop(sig=sig)
     assert rc == EXIT_OK, (rc, log.read_text())
     assert "did not close" not in log.read_text()
+
+
+def _tgkill(pid: int, tid: int, sig: int) -> None:
+    """Send ``sig`` to the thread ``tid`` of process ``pid`` (Linux ``tgkill``): the
+    kernel hands a signal sent to a process to any of its threads that does not block
+    it, often one of Zenoh's."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.syscall(234, pid, tid, sig) != 0:  # SYS_tgkill on x86-64
+        raise OSError(ctypes.get_errno(), "tgkill")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+def test_a_signal_taken_by_one_of_zenohs_threads_still_stops_the_router(tmp_path, sig):
+    """A stop signal that the kernel gives to one of Zenoh's threads, not to Python's main
+    thread, stops the router as one the main thread took does (a router that waited on
+    an event without a timeout never saw it and was killed after the 10 s grace)."""
+    port = free_port()
+    log = tmp_path / "router.log"
+    router = sctd("router", "--config", str(router_file(tmp_path / "router.json5", port)), log=log)
+    try:
+        assert wait_for(lambda: "listening on" in log.read_text(), 30), log.read_text()
+        pid = router.p.pid
+        others = sorted(int(t) for t in os.listdir(f"/proc/{pid}/task") if int(t) != pid)
+        assert others, "the router runs Zenoh's threads"
+        _tgkill(pid, others[-1], sig)
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            router.p.wait(3 * CLOSE_WAIT + 10)  # the router's own bound, with room
+        ended = router.p.returncode  # None: it did not end by itself
+    finally:
+        router.stop()
+    assert ended == EXIT_OK, (ended, log.read_text())
 
 
 def test_router_whose_session_does_not_close_exits_3_after_the_bound(tmp_path):

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
 import threading
 import time
@@ -30,7 +29,7 @@ from sctd.cli.procs import Child, free_port
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.skill import load_skill
-from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack
+from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack, wait_until
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
 
@@ -42,12 +41,9 @@ def echo_main(argv: list[str]) -> int:
     p = argparse.ArgumentParser(prog="sctd-bench-echo")
     add_zenoh_arguments(p)
     args = p.parse_args(argv)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    signal.signal(signal.SIGINT, lambda *a: stop.set())
     with session_from_args(args) as s, s.declare_publisher(PONG, express=True, encoding=TEXT) as pub, \
             s.declare_subscriber(PING, lambda sample: pub.put(sample.payload.to_bytes())):
-        stop.wait()
+        wait_until(threading.Event())
     return 0
 
 

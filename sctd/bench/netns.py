@@ -41,6 +41,7 @@ from typing import IO
 import msgpack
 import zenoh
 
+from sctd.timing import wait_until
 from sctd.wire.session import MSGPACK, TEXT, make_config
 
 PREFIX = "sctd-"
@@ -395,13 +396,6 @@ def _open(config: str) -> zenoh.Session:
         raise _Refused(str(e)) from None
 
 
-def _stop_event() -> threading.Event:
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    signal.signal(signal.SIGINT, lambda *a: stop.set())
-    return stop
-
-
 def listen_main(args: argparse.Namespace) -> int:
     """Count the samples arriving on each key expression for ``--seconds``, and the Unix
     time of the first one per key. With ``--mark NAME`` only msgpack maps that have the
@@ -436,8 +430,8 @@ def listen_main(args: argparse.Namespace) -> int:
                     per_key[key] = per_key.get(key, 0) + 1
         subs.append(s.declare_subscriber(key, on))
     print(json.dumps({"ready": True}), flush=True)
-    stop = _stop_event()
-    stop.wait(args.seconds)
+    stop = threading.Event()
+    wait_until(stop, args.seconds)
     for sub in subs:
         sub.undeclare()
     s.close()
@@ -466,11 +460,11 @@ def record_main(args: argparse.Namespace) -> int:
         with lock:
             out.write(line + "\n")
 
-    stop = _stop_event()
+    stop = threading.Event()
     limits = [(key, args.max_rate) for key in args.key] if args.max_rate else []
     s = zenoh.open(make_config(config_file=args.config, rate_limits=limits))
     subs = [s.declare_subscriber(key, on) for key in args.key]
-    stop.wait()
+    wait_until(stop)
     for sub in subs:
         sub.undeclare()
     s.close()
@@ -536,11 +530,11 @@ ECHO_PONG = "sctd/echo/target"
 def echo_main(args: argparse.Namespace) -> int:
     """Republish every ``ECHO_PING`` sample on ``ECHO_PONG`` until SIGTERM (run it in the
     runtime's role)."""
-    stop = _stop_event()
+    stop = threading.Event()
     with _open(args.config) as s, s.declare_publisher(ECHO_PONG, express=True, encoding=TEXT) as pub, \
             s.declare_subscriber(ECHO_PING, lambda sample: pub.put(sample.payload.to_bytes())):
         print(json.dumps({"ready": True}), flush=True)
-        stop.wait()
+        wait_until(stop)
     return 0
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
 import threading
 import time
@@ -24,6 +23,7 @@ from typing import Any
 import msgpack
 import zenoh
 
+from ..timing import wait_until
 from ..wire import DEFAULT_ROBOT, Keys
 from ..wire.session import add_zenoh_arguments, session_from_args
 from .errors import EXIT_OK
@@ -101,19 +101,6 @@ def add_hz_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop after this many seconds (default: run until Ctrl-C)")
     parser.add_argument("--json", action="store_true", help="one JSON object per report and line")
     add_zenoh_arguments(parser)
-
-
-def wait_until(done: threading.Event, seconds: float) -> None:
-    """Wait for ``done``, Ctrl-C or SIGTERM, or ``seconds`` (0: no limit); SIGTERM sets
-    ``done``."""
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    end = time.monotonic() + seconds if seconds > 0 else math.inf
-    try:
-        while not done.wait(min(0.1, max(0.0, end - time.monotonic()))):
-            if time.monotonic() >= end:
-                break
-    except KeyboardInterrupt:
-        pass
 
 
 def main_echo(args: argparse.Namespace) -> int:

@@ -33,9 +33,10 @@ from typing import IO, Any
 import zenoh
 
 from ..files import FileError, open_regular
+from ..timing import wait_until
 from ..wire import DEFAULT_ROBOT, Keys, codec
 from ..wire.session import MSGPACK, add_zenoh_arguments, session_from_args
-from .echo import decode, wait_until
+from .echo import decode
 from .errors import EXIT_FAILED, EXIT_OK, fail
 
 OBSERVATIONS = ("state", "objects", "scene", "status")  # replayed by default

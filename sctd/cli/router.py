@@ -29,6 +29,7 @@ from typing import NoReturn
 
 import zenoh
 
+from sctd.timing import wait_until
 from sctd.wire.session import HUB, close_session
 
 from .errors import EXIT_CODES, EXIT_FAILED, EXIT_FORCED, EXIT_OK, fail
@@ -73,7 +74,7 @@ def main_router(args) -> int:
         listen = json.loads(conf.get_json("listen/endpoints"))
         print(f"sctd router: zid {s.info.zid()} listening on {', '.join(map(str, listen))}",
               flush=True)
-        stop.wait()
+        wait_until(stop)  # (a signal may be taken by one of Zenoh's threads: see there)
     except BaseException:  # reported as it is, the session closed as on a signal
         close_session(s, timeout=CLOSE_WAIT)
         raise
