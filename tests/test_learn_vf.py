@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sctd.bench.fields import phase_kinds
-from sctd.learn import Demo, VectorFieldLearner, learn_vector_fields, ransac_iterations
+from sctd.learn import Demo, VectorFieldLearner, field_kinds_by_phase, learn_vector_fields, ransac_iterations
 from sctd.learn.vf import cylinder_field, sphere_field
 from sctd_sim import demogen
 
@@ -125,7 +124,9 @@ def _phase_kinds(task: str, seed: int, **kw):
     ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=seed, **kw))
-    return ds, res, phase_kinds(ds, res)
+    kinds = field_kinds_by_phase(res.field_labels, [f.type for f in res.learner.fields_],
+                                 ds.truth["labels"], len(ds.truth["phases"]))
+    return ds, res, kinds
 
 
 @pytest.mark.parametrize("seed", range(8))

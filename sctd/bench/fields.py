@@ -15,31 +15,27 @@ import numpy as np
 
 from sctd_sim import demogen
 
-from ..learn import Demo, LinearIMLearner, VectorFieldLearner, learn_linear, learn_vector_fields
+from ..learn import (
+    LinearIMLearner,
+    VectorFieldLearner,
+    field_kinds_by_phase,
+    learn_linear,
+    learn_vector_fields,
+    segmentation_accuracy,
+)
 from ..learn.results import VectorFieldResult
 from ..skill.fields import CylinderField, SphereField
+from .demos import demos_of
 
 TASKS = ("pour", "drawer", "crank", "wipe")
 SELECTIONS = ("likelihood", "inliers")
 
 
-def _demos(ds: demogen.DemoSet) -> list[Demo]:
-    return [Demo(d.name, d.t, d.poses) for d in ds.demos]
-
-
 def phase_kinds(ds: demogen.DemoSet, res: VectorFieldResult) -> tuple[str | None, ...]:
     """Per phase of a generated task, the kind of field most of its displacements are
     assigned to (None: all outliers)."""
-    out = []
-    for phase in range(len(ds.truth["phases"])):
-        votes: dict[str, int] = {}
-        for d in ds.demos:
-            fl = np.asarray(res.field_labels[d.name])
-            for i in fl[(d.phase == phase) & (fl >= 0)]:
-                kind = res.learner.fields_[i].type
-                votes[kind] = votes.get(kind, 0) + 1
-        out.append(max(votes, key=lambda k: votes[k]) if votes else None)
-    return tuple(out)
+    return field_kinds_by_phase(res.field_labels, [f.type for f in res.learner.fields_],
+                                ds.truth["labels"], len(ds.truth["phases"]))
 
 
 def _geometry(ds: demogen.DemoSet, res: VectorFieldResult) -> dict[str, float]:
@@ -74,7 +70,7 @@ def run_field_bench(seeds: int = 10, n_demos: int = 10, noise: float = 0.001,
             for seed in range(seeds):
                 ds = demogen.generate(task, n_demos, noise=noise, outliers=outliers, seed=seed)
                 t = time.perf_counter()
-                res = learn_vector_fields(_demos(ds), learner=VectorFieldLearner(
+                res = learn_vector_fields(demos_of(ds), learner=VectorFieldLearner(
                     random_state=seed, selection=sel))
                 times.append(time.perf_counter() - t)
                 kinds = phase_kinds(ds, res)
@@ -95,8 +91,6 @@ def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float) -> di
     """The linear learner with automatic frames against the given tip frame on the
     pour (segmentation accuracy against the generator's phases), and the crank axis
     offset found, over seeds; learning times."""
-    from .learn import demos_of, segmentation_accuracy
-
     tip = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
     acc_auto, acc_given, tip_err, t_auto, crank_err = [], [], [], [], []
     for seed in range(seeds):
@@ -105,8 +99,8 @@ def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float) -> di
         auto = learn_linear(demos_of(pour), learner=LinearIMLearner(random_state=seed))
         t_auto.append(time.perf_counter() - t)
         given = learn_linear(demos_of(pour), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
-        acc_auto.append(segmentation_accuracy(auto, pour.truth)[0])
-        acc_given.append(segmentation_accuracy(given, pour.truth)[0])
+        acc_auto.append(segmentation_accuracy(auto.labels, pour.truth["labels"])[0])
+        acc_given.append(segmentation_accuracy(given.labels, pour.truth["labels"])[0])
         spheres = [f for f in auto.found_frames if f.kind == "sphere"]
         tip_err.append(min((float(np.linalg.norm(f.pose[:3] - tip[:3])) for f in spheres), default=np.inf))
         crank = demogen.generate("crank", n_demos, noise=noise, outliers=outliers, seed=seed)

@@ -37,7 +37,6 @@ from sctd import se3
 from sctd_sim import demogen
 
 from ..learn import (
-    Demo,
     LinearIMLearner,
     Preprocessing,
     alpha_beta_swap,
@@ -47,6 +46,7 @@ from ..learn import (
     neighbour_graph,
 )
 from ..learn.preprocess import preprocess
+from .demos import demos_of
 
 Problem = tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], float]
 GCO_INSTALL = "pip install gco-wrapper; it is in the dev extra"
@@ -62,7 +62,7 @@ def segmentation_instance(seed: int, task: str = "pour", n_demos: int = 10,
     lr = LinearIMLearner() if learner is None else learner
     ds = demogen.generate(task, n_demos, noise=noise, outliers=outliers, seed=seed)
     prep = Preprocessing()
-    prepared = preprocess([Demo(d.name, d.t, d.poses) for d in ds.demos], prep, prep.spacing,
+    prepared = preprocess(demos_of(ds), prep, prep.spacing,
                           lr.alpha, translation_only=False)
     labels = label_set(["ee"])
     costs, starts = [], []

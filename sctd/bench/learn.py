@@ -32,7 +32,6 @@ from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 from sctd_sim import demogen
 
 from ..learn import (
-    Demo,
     LinearIMLearner,
     LinearResult,
     VectorFieldLearner,
@@ -41,8 +40,10 @@ from ..learn import (
     energy,
     learn_linear,
     learn_vector_fields,
+    segmentation_accuracy,
 )
 from ..skill.fields import SphereField, TranslationField
+from .demos import demos_of
 from .fields import format_field_bench, run_field_bench
 from .gco import format_gco_bench, run_gco_bench
 
@@ -109,27 +110,6 @@ def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float 
     return f
 
 
-def demos_of(ds: demogen.DemoSet) -> list[Demo]:
-    """The generated demonstrations as the learner reads them."""
-    return [Demo(d.name, d.t, d.poses) for d in ds.demos]
-
-
-def segmentation_accuracy(result: LinearResult, truth: dict[str, Any]) -> tuple[float, dict]:
-    """Share of raw displacements whose state maps to the true phase (states mapped to
-    phases by majority)."""
-    pairs = np.concatenate([np.stack([np.asarray(result.labels[k]), np.asarray(v)], axis=1)
-                            for k, v in truth["labels"].items()])
-    mapping = {}
-    for s in np.unique(pairs[:, 0]):
-        ph = pairs[pairs[:, 0] == s, 1]
-        mapping[int(s)] = int(np.bincount(ph).argmax())
-    pred = np.array([mapping[int(s)] for s in pairs[:, 0]])
-    per_demo = {k: float(np.mean([mapping[s] == p for s, p in zip(result.labels[k], v,
-                                                                    strict=True)]))
-                for k, v in truth["labels"].items()}
-    return float(np.mean(pred == pairs[:, 1])), per_demo
-
-
 def _angle(a, b) -> float:
     a = np.asarray(a) / np.linalg.norm(a)
     b = np.asarray(b) / np.linalg.norm(b)
@@ -164,7 +144,7 @@ def _bench_linear(pour: demogen.DemoSet, seed: int, out: dict[str, Any]) -> Line
     t = time.perf_counter()
     lin = learn_linear(demos_of(pour), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
     out["linear_time_s"] = time.perf_counter() - t
-    acc, per_demo = segmentation_accuracy(lin, pour.truth)
+    acc, per_demo = segmentation_accuracy(lin.labels, pour.truth["labels"])
     out["segmentation_accuracy"] = acc
     out["segmentation_accuracy_min_demo"] = min(per_demo.values())
     states = lin.learner.states_

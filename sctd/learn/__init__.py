@@ -25,7 +25,8 @@ each is defined once there, with the help text the command line shows.
 The parts: demonstrations (:func:`read_demos`, :func:`dtw`, preprocessing); linear IMs
 (Ch. 4.1: :class:`LinearIMLearner`, :func:`alpha_beta_swap`, :func:`alpha_expansion`,
 :func:`energy`); vector fields (Ch. 4.2: :class:`VectorFieldLearner`); end to end
-(:func:`learn_linear`, :func:`learn_vector_fields`, :func:`learn`, :func:`learn_skill`).
+(:func:`learn_linear`, :func:`learn_vector_fields`, :func:`learn`, :func:`learn_skill`);
+scores against known phases (:func:`segmentation_accuracy`, :func:`field_kinds_by_phase`).
 """
 
 from .bundle import skill_bundle
@@ -53,6 +54,7 @@ from .linear import (
     selection_matrices,
     selection_matrix,
 )
+from .metrics import field_kinds_by_phase, segmentation_accuracy
 from .params import HyperparameterError, get_params, hyperparameter
 from .pipeline import (
     METHODS,
@@ -93,6 +95,7 @@ __all__ = [
     "check_hyperparameters",
     "dtw",
     "energy",
+    "field_kinds_by_phase",
     "get_params",
     "hyperparameter",
     "hyperparameter_names",
@@ -107,6 +110,7 @@ __all__ = [
     "ransac_iterations",
     "read_demo_csv",
     "read_demos",
+    "segmentation_accuracy",
     "selection_matrices",
     "selection_matrix",
     "skill_bundle",
