@@ -14,9 +14,10 @@ from hypothesis import strategies as st
 
 from sctd.bench import gco as gco_bench
 from sctd.bench.gco import chain_instance, gco_swap, segmentation_instance
-from sctd.bench.learn import reference_swap
-from sctd.learn import alpha_beta_swap, alpha_expansion, energy
+from sctd.learn import Demo, LinearIMLearner, alpha_beta_swap, alpha_expansion, energy, learn_linear
 from sctd.learn.graphcut import _expansion_candidates, _label_pairs, _Potts, _swap_candidates
+from sctd_sim import demogen
+from tests.oracles import reference_swap
 
 
 @st.composite
@@ -168,6 +169,21 @@ def test_swap_matches_independent_reference(seed):
     assert e1 <= 1.01 * e2  # ours starts from alpha-expansion's minimum: it may end lower
     # The independent swap finds no move that lowers our result.
     assert energy(U, E, w, 0.3, reference_swap(U, E, w, 0.3, labels=f1)) >= e1 - _tol(e1)
+
+
+def test_swap_matches_independent_reference_on_the_learners_pour_energy():
+    """The energy the linear learner segments a generated pour with (given the tip
+    frame): the swap ends no higher than the independent one, which finds no move that
+    lowers it."""
+    ds = demogen.generate("pour", 4, noise=0.001, outliers=0.05, seed=0)
+    demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
+    lr = learn_linear(demos, {"tip": [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]},
+                      learner=LinearIMLearner(random_state=0)).learner
+    U, E, w, lam = np.concatenate(lr.costs_), lr.edges_, lr.weights_, lr.smoothness
+    f = alpha_beta_swap(U, E, w, lam)
+    e = energy(U, E, w, lam, f)
+    assert e <= 1.01 * energy(U, E, w, lam, reference_swap(U, E, w, lam))
+    assert energy(U, E, w, lam, reference_swap(U, E, w, lam, labels=f)) >= e - _tol(e)
 
 
 @pytest.mark.parametrize("make", [lambda s: segmentation_instance(s, "pour"),
