@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from sctd.bench.robustness import malformed_bundles
+from sctd.bench.bundles import malformed_bundles
 from sctd.skill import bundle_from_file
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session

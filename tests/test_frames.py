@@ -35,7 +35,7 @@ def _mapped(a: np.ndarray) -> bool:
 
 
 def test_a_large_skill_arrives_equal_with_its_model_arrays_on_memory_maps():
-    from sctd.bench.robustness import big_bundle
+    from sctd.bench.bundles import big_bundle
 
     skill = skill_from_bundle(Bundle.unpack(big_bundle(ROOT / "skills", seed=3, size=2 << 20).pack()))
     got = _through_link(("swap", 7, skill))

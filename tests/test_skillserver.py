@@ -16,7 +16,7 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from sctd.bench.robustness import big_bundle
+from sctd.bench.bundles import big_bundle
 from sctd.skill import Bundle, bundle_from_file, skill_from_bundle, skill_summary
 from sctd.skill.loader import MAX_BUNDLE_BYTES
 from sctd.wire import Keys, client, codec
