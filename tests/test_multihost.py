@@ -1,5 +1,5 @@
 """sctd across real hosts: network namespaces on this machine, one per host, joined by
-a bridge, every program a client of a Zenoh router (``sctd.bench.multihost.Cluster``).
+a bridge, every program a client of a Zenoh router (``sctd.deploy.cluster.Cluster``).
 
 Needs root (``ip netns add``). Without it the tests skip and say why, except in CI
 (``$CI`` set), where they fail instead: there they must run.
@@ -14,9 +14,9 @@ import time
 
 import pytest
 
-from sctd.bench.multihost import Cluster
-from sctd.bench.netns import Hosts, NamespaceError, can_make_namespaces, namespaces
 from sctd.cli.errors import EXIT_FORCED, EXIT_OK
+from sctd.deploy.cluster import Cluster
+from sctd.deploy.netns import Hosts, NamespaceError, can_make_namespaces, namespaces
 from sctd.runtime.controller import RuntimeConfig
 from tests.conftest import wait_for
 

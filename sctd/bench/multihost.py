@@ -1,335 +1,24 @@
 """``sctd bench multihost``: sctd across real hosts (network namespaces on this machine).
 
-:class:`Cluster` is the setup that ``tests/test_multihost.py`` checks and this bench
-measures: in the namespaces of :class:`~sctd.bench.netns.Hosts`,
-- ``router``: a Zenoh router on ``tcp/<router>:7447``;
-- ``robot``: ``sctd sim --scene pour``;
-- ``runtime``: ``sctd run --skill pour``;
-- ``input``: the simulated user, or a steady input source;
-- ``observer``: a recorder of the contract's keys (JSON lines, see
-  ``python -m sctd.bench.netns record``);
-- ``intruder``: probes that try to read, write and query.
-Every program is a Zenoh client of the router, configured only by its role's file.
-
-The bench prints input -> target latency across the hosts (probe on the input host,
-daemon on the runtime host, robot on the robot host) next to a Zenoh echo over the same
-links (echo on the runtime host, on keys the input and runtime roles may use, so the echo
-crosses the router's access control as input and target do), and the time from a router restart to the first
-target and state seen again on the observer host.
+It runs the :class:`~sctd.deploy.cluster.Cluster` (a router, robot, runtime, input,
+learner, observer and intruder host) and prints input -> target latency across the hosts
+(probe on the input host, daemon on the runtime host, robot on the robot host) next to a
+Zenoh echo over the same links (echo on the runtime host, on keys the input and runtime
+roles may use, so the echo crosses the router's access control as input and target do),
+the time from a router restart to the first target and state seen again on the observer
+host, and, with ``sctd certs``'s configs, what the intruders got through.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import json
-import subprocess
-import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 from sctd.bench import run_and_report
-from sctd.bench.netns import (
-    ROUTER_PORT,
-    Hosts,
-    Process,
-    client_config,
-    last_json,
-    router_config,
-    sign_certificate,
-    tls_client_config,
-    write_config,
-)
 from sctd.cli.errors import EXIT_FORCED, EXIT_OK
-from sctd.wire import Keys
-
-HOSTS = ("router", "robot", "runtime", "input", "learner", "observer", "intruder")
-ROLE_OF_HOST = {"router": "sctd-router", "robot": "sctd-robot", "runtime": "sctd-runtime",
-                "input": "sctd-input", "learner": "sctd-learner", "observer": "sctd-observer"}
-# The client roles the cluster uses: the hosts' and the operator's, who watches for intruders.
-CLIENT_ROLES = ("sctd-robot", "sctd-runtime", "sctd-input", "sctd-learner", "sctd-observer",
-                "sctd-operator")
-STEADY_INPUT = {"v": 1, "u": [0.0, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held, stick at rest
-TLS_PORT = 7448
-# Every key of the wire contract an intruder could write to, as suffixes of sctd/<robot>/.
-CONTRACT_KEYS = ("input/intruder", "state", "objects/mug", "target", "status", "scene", "can",
-                 "demos/pour/intruder", "learner/status")
-# The intruders: who tries (the name is also the mark on its messages).
-INTRUDERS = ("no-certificate", "other-ca", "unlisted-name", "observer")
-N_PER_KEY = 20
-
-
-def secure_available() -> bool:
-    """True when this sctd has ``sctd certs`` (mutual TLS and the roles' access control);
-    else the cluster runs on plain TCP."""
-    return importlib.util.find_spec("sctd.cli.certs") is not None
-
-
-class Cluster:
-    """The hosts and their programs (module doc); a context manager that stops all.
-
-    Parameters
-    ----------
-    logdir : Path
-        Logs, configs and the observer's records.
-    robot : str
-        Key prefix ``sctd/<robot>``.
-    """
-
-    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None):
-        self.logdir = Path(logdir)
-        self.keys = Keys(robot)
-        self.hosts = Hosts(HOSTS, self.logdir)
-        self.secure = secure_available() if secure is None else secure
-        self.router: Process | None = None
-        self.records = self.logdir / "observer.jsonl"
-        self._configs: dict[str, Path] = {}
-        self.intruder_configs: dict[str, Path] = {}
-        self._seen: dict[str, list[dict[str, Any]]] = {}
-        self._offset = 0
-        self._router_starts = 0
-
-    @property
-    def endpoint(self) -> str:
-        if self.secure:
-            return f"tls/{self.hosts.addr('router')}:{TLS_PORT}"
-        return f"tcp/{self.hosts.addr('router')}:{ROUTER_PORT}"
-
-    def config(self, role: str) -> Path:
-        """The Zenoh config file of ``role`` (``router`` or a client role)."""
-        return self._configs[role]
-
-    def __enter__(self) -> Cluster:
-        self.hosts.__enter__()
-        try:
-            self._write_configs()
-        except BaseException:
-            self.hosts.close()
-            raise
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.hosts.close()
-
-    def _write_configs(self) -> None:
-        if self.secure:
-            self._write_secure_configs()
-            return
-        d = self.logdir / "zenoh"
-        self._configs["router"] = write_config(d / "router.json5", router_config(self.endpoint))
-        for role in CLIENT_ROLES:
-            self._configs[role] = write_config(d / f"{role}.json5", client_config(self.endpoint))
-
-    def _certs(self, out: Path) -> Path:
-        r = subprocess.run([sys.executable, "-m", "sctd.cli.main", "certs", "--out", str(out),
-                            "--router", self.endpoint, "--ip", self.hosts.addr("router")],
-                           capture_output=True, text=True)
-        if r.returncode != 0:
-            raise RuntimeError(f"sctd certs --out {out}: exit {r.returncode}: {r.stderr.strip()}")
-        return out
-
-    def _write_secure_configs(self) -> None:
-        """``sctd certs`` renders every role's file (the programs get nothing else); the
-        intruders get a client without a certificate, one whose certificate another CA
-        signed, one with a CA-signed certificate whose name is no role, and a valid
-        observer."""
-        tls = self._certs(self.logdir / "tls")
-        self._configs["router"] = tls / "zenoh" / "router.json5"
-        for role in CLIENT_ROLES:
-            self._configs[role] = tls / "zenoh" / f"{role}.json5"
-        other = self._certs(self.logdir / "other-ca")
-        cert, key = sign_certificate(tls, "intruder", self.logdir / "unlisted")
-        ca, ep, d = tls / "ca.pem", self.endpoint, self.logdir / "intruders"
-        self.intruder_configs = {
-            "no-certificate": write_config(d / "no-certificate.json5", tls_client_config(ep, ca)),
-            "other-ca": write_config(d / "other-ca.json5", tls_client_config(
-                ep, ca, other / "sctd-observer.pem", other / "sctd-observer-key.pem")),
-            "unlisted-name": write_config(d / "unlisted-name.json5", tls_client_config(ep, ca, cert, key)),
-            "observer": self._configs["sctd-observer"],
-        }
-
-    def _zargs(self, host: str) -> list[str]:
-        return ["--zenoh-config", str(self.config(ROLE_OF_HOST[host]))]
-
-    # -- programs
-    def start_router(self) -> Process:
-        """``sctd router`` with the router's config (again, after a restart: each start
-        logs to its own file); it prints ``listening on`` once its session is open."""
-        self._router_starts += 1
-        self.router = self.hosts.python("router", "sctd.cli.main", "router", "--config",
-                                        str(self.config("router")), log=f"router-{self._router_starts}.log")
-        return self.router
-
-    def stop_router(self) -> int | None:
-        """Stop the router with SIGTERM (SIGKILL after 10 s); its exit code (None when no
-        router was started): ``sctd router`` exits 0 when its session closed and 3
-        (``EXIT_FORCED``) when Zenoh did not close it within 2 s, -9 only if killed."""
-        return None if self.router is None else self.router.stop()
-
-    def start_learner(self) -> Process:
-        return self.hosts.python("learner", "sctd.cli.main", "learner", "--store",
-                                 str(self.logdir / "store"), *self._zargs("learner"), log="learner.log")
-
-    def start_robot(self, *extra: str) -> Process:
-        return self.hosts.python("robot", "sctd_sim.service", "--scene", "pour", *extra,
-                                 *self._zargs("robot"), log="robot.log")
-
-    def start_runtime(self, skill: str = "pour", *extra: str) -> Process:
-        return self.hosts.python("runtime", "sctd.cli.main", "run", "--skill", skill, "--stats-json",
-                                 *extra, *self._zargs("runtime"), log="runtime.log")
-
-    def start_observer(self) -> Process:
-        k = self.keys
-        rec = ["--key", k.status, "--key", k.scene, "--key", k.target, "--key", k.state,
-               "--key", k.learner_status,
-               "--field", "seq", "--field", "stamp", "--field", "state", "--field", "mode",
-               "--field", "in_seq", "--field", "pose", "--field", "success", "--field", "poured",
-               "--field", "targets", "--field", "state_age", "--field", "counters"]
-        rec += ["--max-rate", "100"]  # of each key: enough to see seq and pose change
-        return self.hosts.python("observer", "sctd.bench.netns", "record", "--config",
-                                 str(self.config("sctd-observer")), "--out", str(self.records), *rec,
-                                 log="observer.log")
-
-    def start_steady_input(self) -> Process:
-        """Input at 50 Hz, stick at rest and deadman held, until stopped."""
-        return self.hosts.python("input", "sctd.bench.netns", "put", "--config",
-                                 str(self.config("sctd-input")), "--key", self.keys.input("steady"),
-                                 "--n", "100000000", "--rate", "50", "--settle", "0",
-                                 "--payload", json.dumps(STEADY_INPUT), log="steady-input.log")
-
-    def user(self, seconds: float = 90.0) -> dict:
-        """The simulated user doing the pour task until done; its JSON report."""
-        return self.hosts.call("input", "sctd_services.simulated_user", "--task", "pour",
-                               "--duration", str(seconds), "--until-done", "--json",
-                               *self._zargs("input"), timeout=seconds + 60)
-
-    # -- the intruders
-    def intrude(self, intruders: tuple[str, ...] = INTRUDERS, n: int = N_PER_KEY) -> dict:
-        """Each intruder (on the intruder host, at once) puts ``n`` marked messages on
-        every key of :data:`CONTRACT_KEYS`, subscribes to all of them, asks for a skill
-        swap and for training; an operator on the observer host counts the marked
-        messages that arrive. The input host puts ``n`` marked input messages too (the
-        control: what an allowed sender delivers), the operator asks for a swap and for
-        training (the control: the runtime and the learner answer). Per intruder:
-        ``delivered`` (key -> marked messages the operator got), ``received`` (key ->
-        messages it got), ``swap`` and ``train`` (ok and error replies)."""
-        h, k = self.hosts, self.keys
-        keys = [f"{k.prefix}/{suffix}" for suffix in CONTRACT_KEYS]
-        configs = {name: self.intruder_configs.get(name, self.config("sctd-observer"))
-                   for name in intruders}
-        op = ["--config", str(self.config("sctd-operator"))]
-        # first the listeners (until stopped), each ready before anyone sends
-        listeners = {"watch": h.python("observer", "sctd.bench.netns", "listen", *op, "--mark", "intruder",
-                                       "--seconds", "600", *_each("--key", keys),
-                                       log="intrusion-watch.log")}
-        for name, conf in configs.items():
-            listeners[name] = h.python("intruder", "sctd.bench.netns", "listen", "--config", str(conf),
-                                       "--seconds", "600", *_each("--key", keys),
-                                       log=f"intruder-{name}-read.log")
-        for p in listeners.values():
-            if not _wait_line(p, '"ready"', 60):
-                raise RuntimeError(f"{p.host}: a listener did not start; see {p.log_path}")
-        procs: dict[tuple[str, str], Process] = {}
-        for name, conf in configs.items():
-            c = ["--config", str(conf)]
-            procs[name, "put"] = h.python(
-                "intruder", "sctd.bench.netns", "put", *c, "--n", str(n), "--settle", "3",
-                "--payload", json.dumps({"v": 1, "intruder": name, **STEADY_INPUT}),
-                *_each("--key", keys), log=f"intruder-{name}-put.log")
-            for what, key, payload in self._asks():
-                procs[name, what] = h.python("intruder", "sctd.bench.netns", "query", *c, "--key", key,
-                                             "--payload", payload, "--settle", "1",
-                                             log=f"intruder-{name}-{what}.log")
-        procs["control", "put"] = h.python(
-            "input", "sctd.bench.netns", "put", "--config", str(self.config("sctd-input")), "--n", str(n),
-            "--settle", "3", "--payload", json.dumps({"v": 1, "intruder": "control", **STEADY_INPUT}),
-            "--key", k.input("intruder"), log="control-put.log")
-        controls: list[tuple[str, str, str | None]] = [
-            ("summary", k.skill, None), ("swap", k.skill + "/swap", "{}"), ("train", k.learner, '{"bad": 1}')]
-        for what, key, pay in controls:
-            procs["control", what] = h.python("observer", "sctd.bench.netns", "query", *op, "--key", key,
-                                              *(() if pay is None else ("--payload", pay)),
-                                              log=f"control-{what}.log")
-        got = {what: _result(p, 90) for what, p in procs.items()}
-        time.sleep(1.0)  # the last messages on their way
-        for p in listeners.values():
-            p.stop()
-        heard = {name: _result(p, 10) for name, p in listeners.items()}
-        out: dict[str, dict] = {}
-        for name in [*intruders, "control"]:
-            out[name] = {"delivered": heard["watch"]["marked"].get(name, {}),
-                         "sent": sum(got[name, "put"]["sent"].values()),
-                         "tried": got[name, "put"]["tried"],
-                         "refused": got[name, "put"].get("refused"),
-                         **{what: r for (who, what), r in got.items()
-                            if who == name and what != "put"}}
-            if name in heard:
-                out[name]["received"] = heard[name]["counts"]
-        return out
-
-    def _asks(self) -> list[tuple[str, str, str]]:
-        """What an intruder asks: a swap on both queryables that take bundles, and
-        training (name, key, JSON payload)."""
-        k = self.keys
-        return [("swap-on-skill", k.skill, '{"bundle": "intruder"}'),
-                ("swap", k.skill + "/swap", '{"bundle": "intruder"}'),
-                ("train", k.learner, '{"task": "pour", "intruder": true}')]
-
-    # -- what the observer recorded
-    def seen(self, key: str, since: float = 0.0) -> Iterator[dict[str, Any]]:
-        """Records on ``key`` that arrived at the observer after ``since`` (Unix time)."""
-        self._read_records()
-        for r in self._seen.get(key, ()):
-            if r["t"] > since:
-                yield r
-
-    def _read_records(self) -> None:
-        """Parse the lines the recorder added since the last call (whole lines only)."""
-        if not self.records.exists():
-            return
-        with open(self.records, "rb") as f:
-            f.seek(self._offset)
-            chunk = f.read()
-        end = chunk.rfind(b"\n") + 1
-        self._offset += end
-        for line in chunk[:end].splitlines():
-            r = json.loads(line)
-            if isinstance(r["msg"], dict):
-                self._seen.setdefault(r["key"], []).append(r)
-
-    def last(self, key: str, since: float = 0.0) -> dict[str, Any] | None:
-        records = list(self.seen(key, since))
-        return records[-1] if records else None
-
-    def first(self, key: str, since: float = 0.0) -> dict[str, Any] | None:
-        return next(self.seen(key, since), None)
-
-
-def _each(flag: str, values: list[str]) -> list[str]:
-    return [x for v in values for x in (flag, v)]
-
-
-def _wait_line(p: Process, text: str, seconds: float) -> bool:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end and p.running():
-        if text in p.output():
-            return True
-        time.sleep(0.05)
-    return text in p.output()
-
-
-def _result(p: Process, seconds: float) -> dict:
-    """The last JSON line of a probe once it has ended."""
-    try:
-        p.p.wait(seconds)
-    except subprocess.TimeoutExpired:
-        p.stop()
-    got = last_json(p.output())
-    if got is None or "ready" in got:
-        raise RuntimeError(f"{p.host}: {' '.join(p.argv[2:5])}: no result; see {p.log_path}")
-    return got
+from sctd.deploy.cluster import HOSTS, Cluster
+from sctd.deploy.netns import Process, last_json
 
 
 def _wait(pred, seconds: float, what: str, *procs: Process):
@@ -353,18 +42,18 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
         c.start_router()
         robot, runtime = c.start_robot(), c.start_runtime()
         observer = c.start_observer()
-        echo = h.python("runtime", "sctd.bench.netns", "echo", "--config",
+        echo = h.python("runtime", "sctd.deploy.probe", "echo", "--config",
                         str(c.config("sctd-runtime")), log="echo.log")
         _wait(lambda: c.first(c.keys.target), 60, "first target on the observer host",
               robot, runtime, observer, echo)
         n = int(seconds * input_rate)
-        ping = h.call("input", "sctd.bench.netns", "ping", "--config", str(c.config("sctd-input")),
+        ping = h.call("input", "sctd.deploy.probe", "ping", "--config", str(c.config("sctd-input")),
                       "--rate", str(input_rate), "--n", str(n + n // 10), "--warmup", str(n // 10),
                       timeout=seconds + 90)
         # sctd.bench.latency's probe: its echo phase (on sctd/bench/*, which the roles
         # policy denies) kept short, then input -> target as in ``sctd bench latency``
         probe = h.call("input", "sctd.bench.latency", "probe", "--rate", str(input_rate),
-                       "--seconds", str(seconds), "--echo-seconds", "0.1", *c._zargs("input"),
+                       "--seconds", str(seconds), "--echo-seconds", "0.1", *c.zenoh_args("input"),
                        timeout=seconds + 90)
         steady = c.start_steady_input()
         reconnect: list[dict[str, float]] = []

@@ -1,0 +1,350 @@
+"""sctd across real hosts on this machine: :class:`Cluster`, the setup that
+``tests/test_multihost.py`` checks and ``sctd bench multihost`` measures.
+
+In the namespaces of :class:`~sctd.deploy.netns.Hosts`,
+- ``router``: ``sctd router``, on ``tcp/<router>:7447`` or, with ``sctd certs``'s
+  configs (mutual TLS and the roles' access control), ``tls/<router>:7448``;
+- ``robot``: ``sctd sim --scene pour``;
+- ``runtime``: ``sctd run --skill pour``;
+- ``input``: the simulated user, or a steady input source;
+- ``learner``: ``sctd learner``;
+- ``observer``: a recorder of the contract's keys (JSON lines, see
+  ``python -m sctd.deploy.probe record``);
+- ``intruder``: probes that try to read, write and query (:meth:`Cluster.intrude`).
+Every program is a Zenoh client of the router, configured only by its role's file.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from sctd.wire import Keys
+
+from .configs import (
+    ROUTER_PORT,
+    client_config,
+    router_config,
+    sign_certificate,
+    tls_client_config,
+    write_config,
+)
+from .netns import Hosts, Process, last_json
+
+HOSTS = ("router", "robot", "runtime", "input", "learner", "observer", "intruder")
+ROLE_OF_HOST = {"router": "sctd-router", "robot": "sctd-robot", "runtime": "sctd-runtime",
+                "input": "sctd-input", "learner": "sctd-learner", "observer": "sctd-observer"}
+# The client roles the cluster uses: the hosts' and the operator's, who watches for intruders.
+CLIENT_ROLES = ("sctd-robot", "sctd-runtime", "sctd-input", "sctd-learner", "sctd-observer",
+                "sctd-operator")
+STEADY_INPUT = {"v": 1, "u": [0.0, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held, stick at rest
+TLS_PORT = 7448
+# Every key of the wire contract an intruder could write to, as suffixes of sctd/<robot>/.
+CONTRACT_KEYS = ("input/intruder", "state", "objects/mug", "target", "status", "scene", "can",
+                 "demos/pour/intruder", "learner/status")
+# The intruders: who tries (the name is also the mark on its messages).
+INTRUDERS = ("no-certificate", "other-ca", "unlisted-name", "observer")
+N_PER_KEY = 20
+
+
+def secure_available() -> bool:
+    """True when this sctd has ``sctd certs`` (mutual TLS and the roles' access control);
+    else the cluster runs on plain TCP."""
+    return importlib.util.find_spec("sctd.cli.certs") is not None
+
+
+class Cluster:
+    """The hosts and their programs (module doc); a context manager that stops all.
+
+    Parameters
+    ----------
+    logdir : Path
+        Logs, configs and the observer's records.
+    robot : str
+        Key prefix ``sctd/<robot>``.
+    """
+
+    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None):
+        self.logdir = Path(logdir)
+        self.keys = Keys(robot)
+        self.hosts = Hosts(HOSTS, self.logdir)
+        self.secure = secure_available() if secure is None else secure
+        self.router: Process | None = None
+        self.records = self.logdir / "observer.jsonl"
+        self._configs: dict[str, Path] = {}
+        self.intruder_configs: dict[str, Path] = {}
+        self._seen: dict[str, list[dict[str, Any]]] = {}
+        self._offset = 0
+        self._router_starts = 0
+
+    @property
+    def endpoint(self) -> str:
+        if self.secure:
+            return f"tls/{self.hosts.addr('router')}:{TLS_PORT}"
+        return f"tcp/{self.hosts.addr('router')}:{ROUTER_PORT}"
+
+    def config(self, role: str) -> Path:
+        """The Zenoh config file of ``role`` (``router`` or a client role)."""
+        return self._configs[role]
+
+    def __enter__(self) -> Cluster:
+        self.hosts.__enter__()
+        try:
+            self._write_configs()
+        except BaseException:
+            self.hosts.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.hosts.close()
+
+    def _write_configs(self) -> None:
+        if self.secure:
+            self._write_secure_configs()
+            return
+        d = self.logdir / "zenoh"
+        self._configs["router"] = write_config(d / "router.json5", router_config(self.endpoint))
+        for role in CLIENT_ROLES:
+            self._configs[role] = write_config(d / f"{role}.json5", client_config(self.endpoint))
+
+    def _certs(self, out: Path) -> Path:
+        r = subprocess.run([sys.executable, "-m", "sctd.cli.main", "certs", "--out", str(out),
+                            "--router", self.endpoint, "--ip", self.hosts.addr("router")],
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            raise RuntimeError(f"sctd certs --out {out}: exit {r.returncode}: {r.stderr.strip()}")
+        return out
+
+    def _write_secure_configs(self) -> None:
+        """``sctd certs`` renders every role's file (the programs get nothing else); the
+        intruders get a client without a certificate, one whose certificate another CA
+        signed, one with a CA-signed certificate whose name is no role, and a valid
+        observer."""
+        tls = self._certs(self.logdir / "tls")
+        self._configs["router"] = tls / "zenoh" / "router.json5"
+        for role in CLIENT_ROLES:
+            self._configs[role] = tls / "zenoh" / f"{role}.json5"
+        other = self._certs(self.logdir / "other-ca")
+        cert, key = sign_certificate(tls, "intruder", self.logdir / "unlisted")
+        ca, ep, d = tls / "ca.pem", self.endpoint, self.logdir / "intruders"
+        self.intruder_configs = {
+            "no-certificate": write_config(d / "no-certificate.json5", tls_client_config(ep, ca)),
+            "other-ca": write_config(d / "other-ca.json5", tls_client_config(
+                ep, ca, other / "sctd-observer.pem", other / "sctd-observer-key.pem")),
+            "unlisted-name": write_config(d / "unlisted-name.json5", tls_client_config(ep, ca, cert, key)),
+            "observer": self._configs["sctd-observer"],
+        }
+
+    def zenoh_args(self, host: str) -> list[str]:
+        """``--zenoh-config`` with the config of ``host``'s role, for an sctd program."""
+        return ["--zenoh-config", str(self.config(ROLE_OF_HOST[host]))]
+
+    # -- programs
+    def start_router(self) -> Process:
+        """``sctd router`` with the router's config (again, after a restart: each start
+        logs to its own file); it prints ``listening on`` once its session is open."""
+        self._router_starts += 1
+        self.router = self.hosts.python("router", "sctd.cli.main", "router", "--config",
+                                        str(self.config("router")), log=f"router-{self._router_starts}.log")
+        return self.router
+
+    def stop_router(self) -> int | None:
+        """Stop the router with SIGTERM (SIGKILL after 10 s); its exit code (None when no
+        router was started): ``sctd router`` exits 0 when its session closed and 3
+        (``EXIT_FORCED``) when Zenoh did not close it within 2 s, -9 only if killed."""
+        return None if self.router is None else self.router.stop()
+
+    def start_learner(self) -> Process:
+        return self.hosts.python("learner", "sctd.cli.main", "learner", "--store",
+                                 str(self.logdir / "store"), *self.zenoh_args("learner"), log="learner.log")
+
+    def start_robot(self, *extra: str) -> Process:
+        return self.hosts.python("robot", "sctd_sim.service", "--scene", "pour", *extra,
+                                 *self.zenoh_args("robot"), log="robot.log")
+
+    def start_runtime(self, skill: str = "pour", *extra: str) -> Process:
+        return self.hosts.python("runtime", "sctd.cli.main", "run", "--skill", skill, "--stats-json",
+                                 *extra, *self.zenoh_args("runtime"), log="runtime.log")
+
+    def start_observer(self) -> Process:
+        k = self.keys
+        rec = ["--key", k.status, "--key", k.scene, "--key", k.target, "--key", k.state,
+               "--key", k.learner_status,
+               "--field", "seq", "--field", "stamp", "--field", "state", "--field", "mode",
+               "--field", "in_seq", "--field", "pose", "--field", "success", "--field", "poured",
+               "--field", "targets", "--field", "state_age", "--field", "counters"]
+        rec += ["--max-rate", "100"]  # of each key: enough to see seq and pose change
+        return self.hosts.python("observer", "sctd.deploy.probe", "record", "--config",
+                                 str(self.config("sctd-observer")), "--out", str(self.records), *rec,
+                                 log="observer.log")
+
+    def start_steady_input(self) -> Process:
+        """Input at 50 Hz, stick at rest and deadman held, until stopped."""
+        return self.hosts.python("input", "sctd.deploy.probe", "put", "--config",
+                                 str(self.config("sctd-input")), "--key", self.keys.input("steady"),
+                                 "--n", "100000000", "--rate", "50", "--settle", "0",
+                                 "--payload", json.dumps(STEADY_INPUT), log="steady-input.log")
+
+    def user(self, seconds: float = 90.0) -> dict:
+        """The simulated user doing the pour task until done; its JSON report."""
+        return self.hosts.call("input", "sctd_services.simulated_user", "--task", "pour",
+                               "--duration", str(seconds), "--until-done", "--json",
+                               *self.zenoh_args("input"), timeout=seconds + 60)
+
+    # -- the intruders
+    def intrude(self, intruders: tuple[str, ...] = INTRUDERS, n: int = N_PER_KEY) -> dict:
+        """Each intruder (on the intruder host, at once) puts ``n`` marked messages on
+        every key of :data:`CONTRACT_KEYS`, subscribes to all of them, asks for a skill
+        swap and for training; an operator on the observer host counts the marked
+        messages that arrive. The input host puts ``n`` marked input messages too (the
+        control: what an allowed sender delivers), the operator asks for a swap and for
+        training (the control: the runtime and the learner answer). Per intruder:
+        ``delivered`` (key -> marked messages the operator got), ``received`` (key ->
+        messages it got), ``swap`` and ``train`` (ok and error replies)."""
+        keys = [f"{self.keys.prefix}/{suffix}" for suffix in CONTRACT_KEYS]
+        configs = {name: self.intruder_configs.get(name, self.config("sctd-observer"))
+                   for name in intruders}
+        listeners = self._start_listeners(keys, configs)  # each ready before anyone sends
+        procs = {**self._start_intruders(keys, configs, n), **self._start_controls(n)}
+        got = {what: _result(p, 90) for what, p in procs.items()}
+        time.sleep(1.0)  # the last messages on their way
+        for p in listeners.values():
+            p.stop()
+        heard = {name: _result(p, 10) for name, p in listeners.items()}
+        return _tally([*intruders, "control"], got, heard)
+
+    def _start_listeners(self, keys: list[str], configs: dict[str, Path]) -> dict[str, Process]:
+        """The operator's watch for marked messages and each intruder's subscriptions to
+        ``keys`` (until stopped), once all of them are ready."""
+        h = self.hosts
+        listeners = {"watch": h.python("observer", "sctd.deploy.probe", "listen", *self._operator(),
+                                       "--mark", "intruder", "--seconds", "600", *_each("--key", keys),
+                                       log="intrusion-watch.log")}
+        for name, conf in configs.items():
+            listeners[name] = h.python("intruder", "sctd.deploy.probe", "listen", "--config", str(conf),
+                                       "--seconds", "600", *_each("--key", keys),
+                                       log=f"intruder-{name}-read.log")
+        for p in listeners.values():
+            if not _wait_line(p, '"ready"', 60):
+                raise RuntimeError(f"{p.host}: a listener did not start; see {p.log_path}")
+        return listeners
+
+    def _start_intruders(self, keys: list[str], configs: dict[str, Path],
+                         n: int) -> dict[tuple[str, str], Process]:
+        """Each intruder's puts on ``keys`` and its asks (:meth:`_asks`), by (name, what)."""
+        procs: dict[tuple[str, str], Process] = {}
+        for name, conf in configs.items():
+            c = ["--config", str(conf)]
+            procs[name, "put"] = self.hosts.python(
+                "intruder", "sctd.deploy.probe", "put", *c, "--n", str(n), "--settle", "3",
+                "--payload", json.dumps({"v": 1, "intruder": name, **STEADY_INPUT}),
+                *_each("--key", keys), log=f"intruder-{name}-put.log")
+            for what, key, payload in self._asks():
+                procs[name, what] = self.hosts.python(
+                    "intruder", "sctd.deploy.probe", "query", *c, "--key", key, "--payload", payload,
+                    "--settle", "1", log=f"intruder-{name}-{what}.log")
+        return procs
+
+    def _start_controls(self, n: int) -> dict[tuple[str, str], Process]:
+        """What the roles may do, by ("control", what): the input role's marked input, the
+        operator's summary, swap and training queries."""
+        h, k = self.hosts, self.keys
+        procs = {("control", "put"): h.python(
+            "input", "sctd.deploy.probe", "put", "--config", str(self.config("sctd-input")), "--n", str(n),
+            "--settle", "3", "--payload", json.dumps({"v": 1, "intruder": "control", **STEADY_INPUT}),
+            "--key", k.input("intruder"), log="control-put.log")}
+        controls: list[tuple[str, str, str | None]] = [
+            ("summary", k.skill, None), ("swap", k.skill + "/swap", "{}"), ("train", k.learner, '{"bad": 1}')]
+        for what, key, pay in controls:
+            procs["control", what] = h.python("observer", "sctd.deploy.probe", "query", *self._operator(),
+                                              "--key", key, *(() if pay is None else ("--payload", pay)),
+                                              log=f"control-{what}.log")
+        return procs
+
+    def _operator(self) -> list[str]:
+        return ["--config", str(self.config("sctd-operator"))]
+
+    def _asks(self) -> list[tuple[str, str, str]]:
+        """What an intruder asks: a swap on both queryables that take bundles, and
+        training (name, key, JSON payload)."""
+        k = self.keys
+        return [("swap-on-skill", k.skill, '{"bundle": "intruder"}'),
+                ("swap", k.skill + "/swap", '{"bundle": "intruder"}'),
+                ("train", k.learner, '{"task": "pour", "intruder": true}')]
+
+    # -- what the observer recorded
+    def seen(self, key: str, since: float = 0.0) -> Iterator[dict[str, Any]]:
+        """Records on ``key`` that arrived at the observer after ``since`` (Unix time)."""
+        self._read_records()
+        for r in self._seen.get(key, ()):
+            if r["t"] > since:
+                yield r
+
+    def _read_records(self) -> None:
+        """Parse the lines the recorder added since the last call (whole lines only)."""
+        if not self.records.exists():
+            return
+        with open(self.records, "rb") as f:
+            f.seek(self._offset)
+            chunk = f.read()
+        end = chunk.rfind(b"\n") + 1
+        self._offset += end
+        for line in chunk[:end].splitlines():
+            r = json.loads(line)
+            if isinstance(r["msg"], dict):
+                self._seen.setdefault(r["key"], []).append(r)
+
+    def last(self, key: str, since: float = 0.0) -> dict[str, Any] | None:
+        records = list(self.seen(key, since))
+        return records[-1] if records else None
+
+    def first(self, key: str, since: float = 0.0) -> dict[str, Any] | None:
+        return next(self.seen(key, since), None)
+
+
+def _each(flag: str, values: list[str]) -> list[str]:
+    return [x for v in values for x in (flag, v)]
+
+
+def _wait_line(p: Process, text: str, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end and p.running():
+        if text in p.output():
+            return True
+        time.sleep(0.05)
+    return text in p.output()
+
+
+def _result(p: Process, seconds: float) -> dict:
+    """The last JSON line of a probe once it has ended."""
+    try:
+        p.p.wait(seconds)
+    except subprocess.TimeoutExpired:
+        p.stop()
+    got = last_json(p.output())
+    if got is None or "ready" in got:
+        raise RuntimeError(f"{p.host}: {' '.join(p.argv[2:5])}: no result; see {p.log_path}")
+    return got
+
+
+def _tally(names: list[str], got: dict[tuple[str, str], dict], heard: dict[str, dict]) -> dict:
+    """Per intruder (and the control): what the operator's watch got of its marked
+    messages, what it sent and tried, its asks' replies, and what its subscriptions read."""
+    out: dict[str, dict] = {}
+    for name in names:
+        out[name] = {"delivered": heard["watch"]["marked"].get(name, {}),
+                     "sent": sum(got[name, "put"]["sent"].values()),
+                     "tried": got[name, "put"]["tried"],
+                     "refused": got[name, "put"].get("refused"),
+                     **{what: r for (who, what), r in got.items()
+                        if who == name and what != "put"}}
+        if name in heard:
+            out[name]["received"] = heard[name]["counts"]
+    return out
