@@ -1,8 +1,10 @@
 """Package discovery: ``sim/`` installs as ``sctd_sim``, ``services/`` as
 ``sctd_services`` (import names that cannot collide with other packages) and ``skills/`` as the
 package data ``sctd_skills`` (the shipped skills, their model files and
-demonstrations, found by name: ``sctd run --skill pour``); metadata is in
-pyproject.toml."""
+demonstrations, found by name: ``sctd run --skill pour``). Whatever else an installed
+command reads ships as package data too: the Zenoh config templates ``sctd certs``
+renders (``sctd/deploy/zenoh/``), the input maps, the robot model and its CAN database.
+Metadata is in pyproject.toml."""
 
 from setuptools import find_packages, setup
 
@@ -15,6 +17,7 @@ for name, folder in MAPPED.items():
 setup(
     packages=packages,
     package_dir=MAPPED,
-    package_data={"sctd_sim": ["*.dbc", "robot/*", "robot/**/*"], "sctd_services": ["input/maps/*.yaml"],
+    package_data={"sctd.deploy": ["zenoh/*.json5"],  # the Zenoh configs `sctd certs` renders
+                  "sctd_sim": ["*.dbc", "robot/*", "robot/**/*"], "sctd_services": ["input/maps/*.yaml"],
                   "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"]},
 )

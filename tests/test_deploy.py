@@ -1,9 +1,10 @@
-"""Every Zenoh config shipped in deploy/ is accepted by Zenoh's own parser, the
+"""Every Zenoh config shipped in sctd/deploy/zenoh/ is accepted by Zenoh's own parser, the
 loopback file says what the built-in defaults do, and ``sctd certs`` makes the CA, the
 role certificates and each role's config (the policy itself: tests/test_acl.py)."""
 
 import json
 import subprocess
+from importlib import resources
 from pathlib import Path
 
 import pytest
@@ -13,7 +14,7 @@ from sctd.cli.certs import ROLES, ROUTER
 from sctd.cli.main import main
 from sctd.wire.session import HUB
 
-DEPLOY = Path(__file__).resolve().parents[1] / "deploy" / "zenoh"
+DEPLOY = Path(str(resources.files("sctd.deploy"))) / "zenoh"  # what the wheel ships
 
 
 @pytest.mark.parametrize("path", sorted(DEPLOY.glob("*.json5")), ids=lambda p: p.name)

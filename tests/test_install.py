@@ -1,16 +1,21 @@
 """An installed sctd: the wheel built from the repository, installed into a fresh
 virtual environment outside the checkout, runs its shipped skills by name from an empty
 folder (``sctd run --skill pour.yaml``, ``sctd skills``, ``sctd inspect pour``), and an
-unknown name exits 2 naming the places searched.
+unknown name exits 2 naming the places searched. What the commands read besides code
+came with the wheel: ``sctd certs`` renders its Zenoh templates, ``sctd bench fuzz``
+seeds its corpus from the shipped skills and input maps.
 
 The fresh environment gets the wheel alone (``--no-deps``); its dependencies come from
 this test's environment, whose site-packages is put on its path with that folder's
-``.pth`` hooks except the checkout's editable install, which is not seen there.
+``.pth`` hooks except the checkout's editable install, which is not seen there. The
+installed commands run without ``PYTHONPATH``: a checkout on it would stand in for the
+wheel.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -20,10 +25,13 @@ import time
 from pathlib import Path
 
 import pytest
+import zenoh
 
+from sctd.cli.certs import ROLES, ROUTER
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, wait_for
+from tests.tiers import needs
 
 pytestmark = pytest.mark.slow  # builds the wheel and installs it in a fresh virtualenv
 
@@ -64,9 +72,15 @@ def _deps_pth() -> str:
     return "\n".join([str(site), *hooks]) + "\n"
 
 
-def _run(bin_dir: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+def _installed_env() -> dict[str, str]:
+    """This environment without ``PYTHONPATH``, so that an installed command imports the
+    installed sctd (and its children too), not a checkout."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+
+
+def _run(bin_dir: Path, cwd: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     return subprocess.run([str(bin_dir / "sctd"), *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=120)
+                          timeout=timeout, env=_installed_env())
 
 
 def test_sctd_comes_from_the_fresh_environment(installed, tmp_path):
@@ -112,7 +126,7 @@ def test_installed_daemon_runs_a_shipped_skill_by_name(installed, tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     p = subprocess.Popen([str(installed / "sctd"), "run", "--skill", "pour.yaml", "--listen", ep,
-                          "--connect", ep, "--rt-priority", "0"], cwd=tmp_path,
+                          "--connect", ep, "--rt-priority", "0"], cwd=tmp_path, env=_installed_env(),
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     session = None
     try:
@@ -135,3 +149,51 @@ def test_installed_daemon_runs_a_shipped_skill_by_name(installed, tmp_path):
         if p.poll() is None:
             p.kill()
             p.communicate()
+
+
+def test_installed_certs_writes_a_working_set_from_an_empty_folder(installed, tmp_path):
+    """``sctd certs`` renders the Zenoh templates it installed with (package data, not a
+    checkout's deploy folder): every key pair, every role's config, and a router config
+    Zenoh parses, listening where ``--router`` says with the certificates written."""
+    empty, out = tmp_path / "empty", tmp_path / "tls"
+    empty.mkdir()
+    r = _run(installed, empty, "certs", "--out", str(out), "--router", "tls/127.0.0.1:7448")
+    assert r.returncode == 0, r.stderr
+    for role in (ROUTER, *ROLES):
+        assert (out / f"{role}.pem").is_file() and (out / f"{role}-key.pem").is_file(), role
+    assert (out / "ca.pem").is_file()
+    for name in ROLES:
+        conf = zenoh.Config.from_file(str(out / "zenoh" / f"{name}.json5"))
+        assert json.loads(conf.get_json("connect/endpoints")) == ["tls/127.0.0.1:7448"], name
+    router = zenoh.Config.from_file(str(out / "zenoh" / "router.json5"))
+    assert json.loads(router.get_json("listen/endpoints")) == ["tls/127.0.0.1:7448"]
+    for field, path in (("root_ca_certificate", out / "ca.pem"),
+                        ("listen_certificate", out / f"{ROUTER}.pem"),
+                        ("listen_private_key", out / f"{ROUTER}-key.pem")):
+        assert json.loads(router.get_json(f"transport/link/tls/{field}")) == str(path), field
+    assert not any(empty.iterdir())  # it wrote only where it was told
+
+
+def test_installed_fuzz_bench_runs_seeded_from_the_installed_files(installed, tmp_path):
+    """``sctd bench fuzz``, short, on the targets seeded from package data: the file
+    reader (the input maps and the shipped skills) and the bundle unpacker (the shipped
+    skills). Each seed it wrote is one of those files, and the run reports success."""
+    needs("atheris")
+    empty, keep = tmp_path / "empty", tmp_path / "corpora"
+    empty.mkdir()
+    r = _run(installed, empty, "bench", "fuzz", "--target", "yaml", "--target", "bundle",
+             "--runs", "300", "--keep", str(keep), "--json", timeout=600)
+    assert r.returncode == 0, r.stdout + r.stderr
+    results = {x["target"]: x for x in json.loads(r.stdout)}
+    assert set(results) == {"yaml", "bundle"}
+    for x in results.values():
+        assert x["ok"] and x["runs"] >= 300 and x["coverage"] and not x["crashes"], x
+    maps = sorted((ROOT / "services" / "input" / "maps").glob("*.yaml"))
+    skills = sorted((ROOT / "skills").glob("*.yaml"))
+    assert maps and skills
+
+    def seeds(target: str) -> list[bytes]:
+        return sorted(p.read_bytes() for p in (keep / target).glob("seed*"))
+
+    assert seeds("yaml") == sorted(p.read_bytes() for p in maps + skills)
+    assert len(seeds("bundle")) == len(skills)

@@ -26,11 +26,14 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from importlib import resources
 from pathlib import Path
 
 TARGETS = ("input", "state", "object", "target", "demo", "can", "bundle", "skill_yaml", "model_npz",
            "model_json", "yaml", "map", "mcap")
-ROOT = Path(__file__).resolve().parents[2]
+# The folder holding this sctd package (the checkout, or site-packages): the fuzzing child
+# runs there, so that ``python -m sctd.bench.fuzz`` imports this same sctd.
+IMPORT_ROOT = Path(__file__).resolve().parents[2]
 
 
 def _seeds(target: str, skills: Path) -> list[bytes]:
@@ -56,7 +59,7 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
         return [msgpack.packb({"v": 1, "frames": [[1.0, 0x80, False, 0, b""],
                                                   [1.0, 0x101, False, 8, b"\x01" * 8]]})]
     if target in ("yaml", "map"):
-        maps = ROOT / "services" / "input" / "maps"
+        maps = Path(str(resources.files("sctd_services") / "input" / "maps"))  # package data
         return [p.read_bytes() for p in sorted(maps.glob("*.yaml"))] + (
             [p.read_bytes() for p in sorted(skills.glob("*.yaml"))] if target == "yaml" else [])
     if target == "mcap":
@@ -210,7 +213,7 @@ def run_target(target: str, runs: int, skills: Path, workdir: Path, max_len: int
            "-rss_limit_mb=4096", "-timeout=20", f"-artifact_prefix={artifacts}/", "-print_final_stats=1",
            str(corpus)]
     t0 = time.monotonic()
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT,
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=IMPORT_ROOT,
                        env={**os.environ, "PYTHONHASHSEED": "0"})
     seconds = time.monotonic() - t0
     log = p.stdout + p.stderr
@@ -242,7 +245,7 @@ def add_fuzz_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=1_000_000, help="inputs per target (default %(default)s)")
     p.add_argument("--target", action="append", choices=TARGETS,
                    help="fuzz only this target (repeatable; default all)")
-    p.add_argument("--skills", default=str(ROOT / "skills"), help="folder of the seed skills")
+    p.add_argument("--skills", help="folder of the seed skills (default: the shipped skills)")
     p.add_argument("--keep", metavar="DIR", help="keep corpora and crash inputs here")
     p.add_argument("--json", action="store_true")
 
@@ -254,8 +257,13 @@ def main_fuzz(args: argparse.Namespace) -> int:
         print("sctd bench fuzz: needs atheris (pip install 'sctd[dev]'; make setup installs it)",
               file=sys.stderr)
         return 2
+    # not at the top: the child imports this module, and sctd's modules only afterwards,
+    # under atheris' instrumentation
+    from sctd.skill.catalog import shipped_folder
+
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="sctd-fuzz-"))
-    results = [run_target(t, args.runs, Path(args.skills), work) for t in (args.target or TARGETS)]
+    skills = Path(args.skills) if args.skills else shipped_folder()
+    results = [run_target(t, args.runs, skills, work) for t in (args.target or TARGETS)]
     if not args.keep and all(r["ok"] for r in results):
         shutil.rmtree(work)  # corpora of a clean run; a crash's inputs are kept and named
     if args.json:

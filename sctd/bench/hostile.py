@@ -31,10 +31,13 @@ import msgpack
 
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
+from sctd.skill.catalog import shipped_folder
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, session
 
-ROOT = Path(__file__).resolve().parents[2]
+# The folder holding this sctd package (the checkout, or site-packages): the measured
+# commands run there, so that ``python -m sctd.bench.hostile`` imports this same sctd.
+IMPORT_ROOT = Path(__file__).resolve().parents[2]
 MAX_RSS_MB = 300.0  # the most any command may take on any of these inputs
 SECRET = "PASSWORD=hunter2-sctd-bench"  # planted in files a refusal must never quote
 
@@ -47,7 +50,8 @@ def run_command(args: list[str], timeout: float = 120.0) -> dict[str, Any]:
         hwm = Path(d) / "hwm"
         with (Path(d) / "err").open("w+b") as err:
             p = subprocess.Popen([sys.executable, "-m", "sctd.bench.hostile", "measure", str(hwm), *args],
-                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err, cwd=ROOT)
+                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err,
+                                 cwd=IMPORT_ROOT)
             t0 = time.monotonic()
             try:
                 code = p.wait(timeout)
@@ -120,7 +124,7 @@ def skill_folders(d: Path) -> list[tuple[str, str]]:
                          ("model file symlinked outside its folder", str(secret))):
         f = d / f"skill-{len(out)}"
         f.mkdir()
-        (f / "pour-vf.yaml").write_bytes((ROOT / "skills" / "pour-vf.yaml").read_bytes())
+        (f / "pour-vf.yaml").write_bytes((shipped_folder() / "pour-vf.yaml").read_bytes())
         (f / "pour-vf.npz").symlink_to(target)
         out.append((what, str(f / "pour-vf.yaml")))
     deep = d / "deep.yaml"

@@ -38,6 +38,7 @@ from sctd.bench import run_and_report
 from sctd.bench.bundles import big_bundle, malformed_bundles
 from sctd.cli.procs import Child, free_port
 from sctd.skill import bundle_from_file
+from sctd.skill.catalog import shipped_folder
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session, session_from_args
 
@@ -578,14 +579,16 @@ def print_report(r: dict) -> None:
 
 def add_robustness_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=5.0, help="length of each flood, s")
-    p.add_argument("--skills", default="skills", help="folder of the shipped skills")
+    p.add_argument("--skills", help="folder holding pour.yaml and pour-vf.yaml, which the daemon "
+                   "runs and the bundles are made from (default: the shipped skills)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
 
 def main_robustness(args: argparse.Namespace) -> int:
     return run_and_report("robustness", args, lambda logdir: summarise(
-        run_robustness_bench(Path(args.skills), args.seconds, logdir)), print_report)
+        run_robustness_bench(Path(args.skills) if args.skills else shipped_folder(), args.seconds,
+                             logdir)), print_report)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
 """``sctd certs``: a private CA, one key pair per role and the Zenoh config of each role.
 
 The role is the certificate's common name (the router's access control reads it, see
-``deploy/zenoh/router.json5``). Keys are EC P-256, made by the ``openssl`` command line
-(no Python crypto library needed). The configs in ``OUT/zenoh/`` are the templates of
-``deploy/zenoh/`` with the certificate paths pointing into ``OUT`` and the router's
-endpoints from ``--router``, so a program is configured by its role's file alone::
+``sctd/deploy/zenoh/router.json5``). Keys are EC P-256, made by the ``openssl`` command
+line (no Python crypto library needed). The configs in ``OUT/zenoh/`` are the templates
+of ``sctd/deploy/zenoh/`` (package data of :mod:`sctd.deploy`, installed with the wheel)
+with the certificate paths pointing into ``OUT`` and the router's endpoints from
+``--router``, so a program is configured by its role's file alone::
 
     sctd certs --out /etc/sctd/tls --host robot-pc.local --router tls/robot-pc.local:7448
     sctd router --config /etc/sctd/tls/zenoh/router.json5
@@ -20,6 +21,7 @@ import secrets
 import shutil
 import subprocess
 import tempfile
+from importlib import resources
 from pathlib import Path
 
 import zenoh
@@ -29,7 +31,7 @@ from .errors import EXIT_OK, fail
 ROLES = ("sctd-runtime", "sctd-robot", "sctd-input", "sctd-recorder", "sctd-learner",
          "sctd-operator", "sctd-observer")
 ROUTER = "sctd-router"
-TEMPLATES = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
+TEMPLATES = resources.files("sctd.deploy") / "zenoh"  # sctd/deploy/zenoh/, package data
 # What the templates say, replaced when rendering.
 TEMPLATE_TLS_DIR = "/etc/sctd/tls/"
 TEMPLATE_CONNECT = '["tls/robot-pc.local:7448"]'
@@ -77,8 +79,8 @@ def main_certs(args) -> int:
         except ValueError:
             return fail("certs", f"--ip: {ip!r}: not an IP address")
     if not TEMPLATES.is_dir():
-        return fail("certs", f"{TEMPLATES}: the config templates are missing (a source checkout "
-                             "of sctd has them in deploy/zenoh/)")
+        return fail("certs", f"{TEMPLATES}: the config templates are missing (sctd/deploy/zenoh/ "
+                             "of a source checkout, the package data of sctd.deploy in a wheel)")
     connect = args.router or [DEFAULT_ROUTER]
     listen = args.router_listen or connect
     try:
@@ -135,7 +137,8 @@ def make_certificates(out: Path, hosts: list[str], ips: list[str], days: int) ->
 
 
 def render(template: str, tls_dir: Path, connect: list[str], listen: list[str]) -> str:
-    """A deploy/zenoh template with its certificate directory and endpoints replaced."""
+    """A ``sctd/deploy/zenoh/`` template with its certificate directory and endpoints
+    replaced."""
     for marker in (TEMPLATE_TLS_DIR,):
         if marker not in template:
             raise ValueError(f"template lacks {marker!r}")

@@ -1,6 +1,9 @@
-"""sctd across hosts: a cluster of hosts on one machine in Linux network namespaces,
-each host running sctd's programs as a Zenoh client of one router.
+"""sctd across hosts: the Zenoh configs of each role, and a cluster of hosts on one
+machine in Linux network namespaces, each host running sctd's programs as a Zenoh
+client of one router.
 
+- ``zenoh/`` (package data): the router's and every role's config templates, which
+  ``sctd certs`` renders, and ``loopback.json5``, the defaults written out;
 - :mod:`~sctd.deploy.netns`: the hosts (``Hosts``: namespaces joined by a bridge,
   programs run inside them, links taken down and up);
 - :mod:`~sctd.deploy.configs`: plain and TLS Zenoh client configs, client certificates;
