@@ -194,7 +194,7 @@ def run_gco_bench(n_instances: int = 20, seed: int = 0) -> dict[str, Any]:
 
 
 def format_gco_bench(r: dict[str, Any]) -> list[str]:
-    """Report lines of :func:`run_gco_bench` with the issue's targets (energy <= GCO's
+    """Report lines of :func:`run_gco_bench` with its targets (energy <= GCO's
     x 1.005 on every instance, time <= 10 x GCO's), then one line per instance."""
     if not r["available"]:
         return [f"[--- ] alpha-beta swap vs GCO: GCO not installed ({r['reason']}; {r['install']})"]

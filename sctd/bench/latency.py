@@ -25,10 +25,12 @@ from pathlib import Path
 import zenoh
 
 from sctd.bench import run_and_report
+from sctd.cli.options import SKILL_HELP
 from sctd.cli.procs import Child, free_port
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.skill import load_skill
+from sctd.skill.catalog import find_skill
 from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack, wait_until
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
@@ -128,7 +130,7 @@ def tick_histogram(skill_path: str, rate: float, n: int = 2000, paced: bool = Fa
     some machines (virtual CPUs) makes each tick start cold. Timings (s)."""
 
     cfg = RuntimeConfig(rate=rate)
-    skill = load_skill(skill_path)
+    skill = load_skill(find_skill(skill_path))
     drv = TickDriver(skill, cfg)
     pose_obj = [0.6, 0.0, 0.78, 0.0, 0.0, 1.0, 0.0]
     pose_ee = [0.35, 0.1, 0.9, 0.0, 0.0, 0.0, 1.0]
@@ -254,7 +256,7 @@ def add_latency_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
     p.add_argument("--seconds", type=float, default=10.0, help="latency measurement length")
     p.add_argument("--input-rate", type=float, default=500.0, help="probe input rate, Hz")
-    p.add_argument("--skill", default="skills/pour.yaml")
+    p.add_argument("--skill", default="pour", help=f"{SKILL_HELP} (default %(default)s)")
     p.add_argument("--rt-priority", type=int, default=10, help="daemon SCHED_FIFO priority (0: off)")
     p.add_argument("--cpu", type=int, default=None, help="pin the daemon's tick thread to this CPU")
     p.add_argument("--json", action="store_true")

@@ -120,7 +120,7 @@ def _bench_vf_drawer(drawer: demogen.DemoSet, seed: int, out: dict[str, Any]) ->
 
 
 def format_bench(r: dict[str, Any]) -> str:
-    """Human-readable report of :func:`run_bench`, with the issue's targets."""
+    """Human-readable report of :func:`run_bench`, with its targets."""
     def ok(flag: bool) -> str:
         return "ok " if flag else "MISS"
 

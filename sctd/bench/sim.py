@@ -315,7 +315,7 @@ def run_bench(seconds: float = 3.0, rate: float = 1000.0) -> dict[str, Any]:
         ``rtf`` (see :func:`measure_rtf`), ``breakdown`` (see
         :func:`measure_breakdown`), ``step`` (one entry per axis, see
         :func:`step_response`), ``tracking`` (one entry per axis, see :func:`tracking`),
-        and ``pass`` with the issue's targets checked.
+        and ``pass`` with the targets checked.
     """
     rtf = measure_rtf(seconds, rate)
     breakdown = measure_breakdown(min(seconds, 1.0), rate)

@@ -25,7 +25,8 @@ import numpy as np
 
 from sctd.bench.latency import run_latency_bench, tick_histogram
 from sctd.cli.errors import fail
-from sctd.skill import VectorFieldModel, load_skill, vector_field_model_to_bytes
+from sctd.skill import SkillError, VectorFieldModel, load_skill, vector_field_model_to_bytes
+from sctd.skill.catalog import find_skill
 from sctd.skill.loader import bundle_from_file
 from sctd.timing import Histogram
 
@@ -157,11 +158,21 @@ def _counts(text: str) -> list[int]:
     return out
 
 
+def _skill_path(name: str) -> str:
+    """The file of a skill named or given by path (argparse type: a bad one is an error
+    naming the places searched)."""
+    try:
+        return str(find_skill(name))
+    except SkillError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def add_bench_vf_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of ``sctd bench vf``."""
-    p.add_argument("--skill", default="skills/pour-vf.yaml",
-                   help="the vector-field skill whose model files are resized (default %(default)s)")
-    p.add_argument("--baseline", default="skills/pour.yaml",
+    p.add_argument("--skill", default="pour-vf", type=_skill_path,
+                   help="the vector-field skill whose model files are resized: a path or a shipped "
+                        "or stored skill's name (default %(default)s)")
+    p.add_argument("--baseline", default="pour", type=_skill_path,
                    help="the hand-written skill timed next to it (default %(default)s)")
     p.add_argument("--points", type=_counts, default=[300, 1000, 5000, 20000],
                    help="demonstration point counts, comma-separated: the skill's model files are "

@@ -5,8 +5,8 @@ before the first demonstration, so that it stores each one as it is published; a
 the last one, the daemon (``sctd run`` on the scene's hand-written skill: the arm is the
 daemon's from then on) and one training request for exactly the demonstrations just
 taught; the learner trains, checks and swaps; then the swapped skill is evaluated
-(``sctd eval --lockstep``). Every step is printed with its time, and the figure the
-issue asks for: from the last demonstration to the swapped skill.
+(``sctd eval --lockstep``). Every step is printed with its time, and the figure that
+matters to whoever teaches: from the last demonstration to the swapped skill.
 """
 
 from __future__ import annotations
