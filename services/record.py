@@ -43,8 +43,10 @@ from typing import Any, TextIO
 import zenoh
 
 from sctd import se3
+from sctd.app.errors import fail
+from sctd.app.options import add_robot_argument
 from sctd.timing import Ticker
-from sctd.wire import DEFAULT_ROBOT, Keys, codec
+from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)  # the CSV header: the learner's columns (sctd.learn.demos)
@@ -320,7 +322,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--task", default=None, metavar="NAME",
                    help="the task the demonstration is published under, sctd/<robot>/demos/<task>/<name> "
                         "(default: the scene the simulator announces, else the object's name)")
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(p)
     p.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default %(default)s)")
     p.add_argument("--min-distance", type=float, default=0.0, metavar="M",
                    help="skip samples closer than this (m, ee position) to the last row (default 0)")
@@ -335,9 +337,7 @@ def run(args: argparse.Namespace) -> int:
     """``sctd record`` with parsed arguments (:func:`add_arguments`); returns the exit
     code (1: nothing recorded, 2: bad flags)."""
     if args.rate <= 0 or args.min_distance < 0 or (args.duration is not None and args.duration <= 0):
-        print("sctd record: --rate, --duration: must be > 0; --min-distance: must be >= 0",
-              file=sys.stderr)
-        return 2
+        return fail("record", "--rate, --duration: must be > 0; --min-distance: must be >= 0")
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     stop = threading.Event()

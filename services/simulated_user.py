@@ -26,6 +26,7 @@ from typing import Any
 import zenoh
 
 from sctd import se3
+from sctd.app.options import add_robot_argument
 from sctd.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
@@ -143,7 +144,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", default="steady", choices=sorted(PROFILES))
     p.add_argument("--axes", type=int, default=3, help="input axes of the device (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="the user's noise seed")
-    p.add_argument("--robot", default="edan")
+    add_robot_argument(p)
     p.add_argument("--device", default="simuser")
     p.add_argument("--rate", type=float, default=100.0, help="input rate, Hz (default %(default)s)")
     p.add_argument("--duration", type=float, default=10.0, help="s to drive (default %(default)s)")

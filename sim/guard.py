@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 from sctd import se3
+from sctd.app.options import add_arguments, check_ranges, from_namespace
 
 
 def distance_and_angle(F_a: se3.Flat, F_b: se3.Flat) -> tuple[float, float]:
@@ -56,18 +57,14 @@ class TargetLimits:
 
 def add_limit_arguments(parser) -> None:
     """``--max-target-offset`` etc., from :class:`TargetLimits`."""
-    for f in fields(TargetLimits):
-        parser.add_argument(f"--{f.name.replace('_', '-')}", type=float, default=f.default,
-                            help=f"{f.metadata['help']} (default %(default)s)")
+    add_arguments(parser, TargetLimits, show_default=True)
 
 
 def limits_from_args(args) -> TargetLimits:
     """The TargetLimits of parsed flags; ValueError for a non-positive one."""
-    kw = {f.name: getattr(args, f.name) for f in fields(TargetLimits)}
-    for name, value in kw.items():
-        if not value > 0:
-            raise ValueError(f"--{name.replace('_', '-')} must be > 0")
-    return TargetLimits(**kw)
+    limits = from_namespace(TargetLimits, args)
+    check_ranges(limits)
+    return limits
 
 
 class TargetGuard:

@@ -21,6 +21,7 @@ import numpy as np
 import zenoh
 
 from sctd import se3
+from sctd.app.options import add_robot_argument
 from sctd.timing import Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import add_zenoh_arguments, session_from_args
@@ -116,7 +117,7 @@ class KinematicRobot:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the kinematic robot's flags to ``p``."""
     p.add_argument("--scene", default="pour", choices=("pour", "drawer"))
-    p.add_argument("--robot", default="edan")
+    add_robot_argument(p)
     p.add_argument("--rate", type=float, default=1000.0, help="state rate, Hz")
     p.add_argument("--object-rate", type=float, default=50.0, help="objects rate, Hz")
     p.add_argument("--tau", type=float, default=0.02, help="tracking time constant, s")

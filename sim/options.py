@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from sctd.wire import DEFAULT_ROBOT
+from sctd.app.options import add_robot_argument
 from sctd.wire.ros_options import add_ros_arguments
 from sctd.wire.session import add_zenoh_arguments
 
@@ -21,7 +21,7 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
     """Add the simulator service's flags (see :func:`sctd_sim.service.run`) to ``p``."""
     p.add_argument("--scene", default="pour", choices=("pour", "drawer"),
                    help="task scene (default %(default)s)")
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(p)
     p.add_argument("--trial-seed", type=int, default=None, metavar="N",
                    help="start from the seeded random start N of an evaluation trial (hand within "
                         "+-10 cm and +-15 deg of yaw of the scene's start, the object within +-5 cm)")

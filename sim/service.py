@@ -50,6 +50,7 @@ import can
 import zenoh
 
 from sctd import se3
+from sctd.app.errors import fail
 from sctd.timing import Histogram, Ticker, set_timer_slack
 from sctd.wire import DEFAULT_ROBOT, Keys, codec
 from sctd.wire.ros_options import check_ros_arguments
@@ -468,8 +469,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         settings = _settings_from_args(args)
     except ValueError as e:
-        print(f"sctd sim: {e}", file=sys.stderr)
-        return 2
+        return fail("sim", str(e))
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
@@ -482,8 +482,7 @@ def run(args: argparse.Namespace) -> int:
             try:
                 viewer = stack.enter_context(open_viewer(args.view_port))
             except ViewerUnavailable as e:
-                print(f"sctd sim: --view: {e}", file=sys.stderr)
-                return 2
+                return fail("sim", f"--view: {e}")
             print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
         summary = _serve(stack, args, settings, viewer, stop)
     print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "

@@ -19,8 +19,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.cli.certs import ROLES
-from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.wire.session import close_session
 from tests.conftest import Proc, free_port, sctd, wait_for
 

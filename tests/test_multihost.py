@@ -14,7 +14,7 @@ import time
 
 import pytest
 
-from sctd.cli.errors import EXIT_FORCED, EXIT_OK
+from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import Cluster
 from sctd.deploy.netns import Hosts, NamespaceError, can_make_namespaces, namespaces
 from sctd.runtime.controller import RuntimeConfig

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from sctd.cli.errors import EXIT_FORCED, EXIT_OK
+from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.cli.router import CLOSE_WAIT
 from sctd.wire.session import close_session
 from tests.conftest import free_port, run_sctd, sctd, wait_for

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sctd.cli.errors import EXIT_FAILED, EXIT_OK, fail
+from sctd.app.errors import EXIT_FAILED, EXIT_OK, fail
 
 
 def run_and_report(name: str, args: argparse.Namespace, run: Callable[[Path], dict[str, Any]],

@@ -15,7 +15,7 @@ import time
 from collections import Counter
 from typing import Any
 
-from sctd.cli.errors import fail
+from sctd.app.errors import fail
 from sctd.skill import load_skill
 from sctd.skill.catalog import find_skill
 from sctd_services.eval.evaluate import task_of

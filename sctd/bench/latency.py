@@ -24,8 +24,8 @@ from pathlib import Path
 
 import zenoh
 
+from sctd.app.options import SKILL_HELP
 from sctd.bench import run_and_report
-from sctd.cli.options import SKILL_HELP
 from sctd.cli.procs import Child, free_port
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
@@ -34,6 +34,8 @@ from sctd.skill.catalog import find_skill
 from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack, wait_until
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, TEXT, add_zenoh_arguments, session, session_from_args
+
+from ..app.options import add_robot_argument
 
 PING = "sctd/bench/ping"
 PONG = "sctd/bench/pong"
@@ -55,7 +57,7 @@ def _probe_parser() -> argparse.ArgumentParser:
     p.add_argument("--echo-seconds", type=float, default=3.0)
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--warmup", type=float, default=1.0)
-    p.add_argument("--robot", default="edan")
+    add_robot_argument(p)
     add_zenoh_arguments(p)
     return p
 

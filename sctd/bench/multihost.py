@@ -15,8 +15,8 @@ import argparse
 import time
 from pathlib import Path
 
+from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.bench import run_and_report
-from sctd.cli.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import HOSTS, Cluster
 from sctd.deploy.netns import Process, last_json
 

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from sctd import se3
-from sctd.cli.errors import fail
+from sctd.app.errors import fail
 from sctd_sim.arm import SimArm
 from sctd_sim.robot import ArmModel, load_arm_model
 from sctd_sim.simulation import Simulation, start_posture

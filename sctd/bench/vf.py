@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from sctd.app.errors import fail
 from sctd.bench.latency import run_latency_bench, tick_histogram
-from sctd.cli.errors import fail
 from sctd.skill import SkillError, VectorFieldModel, load_skill, vector_field_model_to_bytes
 from sctd.skill.catalog import find_skill
 from sctd.skill.loader import bundle_from_file

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import zenoh
 
-from .errors import EXIT_OK, fail
+from ..app.errors import EXIT_OK, fail
 
 ROLES = ("sctd-runtime", "sctd-robot", "sctd-input", "sctd-recorder", "sctd-learner",
          "sctd-operator", "sctd-observer")

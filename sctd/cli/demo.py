@@ -20,12 +20,12 @@ from typing import Any
 
 import zenoh
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import SKILL_HELP
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
 from ..wire import Keys, codec
 from ..wire.session import session as zsession
-from .errors import EXIT_FAILED, EXIT_OK, fail
-from .options import SKILL_HELP
 from .procs import Child, free_port
 
 TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}

@@ -23,10 +23,11 @@ from typing import Any
 import msgpack
 import zenoh
 
+from ..app.errors import EXIT_OK
+from ..app.options import add_robot_argument
 from ..timing import wait_until
-from ..wire import DEFAULT_ROBOT, Keys
+from ..wire import Keys
 from ..wire.session import add_zenoh_arguments, session_from_args
-from .errors import EXIT_OK
 
 
 def full_key(key: str, robot: str) -> str:
@@ -84,7 +85,7 @@ def add_echo_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", metavar="KEY",
                         help="a key expression (wildcards allowed), e.g. sctd/edan/target, or one "
                              "under sctd/<robot>/: target, status, input/*, objects/**")
-    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="the robot name (default %(default)s)")
+    add_robot_argument(parser)
     parser.add_argument("--json", action="store_true", help="one JSON object per sample and line")
     parser.add_argument("--count", type=int, default=0, help="stop after N samples (default: run)")
     parser.add_argument("--timeout", type=float, default=0.0,
@@ -94,7 +95,7 @@ def add_echo_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_hz_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", metavar="KEY", help="as for sctd echo")
-    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="the robot name (default %(default)s)")
+    add_robot_argument(parser)
     parser.add_argument("--window", type=int, default=1000,
                         help="intervals per key the figures are over (default %(default)s)")
     parser.add_argument("--timeout", type=float, default=0.0,

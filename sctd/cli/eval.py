@@ -32,7 +32,7 @@ from sctd_services.eval.report import write_report
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import PROFILES
 
-from .errors import fail
+from ..app.errors import fail
 from .eval_realtime import realtime_job
 
 

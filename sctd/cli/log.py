@@ -32,12 +32,13 @@ from typing import IO, Any
 
 import zenoh
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import add_robot_argument
 from ..files import FileError, open_regular
 from ..timing import wait_until
-from ..wire import DEFAULT_ROBOT, Keys, codec
+from ..wire import Keys, codec
 from ..wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 from .echo import decode
-from .errors import EXIT_FAILED, EXIT_OK, fail
 
 OBSERVATIONS = ("state", "objects", "scene", "status")  # replayed by default
 COMMANDS = ("target", "input", "can")  # replayed only with --all
@@ -135,7 +136,7 @@ class McapLog:
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mcap", required=True, type=Path, metavar="FILE", help="the MCAP file to write")
-    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="the robot name (default %(default)s)")
+    add_robot_argument(parser)
     parser.add_argument("--duration", type=float, default=0.0,
                         help="stop after this many seconds (default: until Ctrl-C or SIGTERM)")
     add_zenoh_arguments(parser)
@@ -320,8 +321,7 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
                         help="time scale (default %(default)s: as logged)")
     parser.add_argument("--all", action="store_true",
                         help="also target, input and can (never while a daemon or robot answers)")
-    parser.add_argument("--robot", default=None,
-                        help="replay under this robot's prefix instead of the logged one")
+    add_robot_argument(parser, None, "replay under this robot's prefix instead of the logged one")
     add_zenoh_arguments(parser)
 
 

@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import version
 
-from .errors import EXIT_USAGE, Parser, fail
+from ..app.errors import EXIT_USAGE, Parser, fail
 
 
 @dataclass(frozen=True)

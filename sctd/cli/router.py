@@ -10,7 +10,7 @@ here: zenohd is not installable from our registries).
 Stopping is bounded: on SIGINT/SIGTERM the session is closed from a helper thread
 (:func:`sctd.wire.session.close_session`) and waited for at most :data:`CLOSE_WAIT`
 s, and then the process ends at once (``os._exit``) with 0 when the session closed in
-time and :data:`~sctd.cli.errors.EXIT_FORCED` (3) when it did not. The interpreter's
+time and :data:`~sctd.app.errors.EXIT_FORCED` (3) when it did not. The interpreter's
 own shutdown is skipped on purpose: it would wait for a session still closing
 (``Session.close`` can block for about 10 s, e.g. while a listen endpoint is still being
 retried), and on the loaded 2-core machine it took 1.5-10 s even after a clean close
@@ -32,7 +32,7 @@ import zenoh
 from sctd.timing import wait_until
 from sctd.wire.session import HUB, close_session
 
-from .errors import EXIT_CODES, EXIT_FAILED, EXIT_FORCED, EXIT_OK, fail
+from ..app.errors import EXIT_CODES, EXIT_FAILED, EXIT_FORCED, EXIT_OK, fail
 
 CLOSE_WAIT = 2.0  # s the session may take to close after SIGINT/SIGTERM
 

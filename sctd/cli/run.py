@@ -10,11 +10,12 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack
-from dataclasses import fields
 from typing import Any
 
 import zenoh
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import SKILL_HELP, add_arguments, add_robot_argument, check_ranges, from_namespace
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
 from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
@@ -28,8 +29,6 @@ from ..wire.session import (
     make_config,
     session_from_args,
 )
-from .errors import EXIT_FAILED, EXIT_OK, fail
-from .options import SKILL_HELP, add_arguments, flag_name, from_namespace
 
 ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (the rest must be > 0)
 
@@ -91,11 +90,7 @@ def runtime_config(args: argparse.Namespace) -> RuntimeConfig:
         A setting out of range, naming its flag.
     """
     config = from_namespace(RuntimeConfig, args)
-    for f in fields(RuntimeConfig):
-        value = getattr(config, f.name)
-        zero_ok = f.name in ZERO_ALLOWED
-        if isinstance(value, float) and not (value >= 0 if zero_ok else value > 0):
-            raise ValueError(f"{flag_name(f)}: must be {'>= 0' if zero_ok else '> 0'}")
+    check_ranges(config, ZERO_ALLOWED)
     Keys(config.robot)  # one key chunk
     return config
 
@@ -215,7 +210,7 @@ def _describe_matrix(m: list[list[float]]) -> str:
 
 def add_swap_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("skill", help="the skill to send to the running daemon; " + SKILL_HELP)
-    p.add_argument("--robot", default="edan")
+    add_robot_argument(p)
     p.add_argument("--timeout", type=float, default=10.0, help="s to wait for the daemon's reply")
     add_zenoh_arguments(p)
 

@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import SKILL_HELP, add_robot_argument
 from ..skill import SkillError, bundle_from_file, load_skill, skill_summary
 from ..skill.catalog import (
     StoredSkill,
@@ -19,10 +21,8 @@ from ..skill.catalog import (
     store_folder,
     stored_skills,
 )
-from ..wire import DEFAULT_ROBOT, Keys, client
+from ..wire import Keys, client
 from ..wire.session import add_zenoh_arguments, session_from_args
-from .errors import EXIT_FAILED, EXIT_OK, fail
-from .options import SKILL_HELP
 from .run import main_inspect
 
 
@@ -37,8 +37,7 @@ def add_skills_arguments(p: argparse.ArgumentParser) -> None:
                           description="put a stored skill into the running daemon")
     swap.add_argument("ref", metavar="REF", help="a stored skill: NAME@ID, ID (or a prefix of 4+ "
                                                  "characters), or NAME (the newest)")
-    swap.add_argument("--robot", default=DEFAULT_ROBOT,
-                      help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(swap)
     swap.add_argument("--timeout", type=float, default=40.0,
                       help="s to wait for the daemon's reply (default %(default)s)")
     add_zenoh_arguments(swap)

@@ -36,9 +36,9 @@ from sctd_services.teach import (
     teach,
 )
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
+from ..app.options import add_arguments, from_namespace
 from ..wire.session import add_zenoh_arguments, session
-from .errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
-from .options import add_arguments, from_namespace
 from .procs import Child, free_port
 from .teach_loop import (
     LoopError,

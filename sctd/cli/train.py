@@ -12,10 +12,11 @@ import json
 import sys
 from typing import Any
 
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import add_robot_argument
 from ..files import FileError, parse_yaml
-from ..wire import DEFAULT_ROBOT, Keys, client, codec
+from ..wire import Keys, client, codec
 from ..wire.session import add_zenoh_arguments, session_from_args
-from .errors import EXIT_FAILED, EXIT_OK, fail
 
 DEFAULT_TIMEOUT = 120.0
 
@@ -41,8 +42,7 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                         "--allow-unchecked; refused otherwise)")
     p.add_argument("--no-swap", dest="swap", action="store_false",
                    help="train, check and store; do not swap")
-    p.add_argument("--robot", default=DEFAULT_ROBOT,
-                   help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(p)
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT,
                    help="s to wait for the learner's reply (default %(default)s; training and the "
                         "check take tens of seconds)")

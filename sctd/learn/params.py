@@ -5,7 +5,7 @@ and the options around them (:class:`~sctd.learn.Preprocessing`,
 :class:`~sctd.learn.SkillOptions`, :class:`~sctd.learn.VectorFieldOptions`) are
 dataclasses: the field is the keyword argument, its default and its documentation.
 :func:`hyperparameter` adds the one-line help and, where the command line has always
-called it differently, the flag; ``sctd.cli.options`` derives the flags of
+called it differently, the flag; ``sctd.app.options`` derives the flags of
 ``sctd learn`` from that metadata, so nothing is written twice.
 """
 

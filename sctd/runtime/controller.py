@@ -32,7 +32,7 @@ def _setting(default, help: str):
 class RuntimeConfig:
     """Daemon settings; defaults are the safe ones (SI units). Every field with a help
     text is a ``sctd run`` flag of the same name (``--max-offset`` for ``max_offset``;
-    ``--no-stamp-check`` clears ``stamp_check``), derived by :mod:`sctd.cli.options`."""
+    ``--no-stamp-check`` clears ``stamp_check``), derived by :mod:`sctd.app.options`."""
 
     rate: float = _setting(1000.0, "tick rate, Hz")
     robot: str = _setting("edan", "robot name in the key prefix sctd/<robot>")

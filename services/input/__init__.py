@@ -17,7 +17,8 @@ import signal
 import sys
 import threading
 
-from sctd.wire import DEFAULT_ROBOT
+from sctd.app.errors import EXIT_FAILED, EXIT_USAGE, fail
+from sctd.app.options import add_robot_argument
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .device import Backend, InputError
@@ -30,7 +31,7 @@ def _backends() -> list[Backend]:
         try:
             out.append(get_backend(name))
         except InputError as e:  # a broken plug-in must not hide the others
-            print(f"sctd input: {e}", file=sys.stderr)
+            fail("input", str(e))  # said, and the other backends listed
     return out
 
 
@@ -51,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--axes", type=int, choices=(3, 6), default=3, help="length of u (default 3)")
     p.add_argument("--rate", type=float, default=100.0,
                    help="messages per second, 20 to 1000 (default %(default)s)")
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(p)
     p.add_argument("--print", action="store_true", dest="echo",
                    help="also print the published u and buttons, 10 times a second")
     for b in backends:
@@ -152,10 +153,8 @@ def _echo(rate: float):
 
 
 def _usage(msg: str) -> int:
-    print(f"sctd input: {msg}", file=sys.stderr)
-    return 2
+    return fail("input", msg, EXIT_USAGE)
 
 
 def _fail(msg: str) -> int:
-    print(f"sctd input: {msg}", file=sys.stderr)
-    return 1
+    return fail("input", msg, EXIT_FAILED)

@@ -23,11 +23,12 @@ from __future__ import annotations
 
 import argparse
 import ctypes
-import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from sctd.app.errors import fail
 
 from .device import Backend, DeviceInfo, InputDevice, InputError, Reading, pick
 from .sdl import MISSING as _MISSING
@@ -206,8 +207,7 @@ class Gamepad(Backend):
 
                 load_script(args.virtual_script)
         except InputError as e:
-            print(f"sctd input: {e}", file=sys.stderr)
-            return 2
+            return fail("input", str(e))
         return None
 
     def missing(self) -> str | None:

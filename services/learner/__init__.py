@@ -17,7 +17,8 @@ import signal
 import sys
 import threading
 
-from sctd.wire import DEFAULT_ROBOT
+from sctd.app.errors import fail
+from sctd.app.options import add_robot_argument
 from sctd.wire.session import add_zenoh_arguments, session_from_args
 
 from .check import CheckSettings
@@ -31,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--store", default=None, metavar="DIR",
                    help="the store of demonstrations and skills (default $SCTD_STORE, else "
                         "$XDG_DATA_HOME/sctd/store, else ~/.local/share/sctd/store)")
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help="key prefix sctd/<robot> (default %(default)s)")
+    add_robot_argument(p)
     g = p.add_argument_group("the check before a swap (sctd eval --lockstep)")
     g.add_argument("--trials", type=int, default=d.trials, help="lockstep trials (default %(default)s)")
     g.add_argument("--floor", type=float, default=d.floor,
@@ -69,8 +70,7 @@ def run(args: argparse.Namespace) -> int:
         limits = TrainingLimits(args.train_memory_mb * 1024**2, args.train_timeout)
         store = Store(store_path(args.store))
     except (ValueError, OSError) as e:
-        print(f"sctd learner: {e}", file=sys.stderr)
-        return 2
+        return fail("learner", str(e))
     if args.nice > 0:
         os.nice(args.nice)
     logging.basicConfig(level=logging.INFO, format="sctd learner: %(message)s", stream=sys.stderr)

@@ -1,6 +1,6 @@
 """``sctd learn`` and ``sctd dtw``: arguments, progress line, messages, exit codes.
 
-The hyperparameter flags are derived (:mod:`sctd.cli.options`) from the fields that
+The hyperparameter flags are derived (:mod:`sctd.app.options`) from the fields that
 define them in :mod:`sctd.learn`; this module adds only the command's own arguments
 (the folder, ``--method``, ``--out``, ``--frame``, ``--report``, ``--quiet``).
 """
@@ -18,6 +18,8 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from ...app.errors import fail
+from ...app.options import add_arguments, flag_name, from_namespace
 from ...learn import (
     METHODS,
     STAGES,
@@ -38,8 +40,6 @@ from ...learn import (
 )
 from ...learn.pipeline import hyperparameter_fields
 from ...skill import SkillError
-from ..errors import fail
-from ..options import add_arguments, flag_name, from_namespace
 from .report import write_report, write_skill
 
 

@@ -16,10 +16,11 @@ without one.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import signal
 import sys
 from pathlib import Path
+
+from sctd.app.options import add_arguments, from_namespace
 
 from ..device import Backend, DeviceInfo, InputDevice, InputError
 from .filters import Filters
@@ -55,11 +56,8 @@ class Emg(Backend):
         group.add_argument("--settle-seconds", type=float, default=1.0,
                            help="--calibrate: seconds dropped at the start of each phase "
                                 "(default %(default)s)")
-        for f in dataclasses.fields(Filters):  # the filters' flags come from their one definition
-            group.add_argument(f"--{f.name.replace('_', '-')}", dest=f"emg_{f.name}",
-                               type=type(f.default), default=f.default,
-                               metavar="N" if isinstance(f.default, int) else "HZ",
-                               help=f"--calibrate: {f.metadata['help']} (default %(default)s)")
+        # the filters' flags come from their one definition
+        add_arguments(group, Filters, show_default=True, dest_prefix="emg_", help_prefix="--calibrate: ")
 
     def missing(self) -> str | None:
         from .board import missing
@@ -103,7 +101,7 @@ class Emg(Backend):
         if args.phase_seconds <= args.settle_seconds:
             raise InputError(f"emg --calibrate: --phase-seconds {args.phase_seconds:g} must exceed "
                              f"--settle-seconds {args.settle_seconds:g}")
-        filters = Filters(**{f.name: getattr(args, f"emg_{f.name}") for f in dataclasses.fields(Filters)})
+        filters = from_namespace(Filters, args, dest_prefix="emg_")
         # the bridge's handlers only set its stop event; here Ctrl-C must end the calibration
         handlers = {s: signal.signal(s, _interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
         try:

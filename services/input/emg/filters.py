@@ -29,13 +29,17 @@ class Filters:
         Its order.
     """
 
-    band_low_hz: float = field(default=20.0, metadata={"help": "band-pass low edge, Hz"})
-    band_high_hz: float = field(default=0.0, metadata={
+    band_low_hz: float = field(default=20.0, metadata={"metavar": "HZ", "help": "band-pass low edge, Hz"})
+    band_high_hz: float = field(default=0.0, metadata={"metavar": "HZ",
         "help": "band-pass high edge, Hz (0: min(450, 0.45 x the board's rate))"})
-    band_order: int = field(default=4, metadata={"help": "band-pass Butterworth order"})
-    notch_hz: float = field(default=0.0, metadata={"help": "mains notch, Hz: 50 or 60 (0: none)"})
-    envelope_hz: float = field(default=4.0, metadata={"help": "envelope low-pass cut-off, Hz"})
-    envelope_order: int = field(default=2, metadata={"help": "envelope low-pass Butterworth order"})
+    band_order: int = field(default=4, metadata={"metavar": "N",
+                                                 "help": "band-pass Butterworth order"})
+    notch_hz: float = field(default=0.0, metadata={"metavar": "HZ",
+                                                   "help": "mains notch, Hz: 50 or 60 (0: none)"})
+    envelope_hz: float = field(default=4.0, metadata={"metavar": "HZ",
+                                                      "help": "envelope low-pass cut-off, Hz"})
+    envelope_order: int = field(default=2, metadata={"metavar": "N",
+                                                     "help": "envelope low-pass Butterworth order"})
 
     def band_hz(self, rate_hz: float) -> tuple[float, float]:
         """The band-pass edges at sampling rate ``rate_hz``; ValueError when they do not

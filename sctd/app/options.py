@@ -32,6 +32,12 @@ import typing
 from collections.abc import Collection
 from typing import Any, TypeVar
 
+from ..wire import DEFAULT_ROBOT
+from ..wire.session import add_zenoh_arguments
+
+__all__ = ["SKILL_HELP", "add_arguments", "add_robot_argument", "add_zenoh_arguments", "check_ranges",
+           "flag_name", "from_namespace"]
+
 T = TypeVar("T")
 
 # The help of every --skill / SKILL argument: how sctd.skill.catalog.find_skill resolves it.
@@ -55,7 +61,7 @@ def _scalar_type(hint: Any) -> Any:
 
 def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type,
                   only: Collection[str] | None = None, exclude: Collection[str] = (),
-                  show_default: bool = False) -> None:
+                  show_default: bool = False, dest_prefix: str = "", help_prefix: str = "") -> None:
     """Add one flag per documented field of dataclass ``cls`` to ``parser``.
 
     Parameters
@@ -69,6 +75,11 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         Field names to leave out (a flag another call adds, or a differently grouped one).
     show_default : bool
         End each help text of a flag taking a value with ``(default <value>)``.
+    dest_prefix : str
+        Prefix of the argparse destinations (``emg_`` keeps a device's filter settings
+        apart from other flags); :func:`from_namespace` takes the same prefix.
+    help_prefix : str
+        Prefix of every help text (``--calibrate: ``: the flag matters only there).
 
     Raises
     ------
@@ -84,7 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         if (only is not None and f.name not in only) or f.name in exclude:
             continue
         kind = _scalar_type(hints[f.name])
-        kwargs: dict[str, Any] = {"dest": f.name, "help": f.metadata["help"], "default": f.default}
+        kwargs: dict[str, Any] = {"dest": dest_prefix + f.name, "help": help_prefix + f.metadata["help"],
+                                  "default": f.default}
         if kind is bool:
             kwargs["action"] = "store_false" if f.default else "store_true"
         else:
@@ -98,10 +110,31 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         parser.add_argument(flag_name(f), **kwargs)
 
 
-def from_namespace(cls: type[T], namespace: argparse.Namespace) -> T:
+def from_namespace(cls: type[T], namespace: argparse.Namespace, dest_prefix: str = "") -> T:
     """An instance of dataclass ``cls`` with every field the namespace holds (by field
-    name, as :func:`add_arguments` stores them); the other fields keep their defaults."""
+    name after ``dest_prefix``, as :func:`add_arguments` stores them); the other fields
+    keep their defaults."""
     given = vars(namespace)
-    values = {f.name: given[f.name] for f in dataclasses.fields(cls)  # type: ignore[arg-type]
-              if f.init and f.name in given}
+    values = {f.name: given[dest_prefix + f.name] for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+              if f.init and dest_prefix + f.name in given}
     return cls(**values)
+
+
+def check_ranges(obj: Any, zero_allowed: Collection[str] = ()) -> None:
+    """Every float field of dataclass instance ``obj`` is > 0 (>= 0 for the names in
+    ``zero_allowed``, where 0 means none); ValueError naming the flag otherwise (NaN
+    fails both)."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        zero_ok = f.name in zero_allowed
+        if isinstance(value, float) and not (value >= 0 if zero_ok else value > 0):
+            raise ValueError(f"{flag_name(f)}: must be {'>= 0' if zero_ok else '> 0'}")
+
+
+def add_robot_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                       default: str | None = DEFAULT_ROBOT, help: str | None = None) -> None:
+    """``--robot NAME``: the robot whose keys (``sctd/<robot>/...``) a program uses; one
+    definition for every program. ``default`` None with a ``help`` of the caller's
+    for a program that otherwise takes the name from elsewhere (a log's keys)."""
+    parser.add_argument("--robot", default=default, metavar="NAME",
+                        help=help or "the robot's name, the key prefix sctd/<robot> (default %(default)s)")
