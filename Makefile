@@ -48,6 +48,7 @@ lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/mypy sctd services sim
 	$(BIN)/lint-imports
+	$(BIN)/python tools/check_function_length.py
 
 bench: setup
 	$(BIN)/sctd bench latency

@@ -282,32 +282,10 @@ def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: floa
     length = float(rng.uniform(0.25, 0.30)) if task == "wipe" else 0.0
     demos = []
     for k in range(n_demos):
-        if task == "pour":
-            t, clean, phase, info = _pour_demo(rng, rate, pour_jitter)
-        elif task == "drawer":
-            t, clean, phase, info = _drawer_demo(rng, rate)
-        elif task == "crank":
-            t, clean, phase, info = _crank_demo(rng, rate, radius)
-        else:
-            t, clean, phase, info = _wipe_demo(rng, rate, length)
+        t, clean, phase, info = _clean_demo(task, rng, rate, pour_jitter, radius, length)
         poses, rows = _corrupt(rng, clean, noise, rn, outliers)
         demos.append(GeneratedDemo(f"demo_{k:02d}.csv", t, poses, clean, phase, rows, info))
-    if task == "pour":
-        dirs = np.array([d.info["carry_direction"] for d in demos])
-        centre = np.mean([d.info["pour_point"] for d in demos], axis=0)
-        truth = {"sphere_centre": centre.tolist(), "tip_offset": TIP_OFFSET.tolist(),
-                 "directions": {"carry": _unit_mean(dirs).tolist()},
-                 "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
-    else:
-        dirs = np.array([d.info["reach_direction"] for d in demos])
-        truth = {"directions": {"reach": _unit_mean(dirs).tolist()}}
-        if task == "drawer":
-            truth["directions"]["pull"] = [1.0, 0.0, 0.0]
-        elif task == "crank":
-            truth.update({"axis": [0.0, 0.0, 1.0], "point": [0.0, 0.0, 0.0], "radius": radius,
-                          "axis_ee_offset": [radius, 0.0, 0.0]})
-        else:
-            truth["length"] = length
+    truth = _task_truth(task, demos, radius, length)
     truth.update({
         "task": task, "object": OBJECTS[task], "fields": list(FIELD_TRUTH[task]),
         "phases": list(PHASES[task]),
@@ -317,6 +295,39 @@ def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: floa
                    "rate": rate, "seed": seed, "pour_jitter": pour_jitter},
     })
     return DemoSet(task, demos, truth)
+
+
+def _clean_demo(task: str, rng: np.random.Generator, rate: float, pour_jitter: float,
+                radius: float, length: float) -> tuple:
+    """One noise-free demonstration of ``task``: ``(t, poses, phase, info)``."""
+    if task == "pour":
+        return _pour_demo(rng, rate, pour_jitter)
+    if task == "drawer":
+        return _drawer_demo(rng, rate)
+    if task == "crank":
+        return _crank_demo(rng, rate, radius)
+    return _wipe_demo(rng, rate, length)
+
+
+def _task_truth(task: str, demos: list[GeneratedDemo], radius: float, length: float) -> dict:
+    """What the demonstrations of ``task`` were generated from, the part that depends on
+    the task: its directions and its geometry (pour point, crank axis, wipe length)."""
+    if task == "pour":
+        dirs = np.array([d.info["carry_direction"] for d in demos])
+        centre = np.mean([d.info["pour_point"] for d in demos], axis=0)
+        return {"sphere_centre": centre.tolist(), "tip_offset": TIP_OFFSET.tolist(),
+                "directions": {"carry": _unit_mean(dirs).tolist()},
+                "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
+    dirs = np.array([d.info["reach_direction"] for d in demos])
+    truth: dict = {"directions": {"reach": _unit_mean(dirs).tolist()}}
+    if task == "drawer":
+        truth["directions"]["pull"] = [1.0, 0.0, 0.0]
+    elif task == "crank":
+        truth.update({"axis": [0.0, 0.0, 1.0], "point": [0.0, 0.0, 0.0], "radius": radius,
+                      "axis_ee_offset": [radius, 0.0, 0.0]})
+    else:
+        truth["length"] = length
+    return truth
 
 
 def _unit_mean(v: Array) -> Array:

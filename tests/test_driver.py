@@ -11,9 +11,10 @@ import pytest
 
 from sctd import se3
 from sctd.runtime.controller import RuntimeConfig
-from sctd.runtime.daemon import Daemon
 from sctd.runtime.driver import TickDriver
 from sctd.runtime.ingress import ANY_DEPTH, DEVICE_DEPTH, Ingress
+from sctd.runtime.loop import TickLoop
+from sctd.runtime.swap import SkillSwap
 from sctd.skill import load_skill
 from sctd.wire import Keys, codec
 from sctd_services.eval.lockstep import Feed
@@ -135,13 +136,15 @@ def replay_lockstep(skill, msgs, ticks):
 
 
 def replay_daemon(skill, msgs, ticks):
-    """The daemon's own methods around its tick: drain (ingress into the driver), step,
+    """The daemon's own tick loop around its tick: drain (ingress into the driver), step,
     after-tick; the messages as bytes in its rings, arriving before each drain. Returns
     what it published, by tick: ``(tick, pose, in_seq, device, state, seed)``."""
     fake = FakeSession()
-    daemon = Daemon(skill, fake, RuntimeConfig())  # type: ignore[arg-type]
-    daemon.ingress = Ingress(fake, KEYS, daemon.driver)  # type: ignore[arg-type]
-    out, sent = [], []
+    driver = TickDriver(skill, RuntimeConfig())
+    ingress = Ingress(fake, KEYS, driver)  # type: ignore[arg-type]
+    out: list = []
+    sent: list = []
+    loop = TickLoop(driver, ingress, SkillSwap(driver), sent.append)
     by_tick = _by_tick(msgs)
     for k in range(ticks):
         t = k * PERIOD
@@ -152,13 +155,13 @@ def replay_daemon(skill, msgs, ticks):
             fake.arrive(key, data)
         assert max(per_ring.values(), default=0) <= min(DEVICE_DEPTH, ANY_DEPTH)
         before = len(sent)
-        daemon._before_tick(t)
-        daemon._step(t, t, sent.append)
-        daemon._after_tick()
+        loop.before_tick(t)
+        loop.step(t, t)
+        loop.after_tick()
         # a queued target: (seq, stamp, pose, state, skill id, in_seq, in_device, seed)
         out += [(k, item[2], item[5], item[6], item[3], item[7]) for item in sent[before:]]
         assert [item[0] for item in sent[before:]] == list(range(before + 1, len(sent) + 1))
-    return out, daemon.driver.counters
+    return out, driver.counters
 
 
 def _by_tick(msgs):

@@ -116,10 +116,14 @@ def test_an_ambiguous_id_prefix_is_refused(store):
 
 def test_the_record_is_what_the_catalog_reads(store):
     s = _stored_copy(store, "pour.yaml", "mine", created=5.0)
-    rec = store.update_record(s.id, {"evaluation": {"pour": {"success_rate": 1.0}}})
+    rec = store.record(s.id)
+    rec.update({"evaluation": {"pour": {"success_rate": 1.0}}})
+    assert "evaluation" not in find_stored("mine").record  # changed in memory only
+    rec.save()
     on_disk = json.loads((s.path.parent / "record.json").read_text())
-    assert on_disk == rec and on_disk["id"] == s.id and on_disk["name"] == "mine"
+    assert on_disk == rec.data and on_disk["id"] == s.id and on_disk["name"] == "mine"
     assert find_stored("mine").record["evaluation"]["pour"]["success_rate"] == 1.0
+    assert [p.name for p in s.path.parent.iterdir() if p.name.startswith(".")] == []  # no leftovers
 
 
 # --- requests -------------------------------------------------------------------------
@@ -228,12 +232,58 @@ def test_a_request_cannot_skip_the_check_unless_the_operator_allows_it(store):
         Learner(None, store, settings=CheckSettings()).handle(req)  # type: ignore[arg-type]
     s = _stored_copy(store, "pour.yaml", "unchecked", created=1.0)
     learner = Learner(None, store, settings=CheckSettings(allow_unchecked=True))  # type: ignore[arg-type]
-    ev, passed, reason = learner._check(req, s)
+    record = store.record(s.id)
+    ev, passed, reason = learner._check(req, s, record)
     assert ev is None and passed is None and reason.startswith("not checked")
-    assert find_stored("unchecked").record["check"] == {"passed": None, "checked": False, "reason": reason}
+    assert record.data["check"] == {"passed": None, "checked": False, "reason": reason}
     swapped, why, _ = learner._swap(s, Request(task="pour", method="vf", gate=False, swap=False), passed,
-                                    reason)
+                                    reason, record)
     assert not swapped and "not checked" in why
+
+
+@pytest.mark.parametrize("swap", [False, True])
+def test_a_request_writes_the_record_before_a_swap_and_once_at_the_end(store, monkeypatch, swap):
+    """record.json is written when the skill is stored, before the daemon is asked to run
+    it (a learner that dies waiting for the reply leaves its check on disk), and once at
+    the end (the swap and the timings): never half-written."""
+    from sctd_services.learner import service
+    from sctd_services.learner import store as store_module
+    from sctd_services.learner.request import Request
+    from sctd_services.learner.service import Learner
+
+    s = _stored_copy(store, "pour.yaml", "taught", created=1.0)
+    record_path = s.path.parent / "record.json"
+    learner = Learner(None, store, settings=CheckSettings(allow_unchecked=True))  # type: ignore[arg-type]
+    monkeypatch.setattr(learner, "say", lambda *args, **fields: None)
+    monkeypatch.setattr(learner, "_train", lambda req: (s, load_skill(s.path), {"method": "vf"}))
+    writes: list[dict] = []
+    write_atomic = store_module._write_atomic
+
+    def counted(path, data):
+        if path == record_path:
+            writes.append(json.loads(data))
+        write_atomic(path, data)
+
+    monkeypatch.setattr(store_module, "_write_atomic", counted)
+    asked: list[dict] = []
+
+    def daemon_swap(session, keys, bundle, timeout):
+        asked.append(json.loads(record_path.read_text()))  # what a learner killed now leaves
+        return True, {"ok": True, "id": s.id}
+
+    monkeypatch.setattr(service.client, "swap", daemon_swap)
+    out = learner.handle(Request(task="pour", method="vf", gate=False, swap=swap))
+    assert out.swapped is swap and out.passed is None
+    if swap:
+        assert len(writes) == 2 and asked == writes[:1]
+        assert asked[0]["check"] == {"passed": None, "checked": False,
+                                     "reason": "not checked (gate: false, allowed by the learner's operator)"}
+        assert "timings" not in writes[0] and "swaps" not in writes[0]
+    else:
+        assert len(writes) == 1 and not asked
+    final = json.loads(record_path.read_text())
+    assert final == writes[-1] and final["timings"] == out.timings
+    assert final["check"]["checked"] is False and ("swaps" in final) is swap
 
 
 @pytest.mark.parametrize("bad", [".", "..", ".h", "a\x00b", "a/b", "x" * 65, "", "a b", "sub\\dir"])

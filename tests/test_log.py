@@ -93,14 +93,13 @@ def test_replay_publishes_observations_and_commands_only_with_all(tmp_path):
     from sctd.cli.log import McapLog
 
     path = tmp_path / "made.mcap"
-    log = McapLog(path)
     t = time.time()
-    for k in range(20):
-        pose = [0.1, 0, 0.5, 0, 0, 0, 1]
-        log.add(KEYS.state, "state", codec.encode_state(k, t + k * 0.01, pose), t + k * 0.01)
-        log.add(KEYS.target, "target", codec.encode_target(k, t + k * 0.01, [0.1, 0, 0.5, 0, 0, 0, 1], "s",
-                                                              "id", k), t + k * 0.01)
-    log.close()
+    with McapLog(path) as log:
+        for k in range(20):
+            pose = [0.1, 0, 0.5, 0, 0, 0, 1]
+            log.add(KEYS.state, "state", codec.encode_state(k, t + k * 0.01, pose), t + k * 0.01)
+            log.add(KEYS.target, "target", codec.encode_target(k, t + k * 0.01, [0.1, 0, 0.5, 0, 0, 0, 1],
+                                                                  "s", "id", k), t + k * 0.01)
     assert len(read_log(path)) == 40
     port = free_port()
     s = open_session(listen=[f"tcp/127.0.0.1:{port}"])  # the listening side: replay connects here
@@ -140,12 +139,11 @@ def test_replay_publishes_observations_and_commands_only_with_all(tmp_path):
 def _log_file(path, n=20):
     from sctd.cli.log import McapLog
 
-    log = McapLog(path)
     t = 1_800_000_000.0
-    for k in range(n):
-        log.add(KEYS.state, "state", codec.encode_state(k, t + k * 0.01, [0.1, 0, 0.5, 0, 0, 0, 1]),
-                t + k * 0.01)
-    log.close()
+    with McapLog(path) as log:
+        for k in range(n):
+            log.add(KEYS.state, "state", codec.encode_state(k, t + k * 0.01, [0.1, 0, 0.5, 0, 0, 0, 1]),
+                    t + k * 0.01)
     return path
 
 

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
+import zenoh
 
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
@@ -247,6 +248,7 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
     hub = f"tcp/127.0.0.1:{free_port()}"
     store = d / "store"
     status: list[dict] = []
+    events: list[dict] = []  # the learner's status
     lock = threading.Lock()
 
     def on_status(sample: Any) -> None:
@@ -260,10 +262,9 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "daemon.log"), \
             Child("sctd.cli.main", "learner", "--store", str(store), "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "learner.log"), \
-            s.declare_subscriber(keys.status, on_status):
-        events: list[dict] = []
-        sub = s.declare_subscriber(keys.learner_status, lambda sample: events.append(
-            msgpack.unpackb(sample.payload.to_bytes(), raw=False)))
+            s.declare_subscriber(keys.status, on_status), \
+            s.declare_subscriber(keys.learner_status, lambda sample: events.append(
+                msgpack.unpackb(sample.payload.to_bytes(), raw=False))):
         end = time.monotonic() + 60
         while not any(e.get("event") == "state" for e in events) or not status:
             if time.monotonic() > end:
@@ -276,28 +277,9 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
         files_changed = _flips_changed(d / "logs")
         tools = _windows(status, lock, k0)
         k0 = len(status)
-        replies = []
-        for what, over in BAD_REQUESTS:
-            req = {"task": "pour", "method": "vf", **over}
-            got = list(s.get(keys.learner, payload=msgpack.packb(req), timeout=30.0))
-            answer = (got[0].err or got[0].ok) if got else None
-            body = msgpack.unpackb(answer.payload.to_bytes(), raw=False) if answer is not None else {}
-            replies.append({"what": what, "refused": bool(got) and got[0].err is not None,
-                            "said": str(body.get("error", body.get("reason", "")))[:160]})
-        for name, rows in (("long", 100_001), ("..", 12), (".h", 12), ("a\x00b", 12)):
-            s.put(keys.demos("pour", name.replace("\x00", "_")), _demo("pour", name, rows), encoding=MSGPACK)
-        for k in range(1200):  # distinct names, small: past the task's quota of 1,000
-            s.put(keys.demos("quota", f"d{k:04d}"), _demo("quota", f"d{k:04d}", 10), encoding=MSGPACK)
-        sent = 1200 + 4
-
-        def handled() -> int:
-            return sum(1 for e in list(events) if e.get("event") in ("stored", "rejected", "duplicate"))
-
-        end = time.monotonic() + 120
-        while handled() < sent and time.monotonic() < end:
-            time.sleep(0.2)
+        replies = _bad_requests(s, keys)
+        _bad_demos(s, keys, events)
         attacked = _windows(status, lock, k0)
-        sub.undeclare()
     stored = sum(1 for e in events if e.get("event") == "stored")
     rejected = [e for e in events if e.get("event") == "rejected"]
     return {"files": files, "flips_changed": files_changed, "lateness_tools": tools,
@@ -306,6 +288,38 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
                                for r in sorted({str(e.get("reason")) for e in rejected})},
             "quota_stored": len(list((store / "demos" / "quota").glob("*.csv"))),
             "lateness_quiet": quiet, "lateness_attacked": attacked}
+
+
+def _bad_requests(s: zenoh.Session, keys: Keys) -> list[dict[str, Any]]:
+    """Each of :data:`BAD_REQUESTS` asked of the learner: whether it was refused, and
+    what it said."""
+    replies = []
+    for what, over in BAD_REQUESTS:
+        req = {"task": "pour", "method": "vf", **over}
+        got = list(s.get(keys.learner, payload=msgpack.packb(req), timeout=30.0))
+        answer = (got[0].err or got[0].ok) if got else None
+        body = msgpack.unpackb(answer.payload.to_bytes(), raw=False) if answer is not None else {}
+        replies.append({"what": what, "refused": bool(got) and got[0].err is not None,
+                        "said": str(body.get("error", body.get("reason", "")))[:160]})
+    return replies
+
+
+def _bad_demos(s: zenoh.Session, keys: Keys, events: list[dict]) -> None:
+    """Demonstrations the learner must refuse (too long, names that are paths) and more
+    than a task's quota; returns once the learner's status ``events`` account for each
+    of them, or after 120 s."""
+    for name, rows in (("long", 100_001), ("..", 12), (".h", 12), ("a\x00b", 12)):
+        s.put(keys.demos("pour", name.replace("\x00", "_")), _demo("pour", name, rows), encoding=MSGPACK)
+    for k in range(1200):  # distinct names, small: past the task's quota of 1,000
+        s.put(keys.demos("quota", f"d{k:04d}"), _demo("quota", f"d{k:04d}", 10), encoding=MSGPACK)
+    sent = 1200 + 4
+
+    def handled() -> int:
+        return sum(1 for e in list(events) if e.get("event") in ("stored", "rejected", "duplicate"))
+
+    end = time.monotonic() + 120
+    while handled() < sent and time.monotonic() < end:
+        time.sleep(0.2)
 
 
 def _lateness(status: list[dict], lock: threading.Lock, seconds: float) -> dict[str, float]:

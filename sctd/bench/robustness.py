@@ -154,47 +154,59 @@ def devices_main(argv: list[str]) -> int:
         time.sleep(1.0)  # routes to the daemon
         dev.paced(0.2, lambda: dev.send("A", [0.0, 0.0, 0.0]))
         if args.kind == "release":
-            out["releases"] = []
-            for k in range(args.trials):
-                u = [0.0, 1.0 if k % 2 == 0 else -1.0, 0.0]
-                last = [0.0]
-
-                def push(u=u, last=last) -> None:
-                    dev.send("A", u)
-                    last[0] = time.monotonic()
-
-                dev.paced(0.6, push)
-                _busy_until(last[0] + 2e-4)
-                seq, sent = dev.send("A", [0.0, 0.0, 0.0])
-                out["releases"].append({"seq": seq, "sent": sent})
-                time.sleep(0.5)
+            out["releases"] = _send_releases(dev, args.trials)
         else:
-            def both(u_b, buttons=(0, 1, 0), stop=False):
-                def step() -> None:
-                    dev.send("B", u_b, buttons, stop)
-                    _busy_until(time.monotonic() + 2e-4)
-                    dev.send("A", PUSH)
-                return step
-
-            phases: list[tuple[str, float, Any]] = [
-                ("A alone", 0.05, lambda: dev.send("A", PUSH)),
-                ("B zeros", 0.3, both([0.0, 0.0, 0.0])),
-                ("B pushes back", 0.3, both([-x for x in PUSH])),
-                ("B deadman released", 0.3, both([0.0, 0.0, 0.0], (0, 0, 0))),
-                ("B stop", 0.2, both([0.0, 0.0, 0.0], stop=True)),
-                ("after stop", 0.2, both([0.0, 0.0, 0.0])),
-                ("A at rest", 0.02, lambda: dev.send("A", [0.0, 0.0, 0.0])),
-                ("A pushes again", 0.3, lambda: dev.send("A", PUSH)),
-            ]
-            out["phases"] = []
-            for name, seconds, step in phases:
-                t0 = time.time()
-                dev.paced(seconds, step)
-                out["phases"].append({"name": name, "start": t0, "end": time.time()})
+            out["phases"] = _send_two_devices(dev)
             dev.paced(0.1, lambda: dev.send("A", [0.0, 0.0, 0.0]))
         time.sleep(0.3)
     print(json.dumps(out), flush=True)
     return 0
+
+
+def _send_releases(dev: _Devices, trials: int) -> list[dict[str, Any]]:
+    """``devices release``: A's pushes and releases; each release's seq and send time."""
+    releases = []
+    for k in range(trials):
+        u = [0.0, 1.0 if k % 2 == 0 else -1.0, 0.0]
+        last = [0.0]
+
+        def push(u=u, last=last) -> None:
+            dev.send("A", u)
+            last[0] = time.monotonic()
+
+        dev.paced(0.6, push)
+        _busy_until(last[0] + 2e-4)
+        seq, sent = dev.send("A", [0.0, 0.0, 0.0])
+        releases.append({"seq": seq, "sent": sent})
+        time.sleep(0.5)
+    return releases
+
+
+def _send_two_devices(dev: _Devices) -> list[dict[str, Any]]:
+    """``devices two``: the phases of A and B; each one's name, start and end."""
+    def both(u_b, buttons=(0, 1, 0), stop=False):
+        def step() -> None:
+            dev.send("B", u_b, buttons, stop)
+            _busy_until(time.monotonic() + 2e-4)
+            dev.send("A", PUSH)
+        return step
+
+    phases: list[tuple[str, float, Any]] = [
+        ("A alone", 0.05, lambda: dev.send("A", PUSH)),
+        ("B zeros", 0.3, both([0.0, 0.0, 0.0])),
+        ("B pushes back", 0.3, both([-x for x in PUSH])),
+        ("B deadman released", 0.3, both([0.0, 0.0, 0.0], (0, 0, 0))),
+        ("B stop", 0.2, both([0.0, 0.0, 0.0], stop=True)),
+        ("after stop", 0.2, both([0.0, 0.0, 0.0])),
+        ("A at rest", 0.02, lambda: dev.send("A", [0.0, 0.0, 0.0])),
+        ("A pushes again", 0.3, lambda: dev.send("A", PUSH)),
+    ]
+    out = []
+    for name, seconds, step in phases:
+        t0 = time.time()
+        dev.paced(seconds, step)
+        out.append({"name": name, "start": t0, "end": time.time()})
+    return out
 
 
 # --- the bench's view of the daemon ----------------------------------------------------

@@ -27,6 +27,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 from typing import IO, Any
 
@@ -105,8 +106,12 @@ class McapLog:
         from mcap.writer import Writer
 
         self.fh = path.open("wb")
-        self.writer = Writer(self.fh, enable_data_crcs=True)  # replay checks every byte it reads
-        self.writer.start(profile="", library="sctd log")
+        try:
+            self.writer = Writer(self.fh, enable_data_crcs=True)  # replay checks every byte it reads
+            self.writer.start(profile="", library="sctd log")
+        except BaseException:
+            self.fh.close()
+            raise
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.counts: dict[str, int] = {}
@@ -130,8 +135,45 @@ class McapLog:
         self.counts[key] = n + 1
 
     def close(self) -> None:
-        self.writer.finish()
-        self.fh.close()
+        try:
+            self.writer.finish()
+        finally:
+            self.fh.close()
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class _LogWriter(threading.Thread):
+    """Writes the samples Zenoh's threads queue (:meth:`on_sample`) into ``log`` on a
+    thread of its own, the keys under ``prefix`` of a recorded kind. A context manager:
+    started on entry; on exit, what is queued is written and the thread joined."""
+
+    def __init__(self, log: McapLog, prefix: str):
+        super().__init__(name="sctd-log-writer")
+        self.log, self.prefix = log, prefix
+        self.samples: queue.SimpleQueue[tuple[str, bytes, float] | None] = queue.SimpleQueue()
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        self.samples.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
+
+    def run(self) -> None:
+        while (item := self.samples.get()) is not None:
+            key, data, received = item
+            kind = kind_of(key, self.prefix)
+            if kind in RECORDED:
+                self.log.add(key, kind, data, received)
+
+    def __enter__(self) -> _LogWriter:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.samples.put(None)
+        self.join()
 
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
@@ -149,30 +191,12 @@ def main_log(args: argparse.Namespace) -> int:
     except ModuleNotFoundError:
         return fail("log", "needs mcap, which is not installed: pip install 'sctd[logs]'")
     prefix = Keys(args.robot).prefix
-    samples: queue.SimpleQueue[tuple[str, bytes, float] | None] = queue.SimpleQueue()
-    stop = threading.Event()
-    log = McapLog(args.mcap)
-
-    def writer() -> None:
-        while (item := samples.get()) is not None:
-            key, data, received = item
-            kind = kind_of(key, prefix)
-            if kind in RECORDED:
-                log.add(key, kind, data, received)
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        samples.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
-
-    t = threading.Thread(target=writer, name="sctd-log-writer")
-    t.start()
-    try:
-        with session_from_args(args) as s, s.declare_subscriber(f"{prefix}/**", on_sample):
-            print(f"sctd log: {prefix}/** -> {args.mcap}", file=sys.stderr, flush=True)
-            wait_until(stop, args.duration)
-    finally:
-        samples.put(None)
-        t.join()
-        log.close()
+    # Closed in reverse: the subscription and the session, then the writer (what was
+    # queued is written), then the file.
+    with McapLog(args.mcap) as log, _LogWriter(log, prefix) as writer, \
+            session_from_args(args) as s, s.declare_subscriber(f"{prefix}/**", writer.on_sample):
+        print(f"sctd log: {prefix}/** -> {args.mcap}", file=sys.stderr, flush=True)
+        wait_until(threading.Event(), args.duration)
     total = sum(log.counts.values())
     print(f"sctd log: {total} messages on {len(log.channels)} keys written to {args.mcap}"
           + (f" ({log.undecodable} not msgpack maps, left out)" if log.undecodable else ""),
@@ -329,16 +353,74 @@ def _live(s: zenoh.Session, keys: list[str], wait: float = 1.0) -> str | None:
     """A key of ``keys`` someone else publishes on now, or a daemon's skill queryable on
     the prefix, within ``wait`` s; None when nobody answers."""
     heard: list[str] = []
-    subs = [s.declare_subscriber(k, lambda sample: heard.append(str(sample.key_expr)),
-                                 allowed_origin=zenoh.Locality.REMOTE) for k in keys]
-    try:
+    with ExitStack() as stack:
+        for k in keys:
+            stack.enter_context(s.declare_subscriber(k, lambda sample: heard.append(str(sample.key_expr)),
+                                                     allowed_origin=zenoh.Locality.REMOTE))
         end = time.monotonic() + wait
         while time.monotonic() < end and not heard:
             time.sleep(0.02)
-    finally:
-        for sub in subs:
-            sub.undeclare()
     return heard[0] if heard else None
+
+
+def _replayed(file: Path, kinds: tuple[str, ...], robot: str | None
+              ) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """The messages of ``kinds`` to replay from ``file``, under ``robot``'s prefix when
+    given (a stream: the file is read twice, once to know what it holds, once to replay
+    it)."""
+    for key, t, value in log_messages(file):
+        parts = key.split("/")
+        if parts[2] not in kinds:
+            continue
+        if robot is not None:
+            parts[1] = robot
+        yield "/".join(parts), t, value
+
+
+def _watched(held: set[tuple[str, str]]) -> tuple[list[str], list[str]]:
+    """The prefixes a replay of ``held`` (robot, kind) publishes under, and the keys on
+    which a live program would show: each prefix's target and state, and what it
+    replays."""
+    prefixes = sorted({f"sctd/{robot}" for robot, _ in held})
+    watched = [f"{p}/{k}" for p in prefixes for k in ("target", "state")] + [
+        f"{p}/{k}/**" if k in ("objects", "input") else f"{p}/{k}"
+        for p in prefixes for k in sorted({kind for _, kind in held})]
+    return prefixes, sorted(set(watched))
+
+
+def _live_program(s: zenoh.Session, watched: list[str], prefixes: list[str]) -> str | None:
+    """Where a live program answers: one of the ``watched`` keys it publishes on, or the
+    skill queryable of one of the ``prefixes``; None when nobody does."""
+    live = _live(s, watched)
+    if live is None:
+        for p in prefixes:
+            if any(r.ok is not None for r in s.get(f"{p}/skill", timeout=0.5)):
+                live = f"{p}/skill"
+    return live
+
+
+def _publish(s: zenoh.Session, messages: Iterator[tuple[str, int, dict[str, Any]]], speed: float,
+             stop: threading.Event) -> tuple[int, int]:
+    """Publish ``messages`` (key, log time in ns, value) with their logged spacing divided
+    by ``speed``, until they end, ``stop`` is set or Ctrl-C; returns how many were sent
+    on how many keys."""
+    with ExitStack() as stack:
+        pubs: dict[str, zenoh.Publisher] = {}
+        t0, start = None, time.monotonic()
+        sent = 0
+        try:
+            for key, t, value in messages:
+                t0 = t if t0 is None else t0
+                due = start + (t - t0) / 1e9 / speed
+                if stop.wait(max(0.0, due - time.monotonic())):
+                    break
+                if key not in pubs:
+                    pubs[key] = stack.enter_context(s.declare_publisher(key, encoding=MSGPACK))
+                pubs[key].put(codec.pack(dict(value)))
+                sent += 1
+        except KeyboardInterrupt:
+            pass
+    return sent, len(pubs)
 
 
 def main_replay(args: argparse.Namespace) -> int:
@@ -349,75 +431,41 @@ def main_replay(args: argparse.Namespace) -> int:
         return fail("replay", "needs mcap, which is not installed: pip install 'sctd[logs]'")
     if not args.speed > 0:
         return fail("replay", f"--speed: expected a number > 0, got {args.speed}")
-    kinds = OBSERVATIONS + (COMMANDS if args.all else ())
-
-    def plan() -> Iterator[tuple[str, int, dict[str, Any]]]:
-        """The messages to replay, under ``--robot``'s prefix when given (a stream: the
-        file is read twice, once to know what it holds, once to replay it)."""
-        for key, t, value in log_messages(args.file):
-            parts = key.split("/")
-            if parts[2] not in kinds:
-                continue
-            if args.robot is not None:
-                parts[1] = args.robot
-            yield "/".join(parts), t, value
-
     if args.robot is not None and codec.name_problem(args.robot):
         return fail("replay", f"--robot: {codec.name_problem(args.robot)}")
+    kinds = OBSERVATIONS + (COMMANDS if args.all else ())
     try:
-        held = {(k.split("/")[1], k.split("/")[2]) for k, _, _ in plan()}
+        held = {(k.split("/")[1], k.split("/")[2]) for k, _, _ in _replayed(args.file, kinds, args.robot)}
     except LogError as e:
         return fail("replay", str(e))
     if not held:
         return fail("replay", f"{args.file}: nothing to replay ({', '.join(kinds)})")
-    prefixes = sorted({f"sctd/{robot}" for robot, _ in held})
-    watched = [f"{p}/{k}" for p in prefixes for k in ("target", "state")] + [
-        f"{p}/{k}/**" if k in ("objects", "input") else f"{p}/{k}"
-        for p in prefixes for k in sorted({kind for _, kind in held})]
+    prefixes, watched = _watched(held)
     stop = threading.Event()
     foreign: list[str] = []
+
+    def on_foreign(sample: zenoh.Sample) -> None:
+        foreign.append(str(sample.key_expr))
+        stop.set()
+
     with session_from_args(args) as s:
-        live = _live(s, sorted(set(watched)))
-        if live is None:
-            for p in prefixes:
-                if any(r.ok is not None for r in s.get(f"{p}/skill", timeout=0.5)):
-                    live = f"{p}/skill"
+        live = _live_program(s, watched, prefixes)
         if live is not None:
             print(f"sctd replay: a live program answers on {live}: not replaying over it",
                   file=sys.stderr)
             return EXIT_FAILED
-        def on_foreign(sample: zenoh.Sample) -> None:
-            foreign.append(str(sample.key_expr))
-            stop.set()
-
-        subs = [s.declare_subscriber(k, on_foreign, allowed_origin=zenoh.Locality.REMOTE)
-                for k in sorted(set(watched))]
-        pubs: dict[str, zenoh.Publisher] = {}
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
-        t0, start = None, time.monotonic()
-        sent = 0
         try:
-            for key, t, value in plan():
-                t0 = t if t0 is None else t0
-                due = start + (t - t0) / 1e9 / args.speed
-                if stop.wait(max(0.0, due - time.monotonic())):
-                    break
-                if key not in pubs:
-                    pubs[key] = s.declare_publisher(key, encoding=MSGPACK)
-                pubs[key].put(codec.pack(dict(value)))
-                sent += 1
-        except KeyboardInterrupt:
-            pass
+            with ExitStack() as stack:
+                for k in watched:
+                    stack.enter_context(s.declare_subscriber(k, on_foreign,
+                                                             allowed_origin=zenoh.Locality.REMOTE))
+                sent, keys = _publish(s, _replayed(args.file, kinds, args.robot), args.speed, stop)
         except LogError as e:  # changed on disk between the two readings
             return fail("replay", str(e))
-        finally:
-            for sub in subs:
-                sub.undeclare()
-            for pub in pubs.values():
-                pub.undeclare()
     if foreign:
         print(f"sctd replay: stopped after {sent} messages: a live program published on {foreign[0]}",
               file=sys.stderr)
         return EXIT_FAILED
-    print(f"sctd replay: {sent} messages on {len(pubs)} keys from {args.file}", file=sys.stderr)
+    print(f"sctd replay: {sent} messages on {keys} keys from {args.file}", file=sys.stderr)
     return EXIT_OK

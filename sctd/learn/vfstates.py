@@ -73,6 +73,56 @@ def _goes_back(labels: NDArray[np.int64], order: tuple[int, ...], min_run: int) 
     return any(b < a for a, b in pairwise(rank)) or len(set(runs)) < len(runs)
 
 
+def _demo_times(demo: NDArray[np.int64], sample: NDArray[np.int64]) -> Array:
+    """Each point's time in its demonstration (``demo``, ``sample``: which and which
+    sample) normalised to [0, 1], so that demonstrations of different lengths weigh
+    alike."""
+    t = sample.astype(float)
+    for k in np.unique(demo):
+        sel = demo == k
+        t[sel] = (t[sel] - t[sel].min()) / max(1.0, float(np.ptp(t[sel])))
+    return t
+
+
+def _median_times(learner: VectorFieldLearner, t: Array) -> Array:
+    """When each demonstration (rows) uses each field (columns): the median normalised
+    time ``t`` of its points of the field, NaN where it has fewer than ``coherence_run``."""
+    a, demo = learner.assignment_, learner.demo_index_
+    K = len(learner.fields_)
+    when = np.full((int(demo.max()) + 1, K), np.nan)
+    for k in np.unique(demo):
+        for m in range(K):
+            sel = (demo == k) & (a == m)
+            if sel.sum() >= learner.coherence_run:
+                when[k, m] = float(np.median(t[sel]))
+    return when
+
+
+def _switch(learner: VectorFieldLearner, t: Array, when: Array, m0: int, m1: int,
+            max_spread: float, min_radius: float) -> FieldTransition | str:
+    """The transition from field ``m0`` to ``m1`` where the demonstrations that use both
+    switch (the first point of ``m1`` after the median time of ``m0``), or why there is
+    none."""
+    a, demo = learner.assignment_, learner.demo_index_
+    both = np.isfinite(when[:, m0]) & np.isfinite(when[:, m1])
+    switches = []
+    for k in np.flatnonzero(both):
+        # Where the next field starts: its first point after the bulk of the one before.
+        i1 = np.flatnonzero((demo == k) & (a == m1))
+        first = i1[t[i1] >= when[k, m0]]
+        if len(first):
+            switches.append(learner.points_[first[0]])
+    if not switches:
+        return f"no demonstration switches from field {m0} to field {m1}"
+    S = np.array(switches)
+    centre = np.median(S, axis=0)
+    spread = float(np.sqrt(np.mean(np.sum((S - centre) ** 2, axis=1))))
+    if spread > max_spread:
+        return (f"the demonstrations switch from field {m0} to field {m1} in different places "
+                f"({spread * 100:.1f} cm apart, RMS)")
+    return FieldTransition(m0, m1, centre, max(min_radius, 2.0 * spread), spread)
+
+
 def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, max_spread: float = 0.03,
                 min_radius: float = 0.01) -> StatePlan:
     """Whether the fitted ``learner``'s fields are a sequence, and its transitions.
@@ -91,22 +141,11 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, max_spread:
     min_radius : float
         The smallest radius (m) of a switch; otherwise twice the switch points' spread.
     """
-    K = len(learner.fields_)
-    if K < 2:
+    if len(learner.fields_) < 2:
         return StatePlan(reason="one field")
     a, demo = learner.assignment_, learner.demo_index_
-    t = learner.sample_index_.astype(float)
-    # Each demonstration's time normalised to [0, 1], so that demonstrations of
-    # different lengths weigh alike.
-    for k in np.unique(demo):
-        sel = demo == k
-        t[sel] = (t[sel] - t[sel].min()) / max(1.0, float(np.ptp(t[sel])))
-    when = np.full((int(demo.max()) + 1, K), np.nan)
-    for k in np.unique(demo):
-        for m in range(K):
-            sel = (demo == k) & (a == m)
-            if sel.sum() >= learner.coherence_run:
-                when[k, m] = float(np.median(t[sel]))
+    t = _demo_times(demo, learner.sample_index_)
+    when = _median_times(learner, t)
     used = np.sum(np.isfinite(when), axis=0)
     if np.any(used < 0.5 * when.shape[0]):
         return StatePlan(reason=f"field {int(np.argmin(used))} is used in {int(used.min())} of "
@@ -125,21 +164,8 @@ def plan_states(learner: VectorFieldLearner, min_order: float = 0.9, max_spread:
         if share < min_order:
             return StatePlan(reason=f"field {m0} comes before field {m1} in only {share:.0%} of the "
                                     "demonstrations", timing=timing)
-        switches = []
-        for k in np.flatnonzero(both):
-            # Where the next field starts: its first point after the bulk of the one before.
-            i1 = np.flatnonzero((demo == k) & (a == m1))
-            first = i1[t[i1] >= when[k, m0]]
-            if len(first):
-                switches.append(learner.points_[first[0]])
-        if not switches:
-            return StatePlan(reason=f"no demonstration switches from field {m0} to field {m1}",
-                             timing=timing)
-        S = np.array(switches)
-        centre = np.median(S, axis=0)
-        spread = float(np.sqrt(np.mean(np.sum((S - centre) ** 2, axis=1))))
-        if spread > max_spread:
-            return StatePlan(reason=f"the demonstrations switch from field {m0} to field {m1} in "
-                                    f"different places ({spread * 100:.1f} cm apart, RMS)", timing=timing)
-        transitions.append(FieldTransition(m0, m1, centre, max(min_radius, 2.0 * spread), spread))
+        switch = _switch(learner, t, when, m0, m1, max_spread, min_radius)
+        if isinstance(switch, str):
+            return StatePlan(reason=switch, timing=timing)
+        transitions.append(switch)
     return StatePlan(order=order, transitions=tuple(transitions), timing=timing)

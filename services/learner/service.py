@@ -44,7 +44,7 @@ from sctd.wire.session import MSGPACK
 
 from .check import TASKS, CheckSettings, evaluation, verdict
 from .request import Request, RequestError, parse_request, request_map
-from .store import Store, StoreFull
+from .store import SkillRecord, Store, StoreFull
 from .training import Trainer, TrainingError
 
 log = logging.getLogger("sctd.learner")
@@ -241,19 +241,21 @@ class Learner:
         try:
             self.stage = f"training {req.task} ({req.method})"
             stored, skill, report = self._train(req)
+            record = self.store.record(stored.id)
             t1 = time.monotonic()
             self.stage = f"checking {stored.ref}"
-            ev, passed, reason = self._check(req, stored)
+            ev, passed, reason = self._check(req, stored, record)
             t2 = time.monotonic()
             self.stage = f"swapping {stored.ref} in"
-            swapped, reason, daemon = self._swap(stored, req, passed, reason)
+            swapped, reason, daemon = self._swap(stored, req, passed, reason, record)
         finally:
             self.busy = None
             self.stage = "idle"
         t3 = time.monotonic()
         timings = {"train_s": round(t1 - t0, 3), "check_s": round(t2 - t1, 3),
                    "swap_s": round(t3 - t2, 3), "total_s": round(t3 - t0, 3)}
-        self.store.update_record(stored.id, {"timings": timings})
+        record.update({"timings": timings})
+        record.save()
         self.counters["swapped" if swapped else "kept"] += 1
         self.say("swapped" if swapped else "kept", id=stored.id, name=stored.name, reason=reason,
                  timings=timings)
@@ -292,13 +294,14 @@ class Learner:
                                          f"{sorted(map(str, objects))}: name the object")
         return str(objects.pop())
 
-    def _check(self, req: Request, stored: StoredSkill) -> tuple[dict[str, Any] | None, bool | None, str]:
+    def _check(self, req: Request, stored: StoredSkill, record: SkillRecord
+               ) -> tuple[dict[str, Any] | None, bool | None, str]:
         """The lockstep check (with the gate on): its evaluation, whether it passed (None:
-        not checked), why."""
+        not checked), why; the evaluation and the verdict go into ``record`` (not yet
+        written)."""
         if not req.gate:
             reason = "not checked (gate: false, allowed by the learner's operator)"
-            self.store.update_record(stored.id, {"check": {"passed": None, "checked": False,
-                                                          "reason": reason}})
+            record.update({"check": {"passed": None, "checked": False, "reason": reason}})
             return None, None, reason
         if req.task not in TASKS:
             return None, *verdict(None, req.task, self.settings, None)
@@ -307,11 +310,9 @@ class Learner:
         ev = evaluation(stored, req.task, self.settings, seed, self.pool,
                         lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n),
                         active=active)
-        rec = self.store.update_record(stored.id, {"evaluation": {
-            **stored.record.get("evaluation", {}), req.task: ev}})
         passed, reason = verdict(ev, req.task, self.settings, active)
-        self.store.update_record(stored.id, {"check": {"passed": passed, "reason": reason,
-                                                      "evaluation": rec["evaluation"][req.task]}})
+        record.update({"evaluation": {**record.data.get("evaluation", {}), req.task: ev},
+                       "check": {"passed": passed, "reason": reason, "evaluation": ev}})
         return ev, passed, reason
 
     def _active_evaluation(self, task: str, exclude: str) -> dict[str, Any] | None:
@@ -328,16 +329,22 @@ class Learner:
         """The daemon's active skill summary, or None when no daemon answers."""
         return client.active_skill(self.session, self.keys, DAEMON_TIMEOUT, find=1.0)
 
-    def _swap(self, stored: StoredSkill, req: Request, passed: bool | None,
-              reason: str) -> tuple[bool, str, dict[str, Any] | None]:
+    def _swap(self, stored: StoredSkill, req: Request, passed: bool | None, reason: str,
+              record: SkillRecord) -> tuple[bool, str, dict[str, Any] | None]:
+        """Swap the skill into the daemon when it passed (or was not checked) and the
+        request asks for it; a swap goes into ``record``. The record is written before
+        the daemon is asked: from then on the daemon may run the skill, and a learner
+        that dies before the reply must leave its check (the baseline of later checks,
+        what ``sctd skills`` shows) on disk."""
         if passed is False:
             return False, f"kept the active skill: {reason}", None
         if not req.swap:
             return False, f"stored, not swapped (swap: false); check: {reason}", None
+        record.save()
         self.say("swapping", id=stored.id)
         ok, body = client.swap(self.session, self.keys, bundle_from_file(stored.path), SWAP_TIMEOUT)
         if ok:
-            self.store.update_record(stored.id, {"swaps": [*stored.record.get("swaps", []), time.time()]})
+            record.update({"swaps": [*record.data.get("swaps", []), time.time()]})
             return True, f"swapped: {reason}", body
         return False, f"not swapped: {body.get('error', body)}; check: {reason}", body
 

@@ -69,6 +69,34 @@ def csv_text(rows: list[list[float]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+class SkillRecord:
+    """A stored skill's record (``record.json``): read once, changed in memory
+    (:meth:`update`), and written whole, all or nothing (:meth:`save`), when a change
+    must be on disk.
+
+    Attributes
+    ----------
+    path : Path
+    data : dict
+        The record as it will be written.
+    """
+
+    def __init__(self, path: Path, data: dict[str, Any]):
+        self.path = path
+        self.data = data
+
+    @classmethod
+    def read(cls, path: Path) -> SkillRecord:
+        return cls(path, json.loads(path.read_text()))
+
+    def update(self, changes: dict[str, Any]) -> None:
+        """Merge ``changes`` in (top-level keys replaced); nothing is written."""
+        self.data.update(changes)
+
+    def save(self) -> None:
+        _write_atomic(self.path, json.dumps(self.data, indent=1, default=plain).encode())
+
+
 @dataclass(frozen=True)
 class StoredDemo:
     """A demonstration in the store."""
@@ -205,18 +233,16 @@ class Store:
                 shutil.rmtree(tmp, ignore_errors=True)
                 raise
         else:
-            self.update_record(sid, rec)
+            existing = self.record(sid)
+            existing.update(rec)
+            existing.save()
         stored = read_record(folder)
         assert stored is not None
         return stored
 
-    def update_record(self, sid: str, changes: dict[str, Any]) -> dict[str, Any]:
-        """Merge ``changes`` into a stored skill's record (atomically); the new record."""
-        path = self.skills_dir / sid / RECORD
-        rec = json.loads(path.read_text())
-        rec.update(changes)
-        _write_atomic(path, json.dumps(rec, indent=1, default=plain).encode())
-        return rec
+    def record(self, sid: str) -> SkillRecord:
+        """The record of the stored skill with content id ``sid``, as it is on disk."""
+        return SkillRecord.read(self.skills_dir / sid / RECORD)
 
     def skill(self, sid: str) -> StoredSkill | None:
         """The stored skill with content id ``sid`` (exactly), or None."""

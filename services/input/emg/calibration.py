@@ -114,6 +114,20 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     """
     skip = round(settle_s * rate_hz)
     filters = replace(filters, band_high_hz=filters.band_hz(rate_hz)[1])  # the file says which edge
+    held = _held(envelopes, phases, skip)
+    notes: list[str] = []
+    norm, strong = _normalisation(held, phases, channels, notes)
+    act = {name: norm(e) for name, e in held.items()}
+    mapping = _axis_map(act, phases, strong, ridge, notes)
+    notes += _phase_notes(mapping, act, phases)
+    return Calibration(board=board, channels=list(channels), rate_hz=rate_hz, filters=filters,
+                       normalisation=norm, mapping=mapping,
+                       created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), notes=notes)
+
+
+def _held(envelopes: dict[str, np.ndarray], phases: tuple[Phase, ...], skip: int) -> dict[str, np.ndarray]:
+    """Each phase's envelopes without their first ``skip`` samples (the user's reaction
+    and the envelope's rise)."""
     held = {}
     for p in phases:
         e = envelopes.get(p.name)
@@ -121,9 +135,16 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
             raise InputError(f"calibration: phase {p.name!r} recorded {0 if e is None else len(e)} "
                              f"samples, needs more than {skip + 10}")
         held[p.name] = e[skip:]
+    return held
+
+
+def _normalisation(held: dict[str, np.ndarray], phases: tuple[Phase, ...], channels: list[int],
+                   notes: list[str]) -> tuple[Normalisation, np.ndarray]:
+    """Per channel, ``rest`` the median at rest and ``mvc`` the largest phase median; and
+    which channels contracted (an MVC of at least :data:`WEAK_RATIO` x rest). The weak
+    ones are named in ``notes``."""
     rest = np.median(held["rest"], axis=0)
     mvc = np.max([np.median(held[p.name], axis=0) for p in phases if p.name != "rest"], axis=0)
-    notes = []
     strong = mvc >= WEAK_RATIO * rest
     if not strong.any():
         raise InputError(f"calibration: no channel contracted above {WEAK_RATIO:g} x its rest "
@@ -132,8 +153,14 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     if weak:
         notes.append(f"channels {weak}: no contraction above {WEAK_RATIO:g} x rest; not used")
     mvc = np.maximum(mvc, WEAK_RATIO * rest + 1e-9)
-    norm = Normalisation(rest=rest, mvc=mvc)
-    act = {name: norm(e) for name, e in held.items()}
+    return Normalisation(rest=rest, mvc=mvc), strong
+
+
+def _axis_map(act: dict[str, np.ndarray], phases: tuple[Phase, ...], strong: np.ndarray,
+              ridge: float, notes: list[str]) -> AxisMap:
+    """Ridge regression from the activations ``act`` to each phase's target, with the
+    co-contraction rule (when co-contraction stands apart; otherwise said in ``notes``)
+    and the dead zone over what rest leaves."""
     A = np.vstack([act[p.name] for p in phases])
     Y = np.vstack([np.tile(p.target, (len(act[p.name]), 1)) for p in phases])
     raw = fit_axis_map(A, Y, ridge=ridge, deadzone=0.0, use=strong)
@@ -149,7 +176,13 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
     quiet = [act["rest"]] + ([act["co-contract"]] if cocontraction is None and "co-contract" in act else [])
     residual = np.abs(raw(np.vstack(quiet)))
     deadzone = float(np.clip(1.2 * np.percentile(residual.max(axis=1), 95), 0.05, 0.3))
-    mapping = AxisMap(matrix=raw.matrix, bias=raw.bias, deadzone=deadzone, cocontraction=cocontraction)
+    return AxisMap(matrix=raw.matrix, bias=raw.bias, deadzone=deadzone, cocontraction=cocontraction)
+
+
+def _phase_notes(mapping: AxisMap, act: dict[str, np.ndarray], phases: tuple[Phase, ...]) -> list[str]:
+    """What the fitted map makes of each phase where it falls short: a single-axis phase
+    that reaches less than half its axis, a quiet one that moves."""
+    notes = []
     for p in phases:
         u = mapping(act[p.name]).mean(axis=0)
         own = int(np.argmax(np.abs(p.target))) if any(p.target) else None
@@ -158,9 +191,7 @@ def fit(envelopes: dict[str, np.ndarray], *, board: str, channels: list[int], ra
                          f"with a stronger or more distinct contraction")
         elif own is None and np.max(np.abs(u)) > 0.1:
             notes.append(f"phase {p.name} maps to {np.round(u, 2).tolist()}, not zero")
-    return Calibration(board=board, channels=list(channels), rate_hz=rate_hz, filters=filters,
-                       normalisation=norm, mapping=mapping,
-                       created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), notes=notes)
+    return notes
 
 
 def save(cal: Calibration, path: str | Path) -> None:

@@ -1,0 +1,162 @@
+"""The daemon's parts, each on its own: the swap of a skill between two ticks
+(:class:`SkillSwap`), the tick statistics (:class:`TickStats`) and the status map
+(:class:`DaemonStatus`). The loop they serve is tested by tests/test_driver.py, the
+daemon they make up by the end-to-end tests."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections import deque
+from pathlib import Path
+
+import pytest
+
+from sctd.runtime import swap as swap_module
+from sctd.runtime.controller import RuntimeConfig
+from sctd.runtime.driver import TickDriver
+from sctd.runtime.ingress import Ingress
+from sctd.runtime.status import RECENT, DaemonStatus, TickStats
+from sctd.runtime.swap import SkillSwap
+from sctd.skill import SkillError, load_skill
+from sctd.timing import Ticker
+from sctd.wire import Keys
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = Keys()
+
+
+class _Sub:
+    def __init__(self, key: str):
+        self.key, self.ring, self.live = key, deque(), True
+
+    def try_recv(self):
+        return self.ring.popleft() if self.ring else None
+
+    def undeclare(self):
+        self.live = False
+
+
+class _Session:
+    """Subscriptions as the ingress declares them (nothing ever arrives)."""
+
+    def __init__(self):
+        self.subs: list[_Sub] = []
+
+    def declare_subscriber(self, key, handler):
+        self.subs.append(_Sub(key))
+        return self.subs[-1]
+
+    def live(self, key: str) -> bool:
+        return any(s.live for s in self.subs if s.key == key)
+
+
+@pytest.fixture(scope="module")
+def skills():
+    return load_skill(ROOT / "skills" / "pour.yaml"), load_skill(ROOT / "skills" / "drawer.yaml")
+
+
+def _running(skill):
+    """A driver on ``skill``, its ingress on a fake session, and the swap into them."""
+    session = _Session()
+    driver = TickDriver(skill, RuntimeConfig())
+    swap = SkillSwap(driver)
+    swap.ingress = Ingress(session, KEYS, driver)  # type: ignore[arg-type]
+    return session, driver, swap
+
+
+# --- the swap ------------------------------------------------------------------------------
+
+def test_a_swap_lands_between_two_ticks_and_retires_the_old_object_ring(skills):
+    pour, drawer = skills
+    session, driver, swap = _running(pour)
+    result: list = []
+    t = threading.Thread(target=lambda: result.append(swap.swap(drawer)))
+    t.start()
+    now = 0.0
+    while t.is_alive():  # the tick: the mailbox is read ahead of every tick
+        if swap.pending is not None:
+            swap.install(now)
+        now += 1e-3
+        t.join(1e-3)
+    assert result == [drawer.start] and driver.skill is drawer and driver.engine.state == drawer.start
+    assert swap.pending is None
+    assert set(swap.ingress.objects) == {"drawer_handle"}
+    assert session.live(KEYS.objects("drawer_handle")) and not session.live(KEYS.objects("mug"))
+
+
+def test_a_swap_is_refused_unless_the_daemon_runs(skills):
+    pour, drawer = skills
+    driver = TickDriver(pour, RuntimeConfig())
+    with pytest.raises(SkillError, match="the daemon is not running"):
+        SkillSwap(driver).swap(drawer)  # no ingress: not running
+    _, driver, swap = _running(pour)
+    swap.stop_event.set()
+    with pytest.raises(SkillError, match="the daemon is not running"):
+        swap.swap(drawer)
+    assert driver.skill is pour
+
+
+def test_a_swap_the_tick_never_takes_is_withdrawn_and_its_ring_closed(skills, monkeypatch):
+    pour, drawer = skills
+    monkeypatch.setattr(swap_module, "BOUNDARY_WAIT", 0.2)
+    session, driver, swap = _running(pour)
+    with pytest.raises(SkillError, match=r"did not reach a tick boundary in 0\.2 s"):
+        swap.swap(drawer)
+    assert swap.pending is None and driver.skill is pour
+    assert not session.live(KEYS.objects("drawer_handle")) and session.live(KEYS.objects("mug"))
+    swap.install(0.0)  # a tick after it: nothing to install
+    assert driver.skill is pour
+
+
+def test_the_summary_is_of_the_running_skill_and_refusals_are_counted(skills):
+    pour, _ = skills
+    _, driver, swap = _running(pour)
+    assert swap.summary()["name"] == pour.name and swap.summary()["state"] == driver.engine.state
+    swap.refuse("bundle.zip: too large")
+    swap.refuse("x.yaml: states: missing")
+    assert swap.refused == 2
+    status = DaemonStatus(driver, TickStats(0.0, driver.engine.state, 0.1), swap)
+    assert status.map(Ticker(1e-3), 0.0, 0.0)["counters"]["swaps_refused"] == 2
+
+
+# --- the statistics and the status -------------------------------------------------------
+
+def test_tick_stats_keep_the_windows_maximum_and_log_state_changes(caplog):
+    stats = TickStats(10.0, "carry", status_period=0.1)
+    with caplog.at_level(logging.INFO, logger="sctd.run"):
+        stats.account(1e-5, 2e-4, "carry")
+        stats.account(3e-5, 1e-4, "pour")
+    assert "state carry -> pour" in caplog.text and stats.state == "pour"
+    assert stats.lateness.n == stats.compute.n == 2 and stats.compute_max == 2e-4
+    stats.roll_recent(10.0 + RECENT / 2)
+    assert stats.recent is None  # not a whole window yet
+    stats.roll_recent(10.0 + RECENT)
+    assert stats.recent is not None and stats.recent["compute"]["n"] == 2
+    stats.next_window(11.0, targets=7)
+    assert (stats.window_start, stats.next_status, stats.window_targets, stats.compute_max) == \
+        (11.0, pytest.approx(11.1), 7, 0.0)
+    stats.account(1e-5, 5e-5, "pour")
+    stats.roll_recent(11.0 + RECENT / 2)
+    assert stats.recent["compute"]["n"] == 2  # the last whole window's, until the next one
+
+
+def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
+    pour, _ = skills
+    driver = TickDriver(pour, RuntimeConfig())
+    stats = TickStats(0.0, driver.engine.state, status_period=0.25)
+    status = DaemonStatus(driver, stats, SkillSwap(driver), realtime=True)
+    ticker = Ticker(1e-3)
+    driver.target_seq = 50  # 50 targets in the first half second
+    first = status.close_window(ticker, 0.5)
+    assert set(first) == {
+        "stamp", "skill", "skill_name", "state", "finished", "stuck", "mode", "rate", "realtime",
+        "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
+        "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
+        "state_age", "object_age", "in_seq", "input", "vf_scale", "dropped", "counters"}
+    assert (first["targets"], first["target_rate"], first["realtime"]) == (50, 100.0, True)
+    assert first["publish_ms"] is None and first["mode"] == "waiting"
+    assert stats.next_status == 0.75 and stats.window_targets == 50
+    driver.target_seq = 60  # 10 more in the next 0.25 s
+    assert status.close_window(ticker, 0.75)["target_rate"] == 40.0
+    assert status.map(ticker, 0.75, 0.0)["target_rate"] is None  # the final statistics
