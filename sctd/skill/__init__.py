@@ -13,10 +13,11 @@ from .constraints import CONSTRAINTS, ActiveConstraint, Band, Box, NeighbourOrie
 from .engine import SkillEngine
 from .errors import SkillError
 from .fields import FIELDS, CylinderField, Field, SphereField, TranslationField, sigmoid
+from .frames import WORLD_OBJECT, Frame
 from .loader import Bundle, bundle_from_file, load_skill, skill_from_bundle
-from .mappings import MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
-from .model import AXIS_NAMES, WORLD_OBJECT, Frame, Limits, Skill, State, VectorFieldModel
-from .modelfile import vector_field_model_from_bytes, vector_field_model_to_bytes
+from .mappings import AXIS_NAMES, MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
+from .model import Limits, Skill, State
+from .modelfile import VectorFieldModel, vector_field_model_from_bytes, vector_field_model_to_bytes
 from .registry import Registry
 from .stuck import StuckDetector
 from .summary import field_summary, skill_summary

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
-from .model import VectorFieldModel
+from .modelfile import VectorFieldModel
 from .reader import Reader
 from .registry import Registry, plain
 from .workspace import Workspace

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .fields import Field, sigmoid
-from .model import AXIS_NAMES, VectorFieldModel
+from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
 from .registry import Registry, plain
 from .workspace import Workspace
@@ -27,6 +27,7 @@ Array = NDArray[np.float64]
 Flat = se3.Flat
 Vec3 = tuple[float, float, float]
 
+AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")  # a displacement's rows, a linear matrix's too
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
 

@@ -1,4 +1,5 @@
-"""Vector-field model files: ``.json`` or pickle-free ``.npz`` <-> :class:`VectorFieldModel`.
+"""Vector-field models and their files: ``.json`` or pickle-free ``.npz`` <->
+:class:`VectorFieldModel`.
 
 A model file holds the fields (as their summaries) and the demonstration points they
 were fitted on; it is plain data, never a pickle, so loading one runs no code.
@@ -9,15 +10,33 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .errors import SkillError
 from .fields import Field
-from .model import VectorFieldModel
+
+Array = NDArray[np.float64]
 
 MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
+
+
+@dataclass(frozen=True)
+class VectorFieldModel:
+    """Fields plus the demonstration points they were fitted on (model file data).
+
+    ``points`` (n, 3) positions of the mapping's frame in the object frame,
+    ``quaternions`` (n, 4) orientations (x, y, z, w) of that frame, and
+    ``responsibilities`` (n, K) the EM membership of each point in each field.
+    """
+
+    fields: tuple[Field, ...]
+    points: Array
+    quaternions: Array
+    responsibilities: Array
 
 
 def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFieldModel:

@@ -15,8 +15,8 @@ import numpy as np
 
 from .. import se3
 from .errors import SkillError
-from .model import Frame, VectorFieldModel
-from .modelfile import vector_field_model_from_bytes
+from .frames import Frame
+from .modelfile import VectorFieldModel, vector_field_model_from_bytes
 
 
 def kind_of(v: Any) -> str:
