@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from .. import se3
 from .modelfile import VectorFieldModel
 from .reader import Reader
-from .registry import Registry, plain
+from .registry import ByValue, Registry, plain
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -39,8 +39,8 @@ def _set(obj: object, **values: Any) -> None:
         object.__setattr__(obj, k, v)
 
 
-@dataclass(frozen=True, kw_only=True)
-class ActiveConstraint(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ActiveConstraint(ByValue, ABC):
     """One active constraint of a state, on the pose of ``frame`` (on the end-effector)."""
 
     type: ClassVar[str]
@@ -88,7 +88,7 @@ def _rotate_about(F: Flat, G: Flat, R: Array) -> Flat:
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class TiltCone(ActiveConstraint):
     """``axis`` (3,; in ``frame``) stays within ``max_angle`` of ``reference`` (3,; object
     frame); a tilted frame is turned back about its origin onto the cone."""
@@ -141,7 +141,7 @@ class TiltCone(ActiveConstraint):
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Band(ActiveConstraint):
     """``frame``'s origin keeps a signed distance in [lower, upper] along the unit
     ``normal`` (3,) from the plane through ``point`` (3,) (object frame): a height band
@@ -187,7 +187,7 @@ class Band(ActiveConstraint):
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Box(ActiveConstraint):
     """``frame``'s origin stays inside the axis-aligned box [lower, upper] (3, each;
     object frame)."""
@@ -230,7 +230,7 @@ def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[fl
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class NeighbourOrientation(ActiveConstraint):
     """Orientation of ``frame`` pulled to the distance-weighted mean orientation of the
     demonstration points near it (Ch. 4.2.5, Algorithm 7 lines 2-5).

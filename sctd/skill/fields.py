@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import SkillError
-from .registry import Registry, plain
+from .registry import ByValue, Registry, plain, unit_divisor
 
 Array = NDArray[np.float64]
 
@@ -77,7 +77,7 @@ class FieldReader:
             n = float(np.linalg.norm(a))
             if n < 1e-9:
                 raise self.fail(key, "direction of zero length")
-            a = a / n
+            a = a / unit_divisor(n)
         return a
 
     def num(self, key: str, default: float) -> float:
@@ -105,8 +105,8 @@ class FieldReader:
         return a
 
 
-@dataclass(frozen=True, kw_only=True)
-class Field(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Field(ByValue, ABC):
     """One basic vector field in the object frame.
 
     ``weight`` is its mixing proportion pi (eq. 4.29), ``sigma`` the angular spread
@@ -207,7 +207,7 @@ FIELDS: Registry[Field] = Registry("vector field")
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class TranslationField(Field):
     """Motion along the unit ``direction`` (3,), everywhere the same."""
 
@@ -231,7 +231,7 @@ class TranslationField(Field):
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class CylinderField(Field):
     """Rotation about the line through ``point`` (3,) along the unit ``axis`` (3,)
     (circulation by the right-hand rule about ``axis``)."""
@@ -286,7 +286,7 @@ class CylinderField(Field):
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class SphereField(Field):
     """Motion tangent to the spheres about ``centre`` (3,); ``radius`` the demonstrations'
     mean distance from it, if known.
@@ -372,7 +372,7 @@ GENERAL_REUSE = 5e-4  # m: a single-point query reuses its neighbours this close
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class GeneralField(Field):
     """A non-parametric field (the thesis' future work, Ch. 7: "a general model ... a
     smoothed version of its neighbours"): at a point, the Gaussian-kernel mean
@@ -393,7 +393,7 @@ class GeneralField(Field):
 
     def __post_init__(self) -> None:
         d = np.asarray(self.directions, dtype=float)
-        n = np.linalg.norm(d, axis=1, keepdims=True)
+        n = unit_divisor(np.linalg.norm(d, axis=1, keepdims=True))
         object.__setattr__(self, "directions", np.where(n > 1e-12, d / np.maximum(n, 1e-12), 0.0))
         from scipy.spatial import cKDTree  # here: 0.6 s to import, and only these fields need it
 

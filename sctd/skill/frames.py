@@ -12,14 +12,16 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from .registry import ByValue
+
 Array = NDArray[np.float64]
 
 BUILTIN_FRAMES = ("ee", "object")
 WORLD_OBJECT = "world"  # a skill's ``object``: the world frame itself (no object pose needed)
 
 
-@dataclass(frozen=True)
-class Frame:
+@dataclass(frozen=True, eq=False)
+class Frame(ByValue):
     """A feature frame: a fixed offset ``T_parent_frame`` (4, 4) from the ee or the object."""
 
     name: str

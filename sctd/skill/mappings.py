@@ -20,7 +20,7 @@ from .. import se3
 from .fields import Field, sigmoid
 from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
-from .registry import Registry, plain
+from .registry import ByValue, Registry, plain
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -31,8 +31,8 @@ AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")  # a displacement's rows, a li
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
 
-@dataclass(frozen=True, kw_only=True)
-class InputMapping(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class InputMapping(ByValue, ABC):
     """One input mapping of a state: moves the end-effector for the user's input.
 
     ``frame`` is the feature frame the motion is expressed relative to.
@@ -113,7 +113,7 @@ def _axes(r: Reader, v: Any, path: str) -> Array:
 
 
 @MAPPINGS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class LinearMapping(InputMapping):
     """Linear input mapping (eq. 4.1, Algorithm 2).
 
@@ -264,7 +264,7 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
 
 
 @MAPPINGS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class VectorFieldMapping(InputMapping):
     """Vector-field input mapping (Ch. 4.2.5, Algorithm 7).
 

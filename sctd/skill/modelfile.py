@@ -18,14 +18,15 @@ from numpy.typing import NDArray
 
 from .errors import SkillError
 from .fields import Field
+from .registry import ByValue, unit_divisor
 
 Array = NDArray[np.float64]
 
 MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
 
 
-@dataclass(frozen=True)
-class VectorFieldModel:
+@dataclass(frozen=True, eq=False)
+class VectorFieldModel(ByValue):
     """Fields plus the demonstration points they were fitted on (model file data).
 
     ``points`` (n, 3) positions of the mapping's frame in the object frame,
@@ -82,7 +83,7 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
     if len(bad):
         raise SkillError(where, f"quaternions[{bad[0]}]", f"not unit (norm {norms[bad[0]]:.6f})")
-    return VectorFieldModel(fields=fields, points=points, quaternions=quats / norms[:, None],
+    return VectorFieldModel(fields=fields, points=points, quaternions=quats / unit_divisor(norms)[:, None],
                             responsibilities=resp)
 
 

@@ -17,6 +17,7 @@ from .. import se3
 from .errors import SkillError
 from .frames import Frame
 from .modelfile import VectorFieldModel, vector_field_model_from_bytes
+from .registry import unit_divisor
 
 
 def kind_of(v: Any) -> str:
@@ -101,7 +102,7 @@ class Reader:
             norm = float(np.linalg.norm(out))
             if norm < 1e-9:
                 raise self.fail(path, "direction of zero length")
-            out = out / norm
+            out = out / unit_divisor(norm)
         return out
 
     def pose(self, v: Any, path: str) -> np.ndarray:

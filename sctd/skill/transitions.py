@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .reader import Reader
-from .registry import Registry, plain
+from .registry import ByValue, Registry, plain, unit_divisor
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -28,8 +28,8 @@ Flat = se3.Flat
 COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
 
 
-@dataclass(frozen=True, kw_only=True)
-class Transition(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Transition(ByValue, ABC):
     """A guarded FSM edge from state ``source`` to state ``target``."""
 
     type: ClassVar[str]
@@ -86,7 +86,7 @@ TRANSITIONS: Registry[Transition] = Registry("transition")
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Hyperplane(Transition):
     """Fires when ``normal . p + offset > margin`` for the position p of ``frame`` in the
     object frame: the linear-SVM decision function of Algorithm 3 (positive side =
@@ -110,6 +110,7 @@ class Hyperplane(Transition):
         if norm < 1e-12:
             raise r.fail(f"{path}.normal", "normal of zero length")
         offset = r.number(td.get("offset", 0.0), f"{path}.offset")
+        norm = unit_divisor(norm)
         return cls(source=source, target=target,
                    frame=r.ee_frame_ref(td.get("frame", "ee"), f"{path}.frame"),
                    normal=normal / norm, offset=offset / norm,
@@ -133,7 +134,7 @@ class Hyperplane(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Distance(Transition):
     """Fires when the distance from ``frame`` to ``point`` (3,; object frame) goes below
     ``threshold - margin`` (``direction == "below"``) or above ``threshold + margin``."""
@@ -187,7 +188,7 @@ class Distance(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Timeout(Transition):
     """Fires when the state has been active ``after`` seconds."""
 
@@ -213,7 +214,7 @@ class Timeout(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Force(Transition):
     """Fires when the measured force, along the unit ``axis`` (3,; object frame) or its
     norm without one, exceeds ``above + margin`` newtons."""
@@ -250,7 +251,7 @@ class Force(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Button(Transition):
     """Fires when input button ``button`` (its index in the input message) is pressed."""
 
