@@ -88,7 +88,7 @@ def test_model_files_keep_a_general_field(rel):
 ])
 def test_a_malformed_general_field_is_refused_naming_where(doc, where):
     with pytest.raises(SkillError) as e:
-        Field.from_doc(doc, "fields[0]", "m.npz")
+        Field.from_yaml(doc, "fields[0]", "m.npz")
     assert f"fields[0].{where}" in str(e.value)
 
 

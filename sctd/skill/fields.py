@@ -3,8 +3,9 @@ of eqs. 4.31-4.34.
 
 Shared by the runtime (evaluating a field at the end-effector, on Python floats) and
 the learner (deviation angles for RANSAC and EM, vectorised over points). Each kind
-holds its parameters, reads them from a model file, summarises itself and evaluates
-itself; :data:`FIELDS` finds a kind by its ``type`` name. Pure numpy.
+holds its parameters, reads them from a model file (``from_yaml``, ``read``), writes
+them back (``to_yaml``), summarises itself and evaluates itself; :data:`FIELDS` finds a
+kind by its ``type`` name. Pure numpy.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import SkillError
-from .registry import ByValue, Registry, plain, unit_divisor
+from .registry import ByValue, Registry, summarised, unit_divisor
 
 Array = NDArray[np.float64]
 
@@ -123,7 +124,7 @@ class Field(ByValue, ABC):
     pivot: Array | None = None
 
     @classmethod
-    def from_doc(cls, fd: Any, path: str, where: str) -> Field:
+    def from_yaml(cls, fd: Any, path: str, where: str) -> Field:
         """Read one entry of a model file's ``fields`` list (any kind, by its ``type``)."""
         if not isinstance(fd, dict):
             raise SkillError(where, path, "expected a mapping")
@@ -141,13 +142,18 @@ class Field(ByValue, ABC):
     def read(cls, r: FieldReader, common: dict[str, Any]) -> Field:
         """This kind's parameters from ``r``, with the ``common`` ones already read."""
 
-    def summary(self) -> dict[str, Any]:
-        """The field as plain data (also what a model file stores)."""
+    def to_yaml(self) -> dict[str, Any]:
+        """The field as the plain dict :meth:`from_yaml` reads (an entry of a model file's
+        ``fields`` list): every parameter, exactly."""
         out: dict[str, Any] = {"type": self.type, "inliers": self.inliers, "weight": self.weight,
                                "sigma": self.sigma, **self._parameters()}
         if self.pivot is not None:
-            out["pivot"] = plain(self.pivot)
+            out["pivot"] = self.pivot.tolist()
         return out
+
+    def summary(self) -> dict[str, Any]:
+        """The field as plain data (:meth:`to_yaml`, arrays rounded to 12 decimals)."""
+        return summarised(self.to_yaml())
 
     def brief(self) -> dict[str, Any]:
         """:meth:`summary` short enough for a person (a comment, ``sctd inspect``)."""
@@ -155,7 +161,7 @@ class Field(ByValue, ABC):
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
-        """This kind's own parameters for :meth:`summary`."""
+        """This kind's own parameters for :meth:`to_yaml`."""
 
     @abstractmethod
     def vectors(self, points: ArrayLike) -> Array:
@@ -219,7 +225,7 @@ class TranslationField(Field):
         return cls(**common, direction=r.vec("direction", unit=True))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"direction": plain(self.direction)}
+        return {"direction": self.direction.tolist()}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -246,7 +252,7 @@ class CylinderField(Field):
         return cls(**common, point=r.vec("point"), axis=r.vec("axis", unit=True), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        return {"point": plain(self.point), "axis": plain(self.axis)}
+        return {"point": self.point.tolist(), "axis": self.axis.tolist()}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -308,7 +314,7 @@ class SphereField(Field):
                    radius=None if radius is None else r.num("radius", 0.0), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"centre": plain(self.centre)}
+        out: dict[str, Any] = {"centre": self.centre.tolist()}
         if self.radius is not None:
             out["radius"] = self.radius
         return out
@@ -413,8 +419,8 @@ class GeneralField(Field):
         return cls(**common, centres=centres, directions=directions, bandwidth=bandwidth)
 
     def _parameters(self) -> dict[str, Any]:
-        return {"bandwidth": self.bandwidth, "centres": plain(self.centres),
-                "directions": plain(self.directions)}
+        return {"bandwidth": self.bandwidth, "centres": self.centres.tolist(),
+                "directions": self.directions.tolist()}
 
     def brief(self) -> dict[str, Any]:
         """The summary with the number of centres in place of the centres and directions."""

@@ -1,8 +1,9 @@
 """Input mappings (user input -> end-effector motion), one class per kind.
 
-Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
-and applies itself to a flat pose in the tick (``apply``); :data:`MAPPINGS` finds a
-kind by its ``type`` name. Displacements follow the convention of :mod:`sctd.se3`.
+Each kind reads its parameters from a skill file (``from_yaml``), writes them back
+(``to_yaml``), summarises and describes itself and applies itself to a flat pose in the
+tick (``apply``); :data:`MAPPINGS` finds a kind by its ``type`` name. Displacements
+follow the convention of :mod:`sctd.se3`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from .. import se3
 from .fields import Field, sigmoid
 from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
-from .registry import ByValue, Registry, plain
+from .registry import ByValue, Registry, plain, summarised
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -47,8 +48,17 @@ class InputMapping(ByValue, ABC):
         """Read and validate this kind's parameters from the mapping ``md`` at ``path``."""
 
     @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """The mapping as the plain dict :meth:`from_yaml` reads (an entry of a state's
+        ``input_mapping`` list): every parameter, exactly."""
+
     def summary(self) -> dict[str, Any]:
         """The mapping as plain data (``sctd inspect --json``, the skill query)."""
+        return summarised(self.to_yaml())
+
+    def describe(self) -> str:
+        """What the mapping does, in a line for a person (``sctd inspect``)."""
+        return str({k: v for k, v in self.summary().items() if k not in ("type", "frame")})
 
     @abstractmethod
     def input_axes(self) -> set[int]:
@@ -152,9 +162,19 @@ class LinearMapping(InputMapping):
         return cls(frame=frame, matrix=matrix, translation=translation,  # type: ignore[arg-type]
                    rotation=rotation)  # type: ignore[arg-type]
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "translation": self.translation,
-                "rotation": self.rotation, "matrix": plain(self.matrix)}
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "matrix": self.matrix.tolist(),
+                "translation": self.translation, "rotation": self.rotation}
+
+    def describe(self) -> str:
+        """Each input column and the axes it drives: ``u0->+1tx, u1->+1ty-0.5tz`` (from
+        the matrix as the summary shows it)."""
+        m = plain(self.matrix)
+        cols = []
+        for j in range(len(m[0])):
+            terms = [f"{m[i][j]:+g}{AXIS_NAMES[i]}" for i in range(6) if m[i][j] != 0]
+            cols.append(f"u{j}->" + ("".join(terms) if terms else "none"))
+        return ", ".join(cols)
 
     def input_axes(self) -> set[int]:
         """The matrix's non-zero columns."""
@@ -324,11 +344,18 @@ class VectorFieldMapping(InputMapping):
                             ("translate", "rigid")),
         )
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "model": self.model_file, "mode": self.mode,
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "model": self.model_file, "frame": self.frame, "mode": self.mode,
                 "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
                 "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
-                "motion": self.motion, "fields": len(self.model.fields)}
+                "motion": self.motion}
+
+    def summary(self) -> dict[str, Any]:
+        """:meth:`to_yaml` and how many fields the model has."""
+        return super().summary() | {"fields": len(self.model.fields)}
+
+    def describe(self) -> str:
+        return f"{len(self.model.fields)} fields, mode {self.mode}"
 
     def input_axes(self) -> set[int]:
         """The first three: a translation command."""

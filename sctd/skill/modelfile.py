@@ -1,7 +1,7 @@
 """Vector-field models and their files: ``.json`` or pickle-free ``.npz`` <->
 :class:`VectorFieldModel`.
 
-A model file holds the fields (as their summaries) and the demonstration points they
+A model file holds the fields (as their ``to_yaml`` documents) and the demonstration points they
 were fitted on; it is plain data, never a pickle, so loading one runs no code.
 """
 
@@ -72,7 +72,7 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
 
     if not isinstance(fields_doc, list) or not fields_doc:
         raise SkillError(where, "fields", "expected a non-empty list of fields")
-    fields = tuple(Field.from_doc(f, f"fields[{i}]", where) for i, f in enumerate(fields_doc))
+    fields = tuple(Field.from_yaml(f, f"fields[{i}]", where) for i, f in enumerate(fields_doc))
     points = array("points", 3)
     quats = array("quaternions", 4)
     resp = array("responsibilities", len(fields))
@@ -109,7 +109,7 @@ def _npz_arrays(data: bytes, where: str) -> tuple[dict[str, Any], Any]:
 
 def vector_field_model_to_bytes(model: VectorFieldModel, rel: str) -> bytes:
     """Serialise a model for a ``.json`` or pickle-free ``.npz`` model file."""
-    fields = [f.summary() for f in model.fields]
+    fields = [f.to_yaml() for f in model.fields]
     if rel.endswith(".json"):
         return json.dumps({"fields": fields, "points": model.points.tolist(),
                            "quaternions": model.quaternions.tolist(),

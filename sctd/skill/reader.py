@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import se3
 from .errors import SkillError
 from .frames import Frame
 from .modelfile import VectorFieldModel, vector_field_model_from_bytes
@@ -106,12 +105,12 @@ class Reader:
         return out
 
     def pose(self, v: Any, path: str) -> np.ndarray:
-        """The 4x4 transform of a pose [x, y, z, qx, qy, qz, qw] with a unit quaternion."""
+        """A pose [x, y, z, qx, qy, qz, qw] (shape (7,)) whose quaternion is unit (to 1e-3)."""
         p = self.vector(v, path, 7)
         n = float(np.linalg.norm(p[3:]))
         if abs(n - 1.0) > 1e-3:
             raise self.fail(path, f"quaternion [qx, qy, qz, qw] must be unit, has norm {n:.6f}")
-        return se3.transform_from_pose(p)
+        return p
 
     def choice(self, v: Any, path: str, options: tuple[str, ...]) -> str:
         if v not in options:

@@ -1,15 +1,17 @@
 """Registries of skill elements: one per element kind, name -> class.
 
 Each kind of element (input mapping, active constraint, transition, vector field) is
-one class that holds its parameters, reads and validates them from a skill file, says
-what it is for the summary and evaluates itself; the class registers itself under its
-``type`` name where it is defined (``@CONSTRAINTS.register``), as python-can's bus
+one class that holds its parameters, reads and validates them from a skill file
+(``from_yaml``), writes them back (``to_yaml``: the plain dict ``from_yaml`` reads),
+says what it is for the summary and evaluates itself; the class registers itself under
+its ``type`` name where it is defined (``@CONSTRAINTS.register``), as python-can's bus
 backends do. The loader finds a class by the ``type`` a skill file gives, so adding a
 kind of element is adding one class.
 
 What every kind shares: :class:`ByValue`, equality parameter by parameter (arrays by
-value); :func:`plain`, how a summary writes an array; :func:`unit_divisor`, how a
-reader normalises a direction so that a direction written reads back the same.
+value); :func:`summarised`, how a summary shows an element's document (:func:`plain`,
+how it writes an array); :func:`unit_divisor`, how a reader normalises a direction so
+that a direction written reads back the same.
 """
 
 from __future__ import annotations
@@ -65,6 +67,12 @@ class Registry(Generic[E]):
 def plain(a: ArrayLike) -> list:
     """An array as the nested list of floats (rounded to 12 decimals) a summary holds."""
     return np.asarray(a, dtype=float).round(12).tolist()
+
+
+def summarised(doc: dict[str, Any]) -> dict[str, Any]:
+    """An element's document (its ``to_yaml``) as a summary shows it: each list (an
+    array) written by :func:`plain`, the rest as it is."""
+    return {k: plain(v) if isinstance(v, list) else v for k, v in doc.items()}
 
 
 # A normalised vector's norm is within 1.5 ulps of 1 (measured over millions of 3- and

@@ -1,7 +1,7 @@
 """FSM transitions (guarded edges between states), one class per kind.
 
-Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
-and says in the tick whether it fires (``fires``; a button, an event, through
+Each kind reads its parameters from a skill file (``from_yaml``), writes them back
+(``to_yaml``), summarises itself and says in the tick whether it fires (``fires``; a button, an event, through
 ``pressed``); :data:`TRANSITIONS` finds a kind by its ``type`` name. Guards carry a
 hysteresis ``margin`` in their own unit.
 """
@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .reader import Reader
-from .registry import ByValue, Registry, plain, unit_divisor
+from .registry import ByValue, Registry, summarised, unit_divisor
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -42,13 +42,19 @@ class Transition(ByValue, ABC):
         """Read and validate this kind's parameters from the mapping ``td`` at ``path``
         (``from``, ``to`` and ``type`` already read)."""
 
+    def to_yaml(self) -> dict[str, Any]:
+        """The transition as the plain dict the loader reads (an entry of the FSM's
+        ``transitions`` list: ``from``, ``to``, ``type``, then what :meth:`from_yaml`
+        reads): every parameter, exactly."""
+        return {"from": self.source, "to": self.target, "type": self.type, **self._parameters()}
+
     def summary(self) -> dict[str, Any]:
         """The transition as plain data (``sctd inspect --json``, the skill query)."""
-        return {"from": self.source, "to": self.target, "type": self.type, **self._parameters()}
+        return summarised(self.to_yaml())
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
-        """This kind's own parameters for :meth:`summary`."""
+        """This kind's own parameters for :meth:`to_yaml`."""
 
     @abstractmethod
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
@@ -117,7 +123,7 @@ class Hyperplane(Transition):
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "normal": plain(self.normal), "offset": self.offset,
+        return {"frame": self.frame, "normal": self.normal.tolist(), "offset": self.offset,
                 "margin": self.margin}
 
     progress_step: ClassVar[float] = 0.002  # m
@@ -164,8 +170,8 @@ class Distance(Transition):
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "point": plain(self.point), "margin": self.margin,
-                self.direction: self.threshold}
+        return {"frame": self.frame, "point": self.point.tolist(), self.direction: self.threshold,
+                "margin": self.margin}
 
     progress_step: ClassVar[float] = 0.002  # m
 
@@ -234,8 +240,10 @@ class Force(Transition):
                    margin=r.number(td.get("margin", 1.0), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"above": self.above, "axis": None if self.axis is None else plain(self.axis),
-                "margin": self.margin}
+        out: dict[str, Any] = {"above": self.above}
+        if self.axis is not None:
+            out["axis"] = self.axis.tolist()
+        return out | {"margin": self.margin}
 
     progress_step: ClassVar[float] = 0.5  # N
 
