@@ -29,6 +29,7 @@ Flat = se3.Flat
 Vec3 = tuple[float, float, float]
 
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")  # a displacement's rows, a linear matrix's too
+MATRIX_WIDTHS = (1, 2, 3, 6)  # input columns a linear ``matrix`` may have (``axes``: 1 to 6)
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
 
@@ -94,7 +95,7 @@ def _matrix(r: Reader, v: Any, path: str) -> Array:
         elif len(row) != width:
             raise r.fail(f"{path}[{i}]", f"expected {width} columns like row 0, got {len(row)}")
         rows.append([r.number(x, f"{path}[{i}][{j}]") for j, x in enumerate(row)])
-    if width not in (1, 2, 3, 6):
+    if width not in MATRIX_WIDTHS:
         raise r.fail(path, f"expected 1, 2, 3 or 6 input columns, got {width}")
     m = np.array(rows)
     if not np.any(m):
@@ -120,6 +121,16 @@ def _axes(r: Reader, v: Any, path: str) -> Array:
     if not np.any(m):
         raise r.fail(path, "no axis selected")
     return m
+
+
+def _axis_names(m: Array) -> list[str | None]:
+    """The ``axes`` list of a selection matrix (6, k): per column the axis it drives,
+    ``-`` when negated, None when it drives none."""
+    names: list[str | None] = []
+    for j in range(m.shape[1]):
+        rows = np.flatnonzero(m[:, j])
+        names.append(None if not len(rows) else ("-" if m[rows[0], j] < 0 else "") + AXIS_NAMES[rows[0]])
+    return names
 
 
 @MAPPINGS.register
@@ -163,8 +174,17 @@ class LinearMapping(InputMapping):
                    rotation=rotation)  # type: ignore[arg-type]
 
     def to_yaml(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "matrix": self.matrix.tolist(),
-                "translation": self.translation, "rotation": self.rotation}
+        """The ``matrix``; a matrix of 4 or 5 columns, which only ``axes`` can give, as its
+        ``axes``."""
+        m = self.matrix
+        shape = {"matrix": m.tolist()} if m.shape[1] in MATRIX_WIDTHS else {"axes": _axis_names(m)}
+        return {"type": self.type, "frame": self.frame, **shape, "translation": self.translation,
+                "rotation": self.rotation}
+
+    def summary(self) -> dict[str, Any]:
+        """:meth:`to_yaml` with the ``matrix`` whatever its width."""
+        doc = {k: v for k, v in self.to_yaml().items() if k != "axes"}
+        return summarised(doc | {"matrix": self.matrix.tolist()})
 
     def describe(self) -> str:
         """Each input column and the axes it drives: ``u0->+1tx, u1->+1ty-0.5tz`` (from

@@ -70,9 +70,15 @@ def plain(a: ArrayLike) -> list:
 
 
 def summarised(doc: dict[str, Any]) -> dict[str, Any]:
-    """An element's document (its ``to_yaml``) as a summary shows it: each list (an
-    array) written by :func:`plain`, the rest as it is."""
-    return {k: plain(v) if isinstance(v, list) else v for k, v in doc.items()}
+    """An element's document (its ``to_yaml``) as a summary shows it: each array (a list
+    of numbers, nested or not) written by :func:`plain`, the rest as it is."""
+    return {k: plain(v) if isinstance(v, list) and _numbers(v) else v for k, v in doc.items()}
+
+
+def _numbers(v: Any) -> bool:
+    if isinstance(v, list):
+        return all(_numbers(x) for x in v)
+    return isinstance(v, int | float) and not isinstance(v, bool)
 
 
 # A normalised vector's norm is within 1.5 ulps of 1 (measured over millions of 3- and
