@@ -11,8 +11,7 @@ from hypothesis import strategies as st
 from sctd.learn.vf import general_field, held_out_angles
 from sctd.skill import SkillError
 from sctd.skill.fields import Field, GeneralField
-from sctd.skill.model import VectorFieldModel
-from sctd.skill.modelfile import vector_field_model_from_bytes, vector_field_model_to_bytes
+from sctd.skill.modelfile import VectorFieldModel, vector_field_model_from_bytes, vector_field_model_to_bytes
 
 
 def _s_curve(n=200, seed=0):
@@ -89,7 +88,7 @@ def test_model_files_keep_a_general_field(rel):
 ])
 def test_a_malformed_general_field_is_refused_naming_where(doc, where):
     with pytest.raises(SkillError) as e:
-        Field.from_doc(doc, "fields[0]", "m.npz")
+        Field.from_yaml(doc, "fields[0]", "m.npz")
     assert f"fields[0].{where}" in str(e.value)
 
 

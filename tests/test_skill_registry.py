@@ -23,6 +23,7 @@ from sctd.skill import (
     SkillError,
     SphereField,
     TranslationField,
+    bundle_from_skill,
     skill_from_bundle,
     skill_summary,
 )
@@ -54,11 +55,12 @@ def _doc(constraint: dict) -> str:
 
 
 def test_a_new_constraint_kind_is_one_class(monkeypatch):
-    """Registering a class is all it takes for skill files, the summary and the engine."""
+    """Registering a class is all it takes for reading and writing skill files, the
+    summary and the engine."""
     monkeypatch.setattr(CONSTRAINTS, "_classes", dict(CONSTRAINTS._classes))
 
     @CONSTRAINTS.register
-    @dataclass(frozen=True, kw_only=True)
+    @dataclass(frozen=True, kw_only=True, eq=False)
     class Floor(ActiveConstraint):
         type: ClassVar[str] = "floor"
         height: float
@@ -69,7 +71,7 @@ def test_a_new_constraint_kind_is_one_class(monkeypatch):
             return cls(frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"),
                        height=r.number(cd.get("height"), f"{path}.height"))
 
-        def summary(self) -> dict[str, Any]:
+        def to_yaml(self) -> dict[str, Any]:
             return {"type": self.type, "frame": self.frame, "height": self.height}
 
         def project(self, F: se3.Flat, G: se3.Flat, ws: Workspace) -> se3.Flat:
@@ -78,6 +80,9 @@ def test_a_new_constraint_kind_is_one_class(monkeypatch):
     skill = skill_from_bundle(Bundle("t.yaml", _doc({"type": "floor", "height": 0.05}), {}))
     assert skill_summary(skill)["states"][0]["active_constraints"] == [
         {"type": "floor", "frame": "ee", "height": 0.05}]
+    floor = skill.states[0].active_constraints[0]
+    back = skill_from_bundle(bundle_from_skill(skill)).states[0].active_constraints[0]
+    assert back == floor and back != Floor(frame="ee", height=0.06)
     eng = SkillEngine(skill)
     F = se3.flat_from_pose([0.0, 0.0, 0.051, 0.0, 0.0, 0.0, 1.0])
     assert np.isclose(eng.command(F, (0.0, 0.0, -1.0), 0.1)[11], 0.05)
@@ -93,7 +98,7 @@ def test_an_unknown_type_lists_the_registered_ones():
                             "tilt_cone, band, box, neighbour_orientation, got 'cage'")
     with pytest.raises(SkillError, match=r"m.json: fields\[0\].type: expected translation, cylinder, "
                                          r"sphere or general, got 'torus'"):
-        Field.from_doc({"type": "torus"}, "fields[0]", "m.json")
+        Field.from_yaml({"type": "torus"}, "fields[0]", "m.json")
 
 
 @pytest.mark.parametrize("field", [
@@ -103,7 +108,7 @@ def test_an_unknown_type_lists_the_registered_ones():
     SphereField(centre=np.array([0.05, -0.02, 0.1]), radius=0.12),
     SphereField(centre=np.array([0.05, -0.02, 0.1])),
 ])
-def test_a_field_reads_back_its_summary(field):
-    """What a model file stores of a field (its summary) reads back as the same field."""
-    back = Field.from_doc(field.summary(), "fields[0]", "m.json")
-    assert type(back) is type(field) and back.summary() == field.summary()
+def test_a_field_reads_back_what_it_writes(field):
+    """What a model file stores of a field (its ``to_yaml``) reads back as the same field."""
+    back = Field.from_yaml(field.to_yaml(), "fields[0]", "m.json")
+    assert back == field and back.summary() == field.summary()

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sctd.skill import Bundle, SkillEngine, StuckDetector, Workspace, load_skill, skill_from_bundle
+from sctd.skill import Bundle, SkillEngine, StuckDetector, load_skill, skill_from_bundle
 
 ROOT = Path(__file__).resolve().parents[1]
 STEP = 0.002  # m, the hyperplane's progress_step
@@ -86,7 +86,7 @@ def test_an_episode_needs_stuck_after_without_any_step(values, stuck_after):
 
 def test_progress_of_each_kind_grows_towards_firing():
     skill = load_skill(ROOT / "skills" / "pour.yaml")
-    ws = Workspace(skill)
+    ws = SkillEngine(skill).workspace
     dist = skill.transitions[0]  # carry -> approach: tip below 0.15 of [0, 0, 0.08]
     far, near = at(0.3, 0, 0), at(0.1, 0, 0)
     assert dist.progress(near, 0, None, ws) > dist.progress(far, 0, None, ws)

@@ -18,7 +18,7 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import SKILL_HELP, add_arguments, add_robot_argument, check_ranges, from_namespace
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
-from ..skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
+from ..skill import Bundle, Skill, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill
 from ..wire import Keys, client
 from ..wire.ros_options import add_ros_arguments, check_ros_arguments
@@ -163,30 +163,29 @@ def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
 
 def main_inspect(args: argparse.Namespace) -> int:
     try:
-        s = skill_summary(load_skill(find_skill(args.skill)))
+        skill = load_skill(find_skill(args.skill))
     except SkillError as e:
         return fail("inspect", str(e))
+    s = skill_summary(skill)
     if args.json:
         print(json.dumps(s, indent=2))
     else:
-        _print_summary(s)
+        _print_summary(skill, s)
     return EXIT_OK
 
 
-def _print_summary(s: dict[str, Any]) -> None:
+def _print_summary(skill: Skill, s: dict[str, Any]) -> None:
+    """The summary ``s`` of ``skill`` for a person; each input mapping says what it does."""
     print(f"skill {s['name']} (id {s['id']}), object {s['object']}: {s['description']}")
     print(f"  limits: {s['limits']['max_linear_speed']} m/s, {s['limits']['max_angular_speed']} rad/s")
     for name, f in s["frames"].items():
         print(f"  frame {name}: parent {f['parent']}, pose {f['pose']}")
-    for st in s["states"]:
+    for state, st in zip(skill.states, s["states"], strict=True):
         mark = " (start)" if st["name"] == s["start"] else ""
         mark += " (end)" if st["name"] == s["end"] else ""
         print(f"  state {st['name']}{mark}")
-        for m in st["input_mappings"]:
-            if m["type"] == "linear":
-                print(f"    IM linear on {m['frame']}: {_describe_matrix(m['matrix'])}")
-            else:
-                print(f"    IM vector_field on {m['frame']}: {m['fields']} fields, mode {m['mode']}")
+        for m in state.input_mappings:
+            print(f"    IM {m.type} on {m.frame}: {m.describe()}")
         for c in st["active_constraints"]:
             extra = {k: v for k, v in c.items() if k not in ("type", "frame")}
             print(f"    AC {c['type']} on {c['frame']}: {extra}")
@@ -197,15 +196,6 @@ def _print_summary(s: dict[str, Any]) -> None:
         print(f"  field {f}")
     for c in s["candidate_frames"]:
         print(f"  candidate frame {c}")
-
-
-def _describe_matrix(m: list[list[float]]) -> str:
-    names = ("tx", "ty", "tz", "rx", "ry", "rz")
-    cols = []
-    for j in range(len(m[0])):
-        terms = [f"{m[i][j]:+g}{names[i]}" for i in range(6) if m[i][j] != 0]
-        cols.append(f"u{j}->" + ("".join(terms) if terms else "none"))
-    return ", ".join(cols)
 
 
 def add_swap_arguments(p: argparse.ArgumentParser) -> None:

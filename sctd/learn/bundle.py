@@ -1,18 +1,39 @@
-"""Learned results -> skill bundles: the YAML text and model files, in memory.
+"""Learned results -> skills -> skill bundles: the YAML text and model files, in memory.
 
-The skill format is ``docs/skill-format.md``. :func:`skill_bundle` returns a
-:class:`sctd.skill.Bundle`; :func:`sctd.skill.skill_from_bundle` validates it into a
-:class:`sctd.skill.Skill`, and ``sctd learn`` writes its files next to each other.
+The skill format is ``docs/skill-format.md``. :func:`linear_skill` and :func:`vf_skill`
+build the learned :class:`sctd.skill.Skill` of a result from the skill's element
+classes, with the learned numbers rounded as skill files store them;
+:func:`skill_bundle` writes it (each element writes itself,
+:func:`sctd.skill.bundle_from_skill`) under a comment header saying what was learned.
+:func:`sctd.skill.skill_from_bundle` validates the bundle, and ``sctd learn`` writes
+its files next to each other.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
-import yaml
 
-from ..skill import Bundle, VectorFieldModel, vector_field_model_to_bytes
+from ..skill import (
+    Bundle,
+    Distance,
+    Field,
+    Frame,
+    Hyperplane,
+    Limits,
+    LinearMapping,
+    NeighbourOrientation,
+    Skill,
+    State,
+    Transition,
+    VectorFieldMapping,
+    VectorFieldModel,
+    bundle_from_skill,
+)
+from ..skill.frames import builtin_frames
+from ..skill.reader import Reader
 from ..skill.summary import field_summary
 from .linear import AXIS_NAMES
 from .results import LinearResult, VectorFieldResult
@@ -35,45 +56,44 @@ def state_name(k: int) -> str:
     return f"s{k}"
 
 
-def _dump(doc: dict, header: str) -> str:
-    body = yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100)
-    return "".join(f"# {line}\n" for line in header.splitlines()) + body
-
-
-def _limits(result: LinearResult | VectorFieldResult) -> dict[str, float]:
+def _limits(result: LinearResult | VectorFieldResult) -> Limits:
     o = result.options
-    return {"max_linear_speed": o.max_linear_speed, "max_angular_speed": o.max_angular_speed}
+    return Limits(max_linear_speed=o.max_linear_speed, max_angular_speed=o.max_angular_speed)
 
 
-def linear_skill_doc(result: LinearResult, name: str) -> dict[str, Any]:
-    """The skill document (a dict for YAML) of a linear-IM result."""
+def linear_skill(result: LinearResult, name: str) -> Skill:
+    """The skill of a linear-IM result: a state per learned IM, a hyperplane transition
+    each way per learned boundary; matrices, normals, offsets and frame poses rounded to
+    6 digits.
+
+    Raises
+    ------
+    sctd.skill.SkillError
+        A frame's pose is not 7 finite numbers with a unit quaternion (checked as the
+        loader checks it).
+    """
     L = result.learner
-    states = {state_name(k): {"input_mapping": [
-        {"type": "linear", "frame": st.label.frame, "matrix": rounded(st.label.matrix.tolist())}]}
-        for k, st in enumerate(L.states_)}
-    transitions = []
+    r = Reader(f"{name}.yaml", {})
+    frames = builtin_frames() | {k: Frame(k, "ee", r.pose(rounded(v), f"frames.{k}.pose"))
+                                 for k, v in result.frames.items()}
+    states = tuple(State(name=state_name(k), active_constraints=(), input_mappings=(
+        LinearMapping(frame=st.label.frame, matrix=np.array(rounded(st.label.matrix))),))
+        for k, st in enumerate(L.states_))
+    transitions: list[Transition] = []
     for h in L.transitions_:
         a, b = state_name(h.source), state_name(h.target)
-        n, o = rounded(h.normal, 6), round(float(h.offset), 6)
-        transitions.append({"from": a, "to": b, "type": "hyperplane", "frame": h.frame,
-                            "normal": n, "offset": o, "margin": h.margin})
+        n, o = np.array(rounded(h.normal, 6)), round(float(h.offset), 6)
+        transitions.append(Hyperplane(source=a, target=b, frame=h.frame, normal=n, offset=o,
+                                      margin=h.margin))
         # The way back on the same plane: the margins leave a dead band between them.
-        transitions.append({"from": b, "to": a, "type": "hyperplane", "frame": h.frame,
-                            "normal": [-x for x in n], "offset": -o, "margin": h.margin})
-    frames = {k: {"parent": "ee", "pose": rounded(v)} for k, v in result.frames.items()}
-    doc: dict[str, Any] = {
-        "sctd_skill": 1, "name": name,
-        "description": (f"Learned by sctd learn --method linear from {len(result.prepared)} "
-                        "demonstrations (linear IMs, alpha-beta swap, linear-SVM transitions)."),
-        "object": result.options.object,
-        "limits": _limits(result),
-    }
-    if frames:
-        doc["frames"] = frames
-    doc["fsm"] = {"start": state_name(0), "end": state_name(len(L.states_) - 1), "min_dwell": 0.1,
-                  "transitions": transitions}
-    doc["states"] = states
-    return doc
+        transitions.append(Hyperplane(source=b, target=a, frame=h.frame, normal=-n, offset=-o,
+                                      margin=h.margin))
+    return Skill(
+        name=name, object=result.options.object, frames=frames, states=states,
+        transitions=tuple(transitions), start=state_name(0), end=state_name(len(L.states_) - 1),
+        limits=_limits(result), min_dwell=0.1,
+        description=(f"Learned by sctd learn --method linear from {len(result.prepared)} "
+                     "demonstrations (linear IMs, alpha-beta swap, linear-SVM transitions)."))
 
 
 def _linear_header(result: LinearResult) -> str:
@@ -108,70 +128,86 @@ def trap_lines(result: LinearResult) -> list[str]:
 
 
 def vf_model(result: VectorFieldResult, fields: tuple[int, ...] | None = None) -> VectorFieldModel:
-    """The model file's content: the fields (all, or those indexed by ``fields``) and the
-    demonstration points (those the chosen fields explain)."""
+    """The model file's content: the fields (all, or those indexed by ``fields``; their
+    arrays rounded to 12 decimals, as model files store them) and the demonstration
+    points (those the chosen fields explain)."""
     L = result.learner
     if not L.fields_:
         raise ValueError("no vector field was found in the demonstrations")
+    chosen = [_stored(f) for f in (L.fields_ if fields is None else [L.fields_[m] for m in fields])]
     if fields is None:
-        return VectorFieldModel(fields=tuple(L.fields_), points=L.points_,
+        return VectorFieldModel(fields=tuple(chosen), points=L.points_,
                                 quaternions=L.quaternions_, responsibilities=L.responsibilities_)
     sel = np.isin(L.assignment_, fields)
     R = L.responsibilities_[sel][:, list(fields)]
     s = R.sum(axis=1, keepdims=True)
     R = np.where(s > 1e-12, R / np.maximum(s, 1e-12), 1.0 / len(fields))
-    return VectorFieldModel(fields=tuple(L.fields_[m] for m in fields), points=L.points_[sel],
+    return VectorFieldModel(fields=tuple(chosen), points=L.points_[sel],
                             quaternions=L.quaternions_[sel], responsibilities=R)
 
 
-def _vf_state(result: VectorFieldResult, model: str, fields: list) -> dict[str, Any]:
+def _stored(f: Field) -> Field:
+    """The field with its arrays rounded to 12 decimals (a general field renormalises its
+    directions)."""
+    arrays: dict[str, Any] = {d.name: np.round(v, 12) for d in dataclasses.fields(f)
+                              if isinstance(v := getattr(f, d.name), np.ndarray)}
+    return dataclasses.replace(f, **arrays)
+
+
+def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorFieldModel,
+              fields: list[Field]) -> State:
     """One state of a vector-field skill: a vector-field IM and a neighbour-orientation AC
-    on the model file ``model`` (whose fields are ``fields``)."""
+    on ``model``, the model file ``rel`` (fitted as ``fields``)."""
     p = result.field_options
-    constraint: dict[str, Any] = {"type": "neighbour_orientation", "model": model, "frame": "ee",
-                                  "max_n": p.vf_max_n, "max_d": p.max_d,
-                                  "rotation_weight": p.vf_rotation_weight}
+    pivot = None
     pivots = [f for f in fields if f.pivot is not None]
     if pivots and p.vf_motion == "rigid":  # orientation pulled about the point the hand turned about
-        constraint["pivot"] = rounded(max(pivots, key=lambda f: f.weight).pivot)
-    return {"input_mapping": [{"type": "vector_field", "model": model, "frame": "ee", "mode": "scale",
-                               "combine": p.vf_combine, "min_v": p.min_v, "k_s": p.k_s,
-                               "max_n": p.vf_max_n, "max_d": p.max_d, "motion": p.vf_motion}],
-            "active_constraints": [constraint]}
+        pivot = np.array(rounded(max(pivots, key=lambda f: f.weight).pivot))
+    mapping = VectorFieldMapping(model_file=rel, model=model, frame="ee", mode="scale",
+                                 combine=p.vf_combine, min_v=p.min_v, k_s=p.k_s,  # type: ignore[arg-type]
+                                 max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion)  # type: ignore[arg-type]
+    constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
+                                      max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot)
+    return State(name=name, input_mappings=(mapping,), active_constraints=(constraint,))
 
 
-def vf_skill_doc(result: VectorFieldResult, name: str, model: str) -> dict[str, Any]:
-    """The skill document of a vector-field result. Blended (the thesis): one state
-    ``default`` with a vector-field IM and a neighbour-orientation AC on the model file
-    ``model``. Sequential (``result.plan``): one state per field, in the order the
+def vf_skill(result: VectorFieldResult, name: str) -> Skill:
+    """The skill of a vector-field result. Blended (the thesis): one state ``default``
+    with a vector-field IM and a neighbour-orientation AC on the model file
+    ``name.npz``. Sequential (``result.plan``): one state per field, in the order the
     demonstrations use them, each on its own model file (:func:`state_model_files`),
-    with hyperplane transitions both ways between consecutive ones."""
+    with a distance transition from each to the next where the demonstrations switched.
+
+    Raises
+    ------
+    ValueError
+        A result without any field.
+    """
     L, plan = result.learner, result.plan
-    doc: dict[str, Any] = {
-        "sctd_skill": 1, "name": name,
-        "description": (f"Learned by sctd learn --method vf from {len(result.prepared)} "
-                        "demonstrations (RANSAC + EM vector fields, neighbour orientation"
-                        + (", one state per field in the order they are used)." if plan.sequential
-                           else ").")),
-        "object": result.options.object,
-        "limits": _limits(result),
-    }
+    rel = f"{name}.npz"
+    description = (f"Learned by sctd learn --method vf from {len(result.prepared)} "
+                   "demonstrations (RANSAC + EM vector fields, neighbour orientation"
+                   + (", one state per field in the order they are used)." if plan.sequential
+                      else ")."))
     if not plan.sequential:
-        doc["fsm"] = {"start": "default", "end": "default", "transitions": []}
-        doc["states"] = {"default": _vf_state(result, model, list(L.fields_))}
+        names = ["default"]
+        states: tuple[State, ...] = (_vf_state(result, "default", rel, vf_model(result), list(L.fields_)),)
+        transitions: tuple[Transition, ...] = ()
+        min_dwell = Skill.min_dwell  # what a file without it gives
     else:
-        files = state_model_files(result, model)
         names = [state_name(k) for k in range(len(plan.order))]
-        transitions = []
-        for h in plan.transitions:  # on when the hand is where the demonstrations switched
-            a, b = names[plan.order.index(h.source)], names[plan.order.index(h.target)]
-            transitions.append({"from": a, "to": b, "type": "distance", "frame": "ee",
-                                "point": rounded(h.point), "below": round(h.radius, 6), "margin": 0.0})
-        doc["fsm"] = {"start": names[0], "end": names[-1], "min_dwell": 0.1, "transitions": transitions}
-        doc["states"] = {nm: _vf_state(result, rel, [L.fields_[m]])
-                         for nm, rel, m in zip(names, files, plan.order, strict=True)}
-    doc["candidate_frames"] = L.candidate_frames_
-    return doc
+        states = tuple(_vf_state(result, nm, f, vf_model(result, (m,)), [L.fields_[m]]) for nm, f, m
+                       in zip(names, state_model_files(result, rel), plan.order, strict=True))
+        transitions = tuple(  # on when the hand is where the demonstrations switched
+            Distance(source=names[plan.order.index(h.source)], target=names[plan.order.index(h.target)],
+                     frame="ee", point=np.array(rounded(h.point)), threshold=round(h.radius, 6),
+                     direction="below", margin=0.0)
+            for h in plan.transitions)
+        min_dwell = 0.1
+    return Skill(name=name, object=result.options.object, frames=builtin_frames(), states=states,
+                 transitions=transitions, start=names[0], end=names[-1], limits=_limits(result),
+                 min_dwell=min_dwell, description=description,
+                 candidate_frames=tuple(L.candidate_frames_))
 
 
 def state_model_files(result: VectorFieldResult, model: str) -> list[str]:
@@ -202,7 +238,8 @@ def _vf_header(result: VectorFieldResult) -> str:
 
 def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
     """The learned skill as a bundle: ``name.yaml`` (a comment header summarising what
-    was learned, then the document) and, for vector fields, the model ``name.npz``.
+    was learned, then the document) and, for vector fields, the model ``name.npz`` (one
+    per state, ``name-s0.npz``, ..., for sequential fields).
 
     Raises
     ------
@@ -210,13 +247,5 @@ def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
         A vector-field result without any field.
     """
     if isinstance(result, LinearResult):
-        text = _dump(linear_skill_doc(result, name), _linear_header(result))
-        return Bundle(name=f"{name}.yaml", yaml_text=text, files={})
-    rel = f"{name}.npz"
-    if result.plan.sequential:
-        files = {f: vector_field_model_to_bytes(vf_model(result, (m,)), f)
-                 for f, m in zip(state_model_files(result, rel), result.plan.order, strict=True)}
-    else:
-        files = {rel: vector_field_model_to_bytes(vf_model(result), rel)}
-    text = _dump(vf_skill_doc(result, name, rel), _vf_header(result))
-    return Bundle(name=f"{name}.yaml", yaml_text=text, files=files)
+        return bundle_from_skill(linear_skill(result, name), _linear_header(result))
+    return bundle_from_skill(vf_skill(result, name), _vf_header(result))

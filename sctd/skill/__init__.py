@@ -6,22 +6,25 @@ Each kind of element is one class in the module of its element kind, registered 
 its ``type`` name: input mappings in :mod:`.mappings` (:data:`MAPPINGS`), active
 constraints in :mod:`.constraints` (:data:`CONSTRAINTS`), transitions in
 :mod:`.transitions` (:data:`TRANSITIONS`), vector fields in :mod:`.fields`
-(:data:`FIELDS`).
+(:data:`FIELDS`). Each reads itself (``from_yaml``) and writes itself (``to_yaml``);
+:mod:`.loader` reads a whole skill, :mod:`.writer` writes one.
 """
 
 from .constraints import CONSTRAINTS, ActiveConstraint, Band, Box, NeighbourOrientation, TiltCone
 from .engine import SkillEngine
 from .errors import SkillError
 from .fields import FIELDS, CylinderField, Field, SphereField, TranslationField, sigmoid
+from .frames import WORLD_OBJECT, Frame
 from .loader import Bundle, bundle_from_file, load_skill, skill_from_bundle
-from .mappings import MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
-from .model import AXIS_NAMES, WORLD_OBJECT, Frame, Limits, Skill, State, VectorFieldModel
-from .modelfile import vector_field_model_from_bytes, vector_field_model_to_bytes
+from .mappings import AXIS_NAMES, MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
+from .model import Limits, Skill, State
+from .modelfile import VectorFieldModel, vector_field_model_from_bytes, vector_field_model_to_bytes
 from .registry import Registry
 from .stuck import StuckDetector
 from .summary import field_summary, skill_summary
 from .transitions import TRANSITIONS, Button, Distance, Force, Hyperplane, Timeout, Transition
 from .workspace import Workspace
+from .writer import bundle_from_skill, dump_skill, skill_to_yaml
 
 __all__ = [
     "AXIS_NAMES",
@@ -60,11 +63,14 @@ __all__ = [
     "VectorFieldModel",
     "Workspace",
     "bundle_from_file",
+    "bundle_from_skill",
+    "dump_skill",
     "field_summary",
     "load_skill",
     "sigmoid",
     "skill_from_bundle",
     "skill_summary",
+    "skill_to_yaml",
     "vector_field_model_from_bytes",
     "vector_field_model_to_bytes",
 ]

@@ -1,10 +1,10 @@
 """Active constraints (geometric limits on the end-effector pose), one class per kind.
 
-Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
-and projects a flat pose onto itself in the tick (``project``, moving the constrained
-frame minimally); :data:`CONSTRAINTS` finds a kind by its ``type`` name. The checks
-run on Python floats, precomputed from the parameters when the constraint is made;
-only a projection that turns the pose builds arrays.
+Each kind reads its parameters from a skill file (``from_yaml``), writes them back
+(``to_yaml``), summarises itself and projects a flat pose onto itself in the tick
+(``project``, moving the constrained frame minimally); :data:`CONSTRAINTS` finds a kind
+by its ``type`` name. The checks run on Python floats, precomputed from the parameters
+when the constraint is made; only a projection that turns the pose builds arrays.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
-from .model import VectorFieldModel
+from .modelfile import VectorFieldModel
 from .reader import Reader
-from .registry import Registry, plain
+from .registry import ByValue, Registry, summarised
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -39,8 +39,8 @@ def _set(obj: object, **values: Any) -> None:
         object.__setattr__(obj, k, v)
 
 
-@dataclass(frozen=True, kw_only=True)
-class ActiveConstraint(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ActiveConstraint(ByValue, ABC):
     """One active constraint of a state, on the pose of ``frame`` (on the end-effector)."""
 
     type: ClassVar[str]
@@ -52,8 +52,13 @@ class ActiveConstraint(ABC):
         """Read and validate this kind's parameters from the mapping ``cd`` at ``path``."""
 
     @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """The constraint as the plain dict :meth:`from_yaml` reads (an entry of a state's
+        ``active_constraints`` list): every parameter, exactly."""
+
     def summary(self) -> dict[str, Any]:
         """The constraint as plain data (``sctd inspect --json``, the skill query)."""
+        return summarised(self.to_yaml())
 
     def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
         """The model files this constraint reads, as (relative path, model)."""
@@ -88,7 +93,7 @@ def _rotate_about(F: Flat, G: Flat, R: Array) -> Flat:
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class TiltCone(ActiveConstraint):
     """``axis`` (3,; in ``frame``) stays within ``max_angle`` of ``reference`` (3,; object
     frame); a tilted frame is turned back about its origin onto the cone."""
@@ -115,9 +120,9 @@ class TiltCone(ActiveConstraint):
             max_angle=r.number(cd.get("max_angle"), f"{path}.max_angle", 0.0, math.pi),
         )
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "axis": plain(self.axis),
-                "reference": plain(self.reference), "max_angle": self.max_angle}
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "axis": self.axis.tolist(),
+                "reference": self.reference.tolist(), "max_angle": self.max_angle}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         ax, ay, az = self._axis3
@@ -141,7 +146,7 @@ class TiltCone(ActiveConstraint):
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Band(ActiveConstraint):
     """``frame``'s origin keeps a signed distance in [lower, upper] along the unit
     ``normal`` (3,) from the plane through ``point`` (3,) (object frame): a height band
@@ -172,9 +177,9 @@ class Band(ActiveConstraint):
             lower=lower, upper=upper,
         )
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "normal": plain(self.normal),
-                "point": plain(self.point), "lower": self.lower, "upper": self.upper}
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "normal": self.normal.tolist(),
+                "point": self.point.tolist(), "lower": self.lower, "upper": self.upper}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         nx, ny, nz = self._normal3
@@ -187,7 +192,7 @@ class Band(ActiveConstraint):
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Box(ActiveConstraint):
     """``frame``'s origin stays inside the axis-aligned box [lower, upper] (3, each;
     object frame)."""
@@ -210,9 +215,9 @@ class Box(ActiveConstraint):
             raise r.fail(f"{path}.upper", "every upper bound must be >= its lower bound")
         return cls(frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"), lower=lower, upper=upper)
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "lower": plain(self.lower),
-                "upper": plain(self.upper)}
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "frame": self.frame, "lower": self.lower.tolist(),
+                "upper": self.upper.tolist()}
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         p = G[9:]
@@ -230,7 +235,7 @@ def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[fl
 
 
 @CONSTRAINTS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class NeighbourOrientation(ActiveConstraint):
     """Orientation of ``frame`` pulled to the distance-weighted mean orientation of the
     demonstration points near it (Ch. 4.2.5, Algorithm 7 lines 2-5).
@@ -267,13 +272,16 @@ class NeighbourOrientation(ActiveConstraint):
             rotation_weight=r.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
         )
 
-    def summary(self) -> dict[str, Any]:
-        out = {"type": self.type, "frame": self.frame, "model": self.model_file, "max_n": self.max_n,
-               "max_d": self.max_d, "rotation_weight": self.rotation_weight,
-               "points": len(self.model.points)}
+    def to_yaml(self) -> dict[str, Any]:
+        out = {"type": self.type, "model": self.model_file, "frame": self.frame, "max_n": self.max_n,
+               "max_d": self.max_d, "rotation_weight": self.rotation_weight}
         if self.pivot is not None:
-            out["pivot"] = plain(self.pivot)
+            out["pivot"] = self.pivot.tolist()
         return out
+
+    def summary(self) -> dict[str, Any]:
+        """:meth:`to_yaml` and how many demonstration points the model has."""
+        return super().summary() | {"points": len(self.model.points)}
 
     def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
         return ((self.model_file, self.model),)

@@ -45,7 +45,7 @@ class SkillEngine:
 
     def __init__(self, skill: Skill):
         self.skill = skill
-        self.workspace = Workspace(skill)
+        self.workspace = Workspace(skill.limits.speeds, skill.frames, skill.models())
         self._out_of: list[list[Transition]] = [
             [t for t in skill.transitions if t.source == s.name] for s in skill.states]
         # What the stuck detector watches: the transitions whose progress the pose

@@ -3,8 +3,9 @@ of eqs. 4.31-4.34.
 
 Shared by the runtime (evaluating a field at the end-effector, on Python floats) and
 the learner (deviation angles for RANSAC and EM, vectorised over points). Each kind
-holds its parameters, reads them from a model file, summarises itself and evaluates
-itself; :data:`FIELDS` finds a kind by its ``type`` name. Pure numpy.
+holds its parameters, reads them from a model file (``from_yaml``, ``read``), writes
+them back (``to_yaml``), summarises itself and evaluates itself; :data:`FIELDS` finds a
+kind by its ``type`` name. Pure numpy.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import SkillError
-from .registry import Registry, plain
+from .registry import ByValue, Registry, summarised, unit_divisor
 
 Array = NDArray[np.float64]
 
@@ -77,7 +78,7 @@ class FieldReader:
             n = float(np.linalg.norm(a))
             if n < 1e-9:
                 raise self.fail(key, "direction of zero length")
-            a = a / n
+            a = a / unit_divisor(n)
         return a
 
     def num(self, key: str, default: float) -> float:
@@ -105,8 +106,8 @@ class FieldReader:
         return a
 
 
-@dataclass(frozen=True, kw_only=True)
-class Field(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Field(ByValue, ABC):
     """One basic vector field in the object frame.
 
     ``weight`` is its mixing proportion pi (eq. 4.29), ``sigma`` the angular spread
@@ -123,7 +124,7 @@ class Field(ABC):
     pivot: Array | None = None
 
     @classmethod
-    def from_doc(cls, fd: Any, path: str, where: str) -> Field:
+    def from_yaml(cls, fd: Any, path: str, where: str) -> Field:
         """Read one entry of a model file's ``fields`` list (any kind, by its ``type``)."""
         if not isinstance(fd, dict):
             raise SkillError(where, path, "expected a mapping")
@@ -141,13 +142,18 @@ class Field(ABC):
     def read(cls, r: FieldReader, common: dict[str, Any]) -> Field:
         """This kind's parameters from ``r``, with the ``common`` ones already read."""
 
-    def summary(self) -> dict[str, Any]:
-        """The field as plain data (also what a model file stores)."""
+    def to_yaml(self) -> dict[str, Any]:
+        """The field as the plain dict :meth:`from_yaml` reads (an entry of a model file's
+        ``fields`` list): every parameter, exactly."""
         out: dict[str, Any] = {"type": self.type, "inliers": self.inliers, "weight": self.weight,
                                "sigma": self.sigma, **self._parameters()}
         if self.pivot is not None:
-            out["pivot"] = plain(self.pivot)
+            out["pivot"] = self.pivot.tolist()
         return out
+
+    def summary(self) -> dict[str, Any]:
+        """The field as plain data (:meth:`to_yaml`, arrays rounded to 12 decimals)."""
+        return summarised(self.to_yaml())
 
     def brief(self) -> dict[str, Any]:
         """:meth:`summary` short enough for a person (a comment, ``sctd inspect``)."""
@@ -155,7 +161,7 @@ class Field(ABC):
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
-        """This kind's own parameters for :meth:`summary`."""
+        """This kind's own parameters for :meth:`to_yaml`."""
 
     @abstractmethod
     def vectors(self, points: ArrayLike) -> Array:
@@ -207,7 +213,7 @@ FIELDS: Registry[Field] = Registry("vector field")
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class TranslationField(Field):
     """Motion along the unit ``direction`` (3,), everywhere the same."""
 
@@ -219,7 +225,7 @@ class TranslationField(Field):
         return cls(**common, direction=r.vec("direction", unit=True))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"direction": plain(self.direction)}
+        return {"direction": self.direction.tolist()}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -231,7 +237,7 @@ class TranslationField(Field):
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class CylinderField(Field):
     """Rotation about the line through ``point`` (3,) along the unit ``axis`` (3,)
     (circulation by the right-hand rule about ``axis``)."""
@@ -246,7 +252,7 @@ class CylinderField(Field):
         return cls(**common, point=r.vec("point"), axis=r.vec("axis", unit=True), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        return {"point": plain(self.point), "axis": plain(self.axis)}
+        return {"point": self.point.tolist(), "axis": self.axis.tolist()}
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -286,7 +292,7 @@ class CylinderField(Field):
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class SphereField(Field):
     """Motion tangent to the spheres about ``centre`` (3,); ``radius`` the demonstrations'
     mean distance from it, if known.
@@ -308,7 +314,7 @@ class SphereField(Field):
                    radius=None if radius is None else r.num("radius", 0.0), pivot=pivot)
 
     def _parameters(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"centre": plain(self.centre)}
+        out: dict[str, Any] = {"centre": self.centre.tolist()}
         if self.radius is not None:
             out["radius"] = self.radius
         return out
@@ -372,7 +378,7 @@ GENERAL_REUSE = 5e-4  # m: a single-point query reuses its neighbours this close
 
 
 @FIELDS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class GeneralField(Field):
     """A non-parametric field (the thesis' future work, Ch. 7: "a general model ... a
     smoothed version of its neighbours"): at a point, the Gaussian-kernel mean
@@ -393,7 +399,7 @@ class GeneralField(Field):
 
     def __post_init__(self) -> None:
         d = np.asarray(self.directions, dtype=float)
-        n = np.linalg.norm(d, axis=1, keepdims=True)
+        n = unit_divisor(np.linalg.norm(d, axis=1, keepdims=True))
         object.__setattr__(self, "directions", np.where(n > 1e-12, d / np.maximum(n, 1e-12), 0.0))
         from scipy.spatial import cKDTree  # here: 0.6 s to import, and only these fields need it
 
@@ -413,8 +419,8 @@ class GeneralField(Field):
         return cls(**common, centres=centres, directions=directions, bandwidth=bandwidth)
 
     def _parameters(self) -> dict[str, Any]:
-        return {"bandwidth": self.bandwidth, "centres": plain(self.centres),
-                "directions": plain(self.directions)}
+        return {"bandwidth": self.bandwidth, "centres": self.centres.tolist(),
+                "directions": self.directions.tolist()}
 
     def brief(self) -> dict[str, Any]:
         """The summary with the number of centres in place of the centres and directions."""

@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 import msgpack
-import numpy as np
 
 from ..files import FileError, inside, parse_yaml, read_bytes, read_text
 from .constraints import CONSTRAINTS
 from .errors import SkillError
+from .frames import BUILTIN_FRAMES, Frame, builtin_frames
 from .mappings import MAPPINGS
-from .model import BUILTIN_FRAMES, Frame, Limits, Skill, State
+from .model import Limits, Skill, State
 from .reader import Reader, check_relative, kind_of
 from .registry import Registry
 from .transitions import TRANSITIONS, Transition
@@ -211,7 +211,7 @@ class _Parser(Reader):
 
     def frame_table(self, frames_doc: Any) -> dict[str, Frame]:
         """The built-in frames and those the skill defines."""
-        frames = {n: Frame(n, n, np.eye(4)) for n in BUILTIN_FRAMES}  # type: ignore[arg-type]
+        frames = builtin_frames()
         for fname, fd in (self.mapping(frames_doc, "frames")).items():
             path = f"frames.{fname}"
             if fname in BUILTIN_FRAMES:

@@ -1,8 +1,9 @@
 """Input mappings (user input -> end-effector motion), one class per kind.
 
-Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
-and applies itself to a flat pose in the tick (``apply``); :data:`MAPPINGS` finds a
-kind by its ``type`` name. Displacements follow the convention of :mod:`sctd.se3`.
+Each kind reads its parameters from a skill file (``from_yaml``), writes them back
+(``to_yaml``), summarises and describes itself and applies itself to a flat pose in the
+tick (``apply``); :data:`MAPPINGS` finds a kind by its ``type`` name. Displacements
+follow the convention of :mod:`sctd.se3`.
 """
 
 from __future__ import annotations
@@ -18,20 +19,22 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .fields import Field, sigmoid
-from .model import AXIS_NAMES, VectorFieldModel
+from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
-from .registry import Registry, plain
+from .registry import ByValue, Registry, plain, summarised
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
 Vec3 = tuple[float, float, float]
 
+AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")  # a displacement's rows, a linear matrix's too
+MATRIX_WIDTHS = (1, 2, 3, 6)  # input columns a linear ``matrix`` may have (``axes``: 1 to 6)
 INTENT_PRIOR = 0.1  # share of the fields' weights mixed into P(F | p) before the command's evidence
 
 
-@dataclass(frozen=True, kw_only=True)
-class InputMapping(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class InputMapping(ByValue, ABC):
     """One input mapping of a state: moves the end-effector for the user's input.
 
     ``frame`` is the feature frame the motion is expressed relative to.
@@ -46,8 +49,17 @@ class InputMapping(ABC):
         """Read and validate this kind's parameters from the mapping ``md`` at ``path``."""
 
     @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """The mapping as the plain dict :meth:`from_yaml` reads (an entry of a state's
+        ``input_mapping`` list): every parameter, exactly."""
+
     def summary(self) -> dict[str, Any]:
         """The mapping as plain data (``sctd inspect --json``, the skill query)."""
+        return summarised(self.to_yaml())
+
+    def describe(self) -> str:
+        """What the mapping does, in a line for a person (``sctd inspect``)."""
+        return str({k: v for k, v in self.summary().items() if k not in ("type", "frame")})
 
     @abstractmethod
     def input_axes(self) -> set[int]:
@@ -83,7 +95,7 @@ def _matrix(r: Reader, v: Any, path: str) -> Array:
         elif len(row) != width:
             raise r.fail(f"{path}[{i}]", f"expected {width} columns like row 0, got {len(row)}")
         rows.append([r.number(x, f"{path}[{i}][{j}]") for j, x in enumerate(row)])
-    if width not in (1, 2, 3, 6):
+    if width not in MATRIX_WIDTHS:
         raise r.fail(path, f"expected 1, 2, 3 or 6 input columns, got {width}")
     m = np.array(rows)
     if not np.any(m):
@@ -111,8 +123,18 @@ def _axes(r: Reader, v: Any, path: str) -> Array:
     return m
 
 
+def _axis_names(m: Array) -> list[str | None]:
+    """The ``axes`` list of a selection matrix (6, k): per column the axis it drives,
+    ``-`` when negated, None when it drives none."""
+    names: list[str | None] = []
+    for j in range(m.shape[1]):
+        rows = np.flatnonzero(m[:, j])
+        names.append(None if not len(rows) else ("-" if m[rows[0], j] < 0 else "") + AXIS_NAMES[rows[0]])
+    return names
+
+
 @MAPPINGS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class LinearMapping(InputMapping):
     """Linear input mapping (eq. 4.1, Algorithm 2).
 
@@ -151,9 +173,28 @@ class LinearMapping(InputMapping):
         return cls(frame=frame, matrix=matrix, translation=translation,  # type: ignore[arg-type]
                    rotation=rotation)  # type: ignore[arg-type]
 
+    def to_yaml(self) -> dict[str, Any]:
+        """The ``matrix``; a matrix of 4 or 5 columns, which only ``axes`` can give, as its
+        ``axes``."""
+        m = self.matrix
+        shape = {"matrix": m.tolist()} if m.shape[1] in MATRIX_WIDTHS else {"axes": _axis_names(m)}
+        return {"type": self.type, "frame": self.frame, **shape, "translation": self.translation,
+                "rotation": self.rotation}
+
     def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "translation": self.translation,
-                "rotation": self.rotation, "matrix": plain(self.matrix)}
+        """:meth:`to_yaml` with the ``matrix`` whatever its width."""
+        doc = {k: v for k, v in self.to_yaml().items() if k != "axes"}
+        return summarised(doc | {"matrix": self.matrix.tolist()})
+
+    def describe(self) -> str:
+        """Each input column and the axes it drives: ``u0->+1tx, u1->+1ty-0.5tz`` (from
+        the matrix as the summary shows it)."""
+        m = plain(self.matrix)
+        cols = []
+        for j in range(len(m[0])):
+            terms = [f"{m[i][j]:+g}{AXIS_NAMES[i]}" for i in range(6) if m[i][j] != 0]
+            cols.append(f"u{j}->" + ("".join(terms) if terms else "none"))
+        return ", ".join(cols)
 
     def input_axes(self) -> set[int]:
         """The matrix's non-zero columns."""
@@ -263,7 +304,7 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
 
 
 @MAPPINGS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class VectorFieldMapping(InputMapping):
     """Vector-field input mapping (Ch. 4.2.5, Algorithm 7).
 
@@ -323,11 +364,18 @@ class VectorFieldMapping(InputMapping):
                             ("translate", "rigid")),
         )
 
-    def summary(self) -> dict[str, Any]:
-        return {"type": self.type, "frame": self.frame, "model": self.model_file, "mode": self.mode,
+    def to_yaml(self) -> dict[str, Any]:
+        return {"type": self.type, "model": self.model_file, "frame": self.frame, "mode": self.mode,
                 "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
                 "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
-                "motion": self.motion, "fields": len(self.model.fields)}
+                "motion": self.motion}
+
+    def summary(self) -> dict[str, Any]:
+        """:meth:`to_yaml` and how many fields the model has."""
+        return super().summary() | {"fields": len(self.model.fields)}
+
+    def describe(self) -> str:
+        return f"{len(self.model.fields)} fields, mode {self.mode}"
 
     def input_axes(self) -> set[int]:
         """The first three: a translation command."""

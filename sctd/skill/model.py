@@ -6,54 +6,21 @@ active constraints (geometric limits on the end-effector pose), expressed in the
 of one task object. The kinds of elements are classes of their own, one per kind, each
 in the module of its element kind: :mod:`sctd.skill.mappings`,
 :mod:`sctd.skill.constraints`, :mod:`sctd.skill.transitions` and
-:mod:`sctd.skill.fields`. :mod:`sctd.skill.loader` builds a skill from YAML;
+:mod:`sctd.skill.fields`; frames are in :mod:`sctd.skill.frames`, vector-field models
+in :mod:`sctd.skill.modelfile`. The model sits above all of them (they never import
+it). :mod:`sctd.skill.loader` builds a skill from YAML;
 :mod:`sctd.skill.engine` runs it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
 
-import numpy as np
-from numpy.typing import NDArray
-
-from .fields import Field
-
-if TYPE_CHECKING:
-    from .constraints import ActiveConstraint
-    from .mappings import InputMapping
-    from .transitions import Transition
-
-Array = NDArray[np.float64]
-
-AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
-BUILTIN_FRAMES = ("ee", "object")
-WORLD_OBJECT = "world"  # a skill's ``object``: the world frame itself (no object pose needed)
-
-
-@dataclass(frozen=True)
-class Frame:
-    """A feature frame: a fixed offset ``T_parent_frame`` (4, 4) from the ee or the object."""
-
-    name: str
-    parent: Literal["ee", "object"]
-    T_parent_frame: Array
-
-
-@dataclass(frozen=True)
-class VectorFieldModel:
-    """Fields plus the demonstration points they were fitted on (model file data).
-
-    ``points`` (n, 3) positions of the mapping's frame in the object frame,
-    ``quaternions`` (n, 4) orientations (x, y, z, w) of that frame, and
-    ``responsibilities`` (n, K) the EM membership of each point in each field.
-    """
-
-    fields: tuple[Field, ...]
-    points: Array
-    quaternions: Array
-    responsibilities: Array
+from .constraints import ActiveConstraint
+from .frames import Frame
+from .mappings import InputMapping
+from .modelfile import VectorFieldModel
+from .transitions import Transition
 
 
 @dataclass(frozen=True)
@@ -69,6 +36,13 @@ class Limits:
 
     max_linear_speed: float = 0.10
     max_angular_speed: float = 0.5
+
+    @property
+    def speeds(self) -> tuple[float, float, float, float, float, float]:
+        """The speed at full input per displacement axis: tx, ty, tz (m/s), rx, ry, rz
+        (rad/s)."""
+        v, w = self.max_linear_speed, self.max_angular_speed
+        return v, v, v, w, w, w
 
 
 @dataclass(frozen=True)
@@ -88,6 +62,25 @@ class Skill:
     id: str = ""
     source: str = ""
     candidate_frames: tuple[dict, ...] = ()
+
+    def models(self) -> dict[str, VectorFieldModel]:
+        """The model files the states' elements read, by relative path, in the order
+        they are first named.
+
+        Raises
+        ------
+        ValueError
+            Two elements name one file but hold different models (a loaded skill reads
+            each file once, so only a skill built in code can).
+        """
+        out: dict[str, VectorFieldModel] = {}
+        for s in self.states:
+            elements: list[InputMapping | ActiveConstraint] = [*s.input_mappings, *s.active_constraints]
+            for element in elements:
+                for rel, model in element.models():
+                    if out.setdefault(rel, model) is not model:
+                        raise ValueError(f"two models for the model file {rel!r}")
+        return out
 
     def state_index(self, name: str) -> int:
         for i, s in enumerate(self.states):

@@ -1,6 +1,7 @@
-"""Vector-field model files: ``.json`` or pickle-free ``.npz`` <-> :class:`VectorFieldModel`.
+"""Vector-field models and their files: ``.json`` or pickle-free ``.npz`` <->
+:class:`VectorFieldModel`.
 
-A model file holds the fields (as their summaries) and the demonstration points they
+A model file holds the fields (as their ``to_yaml`` documents) and the demonstration points they
 were fitted on; it is plain data, never a pickle, so loading one runs no code.
 """
 
@@ -9,15 +10,34 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .errors import SkillError
 from .fields import Field
-from .model import VectorFieldModel
+from .registry import ByValue, unit_divisor
+
+Array = NDArray[np.float64]
 
 MAX_MODEL_BYTES = 256 * 1024 * 1024  # arrays of one .npz model file, uncompressed
+
+
+@dataclass(frozen=True, eq=False)
+class VectorFieldModel(ByValue):
+    """Fields plus the demonstration points they were fitted on (model file data).
+
+    ``points`` (n, 3) positions of the mapping's frame in the object frame,
+    ``quaternions`` (n, 4) orientations (x, y, z, w) of that frame, and
+    ``responsibilities`` (n, K) the EM membership of each point in each field.
+    """
+
+    fields: tuple[Field, ...]
+    points: Array
+    quaternions: Array
+    responsibilities: Array
 
 
 def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFieldModel:
@@ -52,7 +72,7 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
 
     if not isinstance(fields_doc, list) or not fields_doc:
         raise SkillError(where, "fields", "expected a non-empty list of fields")
-    fields = tuple(Field.from_doc(f, f"fields[{i}]", where) for i, f in enumerate(fields_doc))
+    fields = tuple(Field.from_yaml(f, f"fields[{i}]", where) for i, f in enumerate(fields_doc))
     points = array("points", 3)
     quats = array("quaternions", 4)
     resp = array("responsibilities", len(fields))
@@ -63,7 +83,7 @@ def vector_field_model_from_bytes(data: bytes, rel: str, where: str) -> VectorFi
     bad = np.flatnonzero(np.abs(norms - 1.0) > 1e-3)
     if len(bad):
         raise SkillError(where, f"quaternions[{bad[0]}]", f"not unit (norm {norms[bad[0]]:.6f})")
-    return VectorFieldModel(fields=fields, points=points, quaternions=quats / norms[:, None],
+    return VectorFieldModel(fields=fields, points=points, quaternions=quats / unit_divisor(norms)[:, None],
                             responsibilities=resp)
 
 
@@ -89,7 +109,7 @@ def _npz_arrays(data: bytes, where: str) -> tuple[dict[str, Any], Any]:
 
 def vector_field_model_to_bytes(model: VectorFieldModel, rel: str) -> bytes:
     """Serialise a model for a ``.json`` or pickle-free ``.npz`` model file."""
-    fields = [f.summary() for f in model.fields]
+    fields = [f.to_yaml() for f in model.fields]
     if rel.endswith(".json"):
         return json.dumps({"fields": fields, "points": model.points.tolist(),
                            "quaternions": model.quaternions.tolist(),

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .model import VectorFieldModel
+from .modelfile import VectorFieldModel
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree

@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from .. import se3
 from .errors import SkillError
-from .model import Frame, VectorFieldModel
-from .modelfile import vector_field_model_from_bytes
+from .frames import Frame
+from .modelfile import VectorFieldModel, vector_field_model_from_bytes
+from .registry import unit_divisor
 
 
 def kind_of(v: Any) -> str:
@@ -101,16 +101,16 @@ class Reader:
             norm = float(np.linalg.norm(out))
             if norm < 1e-9:
                 raise self.fail(path, "direction of zero length")
-            out = out / norm
+            out = out / unit_divisor(norm)
         return out
 
     def pose(self, v: Any, path: str) -> np.ndarray:
-        """The 4x4 transform of a pose [x, y, z, qx, qy, qz, qw] with a unit quaternion."""
+        """A pose [x, y, z, qx, qy, qz, qw] (shape (7,)) whose quaternion is unit (to 1e-3)."""
         p = self.vector(v, path, 7)
         n = float(np.linalg.norm(p[3:]))
         if abs(n - 1.0) > 1e-3:
             raise self.fail(path, f"quaternion [qx, qy, qz, qw] must be unit, has norm {n:.6f}")
-        return se3.transform_from_pose(p)
+        return p
 
     def choice(self, v: Any, path: str, options: tuple[str, ...]) -> str:
         if v not in options:

@@ -1,7 +1,7 @@
 """FSM transitions (guarded edges between states), one class per kind.
 
-Each kind reads its parameters from a skill file (``from_yaml``), summarises itself
-and says in the tick whether it fires (``fires``; a button, an event, through
+Each kind reads its parameters from a skill file (``from_yaml``), writes them back
+(``to_yaml``), summarises itself and says in the tick whether it fires (``fires``; a button, an event, through
 ``pressed``); :data:`TRANSITIONS` finds a kind by its ``type`` name. Guards carry a
 hysteresis ``margin`` in their own unit.
 """
@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .reader import Reader
-from .registry import Registry, plain
+from .registry import ByValue, Registry, summarised, unit_divisor
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -28,8 +28,8 @@ Flat = se3.Flat
 COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
 
 
-@dataclass(frozen=True, kw_only=True)
-class Transition(ABC):
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Transition(ByValue, ABC):
     """A guarded FSM edge from state ``source`` to state ``target``."""
 
     type: ClassVar[str]
@@ -42,13 +42,19 @@ class Transition(ABC):
         """Read and validate this kind's parameters from the mapping ``td`` at ``path``
         (``from``, ``to`` and ``type`` already read)."""
 
+    def to_yaml(self) -> dict[str, Any]:
+        """The transition as the plain dict the loader reads (an entry of the FSM's
+        ``transitions`` list: ``from``, ``to``, ``type``, then what :meth:`from_yaml`
+        reads): every parameter, exactly."""
+        return {"from": self.source, "to": self.target, "type": self.type, **self._parameters()}
+
     def summary(self) -> dict[str, Any]:
         """The transition as plain data (``sctd inspect --json``, the skill query)."""
-        return {"from": self.source, "to": self.target, "type": self.type, **self._parameters()}
+        return summarised(self.to_yaml())
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
-        """This kind's own parameters for :meth:`summary`."""
+        """This kind's own parameters for :meth:`to_yaml`."""
 
     @abstractmethod
     def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
@@ -86,7 +92,7 @@ TRANSITIONS: Registry[Transition] = Registry("transition")
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Hyperplane(Transition):
     """Fires when ``normal . p + offset > margin`` for the position p of ``frame`` in the
     object frame: the linear-SVM decision function of Algorithm 3 (positive side =
@@ -110,13 +116,14 @@ class Hyperplane(Transition):
         if norm < 1e-12:
             raise r.fail(f"{path}.normal", "normal of zero length")
         offset = r.number(td.get("offset", 0.0), f"{path}.offset")
+        norm = unit_divisor(norm)
         return cls(source=source, target=target,
                    frame=r.ee_frame_ref(td.get("frame", "ee"), f"{path}.frame"),
                    normal=normal / norm, offset=offset / norm,
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "normal": plain(self.normal), "offset": self.offset,
+        return {"frame": self.frame, "normal": self.normal.tolist(), "offset": self.offset,
                 "margin": self.margin}
 
     progress_step: ClassVar[float] = 0.002  # m
@@ -133,7 +140,7 @@ class Hyperplane(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Distance(Transition):
     """Fires when the distance from ``frame`` to ``point`` (3,; object frame) goes below
     ``threshold - margin`` (``direction == "below"``) or above ``threshold + margin``."""
@@ -163,8 +170,8 @@ class Distance(Transition):
                    margin=r.number(td.get("margin", 0.005), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"frame": self.frame, "point": plain(self.point), "margin": self.margin,
-                self.direction: self.threshold}
+        return {"frame": self.frame, "point": self.point.tolist(), self.direction: self.threshold,
+                "margin": self.margin}
 
     progress_step: ClassVar[float] = 0.002  # m
 
@@ -187,7 +194,7 @@ class Distance(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Timeout(Transition):
     """Fires when the state has been active ``after`` seconds."""
 
@@ -213,7 +220,7 @@ class Timeout(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Force(Transition):
     """Fires when the measured force, along the unit ``axis`` (3,; object frame) or its
     norm without one, exceeds ``above + margin`` newtons."""
@@ -233,8 +240,10 @@ class Force(Transition):
                    margin=r.number(td.get("margin", 1.0), f"{path}.margin", 0.0))
 
     def _parameters(self) -> dict[str, Any]:
-        return {"above": self.above, "axis": None if self.axis is None else plain(self.axis),
-                "margin": self.margin}
+        out: dict[str, Any] = {"above": self.above}
+        if self.axis is not None:
+            out["axis"] = self.axis.tolist()
+        return out | {"margin": self.margin}
 
     progress_step: ClassVar[float] = 0.5  # N
 
@@ -250,7 +259,7 @@ class Force(Transition):
 
 
 @TRANSITIONS.register
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Button(Transition):
     """Fires when input button ``button`` (its index in the input message) is pressed."""
 

@@ -3,24 +3,23 @@
 A :class:`~sctd.skill.model.Skill` is immutable and shared; a :class:`Workspace` holds
 what running it needs besides: its frames as flat transforms, its speeds, the KD-trees
 of its model files (with their reuse caches), and what the last command left for
-others to read. The element classes evaluate themselves against it.
+others to read. The element classes evaluate themselves against it, so it is made from
+the skill's parts (its speeds, frames and model files), not from the skill: the
+elements sit below the model that holds them.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
-from .model import Skill
+from .frames import Frame
+from .modelfile import VectorFieldModel
 from .neighbours import Neighbours
-
-if TYPE_CHECKING:
-    from .constraints import ActiveConstraint
-    from .mappings import InputMapping
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
@@ -53,7 +52,12 @@ class Workspace:
 
     Parameters
     ----------
-    skill : Skill
+    speeds : sequence of 6 floats
+        The skill's :attr:`~sctd.skill.model.Limits.speeds`.
+    frames : mapping of str to Frame
+        The skill's frames, the built-in ones included.
+    models : mapping of str to VectorFieldModel
+        The skill's model files by relative path (:meth:`~sctd.skill.model.Skill.models`).
 
     Attributes
     ----------
@@ -77,25 +81,18 @@ class Workspace:
         (None before one; for evaluation and plots).
     """
 
-    def __init__(self, skill: Skill):
-        lim = skill.limits
-        self.speeds = (lim.max_linear_speed,) * 3 + (lim.max_angular_speed,) * 3
+    def __init__(self, speeds: Sequence[float], frames: Mapping[str, Frame],
+                 models: Mapping[str, VectorFieldModel]):
+        self.speeds = tuple(speeds)
         self.offsets: dict[str, FrameOffset] = {}
         self.fixed: dict[str, tuple[Flat, Flat]] = {}
-        for name, f in skill.frames.items():
+        for name, f in frames.items():
             if f.parent == "ee":
                 self.offsets[name] = FrameOffset(f.T_parent_frame)
             else:
                 F = se3.flat_from_transform(f.T_parent_frame)
                 self.fixed[name] = (F, se3.invert_flat(F))
-        self.neighbours: dict[str, Neighbours] = {}
-        for state in skill.states:
-            elements: list[InputMapping | ActiveConstraint] = [*state.input_mappings,
-                                                                *state.active_constraints]
-            for item in elements:
-                for rel, model in item.models():
-                    if rel not in self.neighbours:
-                        self.neighbours[rel] = Neighbours(model)
+        self.neighbours = {rel: Neighbours(model) for rel, model in models.items()}
         self.turn_budget = math.inf
         self.scale = 1.0
         self.membership: Array | None = None
