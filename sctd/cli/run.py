@@ -133,24 +133,22 @@ def main_run(args: argparse.Namespace) -> int:
         session = zenoh.open(conf)
     except (ValueError, zenoh.ZError) as e:
         return fail("run", f"cannot open Zenoh session: {e}")
-    try:
-        with ExitStack() as stack:
-            try:
-                ros = _runtime_ros(args, session, config)
-            # the mapping file's InputError is a RuntimeError
-            except (ImportError, ValueError, RuntimeError, OSError, zenoh.ZError) as e:
-                return fail("run", f"--ros: {e}")
-            if ros is not None:
-                stack.enter_context(ros)
-            daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6,
-                            rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
-                            # wire contract v1: on the loopback defaults, bundles sent to the
-                            # skill key still swap; with a config file only skill/swap does
-                            swap_on_skill_key=args.zenoh_config is None, ros=ros,
-                            settings=SessionSettings.from_args(args))
-            stats = daemon.run(args.duration)
-    finally:
-        close_session(session)
+    with ExitStack() as stack:
+        stack.callback(close_session, session)  # last: after the ROS side and the daemon
+        try:
+            ros = _runtime_ros(args, session, config)
+        # the mapping file's InputError is a RuntimeError
+        except (ImportError, ValueError, RuntimeError, OSError, zenoh.ZError) as e:
+            return fail("run", f"--ros: {e}")
+        if ros is not None:
+            stack.enter_context(ros)
+        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6,
+                        rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
+                        # wire contract v1: on the loopback defaults, bundles sent to the
+                        # skill key still swap; with a config file only skill/swap does
+                        swap_on_skill_key=args.zenoh_config is None, ros=ros,
+                        settings=SessionSettings.from_args(args))
+        stats = daemon.run(args.duration)
     if args.stats_json:
         print(json.dumps(stats))
     return EXIT_OK
