@@ -27,14 +27,16 @@ def distance_and_angle(F_a: se3.Flat, F_b: se3.Flat) -> tuple[float, float]:
     The angle of ``M = R_a^T R_b`` is ``atan2(|vee(M - M^T)| / 2, (tr M - 1) / 2)``:
     sine and cosine together, accurate near 0 and near pi alike.
     """
-    a, b = F_a, F_b
-    # M[i][j] = sum_k R_a[k][i] * R_b[k][j]; only the trace and the skew part are needed
-    def m(i: int, j: int) -> float:
-        return a[i] * b[j] + a[3 + i] * b[3 + j] + a[6 + i] * b[6 + j]
-    trace = m(0, 0) + m(1, 1) + m(2, 2)
-    sx, sy, sz = m(2, 1) - m(1, 2), m(0, 2) - m(2, 0), m(1, 0) - m(0, 1)
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = F_a[:9]
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = F_b[:9]
+    # M[i][j] = sum_k R_a[k][i] R_b[k][j]: its trace and skew part, written out (the
+    # guard runs on every target the robot receives)
+    trace = a0 * b0 + a3 * b3 + a6 * b6 + a1 * b1 + a4 * b4 + a7 * b7 + a2 * b2 + a5 * b5 + a8 * b8
+    sx = (a2 * b1 + a5 * b4 + a8 * b7) - (a1 * b2 + a4 * b5 + a7 * b8)  # M[2][1] - M[1][2]
+    sy = (a0 * b2 + a3 * b5 + a6 * b8) - (a2 * b0 + a5 * b3 + a8 * b6)  # M[0][2] - M[2][0]
+    sz = (a1 * b0 + a4 * b3 + a7 * b6) - (a0 * b1 + a3 * b4 + a6 * b7)  # M[1][0] - M[0][1]
     angle = math.atan2(0.5 * math.sqrt(sx * sx + sy * sy + sz * sz), 0.5 * (trace - 1.0))
-    dx, dy, dz = b[9] - a[9], b[10] - a[10], b[11] - a[11]
+    dx, dy, dz = F_b[9] - F_a[9], F_b[10] - F_a[10], F_b[11] - F_a[11]
     return math.sqrt(dx * dx + dy * dy + dz * dz), angle
 
 
