@@ -20,3 +20,20 @@ def test_the_field_report_compares_both_selections_on_every_task():
     for task in TASKS:
         assert task in text
     assert "automatic frames" in text
+
+
+def test_the_learn_report_says_when_no_seed_found_the_sphere():
+    """``sctd bench learn``'s report of a run in which the pour's sphere was never found
+    (few demonstrations, one seed) marks it missing instead of failing on the blanks."""
+    from sctd.bench.learn import format_bench
+
+    r = {"seed": 0, "n_demos": 4, "outliers": 0.05, "noise": 0.001, "segmentation_accuracy": 0.97,
+         "segmentation_accuracy_min_demo": 0.9, "pour_state_tip_rotation_only": False,
+         "states": ["s0", "s1"], "pour_sphere_centre_error_m": None, "pour_sphere_found": "0/1",
+         "pour_sphere_centre_spread_m": None, "pour_tip_offset_from_sphere": None,
+         "drawer_direction_error_deg": {"pull": 1.5, "reach": None}, "linear_time_s": 0.4,
+         "vf_pour_time_s": 1.0, "vf_drawer_time_s": 1.0, "sklearn_import_s": 0.3,
+         "swap_vs_gco": {"available": False, "reason": "not installed", "install": "pip install gco-wrapper"}}
+    text = format_bench(r)
+    assert "[MISS] pour sphere centre error - (max over seeds, found 0/1), spread -" in text
+    assert "[MISS] drawer field direction errors pull 1.50 deg, reach - deg" in text

@@ -125,6 +125,7 @@ def format_bench(r: dict[str, Any]) -> str:
         return "ok " if flag else "MISS"
 
     err = r["pour_sphere_centre_error_m"]
+    spread = r["pour_sphere_centre_spread_m"]  # None, as err, when no seed found the sphere
     de = r["drawer_direction_error_deg"]
     lines = [
         f"sctd learn benchmark (seed {r['seed']}, {r['n_demos']} demos, "
@@ -136,12 +137,13 @@ def format_bench(r: dict[str, Any]) -> str:
         f"states {r['states']}",
         f"[{ok(err is not None and err <= 0.005)}] pour sphere centre error "
         f"{'-' if err is None else f'{err * 1000:.2f} mm'} (max over seeds, found "
-        f"{r['pour_sphere_found']}), spread {r['pour_sphere_centre_spread_m'] * 1000:.3f} mm"
+        f"{r['pour_sphere_found']}), spread {'-' if spread is None else f'{spread * 1000:.3f} mm'}"
         " target <= 5 mm",
         f"      tip offset recovered from the sphere: {np.round(r['pour_tip_offset_from_sphere'], 4)}"
         if r["pour_tip_offset_from_sphere"] is not None else "      (no tip offset)",
         f"[{ok(all(v is not None and v <= 5 for v in de.values()))}] drawer field direction "
-        "errors " + ", ".join(f"{k} {v:.2f} deg" for k, v in de.items()) + " target <= 5 deg",
+        "errors " + ", ".join(f"{k} {'-' if v is None else f'{v:.2f}'} deg" for k, v in de.items())
+        + " target <= 5 deg",
         f"[{ok(max(r['linear_time_s'], r['vf_pour_time_s'], r['vf_drawer_time_s']) <= 5)}] "
         f"learning time linear {r['linear_time_s']:.2f} s, vf pour {r['vf_pour_time_s']:.2f} s, "
         f"vf drawer {r['vf_drawer_time_s']:.2f} s (scikit-learn import "
