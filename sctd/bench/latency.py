@@ -27,6 +27,7 @@ import zenoh
 from sctd.app.options import SKILL_HELP
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
+from sctd.deploy.netns import last_json
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.skill import load_skill
@@ -157,16 +158,6 @@ def tick_histogram(skill_path: str, rate: float, n: int = 2000, paced: bool = Fa
     return h
 
 
-def _last_json(text: str) -> dict | None:
-    for line in reversed(text.splitlines()):
-        if line.strip().startswith("{"):
-            try:
-                return json.loads(line)
-            except ValueError:
-                continue
-    return None
-
-
 def wait_for_targets(ep: str, daemon: Child, logdir: Path, timeout: float = 30.0) -> None:
     """Until the daemon started as ``daemon`` publishes targets on ``ep`` (RuntimeError
     naming its log when it does not within ``timeout`` s or exits)."""
@@ -196,10 +187,10 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
         wait_for_targets(ep, daemon, logdir)
         probe = Child("sctd.bench.latency", "probe", "--connect", ep, "--rate", str(input_rate),
                       "--seconds", str(seconds))
-        figures = _last_json(probe.communicate(timeout=total + 60))
+        figures = last_json(probe.communicate(timeout=total + 60))
         probe.stop()
         daemon.stop()
-    stats = _last_json(daemon.output())
+    stats = last_json(daemon.output())
     if figures is None or stats is None:
         raise RuntimeError(f"benchmark processes did not report; see {logdir}")
     period_ms = 1e3 / rate
