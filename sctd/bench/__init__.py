@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from sctd.app.errors import EXIT_FAILED, EXIT_OK, fail
+from sctd.app.logs import log_folder
 
 
 def run_and_report(name: str, args: argparse.Namespace, run: Callable[[Path], dict[str, Any]],
@@ -22,8 +22,7 @@ def run_and_report(name: str, args: argparse.Namespace, run: Callable[[Path], di
     """Run a benchmark of processes (``run(logdir)``, logs in ``--logs`` or a temporary
     folder) and print its figures: JSON with ``--json``, else the report. A benchmark
     that could not run (RuntimeError) exits 1 with ``sctd bench <name>: <why>``."""
-    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-bench-"))
-    logdir.mkdir(parents=True, exist_ok=True)
+    logdir = log_folder(args.logs, "sctd-bench-")
     try:
         r = run(logdir)
     except RuntimeError as e:

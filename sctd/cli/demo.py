@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import tempfile
 import threading
 import time
 from contextlib import ExitStack
@@ -21,6 +20,7 @@ from typing import Any
 import zenoh
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.logs import log_folder
 from ..app.options import SKILL_HELP
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
@@ -161,8 +161,7 @@ def main_demo(args: argparse.Namespace) -> int:
     task = args.task or TASK_OF_OBJECT.get(skill.object)
     if task is None:
         return fail("demo", f"{args.skill}: object: no scene for object {skill.object!r}; pass --task")
-    logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-demo-"))
-    logdir.mkdir(parents=True, exist_ok=True)
+    logdir = log_folder(args.logs, "sctd-demo-")
     ep = f"tcp/127.0.0.1:{free_port()}"
     print(f"sctd demo: skill {skill.name}@{skill.id} ({args.skill}), task {task}, "
           f"robot {args.robot_backend}, Zenoh {ep}, logs in {logdir}")

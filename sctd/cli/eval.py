@@ -33,6 +33,7 @@ from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import PROFILES
 
 from ..app.errors import fail
+from ..app.logs import log_folder
 from .eval_realtime import realtime_job
 
 
@@ -111,7 +112,12 @@ def main_eval(args: argparse.Namespace) -> int:
     problem = _check(args)
     if problem:
         return fail("eval", problem)
-    work = Path(tempfile.mkdtemp(prefix="sctd-eval-"))
+    # the skills' copies with another's limits (a baseline's), removed at the end
+    with tempfile.TemporaryDirectory(prefix="sctd-eval-") as work:
+        return _evaluate(args, Path(work))
+
+
+def _evaluate(args: argparse.Namespace, work: Path) -> int:
     try:
         ents = entries([str(find_skill(k)) for k in args.skill], args.baseline, work)
         task = task_of([e.skill for e in ents], args.task)
@@ -122,8 +128,9 @@ def main_eval(args: argparse.Namespace) -> int:
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
     jobs = (args.jobs or os.cpu_count() or 1) if args.lockstep else 1
+    logdir = None if args.lockstep else log_folder(args.logs, "sctd-eval-logs-")  # lockstep: none
     results = evaluate(ents, spec, args.trials, args.seed, job, jobs, args.demos, keep=bool(args.report),
-                       logdir=Path(args.logs) if args.logs else None, progress=_progress_bar())
+                       logdir=logdir, progress=_progress_bar())
     print(file=sys.stderr)
     header = {"task": task, "trials": args.trials, "seed": args.seed, "user": args.user,
               "lockstep": args.lockstep}

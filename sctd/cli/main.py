@@ -17,7 +17,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib.metadata import version
 
-from ..app.errors import EXIT_USAGE, Parser, fail
+from ..app import logs
+from ..app.errors import EXIT_FAILED, EXIT_USAGE, Parser, fail
 
 
 @dataclass(frozen=True)
@@ -160,14 +161,18 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
+    rc = EXIT_FAILED
     try:
-        return int(args.func(args) or 0)
+        rc = int(args.func(args) or 0)
     except ModuleNotFoundError as e:  # an optional library imported once the command runs
         name = " ".join(n for n in (args.command, getattr(args, "bench", None)) if n)
-        return fail(name, _missing_extra(e))
+        rc = fail(name, _missing_extra(e))
     except BrokenPipeError:  # the reader went away (sctd skills | head): not our error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
+        rc = 0
+    finally:
+        logs.finish(rc == 0)
+    return rc
 
 
 if __name__ == "__main__":

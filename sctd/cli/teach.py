@@ -19,9 +19,7 @@ import argparse
 import contextlib
 import dataclasses
 import signal
-import tempfile
 import time
-from pathlib import Path
 
 import zenoh
 
@@ -37,6 +35,7 @@ from sctd_services.teach import (
 )
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
+from ..app.logs import log_folder
 from ..app.options import add_arguments, from_namespace
 from ..wire.session import add_zenoh_arguments, session
 from .procs import Child, free_port
@@ -108,8 +107,7 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
     simulator ``--connect`` / ``--zenoh-config`` names, else to a ``sctd sim --scene``
     started here on a free loopback port (stopped when ``stack`` closes, after the
     session, which lingers a moment so that the last demonstration leaves)."""
-    logdir = args.logdir = Path(args.logs) if args.logs else Path(tempfile.mkdtemp(prefix="sctd-teach-"))
-    logdir.mkdir(parents=True, exist_ok=True)
+    logdir = args.logdir = log_folder(args.logs, "sctd-teach-")
     if args.connect or args.zenoh_config:
         s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config))
         args.child_zenoh = (["--zenoh-config", args.zenoh_config] if args.zenoh_config

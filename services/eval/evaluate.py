@@ -8,7 +8,6 @@ with the speed limits of the assisted skill it is compared with.
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Callable
 from concurrent.futures import Executor, ProcessPoolExecutor
 from contextlib import ExitStack
@@ -92,14 +91,14 @@ def entries(paths: list[str], baseline: bool, workdir: Path) -> list[Entry]:
     return out
 
 
-TrialJob = Callable[[str, TaskSpec, int, "str | None", bool, Path], dict[str, Any]]
+TrialJob = Callable[[str, TaskSpec, int, "str | None", bool, "Path | None"], dict[str, Any]]
 """How one trial runs: ``(skill path, spec, seed, demos dir, keep trajectory, log dir) ->
 TrialResult.as_dict()``. :func:`lockstep_job` here; the real-time one, which starts
 processes, is the application layer's (:func:`sctd.cli.eval_realtime.realtime_job`)."""
 
 
 def lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
-                 logdir: Path) -> dict[str, Any]:
+                 logdir: Path | None) -> dict[str, Any]:
     """One lockstep trial (in this process, simulated time; ``logdir`` is unused)."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
     return run_trial(load_skill(path), spec, seed, demos).as_dict(with_trajectory=keep)
@@ -128,13 +127,13 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
     total = len(ents) * trials
     done = 0
     results = []
-    logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
     n = max(1, min(jobs, trials))
     with ExitStack() as stack:
         if pool is None and n > 1:
             pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn")))
         for e in ents:
-            args = [(str(e.path), spec, s, demos, keep, logdir / e.skill.name) for s in seeds]
+            folder = logdir / e.skill.name if logdir else None  # None: the job's own choice
+            args = [(str(e.path), spec, s, demos, keep, folder) for s in seeds]
             futures = [pool.submit(job, *a) for a in args] if pool is not None else []
             runs = (f.result() for f in futures) if pool is not None else (job(*a) for a in args)
             per_trial: list[dict[str, Any]] = []

@@ -6,13 +6,11 @@ from __future__ import annotations
 
 import ctypes
 import signal
-import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from multiprocessing import get_context
-from pathlib import Path
 from typing import Any
 
 from sctd.skill.catalog import StoredSkill
@@ -84,11 +82,11 @@ def evaluation(stored: StoredSkill, task: str, settings: CheckSettings, seed: in
     its stored evaluation, a later check's baseline, is over every trial."""
     t0 = time.monotonic()
     until = (lambda per_trial: failed_already(per_trial, settings, active)) if stop_early else None
-    with tempfile.TemporaryDirectory(prefix="sctd-learner-check-") as work:
-        ents = [replace(e, label=stored.ref)
-                for e in entries([str(stored.path)], baseline=False, workdir=Path(work))]
-        [res] = evaluate(ents, TaskSpec(task), settings.trials, seed, jobs=settings.jobs,
-                         logdir=Path(work) / "logs", progress=progress, pool=pool, until=until)
+    # one skill and no baseline: entries() writes no copy into the work folder
+    ents = [replace(e, label=stored.ref)
+            for e in entries([str(stored.path)], baseline=False, workdir=stored.path.parent)]
+    [res] = evaluate(ents, TaskSpec(task), settings.trials, seed, jobs=settings.jobs,
+                     progress=progress, pool=pool, until=until)
     res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "spill")}
                         for t in res["per_trial"]]
     res.update(task=task, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
