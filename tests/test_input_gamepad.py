@@ -8,6 +8,7 @@ import argparse
 import ctypes
 import itertools
 import os
+import re
 import subprocess
 import sys
 import threading
@@ -191,6 +192,27 @@ def test_script_plays_on_the_pad_opened_like_a_real_one(tmp_path):
         r = at(1.5)
         assert r is not None and r.axes == (0.0,) * 6 and not any(r.buttons)
         assert at(2.0).axes[4] == pytest.approx(0.5, abs=1e-4)
+
+
+@pytest.mark.slow
+def test_a_late_reader_still_sees_the_pad_unplugged_and_plugged_in_again(tmp_path):
+    """A reader that falls 2 s behind the script (a loaded machine) reads the unplugging
+    and the plugging in as two reads, in order, and the steps after them on a third."""
+    steps = parse_script([{"at": 0.0, "axis": 1, "value": -1.0}, {"at": 1.0, "detach": True},
+                          {"at": 1.5, "attach": True}, {"at": 1.6, "axis": 0, "value": 0.5}], "s")
+    now = [0.0]
+    with VirtualPad() as p, Gamepad().open("virtual", NO_FLAGS) as dev:
+        s = Script(p, steps, clock=lambda: now[0])
+        s.advance()
+        assert dev.read().axes[1] == -1.0
+        now[0] = 3.0  # everything is due at once
+        reads = []
+        for _ in range(3):
+            s.advance()
+            reads.append(dev.read())
+        assert reads[0] is None  # unplugged
+        assert reads[1] is not None and reads[1].axes == (0.0,) * 6  # plugged in, at rest
+        assert reads[2] is not None and reads[2].axes[0] == pytest.approx(0.5, abs=1e-4)
 
 
 @pytest.mark.parametrize(("doc", "message"), [
@@ -378,10 +400,13 @@ def test_scripted_pad_drives_the_daemon_and_unplugging_stops_it(tmp_path):
         inputs, targets = list(rig.inputs), sorted(rig.targets, key=lambda t: t["seq"])
     forward = [m for m in inputs if pushed(1)(m)]
     right = [m for m in inputs if pushed(0)(m)]
-    assert len(forward) > 100, "2 s of the left stick forward at 100 Hz"
+    # spans in the bridge's own stamps, not counts: a loaded machine reads less often
+    assert len(forward) > 10 and forward[-1].stamp - forward[0].stamp > 1.0, \
+        "2 s of the left stick forward (less what a late reader missed)"
     # unplugged: zero with the deadman released between the two pushes
     gap = [m for m in inputs if forward[-1].seq < m.seq < right[0].seq]
-    assert len(gap) > 50 and all(released(m) for m in gap), gap[:3]
+    assert gap and all(released(m) for m in gap), gap[:3]
+    assert re.search(r"stopped after \d+ messages \(([1-9]\d*) zero while disconnected", log), log
     assert all(released(m) for m in inputs[-3:]), "the bridge's last messages are zero"
 
     # Left stick forward: the pour skill's carry translates the tip in the mug's axes

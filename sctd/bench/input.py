@@ -4,8 +4,9 @@ echo of the same run; and the EMG chain's processing latency.
 Processes, on one free loopback port: ``sctd run`` (pour, 1 kHz), the kinematic
 stand-in robot and the echo of ``sctd bench latency``. This process holds SDL's virtual
 game controller (it exists only in the process that creates it) and runs the gamepad
-bridge on it, in one thread: at a random moment within each bridge period it moves the
-stick (an *event*), and at the period's deadline the bridge reads the pad and publishes.
+bridge on it, in one thread: every 0.1 s, once the previous move was answered (or given
+up as lost after 1 s), it moves the stick at a random moment within a bridge period (an
+*event*), and at the period's deadline the bridge reads the pad and publishes.
 An event's latency is from the moment the stick moved to the arrival of the first
 target whose ``in_seq`` is at least the ``seq`` of the first message carrying the
 move. The bound is the bridge period + the daemon period + 2 x the echo's p99, measured
@@ -30,10 +31,16 @@ from sctd.timing import Histogram, RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, TEXT, session
 
+ANSWER_TIMEOUT = 1.0  # s an event waits for its target before it counts as lost
+
 
 class _EventTimes:
     """The pending event (its first carrying ``seq`` and the time it happened) and the
-    latencies of answered ones. Thread-safe: targets arrive on Zenoh's threads."""
+    latencies of answered ones. Thread-safe: targets arrive on Zenoh's threads.
+
+    One event at a time: the next waits until the pending one is answered or lost (no
+    target within :data:`ANSWER_TIMEOUT`), so that a slow answer on a loaded machine is
+    measured as slow rather than counted as lost."""
 
     def __init__(self) -> None:
         self.histogram = Histogram()
@@ -44,9 +51,19 @@ class _EventTimes:
 
     def wait_for(self, seq: int, t_event: float) -> None:
         with self.lock:
-            if self.pending is not None:
-                self.lost += 1
             self.pending = (seq, t_event)
+
+    def lose(self) -> None:
+        with self.lock:
+            self.lost += 1
+
+    def idle(self, now: float) -> bool:
+        """No event pending (one pending past :data:`ANSWER_TIMEOUT` counts as lost)."""
+        with self.lock:
+            if self.pending is not None and now - self.pending[1] > ANSWER_TIMEOUT:
+                self.pending = None
+                self.lost += 1
+            return self.pending is None
 
     def on_target(self, sample: zenoh.Sample) -> None:
         now = time.monotonic()
@@ -109,7 +126,8 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
             moved: float | None = None
             try:
                 while time.monotonic() < start + seconds + 1.0:
-                    if k % every == 0 and time.monotonic() > start + 1.0:  # an event this period
+                    now = time.monotonic()
+                    if k % every == 0 and now > start + 1.0 and moved is None and times.idle(now):
                         time.sleep(rng.uniform(0.0, 0.9) * period)
                         sign = -sign
                         pad.set_axis(0, 0.6 * sign)
@@ -119,12 +137,16 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
                     if moved is not None and u[0] * sign > 0.3:
                         times.wait_for(bridge.seq, moved)
                         moved = None
+                    elif moved is not None and time.monotonic() - moved > ANSWER_TIMEOUT:
+                        times.lose()  # the bridge never read the move
+                        moved = None
                     k += 1
-                time.sleep(0.3)
+                while not times.idle(time.monotonic()):  # the last event's answer, or its loss
+                    time.sleep(0.01)
             finally:
                 bridge.zero()
                 device.close()
-    events = times.answered + times.lost + (times.pending is not None)
+    events = times.answered + times.lost
     return {"bridge_rate_hz": bridge_rate, "events": events, "answered": times.answered,
             "echo_rtt_ms": echo, "event_to_target_ms": times.histogram.summary_ms()}
 

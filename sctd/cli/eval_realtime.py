@@ -10,11 +10,15 @@ daemon) and the simulated user client (:mod:`sctd_services.simulated_user`, the 
 :class:`~sctd_services.user.SimulatedUser` the lockstep trials step). The evaluator
 watches what they publish (the hand's state, the objects, the scene, the targets' mode
 and the user's input) and feeds the same :class:`~.trial.TrialRecorder`.
+
+A trial is timed by the simulator's clock (the ``t`` of its scene messages), as lockstep
+trials are: on a machine too busy for the simulator to keep real time, the task's time is
+then what the arm took, not the wall clock's (the report still flags such trials, by the
+simulator's real-time factor).
 """
 
 from __future__ import annotations
 
-import tempfile
 import threading
 import time
 from pathlib import Path
@@ -23,6 +27,7 @@ from typing import Any
 import zenoh
 
 from sctd import se3
+from sctd.app.logs import log_folder
 from sctd.wire import Keys, codec
 from sctd.wire.session import session
 from sctd_services.eval.evaluate import read_demo_poses
@@ -38,6 +43,7 @@ WATCH_RATE = 100.0  # Hz at which the evaluator samples what it sees
 # so that watching does not take from the simulator, the daemon and the user the CPU they
 # need to keep real time on a small machine.
 WATCH_INGRESS = 250.0  # Hz
+SCENE_PERIOD = 0.1  # s between the simulator's scene messages (``sctd sim``'s default)
 
 
 class _Watcher:
@@ -47,6 +53,8 @@ class _Watcher:
         self.T_world_ee: Any = None
         self.objects: dict[str, Any] = {}
         self.scene: dict[str, Any] = {}
+        self._scene_at = (0.0, 0.0)  # (simulated t, monotonic arrival) of the newest scene
+        self._t_sim = 0.0  # the newest simulated time an observation carried
         self.mode: str | None = None
         self.u: tuple[float, ...] = (0.0, 0.0, 0.0)
         self.buttons: tuple[int, ...] = (0, 1, 0)
@@ -72,9 +80,20 @@ class _Watcher:
 
     def _scene(self, sample: zenoh.Sample) -> None:
         try:
-            self.scene = codec.unpack_map(sample.payload.to_bytes())
+            scene = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
-            pass
+            return
+        t = scene.get("t")
+        if isinstance(t, (int, float)) and not isinstance(t, bool):
+            self._scene_at = (float(t), time.monotonic())
+        self.scene = scene
+
+    def sim_time(self) -> float:
+        """The simulator's time now: its newest scene's ``t`` plus the wall time since it
+        arrived (at most a scene period), never going back."""
+        t, arrived = self._scene_at
+        self._t_sim = max(self._t_sim, t + min(time.monotonic() - arrived, SCENE_PERIOD))
+        return self._t_sim
 
     def _target(self, sample: zenoh.Sample) -> None:
         try:
@@ -97,9 +116,10 @@ class _Watcher:
             pass
 
     def observation(self, task: str) -> Observation | None:
-        if self.T_world_ee is None or self.mode is None or any(n not in self.objects for n in OBJECTS[task]):
+        if (self.T_world_ee is None or self.mode is None or "t" not in self.scene
+                or any(n not in self.objects for n in OBJECTS[task])):
             return None
-        return Observation(time.monotonic(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode)
+        return Observation(self.sim_time(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode)
 
     def close(self) -> None:
         for sub in self.subs:
@@ -109,8 +129,7 @@ class _Watcher:
 def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | None = None,
               logdir: Path | None = None, startup: float = 90.0) -> TrialResult:
     """One real-time trial of the skill file ``skill_path`` from the seeded start."""
-    logdir = logdir or Path(tempfile.mkdtemp(prefix="sctd-eval-"))
-    logdir.mkdir(parents=True, exist_ok=True)
+    logdir = log_folder(logdir, "sctd-eval-")
     hub = f"tcp/127.0.0.1:{free_port()}"
     profile = PROFILES[spec.profile]
     rec = TrialRecorder(spec.task, seed, profile.switch_time, spec.time_limit, spec.stuck_after)
@@ -120,7 +139,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
 
     keys = Keys()
     first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start
-    obs: Observation | None = None
+    last: tuple[float, float] | None = None  # (wall, simulated) at its end
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
         w = _Watcher(s, spec.task)
         try:
@@ -143,22 +162,22 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
                         obs = w.observation(spec.task)
                         if obs is None or w.inputs == 0:  # the trial starts with the user
                             continue
-                        if first is None and "t" in w.scene:
-                            first = (obs.t, float(w.scene["t"]))
+                        last = (time.monotonic(), obs.t)
+                        first = first or last
                         st = w.status
                         if rec.add(obs, w.u, w.buttons, st.get("vf_scale")) is not None:
                             break
         finally:
             w.close()
     res = rec.result(demos)
-    if first is not None and "t" in w.scene and obs is not None and obs.t - first[0] > 1.0:
-        # how well the simulator kept real time (its last scene message is <= 0.1 s old)
-        res.sim_rtf = round((float(w.scene["t"]) - first[1]) / (obs.t - first[0]), 3)
+    if first is not None and last is not None and last[0] - first[0] > 1.0:
+        # how well the simulator kept real time
+        res.sim_rtf = round((last[1] - first[1]) / (last[0] - first[0]), 3)
     return res
 
 
 def realtime_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
-                 logdir: Path) -> dict[str, Any]:
+                 logdir: Path | None) -> dict[str, Any]:
     """One real-time trial as :func:`sctd_services.eval.evaluate.evaluate` runs it."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
     return run_trial(path, spec, seed, demos, logdir).as_dict(with_trajectory=keep)

@@ -250,6 +250,10 @@ class Script:
     """``steps`` played on ``pad``: :meth:`advance` applies the steps that are due, with
     time counted from its first call (the bridge's first read).
 
+    A detach or an attach is the last step one call applies: the read that follows sees
+    the pad unplugged (or plugged in) even when the reader fell behind the script's
+    timeline, so that a late reader never skips an unplugging the script plays.
+
     Parameters
     ----------
     pad : VirtualPad
@@ -267,7 +271,7 @@ class Script:
         self._t0: float | None = None
 
     def advance(self) -> None:
-        """Apply every step due by now."""
+        """Apply the steps due by now, up to and including the first detach or attach."""
         now = self.clock()
         if self._t0 is None:
             self._t0 = now
@@ -281,5 +285,7 @@ class Script:
                 self.pad.set_button(s.index, bool(s.value))
             elif s.kind == "detach":
                 self.pad.detach()
+                return
             else:
                 self.pad.attach()
+                return

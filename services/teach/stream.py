@@ -80,7 +80,8 @@ class StreamLimits:
     max_speed, max_turn : float
         m/s and rad/s no step between two targets exceeds.
     state_timeout : float
-        s without a state after which the simulator counts as gone.
+        s without a state after which the simulator counts as gone: long enough that a
+        machine too busy to keep time for a few seconds is not taken for a lost simulator.
     """
 
     rate: float = 250.0
@@ -89,7 +90,7 @@ class StreamLimits:
     stall: float = 5.0
     max_speed: float = 0.25
     max_turn: float = 1.5
-    state_timeout: float = 2.0
+    state_timeout: float = 5.0
 
 
 class Teacher:
