@@ -80,6 +80,17 @@ def test_bad_mapping_files_name_the_field(over, where):
     assert str(e.value).startswith(f"my.yaml: {where}: ")
 
 
+def test_unknown_keys_of_mixed_types_are_named():
+    """YAML's ``82:`` is an int key: next to a string one, naming the first unknown key
+    must not compare an int with a str (found by ``sctd bench fuzz``)."""
+    doc = _doc()
+    with pytest.raises(InputError, match=r"^my\.yaml: 82: unknown field"):
+        parse_mapping({**doc, 82: None, "colour": "red"}, "my.yaml")
+    doc["axes"] = [{"source": 0, "gain": 2, 82: None}]
+    with pytest.raises(InputError, match=r"^my\.yaml: axes\[0\]\.82: unknown field"):
+        parse_mapping(doc, "my.yaml")
+
+
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     for name in ("xbox", "spacemouse"):
         m = shipped_mapping(name)

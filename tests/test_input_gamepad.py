@@ -224,6 +224,7 @@ def test_a_late_reader_still_sees_the_pad_unplugged_and_plugged_in_again(tmp_pat
     ([{"at": -1, "detach": True}], r"\[0\]\.at: expected seconds >= 0"),
     ([{"at": 0, "axis": 0, "value": 0, "button": 1}], r"\[0\]: expected exactly one of"),
     ([{"at": 0, "axis": 0, "value": 0, "speed": 1}], r"\[0\]\.speed: unknown field"),
+    ([{"at": 0, "axis": 0, "value": 0, "speed": 1, 7: 1}], r"\[0\]\.7: unknown field"),
     ([{"at": 1, "detach": True}, {"at": 2, "axis": 0, "value": 1}], r"\[1\]: the pad is detached at 2 s"),
     ([{"at": 0, "attach": True}], r"\[0\]: the pad is already attached at 0 s"),
     ({"at": 0}, "expected a list of steps"),

@@ -177,7 +177,7 @@ def check_hyperparameters(method: str, hyperparameters: Mapping[str, Any]) -> No
     unknown = set(hyperparameters) - set(fields)
     if unknown:
         raise TypeError(f"unknown hyperparameter(s) for method {method!r}: "
-                        f"{', '.join(sorted(unknown))} (see sctd.learn.hyperparameter_names)")
+                        f"{', '.join(sorted(map(str, unknown)))} (see sctd.learn.hyperparameter_names)")
     for name, value in hyperparameters.items():
         problem = param_problem(fields[name], value)
         if problem:

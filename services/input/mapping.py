@@ -105,7 +105,7 @@ def parse_mapping(doc: Any, origin: str) -> Mapping:
         raise bad("(top)", "expected a map with version, axes and buttons")
     unknown = set(doc) - {"version", "device", "axes", "buttons"}
     if unknown:
-        raise bad(sorted(unknown)[0], "unknown field (known: version, device, axes, buttons)")
+        raise bad(sorted(map(str, unknown))[0], "unknown field (known: version, device, axes, buttons)")
     if doc.get("version") != VERSION:
         raise bad("version", f"expected {VERSION}, got {doc.get('version')!r}")
     raw_axes = doc.get("axes")
@@ -132,7 +132,8 @@ def _axis(a: Any, where: str, bad) -> AxisMap:
         raise bad(where, "expected a map with source and optional scale, invert, deadband")
     unknown = set(a) - {"source", "scale", "invert", "deadband"}
     if unknown:
-        raise bad(f"{where}.{sorted(unknown)[0]}", "unknown field (known: source, scale, invert, deadband)")
+        raise bad(f"{where}.{sorted(map(str, unknown))[0]}",
+                  "unknown field (known: source, scale, invert, deadband)")
     src = a.get("source")
     if type(src) is int and src >= 0:
         source, minus = src, None

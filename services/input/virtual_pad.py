@@ -206,7 +206,7 @@ def parse_script(doc: Any, origin: str) -> list[Step]:
         known = {"at", kind} | ({"value"} if kind == "axis" else {"pressed"} if kind == "button" else set())
         unknown = set(raw) - known
         if unknown:
-            raise InputError(f"{where}.{sorted(unknown)[0]}: unknown field "
+            raise InputError(f"{where}.{sorted(map(str, unknown))[0]}: unknown field "
                              f"(known: {', '.join(sorted(known))})")
         at = raw.get("at")
         if isinstance(at, bool) or not isinstance(at, int | float) or not math.isfinite(at) or at < 0:
