@@ -196,7 +196,10 @@ def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tm
         assert listeners(port) == ["127.0.0.1"]
         status, body = get_page(port)
         assert status == 200 and b"<title>Viser</title>" in body
-        z0 = client_scene(port)["/arm/ee"]["position"][2]
+        # the page can be served before the first frame draws the hand
+        drawn = wait_for(lambda: client_scene(port).get("/arm/ee", {}).get("position"), 30)
+        assert drawn, client_scene(port)
+        z0 = drawn[2]
 
         with open_session(connect=[f"tcp/127.0.0.1:{zport}"]) as s:
             states: list[codec.StateMsg] = []
@@ -209,8 +212,14 @@ def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tm
             for k in range(200):
                 pub.put(codec.encode_target(k, time.time(), goal, "test", "test", -1))
                 time.sleep(0.005)
-            time.sleep(0.5)  # settled and holding; the view redraws at 30 Hz
-            seen = client_scene(port)["/arm/ee"]["position"]
+
+            def drawn_where_reported():
+                """The drawn hand where the simulator reports it (settled and holding;
+                the view redraws at 30 Hz)."""
+                seen = client_scene(port)["/arm/ee"]["position"]
+                return seen if math.dist(seen, states[-1].pose[:3]) < 0.005 else None
+
+            seen = wait_for(drawn_where_reported, 10) or client_scene(port)["/arm/ee"]["position"]
             pose = states[-1].pose
             sub.undeclare()
             pub.undeclare()
