@@ -187,31 +187,31 @@ def _check_taught(out, published, task, obj, n):
 
 
 @pytest.mark.slow
-def test_teach_pour_keeps_two_and_discards_the_spilling_one(tmp_path):
-    """`sctd teach --scene pour --demos 2 --mistake 2` (its own simulator): attempt 2 spills
-    and is discarded, neither written nor published; attempts 1 and 3 are kept."""
+def test_teach_pour_discards_the_spilling_attempt_and_keeps_the_next(tmp_path):
+    """`sctd teach --scene pour --demos 1 --mistake 1` (its own simulator): attempt 1
+    spills and is discarded, neither written nor published; attempt 2 is kept as
+    demo_000 (the numbering counts kept demonstrations)."""
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
     out = tmp_path / "taught"
     with open_session(connect=[ep]) as s:
         watch = _Demos(s)
-        proc = sctd("teach", "--scene", "pour", "--demos", "2", "--mistake", "2", "--out", str(out),
+        proc = sctd("teach", "--scene", "pour", "--demos", "1", "--mistake", "1", "--out", str(out),
                     "--seed", "1", "--listen", ep, "--logs", str(tmp_path / "logs"),
                     log=tmp_path / "teach.log")
         try:
             assert proc.p.wait(300) == 0, proc.output()
         finally:
             proc.stop()
-        assert wait_for(lambda: len(watch.got) >= 2, 5)
+        assert wait_for(lambda: len(watch.got) >= 1, 5)
         watch.sub.undeclare()
     text = proc.output()
     lines = [ln for ln in text.splitlines() if ln.strip().startswith("attempt")]
-    assert len(lines) == 3, text
-    assert "demo_000" in lines[0] and "kept" in lines[0]
-    assert "discarded" in lines[1] and "spilled" in lines[1] and "a mistake" in lines[1], text
-    assert "demo_001" in lines[2] and "kept" in lines[2]
-    assert "kept 2 of 2" in text and "1 discarded" in text
-    _check_taught(out, watch.got, "pour", "mug", 2)
+    assert len(lines) == 2, text
+    assert "discarded" in lines[0] and "spilled" in lines[0] and "a mistake" in lines[0], text
+    assert "demo_000" in lines[1] and "kept" in lines[1]
+    assert "kept 1 of 1" in text and "1 discarded" in text
+    _check_taught(out, watch.got, "pour", "mug", 1)
     assert port_is_free(port)
 
 
@@ -223,7 +223,7 @@ def test_teach_drawer_joins_a_running_simulator(tmp_path):
     in the closed handle's frame)."""
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    sim = sctd("sim", "--scene", "drawer", "--listen", ep, log=tmp_path / "sim.log")
+    sim = sctd("sim", "--task", "drawer", "--listen", ep, log=tmp_path / "sim.log")
     out = tmp_path / "taught"
     try:
         wrong = sctd("teach", "--scene", "pour", "--out", str(out), "--connect", ep,
