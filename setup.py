@@ -1,14 +1,15 @@
 """Package discovery: ``sim/`` installs as ``sctd_sim``, ``services/`` as
-``sctd_services`` (import names that cannot collide with other packages) and ``skills/`` as the
+``sctd_services`` (import names that cannot collide with other packages), ``skills/`` as the
 package data ``sctd_skills`` (the shipped skills, their model files and
-demonstrations, found by name: ``sctd run --skill pour``). Whatever else an installed
+demonstrations, found by name: ``sctd run --skill pour``) and ``tasks/`` as ``sctd_tasks``
+(the shipped task files: ``sctd sim --task pour``). Whatever else an installed
 command reads ships as package data too: the Zenoh config templates ``sctd certs``
 renders (``sctd/deploy/zenoh/``), the input maps, the robot model and its CAN database.
 Metadata is in pyproject.toml."""
 
 from setuptools import find_packages, setup
 
-MAPPED = {"sctd_sim": "sim", "sctd_services": "services", "sctd_skills": "skills"}
+MAPPED = {"sctd_sim": "sim", "sctd_services": "services", "sctd_skills": "skills", "sctd_tasks": "tasks"}
 
 packages = find_packages(include=["sctd", "sctd.*"])
 for name, folder in MAPPED.items():
@@ -19,5 +20,6 @@ setup(
     package_dir=MAPPED,
     package_data={"sctd.deploy": ["zenoh/*.json5"],  # the Zenoh configs `sctd certs` renders
                   "sctd_sim": ["*.dbc", "robot/*", "robot/**/*"], "sctd_services": ["input/maps/*.yaml"],
-                  "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"]},
+                  "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"],
+                  "sctd_tasks": ["*.yaml", "*.md"]},
 )

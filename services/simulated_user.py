@@ -27,13 +27,18 @@ import zenoh
 
 from sctd import se3
 from sctd.app.options import add_robot_argument
+from sctd.task import find_task
 from sctd.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 from .user import INTENTS, PROFILES, Observation, SimulatedUser
 
-OBJECTS = {"pour": ("mug", "bottle_tip"), "drawer": ("drawer_handle",)}
+
+def task_frames(task: str) -> tuple[str, ...]:
+    """The frames the task's scene publishes (its bodies', then the held object's): what
+    a person in the chair sees."""
+    return tuple(find_task(task).scene.frames())
 
 
 class UserClient:
@@ -57,7 +62,8 @@ class UserClient:
         for key, callback in ((k.target, self._on_target), (k.state, self._on_state),
                               (k.scene, self._on_scene)):
             self._stack.enter_context(session.declare_subscriber(key, callback))
-        for name in OBJECTS[user.task]:
+        self.frames = task_frames(user.task)
+        for name in self.frames:
             self._stack.enter_context(session.declare_subscriber(k.objects(name), self._on_object))
         self.pub = self._stack.enter_context(session.declare_publisher(k.input(device), express=True,
                                                                                     encoding=MSGPACK))
@@ -109,7 +115,7 @@ class UserClient:
     def observation(self) -> Observation | None:
         info = self.info
         if info["T_world_ee"] is None or info["mode"] is None or \
-                any(n not in self.objects for n in OBJECTS[self.user.task]):
+                any(n not in self.objects for n in self.frames):
             return None
         return Observation(time.monotonic(), info["T_world_ee"], dict(self.objects), info["scene"],
                            info["mode"])

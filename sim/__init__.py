@@ -31,8 +31,7 @@ _LAZY = {
     "inverse_kinematics": "robot",
     "FaultConfig": "canbus",
     "FaultInjectingBus": "canbus",
-    "PourScene": "scenes",
-    "DrawerScene": "scenes",
+    "TaskScene": "scenes",
     "make_scene": "scenes",
 }
 

@@ -3,7 +3,7 @@
 where dynamics matter. Useful for runtime tests and benchmarks, where it keeps the
 robot side cheap and deterministic.
 
-    python -m sctd_sim.kinematic --scene pour --connect tcp/127.0.0.1:7447
+    python -m sctd_sim.kinematic --task pour --connect tcp/127.0.0.1:7447
 """
 
 from __future__ import annotations
@@ -116,7 +116,8 @@ class KinematicRobot:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the kinematic robot's flags to ``p``."""
-    p.add_argument("--scene", default="pour", choices=("pour", "drawer"))
+    p.add_argument("--task", "--scene", dest="task", default="pour", choices=("pour", "drawer"),
+                   help="the stand-in geometry of the shipped skill of that name (default %(default)s)")
     add_robot_argument(p)
     p.add_argument("--rate", type=float, default=1000.0, help="state rate, Hz")
     p.add_argument("--object-rate", type=float, default=50.0, help="objects rate, Hz")
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     add_arguments(p)
     args = p.parse_args(argv)
     keys = Keys(args.robot)
-    robot = KinematicRobot(kinematic_scene(args.scene), tau=args.tau)
+    robot = KinematicRobot(kinematic_scene(args.task), tau=args.tau)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())

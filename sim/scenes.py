@@ -1,44 +1,44 @@
 """Task scenes: what the arm interacts with and how well the task went (pure logic).
 
+A scene is built from a task file (:mod:`sctd.task`: ``tasks/pour.yaml``,
+``tasks/drawer.yaml``, or any other) out of a few kinds of element, none of which
+knows a task:
+
+- **bodies** standing in the world, each a published frame (a container's opening is
+  its origin, z up);
+- the **held object** (mass, centre of mass, named frames fixed in the hand, such as a
+  bottle's opening) and its **contents** (:class:`Flow`): they flow out of the outlet
+  frame while its axis is tilted past the flow angle, into the container if the outlet
+  is over its opening, otherwise they are spilled;
+- **prismatic joints** (:class:`PrismaticHandle`): a handle body on a joint along its
+  own x axis, grasped when the hand comes within the grasp radius, then coupled to the
+  hand by a stiff spring-damper; the joint resists with a spring, viscous damping and
+  Coulomb friction, and stops at its end stops. The handle's published frame stays at
+  the joint's 0, so moving it shows as hand motion along the frame's +x.
+
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
-external wrench it exerts on the ee (world axes at the ee origin, N and N m), names
-its objects' poses, and scores the task. No Pinocchio, bus or Zenoh here.
+external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
+objects' poses, and reports its readings (``<element>.<quantity>``) and the task's
+predicates on them (done, success, progress). No Pinocchio, bus or Zenoh here.
 
-``pour``
-    A bottle held in the hand and a ``mug`` on the table (the task object: origin at
-    the centre of the mug's opening, z up, x towards the robot). The ee z axis is the
-    bottle's axis and its opening, ``bottle_tip``, sits 0.12 m along it (as in
-    :mod:`sctd_sim.demogen` and the shipped skill). Liquid flows while the bottle is
-    tilted past the pouring angle; it lands in the mug if the tip is over the opening,
-    otherwise it is spilled.
-``drawer``
-    A drawer on a prismatic joint. Its ``drawer_handle`` (task object: origin at the
-    grasp point of the *closed* drawer, x out of the drawer, z up; the published frame
-    stays there, so opening shows as ee motion along +x, as in the demonstrations) is
-    grasped when the ee comes within the grasp radius of the moving handle, which is
-    then coupled to the ee by a stiff spring-damper; the drawer resists with a spring,
-    viscous damping and Coulomb friction, and stops at its end stops.
-
-World is the arm's base frame. The arm is mounted low (as on a wheelchair), so the
-mug's opening is 0.65 m and the drawer handle 0.60 m above the base, 0.75 m in front:
-where the demonstrations' motions (with the hand pointing up) stay in reach.
+World is the arm's base frame.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from sctd import se3
+from sctd.task import Task, find_task
+from sctd.task.judge import holds, thresholds
+from sctd.task.model import Container, Contents, Held, Joint
 
 GRAVITY = 9.81
-
-
-R_TOWARDS_ROBOT = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])
-"""Object orientation with x pointing back at the robot (world -x), z up."""
 
 
 class Scene(Protocol):
@@ -67,355 +67,320 @@ class Scene(Protocol):
         load data): mass (kg) and centre of mass in the ee frame (m); None for none."""
 
 
-# -- pour -----------------------------------------------------------------------------
-@dataclass
-class PourParams:
-    """Geometry and physics of the pouring scene (SI units).
-
-    Attributes
-    ----------
-    T_world_mug : ndarray, shape (4, 4)
-        Mug frame: centre of the opening, z up, x towards the robot.
-    mug_radius, mug_height : float
-        Inner radius of the opening and depth of the mug below it, m.
-    rim_margin : float
-        The tip counts as over the opening within ``mug_radius - rim_margin``.
-    max_drop : float
-        Highest tip height above the rim at which the stream still lands in the mug.
-    T_ee_tip : ndarray, shape (4, 4)
-        Bottle opening in the ee frame; its z axis is the bottle axis, out of the
-        opening. Default: 0.12 m along ee z, axes as the ee's.
-    pour_angle : float
-        Tilt (angle between bottle axis and world up, rad) past which liquid flows.
-    flow_rate : float
-        Flow at 90 deg past the pouring angle, fraction of the content per second
-        (flow grows as the sine of the tilt past the pouring angle).
-    fill_target : float
-        Fraction of the content that counts as a successful pour.
-    bottle_mass_empty, liquid_mass : float
-        Masses, kg; their weight acts at ``com_in_ee`` (m, ee frame).
-    com_in_ee : ndarray, shape (3,)
-    start_position : ndarray, shape (3,)
-        Start position of the ee in world (orientation: bottle upright, ee x towards
-        the mug).
-    start_yaw : float
-        Start orientation's turn about world z from ee x towards the mug, rad.
-    """
-
-    T_world_mug: np.ndarray = field(
-        default_factory=lambda: se3.transform_from_rt(R_TOWARDS_ROBOT, [0.75, 0.0, 0.65]))
-    mug_radius: float = 0.04
-    mug_height: float = 0.10
-    rim_margin: float = 0.005
-    max_drop: float = 0.15
-    T_ee_tip: np.ndarray = field(
-        default_factory=lambda: se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.12]))
-    pour_angle: float = math.radians(75.0)
-    flow_rate: float = 0.6
-    fill_target: float = 0.5
-    bottle_mass_empty: float = 0.2
-    liquid_mass: float = 0.3
-    com_in_ee: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 0.05]))
-    start_position: np.ndarray = field(default_factory=lambda: np.array([0.45, 0.0, 0.68]))
-    start_yaw: float = 0.0
-
-
+# -- contents that flow --------------------------------------------------------------
 @dataclass(frozen=True)
 class PourGeometry:
-    """Where the bottle opening is relative to the mug.
+    """Where the outlet is relative to the container's opening.
 
     Attributes
     ----------
-    tip_in_mug : ndarray, shape (3,)
-        Bottle opening in the mug frame, m.
-    tip_above_rim : float
-        Height of the bottle opening above the mug's opening, m.
+    outlet_in_container : ndarray, shape (3,)
+        The outlet in the container's frame, m.
+    above_rim : float
+        Height of the outlet above the container's opening, m.
     radial : float
-        Horizontal distance of the opening from the mug axis, m.
+        Horizontal distance of the outlet from the container's axis, m.
     tilt : float
-        Angle between the bottle axis and world up, rad (0 upright, pi upside down).
+        Angle between the outlet's axis and world up, rad (0 upright, pi upside down).
     over_opening : bool
-        Whether a stream from the tip lands inside the mug.
+        Whether a stream from the outlet lands inside the container.
     """
 
-    tip_in_mug: np.ndarray
-    tip_above_rim: float
+    outlet_in_container: np.ndarray
+    above_rim: float
     radial: float
     tilt: float
     over_opening: bool
 
 
-def pour_geometry(T_world_tip: np.ndarray, params: PourParams,
-                  T_mug_world: np.ndarray | None = None) -> PourGeometry:
-    """Bottle opening relative to the mug opening, and the bottle's tilt.
-
-    ``T_mug_world``: the inverse of ``params.T_world_mug``, when the caller keeps it
-    (the scene does: the mug does not move).
-    """
-    if T_mug_world is None:
-        T_mug_world = se3.invert_transform(params.T_world_mug)
-    p = (T_mug_world @ T_world_tip)[:3, 3]
+def pour_geometry(T_world_outlet: np.ndarray, container: Container, T_container_world: np.ndarray
+                  ) -> PourGeometry:
+    """The outlet relative to the container's opening (``T_container_world``: the
+    inverse of the container body's pose), and the outlet's tilt."""
+    p = (T_container_world @ T_world_outlet)[:3, 3]
     x, y, above = p.tolist()
     radial = math.hypot(x, y)
-    tilt = math.acos(min(1.0, max(-1.0, float(T_world_tip[2, 2]))))
-    over = radial <= params.mug_radius - params.rim_margin and 0.0 <= above <= params.max_drop
+    tilt = math.acos(min(1.0, max(-1.0, float(T_world_outlet[2, 2]))))
+    over = radial <= container.radius - container.rim_margin and 0.0 <= above <= container.max_drop
     return PourGeometry(p.copy(), above, radial, tilt, over)
 
 
-def pour_flow(tilt: float, params: PourParams) -> float:
-    """Flow out of the bottle at ``tilt`` (fraction of the full content per second)."""
-    past = tilt - params.pour_angle
+def pour_flow(tilt: float, contents: Contents) -> float:
+    """Flow out of the outlet at ``tilt`` (fraction of the full contents per second)."""
+    past = tilt - contents.flow_angle
     if past <= 0.0:
         return 0.0
-    return params.flow_rate * math.sin(min(past, math.pi / 2))
+    return contents.flow_rate * math.sin(min(past, math.pi / 2))
 
 
-class PourScene:
-    """Bottle in the hand, mug on the table.
-
-    Parameters
-    ----------
-    params : PourParams, optional
+class Flow:
+    """The held object's contents, poured into a container body or spilled.
 
     Attributes
     ----------
     remaining, poured, spilled : float
-        Fractions of the bottle's content: still in the bottle, in the mug, spilled.
+        Fractions of the full contents: still held, in the container, spilled.
     """
 
-    name = "pour"
-    task_object = "mug"
-
-    def __init__(self, params: PourParams | None = None) -> None:
-        self.params = params or PourParams()
-        self._mug_key = b""  # the T_world_mug (bytes) that _T_mug_world inverts
-        self._T_mug_world = np.eye(4)
+    def __init__(self, held: Held, contents: Contents, container: Container):
+        self.name = held.name
+        self.contents = contents
+        self.container = container
+        self.T_ee_outlet = held.frames[contents.outlet]
+        self._key = b""  # the container pose (bytes) _T_container_world inverts
+        self._T_container_world = np.eye(4)
         self.reset()
 
     def reset(self) -> None:
-        """Full bottle, nothing poured."""
+        """Full, nothing poured."""
         self.remaining = 1.0
         self.poured = 0.0
         self.spilled = 0.0
         self.geometry: PourGeometry | None = None
 
-    def start_pose(self) -> np.ndarray:
-        """Bottle upright, 0.3 m short of the mug, ee x towards it (turned by ``start_yaw``)."""
-        R = se3.matrix_from_rotvec([0.0, 0.0, self.params.start_yaw])
-        return se3.transform_from_rt(R, self.params.start_position)
-
-    def tip_transform(self, T_world_ee: np.ndarray) -> np.ndarray:
-        """``T_world_tip`` of the bottle opening."""
-        return T_world_ee @ self.params.T_ee_tip
-
-    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """Pour for ``dt`` seconds; return the bottle's weight as a wrench on the ee."""
-        P = self.params
-        g = self.geometry = pour_geometry(self.tip_transform(T_world_ee), P, self._mug_inverse())
-        out = min(self.remaining, pour_flow(g.tilt, P) * dt)
+    def step(self, T_world_ee: np.ndarray, T_world_container: np.ndarray, dt: float) -> None:
+        g = self.geometry = pour_geometry(T_world_ee @ self.T_ee_outlet, self.container,
+                                          self._inverse(T_world_container))
+        out = min(self.remaining, pour_flow(g.tilt, self.contents) * dt)
         if out > 0.0:
             self.remaining -= out
             if g.over_opening:
                 self.poured += out
             else:
                 self.spilled += out
-        fz = -(P.bottle_mass_empty + P.liquid_mass * self.remaining) * GRAVITY
-        r0, r1, _ = T_world_ee[:3, :3].dot(P.com_in_ee).tolist()
-        # [force, r x force] with force = (0, 0, fz), written out (np.cross costs ~25 us)
-        return np.array((0.0, 0.0, fz, r1 * fz, -r0 * fz, 0.0))
 
-    def _mug_inverse(self) -> np.ndarray:
-        """``T_mug_world``, computed again only when the mug's pose changed."""
-        T = self.params.T_world_mug
+    def _inverse(self, T: np.ndarray) -> np.ndarray:
+        """``T_container_world``, computed again only when the container moved."""
         key = T.tobytes()
-        if key != self._mug_key:
-            self._T_mug_world, self._mug_key = se3.invert_transform(T), key
-        return self._T_mug_world
+        if key != self._key:
+            self._T_container_world, self._key = se3.invert_transform(T), key
+        return self._T_container_world
 
-    def payload(self) -> tuple[float, np.ndarray] | None:
-        """The bottle with what is left in it (the arm's load data follows it as it
-        empties, as a real arm's load estimate from its force-torque sensing would)."""
-        P = self.params
-        return P.bottle_mass_empty + P.liquid_mass * self.remaining, P.com_in_ee
-
-    def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
-        """``mug`` and ``bottle_tip``."""
-        return {"mug": self.params.T_world_mug.copy(), "bottle_tip": self.tip_transform(T_world_ee)}
-
-    def outcome(self) -> dict[str, Any]:
-        """Tip relative to the mug, tilt, poured and spilled fractions, success."""
+    @property
+    def flowing(self) -> bool:
         g = self.geometry
-        out: dict[str, Any] = {
-            "scene": self.name,
-            "poured": self.poured,
-            "spilled_amount": self.spilled,
-            "spilled": self.spilled > 1e-9,
-            "remaining": self.remaining,
-            "success": self.poured >= self.params.fill_target and self.spilled <= 1e-9,
-            "fill_target": self.params.fill_target,
-        }
+        return g is not None and pour_flow(g.tilt, self.contents) > 0.0 and self.remaining > 0.0
+
+    def readings(self) -> dict[str, float | bool]:
+        n = self.name
+        return {f"{n}.poured": self.poured, f"{n}.spilled": self.spilled, f"{n}.remaining": self.remaining,
+                f"{n}.flowing": self.flowing}
+
+    def outcome(self, thresholds: dict[str, float]) -> dict[str, Any]:
+        """The poured, spilled and remaining fractions, the fraction to pour (the task's
+        ``thresholds``: 1 when it names none) and the outlet's geometry."""
+        out: dict[str, Any] = {"poured": self.poured, "spilled_amount": self.spilled,
+                               "spilled": self.spilled > 1e-9, "remaining": self.remaining,
+                               "fill_target": thresholds.get(f"{self.name}.poured", 1.0)}
+        g = self.geometry
         if g is not None:
-            out.update(tip_in_mug=g.tip_in_mug.tolist(), tip_above_rim=g.tip_above_rim,
-                       radial=g.radial, tilt=g.tilt, over_opening=g.over_opening,
-                       pouring=pour_flow(g.tilt, self.params) > 0.0 and self.remaining > 0.0)
+            out.update(outlet_in_container=g.outlet_in_container.tolist(), above_rim=g.above_rim,
+                       radial=g.radial, tilt=g.tilt, over_opening=g.over_opening, pouring=self.flowing)
         return out
 
 
-# -- drawer ---------------------------------------------------------------------------
-@dataclass
-class DrawerParams:
-    """Geometry and physics of the drawer scene (SI units).
+# -- a handle on a prismatic joint ------------------------------------------------------
+def joint_force(position: float, speed: float, joint: Joint) -> float:
+    """Resistance of the joint along its axis, N (negative: resists opening)."""
+    return (-joint.spring * position - joint.damping * speed
+            - joint.friction * math.tanh(speed / joint.friction_speed))
+
+
+class PrismaticHandle:
+    """A handle on a prismatic joint along the handle body's x axis, pulled by the hand
+    that grasped it.
 
     Attributes
     ----------
-    T_world_closed : ndarray, shape (4, 4)
-        Handle frame with the drawer closed; x is the pull (opening) direction, out of
-        the drawer, z up. This is the published ``drawer_handle``.
-    max_opening : float
-        Travel to the end stop, m.
-    mass : float
-        Moving mass, kg.
-    stiffness : float
-        Soft-close spring towards closed, N/m.
-    damping : float
-        Viscous damping, N s/m.
-    friction : float
-        Coulomb friction, N (smoothed over ``friction_speed``).
-    friction_speed : float
-        Speed, m/s, over which the friction force builds up (tanh).
-    grasp_radius : float
-        The handle is grasped when the ee comes this close, m.
-    release_distance : float
-        The grasp slips when the ee is pulled this far from the handle, m.
-    coupling_stiffness, coupling_damping : float
-        Spring (N/m) and damper (N s/m) between ee and grasped handle.
-    success_opening : float
-        Opening that counts as success, m.
-    start_position : ndarray, shape (3,)
-        Start position of the ee in world (orientation: the handle's).
-    start_yaw : float
-        Start orientation's turn about world z from the handle's, rad.
-    """
-
-    T_world_closed: np.ndarray = field(
-        default_factory=lambda: se3.transform_from_rt(R_TOWARDS_ROBOT, [0.75, 0.0, 0.60]))
-    max_opening: float = 0.30
-    mass: float = 2.0
-    stiffness: float = 30.0
-    damping: float = 15.0
-    friction: float = 3.0
-    friction_speed: float = 0.01
-    grasp_radius: float = 0.02
-    release_distance: float = 0.06
-    coupling_stiffness: float = 2000.0
-    coupling_damping: float = 60.0
-    success_opening: float = 0.20
-    start_position: np.ndarray = field(default_factory=lambda: np.array([0.50, 0.0, 0.71]))
-    start_yaw: float = 0.0
-
-
-def drawer_force(opening: float, speed: float, params: DrawerParams) -> float:
-    """Resistance of the drawer along its pull axis, N (negative: resists opening)."""
-    return (-params.stiffness * opening - params.damping * speed
-            - params.friction * math.tanh(speed / params.friction_speed))
-
-
-class DrawerScene:
-    """A drawer on a prismatic joint, opened by pulling its grasped handle.
-
-    Attributes
-    ----------
-    opening : float
-        Drawer travel from closed, m.
+    position : float
+        Travel from 0, m.
     speed : float
-        Opening speed, m/s.
+        m/s.
     attached : bool
         Whether the hand holds the handle.
     """
 
-    name = "drawer"
-    task_object = "drawer_handle"
-
-    def __init__(self, params: DrawerParams | None = None) -> None:
-        self.params = params or DrawerParams()
+    def __init__(self, joint: Joint):
+        self.joint = joint
+        self.name = joint.name
         self.reset()
 
     def reset(self) -> None:
-        """Drawer closed and released."""
-        self.opening = 0.0
+        """At 0, released."""
+        self.position = 0.0
         self.speed = 0.0
         self.attached = False
-        self.max_opening_reached = 0.0
+        self.max_position = 0.0
         self.grasps = 0
 
-    def start_pose(self) -> np.ndarray:
-        """Hand above and in front of the handle, in the handle's orientation."""
-        R = se3.matrix_from_rotvec([0.0, 0.0, self.params.start_yaw]) @ self.params.T_world_closed[:3, :3]
-        return se3.transform_from_rt(R, self.params.start_position)
-
-    @property
-    def axis(self) -> np.ndarray:
-        """Pull direction in world, shape (3,)."""
-        return self.params.T_world_closed[:3, 0].copy()
-
-    def handle_transform(self) -> np.ndarray:
-        """``T_world_handle`` at the current opening."""
-        T = self.params.T_world_closed.copy()
-        T[:3, 3] += self.opening * T[:3, 0]
+    def handle_transform(self, T_world_handle0: np.ndarray) -> np.ndarray:
+        """``T_world_handle`` at the current position (``T_world_handle0``: at 0)."""
+        T = T_world_handle0.copy()
+        T[:3, 3] += self.position * T[:3, 0]
         return T
 
-    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """Grasp/release, move the drawer by ``dt``; return the wrench on the ee."""
+    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_handle0: np.ndarray,
+             dt: float) -> np.ndarray:
+        """Grasp or release, move by ``dt``; return the force on the ee, shape (3,)."""
         # (on floats: the same numbers as on 3-vectors, without numpy's per-call cost)
-        P = self.params
-        (ax, _, _, hx), (ay, _, _, hy), (az, _, _, hz), _ = P.T_world_closed.tolist()  # pull axis, handle
-        o = self.opening
+        J, G = self.joint, self.joint.grasp
+        (ax, _, _, hx), (ay, _, _, hy), (az, _, _, hz), _ = T_world_handle0.tolist()  # axis, handle
+        o = self.position
         (_, _, _, ex), (_, _, _, ey), (_, _, _, ez), _ = T_world_ee.tolist()
         dx, dy, dz = ex - (hx + o * ax), ey - (hy + o * ay), ez - (hz + o * az)
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if not self.attached and dist <= P.grasp_radius:
+        if not self.attached and dist <= G.radius:
             self.attached = True
             self.grasps += 1
-        elif self.attached and dist > P.release_distance:
+        elif self.attached and dist > G.release:
             self.attached = False
         fx = fy = fz = pull = 0.0  # force on the ee, and the pull along the axis
         if self.attached:
-            k, c, s = P.coupling_stiffness, P.coupling_damping, self.speed
+            k, c, s = G.stiffness, G.damping, self.speed
             vx, vy, vz = twist[:3].tolist()
             fx, fy, fz = (-k * dx - c * (vx - s * ax), -k * dy - c * (vy - s * ay),
                           -k * dz - c * (vz - s * az))
             pull = 0.0 + -fx * ax + -fy * ay + -fz * az  # (summed as numpy's dot sums)
-        accel = (pull + drawer_force(self.opening, self.speed, P)) / P.mass
+        accel = (pull + joint_force(self.position, self.speed, J)) / J.mass
         self.speed += accel * dt
-        self.opening += self.speed * dt
-        if self.opening <= 0.0:
-            self.opening, self.speed = 0.0, max(self.speed, 0.0)
-        elif self.opening >= P.max_opening:
-            self.opening, self.speed = P.max_opening, min(self.speed, 0.0)
-        self.max_opening_reached = max(self.max_opening_reached, self.opening)
-        return np.array((fx, fy, fz, 0.0, 0.0, 0.0))
+        self.position += self.speed * dt
+        if self.position <= 0.0:
+            self.position, self.speed = 0.0, max(self.speed, 0.0)
+        elif self.position >= J.travel:
+            self.position, self.speed = J.travel, min(self.speed, 0.0)
+        self.max_position = max(self.max_position, self.position)
+        return np.array((fx, fy, fz))
 
-    def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
-        """``drawer_handle``: the closed handle's frame (fixed, see the module doc)."""
-        return {"drawer_handle": self.params.T_world_closed.copy()}
+    def readings(self) -> dict[str, float | bool]:
+        n = self.name
+        return {f"{n}.position": self.position, f"{n}.speed": self.speed, f"{n}.held": self.attached,
+                f"{n}.grasps": float(self.grasps), f"{n}.max_position": self.max_position}
+
+    def outcome(self, thresholds: dict[str, float]) -> dict[str, Any]:
+        """Opening, the opening to reach (the task's ``thresholds``: the travel when it
+        names none), whether the handle is held, how often it was grasped."""
+        return {"opening": self.position, "open_fraction": self.position / self.joint.travel,
+                "max_opening": self.max_position, "attached": self.attached, "grasps": self.grasps,
+                "target_opening": thresholds.get(f"{self.name}.position", self.joint.travel)}
+
+
+# -- the scene of a task ----------------------------------------------------------------
+class TaskScene:
+    """The scene a task file describes (see the module doc).
+
+    Parameters
+    ----------
+    task : Task
+
+    Attributes
+    ----------
+    poses : dict of str to ndarray (4, 4)
+        Each body's pose this trial (:func:`randomize` moves them).
+    start_position, start_yaw
+        The hand's start this trial: position (world) and yaw about the vertical.
+    """
+
+    def __init__(self, task: Task):
+        self.task = task
+        self.name = task.name
+        self.task_object = task.object
+        sc = task.scene
+        self.poses = {n: b.T_world.copy() for n, b in sc.bodies.items()}
+        self.start_position = sc.start.T_world[:3, 3].copy()
+        self.start_yaw = 0.0
+        self.held = sc.held
+        self.flow: Flow | None = None
+        if sc.held is not None and sc.held.contents is not None:
+            container = sc.bodies[sc.held.contents.into].container
+            assert container is not None  # (the reader checks: contents go into a container)
+            self.flow = Flow(sc.held, sc.held.contents, container)
+        self.handles = [PrismaticHandle(j) for j in sc.joints.values()]
+        self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
+        self._hand = np.zeros(3)
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the initial state (contents full, joints at 0 and released)."""
+        if self.flow is not None:
+            self.flow.reset()
+        for h in self.handles:
+            h.reset()
+
+    def start_pose(self) -> np.ndarray:
+        """The hand's start: the file's orientation turned by ``start_yaw`` about the
+        vertical, at ``start_position``."""
+        R = se3.matrix_from_rotvec([0.0, 0.0, self.start_yaw]) @ self.task.scene.start.T_world[:3, :3]
+        return se3.transform_from_rt(R, self.start_position)
+
+    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
+        """Advance by ``dt``; return the wrench of the held load and the grasped handles."""
+        self._hand = T_world_ee[:3, 3].copy()
+        if self.flow is not None:
+            self.flow.step(T_world_ee, self.poses[self.flow.contents.into], dt)
+        wrench = np.zeros(6)
+        for h in self.handles:
+            wrench[:3] += h.step(T_world_ee, twist, self.poses[h.joint.handle], dt)
+        load = self.payload()
+        if load is not None:
+            mass, com = load
+            fz = -mass * GRAVITY
+            r0, r1, _ = T_world_ee[:3, :3].dot(com).tolist()
+            # [force, r x force] with force = (0, 0, fz), written out (np.cross costs ~25 us)
+            wrench += (0.0, 0.0, fz, r1 * fz, -r0 * fz, 0.0)
+        return wrench
 
     def payload(self) -> tuple[float, np.ndarray] | None:
-        """None: the hand holds the handle, the drawer is not a load it carries."""
-        return None
+        """The held object with what is left in it (the arm's load data follows it as it
+        empties, as a real arm's load estimate from its force-torque sensing would);
+        None when the hand holds nothing (a grasped handle is not a load it carries)."""
+        if self.held is None:
+            return None
+        left = self.held.contents.mass * self.flow.remaining if self.flow is not None and \
+            self.held.contents is not None else 0.0
+        return self.held.mass + left, self.held.com
+
+    def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
+        """The bodies' frames, then the held object's frames."""
+        out = {n: T.copy() for n, T in self.poses.items()}
+        if self.held is not None:
+            out.update({n: T_world_ee @ T for n, T in self.held.frames.items()})
+        return out
+
+    def readings(self) -> dict[str, float | bool]:
+        """Every element's ``<element>.<quantity>`` (:data:`sctd.task.model.READINGS`)."""
+        out: dict[str, float | bool] = {}
+        if self.flow is not None:
+            out.update(self.flow.readings())
+        for h in self.handles:
+            out.update(h.readings())
+        return out
+
+    def positions(self) -> dict[str, np.ndarray]:
+        """World positions of the hand (as last stepped), the bodies and the held frames."""
+        out = {n: T[:3, 3] for n, T in self.poses.items()}
+        if self.held is not None:
+            T_ee = np.eye(4)
+            T_ee[:3, 3] = self._hand
+            out.update({n: (T_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
+        out["hand"] = self._hand
+        return out
 
     def outcome(self) -> dict[str, Any]:
-        """Opening, whether the handle is held, success."""
-        P = self.params
-        return {
-            "scene": self.name,
-            "opening": self.opening,
-            "open_fraction": self.opening / P.max_opening,
-            "max_opening": self.max_opening_reached,
-            "attached": self.attached,
-            "grasps": self.grasps,
-            "success": self.opening >= P.success_opening,
-            "target_opening": P.success_opening,
-        }
+        """The readings, the task's ``done``, ``success`` (done and successful),
+        ``progress`` and ``thresholds`` (:func:`sctd.task.judge.thresholds` of ``done``), and
+        each element's own fields."""
+        r = self.readings()
+        o = self.task.outcome
+        pos = self.positions()
+        done = holds(o.done, r, pos)
+        out: dict[str, Any] = {"scene": self.name, "readings": r, "done": done,
+                               "success": done and holds(o.success, r, pos),
+                               "progress": float(r[str(o.progress)]), "thresholds": dict(self.thresholds)}
+        if self.flow is not None:
+            out.update(self.flow.outcome(self.thresholds))
+        for h in self.handles:
+            out.update(h.outcome(self.thresholds))
+        return out
 
 
 class EmptyScene:
@@ -448,45 +413,44 @@ class EmptyScene:
         return {"scene": self.name}
 
 
-SCENES = {"pour": PourScene, "drawer": DrawerScene, "empty": EmptyScene}
-"""Scene classes by name."""
+def make_scene(task: Task | str | Path, trial_seed: int | None = None, attempt: int = 0) -> Scene:
+    """The scene of ``task`` (a :class:`~sctd.task.Task`, or a task's name or file, see
+    :func:`sctd.task.find_task`; ``empty`` for no objects); with ``trial_seed``, a
+    seeded random start (:func:`randomize`; ``attempt`` draws another one for the same
+    seed, for a start the arm cannot reach).
 
-
-def make_scene(name: str, trial_seed: int | None = None, attempt: int = 0) -> Scene:
-    """Scene by name (``pour``, ``drawer``, ``empty``); with ``trial_seed``, a seeded
-    random start (:func:`randomize`; ``attempt`` draws another one for the same seed,
-    for a start the arm cannot reach)."""
-    try:
-        scene = SCENES[name]()
-    except KeyError:
-        raise ValueError(f"scene: unknown {name!r}, expected one of {sorted(SCENES)}") from None
+    Raises
+    ------
+    sctd.task.TaskError
+        An unknown task, or a task file that does not validate.
+    """
+    if isinstance(task, str) and task == EmptyScene.name:
+        return EmptyScene()
+    scene = TaskScene(task if isinstance(task, Task) else find_task(task))
     if trial_seed is not None:
         randomize(scene, trial_seed, attempt)
     return scene
 
 
-START_OFFSET = 0.10  # m: the hand starts within this of the scene's start, per axis
-START_YAW = np.radians(15.0)  # rad: and within this of its start orientation's yaw
-OBJECT_OFFSET = 0.05  # m: the task object stands within this of its default, per axis
-
-
 def randomize(scene: Scene, seed: int, attempt: int = 0) -> None:
-    """A seeded random start for an evaluation trial: the hand within +-START_OFFSET
-    (each axis) and +-START_YAW of the scene's start, the task object within
-    +-OBJECT_OFFSET of its default (on the table: horizontally for the mug)."""
-    rng = np.random.default_rng([seed, attempt] if attempt else seed)
-    P = getattr(scene, "params", None)
-    if P is None:
+    """A seeded random start for an evaluation trial, as the task file's ``vary``
+    fields say: the hand's start position (each axis) and yaw, then each body's
+    position (and yaw), in the file's order."""
+    if not isinstance(scene, TaskScene):
         return
+    rng = np.random.default_rng([seed, attempt] if attempt else seed)
+    sc = scene.task.scene
     scene.default_start_pose = scene.start_pose()  # type: ignore[attr-defined]  # (start_posture's via)
-    P.start_position = P.start_position + rng.uniform(-START_OFFSET, START_OFFSET, 3)
-    P.start_yaw = float(rng.uniform(-START_YAW, START_YAW))
-    shift = rng.uniform(-OBJECT_OFFSET, OBJECT_OFFSET, 3)
-    if isinstance(P, PourParams):
-        shift[2] = 0.0  # the mug stands on the table
-        P.T_world_mug = P.T_world_mug.copy()
-        P.T_world_mug[:3, 3] += shift
-    elif isinstance(P, DrawerParams):
-        P.T_world_closed = P.T_world_closed.copy()
-        P.T_world_closed[:3, 3] += shift
+    v = sc.start.vary
+    scene.start_position = scene.start_position + rng.uniform(-v.position, v.position)
+    scene.start_yaw = float(rng.uniform(-v.yaw, v.yaw))
+    for name, body in sc.bodies.items():
+        if not (np.any(body.vary.position) or body.vary.yaw):
+            continue
+        T = scene.poses[name].copy()
+        T[:3, 3] += rng.uniform(-body.vary.position, body.vary.position)
+        if body.vary.yaw:
+            yaw = float(rng.uniform(-body.vary.yaw, body.vary.yaw))
+            T[:3, :3] = se3.matrix_from_rotvec([0.0, 0.0, yaw]) @ T[:3, :3]
+        scene.poses[name] = T
     scene.reset()

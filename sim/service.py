@@ -27,7 +27,7 @@ behind wall time. Both are counted in the scene message (``overruns``, ``skipped
 ``behind_s``, ``rtf``), and the first time the simulator cannot keep up a warning
 goes to stderr: it never drifts silently.
 
-    python -m sctd_sim.service --scene pour --connect tcp/127.0.0.1:7447
+    python -m sctd_sim.service --task pour --connect tcp/127.0.0.1:7447
 """
 
 from __future__ import annotations
@@ -51,6 +51,7 @@ import zenoh
 
 from sctd import se3
 from sctd.app.errors import fail
+from sctd.task import Task, TaskError, find_task
 from sctd.timing import Histogram, Ticker, set_timer_slack
 from sctd.wire import DEFAULT_ROBOT, Keys, codec
 from sctd.wire.ros_options import check_ros_arguments
@@ -437,6 +438,7 @@ class SimService:
 class _Settings(NamedTuple):
     """What :func:`run` takes from the flags, checked."""
 
+    task: Task
     faults: FaultConfig | None
     limits: TargetLimits
     channel: str | None
@@ -452,6 +454,10 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
         A bad flag, with the message ``sctd sim`` prints.
     """
     faults = parse_faults(args.faults) if args.faults else None
+    try:
+        task = find_task(args.task)
+    except TaskError as e:
+        raise ValueError(f"--task: {e}") from None
     Keys(args.robot)
     check_ros_arguments(args)
     if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
@@ -460,7 +466,7 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
     if not 0 <= args.view_port <= 65535:
         raise ValueError(f"--view-port: not a TCP port: {args.view_port}")
     channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
-    return _Settings(faults, limits, channel, bus_factory)
+    return _Settings(task, faults, limits, channel, bus_factory)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -503,9 +509,9 @@ def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Set
     from .simulation import Simulation, trial_scene
 
     if args.trial_seed is not None:
-        scene, q0 = trial_scene(args.scene, args.trial_seed)
+        scene, q0 = trial_scene(settings.task, args.trial_seed)
     else:
-        scene, q0 = make_scene(args.scene), None
+        scene, q0 = make_scene(settings.task), None
     sim = stack.enter_context(Simulation(
         scene=scene, q0=q0, rate=args.rate, faults=settings.faults, channel=settings.channel,
         bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout))
@@ -526,7 +532,7 @@ def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Set
     # scans it (with the view, ~40 ms and the cycles skipped otherwise).
     gc.collect()
     gc.freeze()
-    print(f"sctd sim: scene {args.scene} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
+    print(f"sctd sim: scene {scene.name} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
           f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
           file=sys.stderr, flush=True)
     service.run(stop, args.duration)

@@ -21,6 +21,7 @@ import can
 import numpy as np
 
 from sctd import se3
+from sctd.task import Task
 
 from .arm import SimArm
 from .canbus import FaultConfig
@@ -184,14 +185,14 @@ class Simulation:
         self.close()
 
 
-def trial_scene(name: str, seed: int, arm: ArmModel | None = None, attempts: int = 50
+def trial_scene(task: Task | str, seed: int, arm: ArmModel | None = None, attempts: int = 50
                 ) -> tuple[Scene, np.ndarray]:
     """The scene of evaluation trial ``seed`` and the arm's start posture: the seeded
     random start (:func:`~sctd_sim.scenes.randomize`), drawn again (deterministically)
     while the arm cannot reach it, so every run of trial ``seed`` starts the same."""
     model = arm or load_arm_model()
     for attempt in range(attempts):
-        scene = make_scene(name, trial_seed=seed, attempt=attempt)
+        scene = make_scene(task, trial_seed=seed, attempt=attempt)
         try:
             return scene, start_posture(model, scene.start_pose(), getattr(scene, "default_start_pose", None))
         except RuntimeError:

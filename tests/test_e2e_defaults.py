@@ -51,4 +51,4 @@ def test_demo_runs_the_pour_skill_end_to_end(tmp_path):
     # mug and pours with the hand-written skill
     assert "state - -> carry" in out and "carry -> approach" in out and "approach -> pour" in out, out
     assert "input -> target latency" in out and "tick lateness" in out
-    assert "task outcome (sim): poured" in out, out  # the Pinocchio scene reported back
+    assert "task outcome (sim): pour done" in out and "bottle.poured" in out, out  # the scene reported back

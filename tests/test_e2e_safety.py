@@ -102,7 +102,7 @@ def test_restarted_sim_is_not_moved_by_the_runtime(tmp_path):
     session = open_session(listen=[hub])
 
     def start_sim(log: str) -> Proc:
-        return sctd("sim", "--scene", "pour", "--connect", hub, "--listen",
+        return sctd("sim", "--task", "pour", "--connect", hub, "--listen",
                     f"tcp/127.0.0.1:{free_port()}", log=tmp_path / log)
 
     sim = start_sim("sim1.log")
@@ -362,7 +362,7 @@ def test_only_the_skills_objects_are_subscribed(tmp_path):
 
 def test_sim_refuses_a_target_far_from_the_arm(tmp_path):
     port = free_port()
-    sim = sctd("sim", "--scene", "pour", "--listen", f"tcp/127.0.0.1:{port}", log=tmp_path / "sim.log")
+    sim = sctd("sim", "--task", "pour", "--listen", f"tcp/127.0.0.1:{port}", log=tmp_path / "sim.log")
     session = open_session(connect=[f"tcp/127.0.0.1:{port}"])
     lis = Listener(session)
     pub = session.declare_publisher(KEYS.target)

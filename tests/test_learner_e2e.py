@@ -91,7 +91,7 @@ def loop(tmp_path, monkeypatch):
     monkeypatch.setenv("SCTD_STORE", str(store))
     learner_args = ("learner", "--store", str(store), "--trials", "2", "--jobs", "2", "--floor", "0.5",
                     "--connect", ep)
-    procs = {"sim": sctd("sim", "--scene", "drawer", "--listen", ep, log=tmp_path / "sim.log"),
+    procs = {"sim": sctd("sim", "--task", "drawer", "--listen", ep, log=tmp_path / "sim.log"),
              "run": sctd("run", "--skill", "drawer", "--connect", ep, log=tmp_path / "run.log"),
              "learner": sctd(*learner_args, log=tmp_path / "learner.log")}
     session = open_session(connect=[ep])

@@ -135,7 +135,7 @@ def test_record_until_sigint_against_a_fake_robot(tmp_path):
 def test_record_from_the_sim_with_the_announced_task_object(tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    sim = sctd("sim", "--scene", "pour", "--listen", ep, log=tmp_path / "sim.log")
+    sim = sctd("sim", "--task", "pour", "--listen", ep, log=tmp_path / "sim.log")
     published: list[str] = []
     watch = open_session(connect=[ep])
     watch.declare_subscriber(KEYS.demos(), lambda m: published.append(str(m.key_expr)))

@@ -288,7 +288,7 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
 @pytest.mark.slow
 def test_sim_publishes_its_ee_pose_as_the_state_pose(tmp_path):
     port = free_port()
-    sim = sctd("sim", "--scene", "pour", "--listen", f"tcp/127.0.0.1:{port}", "--ros",
+    sim = sctd("sim", "--task", "pour", "--listen", f"tcp/127.0.0.1:{port}", "--ros",
                "--ros-namespace", "/lab/sctd", "--ros-domain", "4", log=tmp_path / "sim.log")
     session = open_session(connect=[f"tcp/127.0.0.1:{port}"])
     states: dict[float, list[float]] = {}

@@ -69,7 +69,7 @@ def test_two_buses_talk_over_zenoh():
 def test_can_logger_watches_a_running_sim_and_frames_reach_its_bus(tmp_path):
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    sim = sctd("sim", "--scene", "pour", "--listen", ep, log=tmp_path / "sim.log")
+    sim = sctd("sim", "--task", "pour", "--listen", ep, log=tmp_path / "sim.log")
     logger = None
     try:
         with open_session(connect=[ep]) as s:

@@ -71,7 +71,7 @@ def test_parse_faults():
 
 @pytest.mark.slow
 def test_sim_publishes_follows_targets_and_counts_malformed_ones(tmp_path):
-    proc, port = start_sim(tmp_path, "--scene", "pour")
+    proc, port = start_sim(tmp_path, "--task", "pour")
     try:
         with open_session(connect=[f"tcp/127.0.0.1:{port}"]) as s:
             w = Watcher(s)
@@ -92,12 +92,14 @@ def test_sim_publishes_follows_targets_and_counts_malformed_ones(tmp_path):
             assert w.get("objects/bottle_tip") is not None
             scene = w.get("scene")
             assert scene["scene"] == "pour" and scene["task_object"] == "mug"
-            for k in ("stamp", "t", "tilt", "tip_above_rim", "spilled", "poured", "holding",
-                      "rtf", "overruns", "skipped", "behind_s", "cycles", "link", "dropped"):
+            for k in ("stamp", "t", "tilt", "above_rim", "spilled", "poured", "holding", "done",
+                      "success", "progress", "readings", "thresholds", "rtf", "overruns", "skipped",
+                      "behind_s", "cycles", "link", "dropped"):
                 assert k in scene, k
             assert scene["holding"] and scene["link"]["controller_rx"]["corrupted"] == 0
             # start posture: bottle upright, tip about 0.3 m from the mug's opening
-            assert scene["tilt"] < 0.05 and 0.2 < math.dist(scene["tip_in_mug"], [0, 0, 0]) < 0.45
+            assert scene["tilt"] < 0.05 and 0.2 < math.dist(scene["outlet_in_container"], [0, 0, 0]) < 0.45
+            assert scene["thresholds"] == {"bottle.poured": 0.5} and not scene["done"]
             assert 0.2 < math.dist(st.pose[:3], mug[:3]) < 0.5
 
             # malformed targets: dropped, counted by reason, the arm keeps holding
@@ -191,7 +193,7 @@ def test_socketcan_bus_is_optional_and_refused_clearly_when_absent(tmp_path):
     assert can_bus_choice("auto", name) == (None, None)
     with pytest.raises(ValueError, match="no network interface 'sctdnone0'"):
         can_bus_choice("socketcan", name)
-    proc = sctd("sim", "--scene", "pour", "--can-interface", "socketcan", "--can-channel", name,
+    proc = sctd("sim", "--task", "pour", "--can-interface", "socketcan", "--can-channel", name,
                 "--listen", f"tcp/127.0.0.1:{free_port()}", log=tmp_path / "sim.log")
     assert proc.p.wait(60) == 2
     assert "no network interface 'sctdnone0'" in proc.output()
@@ -231,7 +233,7 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
     """`sim/reset`: a malformed request (not a map, a mistyped field, another scene's)
     gets an error reply and changes nothing; a valid one puts the scene's task state back
     (the spilled bottle full again) and replies {ok, scene, t}; the arm stays put."""
-    proc, port = start_sim(tmp_path, "--scene", "pour")
+    proc, port = start_sim(tmp_path, "--task", "pour")
     try:
         with open_session(connect=[f"tcp/127.0.0.1:{port}"]) as s:
             w = Watcher(s)

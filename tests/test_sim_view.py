@@ -186,7 +186,7 @@ def test_sctd_sim_view_prints_its_url_serves_the_moving_arm_and_stops_cleanly(tm
     """`sctd sim --scene pour --view`: the URL is printed, the page answers on 127.0.0.1
     only, the scene follows the arm driven over Zenoh, and SIGTERM stops it all."""
     zport = free_port()
-    proc = sctd("sim", "--scene", "pour", "--view", "--listen", f"tcp/127.0.0.1:{zport}",
+    proc = sctd("sim", "--task", "pour", "--view", "--listen", f"tcp/127.0.0.1:{zport}",
                 log=tmp_path / "sim.log")
     try:
         m = wait_for(lambda: URL.search(proc.output()), 60)
@@ -237,7 +237,7 @@ def test_view_port_option_and_sigint(tmp_path):
     """`--view-port P` serves on exactly 127.0.0.1:P; a second sim asking for P is refused
     (exit 2); SIGINT stops the first one cleanly and frees P."""
     port = free_port()
-    args = ("--scene", "pour", "--view", "--view-port", str(port))
+    args = ("--task", "pour", "--view", "--view-port", str(port))
     proc = Proc("sctd_sim.service", *args, "--listen", f"tcp/127.0.0.1:{free_port()}",
                 log=tmp_path / "sim.log")
     try:

@@ -7,14 +7,16 @@ the command line and the benches all take them from here; the pure core (``se3``
 from .errors import EXIT_CODES, EXIT_FAILED, EXIT_FORCED, EXIT_OK, EXIT_USAGE, Parser, fail
 from .options import (
     SKILL_HELP,
+    TASK_HELP,
     add_arguments,
     add_robot_argument,
+    add_task_argument,
     add_zenoh_arguments,
     check_ranges,
     flag_name,
     from_namespace,
 )
 
-__all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_FORCED", "EXIT_OK", "EXIT_USAGE", "SKILL_HELP", "Parser",
-           "add_arguments", "add_robot_argument", "add_zenoh_arguments", "check_ranges", "fail",
-           "flag_name", "from_namespace"]
+__all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_FORCED", "EXIT_OK", "EXIT_USAGE", "SKILL_HELP", "TASK_HELP",
+           "Parser", "add_arguments", "add_robot_argument", "add_task_argument", "add_zenoh_arguments",
+           "check_ranges", "fail", "flag_name", "from_namespace"]

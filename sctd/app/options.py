@@ -35,8 +35,8 @@ from typing import Any, TypeVar
 from ..wire import DEFAULT_ROBOT
 from ..wire.session import add_zenoh_arguments
 
-__all__ = ["SKILL_HELP", "add_arguments", "add_robot_argument", "add_zenoh_arguments", "check_ranges",
-           "flag_name", "from_namespace"]
+__all__ = ["SKILL_HELP", "TASK_HELP", "add_arguments", "add_robot_argument", "add_task_argument",
+           "add_zenoh_arguments", "check_ranges", "flag_name", "from_namespace"]
 
 T = TypeVar("T")
 
@@ -138,3 +138,33 @@ def add_robot_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup
     for a program that otherwise takes the name from elsewhere (a log's keys)."""
     parser.add_argument("--robot", default=default, metavar="NAME",
                         help=help or "the robot's name, the key prefix sctd/<robot> (default %(default)s)")
+
+
+TASK_HELP = ("a task: the path of a task file, or the name of a shipped or registered one (pour, "
+             "drawer); sctd tasks lists them")
+
+
+class _DeprecatedAlias(argparse.Action):
+    """Sets the destination like the flag it stands for, and says it is deprecated."""
+
+    def __init__(self, option_strings: list[str], dest: str, instead: str = "", **kwargs: Any):
+        self.instead = instead
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        import sys
+
+        print(f"{parser.prog}: {option_string} is deprecated (it goes in the next release): use "
+              f"{self.instead}", file=sys.stderr, flush=True)
+        setattr(namespace, self.dest, values)
+
+
+def add_task_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
+                      default: str | None = "pour", help: str | None = None) -> None:
+    """``--task NAME|FILE`` (:func:`sctd.task.find_task` resolves it), and ``--scene``, its
+    deprecated alias of the previous release, which says so on stderr."""
+    parser.add_argument("--task", default=default, metavar="NAME|FILE",
+                        help=(help or TASK_HELP) + (" (default %(default)s)" if default else ""))
+    parser.add_argument("--scene", dest="task", action=_DeprecatedAlias, instead="--task",
+                        help=argparse.SUPPRESS)

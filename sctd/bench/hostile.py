@@ -256,7 +256,7 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
             status.append(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
 
     with session(listen=[hub]) as s, \
-            Child("sctd.cli.main", "sim", "--scene", "pour", "--connect", hub, "--listen",
+            Child("sctd.cli.main", "sim", "--task", "pour", "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
             Child("sctd.cli.main", "run", "--skill", "pour", "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "daemon.log"), \

@@ -159,7 +159,7 @@ def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds
     ep = f"tcp/127.0.0.1:{free_port()}"
     with Child("sctd.cli.main", "run", "--skill", "pour", "--listen", ep, "--rate", str(rate),
                log=logdir / "daemon.log") as daemon, \
-         Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd_sim.kinematic", "--task", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         wait_for_targets(ep, daemon, logdir)
         pad = gamepad_events(ep, bridge_rate, seconds)

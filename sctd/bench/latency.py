@@ -182,7 +182,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
     with Child("sctd.cli.main", "run", "--skill", skill, "--listen", ep, "--rate", str(rate),
                "--rt-priority", str(rt_priority), "--stats-json", *pin,
                log=logdir / "daemon.log") as daemon, \
-         Child("sctd_sim.kinematic", "--scene", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd_sim.kinematic", "--task", "pour", "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         wait_for_targets(ep, daemon, logdir)
         probe = Child("sctd.bench.latency", "probe", "--connect", ep, "--rate", str(input_rate),

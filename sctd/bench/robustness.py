@@ -401,7 +401,7 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
     hub = f"tcp/127.0.0.1:{free_port()}"
     out: dict[str, Any] = {"seconds_per_phase": seconds}
     with session(listen=[hub]) as s, \
-            Child("sctd.cli.main", "sim", "--scene", "pour", "--connect", hub, "--listen",
+            Child("sctd.cli.main", "sim", "--task", "pour", "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
             Child("sctd.cli.main", "run", "--skill", str(skills / "pour.yaml"), "--connect", hub,
                   "--listen", f"tcp/127.0.0.1:{free_port()}", "--stats-json",

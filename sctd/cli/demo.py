@@ -21,21 +21,22 @@ import zenoh
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.logs import log_folder
-from ..app.options import SKILL_HELP
+from ..app.options import SKILL_HELP, TASK_HELP
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
+from ..task import TaskError, find_task, task_for_object
 from ..wire import Keys, codec
 from ..wire.session import session as zsession
 from .procs import Child, free_port
 
-TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
 ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
 
 
 def add_demo_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", default="pour", help=SKILL_HELP + " (default %(default)s)")
-    p.add_argument("--task", choices=sorted(set(TASK_OF_OBJECT.values())),
-                   help="what the simulated user tries to do (default: from the skill's object)")
+    p.add_argument("--task", metavar="NAME|FILE",
+                   help="what the simulated user tries to do: " + TASK_HELP + " (default: the task whose "
+                        "object is the skill's)")
     p.add_argument("--seconds", type=float, default=40.0,
                    help="the longest the user drives; it stops when it has done the task "
                         "(default %(default)s)")
@@ -108,7 +109,7 @@ def _drive(args: argparse.Namespace, task: str, ep: str, logdir: Path) -> tuple[
     user's report (None when it did not get one) and the last scene message."""
     with Child("sctd.cli.main", "run", "--skill", args.skill, "--listen", ep, "--rate", str(args.rate),
                "--stats-json", log=logdir / "daemon.log") as daemon, \
-            Child(ROBOTS[args.robot_backend], "--scene", task, "--connect", ep,
+            Child(ROBOTS[args.robot_backend], "--task", task, "--connect", ep,
                   log=logdir / "robot.log") as robot, \
             zsession(connect=[ep]) as session, \
             _Watch(session, Keys("edan")) as watch:
@@ -143,13 +144,10 @@ def _print_outcome(skill: Skill, rate: float, report: dict, scene: dict) -> None
           f"compute: p50 {tc['p50']:.3f} ms, p99 {tc['p99']:.3f} ms")
     print(f"dropped messages: {stats['dropped'] or 'none'}; counters: {stats['counters']}")
     rtf = scene.get("rtf", float("nan"))
-    if scene.get("scene") == "pour":
-        print(f"task outcome (sim): poured {scene.get('poured', 0):.2f} of the bottle, spilled "
-              f"{scene.get('spilled_amount', 0):.2f}, success {scene.get('success')}; "
-              f"sim real-time factor {rtf:.2f}")
-    elif scene.get("scene") == "drawer":
-        print(f"task outcome (sim): drawer open {scene.get('opening', 0):.3f} m, success "
-              f"{scene.get('success')}; sim real-time factor {rtf:.2f}")
+    readings = ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}"
+                         for k, v in (scene.get("readings") or {}).items())
+    print(f"task outcome (sim): {scene.get('scene')} done {scene.get('done')}, success {scene.get('success')}"
+          f" ({readings}); sim real-time factor {rtf:.2f}")
 
 
 def main_demo(args: argparse.Namespace) -> int:
@@ -158,9 +156,14 @@ def main_demo(args: argparse.Namespace) -> int:
         skill = load_skill(args.skill)
     except SkillError as e:
         return fail("demo", str(e))
-    task = args.task or TASK_OF_OBJECT.get(skill.object)
-    if task is None:
-        return fail("demo", f"{args.skill}: object: no scene for object {skill.object!r}; pass --task")
+    try:
+        found = find_task(args.task) if args.task else task_for_object(skill.object)
+    except TaskError as e:
+        return fail("demo", f"--task: {e}")
+    if found is None:
+        return fail("demo", f"{args.skill}: object: no task has the object {skill.object!r}; pass --task "
+                            "(sctd tasks lists them)")
+    task = found.name
     logdir = log_folder(args.logs, "sctd-demo-")
     ep = f"tcp/127.0.0.1:{free_port()}"
     print(f"sctd demo: skill {skill.name}@{skill.id} ({args.skill}), task {task}, "

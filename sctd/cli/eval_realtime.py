@@ -32,7 +32,7 @@ from sctd.wire import Keys, codec
 from sctd.wire.session import session
 from sctd_services.eval.evaluate import read_demo_poses
 from sctd_services.eval.trial import TaskSpec, TrialRecorder, TrialResult
-from sctd_services.simulated_user import OBJECTS
+from sctd_services.simulated_user import task_frames
 from sctd_services.user import PROFILES, Observation
 
 from .procs import Child, free_port
@@ -63,7 +63,8 @@ class _Watcher:
         self.subs = [s.declare_subscriber(key, cb) for key, cb in (
             (k.state, self._state), (k.scene, self._scene), (k.target, self._target),
             (k.input("*"), self._input), (k.status, self._status))]
-        self.subs += [s.declare_subscriber(k.objects(n), self._object) for n in OBJECTS[task]]
+        self.frames = task_frames(task)
+        self.subs += [s.declare_subscriber(k.objects(n), self._object) for n in self.frames]
 
     def _state(self, sample: zenoh.Sample) -> None:
         try:
@@ -117,7 +118,7 @@ class _Watcher:
 
     def observation(self, task: str) -> Observation | None:
         if (self.T_world_ee is None or self.mode is None or "t" not in self.scene
-                or any(n not in self.objects for n in OBJECTS[task])):
+                or any(n not in self.objects for n in self.frames)):
             return None
         return Observation(self.sim_time(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode)
 
@@ -143,7 +144,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
         w = _Watcher(s, spec.task)
         try:
-            with Child("sctd.cli.main", "sim", "--scene", spec.task, "--trial-seed", str(seed),
+            with Child("sctd.cli.main", "sim", "--task", spec.task, "--trial-seed", str(seed),
                        "--connect", hub, "--listen", ep(), log=logdir / f"sim-{seed}.log") as sim, \
                     Child("sctd.cli.main", "run", "--skill", str(skill_path), "--connect", hub,
                           "--listen", ep(), log=logdir / f"daemon-{seed}.log") as daemon:

@@ -91,6 +91,8 @@ COMMANDS: dict[str, Command] = {
     "skills": Command("list the skills --skill NAME finds (stored and shipped); skills show NAME "
                       "inspects one, skills swap ID puts a stored one back into the daemon",
                       "sctd.cli.skills", "add_skills_arguments", "main_skills"),
+    "tasks": Command("list the tasks --task NAME finds (shipped and registered); tasks show NAME|FILE "
+                     "checks and shows one", "sctd.cli.tasks", "add_tasks_arguments", "main_tasks"),
     "demo": Command("run a skill end to end on this machine (daemon, robot, user)", "sctd.cli.demo",
                     "add_demo_arguments", "main_demo"),
     "learn": Command("learn a skill from a folder of demonstrations", "sctd.cli.learn",

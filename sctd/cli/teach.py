@@ -118,7 +118,7 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
         args.sim_log = logdir / "sim.log"
         ep = f"tcp/127.0.0.1:{free_port()}"
         args.child_zenoh = ["--connect", ep]  # how the learner and the daemon join it
-        stack.enter_context(Child("sctd_sim.service", "--scene", options.scene, "--robot",
+        stack.enter_context(Child("sctd_sim.service", "--task", options.scene, "--robot",
                                   options.robot, "--listen", ep, log=args.sim_log))
         s = stack.enter_context(session(args.listen, [ep]))
         print(f"sctd teach: {options.scene} on a simulator started at {ep} (log {args.sim_log})",

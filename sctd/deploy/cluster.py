@@ -166,7 +166,7 @@ class Cluster:
                                  str(self.logdir / "store"), *self.zenoh_args("learner"), log="learner.log")
 
     def start_robot(self, *extra: str) -> Process:
-        return self.hosts.python("robot", "sctd_sim.service", "--scene", "pour", *extra,
+        return self.hosts.python("robot", "sctd_sim.service", "--task", "pour", *extra,
                                  *self.zenoh_args("robot"), log="robot.log")
 
     def start_runtime(self, skill: str = "pour", *extra: str) -> Process:

@@ -23,12 +23,12 @@ from sctd.files import parse_yaml
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
 from sctd.skill.catalog import shipped_folder
+from sctd.task import task_for_object
 from sctd_services.user import PROFILES
 
 from .lockstep import run_trial
 from .trial import TaskSpec, TrialResult
 
-TASK_OF_OBJECT = {"mug": "pour", "drawer_handle": "drawer"}
 TELEOP = shipped_folder() / "teleop.yaml"  # the unassisted baseline, always the shipped one
 
 
@@ -44,13 +44,17 @@ class Entry:
 
 
 def task_of(skills: list[Skill], task: str | None) -> str:
-    """The task: given, or the one every skill's object implies."""
+    """The task: given, or the one known task whose task object every skill's object is
+    (:func:`sctd.task.task_for_object`)."""
     if task is not None:
         return task
-    tasks = {TASK_OF_OBJECT.get(s.object) for s in skills if s.object != WORLD_OBJECT}
-    if len(tasks) != 1 or None in tasks:
-        raise ValueError("cannot tell the task from the skills' objects; pass --task pour|drawer")
-    return tasks.pop()  # type: ignore[return-value]
+    objects = {s.object for s in skills if s.object != WORLD_OBJECT}
+    found = task_for_object(next(iter(objects))) if len(objects) == 1 else None
+    if found is None:
+        named = ", ".join(sorted(objects)) or "none"
+        raise ValueError(f"cannot tell the task from the skills' objects ({named}); pass --task NAME|FILE "
+                         "(sctd tasks lists them)")
+    return found.name
 
 
 def with_limits(path: Path, limits: Limits, directory: Path) -> Path:

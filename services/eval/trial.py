@@ -4,15 +4,17 @@ The same :class:`TrialRecorder` judges lockstep and real-time trials: it is fed 
 the evaluator sees (the hand's pose, the objects, the scene's outcome, the mode, the
 user's input) and decides the outcome:
 
-- **success**: the scene's ``success`` (pour: the fill target reached without a drop
-  spilled, once the bottle stops pouring; drawer: opened to the target);
-- **failure**: a spill, the drawer's handle lost while pulling it, or the time limit;
+- **success** or **failure** once the task file's ``done`` holds (the scene reports
+  it), by its ``success`` (pour: the fill target reached and the bottle no longer
+  pouring, without a drop spilled; drawer: opened to the target);
+- **failure** as soon as one of the task's ``fail`` rules holds (a spill, the drawer's
+  handle lost while pulling it), or at the time limit;
 - **stuck**: no progress towards the task's intent for ``stuck_after`` seconds (an
   observer of its own, the same intent code the simulated user runs, watches it).
 
-Completion times use the thesis' clocks (Ch. 5.2, 5.3): pour, from the bottle opening
-coming within 35 cm of the mug to the end of pouring; drawer, from the hand coming
-within 20 cm of the handle to the drawer open.
+Completion times use the task's clock (the thesis' clocks, Ch. 5.2, 5.3, in the shipped
+files: from the bottle opening within 35 cm of the mug, from the hand within 20 cm of
+the handle) to the task done.
 """
 
 from __future__ import annotations
@@ -25,12 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import find_task
+from sctd.task.judge import holds
 from sctd_services.user.agent import REPROBE_AFTER
 from sctd_services.user.intent import Observation, make_intent
 
 Array = NDArray[np.float64]
-START_DISTANCE = {"pour": 0.35, "drawer": 0.20}  # m, the thesis' clocks
-TASK_OBJECT = {"pour": "mug", "drawer": "drawer_handle"}
 
 
 @dataclass(frozen=True)
@@ -56,7 +58,7 @@ class TrialResult:
     time_s: float | None  # the thesis' clock; None when the task never started or ended
     duration_s: float  # from the trial's start to its end
     spill: float
-    progress: float  # poured fraction or drawer opening (m)
+    progress: float  # the task's progress reading (the poured fraction, the drawer's opening)
     mode_switches: int
     switch_time_s: float
     effort: float  # integral of |u| over the trial
@@ -81,6 +83,7 @@ class TrialRecorder:
     Parameters
     ----------
     task : str
+        A task's name or file (:func:`sctd.task.find_task`).
     seed : int
     switch_time : float
         Seconds one mode switch costs the user (charged per press of button 0).
@@ -93,6 +96,7 @@ class TrialRecorder:
     def __init__(self, task: str, seed: int, switch_time: float, time_limit: float = 60.0,
                  stuck_after: float = 10.0, record_every: float = 0.02):
         self.task = task
+        self.spec = find_task(task)  # what ends the trial, its clock and its progress
         self.seed = seed
         self.switch_time = switch_time
         self.time_limit = time_limit
@@ -115,10 +119,9 @@ class TrialRecorder:
         self.series: dict[str, list[Any]] = {"t": [], "vf_scale": [], "membership": []}
         self.outcome: str | None = None
         self.reason = ""
-        self._attached_once = False
         self._scene: dict[str, Any] = {}
         self.phase_s: dict[str, float] = {}
-        self._done_part = 0.0  # the most poured (fraction) or opened (m) so far
+        self._done_part = 0.0  # the most progress (the task's reading) so far
         self._obj_key = b""  # the task object's pose (bytes) _T_obj_world inverts
         self._T_obj_world = np.eye(4)
 
@@ -133,13 +136,11 @@ class TrialRecorder:
             self.t0 = self.t_best = t
         self._account(t, u, buttons)
         self._scene = obs.scene
-        T_obj = obs.objects[TASK_OBJECT[self.task]]
+        T_obj = obs.objects[self.spec.object]
         self._record(t, T_obj, obs.T_world_ee, vf_scale, membership)
-        if self.t_task is None:  # the thesis' clock starts
-            ref = obs.objects["bottle_tip"][:3, 3] if self.task == "pour" else obs.T_world_ee[:3, 3]
-            if float(np.linalg.norm(ref - T_obj[:3, 3])) < START_DISTANCE[self.task]:
-                self.t_task = t
-        return self._progress(obs) or self._outcome(obs.scene, t)
+        if self.t_task is None and holds(self.spec.outcome.clock, _readings(obs.scene), _positions(obs)):
+            self.t_task = t  # the task's clock starts
+        return self._progress(obs) or self._outcome(obs, t)
 
     def _account(self, t: float, u: tuple[float, ...] | list[float], buttons: tuple[int, ...]) -> None:
         """Effort, time per phase and mode switches (presses of button 0) up to ``t``."""
@@ -178,7 +179,7 @@ class TrialRecorder:
             # while counts as reached (progress is then measured towards the next one)
             self.observer.settle()
             d = self.observer.desire(obs, steer=False)
-        done_part = float(obs.scene.get("poured" if self.task == "pour" else "opening", 0.0))
+        done_part = float(obs.scene.get("progress", 0.0))
         if d.phase != self._phase:  # a new sub-goal: progress is measured towards it
             self._phase, self.best, self.t_best = d.phase, d.error, t
         elif d.error < self.best - 0.005 or done_part > self._done_part + 0.005:
@@ -191,20 +192,20 @@ class TrialRecorder:
             return self._end("stuck", f"no progress for {self.stuck_after:.0f} s ({d.phase})", t)
         return None
 
-    def _outcome(self, scene: dict[str, Any], t: float) -> str | None:
-        """The task's outcome from the scene, or the time limit; None while it goes on."""
-        if self.task == "pour":
-            if scene.get("spilled_amount", 0.0) > 1e-9:
-                return self._end("failure", "spilled", t)
-            if scene.get("poured", 0.0) >= scene.get("fill_target", 0.5) and not scene.get("pouring", False):
-                return self._end("success" if scene.get("success") else "failure", "poured", t)
-        else:
-            if scene.get("attached"):
-                self._attached_once = True
-            elif self._attached_once and scene.get("opening", 0.0) > 0.01 and not scene.get("success"):
-                return self._end("failure", "handle lost while pulling", t)
+    def _outcome(self, obs: Observation, t: float) -> str | None:
+        """The task's outcome (its file's ``done``, ``success`` and ``fail`` rules, on what
+        the scene reports), or the time limit; None while it goes on. A task done on the
+        tick a fail rule fires is judged by ``success``, with the rule's reason when that
+        is a failure."""
+        o, scene = self.spec.outcome, obs.scene
+        readings, positions = _readings(scene), _positions(obs)
+        failed = next((f.reason for f in o.fail if holds(f.when, readings, positions)), None)
+        if scene.get("done"):
             if scene.get("success"):
-                return self._end("success", "opened", t)
+                return self._end("success", o.done_reason, t)
+            return self._end("failure", failed or o.done_reason, t)
+        if failed is not None:
+            return self._end("failure", failed, t)
         assert self.t0 is not None
         if t - self.t0 > self.time_limit:
             return self._end("failure", f"time limit ({self.time_limit:.0f} s)", t)
@@ -219,7 +220,7 @@ class TrialRecorder:
 
     def result(self, demos: list[Array] | None = None) -> TrialResult:
         scene = self._scene
-        progress = scene.get("poured", 0.0) if self.task == "pour" else scene.get("opening", 0.0)
+        progress = scene.get("progress", 0.0)
         time_s = None
         if self.t_task is not None and self.t_end_task is not None:
             time_s = round(self.t_end_task - self.t_task, 3)
@@ -241,6 +242,18 @@ class TrialRecorder:
         end = ((self.t_end_task or self.t_stop) - (self.t0 or 0.0))
         rows = [r[1:] for r in self.trajectory if start <= r[0] <= end]
         return np.asarray(rows) if rows else np.zeros((0, 7))
+
+
+def _readings(scene: dict[str, Any]) -> dict[str, Any]:
+    r = scene.get("readings")
+    return r if isinstance(r, dict) else {}
+
+
+def _positions(obs: Observation) -> dict[str, Array]:
+    """World positions of the published frames and of the hand."""
+    out = {name: T[:3, 3] for name, T in obs.objects.items()}
+    out["hand"] = obs.T_world_ee[:3, 3]
+    return out
 
 
 def dtw_to_demos(poses: Array, demos: list[Array]) -> float | None:

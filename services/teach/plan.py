@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd_sim.scenes import DrawerParams, PourParams
+from sctd.task import find_task
 
 Array = NDArray[np.float64]
 
@@ -141,27 +141,22 @@ class SceneGeometry:
 
 
 def scene_geometry(task: str) -> SceneGeometry:
-    """The geometry of the simulator's scene ``task`` (``pour`` or ``drawer``), from
-    :mod:`sctd_sim.scenes`' defaults: the start pose relative to the task object does not
-    change when the object stands elsewhere.
+    """The geometry of the task ``task`` (a name or a file, :func:`sctd.task.find_task`),
+    from its file's defaults: the start pose relative to the task object does not change
+    when the object stands elsewhere. ``T_ee_tip`` is the held object's outlet (the frame
+    its contents flow out of), else the hand's own frame.
 
     Raises
     ------
-    ValueError
-        Unknown task.
+    sctd.task.TaskError
+        Unknown task, or a task file that does not validate.
     """
-    if task == "pour":
-        P = PourParams()
-        T_world_obj, T_ee_tip = P.T_world_mug, P.T_ee_tip
-        R_start = se3.matrix_from_rotvec([0.0, 0.0, P.start_yaw])
-    elif task == "drawer":
-        D = DrawerParams()
-        P, T_world_obj, T_ee_tip = D, D.T_world_closed, np.eye(4)
-        R_start = se3.matrix_from_rotvec([0.0, 0.0, D.start_yaw]) @ D.T_world_closed[:3, :3]
-    else:
-        raise ValueError(f"task: unknown {task!r}, expected one of {sorted(TASK_OBJECT)}")
-    T_world_start = se3.transform_from_rt(R_start, P.start_position)
-    return SceneGeometry(task, se3.invert_transform(T_world_obj) @ T_world_start, T_ee_tip.copy())
+    t = find_task(task)
+    T_world_obj = t.scene.bodies[t.object].T_world
+    held = t.scene.held
+    outlet = held is not None and held.contents is not None
+    T_ee_tip = held.frames[held.contents.outlet] if outlet else np.eye(4)  # type: ignore[union-attr]
+    return SceneGeometry(t.name, se3.invert_transform(T_world_obj) @ t.scene.start.T_world, T_ee_tip.copy())
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,101 @@
+"""``sctd tasks``: the tasks ``--task NAME`` finds (the shipped task files, then those
+other packages register), and ``sctd tasks show NAME|FILE``: one task's scene and how it
+is judged, checked as every command that takes ``--task`` checks it."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from ..app.errors import EXIT_FAILED, EXIT_OK, fail
+from ..app.options import TASK_HELP
+from ..task import Task, TaskError, find_task, known_tasks, load_task
+from ..task.judge import thresholds
+
+
+def add_tasks_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION")
+    show = sub.add_parser("show", help="one task: its scene, task object and outcome, validated",
+                          description="one task: its scene, task object and outcome, validated")
+    show.add_argument("task", metavar="NAME|FILE", help=TASK_HELP)
+    show.add_argument("--json", action="store_true", help="machine-readable output")
+    p.add_argument("--json", action="store_true", help="one JSON list on stdout")
+
+
+def summary(task: Task) -> dict[str, Any]:
+    """What ``sctd tasks show`` prints, as plain data."""
+    sc = task.scene
+    held = sc.held
+    return {
+        "name": task.name, "title": task.title, "description": task.description, "source": task.source,
+        "object": task.object, "file": task.file,
+        "bodies": {n: {"position": b.T_world[:3, 3].round(4).tolist(),
+                       "container": b.container is not None} for n, b in sc.bodies.items()},
+        "held": None if held is None else {
+            "name": held.name, "mass": held.mass, "frames": sorted(held.frames),
+            "contents": None if held.contents is None else {
+                "mass": held.contents.mass, "outlet": held.contents.outlet, "into": held.contents.into}},
+        "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel} for n, j in sc.joints.items()},
+        "frames": sc.frames(),
+        "thresholds": thresholds(task.outcome.done),
+        "done_reason": task.outcome.done_reason,
+        "fails": [f.reason for f in task.outcome.fail],
+        "progress": str(task.outcome.progress),
+        "time_limit": task.outcome.time_limit,
+    }
+
+
+def _rows() -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    for k in known_tasks():
+        try:
+            t = load_task(k.path)
+            rows.append({"name": k.name, "title": t.title, "object": t.object, "origin": k.origin,
+                         "path": str(k.path), "source": t.source})
+        except TaskError as e:  # listed with its problem: the others stay usable
+            rows.append({"name": k.name, "title": None, "object": None, "origin": k.origin,
+                         "path": str(k.path), "error": str(e)})
+    return rows
+
+
+def main_tasks(args: argparse.Namespace) -> int:
+    if args.action == "show":
+        try:
+            s = summary(find_task(args.task))
+        except TaskError as e:
+            return fail("tasks show", str(e))
+        if args.json:
+            print(json.dumps(s, indent=2))
+            return EXIT_OK
+        print(f"{s['name']}: {s['title']} ({s['file']})")
+        if s["description"]:
+            print(f"  {s['description']}")
+        if s["source"]:
+            print(f"  source: {s['source']}")
+        print(f"  task object: {s['object']}; frames: {', '.join(s['frames'])}")
+        if s["held"]:
+            h = s["held"]
+            contents = f", contents into {h['contents']['into']}" if h["contents"] else ""
+            print(f"  held: {h['name']} ({h['mass']} kg{contents})")
+        for n, j in s["joints"].items():
+            print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {j['travel']} m")
+        targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or "see the file"
+        print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
+              f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
+        return EXIT_OK
+    try:
+        rows = _rows()
+    except TaskError as e:  # a registered task whose entry point is broken
+        return fail("tasks", str(e), EXIT_FAILED)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return EXIT_OK
+    width = max((len(r["name"]) for r in rows), default=4)
+    for r in rows:
+        if "error" in r:
+            print(f"{r['name']:<{width}}  INVALID  {r['error']}")
+            continue
+        print(f"{r['name']:<{width}}  {r['title']:<24}  object {r['object']:<14}  {r['origin']:<8}  "
+              f"{r['path']}")
+    return EXIT_FAILED if any("error" in r for r in rows) else EXIT_OK

@@ -1,0 +1,13 @@
+"""Tasks as files: what the project knows of a daily-living task (its scene, how it is
+judged), read from a YAML file that names no skill (``docs/tasks.md``).
+
+:func:`find_task` resolves a name or a path (:mod:`.catalog`); :class:`Task` is what a
+file says (:mod:`.model`); :class:`TaskError` names the file, the field and the problem.
+"""
+
+from .catalog import find_task, known_tasks, load_task, shipped_folder, task_for_object
+from .model import Task
+from .reader import TaskError, task_from_document
+
+__all__ = ["Task", "TaskError", "find_task", "known_tasks", "load_task", "shipped_folder",
+           "task_for_object", "task_from_document"]

@@ -1,0 +1,348 @@
+"""What a task is, as its file says it (pure data; :mod:`.reader` builds it from YAML).
+
+A task knows nothing of any skill. It holds:
+
+- the **scene**: where the hand starts and how much that varies between trials; the
+  bodies standing in the world (each a frame, optionally a container whose opening is
+  at its origin); what the hand holds (mass, centre of mass, named frames such as a
+  bottle's opening, contents that flow out when it is tilted); joints (a prismatic
+  joint moving a handle the hand grasps);
+- the **task object**: the body whose frame demonstrations and skills are expressed in;
+- the **outcome**: predicates on the scene's readings (:class:`Reading`) saying when
+  the task is done, whether it then succeeded, what ends it early as a failure, what
+  counts as progress, when the completion clock starts, and the time limit.
+
+Every pose is in the world frame, the arm's base (x forward, z up), in metres and
+radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+VERSION = 1
+"""The ``sctd_task`` version this code reads."""
+
+
+# -- the scene ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Vary:
+    """How much a pose varies between trials (uniform, each way).
+
+    Attributes
+    ----------
+    position : ndarray, shape (3,)
+        m along each world axis.
+    yaw : float
+        rad about the world's vertical.
+    """
+
+    position: Array = field(default_factory=lambda: np.zeros(3))
+    yaw: float = 0.0
+
+
+@dataclass(frozen=True)
+class Container:
+    """A body that holds what is poured into it: its opening is the body's origin
+    (z up, the opening's plane its xy plane).
+
+    Attributes
+    ----------
+    radius : float
+        Inner radius of the opening, m.
+    depth : float
+        How deep it is below the opening, m.
+    rim_margin : float
+        A stream lands inside when it falls within ``radius - rim_margin`` of the axis.
+    max_drop : float
+        The highest above the opening a stream still lands inside from, m.
+    """
+
+    radius: float
+    depth: float
+    rim_margin: float = 0.005
+    max_drop: float = 0.15
+
+
+@dataclass(frozen=True)
+class Body:
+    """Something standing in the world.
+
+    Attributes
+    ----------
+    name : str
+        Its frame's name (published on ``sctd/<robot>/objects/<name>``).
+    T_world : ndarray, shape (4, 4)
+        Its default pose.
+    vary : Vary
+        How far a trial's pose is from the default.
+    container : Container or None
+    """
+
+    name: str
+    T_world: Array
+    vary: Vary = field(default_factory=Vary)
+    container: Container | None = None
+
+
+@dataclass(frozen=True)
+class Contents:
+    """What flows out of the held object when it is tilted.
+
+    Attributes
+    ----------
+    mass : float
+        kg when full.
+    outlet : str
+        The held object's frame it flows out of (its z axis: out of the opening).
+    into : str
+        The container body it is meant to go into; what misses it is spilled.
+    flow_angle : float
+        Tilt of the outlet's axis from the vertical past which it flows, rad.
+    flow_rate : float
+        Fraction of the full contents per second at 90 deg past ``flow_angle``; the flow
+        grows as the sine of the tilt past it.
+    """
+
+    mass: float
+    outlet: str
+    into: str
+    flow_angle: float
+    flow_rate: float
+
+
+@dataclass(frozen=True)
+class Held:
+    """The object the hand holds from the start.
+
+    Attributes
+    ----------
+    name : str
+    mass : float
+        kg, empty.
+    com : ndarray, shape (3,)
+        Centre of mass in the hand's frame, m (the contents' too).
+    frames : dict of str to ndarray (4, 4)
+        Named frames fixed in the hand's frame (``T_ee_frame``), published as objects.
+    contents : Contents or None
+    """
+
+    name: str
+    mass: float
+    com: Array
+    frames: dict[str, Array]
+    contents: Contents | None = None
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """How the hand takes hold of a joint's handle.
+
+    Attributes
+    ----------
+    radius : float
+        The hand grasps the handle when it comes this close, m.
+    release : float
+        It lets go when pulled this far from the handle, m.
+    stiffness, damping : float
+        Spring (N/m) and damper (N s/m) between the hand and the grasped handle.
+    """
+
+    radius: float
+    release: float
+    stiffness: float
+    damping: float
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A handle on a prismatic joint (a drawer).
+
+    The handle is the body ``handle``; the joint moves it along that body's own x axis
+    from 0 (its default pose) to ``travel``. The body's published frame stays at 0.
+
+    Attributes
+    ----------
+    name : str
+    kind : {"prismatic"}
+    handle : str
+        The body that moves with the joint.
+    travel : float
+        Range of the joint, m, from its default pose (0) to the end stop.
+    mass : float
+        Moving mass, kg.
+    spring, damping, friction : float
+        Towards 0 (N/m), viscous (N s/m) and Coulomb friction (N).
+    friction_speed : float
+        Speed over which the friction builds up (tanh), m/s.
+    grasp : Grasp
+    """
+
+    name: str
+    kind: Literal["prismatic"]
+    handle: str
+    travel: float
+    mass: float
+    spring: float
+    damping: float
+    friction: float
+    friction_speed: float
+    grasp: Grasp
+
+
+@dataclass(frozen=True)
+class Start:
+    """The hand's start: ``T_world`` and how much it varies between trials."""
+
+    T_world: Array
+    vary: Vary = field(default_factory=Vary)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything in the world, and the hand's start."""
+
+    start: Start
+    bodies: dict[str, Body]
+    held: Held | None = None
+    joints: dict[str, Joint] = field(default_factory=dict)
+
+    def frames(self) -> list[str]:
+        """The names of every published frame: the bodies', then the held object's."""
+        return [*self.bodies, *(self.held.frames if self.held else ())]
+
+
+# -- predicates -----------------------------------------------------------------------
+READINGS = {
+    "contents": ("poured", "spilled", "remaining", "flowing"),
+    "joint": ("position", "speed", "held", "grasps", "max_position"),
+}
+"""What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
+the held object's name) the fractions of them poured into the container, spilled and
+left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
+is held, how often it was grasped and the furthest position reached."""
+
+
+@dataclass(frozen=True)
+class Reading:
+    """``<element>.<quantity>`` (:data:`READINGS`)."""
+
+    element: str
+    quantity: str
+
+    def __str__(self) -> str:
+        return f"{self.element}.{self.quantity}"
+
+
+@dataclass(frozen=True)
+class Compare:
+    """A reading against bounds: ``at_least <= x <= at_most``, ``above < x < below``,
+    or, for a flag, ``x == is_``."""
+
+    reading: Reading
+    at_least: float | None = None
+    at_most: float | None = None
+    above: float | None = None
+    below: float | None = None
+    is_: bool | None = None
+
+
+@dataclass(frozen=True)
+class Near:
+    """The frame ``frame`` (a published frame, or ``hand``) within ``within`` m of the
+    origin of ``to`` (a body)."""
+
+    frame: str
+    to: str
+    within: float
+
+
+@dataclass(frozen=True)
+class AllOf:
+    terms: tuple[Predicate, ...]
+
+
+@dataclass(frozen=True)
+class AnyOf:
+    terms: tuple[Predicate, ...]
+
+
+@dataclass(frozen=True)
+class Not:
+    term: Predicate
+
+
+Predicate = Compare | Near | AllOf | AnyOf | Not | bool
+
+
+@dataclass(frozen=True)
+class FailRule:
+    """Ends a trial at once as a failure, saying ``reason``."""
+
+    when: Predicate
+    reason: str
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a trial of the task is judged.
+
+    Attributes
+    ----------
+    done : Predicate
+        The task is over (then judged by ``success``).
+    success : Predicate
+        Whether it succeeded, asked once it is done.
+    done_reason : str
+        What a trial's end says when it was done (``poured``, ``opened``).
+    fail : tuple of FailRule
+        What ends it early as a failure, in order.
+    progress : Reading
+        How much of the task is done (the trial's ``progress``).
+    clock : Predicate
+        The completion clock starts when this first holds.
+    time_limit : float
+        s after which a trial is a failure.
+    """
+
+    done: Predicate
+    success: Predicate
+    done_reason: str
+    fail: tuple[FailRule, ...]
+    progress: Reading
+    clock: Predicate
+    time_limit: float
+
+
+@dataclass(frozen=True)
+class Task:
+    """A task, as its file says it.
+
+    Attributes
+    ----------
+    name : str
+        What goes on ``sctd/<robot>/demos/<name>/...`` and in learner requests.
+    title, description, source : str
+        A short title, what the task is, and where it comes from (a task list, a paper).
+    object : str
+        The task object: the body whose frame demonstrations and skills are in.
+    scene : Scene
+    outcome : Outcome
+    file : str
+        Where it was read from (for messages).
+    """
+
+    name: str
+    title: str
+    description: str
+    source: str
+    object: str
+    scene: Scene
+    outcome: Outcome
+    file: str = ""

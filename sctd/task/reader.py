@@ -1,0 +1,343 @@
+"""A task file's document to a :class:`~.model.Task`, checked field by field.
+
+Every problem is a :class:`TaskError` naming the file, the field's path and what is
+wrong (``tasks/pour.yaml: scene.bodies.mug.position: expected a list of 3 numbers, got
+str``); an unknown field is one, so that a misspelt key never passes silently.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Collection
+from typing import Any
+
+import numpy as np
+
+from sctd import se3
+from sctd.skill.reader import Reader, kind_of
+
+from .model import (
+    READINGS,
+    VERSION,
+    AllOf,
+    AnyOf,
+    Body,
+    Compare,
+    Container,
+    Contents,
+    FailRule,
+    Grasp,
+    Held,
+    Joint,
+    Near,
+    Not,
+    Outcome,
+    Predicate,
+    Reading,
+    Scene,
+    Start,
+    Task,
+    Vary,
+)
+
+NAME = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
+"""Task, body, frame and joint names: they go into Zenoh keys and file names."""
+DEGREES = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*deg\s*$")
+"""An angle written in degrees: ``"15 deg"``."""
+HAND = "hand"
+"""The frame name predicates use for the hand (the end-effector)."""
+
+
+class TaskError(ValueError):
+    """A task failed to validate: ``file: path.to.field: what is wrong``."""
+
+    def __init__(self, file: str, path: str, problem: str):
+        self.file, self.path, self.problem = file, path, problem
+        super().__init__(f"{file}: {path}: {problem}" if path else f"{file}: {problem}")
+
+    def __reduce__(self):
+        return (type(self), (self.file, self.path, self.problem))
+
+
+class _Reader(Reader):
+    def __init__(self, file: str):
+        super().__init__(file, {})
+
+    def fail(self, path: str, problem: str) -> TaskError:  # type: ignore[override]
+        return TaskError(self.file, path, problem)
+
+    def known_keys(self, d: dict, path: str, allowed: set[str]) -> None:
+        extra = sorted(set(map(str, d)) - allowed)
+        if extra:
+            raise self.fail(f"{path}.{extra[0]}" if path else extra[0],
+                            f"unknown field (allowed: {', '.join(sorted(allowed))})")
+
+    def fields(self, v: Any, path: str, required: set[str], optional: Collection[str] = ()) -> dict:
+        """A mapping with exactly the ``required`` keys and some of the ``optional`` ones."""
+        d = self.mapping(v, path)
+        self.known_keys(d, path, required | set(optional))
+        missing = sorted(required - set(d))
+        if missing:
+            raise self.fail(f"{path}.{missing[0]}" if path else missing[0], "missing")
+        return d
+
+    def name(self, v: Any, path: str) -> str:
+        s = self.string(v, path)
+        if not NAME.match(s):
+            raise self.fail(path, f"expected a name of lower-case letters, digits and _ (at most 40, "
+                                  f"a letter first), got {s!r}")
+        return s
+
+    def positive(self, v: Any, path: str) -> float:
+        return self.number(v, path, lo=0.0, lo_open=True)
+
+    def nonneg(self, v: Any, path: str) -> float:
+        return self.number(v, path, lo=0.0)
+
+    def angle(self, v: Any, path: str, lo: float | None = None, hi: float | None = None) -> float:
+        """Radians: a number, or a string ``"<number> deg"``."""
+        if isinstance(v, str):
+            m = DEGREES.match(v)
+            if m is None:
+                raise self.fail(path, f"expected an angle in rad, or \"<number> deg\", got {v!r}")
+            v = math.radians(float(m.group(1)))
+        return self.number(v, path, lo, hi)
+
+    def transform(self, d: dict, path: str) -> np.ndarray:
+        """``position`` [3] and ``rpy`` [3] (roll, pitch, yaw about fixed x, y, z; angles
+        as :meth:`angle` reads them; default 0)."""
+        p = self.vector(d["position"], f"{path}.position", 3)
+        rpy = np.zeros(3)
+        if "rpy" in d:
+            if not isinstance(d["rpy"], list) or len(d["rpy"]) != 3:
+                raise self.fail(f"{path}.rpy", f"expected a list of 3 angles, got {kind_of(d['rpy'])}")
+            rpy = np.array([self.angle(a, f"{path}.rpy[{i}]") for i, a in enumerate(d["rpy"])])
+        return se3.transform_from_rt(rpy_matrix(rpy), p)
+
+    def vary(self, v: Any, path: str) -> Vary:
+        d = self.fields(v, path, set(), {"position", "yaw"})
+        pos = np.zeros(3)
+        if "position" in d:
+            x = d["position"]
+            pos = (np.full(3, self.nonneg(x, f"{path}.position")) if not isinstance(x, list)
+                   else self.vector(x, f"{path}.position", 3))
+            if np.any(pos < 0):
+                raise self.fail(f"{path}.position", "must be >= 0 on every axis")
+        yaw = self.angle(d.get("yaw", 0.0), f"{path}.yaw", lo=0.0, hi=math.pi)
+        return Vary(pos, yaw)
+
+
+def _cos_sin(a: float) -> tuple[float, float]:
+    """cos and sin of ``a``, exact at quarter turns (sin(pi) is 0, not 1.2e-16: a
+    ``yaw: 3.141592653589793`` gives the same matrix as one written out)."""
+    c, s = math.cos(a), math.sin(a)
+    return (0.0 if abs(c) < 1e-15 else c), (0.0 if abs(s) < 1e-15 else s)
+
+
+def rpy_matrix(rpy: np.ndarray) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll), shape (3, 3)."""
+    (cr, sr), (cp, sp), (cy, sy) = (_cos_sin(float(a)) for a in rpy)
+    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return Rz @ Ry @ Rx
+
+
+def task_from_document(doc: Any, file: str) -> Task:
+    """The task a parsed YAML document describes."""
+    r = _Reader(file)
+    d = r.fields(doc, "", {"sctd_task", "name", "object", "scene", "outcome"},
+                 {"title", "description", "source"})
+    version = d["sctd_task"]
+    if version != VERSION:
+        raise r.fail("sctd_task", f"this sctd reads task files of version {VERSION}, got {version!r}")
+    name = r.name(d["name"], "name")
+    scene = _scene(r, d["scene"], "scene")
+    obj = r.name(d["object"], "object")
+    if obj not in scene.bodies:
+        raise r.fail("object", f"unknown body {obj!r} (bodies: {', '.join(scene.bodies)})")
+    outcome = _outcome(r, d["outcome"], "outcome", scene)
+    text = {k: (r.string(d[k], k) if k in d else "") for k in ("title", "description", "source")}
+    return Task(name, text["title"] or name, text["description"], text["source"], obj, scene, outcome,
+                file)
+
+
+def _scene(r: _Reader, v: Any, path: str) -> Scene:
+    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints"})
+    s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
+    start = Start(r.transform(s, f"{path}.start"),
+                  r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
+    bodies: dict[str, Body] = {}
+    for key, b in r.mapping(d["bodies"], f"{path}.bodies").items():
+        where = f"{path}.bodies.{key}"
+        bodies[r.name(key, where)] = _body(r, key, b, where)
+    if not bodies:
+        raise r.fail(f"{path}.bodies", "expected at least one body")
+    held = _held(r, d["held"], f"{path}.held", bodies) if "held" in d else None
+    joints: dict[str, Joint] = {}
+    for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
+        where = f"{path}.joints.{key}"
+        joints[r.name(key, where)] = _joint(r, key, j, where, bodies)
+    scene = Scene(start, bodies, held, joints)
+    names = [*scene.frames(), *joints, HAND]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints and "
+                           f"{HAND!r} share one namespace)")
+    return scene
+
+
+def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
+    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container"})
+    container = None
+    if "container" in d:
+        c = r.fields(d["container"], f"{path}.container", {"radius", "depth"}, {"rim_margin", "max_drop"})
+        radius = r.positive(c["radius"], f"{path}.container.radius")
+        margin = r.nonneg(c.get("rim_margin", 0.005), f"{path}.container.rim_margin")
+        if margin >= radius:
+            raise r.fail(f"{path}.container.rim_margin", f"must be below the radius {radius}, got {margin}")
+        container = Container(radius, r.positive(c["depth"], f"{path}.container.depth"), margin,
+                              r.positive(c.get("max_drop", 0.15), f"{path}.container.max_drop"))
+    return Body(name, r.transform(d, path), r.vary(d["vary"], f"{path}.vary") if "vary" in d else Vary(),
+                container)
+
+
+def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
+    d = r.fields(v, path, {"name", "mass", "com"}, {"frames", "contents"})
+    frames: dict[str, np.ndarray] = {}
+    for key, f in r.mapping(d.get("frames", {}), f"{path}.frames").items():
+        where = f"{path}.frames.{key}"
+        frames[r.name(key, where)] = r.transform(r.fields(f, where, {"position"}, {"rpy"}), where)
+    contents = None
+    if "contents" in d:
+        where = f"{path}.contents"
+        c = r.fields(d["contents"], where, {"mass", "outlet", "into", "flow_angle", "flow_rate"})
+        outlet = r.string(c["outlet"], f"{where}.outlet")
+        if outlet not in frames:
+            raise r.fail(f"{where}.outlet", f"unknown frame {outlet!r} of the held object "
+                                            f"(frames: {', '.join(frames) or 'none'})")
+        into = r.string(c["into"], f"{where}.into")
+        if into not in bodies or bodies[into].container is None:
+            raise r.fail(f"{where}.into", f"expected a body with a container, got {into!r} (containers: "
+                                          f"{', '.join(b for b in bodies if bodies[b].container) or 'none'})")
+        contents = Contents(r.positive(c["mass"], f"{where}.mass"), outlet, into,
+                            r.angle(c["flow_angle"], f"{where}.flow_angle", lo=0.0, hi=math.pi),
+                            r.positive(c["flow_rate"], f"{where}.flow_rate"))
+    return Held(r.name(d["name"], f"{path}.name"), r.nonneg(d["mass"], f"{path}.mass"),
+                r.vector(d["com"], f"{path}.com", 3), frames, contents)
+
+
+def _joint(r: _Reader, name: str, v: Any, path: str, bodies: dict[str, Body]) -> Joint:
+    d = r.fields(v, path, {"type", "handle", "travel", "mass", "grasp"},
+                 {"spring", "damping", "friction", "friction_speed"})
+    r.choice(d["type"], f"{path}.type", ("prismatic",))  # the one kind so far
+    handle = r.string(d["handle"], f"{path}.handle")
+    if handle not in bodies:
+        raise r.fail(f"{path}.handle", f"unknown body {handle!r} (bodies: {', '.join(bodies)})")
+    g = r.fields(d["grasp"], f"{path}.grasp", {"radius", "release", "stiffness", "damping"})
+    radius, release, stiffness, damping = (r.positive(g[k], f"{path}.grasp.{k}")
+                                           for k in ("radius", "release", "stiffness", "damping"))
+    grasp = Grasp(radius, release, stiffness, damping)
+    if grasp.release <= grasp.radius:
+        raise r.fail(f"{path}.grasp.release", f"must be above the grasp radius {grasp.radius}, "
+                                              f"got {grasp.release}")
+    spring, viscous, friction = (r.nonneg(d.get(k, 0.0), f"{path}.{k}")
+                                 for k in ("spring", "damping", "friction"))
+    return Joint(name, "prismatic", handle, r.positive(d["travel"], f"{path}.travel"),
+                 r.positive(d["mass"], f"{path}.mass"), spring, viscous, friction,
+                 r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed"), grasp)
+
+
+# -- the outcome ----------------------------------------------------------------------
+def _elements(scene: Scene) -> dict[str, str]:
+    """Element name -> kind, of what reports readings."""
+    out = {j: "joint" for j in scene.joints}
+    if scene.held is not None and scene.held.contents is not None:
+        out[scene.held.name] = "contents"
+    return out
+
+
+def _reading(r: _Reader, v: Any, path: str, scene: Scene) -> Reading:
+    s = r.string(v, path)
+    element, _, quantity = s.partition(".")
+    kinds = _elements(scene)
+    if element not in kinds:
+        raise r.fail(path, f"unknown element {element!r} in {s!r} (elements with readings: "
+                           f"{', '.join(kinds) or 'none'})")
+    if quantity not in READINGS[kinds[element]]:
+        raise r.fail(path, f"a {kinds[element]} reports {', '.join(READINGS[kinds[element]])}; "
+                           f"got {quantity!r}")
+    return Reading(element, quantity)
+
+
+COMPARISONS = ("at_least", "at_most", "above", "below", "is")
+
+
+def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:
+    """``true``/``false``, ``{reading, at_least|at_most|above|below|is}``, ``{near: {frame,
+    to, within}}``, ``{all: [...]}``, ``{any: [...]}`` or ``{not: ...}``."""
+    if isinstance(v, bool):
+        return v
+    d = r.mapping(v, path)
+    if "reading" in d:
+        r.known_keys(d, path, {"reading", *COMPARISONS})
+        reading = _reading(r, d["reading"], f"{path}.reading", scene)
+        bounds = {k: d[k] for k in COMPARISONS if k in d}
+        if not bounds:
+            raise r.fail(path, f"expected a comparison: one or two of {', '.join(COMPARISONS)}")
+        flag = reading.quantity in ("flowing", "held")
+        if flag != ("is" in bounds) or (flag and len(bounds) > 1):
+            how = ("a flag: compare it with is: true|false" if flag
+                   else "a number: compare it with at_least, at_most, above or below")
+            raise r.fail(path, f"{reading} is {how}")
+        if flag:
+            if not isinstance(bounds["is"], bool):
+                raise r.fail(f"{path}.is", f"expected true or false, got {kind_of(bounds['is'])}")
+            return Compare(reading, is_=bounds["is"])
+        nums = {k: r.number(x, f"{path}.{k}") for k, x in bounds.items()}
+        return Compare(reading, nums.get("at_least"), nums.get("at_most"), nums.get("above"),
+                       nums.get("below"))
+    if len(d) != 1:
+        got = ", ".join(map(str, d)) or "nothing"
+        raise r.fail(path, f"expected one of reading, near, all, any, not; got {got}")
+    (key, x), = d.items()
+    if key == "near":
+        n = r.fields(x, f"{path}.near", {"frame", "to", "within"})
+        frame = r.string(n["frame"], f"{path}.near.frame")
+        if frame != HAND and frame not in scene.frames():
+            raise r.fail(f"{path}.near.frame", f"unknown frame {frame!r} (frames: {HAND}, "
+                                               f"{', '.join(scene.frames())})")
+        to = r.string(n["to"], f"{path}.near.to")
+        if to not in scene.bodies:
+            raise r.fail(f"{path}.near.to", f"unknown body {to!r} (bodies: {', '.join(scene.bodies)})")
+        return Near(frame, to, r.positive(n["within"], f"{path}.near.within"))
+    if key in ("all", "any"):
+        if not isinstance(x, list) or not x:
+            raise r.fail(f"{path}.{key}", f"expected a non-empty list of predicates, got {kind_of(x)}")
+        terms = tuple(predicate(r, t, f"{path}.{key}[{i}]", scene) for i, t in enumerate(x))
+        return AllOf(terms) if key == "all" else AnyOf(terms)
+    if key == "not":
+        return Not(predicate(r, x, f"{path}.not", scene))
+    raise r.fail(f"{path}.{key}", "unknown predicate (expected reading, near, all, any or not)")
+
+
+def _outcome(r: _Reader, v: Any, path: str, scene: Scene) -> Outcome:
+    d = r.fields(v, path, {"done", "progress", "clock", "time_limit"}, {"success", "done_reason", "fail"})
+    fails = d.get("fail", [])
+    if not isinstance(fails, list):
+        raise r.fail(f"{path}.fail", f"expected a list of {{when, reason}}, got {kind_of(fails)}")
+    rules = []
+    for i, f in enumerate(fails):
+        where = f"{path}.fail[{i}]"
+        g = r.fields(f, where, {"when", "reason"})
+        rules.append(FailRule(predicate(r, g["when"], f"{where}.when", scene),
+                              r.string(g["reason"], f"{where}.reason")))
+    return Outcome(
+        done=predicate(r, d["done"], f"{path}.done", scene),
+        success=predicate(r, d.get("success", True), f"{path}.success", scene),
+        done_reason=r.string(d.get("done_reason", "done"), f"{path}.done_reason"),
+        fail=tuple(rules),
+        progress=_reading(r, d["progress"], f"{path}.progress", scene),
+        clock=predicate(r, d["clock"], f"{path}.clock", scene),
+        time_limit=r.positive(d["time_limit"], f"{path}.time_limit"))

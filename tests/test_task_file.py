@@ -1,0 +1,214 @@
+"""Task files: the shipped ones load, a bad one is refused naming the file and the field,
+the registry finds tasks by path, by name and through entry points, and the predicates
+mean what docs/tasks.md says."""
+
+from __future__ import annotations
+
+import copy
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sctd.task import TaskError, find_task, known_tasks, load_task, shipped_folder, task_from_document
+from sctd.task import catalog as catalog_module
+from sctd.task.judge import holds, thresholds
+from sctd.task.model import AllOf, AnyOf, Compare, Near, Not, Reading
+
+POUR = shipped_folder() / "pour.yaml"
+
+
+def pour_doc() -> dict:
+    return yaml.safe_load(POUR.read_text())
+
+
+def test_the_shipped_tasks_load_under_their_file_names():
+    names = sorted(p.stem for p in shipped_folder().glob("*.yaml"))
+    assert {"pour", "drawer"} <= set(names)
+    for name in names:
+        t = find_task(name)
+        assert t.name == name and t.object in t.scene.bodies and t.outcome.time_limit > 0
+    pour = find_task("pour")
+    assert pour.scene.held.contents.flow_angle == math.radians(75.0)
+    np.testing.assert_array_equal(pour.scene.bodies["mug"].T_world[:3, :3], np.diag([-1.0, -1.0, 1.0]))
+    assert thresholds(pour.outcome.done) == {"bottle.poured": 0.5}
+    assert thresholds(find_task("drawer").outcome.done) == {"drawer.position": 0.2}
+
+
+def _set(doc: dict, path: str, value):
+    *head, last = path.split(".")
+    d = doc
+    for k in head:
+        d = d[int(k)] if isinstance(d, list) else d[k]
+    if value is DELETE:
+        del d[last]
+    else:
+        d[last] = value
+
+
+DELETE = object()
+
+
+@pytest.mark.parametrize(("path", "value", "where", "problem"), [
+    ("sctd_task", 2, "sctd_task", "reads task files of version 1, got 2"),
+    ("name", "Pour Now", "name", "expected a name of lower-case letters"),
+    ("object", "cup", "object", "unknown body 'cup' (bodies: mug)"),
+    ("colour", "red", "colour", "unknown field"),
+    ("scene.bodies.mug.position", "here", "scene.bodies.mug.position", "expected a list of 3 numbers"),
+    ("scene.bodies.mug.rpy", [0, 0, "half a turn"], "scene.bodies.mug.rpy[2]", "expected an angle in rad"),
+    ("scene.bodies.mug.container.rim_margin", 0.05, "scene.bodies.mug.container.rim_margin",
+     "must be below the radius 0.04"),
+    ("scene.start.vary.yaw", "200 deg", "scene.start.vary.yaw", "must be <= 3.14159"),
+    ("scene.held.contents.outlet", "spout", "scene.held.contents.outlet", "unknown frame 'spout'"),
+    ("scene.held.contents.into", "table", "scene.held.contents.into", "expected a body with a container"),
+    ("scene.held.mass", -1, "scene.held.mass", "must be >= 0.0"),
+    ("scene.held.frames.mug", {"position": [0, 0, 0.1]}, "scene", "the name 'mug' is used twice"),
+    ("outcome.done", {"reading": "bottle.fullness", "at_least": 1}, "outcome.done.reading",
+     "a contents reports poured, spilled, remaining, flowing; got 'fullness'"),
+    ("outcome.done", {"reading": "cork.poured", "at_least": 1}, "outcome.done.reading",
+     "unknown element 'cork'"),
+    ("outcome.done", {"reading": "bottle.flowing", "at_least": 1}, "outcome.done",
+     "bottle.flowing is a flag: compare it with is: true|false"),
+    ("outcome.done", {"reading": "bottle.poured"}, "outcome.done", "expected a comparison"),
+    ("outcome.done", {"some": []}, "outcome.done.some", "unknown predicate"),
+    ("outcome.clock", {"near": {"frame": "spout", "to": "mug", "within": 0.3}}, "outcome.clock.near.frame",
+     "unknown frame 'spout' (frames: hand, mug, bottle_tip)"),
+    ("outcome.fail", {"when": True}, "outcome.fail", "expected a list of {when, reason}"),
+    ("outcome.time_limit", 0, "outcome.time_limit", "must be > 0.0"),
+    ("outcome.progress", DELETE, "outcome.progress", "missing"),
+])
+def test_a_bad_task_file_is_refused_naming_the_field(path, value, where, problem):
+    doc = pour_doc()
+    _set(doc, path, value)
+    with pytest.raises(TaskError) as e:
+        task_from_document(doc, "mine.yaml")
+    assert str(e.value).startswith(f"mine.yaml: {where}: "), str(e.value)
+    assert problem in str(e.value)
+
+
+def test_a_bad_file_names_the_file_and_loads_nothing(tmp_path):
+    f = tmp_path / "t.yaml"
+    f.write_text("sctd_task: 1\nname: [\n")
+    with pytest.raises(TaskError, match=r"t\.yaml.*invalid YAML"):
+        load_task(f)
+    f.write_text("sctd_task: 1\nname: a\nname: b\n")
+    with pytest.raises(TaskError, match=r"t\.yaml"):
+        load_task(f)
+
+
+def test_angles_in_degrees_are_the_same_radians():
+    doc = pour_doc()
+    doc["scene"]["start"]["rpy"] = ["90 deg", "-45deg", 0.5]
+    t = task_from_document(doc, "x")
+    doc["scene"]["start"]["rpy"] = [math.pi / 2, -math.pi / 4, 0.5]
+    np.testing.assert_allclose(task_from_document(doc, "x").scene.start.T_world, t.scene.start.T_world,
+                               atol=1e-15)
+
+
+def test_a_file_is_found_by_path_and_named_by_its_name_field(tmp_path):
+    doc = pour_doc()
+    doc["name"] = "pour_tea"
+    f = tmp_path / "anything.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    assert find_task(str(f)).name == "pour_tea"
+    with pytest.raises(TaskError, match=r"no task of that name \(known: drawer, pour.*did you mean 'pour'"):
+        find_task("pout")
+
+
+def test_packages_register_tasks_by_entry_point(tmp_path, monkeypatch):
+    doc = pour_doc()
+    doc["name"] = "pour_tea"
+    f = tmp_path / "tea.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text(yaml.safe_dump(pour_doc()))  # named pour, registered as something else
+    module = SimpleNamespace(tea=str(f), tea_file=lambda: f, wrong=str(wrong))
+    monkeypatch.setitem(__import__("sys").modules, "sctd_test_tasks", module)
+    points = [SimpleNamespace(name="pour_tea", value="sctd_test_tasks:tea_file"),
+              SimpleNamespace(name="pour", value="sctd_test_tasks:tea"),  # a shipped name wins
+              SimpleNamespace(name="odd", value="sctd_test_tasks:wrong"),
+              SimpleNamespace(name="broken", value="sctd_test_tasks:missing")]
+    monkeypatch.setattr(catalog_module, "entry_points", lambda group: points if group == "sctd.tasks" else [])
+    assert find_task("pour_tea").name == "pour_tea"
+    assert find_task("pour").file == str(POUR)
+    with pytest.raises(TaskError, match="the task found as 'odd' is named 'pour'"):
+        find_task("odd")
+    with pytest.raises(TaskError, match=r"entry point sctd_test_tasks:missing \(sctd.tasks\) does not give"):
+        find_task("broken")
+    with pytest.raises(TaskError, match="broken"):
+        known_tasks()  # one broken plug-in is named, not skipped
+    points.pop()
+    assert [(k.name, k.origin) for k in known_tasks()][-2:] == [
+        ("odd", "entry point sctd_test_tasks:wrong"), ("pour_tea", "entry point sctd_test_tasks:tea_file")]
+
+
+# -- predicates -----------------------------------------------------------------------------
+R = Reading("bottle", "poured")
+FLOW = Reading("bottle", "flowing")
+
+
+@given(st.floats(-10, 10), st.floats(-10, 10), st.floats(-10, 10))
+def test_a_comparison_is_its_bounds(x, lo, hi):
+    r = {"bottle.poured": x}
+    assert holds(Compare(R, at_least=lo), r, {}) == (x >= lo)
+    assert holds(Compare(R, at_most=hi), r, {}) == (x <= hi)
+    assert holds(Compare(R, above=lo, below=hi), r, {}) == (lo < x < hi)
+    a, b = Compare(R, at_least=lo), Compare(R, at_most=hi)
+    assert holds(AllOf((a, b)), r, {}) == (lo <= x <= hi)
+    assert holds(AnyOf((a, b)), r, {}) == (x >= lo or x <= hi)
+    assert holds(Not(a), r, {}) == (not x >= lo)
+
+
+def test_flags_distances_and_what_is_not_reported():
+    assert holds(Compare(FLOW, is_=False), {"bottle.flowing": False}, {})
+    assert not holds(Compare(FLOW, is_=False), {}, {})  # not reported yet: false
+    near = Near("bottle_tip", "mug", 0.35)
+    pos = {"mug": np.zeros(3), "bottle_tip": np.array([0.2, 0.2, 0.2])}
+    assert holds(near, {}, pos) and not holds(near, {}, {**pos, "bottle_tip": np.array([0.3, 0.2, 0.0])})
+    assert not holds(near, {}, {"mug": np.zeros(3)})
+    assert holds(True, {}, {}) and not holds(False, {}, {})
+    deep = copy.deepcopy(AllOf((Compare(R, at_least=0.5), AnyOf((Compare(FLOW, is_=False),)))))
+    assert thresholds(deep) == {"bottle.poured": 0.5} and thresholds(Not(Compare(R, at_least=1))) == {}
+
+
+def test_sctd_tasks_lists_and_shows(capsys):
+    from sctd.cli.main import main
+
+    assert main(["tasks"]) == 0
+    out = capsys.readouterr().out
+    assert "pour" in out and "Open a drawer" in out and "object drawer_handle" in out
+    assert main(["tasks", "show", "pour"]) == 0
+    out = capsys.readouterr().out
+    assert "held: bottle" in out and "done (poured) at bottle.poured >= 0.5" in out
+    assert main(["tasks", "show", "juggle"]) == 2
+    assert "sctd tasks show: juggle: no such file" in capsys.readouterr().err
+
+
+def test_scene_is_a_deprecated_alias_of_task(capsys):
+    import argparse
+
+    from sctd_sim.options import add_service_arguments
+
+    p = argparse.ArgumentParser(prog="sctd sim")
+    add_service_arguments(p)
+    assert p.parse_args([]).task == "pour"
+    assert p.parse_args(["--task", "drawer"]).task == "drawer"
+    assert capsys.readouterr().err == ""
+    assert p.parse_args(["--scene", "drawer"]).task == "drawer"
+    err = capsys.readouterr().err
+    assert "sctd sim: --scene is deprecated (it goes in the next release): use --task" in err
+
+
+def test_sctd_sim_refuses_an_unknown_task_before_it_starts(capsys, tmp_path):
+    from sctd_sim import service
+
+    assert service.main(["--task", "juggle"]) == 2
+    assert "sctd sim: --task: juggle: no such file, and no task of that name" in capsys.readouterr().err
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("sctd_task: 1\nname: bad\n")
+    assert service.main(["--task", str(bad)]) == 2
+    assert f"sctd sim: --task: {bad}: object: missing" in capsys.readouterr().err
