@@ -318,3 +318,40 @@ def test_ctrl_c_ends_the_calibration_without_writing(tmp_path):
             p.wait()
     assert p.returncode == 130, err
     assert "interrupted" in err and not out.exists()
+
+
+@pytest.mark.parametrize("arrives_as", ["KeyboardInterrupt", "ctypes.ArgumentError"])
+def test_ctrl_c_anywhere_in_the_calibration_is_an_interruption(arrives_as, tmp_path, monkeypatch, capsys):
+    """Ctrl-C raised inside a ctypes call into BrainFlow reaches Python as a
+    ctypes.ArgumentError (seen on a loaded machine): still an interruption, exit 130,
+    nothing written; an ArgumentError without a Ctrl-C stays an error."""
+    import argparse
+    import ctypes
+
+    from sctd_services.input import add_arguments
+    from sctd_services.input.emg import Emg
+
+    def calibrate(self, args, path, filters):
+        try:
+            signal.raise_signal(signal.SIGINT)
+        except KeyboardInterrupt as e:
+            if arrives_as == "KeyboardInterrupt":
+                raise
+            raise ctypes.ArgumentError("argument 2: KeyboardInterrupt: ") from e
+
+    p = argparse.ArgumentParser()
+    add_arguments(p)
+    out = tmp_path / "cal.json"
+    args = p.parse_args(["emg", "--calibrate", "--board", "synthetic", "--calibration", str(out)])
+    monkeypatch.setattr(Emg, "_calibrate", calibrate)
+    before = signal.getsignal(signal.SIGINT)
+    assert Emg().run_special(args) == 130 and not out.exists()
+    assert "interrupted" in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is before  # the handlers were put back
+
+    def broken(self, args, path, filters):
+        raise ctypes.ArgumentError("argument 1: a real bug")
+
+    monkeypatch.setattr(Emg, "_calibrate", broken)
+    with pytest.raises(ctypes.ArgumentError, match="a real bug"):
+        Emg().run_special(args)

@@ -16,8 +16,10 @@ without one.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import signal
 import sys
+import threading
 from pathlib import Path
 
 from sctd.app.options import add_arguments, from_namespace
@@ -102,11 +104,22 @@ class Emg(Backend):
             raise InputError(f"emg --calibrate: --phase-seconds {args.phase_seconds:g} must exceed "
                              f"--settle-seconds {args.settle_seconds:g}")
         filters = from_namespace(Filters, args, dest_prefix="emg_")
-        # the bridge's handlers only set its stop event; here Ctrl-C must end the calibration
-        handlers = {s: signal.signal(s, _interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+        # the bridge's handlers only set its stop event; here Ctrl-C must end the calibration.
+        # The handler raises KeyboardInterrupt wherever the main thread is: inside a ctypes
+        # call into BrainFlow that arrives as a ctypes.ArgumentError instead, so the flag,
+        # not the exception's type, says the calibration was interrupted
+        interrupted = threading.Event()
+
+        def interrupt(*_: object) -> None:
+            interrupted.set()
+            raise KeyboardInterrupt
+
+        handlers = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             return self._calibrate(args, path, filters)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, ctypes.ArgumentError):
+            if not interrupted.is_set():
+                raise
             print(f"emg --calibrate: interrupted; {path} not written", file=sys.stderr)
             return 130
         finally:
@@ -148,10 +161,6 @@ class Emg(Backend):
         _say(f"wrote {path} (dead zone {cal.mapping.deadzone:.2f}, co-contraction rule "
             f"{'off' if cal.mapping.cocontraction is None else f'at {cal.mapping.cocontraction:.2f}'})")
         return 0
-
-
-def _interrupt(*_: object) -> None:
-    raise KeyboardInterrupt
 
 
 def _say(line: str) -> None:
