@@ -53,3 +53,30 @@ def test_a_hyperparameter_error_comes_back_as_itself():
 
     with Trainer() as t, pytest.raises(HyperparameterError, match="em_iterations"):
         t.train(read_demos(DEMOS), "vf", None, {"em_iterations": 10**9})
+
+
+def _init_then_report(init, args, out):
+    init(*args)
+    out.put("ran")
+
+
+def test_a_pool_worker_whose_learner_is_already_gone_ends_at_once():
+    """Killed while its pools start, a learner sends its workers no death signal (it was
+    not set yet): a worker that finds itself an orphan ends in its initializer."""
+    import multiprocessing
+
+    from sctd_services.learner import check, training
+
+    ctx = multiprocessing.get_context("spawn")
+    out = ctx.SimpleQueue()
+    for init, args in ((check._die_with_parent, (os.getpid(),)),
+                       (training._worker_init, (os.getpid(), 2 << 30, 0, out))):
+        p = ctx.Process(target=_init_then_report, args=(init, args, out))
+        p.start()
+        p.join(60)
+        assert p.exitcode == 0 and out.get() == "ran"  # its parent is alive: it goes on
+    for init, args in ((check._die_with_parent, (1,)), (training._worker_init, (1, 2 << 30, 0, out))):
+        p = ctx.Process(target=_init_then_report, args=(init, args, out))
+        p.start()
+        p.join(60)
+        assert p.exitcode == 0 and out.empty()  # "parent" 1 is not its parent: it ended

@@ -5,6 +5,7 @@ themselves through :mod:`sctd_services.eval`)."""
 from __future__ import annotations
 
 import ctypes
+import os
 import signal
 import time
 from collections.abc import Callable
@@ -43,18 +44,23 @@ class CheckSettings:
             raise ValueError("--floor and --tolerance must be within [0, 1]")
 
 
-def _die_with_parent() -> None:
-    """A pool worker: killed when the learner dies (kill -9 included), and warm."""
+def _die_with_parent(parent: int) -> None:
+    """A pool worker: killed when the learner dies (kill -9 included), and warm. A
+    learner killed before this ran (while the pool was starting) sent no signal: the
+    worker, already an orphan, ends here."""
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+    if os.getppid() != parent:
+        os._exit(0)
     import sctd_services.eval.lockstep  # noqa: F401  (the imports a trial needs, done once)
 
 
 def trial_pool(jobs: int) -> Executor:
     """The learner's pool of trial processes, started once and kept warm."""
-    return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent)
+    return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent,
+                               initargs=(os.getpid(),))
 
 
 def failed_already(per_trial: list[dict[str, Any]], settings: CheckSettings,

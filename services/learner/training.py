@@ -46,13 +46,16 @@ class TrainingError(RuntimeError):
     """A training that did not finish: too slow, too big, or its worker died."""
 
 
-def _worker_init(memory: int, nice: int, stages: Any) -> None:
-    """In the worker: the caps, death with the learner, the stage queue, the imports."""
+def _worker_init(parent: int, memory: int, nice: int, stages: Any) -> None:
+    """In the worker: the caps, death with the learner (also when it was killed before
+    this ran: the orphan ends here), the stage queue, the imports."""
     global _stages
     try:
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
+    if os.getppid() != parent:
+        os._exit(0)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the learner decides what a Ctrl-C stops
     resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
     if nice:
@@ -91,7 +94,8 @@ class Trainer:
         if self._pool is None:
             self._stages = self._ctx.SimpleQueue()
             self._pool = ProcessPoolExecutor(1, mp_context=self._ctx, initializer=_worker_init,
-                                             initargs=(self.limits.memory, self.limits.nice, self._stages))
+                                             initargs=(os.getpid(), self.limits.memory, self.limits.nice,
+                                                       self._stages))
         return self._pool
 
     def kill(self) -> None:
