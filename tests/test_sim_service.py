@@ -152,7 +152,7 @@ def test_sim_rejects_bad_flags(tmp_path):
 def test_demo_with_the_sim_opens_the_drawer(tmp_path):
     """`sctd demo --skill skills/drawer.yaml` on the Pinocchio sim reaches `pull`; a watcher
     on the scene key sees the drawer open."""
-    proc = sctd("demo", "--skill", str(ROOT / "skills" / "drawer.yaml"), "--seconds", "12",
+    proc = sctd("demo", "--skill", str(ROOT / "skills" / "drawer.yaml"), "--seconds", "40",
                 "--robot-backend", "sim", "--logs", str(tmp_path / "logs"), log=tmp_path / "demo.log")
     opening = 0.0
     try:
