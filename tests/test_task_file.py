@@ -285,6 +285,7 @@ def test_sctd_tasks_lists_and_shows(capsys):
     assert main(["tasks", "show", "pour"]) == 0
     out = capsys.readouterr().out
     assert "held: bottle" in out and "done (poured) at bottle.poured >= 0.5" in out
+    assert "intent: bring (reach), pour (tilt), upright (upright)" in out
     assert main(["tasks", "show", "juggle"]) == 2
     assert "sctd tasks show: juggle: no such file" in capsys.readouterr().err
 
