@@ -9,7 +9,8 @@ input ``seq`` to receiving the first target whose ``in_seq`` is ``seq``.
 
     python -m sctd_services.simulated_user --task pour --connect tcp/127.0.0.1:7447
 
-It exits 0 after its ``--duration``, or 1 when no target arrived in that time.
+It exits 0 after its ``--duration``, 1 when no target arrived in that time, and 2 on
+bad flags (a ``--task`` that is no task, or whose file does not validate).
 """
 
 from __future__ import annotations
@@ -26,13 +27,14 @@ from typing import Any
 import zenoh
 
 from sctd import se3
-from sctd.app.options import add_robot_argument
-from sctd.task import find_task
+from sctd.app.errors import EXIT_USAGE
+from sctd.app.options import TASK_HELP, add_robot_argument
+from sctd.task import TaskError, find_task
 from sctd.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
-from .user import INTENTS, PROFILES, Observation, SimulatedUser
+from .user import PROFILES, Observation, SimulatedUser
 
 
 def task_frames(task: str) -> tuple[str, ...]:
@@ -62,7 +64,7 @@ class UserClient:
         for key, callback in ((k.target, self._on_target), (k.state, self._on_state),
                               (k.scene, self._on_scene)):
             self._stack.enter_context(session.declare_subscriber(key, callback))
-        self.frames = task_frames(user.task)
+        self.frames = tuple(user.task.scene.frames())
         for name in self.frames:
             self._stack.enter_context(session.declare_subscriber(k.objects(name), self._on_object))
         self.pub = self._stack.enter_context(session.declare_publisher(k.input(device), express=True,
@@ -146,7 +148,7 @@ class UserClient:
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sctd-simulated-user", description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", default="pour", choices=sorted(INTENTS))
+    p.add_argument("--task", required=True, metavar="NAME|FILE", help=TASK_HELP)
     p.add_argument("--profile", default="steady", choices=sorted(PROFILES))
     p.add_argument("--axes", type=int, default=3, help="input axes of the device (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="the user's noise seed")
@@ -207,7 +209,12 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    user = SimulatedUser(args.task, args.axes, args.profile, seed=args.seed)
+    try:
+        task = find_task(args.task)
+    except TaskError as e:
+        print(f"sctd-simulated-user: --task: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    user = SimulatedUser(task, args.axes, args.profile, seed=args.seed)
     # The hand's pose at 250 Hz is plenty for a person deciding at 100 Hz: Zenoh drops the
     # rest of the state's 1 kHz on arrival, leaving the CPU to the simulator and the daemon
     # (the targets, whose in_seq the latency measurement needs, all arrive).

@@ -165,7 +165,8 @@ def _held_bottle(t: float, tilt: float):
     R = se3.matrix_from_rotvec([0.0, tilt, 0.0])
     T_ee = se3.transform_from_rt(R, tip - R @ [0.0, 0.0, 0.12])
     T_tip = T_ee @ se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.12])
-    scene = {"poured": 0.0, "fill_target": 0.5, "spilled_amount": 0.0, "pouring": False}
+    scene = {"readings": {"bottle.poured": 0.0, "bottle.spilled": 0.0, "bottle.flowing": False},
+             "spilled_amount": 0.0}
     return Observation(t, T_ee, {"mug": mug, "bottle_tip": T_tip}, scene, "m")
 
 

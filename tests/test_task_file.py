@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from sctd.task import TaskError, find_task, known_tasks, load_task, shipped_folder, task_from_document
 from sctd.task import catalog as catalog_module
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import AllOf, AnyOf, Compare, Near, Not, Reading
+from sctd.task.model import AllOf, AnyOf, Compare, MoveJoint, Near, Not, Reach, Reading, Tilt, Upright
 
 POUR = shipped_folder() / "pour.yaml"
 
@@ -44,10 +44,11 @@ def _set(doc: dict, path: str, value):
     d = doc
     for k in head:
         d = d[int(k)] if isinstance(d, list) else d[k]
+    key = int(last) if isinstance(d, list) else last
     if value is DELETE:
-        del d[last]
+        del d[key]
     else:
-        d[last] = value
+        d[key] = value
 
 
 DELETE = object()
@@ -88,6 +89,106 @@ def test_a_bad_task_file_is_refused_naming_the_field(path, value, where, problem
         task_from_document(doc, "mine.yaml")
     assert str(e.value).startswith(f"mine.yaml: {where}: "), str(e.value)
     assert problem in str(e.value)
+
+
+DRAWER = shipped_folder() / "drawer.yaml"
+
+
+@pytest.mark.parametrize(("file", "path", "value", "where", "problem"), [
+    (POUR, "intent", DELETE, "intent", "missing"),
+    (POUR, "intent", [], "intent", "expected a non-empty list of steps"),
+    (POUR, "intent.0.name", DELETE, "intent[0].name", "missing"),
+    (POUR, "intent.0.name", "done", "intent[0].name", "'done' is the phase after the last step"),
+    (POUR, "intent.1.name", "bring", "intent[1].name", "'bring' is the name of an earlier step"),
+    (POUR, "intent.0.colour", "red", "intent[0].colour", "unknown field"),
+    (POUR, "intent.2.tilt", {"to": 1.0, "until": True}, "intent[2]",
+     "expected one of reach, tilt, upright, move_joint; got tilt, upright"),
+    (POUR, "intent.0", {"name": "tip", "upright": {"below": 0.3}}, "intent[0].upright",
+     "the first step must be a reach"),
+    (POUR, "intent.0.reach.frame", "mug", "intent[0].reach.frame",
+     "expected a frame that moves with the hand, got 'mug' (frames: hand, bottle_tip)"),
+    (POUR, "intent.0.reach.handle", "drawer", "intent[0].reach", "expected one goal"),
+    (POUR, "intent.0.reach.to", [0, 0], "intent[0].reach.to", "expected a list of 3 numbers"),
+    (POUR, "intent.0.reach.speed", 1, "intent[0].reach.speed", "unknown field"),
+    (POUR, "intent.0.reach.reached", DELETE, "intent[0].reach", "expected reached, until or both"),
+    (POUR, "intent.0.reach.reached", {}, "intent[0].reach.reached", "expected radial, height or both"),
+    (POUR, "intent.0.reach.reached", {"radial": -0.01}, "intent[0].reach.reached.radial", "must be > 0.0"),
+    (POUR, "intent.0.reach.lift", {"height": 0.04, "between": [0.07, 0.02]}, "intent[0].reach.lift.between",
+     "expected [low, high] with low < high"),
+    (POUR, "intent.0.reach.accept", {"height": [0.0, 0.1]}, "intent[0].reach.accept.radial", "missing"),
+    (POUR, "intent.0.reach.accept", {"radial": 0.03, "tilt": "200 deg"}, "intent[0].reach.accept.tilt",
+     "must be <= 3.14159"),
+    (POUR, "intent.0.reach.orientation", "upright", "intent[0].reach.orientation",
+     "expected free or {upright: <tilt>}"),
+    (POUR, "intent.0.reach.orientation", {"upright": 0}, "intent[0].reach.orientation.upright",
+     "must be > 0.0"),
+    (POUR, "intent.0.reach.until", {"reading": "bottle.full", "is": True}, "intent[0].reach.until.reading",
+     "a contents reports poured, spilled, remaining, flowing; got 'full'"),
+    (POUR, "intent.1.tilt.until", {"reading": "cork.poured", "at_least": 0.5}, "intent[1].tilt.until.reading",
+     "unknown element 'cork'"),
+    (POUR, "intent.1.tilt.until", DELETE, "intent[1].tilt.until", "missing"),
+    (POUR, "intent.1.tilt.to", 0, "intent[1].tilt.to", "must be > 0.0"),
+    (POUR, "intent.1.tilt.off", 0.033, "intent[1].tilt.off",
+     "unknown field (allowed: off_by, to, until, weight)"),
+    (POUR, "intent.1.tilt.weight", -1, "intent[1].tilt.weight", "must be >= 0.0"),
+    (POUR, "intent.2.upright", {"below": 0.3, "above": 0.1}, "intent[2].upright.above", "unknown field"),
+    (POUR, "intent.2", {"name": "pull", "move_joint": {"joint": "drawer"}}, "intent[2].move_joint.joint",
+     "unknown joint 'drawer' (joints: none)"),
+    (DRAWER, "intent.1.move_joint.joint", "lid", "intent[1].move_joint.joint",
+     "unknown joint 'lid' (joints: drawer)"),
+    (DRAWER, "outcome.done", {"reading": "drawer.max_position", "at_least": 0.2},
+     "intent[1].move_joint.joint", "outcome.done sets no at_least on drawer.position"),
+    (DRAWER, "intent.0.reach.handle", "lid", "intent[0].reach.handle",
+     "unknown joint 'lid' (joints: drawer)"),
+    (DRAWER, "intent.1.move_joint.back", {"reading": "drawer.held"}, "intent[1].move_joint.back",
+     "expected a comparison"),
+    (DRAWER, "intent.0.reach.frame", "drawer_handle", "intent[0].reach.frame",
+     "expected a frame that moves with the hand, got 'drawer_handle' (frames: hand)"),
+])
+def test_a_bad_intent_is_refused_naming_the_field(file, path, value, where, problem):
+    doc = yaml.safe_load(file.read_text())
+    _set(doc, path, value)
+    with pytest.raises(TaskError) as e:
+        task_from_document(doc, "mine.yaml")
+    assert str(e.value).startswith(f"mine.yaml: {where}: "), str(e.value)
+    assert problem in str(e.value)
+
+
+def test_a_joint_is_moved_by_the_reach_to_its_handle():
+    doc = yaml.safe_load(DRAWER.read_text())
+    doc["intent"][0]["reach"] = {"frame": "hand", "to": [0, 0, 0],
+                                 "until": {"reading": "drawer.held", "is": True}}
+    with pytest.raises(TaskError, match=r"intent\[1\]\.move_joint\.joint: the reach before it must go to the "
+                                        r"handle of 'drawer'"):
+        task_from_document(doc, "mine.yaml")
+    doc = yaml.safe_load(DRAWER.read_text())
+    doc["intent"].insert(1, {"name": "look", "reach": {"frame": "hand", "to": [0, 0, 0.1],
+                                                       "reached": {"height": 0.01}}})
+    with pytest.raises(TaskError, match="the reach before it must go to the handle"):
+        task_from_document(doc, "mine.yaml")
+
+
+def test_the_intent_reads_as_the_file_says():
+    pour = find_task("pour").intent
+    assert [s.name for s in pour] == ["bring", "pour", "upright"]
+    bring, tilt, upright = (s.action for s in pour)
+    assert isinstance(bring, Reach) and bring.frame == "bottle_tip" and bring.to.tolist() == [0.0, 0.0, 0.05]
+    assert (bring.lift.height, bring.lift.start, bring.lift.span) == (0.04, 0.02, 0.05)
+    assert (bring.reached.radial, bring.reached.height, bring.upright) == (0.025, 0.02, 0.5)
+    assert (bring.accept.radial, bring.accept.height, bring.accept.tilt) == (0.03, (0.02, 0.10), 0.5)
+    assert isinstance(tilt, Tilt) and (tilt.to, tilt.weight, tilt.off_by) == (1.65, 0.5, 0.033)
+    assert thresholds(tilt.until) == {"bottle.poured": 0.5}
+    assert isinstance(upright, Upright) and upright.below == 0.3
+    reach, pull = (s.action for s in find_task("drawer").intent)
+    assert isinstance(reach, Reach) and reach.handle == "drawer"
+    assert reach.upright is None and reach.to is None
+    assert reach.until == Compare(Reading("drawer", "held"), is_=True)
+    assert isinstance(pull, MoveJoint) and (pull.joint, pull.overshoot) == ("drawer", 0.03)
+    doc = pour_doc()
+    doc["intent"][0]["reach"]["orientation"] = "free"
+    doc["intent"][0]["reach"]["accept"]["tilt"] = "20 deg"
+    bring = task_from_document(doc, "x").intent[0].action
+    assert bring.upright is None and bring.accept.tilt == math.radians(20.0)
 
 
 def test_a_bad_file_names_the_file_and_loads_nothing(tmp_path):
@@ -184,6 +285,7 @@ def test_sctd_tasks_lists_and_shows(capsys):
     assert main(["tasks", "show", "pour"]) == 0
     out = capsys.readouterr().out
     assert "held: bottle" in out and "done (poured) at bottle.poured >= 0.5" in out
+    assert "intent: bring (reach), pour (tilt), upright (upright)" in out
     assert main(["tasks", "show", "juggle"]) == 2
     assert "sctd tasks show: juggle: no such file" in capsys.readouterr().err
 
@@ -211,4 +313,4 @@ def test_sctd_sim_refuses_an_unknown_task_before_it_starts(capsys, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("sctd_task: 1\nname: bad\n")
     assert service.main(["--task", str(bad)]) == 2
-    assert f"sctd sim: --task: {bad}: object: missing" in capsys.readouterr().err
+    assert f"sctd sim: --task: {bad}: intent: missing" in capsys.readouterr().err

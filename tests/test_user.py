@@ -1,14 +1,18 @@
-"""The simulated user's parts: the device model it learns, the task intents, and the
-whole user driving a toy device whose mapping it does not know."""
+"""The simulated user's parts: the device model it learns, the task files' intents, and
+the whole user driving a toy device whose mapping it does not know."""
 
 import numpy as np
 import pytest
+import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd_services.user import DeviceModel, Observation, SimulatedUser, make_intent
+from sctd.task import find_task, shipped_folder, task_from_document
+from sctd_services.user import DeviceModel, Observation, SimulatedUser, TaskIntent
 from sctd_services.user.human import PROFILES
+
+DRAWER, POUR = find_task("drawer"), find_task("pour")
 
 
 @given(st.integers(0, 10_000))
@@ -45,12 +49,12 @@ def _drawer_obs(t, p, opening, attached, mode="m"):
     T = np.eye(4)
     T[:3, 3] = p
     H = se3.transform_from_pose([0.5, 0.0, 0.6, 0, 0, 1, 0])  # x of the handle = world -x
-    return Observation(t, T, {"drawer_handle": H}, {"opening": opening, "attached": attached,
-                                                    "target_opening": 0.2}, mode)
+    return Observation(t, T, {"drawer_handle": H},
+                       {"readings": {"drawer.position": opening, "drawer.held": attached}}, mode)
 
 
 def test_drawer_intent_reaches_then_pulls_along_the_handle_axis():
-    it = make_intent("drawer")
+    it = TaskIntent(DRAWER)
     d = it.desire(_drawer_obs(0.0, [0.3, 0.1, 0.7], 0.0, False))
     assert d.phase == "reach" and d.twist[0] > 0 and d.twist[1] < 0 and d.twist[2] < 0
     d = it.desire(_drawer_obs(1.0, [0.5, 0.0, 0.6], 0.05, True))
@@ -86,7 +90,7 @@ def test_user_learns_an_unknown_device_and_opens_the_toy_drawer(perm, signs):
     for axis, (j, s) in enumerate(zip(perm, signs, strict=True)):
         B[axis, j] = 0.1 * s
     toy = ToyDrawer(B)
-    user = SimulatedUser("drawer", 3, PROFILES["steady"], seed=1)
+    user = SimulatedUser(DRAWER, 3, PROFILES["steady"], seed=1)
     t, dt = 0.0, 0.01
     while t < 30.0 and not user.done:
         u, buttons = user.step(t, _drawer_obs(t, toy.p, toy.opening, toy.attached))
@@ -99,7 +103,7 @@ def test_user_learns_an_unknown_device_and_opens_the_toy_drawer(perm, signs):
 def test_user_at_rest_sends_exactly_zero():
     """A user with nothing to do makes no deflection at all (no noise on a released
     stick): zero input never moves the robot, and the simulated user respects that."""
-    user = SimulatedUser("drawer", 3, PROFILES["noisy"], seed=3)
+    user = SimulatedUser(DRAWER, 3, PROFILES["noisy"], seed=3)
     for k in range(200):
         u, _ = user.step(0.01 * k, _drawer_obs(0.01 * k, [0.2, 0.0, 0.6], 0.25, True))
         if k > 60:
@@ -112,7 +116,7 @@ T_EE_TIP = se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.12])
 
 def _pour_obs(t, T_world_ee, mode="m", poured=0.0):
     return Observation(t, T_world_ee, {"mug": MUG, "bottle_tip": T_world_ee @ T_EE_TIP},
-                       {"poured": poured, "fill_target": 0.5}, mode)
+                       {"readings": {"bottle.poured": poured}}, mode)
 
 
 def _hand_with_tip_at(offset):
@@ -120,13 +124,13 @@ def _hand_with_tip_at(offset):
 
 
 def test_pour_intent_takes_an_opening_inside_the_rim_as_close_enough():
-    it = make_intent("pour")
+    it = TaskIntent(POUR)
     d = it.desire(_pour_obs(0.0, _hand_with_tip_at([0.028, 0.0, 0.075])))
     assert d.phase == "bring" and d.close_enough  # not centred, but over the opening
     it.settle()
     assert it.desire(_pour_obs(0.1, _hand_with_tip_at([0.028, 0.0, 0.075]))).phase == "pour"
     for far in ([0.033, 0.0, 0.075], [0.0, 0.0, 0.13], [0.0, 0.0, 0.01]):  # off the rim, too high, too low
-        d = make_intent("pour").desire(_pour_obs(0.0, _hand_with_tip_at(far)))
+        d = TaskIntent(POUR).desire(_pour_obs(0.0, _hand_with_tip_at(far)))
         assert d.phase == "bring" and not d.close_enough, far
 
 
@@ -153,7 +157,7 @@ def test_user_who_cannot_centre_the_opening_pours_from_inside_the_rim():
     B = np.zeros((6, 3))
     B[3, 0], B[4, 1] = 0.4, 0.4  # the stick turns about world x and y
     toy = ToyTilter(B, _hand_with_tip_at([0.0, 0.028, 0.075]))
-    user = SimulatedUser("pour", 3, PROFILES["steady"], seed=2)
+    user = SimulatedUser(POUR, 3, PROFILES["steady"], seed=2)
     t, dt = 0.0, 0.01
     while t < 20.0:
         u, _ = user.step(t, _pour_obs(t, toy.T))
@@ -167,7 +171,7 @@ def test_user_who_cannot_centre_the_opening_pours_from_inside_the_rim():
 def test_user_learns_from_the_input_held_between_two_observations():
     """The stick changes at the user's corrections, not at the observations' times: what
     it learns from is the input averaged over the interval between two observations."""
-    user = SimulatedUser("drawer", 2, PROFILES["steady"])
+    user = SimulatedUser(DRAWER, 2, PROFILES["steady"])
     user._history.extend([(0.0, np.array([1.0, 0.0])), (0.15, np.array([0.0, -1.0]))])
     assert np.allclose(user._applied(0.1, 0.2), [0.5, -0.5])
     assert np.allclose(user._applied(0.0, 0.1), [1.0, 0.0])
@@ -202,7 +206,7 @@ def _pour_path(k):
 def test_an_observers_desire_judges_progress_as_the_users(task):
     """desire(steer=False), what the trial's observer asks, follows the same phases with
     the same error, done and close_enough as desire(), without a twist or weights."""
-    user, observer = make_intent(task), make_intent(task)
+    user, observer = TaskIntent(find_task(task)), TaskIntent(find_task(task))
     phases = set()
     for k in range(160):
         obs = (_pour_path(k) if task == "pour" else
@@ -212,3 +216,57 @@ def test_an_observers_desire_judges_progress_as_the_users(task):
         assert not np.any(o.twist) and not np.any(o.W)
         phases.add(d.phase)
     assert len(phases) >= 3
+
+
+def _watering():
+    """A task no code knows: a can's spout (off the hand's axis) brought over a pot, the
+    can tilted until a third of it is poured, then levelled; pour's file re-aimed."""
+    text = (shipped_folder() / "pour.yaml").read_text()
+    doc = yaml.safe_load(text.replace("bottle_tip", "spout").replace("bottle", "can").replace("mug", "pot"))
+    doc["name"] = "water"
+    doc["scene"]["held"]["frames"]["spout"]["position"] = [0.05, 0.0, 0.10]
+    doc["intent"] = [
+        {"name": "carry", "reach": {"frame": "spout", "to": [0.01, 0.0, 0.08],
+                                    "orientation": {"upright": 0.4},
+                                    "reached": {"radial": 0.01, "height": 0.01}}},
+        {"name": "water", "tilt": {"to": 1.5, "until": {"reading": "can.poured", "at_least": 0.3}}},
+        {"name": "level", "upright": {"below": 0.2}},
+    ]
+    return task_from_document(doc, "water.yaml")
+
+
+def test_the_intent_runs_the_steps_of_a_task_it_has_never_seen():
+    """The hand moved as the intent wishes (a perfect device): the spout goes over the
+    goal in the pot's frame, the can is tilted until the reading holds, then levelled,
+    through the phases the file names."""
+    task = _watering()
+    T_ee_spout = task.scene.held.frames["spout"]
+    pot = task.scene.bodies["pot"].T_world
+    it = TaskIntent(task)
+    T, poured, dt, phases, tilted = task.scene.start.T_world.copy(), 0.0, 0.01, [], 0.0
+    for k in range(3000):
+        T_spout = T @ T_ee_spout
+        d = it.desire(Observation(k * dt, T, {"pot": pot, "spout": T_spout},
+                                  {"readings": {"can.poured": poured}}))
+        if not phases or phases[-1] != d.phase:
+            phases.append(d.phase)
+        if d.done:
+            break
+        tilt = float(np.arccos(np.clip(T_spout[2, 2], -1.0, 1.0)))
+        tilted = max(tilted, tilt)
+        poured += 0.3 * dt if tilt > 1.3 else 0.0
+        R = se3.matrix_from_rotvec(d.twist[3:] * dt) @ T[:3, :3]  # the hand moved as wished
+        T = se3.transform_from_rt(R, T[:3, 3] + d.twist[:3] * dt)
+    assert phases == ["carry", "water", "level", "done"], phases
+    spout = (T @ T_ee_spout)[:3, 3]
+    goal = (pot @ [0.01, 0.0, 0.08, 1.0])[:3]
+    assert np.linalg.norm(spout - goal) < 0.02 and poured >= 0.3 and tilted > 1.3, (spout, goal, poured)
+    assert T[2, 2] > np.cos(0.2)  # level again
+
+
+def test_the_user_client_refuses_what_is_no_task(capsys):
+    from sctd_services import simulated_user
+
+    assert simulated_user.main(["--task", "juggle", "--duration", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "sctd-simulated-user: --task: juggle: no such file, and no task of that name" in err

@@ -17,6 +17,7 @@ from typing import Any
 
 from sctd.skill import SkillError
 from sctd.skill.catalog import find_skill
+from sctd.task import TaskError, find_task
 from sctd_services.eval.evaluate import (
     entries,
     evaluate,
@@ -34,6 +35,7 @@ from sctd_services.user import PROFILES
 
 from ..app.errors import fail
 from ..app.logs import log_folder
+from ..app.options import TASK_HELP
 from .eval_realtime import realtime_job
 
 
@@ -42,8 +44,8 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
                    help="a skill to evaluate (repeatable): a path, or the name of a shipped skill "
                         "(pour, pour.yaml; sctd skills lists them); teleop is the unassisted "
                         "baseline and runs with the first assisted skill's speed limits")
-    p.add_argument("--task", choices=("pour", "drawer"),
-                   help="the task (default: from the skills' object)")
+    p.add_argument("--task", metavar="NAME|FILE",
+                   help=TASK_HELP + " (default: the one whose task object is the skills' object)")
     p.add_argument("--trials", type=int, default=20, help="trials per skill (default %(default)s)")
     p.add_argument("--seed", type=int, default=0,
                    help="first trial seed: trial k starts from the seeded random start seed + k")
@@ -70,6 +72,11 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--trials: must be >= 1"
     if args.jobs is not None and args.jobs < 1:
         return "--jobs: must be >= 1"
+    if args.task is not None:
+        try:
+            find_task(args.task)  # its scene, outcome and intent: what a trial needs
+        except TaskError as e:
+            return f"--task: {e}"
     return None
 
 

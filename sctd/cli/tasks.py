@@ -12,6 +12,7 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import TASK_HELP
 from ..task import Task, TaskError, find_task, known_tasks, load_task
 from ..task.judge import thresholds
+from ..task.reader import KINDS
 
 
 def add_tasks_arguments(p: argparse.ArgumentParser) -> None:
@@ -43,6 +44,8 @@ def summary(task: Task) -> dict[str, Any]:
         "fails": [f.reason for f in task.outcome.fail],
         "progress": str(task.outcome.progress),
         "time_limit": task.outcome.time_limit,
+        "intent": [{"name": s.name, "kind": next(k for k, c in KINDS.items() if isinstance(s.action, c))}
+                   for s in task.intent],
     }
 
 
@@ -83,6 +86,8 @@ def main_tasks(args: argparse.Namespace) -> int:
         targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or "see the file"
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
+        steps = ", ".join(f"{st['name']} ({st['kind']})" for st in s["intent"])
+        print(f"  intent: {steps}")
         return EXIT_OK
     try:
         rows = _rows()

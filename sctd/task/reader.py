@@ -17,9 +17,13 @@ import numpy as np
 from sctd import se3
 from sctd.skill.reader import Reader, kind_of
 
+from .judge import thresholds
 from .model import (
+    DONE,
     READINGS,
     VERSION,
+    Accept,
+    Action,
     AllOf,
     AnyOf,
     Body,
@@ -30,14 +34,21 @@ from .model import (
     Grasp,
     Held,
     Joint,
+    Lift,
+    MoveJoint,
     Near,
     Not,
     Outcome,
     Predicate,
+    Reach,
+    Reached,
     Reading,
     Scene,
     Start,
+    Step,
     Task,
+    Tilt,
+    Upright,
     Vary,
 )
 
@@ -95,14 +106,26 @@ class _Reader(Reader):
     def nonneg(self, v: Any, path: str) -> float:
         return self.number(v, path, lo=0.0)
 
-    def angle(self, v: Any, path: str, lo: float | None = None, hi: float | None = None) -> float:
+    def angle(self, v: Any, path: str, lo: float | None = None, hi: float | None = None,
+              lo_open: bool = False) -> float:
         """Radians: a number, or a string ``"<number> deg"``."""
         if isinstance(v, str):
             m = DEGREES.match(v)
             if m is None:
                 raise self.fail(path, f"expected an angle in rad, or \"<number> deg\", got {v!r}")
             v = math.radians(float(m.group(1)))
-        return self.number(v, path, lo, hi)
+        return self.number(v, path, lo, hi, lo_open)
+
+    def tilt(self, v: Any, path: str) -> float:
+        """A tilt from the vertical: an angle in (0, pi]."""
+        return self.angle(v, path, lo=0.0, hi=math.pi, lo_open=True)
+
+    def pair(self, v: Any, path: str) -> tuple[float, float]:
+        """``[lo, hi]``, two numbers with lo < hi."""
+        lo, hi = self.vector(v, path, 2).tolist()
+        if not lo < hi:
+            raise self.fail(path, f"expected [low, high] with low < high, got [{lo}, {hi}]")
+        return lo, hi
 
     def transform(self, d: dict, path: str) -> np.ndarray:
         """``position`` [3] and ``rpy`` [3] (roll, pitch, yaw about fixed x, y, z; angles
@@ -147,7 +170,7 @@ def rpy_matrix(rpy: np.ndarray) -> np.ndarray:
 def task_from_document(doc: Any, file: str) -> Task:
     """The task a parsed YAML document describes."""
     r = _Reader(file)
-    d = r.fields(doc, "", {"sctd_task", "name", "object", "scene", "outcome"},
+    d = r.fields(doc, "", {"sctd_task", "name", "object", "scene", "outcome", "intent"},
                  {"title", "description", "source"})
     version = d["sctd_task"]
     if version != VERSION:
@@ -158,9 +181,10 @@ def task_from_document(doc: Any, file: str) -> Task:
     if obj not in scene.bodies:
         raise r.fail("object", f"unknown body {obj!r} (bodies: {', '.join(scene.bodies)})")
     outcome = _outcome(r, d["outcome"], "outcome", scene)
+    intent = _intent(r, d["intent"], "intent", scene, outcome)
     text = {k: (r.string(d[k], k) if k in d else "") for k in ("title", "description", "source")}
     return Task(name, text["title"] or name, text["description"], text["source"], obj, scene, outcome,
-                file)
+                intent, file)
 
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
@@ -341,3 +365,124 @@ def _outcome(r: _Reader, v: Any, path: str, scene: Scene) -> Outcome:
         progress=_reading(r, d["progress"], f"{path}.progress", scene),
         clock=predicate(r, d["clock"], f"{path}.clock", scene),
         time_limit=r.positive(d["time_limit"], f"{path}.time_limit"))
+
+
+# -- the intent ---------------------------------------------------------------------------
+KINDS: dict[str, type] = {"reach": Reach, "tilt": Tilt, "upright": Upright, "move_joint": MoveJoint}
+"""The kinds of step, by the key that gives one (each step has one besides its ``name``)."""
+
+
+def _intent(r: _Reader, v: Any, path: str, scene: Scene, outcome: Outcome) -> tuple[Step, ...]:
+    """The ordered steps; the first one a reach (the others move the frame of the reach
+    before them)."""
+    if not isinstance(v, list) or not v:
+        raise r.fail(path, f"expected a non-empty list of steps, got {kind_of(v)}")
+    steps: list[Step] = []
+    anchor: Reach | None = None
+    for i, item in enumerate(v):
+        where = f"{path}[{i}]"
+        d = r.mapping(item, where)
+        r.known_keys(d, where, {"name", *KINDS})
+        if "name" not in d:
+            raise r.fail(f"{where}.name", "missing")
+        name = r.name(d["name"], f"{where}.name")
+        if name == DONE or name in (s.name for s in steps):
+            why = "the phase after the last step" if name == DONE else "the name of an earlier step"
+            raise r.fail(f"{where}.name", f"{name!r} is {why}")
+        kinds = [k for k in KINDS if k in d]
+        if len(kinds) != 1:
+            raise r.fail(where, f"expected one of {', '.join(KINDS)}; got {', '.join(kinds) or 'none'}")
+        kind = kinds[0]
+        if anchor is None and kind != "reach":
+            raise r.fail(f"{where}.{kind}", f"a {kind} step moves the frame of a reach before it: "
+                                            "the first step must be a reach")
+        action = _action(r, kind, d[kind], f"{where}.{kind}", scene, outcome, anchor)
+        if isinstance(action, Reach):
+            anchor = action
+        steps.append(Step(name, action))
+    return tuple(steps)
+
+
+def _action(r: _Reader, kind: str, v: Any, path: str, scene: Scene, outcome: Outcome,
+            anchor: Reach | None) -> Action:
+    if kind == "reach":
+        return _reach(r, v, path, scene)
+    if kind == "tilt":
+        d = r.fields(v, path, {"to", "until"}, {"weight", "off_by"})
+        return Tilt(r.tilt(d["to"], f"{path}.to"), predicate(r, d["until"], f"{path}.until", scene),
+                    r.nonneg(d.get("weight", 1.0), f"{path}.weight"),
+                    r.positive(d["off_by"], f"{path}.off_by") if "off_by" in d else None)
+    if kind == "upright":
+        d = r.fields(v, path, {"below"})
+        return Upright(r.tilt(d["below"], f"{path}.below"))
+    d = r.fields(v, path, {"joint"}, {"overshoot", "back"})
+    joint = _joint_name(r, d["joint"], f"{path}.joint", scene)
+    if f"{joint}.position" not in thresholds(outcome.done):
+        raise r.fail(f"{path}.joint", f"outcome.done sets no at_least on {joint}.position: the joint "
+                                      "has no target to move it to")
+    if anchor is None or anchor.handle != joint:
+        raise r.fail(f"{path}.joint", f"the reach before it must go to the handle of {joint!r} "
+                                      f"(handle: {joint}): that is what moves it")
+    return MoveJoint(joint, r.nonneg(d.get("overshoot", 0.0), f"{path}.overshoot"),
+                     predicate(r, d["back"], f"{path}.back", scene) if "back" in d else None)
+
+
+def _joint_name(r: _Reader, v: Any, path: str, scene: Scene) -> str:
+    name = r.string(v, path)
+    if name not in scene.joints:
+        raise r.fail(path, f"unknown joint {name!r} (joints: {', '.join(scene.joints) or 'none'})")
+    return name
+
+
+def _reach(r: _Reader, v: Any, path: str, scene: Scene) -> Reach:
+    d = r.fields(v, path, {"frame"}, {"to", "handle", "lift", "reached", "accept", "until", "orientation"})
+    frame = r.string(d["frame"], f"{path}.frame")
+    moving = [HAND, *(scene.held.frames if scene.held else ())]
+    if frame not in moving:
+        raise r.fail(f"{path}.frame", f"expected a frame that moves with the hand, got {frame!r} "
+                                      f"(frames: {', '.join(moving)})")
+    if ("to" in d) == ("handle" in d):
+        raise r.fail(path, "expected one goal: to: [x, y, z] (in the task object's frame) or "
+                           "handle: <joint>")
+    handle = _joint_name(r, d["handle"], f"{path}.handle", scene) if "handle" in d else None
+    until = predicate(r, d["until"], f"{path}.until", scene) if "until" in d else None
+    reached = _reached(r, d["reached"], f"{path}.reached") if "reached" in d else None
+    if reached is None and until is None:
+        raise r.fail(path, "expected reached, until or both: what completes the step")
+    return Reach(frame, r.vector(d["to"], f"{path}.to", 3) if "to" in d else None, handle,
+                 _lift(r, d["lift"], f"{path}.lift") if "lift" in d else None, reached,
+                 _accept(r, d["accept"], f"{path}.accept") if "accept" in d else None, until,
+                 _orientation(r, d.get("orientation", "free"), f"{path}.orientation"))
+
+
+def _lift(r: _Reader, v: Any, path: str) -> Lift:
+    d = r.fields(v, path, {"height", "between"})
+    start, end = r.pair(d["between"], f"{path}.between")
+    if start < 0.0:
+        raise r.fail(f"{path}.between", f"distances are >= 0, got {start}")
+    return Lift(r.positive(d["height"], f"{path}.height"), start, end - start)
+
+
+def _reached(r: _Reader, v: Any, path: str) -> Reached:
+    d = r.fields(v, path, set(), {"radial", "height"})
+    if not d:
+        raise r.fail(path, "expected radial, height or both (m)")
+    radial, height = (r.positive(d[k], f"{path}.{k}") if k in d else None for k in ("radial", "height"))
+    return Reached(radial, height)
+
+
+def _accept(r: _Reader, v: Any, path: str) -> Accept:
+    d = r.fields(v, path, {"radial"}, {"height", "tilt"})
+    return Accept(r.positive(d["radial"], f"{path}.radial"),
+                  r.pair(d["height"], f"{path}.height") if "height" in d else None,
+                  r.tilt(d["tilt"], f"{path}.tilt") if "tilt" in d else None)
+
+
+def _orientation(r: _Reader, v: Any, path: str) -> float | None:
+    """``free`` (None), or ``{upright: <tilt tolerated>}``."""
+    if v == "free":
+        return None
+    if not isinstance(v, dict):
+        raise r.fail(path, f"expected free or {{upright: <tilt>}}, got {v!r}")
+    d = r.fields(v, path, {"upright"})
+    return r.tilt(d["upright"], f"{path}.upright")

@@ -18,6 +18,7 @@ from sctd import se3
 from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
 from sctd.skill import Skill
+from sctd.task import find_task
 from sctd.wire import codec
 from sctd_services.user import Observation, SimulatedUser
 from sctd_sim.guard import TargetGuard, TargetLimits
@@ -45,8 +46,9 @@ def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None
 def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list | None) -> TrialResult:
     feed = Feed(TickDriver(skill, RuntimeConfig()))
     drv = feed.driver
-    user = SimulatedUser(spec.task, spec.axes, spec.profile, seed=seed)
-    rec = TrialRecorder(spec.task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
+    task = find_task(spec.task)
+    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed)
+    rec = TrialRecorder(task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
     every_user = max(1, round(1.0 / (USER_RATE * sim.dt)))
     every_object = max(1, round(1.0 / (OBJECT_RATE * sim.dt)))

@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.task import find_task
+from sctd.task import Task, find_task
 from sctd.task.judge import holds
 from sctd_services.user.agent import REPROBE_AFTER
-from sctd_services.user.intent import Observation, make_intent
+from sctd_services.user.intent import Observation, TaskIntent
 
 Array = NDArray[np.float64]
 
@@ -82,8 +82,8 @@ class TrialRecorder:
 
     Parameters
     ----------
-    task : str
-        A task's name or file (:func:`sctd.task.find_task`).
+    task : str or Task
+        A task, or its name or file (:func:`sctd.task.find_task`).
     seed : int
     switch_time : float
         Seconds one mode switch costs the user (charged per press of button 0).
@@ -93,16 +93,16 @@ class TrialRecorder:
         s between recorded trajectory samples (50 Hz, as the demonstrations).
     """
 
-    def __init__(self, task: str, seed: int, switch_time: float, time_limit: float = 60.0,
+    def __init__(self, task: str | Task, seed: int, switch_time: float, time_limit: float = 60.0,
                  stuck_after: float = 10.0, record_every: float = 0.02):
-        self.task = task
-        self.spec = find_task(task)  # what ends the trial, its clock and its progress
+        # what ends the trial, its clock, its progress and the intent its observer judges by
+        self.spec = task if isinstance(task, Task) else find_task(task)
         self.seed = seed
         self.switch_time = switch_time
         self.time_limit = time_limit
         self.stuck_after = stuck_after
         self.record_every = record_every
-        self.observer = make_intent(task)  # judges progress; never steers
+        self.observer = TaskIntent(self.spec)  # judges progress; never steers
         self.t0: float | None = None
         self.t_task: float | None = None
         self.t_end_task: float | None = None

@@ -15,12 +15,19 @@ from multiprocessing import get_context
 from typing import Any
 
 from sctd.skill.catalog import StoredSkill
+from sctd.task import TaskError, find_task
 from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
-from sctd_services.user.intent import INTENTS
 
-TASKS = tuple(INTENTS)
-"""The tasks a lockstep evaluation knows (a simulated scene and a user's intent)."""
+
+def can_evaluate(task: str) -> bool:
+    """Whether a lockstep evaluation can run ``task``: whether it is a task sctd finds
+    whose file validates (its file gives the simulated scene and the user's intent)."""
+    try:
+        find_task(task)
+    except TaskError:
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -106,8 +113,8 @@ def verdict(ev: dict[str, Any] | None, task: str, settings: CheckSettings,
     why. ``active``: the active skill's stored evaluation on the task (None when it did
     not come from the store or was never evaluated on it)."""
     if ev is None:
-        return False, (f"no lockstep evaluation for task {task!r} (known: {', '.join(TASKS)}); "
-                       "send gate: false to swap it unchecked")
+        return False, (f"no lockstep evaluation for task {task!r} (no such task, or its file does not "
+                       "validate: sctd tasks says which); send gate: false to swap it unchecked")
     rate = ev["success_rate"]
     got = f"{ev['successes']}/{ev['trials']} trials succeeded"
     if ev.get("stopped_early"):

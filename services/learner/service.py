@@ -42,7 +42,7 @@ from sctd.skill.catalog import StoredSkill, store_folder
 from sctd.wire import DEFAULT_ROBOT, Keys, client, codec
 from sctd.wire.session import MSGPACK
 
-from .check import TASKS, CheckSettings, evaluation, verdict
+from .check import CheckSettings, can_evaluate, evaluation, verdict
 from .request import Request, RequestError, parse_request, request_map
 from .store import SkillRecord, Store, StoreFull
 from .training import Trainer, TrainingError
@@ -303,7 +303,7 @@ class Learner:
             reason = "not checked (gate: false, allowed by the learner's operator)"
             record.update({"check": {"passed": None, "checked": False, "reason": reason}})
             return None, None, reason
-        if req.task not in TASKS:
+        if not can_evaluate(req.task):
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
         active = self._active_evaluation(req.task, exclude=stored.id)

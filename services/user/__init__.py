@@ -1,6 +1,6 @@
 """The simulated user: a person who knows the task, not the skill.
 
-:class:`SimulatedUser` combines a task intent (:mod:`.intent`), a model of the input
+:class:`SimulatedUser` combines the task file's intent (:mod:`.intent`), a model of the input
 device it learns from the robot's response (:mod:`.device`) and human limits
 (:mod:`.human`). ``sctd eval`` and ``sctd demo`` drive skills with it; the Zenoh client
 is :mod:`sctd_services.simulated_user`.
@@ -9,8 +9,7 @@ is :mod:`sctd_services.simulated_user`.
 from .agent import SimulatedUser, twist_between
 from .device import DeviceModel
 from .human import DEFAULT_PROFILE, PROFILES, HumanProfile
-from .intent import INTENTS, Desire, DrawerIntent, Observation, PourIntent, make_intent
+from .intent import Desire, Observation, TaskIntent
 
-__all__ = ["DEFAULT_PROFILE", "INTENTS", "PROFILES", "Desire", "DeviceModel", "DrawerIntent",
-           "HumanProfile", "Observation", "PourIntent", "SimulatedUser", "make_intent",
-           "twist_between"]
+__all__ = ["DEFAULT_PROFILE", "PROFILES", "Desire", "DeviceModel", "HumanProfile", "Observation",
+           "SimulatedUser", "TaskIntent", "twist_between"]

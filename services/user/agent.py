@@ -1,14 +1,15 @@
-"""The simulated user: a task intent, a learned model of the device, human limits.
+"""The simulated user: a task's intent, a learned model of the device, human limits.
 
-The user knows the task (:mod:`.intent`) and what a person in the chair is shown of
-the skill: the name of the active mode (state) and the number of input axes. It knows
-nothing of mappings, fields or constraints. It learns how the stick moves the hand in
-each mode from the robot's response to its own inputs (:mod:`.device`): trying each
-axis in a mode it has not seen, then choosing at every correction the input whose
-predicted motion comes closest to what the intent wants, and updating the model from
-what the hand then did; when that stops bringing it closer for a while, it tries the
-stick out again, or, when it is as close as the task needs (the bottle's opening inside
-the mug's rim), goes on to the next step. Where the current mode cannot produce the
+The user knows the task (its file's intent, :mod:`.intent`) and what a person in the
+chair is shown of the skill: the name of the active mode (state) and the number of
+input axes. It knows nothing of mappings, fields or constraints. It learns how the
+stick moves the hand in each mode from the robot's response to its own inputs
+(:mod:`.device`): trying each axis in a mode it has not seen, then choosing at every
+correction the input whose predicted motion comes closest to what the intent wants,
+and updating the model from what the hand then did; when that stops bringing it closer
+for a while, it tries the stick out again, or, when it is as close as the task needs
+(within the step's ``accept`` region: the bottle's opening inside the mug's rim), goes
+on to the next step. Where the current mode cannot produce the
 wanted motion, or nothing of its most wanted part, for a while it lets go and tries the
 mode switch (button 0), as a person who knows the device has modes; if pressing it
 changes nothing, it stops trying.
@@ -26,10 +27,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import Task
 
 from .device import DeviceModel
 from .human import PROFILES, HumanProfile
-from .intent import Desire, Observation, make_intent
+from .intent import Desire, Observation, TaskIntent
 
 Array = NDArray[np.float64]
 PROBE = 0.6  # deflection of a trial push
@@ -56,8 +58,8 @@ class SimulatedUser:
 
     Parameters
     ----------
-    task : str
-        ``pour`` or ``drawer`` (the intent).
+    task : Task
+        The task (its file's intent is what the user wants).
     n_axes : int
         Input axes of the device (what the display says).
     profile : HumanProfile or str
@@ -65,10 +67,10 @@ class SimulatedUser:
         Noise seed.
     """
 
-    def __init__(self, task: str, n_axes: int = 3, profile: HumanProfile | str = "steady",
+    def __init__(self, task: Task, n_axes: int = 3, profile: HumanProfile | str = "steady",
                  seed: int = 0):
         self.task = task
-        self.intent = make_intent(task)
+        self.intent = TaskIntent(task)
         self.n = n_axes
         self.profile = PROFILES[profile] if isinstance(profile, str) else profile
         self.rng = np.random.default_rng(seed)

@@ -1,19 +1,23 @@
-"""What a person wants the hand to do next, per task, from the scene alone.
+"""What a person wants the hand to do next: the task file's intent, run on the scene alone.
 
-Written once per task and independent of any skill: an intent looks at what a person in
-the chair sees (the hand, the objects, the task's progress: how full the mug is, how
-far the drawer is open) and says how the hand should move next, as a desired twist of
-the end-effector in the world frame, with a weight matrix saying which components
-matter. It never looks at the skill, its states or its mappings.
+The intent is written in the task file (``intent``, ``docs/tasks.md``), once per task and
+independent of any skill: ordered sub-goals in the task object's frame (reach a region,
+tilt until a reading holds, bring the frame upright, move a joint's handle).
+:class:`TaskIntent` runs them on what a person in the chair sees (the hand, the objects,
+the scene's readings: how full the mug is, how far the drawer is open) and says how the
+hand should move next, as a desired twist of the end-effector in the world frame, with a
+weight matrix saying which components matter. It never looks at the skill, its states or
+its mappings.
 
-pour: bring the bottle opening over the mug at a safe height with the bottle upright,
-tilt until the mug holds the scene's fill target, bring the bottle upright again.
-drawer: reach the handle, then pull until the drawer is open to the scene's target.
+What belongs to the person rather than to the task (how fast they want the hand to move,
+how much a radian of tilt counts against a metre, which way they tilt) are
+:class:`TaskIntent`'s own parameters.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,6 +25,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import Task
+from sctd.task.judge import holds, thresholds
+from sctd.task.model import (
+    DONE,
+    Action,
+    AllOf,
+    AnyOf,
+    Lift,
+    MoveJoint,
+    Near,
+    Not,
+    Predicate,
+    Reach,
+    Tilt,
+    Upright,
+)
+from sctd.task.reader import HAND
 
 Array = NDArray[np.float64]
 UP = np.array([0.0, 0.0, 1.0])
@@ -29,8 +50,8 @@ UP = np.array([0.0, 0.0, 1.0])
 @dataclass
 class Observation:
     """What the user sees at time ``t``: the hand and the objects in the world (4x4),
-    the task's progress (the scene's outcome fields) and the mode the display shows
-    (the skill's active state name)."""
+    the task's progress (the scene's outcome fields, its ``readings`` among them) and the
+    mode the display shows (the skill's active state name)."""
 
     t: float
     T_world_ee: Array
@@ -46,7 +67,7 @@ class Desire:
     compare), ``error`` a distance to the current sub-goal (progress), ``phase`` the
     intent's own step, ``done`` the task is achieved as far as the user can tell,
     ``close_enough`` the hand is short of the sub-goal but within what the task
-    tolerates (a user who cannot get any closer moves on: :meth:`PourIntent.settle`)."""
+    tolerates (a user who cannot get any closer moves on: :meth:`TaskIntent.settle`)."""
 
     twist: Array
     W: Array
@@ -66,215 +87,363 @@ def _saturate(v: Array, limit: float) -> Array:
     return v if n <= limit else v * (limit / n)
 
 
+def _lifted(lift: Lift, radial: float) -> float:
+    """How far the goal is raised at ``radial`` m from its vertical."""
+    return lift.height * min(1.0, max(0.0, (radial - lift.start) / lift.span))
+
+
+def _has_near(p: Predicate | None) -> bool:
+    """Whether ``p`` asks where a frame is (and so needs the frames' positions)."""
+    if isinstance(p, Near):
+        return True
+    if isinstance(p, AllOf | AnyOf):
+        return any(_has_near(t) for t in p.terms)
+    return isinstance(p, Not) and _has_near(p.term)
+
+
 @dataclass
-class PourIntent:
-    """Bring the opening over the mug, pour to the fill target, upright again.
+class _Look:
+    """What the person sees of a reach's frame and its goal.
 
     Attributes
     ----------
+    p, z : ndarray, shape (3,)
+        The frame's position and z axis (world).
+    tilt : float
+        Of its z axis from the vertical, rad.
     height : float
-        Opening above the mug's opening while pouring, m (the stream lands in the mug
-        from up to 0.15 m).
-    centred : float
-        Horizontal distance from the mug's axis within which the user starts tilting, m.
-    acceptable : float
-        Distance within which a user who cannot centre the opening any better (the mode
-        does not move it there) tilts anyway, m: inside the mug's 4 cm opening with a
-        margin for the stream (the scene counts 3.5 cm as over the opening).
-    acceptable_heights : tuple of float
-        Heights of the opening above the mug's within which such a user tilts, m (the
-        stream lands in the mug from up to 0.15 m).
-    off_centre : float
-        Distance at which a pouring user stops and re-centres, m.
-    pour_tilt : float
-        Tilt the user aims for while pouring, rad (the bottle flows past about 1.3).
-    upright_tilt : float
-        Tilt below which the bottle counts as upright again, rad.
-    carry_tilt : float
-        Tilt the user tolerates while bringing the bottle over the mug (well below the
-        angle at which it flows), rad.
+        Its height in the goal's reference frame (the task object's, or the handle's), m.
+    goal_height : float
+        The goal's, unlifted, in that frame, m.
+    radial : float
+        Its distance from the goal's vertical (that frame's z), m. (For a handle, the
+        two are worked out only when the steps ask for them; NaN otherwise.)
+    goal : tuple of 3 floats
+        The goal (world), lifted.
+    to_goal : float
+        From the frame to the goal, m.
     """
 
-    height: float = 0.05
-    centred: float = 0.025
-    acceptable: float = 0.03
-    acceptable_heights: tuple[float, float] = (0.02, 0.10)
-    off_centre: float = 0.033
-    pour_tilt: float = 1.65
-    upright_tilt: float = 0.3
-    carry_tilt: float = 0.5  # rad of tilt that does not worry a user carrying the bottle
-    lean: float = 0.25  # rad: a bottle leaning further than this is poured the way it leans
-    gain: float = 2.0  # 1/s: desired speed per unit error
-    v_max: float = 0.10  # m/s: the fastest the user wants the opening to move
-    w_max: float = 0.6  # rad/s
-    phase: str = "bring"
-    _axis: Array | None = field(default=None, repr=False)
-    _inverse: tuple[bytes, Array] | None = field(default=None, repr=False, compare=False)  # mug's
-
-    def desire(self, obs: Observation, steer: bool = True) -> Desire:
-        """What the hand should do now; with ``steer`` False (an observer judging
-        progress, which never steers) the twist and the weights are left zero."""
-        T_mug = obs.objects["mug"]
-        T_tip = obs.objects["bottle_tip"]
-        (_, _, _, tx), (_, _, _, ty), (_, _, zz, tz), _ = T_tip.tolist()  # the opening, the axis' z
-        mx, my, height, _ = (self._mug_inverse(T_mug) @ np.array((tx, ty, tz, 1.0))).tolist()
-        radial = math.hypot(mx, my)
-        tilt = math.acos(max(-1.0, min(1.0, zz)))  # (the bottle axis . UP)
-        poured = float(obs.scene.get("poured", 0.0))
-        fill = float(obs.scene.get("fill_target", 0.5))
-        if self.phase == "bring" and radial < self.centred and abs(height - self.height) < 0.02:
-            self.phase = "pour"
-        if self.phase == "pour" and poured >= fill:
-            self.phase = "upright"
-        if self.phase == "pour" and radial > self.off_centre:
-            self.phase = "bring"
-        if self.phase == "upright" and tilt < self.upright_tilt:
-            self.phase = "done"
-
-        # the opening's goal: over the mug's axis, higher while still far from it
-        lift = 0.04 * min(1.0, max(0.0, (radial - 0.02) / 0.05))
-        goal = T_mug[:3, :3] @ np.array([0.0, 0.0, self.height + lift]) + T_mug[:3, 3]
-        gx, gy, gz = goal.tolist()
-        ex, ey, ez = gx - tx, gy - ty, gz - tz
-        to_goal = math.sqrt(ex * ex + ey * ey + ez * ez)
-        if self.phase == "pour":
-            err_rot = abs(self.pour_tilt - tilt)
-        else:
-            # bringing: only a tilt beyond carry_tilt needs undoing; upright: all of it
-            err_rot = tilt if self.phase in ("upright", "done") else max(0.0, tilt - self.carry_tilt)
-        err = to_goal + 0.05 * err_rot
-        if self.phase == "pour":  # progress: tilting far enough, then the mug filling
-            err = to_goal + 0.05 * max(0.0, self.pour_tilt - tilt) + 0.5 * max(0.0, fill - poured)
-        done = self.phase == "done"
-        close = (self.phase == "bring" and radial < self.acceptable
-                 and self.acceptable_heights[0] < height < self.acceptable_heights[1]
-                 and tilt < self.carry_tilt)
-        if not steer:
-            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
-        twist, W = self._motion(obs.T_world_ee, T_tip[:3, 3], T_tip[:3, 2], goal, tilt, err_rot)
-        return Desire(twist, W, err, self.phase, done, close)
-
-    def _motion(self, T_world_ee: Array, p_tip: Array, z_b: Array, goal: Array, tilt: float,
-                excess: float) -> tuple[Array, Array]:
-        """The hand's twist towards ``goal`` for the opening and the weights of its
-        components (``excess``: the tilt to undo outside pouring)."""
-        v_tip = _saturate(self.gain * (goal - p_tip), self.v_max)
-        if self.phase == "pour":
-            axis = self._tilt_axis(T_world_ee, z_b, tilt)  # further over, one way
-            w = axis * self.gain * (self.pour_tilt - tilt)
-        else:
-            self._axis = None
-            back = np.cross(z_b, UP)  # rotating about it brings the bottle upright
-            n = float(np.linalg.norm(back))
-            w = back / n * self.gain * excess if n > 1e-9 else np.zeros(3)
-        w = _saturate(w, self.w_max)
-        # the hand's twist that moves the opening so: v_ee = v_tip - w x (p_tip - p_ee)
-        v_ee = v_tip - np.cross(w, p_tip - T_world_ee[:3, 3])
-        W = np.zeros((6, 6))
-        W[:3, :3] = np.eye(3) / self.v_max
-        # spinning the bottle about its own axis does not matter
-        W[3:, 3:] = (np.eye(3) - np.outer(z_b, z_b)) / self.w_max
-        if self.phase == "done":
-            v_ee, w = np.zeros(3), np.zeros(3)
-        return np.concatenate([v_ee, w]), W
-
-    def _mug_inverse(self, T_mug: Array) -> Array:
-        """``T_mug_world``, worked out again only when the mug moved."""
-        key = T_mug.tobytes()
-        if self._inverse is None or self._inverse[0] != key:
-            self._inverse = (key, se3.invert_transform(T_mug))
-        return self._inverse[1]
-
-    def settle(self) -> None:
-        """Take the bottle as brought (it is close enough, see ``acceptable``): pour."""
-        if self.phase == "bring":
-            self.phase = "pour"
-
-    def _tilt_axis(self, T_world_ee: Array, z_b: Array, tilt: float) -> Array:
-        """The horizontal axis to tilt about, kept once chosen: the way the bottle
-        already leans when it leans clearly (``lean``), else the hand's y axis (tipping
-        its top forwards; a lean of a few degrees left over from carrying it is no
-        decision to pour sideways)."""
-        if self._axis is None:
-            a = np.cross(UP, z_b) if tilt > self.lean else T_world_ee[:3, 1].copy()
-            a[2] = 0.0
-            n = float(np.linalg.norm(a))
-            self._axis = a / n if n > 1e-9 else np.array([0.0, 1.0, 0.0])
-        return self._axis
+    p: Array
+    z: Array
+    tilt: float
+    height: float
+    goal_height: float
+    radial: float
+    goal: tuple[float, float, float]
+    to_goal: float
 
 
 @dataclass
-class DrawerIntent:
-    """Reach and grasp the handle, pull to the target opening.
+class TaskIntent:
+    """Runs the steps of ``task.intent`` for a person who does the task.
+
+    Each call of :meth:`desire` first moves through the steps in order as what is seen
+    completes them (a reach within its ``reached`` tolerances or its ``until`` holding; a
+    tilt's ``until``; a frame upright below ``below``; a joint past its target), or back
+    to the step before (a tilted frame off the goal's vertical by more than ``off_by``,
+    checked after ``until``; a handle let go, checked before the joint's target), then
+    says what the step it is in wants.
+
+    Parameters
+    ----------
+    task : Task
+    gain : float
+        1/s: desired speed per unit error.
+    v_max : float
+        m/s: the fastest the user wants the moving frame to go.
+    w_max : float
+        rad/s.
+    per_rad : float
+        m of error a radian of tilt still to go counts as (progress).
+    lean : float
+        rad: a frame leaning further than this is tilted the way it leans; one that
+        leans less, about the hand's y axis (a lean of a few degrees left over from
+        carrying it is no decision to tilt sideways).
+    ahead : float
+        m: how far ahead along a joint's axis the user aims while moving its handle.
+    past : float
+        m: how far past its target a joint must be for the user to see it there.
+    free_weight : float
+        Weight of the hand's angular velocity where its orientation is free (it hardly
+        matters).
 
     Attributes
     ----------
-    overshoot : float
-        How much further than the target the user pulls, m.
+    index : int
+        The step the user is in; ``len(task.intent)`` once done.
     """
 
-    overshoot: float = 0.03
+    task: Task
     gain: float = 2.0
     v_max: float = 0.10
-    phase: str = "reach"
+    w_max: float = 0.6
+    per_rad: float = 0.05
+    lean: float = 0.25
+    ahead: float = 0.05
+    past: float = 1e-3
+    free_weight: float = 0.1
+    index: int = 0
+    _axis: tuple[int, Array] | None = field(default=None, repr=False)  # (step, axis) being tilted about
+    _inverses: dict[str, tuple[bytes, Array]] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        steps = self.task.intent
+        self._anchors: list[int] = []  # per step (and done): the reach whose frame it moves
+        for i, s in enumerate(steps):
+            self._anchors.append(i if isinstance(s.action, Reach) else self._anchors[-1])
+        self._anchors.append(self._anchors[-1])
+        done = thresholds(self.task.outcome.done)  # (the reader checks a moved joint has one)
+        # per step: the readings a tilt waits for, a joint's position to move it to
+        self._waits = [thresholds(s.action.until) if isinstance(s.action, Tilt) else {} for s in steps]
+        self._ends = [done[f"{s.action.joint}.position"] + s.action.overshoot
+                      if isinstance(s.action, MoveJoint) else 0.0 for s in steps]
+        self._near = any(_has_near(getattr(s.action, k, None)) for s in steps for k in ("until", "back"))
+        # the reaches whose frame's place about the goal's vertical is asked for
+        self._placed = {self._anchors[i] for i, s in enumerate(steps)
+                        if (isinstance(s.action, Tilt) and s.action.off_by is not None)
+                        or (isinstance(s.action, Reach) and (s.action.to is not None or s.action.lift
+                                                             or s.action.reached or s.action.accept))}
+
+    @property
+    def phase(self) -> str:
+        """The name of the step the user is in (``done`` after the last)."""
+        steps = self.task.intent
+        return steps[self.index].name if self.index < len(steps) else DONE
 
     def desire(self, obs: Observation, steer: bool = True) -> Desire:
         """What the hand should do now; with ``steer`` False (an observer judging
         progress, which never steers) the twist and the weights are left zero."""
-        H = obs.objects["drawer_handle"]  # the closed handle; x opens the drawer
-        opening = float(obs.scene.get("opening", 0.0))
-        target = float(obs.scene.get("target_opening", 0.2)) + self.overshoot
-        attached = bool(obs.scene.get("attached", False))
-        (a0, _, _, h0), (a1, _, _, h1), (a2, _, _, h2), _ = H.tolist()  # the axis, the handle
-        (_, _, _, x), (_, _, _, y), (_, _, _, z), _ = obs.T_world_ee.tolist()
-        d0, d1, d2 = h0 + opening * a0 - x, h1 + opening * a1 - y, h2 + opening * a2 - z  # to the handle
-        if attached and self.phase == "reach":
-            self.phase = "pull"
-        if self.phase == "pull" and not attached:
-            self.phase = "reach"  # lost the grip
-        if opening >= target - self.overshoot + 1e-3 and self.phase == "pull":
-            self.phase = "done"
-        if self.phase == "reach":
-            err = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        else:
-            da = 0.0 + d0 * a0 + d1 * a1 + d2 * a2  # (summed as numpy's dot)
-            l0, l1, l2 = d0 - da * a0, d1 - da * a1, d2 - da * a2  # lateral
-            err = max(0.0, target - opening) + math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
-        done = self.phase == "done"
+        readings: Mapping[str, Any] = obs.scene.get("readings", {})
+        positions = self._positions(obs) if self._near else {}
+        looks: dict[int, _Look] = {}
+
+        def look(i: int) -> _Look:
+            k = self._anchors[i]
+            if k not in looks:
+                looks[k] = self._look(self._reach(k), k in self._placed, obs, readings)
+            return looks[k]
+
+        for i, s in enumerate(self.task.intent):  # forwards, as far as it goes; back once
+            if self.index == i:
+                self.index = i + self._move(i, s.action, look(i), readings, positions)
+        i = self.index
+        seen = look(i)
+        err = self._error(i, seen, obs, readings)
+        done = i == len(self.task.intent)
+        close = self._close(seen)
         if not steer:
-            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done)
-        return Desire(self._twist(H, opening, target, obs.T_world_ee[:3, 3], done), self._weights(),
-                      err, self.phase, done)
-
-    def _twist(self, H: Array, opening: float, target: float, p: Array, done: bool) -> Array:
-        """The hand's twist: to the handle, or along its axis while pulling."""
-        if done:
-            return np.zeros(6)
-        axis = H[:3, 0]
-        handle = H[:3, 3] + opening * axis
-        if self.phase == "reach":
-            v = _saturate(self.gain * (handle - p), self.v_max)
-        else:
-            lateral = handle - p - float((handle - p) @ axis) * axis
-            along = max(0.0, target - opening)
-            v = _saturate(self.gain * (lateral + min(along, 0.05) * axis), self.v_max)
-        return np.concatenate([v, np.zeros(3)])
-
-    def _weights(self) -> Array:
-        W = np.zeros((6, 6))
-        W[:3, :3] = np.eye(3) / self.v_max
-        W[3:, 3:] = np.eye(3) * 0.1  # the hand's orientation hardly matters
-        return W
+            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
+        return Desire(self._twist(i, seen, obs, readings), self._weights(i, seen), err, self.phase, done,
+                      close)
 
     def settle(self) -> None:
-        """Nothing is tolerated short of the goal: the handle is grasped or not."""
+        """Take the reach as done although short of its goal (the frame is within its
+        ``accept`` region: :attr:`Desire.close_enough`): on to the next step. Nothing
+        else is settled for."""
+        steps = self.task.intent
+        if self.index < len(steps):
+            a = steps[self.index].action
+            if isinstance(a, Reach) and a.accept is not None:
+                self.index += 1
 
+    # -- what is seen --------------------------------------------------------------------
 
-INTENTS = {"pour": PourIntent, "drawer": DrawerIntent}
+    def _reach(self, k: int) -> Reach:
+        a = self.task.intent[k].action
+        assert isinstance(a, Reach)  # (anchors are reaches)
+        return a
 
+    def _last(self, i: int) -> int:
+        """Step ``i``, or once done the last step (whose error and weights it keeps)."""
+        return min(i, len(self.task.intent) - 1)
 
-def make_intent(task: str) -> PourIntent | DrawerIntent:
-    try:
-        return INTENTS[task]()
-    except KeyError:
-        raise ValueError(f"unknown task {task!r} (known: {', '.join(INTENTS)})") from None
+    def _action(self, i: int) -> Action:
+        return self.task.intent[self._last(i)].action
+
+    @staticmethod
+    def _positions(obs: Observation) -> dict[str, Array]:
+        out = {n: T[:3, 3] for n, T in obs.objects.items()}
+        out[HAND] = obs.T_world_ee[:3, 3]
+        return out
+
+    def _joint_position(self, joint: str, readings: Mapping[str, Any]) -> float:
+        return float(readings.get(f"{joint}.position", 0.0))
+
+    def _inverse(self, name: str, T: Array) -> Array:
+        """``T`` inverted, worked out again only when the frame ``name`` moved."""
+        key = T.tobytes()
+        kept = self._inverses.get(name)
+        if kept is None or kept[0] != key:
+            kept = self._inverses[name] = (key, se3.invert_transform(T))
+        return kept[1]
+
+    def _look(self, reach: Reach, placed: bool, obs: Observation, readings: Mapping[str, Any]) -> _Look:
+        """The reach's frame against its goal (see :class:`_Look`; ``placed``: where the
+        frame is about the goal's vertical is asked for)."""
+        T_f = obs.T_world_ee if reach.frame == HAND else obs.objects[reach.frame]
+        (_, _, _, tx), (_, _, _, ty), (_, _, zz, tz), _ = T_f.tolist()  # the frame, its axis' z
+        here = (tx, ty, tz, 1.0)
+        if reach.to is not None:
+            T_ref = obs.objects[self.task.object]
+            gx, gy, gz = reach.to.tolist()
+            mx, my, height, _ = (self._inverse(self.task.object, T_ref) @ np.array(here)).tolist()
+            radial = math.hypot(mx - gx, my - gy)
+            lift = 0.0 if reach.lift is None else _lifted(reach.lift, radial)
+            wx, wy, wz = (T_ref[:3, :3] @ np.array([gx, gy, gz + lift]) + T_ref[:3, 3]).tolist()
+        else:  # the handle where the joint has moved it, along the handle's x
+            assert reach.handle is not None  # (the reader asks for one goal)
+            joint = self.task.scene.joints[reach.handle]
+            H = obs.objects[joint.handle]
+            o = self._joint_position(joint.name, readings)
+            (a0, _, c0, h0), (a1, _, c1, h1), (a2, _, c2, h2), _ = H.tolist()  # its x, z, origin
+            wx, wy, wz = h0 + o * a0, h1 + o * a1, h2 + o * a2
+            gz, height, radial = 0.0, math.nan, math.nan
+            if placed:
+                mx, my, height, _ = (self._inverse(joint.handle, H) @ np.array(here)).tolist()
+                radial = math.hypot(mx - o, my)
+            if reach.lift is not None:
+                lift = _lifted(reach.lift, radial)
+                wx, wy, wz = wx + lift * c0, wy + lift * c1, wz + lift * c2
+        ex, ey, ez = wx - tx, wy - ty, wz - tz
+        tilt = math.acos(max(-1.0, min(1.0, zz)))
+        return _Look(T_f[:3, 3], T_f[:3, 2], tilt, height, gz, radial, (wx, wy, wz),
+                     math.sqrt(ex * ex + ey * ey + ez * ez))
+
+    # -- the steps -----------------------------------------------------------------------
+
+    def _move(self, i: int, a: Action, seen: _Look, readings: Mapping[str, Any],
+              positions: Mapping[str, Array]) -> int:
+        """+1: step ``i`` is complete; -1: back to the step before; 0: stay."""
+        if isinstance(a, Reach):
+            r = a.reached
+            if r is not None and (r.radial is None or seen.radial < r.radial) and \
+                    (r.height is None or abs(seen.height - seen.goal_height) < r.height):
+                return 1
+            return 1 if a.until is not None and holds(a.until, readings, positions) else 0
+        if isinstance(a, Tilt):
+            if holds(a.until, readings, positions):
+                return 1
+            return -1 if a.off_by is not None and seen.radial > a.off_by else 0
+        if isinstance(a, Upright):
+            return 1 if seen.tilt < a.below else 0
+        if a.back is not None and holds(a.back, readings, positions):  # let go: that first
+            return -1
+        return 1 if self._joint_position(a.joint, readings) >= self._ends[i] - a.overshoot + self.past else 0
+
+    def _close(self, seen: _Look) -> bool:
+        """Whether the frame is within the current reach's ``accept`` region."""
+        if self.index == len(self.task.intent):
+            return False
+        a = self.task.intent[self.index].action
+        if not isinstance(a, Reach) or a.accept is None:
+            return False
+        c = a.accept
+        return (seen.radial < c.radial and (c.height is None or c.height[0] < seen.height < c.height[1])
+                and (c.tilt is None or seen.tilt < c.tilt))
+
+    def _error(self, i: int, seen: _Look, obs: Observation, readings: Mapping[str, Any]) -> float:
+        """How far from done step ``i`` is (m and m-equivalents); once done, the last
+        step's."""
+        a = self._action(i)
+        if isinstance(a, Reach):
+            if a.upright is None:
+                return seen.to_goal
+            return seen.to_goal + self.per_rad * max(0.0, seen.tilt - a.upright)
+        if isinstance(a, Tilt):  # tilting far enough, then the readings it waits for
+            err = seen.to_goal + self.per_rad * max(0.0, a.to - seen.tilt)
+            for reading, target in self._waits[self._last(i)].items():
+                err += a.weight * max(0.0, target - float(readings.get(reading, 0.0)))
+            return err
+        if isinstance(a, Upright):
+            return seen.to_goal + self.per_rad * seen.tilt
+        return self._joint_error(i, a, seen, obs, readings)
+
+    def _joint_error(self, i: int, a: MoveJoint, seen: _Look, obs: Observation,
+                     readings: Mapping[str, Any]) -> float:
+        """The joint's travel still to go and the frame's distance off the handle's axis."""
+        H = obs.objects[self.task.scene.joints[a.joint].handle]
+        o = self._joint_position(a.joint, readings)
+        target = self._ends[self._last(i)]
+        (a0, _, _, h0), (a1, _, _, h1), (a2, _, _, h2), _ = H.tolist()  # the axis, the handle
+        x, y, z = seen.p.tolist()
+        d0, d1, d2 = h0 + o * a0 - x, h1 + o * a1 - y, h2 + o * a2 - z  # to the handle
+        da = 0.0 + d0 * a0 + d1 * a1 + d2 * a2  # (summed as numpy's dot)
+        l0, l1, l2 = d0 - da * a0, d1 - da * a1, d2 - da * a2  # lateral
+        err = max(0.0, target - o) + math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+        upright = self._reach(self._anchors[i]).upright
+        return err if upright is None else err + self.per_rad * max(0.0, seen.tilt - upright)
+
+    # -- the motion ----------------------------------------------------------------------
+
+    def _spin_free(self, i: int) -> bool:
+        """Whether only the frame's axis matters at step ``i`` (its spin about it does
+        not), rather than nothing of its orientation."""
+        a = self._action(i)
+        return isinstance(a, Tilt | Upright) or self._reach(self._anchors[i]).upright is not None
+
+    def _weights(self, i: int, seen: _Look) -> Array:
+        W = np.zeros((6, 6))
+        W[:3, :3] = np.eye(3) / self.v_max
+        if self._spin_free(i):
+            W[3:, 3:] = (np.eye(3) - np.outer(seen.z, seen.z)) / self.w_max
+        else:
+            W[3:, 3:] = np.eye(3) * self.free_weight
+        return W
+
+    def _twist(self, i: int, seen: _Look, obs: Observation, readings: Mapping[str, Any]) -> Array:
+        """The hand's twist: the frame to its goal (along the joint's axis when moving
+        it), its axis tilted, brought up or left as it is."""
+        a = self._action(i)
+        if not isinstance(a, Tilt) or i == len(self.task.intent):
+            self._axis = None
+        if i == len(self.task.intent):
+            return np.zeros(6)
+        if isinstance(a, MoveJoint):
+            v = self._along_joint(i, a, seen, obs, readings)
+        else:
+            v = _saturate(self.gain * (np.array(seen.goal) - seen.p), self.v_max)
+        if not self._spin_free(i):
+            return np.concatenate([v, np.zeros(3)])
+        if isinstance(a, Tilt):
+            w = self._tilt_axis(i, obs.T_world_ee, seen) * self.gain * (a.to - seen.tilt)
+        elif isinstance(a, Upright):
+            w = self._uprighting(seen, seen.tilt)
+        else:  # only a tilt beyond what the reach tolerates needs undoing
+            upright = self._reach(self._anchors[i]).upright
+            assert upright is not None  # (spin free)
+            w = self._uprighting(seen, max(0.0, seen.tilt - upright))
+        w = _saturate(w, self.w_max)
+        # the hand's twist that moves the frame so: v_ee = v_frame - w x (p_frame - p_ee)
+        v_ee = v - np.cross(w, seen.p - obs.T_world_ee[:3, 3])
+        return np.concatenate([v_ee, w])
+
+    def _along_joint(self, i: int, a: MoveJoint, seen: _Look, obs: Observation,
+                     readings: Mapping[str, Any]) -> Array:
+        """The frame's velocity moving the handle: onto the axis, and along it towards
+        the target (aiming at most ``ahead`` m ahead)."""
+        H = obs.objects[self.task.scene.joints[a.joint].handle]
+        o = self._joint_position(a.joint, readings)
+        target = self._ends[i]
+        axis = H[:3, 0]
+        handle = H[:3, 3] + o * axis
+        p = seen.p
+        lateral = handle - p - float((handle - p) @ axis) * axis
+        along = max(0.0, target - o)
+        return _saturate(self.gain * (lateral + min(along, self.ahead) * axis), self.v_max)
+
+    def _uprighting(self, seen: _Look, excess: float) -> Array:
+        """The angular velocity that brings ``excess`` rad of the frame's tilt back."""
+        back = np.cross(seen.z, UP)  # rotating about it brings the axis up
+        n = float(np.linalg.norm(back))
+        return back / n * self.gain * excess if n > 1e-9 else np.zeros(3)
+
+    def _tilt_axis(self, i: int, T_world_ee: Array, seen: _Look) -> Array:
+        """The horizontal axis to tilt about, kept once chosen for step ``i``: the way the
+        frame already leans when it leans clearly (``lean``), else the hand's y axis."""
+        if self._axis is None or self._axis[0] != i:
+            a = np.cross(UP, seen.z) if seen.tilt > self.lean else T_world_ee[:3, 1].copy()
+            a[2] = 0.0
+            n = float(np.linalg.norm(a))
+            self._axis = (i, a / n if n > 1e-9 else np.array([0.0, 1.0, 0.0]))
+        return self._axis[1]
