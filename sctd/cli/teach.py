@@ -37,6 +37,7 @@ from sctd_services.teach import (
 from ..app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from ..app.logs import log_folder
 from ..app.options import add_arguments, from_namespace
+from ..wire import Keys
 from ..wire.session import add_zenoh_arguments, session
 from .procs import Child, free_port
 from .teach_loop import (
@@ -48,6 +49,7 @@ from .teach_loop import (
     start_learner,
 )
 
+STATE_INGRESS = 250.0  # Hz of the simulator's state that teaching takes in
 
 def add_teach_arguments(p: argparse.ArgumentParser) -> None:
     own_default = ("out", "max_attempts", "mistakes")  # their help says what the default does
@@ -108,8 +110,12 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
     started here on a free loopback port (stopped when ``stack`` closes, after the
     session, which lingers a moment so that the last demonstration leaves)."""
     logdir = args.logdir = log_folder(args.logs, "sctd-teach-")
+    # the newest state is what teaching reads (paced at 250 Hz, rows at 100 Hz): Zenoh
+    # drops the rest of the simulator's 1 kHz on arrival, so that on a busy machine the
+    # Python callbacks never fall behind into a backlog of seconds-old states
+    ingress = [(Keys(options.robot).state, STATE_INGRESS)]
     if args.connect or args.zenoh_config:
-        s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config))
+        s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config, ingress))
         args.child_zenoh = (["--zenoh-config", args.zenoh_config] if args.zenoh_config
                             else [x for ep in args.connect for x in ("--connect", ep)])
         print(f"sctd teach: {options.scene} on the simulator at "
@@ -120,7 +126,7 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
         args.child_zenoh = ["--connect", ep]  # how the learner and the daemon join it
         stack.enter_context(Child("sctd_sim.service", "--task", options.scene, "--robot",
                                   options.robot, "--listen", ep, log=args.sim_log))
-        s = stack.enter_context(session(args.listen, [ep]))
+        s = stack.enter_context(session(args.listen, [ep], rate_limits=ingress))
         print(f"sctd teach: {options.scene} on a simulator started at {ep} (log {args.sim_log})",
               flush=True)
     stack.callback(time.sleep, LINGER)  # runs before the session closes
