@@ -24,7 +24,7 @@ demo: setup
 # Teach 10 pours in the simulator, have the learner train a vector-field skill, check it,
 # swap it into the running daemon, then evaluate it next to the shipped one.
 teach: setup
-	$(BIN)/sctd teach --scene pour --then-learn vf --swap --out $$(mktemp -d)/pour-taught
+	$(BIN)/sctd teach --task pour --then-learn vf --swap --out $$(mktemp -d)/pour-taught
 
 # The tiers (tests/tiers.py): the fast tier is every test not marked slow; it starts no
 # process, and runs on $(JOBS) workers. test-all runs every test that does not need the

@@ -17,7 +17,20 @@ from hypothesis import strategies as st
 from sctd.task import TaskError, find_task, known_tasks, load_task, shipped_folder, task_from_document
 from sctd.task import catalog as catalog_module
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import AllOf, AnyOf, Compare, MoveJoint, Near, Not, Reach, Reading, Tilt, Upright
+from sctd.task.model import (
+    AllOf,
+    AnyOf,
+    Compare,
+    MoveJoint,
+    Near,
+    Not,
+    Reach,
+    Reading,
+    Teach,
+    TeachStep,
+    Tilt,
+    Upright,
+)
 
 POUR = shipped_folder() / "pour.yaml"
 
@@ -152,6 +165,44 @@ def test_a_bad_intent_is_refused_naming_the_field(file, path, value, where, prob
         task_from_document(doc, "mine.yaml")
     assert str(e.value).startswith(f"mine.yaml: {where}: "), str(e.value)
     assert problem in str(e.value)
+
+
+@pytest.mark.parametrize(("file", "path", "value", "where", "problem"), [
+    (POUR, "teach.colour", 1, "teach.colour", "unknown field"),
+    (POUR, "teach.start", -0.1, "teach.start", "must be >= 0.0"),
+    (POUR, "teach.speed", 1.5, "teach.speed", "must be <= 0.9"),
+    (POUR, "teach.via_at", [0.0, 0.5], "teach.via_at", "fractions strictly between 0 and 1"),
+    (POUR, "teach.start_height", [0.0, -0.1], "teach.start_height", "low < high"),
+    (POUR, "teach.speeds", {"carry": 0.1}, "teach.speeds.carry",
+     "unknown field (allowed: joint, reach, tilt, turn)"),
+    (POUR, "teach.speeds", {"reach": 0}, "teach.speeds.reach", "must be > 0.0"),
+    (POUR, "teach.steps", {"tip": {"yaw": 0.1}}, "teach.steps.tip",
+     "unknown field (allowed: bring, pour, upright)"),
+    (POUR, "teach.steps.pour", {"yaw": 0.1}, "teach.steps.pour.yaw", "unknown field (allowed: to)"),
+    (POUR, "teach.steps.pour", {"to": ["100 deg", "90 deg"]}, "teach.steps.pour.to", "low < high"),
+    (POUR, "teach.steps.pour", {"to": [1.0]}, "teach.steps.pour.to", "expected a list of 2 angles"),
+    (POUR, "teach.steps.bring", {"miss": 0}, "teach.steps.bring.miss", "must be > 0.0"),
+    (POUR, "teach.steps.upright", {"to": [0.1, 0.2]}, "teach.steps.upright.to", "unknown field"),
+    (DRAWER, "teach.steps.reach", {"height": [0.0, 0.1]}, "teach.steps.reach.height",
+     "only a reach to a point (to) has a goal height to vary"),
+    (DRAWER, "teach.steps.pull", {"to": [0.2, 0.35]}, "teach.steps.pull.to",
+     "expected positions within the joint's travel (0, 0.3]"),
+])
+def test_a_bad_teach_section_is_refused_naming_the_field(file, path, value, where, problem):
+    test_a_bad_intent_is_refused_naming_the_field(file, path, value, where, problem)
+
+
+def test_the_teach_section_reads_as_the_file_says():
+    """Degrees are radians, unnamed steps and fields take the defaults, a task without
+    the section varies as the defaults say."""
+    pour = find_task("pour").teach
+    assert pour.step("pour").to == (math.radians(100.0), math.radians(120.0))
+    assert pour.step("bring").yaw == 0.30 and pour.step("bring").miss == 0.06
+    assert pour.step("upright") == TeachStep() and pour.start_height == (-0.10, 0.0)
+    assert (pour.reach_speed, pour.tilt_rate, pour.turn_rate) == (0.10, 0.65, Teach().turn_rate)
+    doc = yaml.safe_load(DRAWER.read_text())
+    del doc["teach"]
+    assert task_from_document(doc, "d.yaml").teach == Teach()
 
 
 def test_a_joint_is_moved_by_the_reach_to_its_handle():

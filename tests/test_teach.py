@@ -13,13 +13,14 @@ import pytest
 
 from sctd import se3
 from sctd.learn.demos import read_demos
+from sctd.task import find_task
+from sctd.task.catalog import shipped_folder
 from sctd.wire import Keys, codec
 from sctd.wire.session import open_session
 from sctd_services.teach import (
-    MISTAKE_OFF_AXIS,
     StreamLimits,
     TeachOptions,
-    Variation,
+    describe_outcome,
     facing,
     judge,
     move,
@@ -36,14 +37,22 @@ TIP = np.array([0.0, 0.0, 0.12])
 
 
 def _same(a, b) -> bool:
-    return all(np.array_equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+    if isinstance(a, tuple):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if hasattr(a, "__dataclass_fields__"):
+        return all(_same(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
+    if isinstance(a, float) and math.isnan(a):
+        return isinstance(b, float) and math.isnan(b)
+    return bool(np.array_equal(a, b)) if a is not None else b is None
 
 
 @pytest.mark.parametrize("task", ["pour", "drawer"])
 def test_plans_are_seeded_and_within_the_variation(task):
     """The same seed gives the same plan attempt by attempt; another seed another one;
-    every variation lies within the issue's ranges; a mistake changes only the goal."""
-    g, V = scene_geometry(task), Variation()
+    every variation lies within the task file's teach ranges; a mistake changes only
+    where the reach ends, by the step's miss."""
+    g = scene_geometry(task)
+    V = g.teach
     for seed in range(5):
         for n in range(1, 9):
             p = plan_demonstration(g, seed, n)
@@ -51,32 +60,39 @@ def test_plans_are_seeded_and_within_the_variation(task):
             assert not _same(p, plan_demonstration(g, seed + 100, n))
             offset = p.T_obj_start[:3, 3] - g.T_obj_start[:3, 3]
             assert np.all(np.abs(offset) <= V.start)
-            if task == "pour":  # no higher than the scene's start
-                assert V.pour_start_height[0] <= offset[2] <= V.pour_start_height[1] <= 0.0
+            if V.start_height is not None:  # the pour's: no higher than the scene's start
+                assert V.start_height[0] <= offset[2] <= V.start_height[1] <= 0.0
             assert 1 - V.speed <= p.speed <= 1 + V.speed
+            reach = p.steps[0]
+            assert reach.kind == "reach" and [s.name for s in p.steps] == [s.name for s in g.task.intent]
             # a turn about z only: from facing the mug from the start (pour), from the handle's
             R0 = facing(p.T_obj_start[:3, 3], g) if task == "pour" else g.T_obj_start[:3, :3]
             R_turn = R0.T @ p.T_obj_start[:3, :3]
-            np.testing.assert_allclose(se3.rotvec_from_matrix(R_turn), [0, 0, p.yaw], atol=1e-12)
+            np.testing.assert_allclose(se3.rotvec_from_matrix(R_turn), [0, 0, reach.yaw], atol=1e-12)
+            assert abs(reach.yaw) <= V.step(reach.name).yaw
             # the via point is off the straight path by at most `via` each way across it
-            a, b = p.T_obj_start[:3, 3], p.T_obj_goal[:3, 3]
-            on = a + p.via_at * (b - a)
-            assert math.dist(p.via, on) <= V.via * math.sqrt(2) + 1e-12
-            assert abs((p.via - on) @ (b - a)) < 1e-9
+            a, b = p.T_obj_start[:3, 3], reach.T_obj_goal[:3, 3]
+            on = a + reach.via_at * (b - a)
+            assert math.dist(reach.via, on) <= V.via * math.sqrt(2) + 1e-12
+            assert abs((reach.via - on) @ (b - a)) < 1e-9
             wrong = plan_demonstration(g, seed, n, mistake=True)
             assert wrong.mistake and not p.mistake
+            miss = V.step(reach.name).miss
             if task == "pour":
-                assert abs(p.yaw) <= V.pour_yaw and V.pour_tilt[0] <= p.tilt <= V.pour_tilt[1]
-                tip = (p.T_obj_goal @ np.append(TIP, 1))[:3]  # over the mug's axis at the height
-                np.testing.assert_allclose(tip, [0, 0, p.height], atol=1e-12)
-                assert V.pour_height[0] <= p.height <= V.pour_height[1]
-                miss = (wrong.T_obj_goal @ np.append(TIP, 1))[:3]
-                assert math.hypot(miss[0], miss[1]) == pytest.approx(MISTAKE_OFF_AXIS["pour"])
+                tilt = p.step("pour")
+                assert V.step("pour").to[0] <= tilt.value <= V.step("pour").to[1]
+                tip = (reach.T_obj_goal @ np.append(TIP, 1))[:3]  # over the mug's axis at the height
+                np.testing.assert_allclose(tip, [0, 0, reach.value], atol=1e-12)
+                assert V.step("bring").height[0] <= reach.value <= V.step("bring").height[1]
+                off = (wrong.steps[0].T_obj_goal @ np.append(TIP, 1))[:3]
+                assert math.hypot(off[0], off[1]) == pytest.approx(miss) and miss == 0.06
             else:
-                assert abs(p.yaw) <= V.reach_yaw and V.pull[0] <= p.pull <= V.pull[1]
-                np.testing.assert_array_equal(p.T_obj_goal, np.eye(4))  # the closed handle
-                assert abs(wrong.T_obj_goal[1, 3]) == MISTAKE_OFF_AXIS["drawer"]
+                pull = p.step("pull")
+                assert V.step("pull").to[0] <= pull.value <= V.step("pull").to[1]
+                np.testing.assert_array_equal(reach.T_obj_goal, np.eye(4))  # the closed handle
+                assert abs(wrong.steps[0].T_obj_goal[1, 3]) == miss == 0.05
             assert np.array_equal(wrong.T_obj_start, p.T_obj_start) and wrong.speed == p.speed
+            assert _same(wrong.steps[1:], p.steps[1:])
 
 
 def _samples(motion, n: int = 400) -> np.ndarray:
@@ -91,34 +107,42 @@ def _peak_speeds(T: np.ndarray, dt: float) -> tuple[float, float]:
 
 @pytest.mark.parametrize("task", ["pour", "drawer"])
 def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
-    """Carry/reach from the start to the goal through the via point; the pour turns
-    about the bottle's opening, tilting its top towards the mug; the pull goes along +x;
-    every motion's peak speed is under the teacher's step bound, itself under the guard."""
+    """One motion per intent step, each starting where the one before ends: the
+    carry/reach from the start to the goal through the via point; the pour turns about
+    the bottle's opening, tilting its top towards the mug; the pull goes along +x; the
+    pour's last step brings the bottle upright about its opening; every motion's peak
+    speed is under the teacher's step bound, itself under the guard."""
     g = scene_geometry(task)
     lim, guard = StreamLimits(), TargetLimits()
     assert lim.max_speed < guard.max_target_speed and lim.max_turn < guard.max_target_angular_speed
     for n in (1, 3, 5):  # demonstrations of one seed, each drawn anew
         p = plan_demonstration(g, 3, n)
-        first, second = task_motions(p, g)
+        motions = task_motions(p, g)
+        assert [s.name for s, _ in motions] == [s.name for s in g.task.intent]
+        (reach, first), (_, second) = motions[:2]
         A, B = _samples(first), _samples(second)
         np.testing.assert_allclose(A[0], p.T_obj_start, atol=1e-12)
-        np.testing.assert_allclose(A[-1], p.T_obj_goal, atol=1e-12)
-        assert min(math.dist(x, p.via) for x in A[:, :3, 3]) < 2e-3
-        np.testing.assert_allclose(B[0], p.T_obj_goal, atol=1e-12)
+        np.testing.assert_allclose(A[-1], reach.T_obj_goal, atol=1e-12)
+        assert min(math.dist(x, reach.via) for x in A[:, :3, 3]) < 2e-3
+        np.testing.assert_allclose(B[0], reach.T_obj_goal, atol=1e-12)
         if task == "pour":
-            np.testing.assert_allclose(A[:, :3, :3], np.broadcast_to(p.T_obj_goal[:3, :3], (400, 3, 3)),
+            assert g.recorded == 2 and len(motions) == 3  # the upright is the finish
+            np.testing.assert_allclose(A[:, :3, :3], np.broadcast_to(reach.T_obj_goal[:3, :3], (400, 3, 3)),
                                        atol=1e-12)  # carried upright: a translation
             tips = B[:, :3, :3] @ TIP + B[:, :3, 3]
             np.testing.assert_allclose(tips, np.broadcast_to(tips[0], tips.shape), atol=1e-12)
             z = B[-1, :3, 2]  # the bottle's axis at the end: tilted by `tilt`, towards the mug
-            assert math.acos(z[2]) == pytest.approx(p.tilt)
+            assert math.acos(z[2]) == pytest.approx(p.step("pour").value)
             hand_to_tip = tips[-1] - B[-1, :3, 3]
             assert hand_to_tip[:2] @ -B[-1, :3, 3][:2] > 0  # the hand behind, the tip over the mug
-            back = _samples(upright(B[-1], g))
+            back = _samples(motions[2][1])
+            np.testing.assert_allclose(back[0], B[-1], atol=1e-12)
             np.testing.assert_allclose(back[-1, :3, 2], [0, 0, 1], atol=1e-9)
             np.testing.assert_allclose(back[-1, :3, :3] @ TIP + back[-1, :3, 3], tips[-1], atol=1e-9)
+            np.testing.assert_allclose(_samples(upright(B[-1], TIP))[-1], back[-1], atol=1e-12)
         else:
-            np.testing.assert_allclose(B[-1, :3, 3], [p.pull, 0, 0], atol=1e-12)
+            assert g.recorded == 2 and len(motions) == 2
+            np.testing.assert_allclose(B[-1, :3, 3], [p.step("pull").value, 0, 0], atol=1e-12)
             np.testing.assert_allclose(B[:, 1:3, 3], 0.0, atol=1e-12)
         for M in (first, second, move(A[-1], A[0])):
             T = _samples(M, 2000)
@@ -138,23 +162,40 @@ def test_facing_the_mug():
         np.testing.assert_allclose(R[:, 2], [0, 0, 1], atol=1e-12)
 
 
-def test_judge_uses_the_scene_outcome():
-    assert judge({"scene": "pour", "success": True, "spilled": False}) == ""
-    assert "spilled 0.040" in judge({"scene": "pour", "success": False, "spilled": True,
-                                     "spilled_amount": 0.04, "poured": 0.3})
-    assert "short of the fill target" in judge({"scene": "pour", "success": False, "poured": 0.3})
-    assert judge({"scene": "drawer", "success": True}) == ""
-    why = judge({"scene": "drawer", "success": False, "opening": 0.0, "grasps": 0})
-    assert "opened 0.000 m" in why and "never grasped" in why
+def test_judge_uses_the_scene_outcome_and_the_task():
+    """Kept: the scene's success with no failure rule holding; else the failure rules'
+    reasons or what the task's done still lacks, with the readings."""
+    pour, drawer = find_task("pour"), find_task("drawer")
+    full = {"bottle.poured": 0.52, "bottle.spilled": 0.0, "bottle.flowing": False}
+    assert judge({"success": True, "readings": full}, pour) == ""
+    spilled = {"success": False, "readings": {**full, "bottle.poured": 0.3, "bottle.spilled": 0.04}}
+    why = judge(spilled, pour)
+    assert why.startswith("spilled (bottle.spilled 0.040)"), why
+    short = judge({"success": False, "readings": {**full, "bottle.poured": 0.3}}, pour)
+    assert short == "not done: bottle.poured 0.300 of 0.5, bottle.flowing false", short
+    # a success the scene reports while a failure rule holds is no success
+    assert judge({"success": True, "readings": spilled["readings"]}, pour).startswith("spilled")
+    opened = {"drawer.position": 0.21, "drawer.grasps": 1, "drawer.held": True}
+    assert judge({"success": True, "readings": opened}, drawer) == ""
+    why = judge({"success": False, "readings": {"drawer.position": 0.0, "drawer.grasps": 0}}, drawer)
+    assert why == "not done: drawer.position 0.000 of 0.2; the hand never grasped the handle of drawer"
+    assert describe_outcome({"readings": full}, pour) == "bottle.poured 0.520 of 0.5, bottle.flowing false"
 
 
-def test_options_are_checked():
+def test_options_are_checked(tmp_path):
     with pytest.raises(ValueError, match="--demos"):
-        TeachOptions(demos=0)
+        TeachOptions(task="pour", demos=0)
     with pytest.raises(ValueError, match="--mistake"):
-        TeachOptions(mistakes=(0,))
-    assert TeachOptions(scene="drawer").out_dir.as_posix() == "demos/drawer-taught"
-    assert TeachOptions(demos=4).attempts == 8 and TeachOptions(demos=1).attempts == 3
+        TeachOptions(task="pour", mistakes=(0,))
+    with pytest.raises(ValueError, match=r"--task: .*no task of that name.*did you mean 'drawer'"):
+        TeachOptions(task="drawr")
+    assert TeachOptions(task="drawer").out_dir.as_posix() == "demos/drawer-taught"
+    assert TeachOptions(task="pour", demos=4).attempts == 8
+    assert TeachOptions(task="pour", demos=1).attempts == 3
+    f = tmp_path / "my-file.yaml"  # a file: its name field names it
+    f.write_text((shipped_folder() / "drawer.yaml").read_text().replace("name: drawer", "name: drawer2"))
+    o = TeachOptions(task=str(f))
+    assert o.name == "drawer2" and o.out_dir.as_posix() == "demos/drawer2-taught"
 
 
 class _Demos:
@@ -196,7 +237,7 @@ def test_teach_pour_discards_the_spilling_attempt_and_keeps_the_next(tmp_path):
     out = tmp_path / "taught"
     with open_session(connect=[ep]) as s:
         watch = _Demos(s)
-        proc = sctd("teach", "--scene", "pour", "--demos", "1", "--mistake", "1", "--out", str(out),
+        proc = sctd("teach", "--task", "pour", "--demos", "1", "--mistake", "1", "--out", str(out),
                     "--seed", "1", "--listen", ep, "--logs", str(tmp_path / "logs"),
                     log=tmp_path / "teach.log")
         try:
@@ -226,7 +267,7 @@ def test_teach_drawer_joins_a_running_simulator(tmp_path):
     sim = sctd("sim", "--task", "drawer", "--listen", ep, log=tmp_path / "sim.log")
     out = tmp_path / "taught"
     try:
-        wrong = sctd("teach", "--scene", "pour", "--out", str(out), "--connect", ep,
+        wrong = sctd("teach", "--task", "pour", "--out", str(out), "--connect", ep,
                      log=tmp_path / "wrong.log")
         try:
             assert wrong.p.wait(120) == 2, wrong.output()
@@ -235,7 +276,7 @@ def test_teach_drawer_joins_a_running_simulator(tmp_path):
         assert "runs scene 'drawer', not 'pour'" in wrong.output()
         with open_session(connect=[ep]) as s:
             watch = _Demos(s)
-            proc = sctd("teach", "--scene", "drawer", "--demos", "2", "--mistake", "1", "--out",
+            proc = sctd("teach", "--task", "drawer", "--demos", "2", "--mistake", "1", "--out",
                         str(out), "--connect", ep, log=tmp_path / "teach.log")
             try:
                 assert proc.p.wait(300) == 0, proc.output() + sim.output()
@@ -269,7 +310,7 @@ def test_teach_refuses_while_a_daemon_commands_the_robot(tmp_path):
             sub_t = s.declare_subscriber(KEYS.target, lambda m: targets.append(m.payload.to_bytes()))
             sub_s = s.declare_subscriber(KEYS.status, lambda m: status.append(b""))
             assert wait_for(lambda: status, 60), daemon.output()
-            proc = sctd("teach", "--scene", "pour", "--out", str(out), "--connect", ep,
+            proc = sctd("teach", "--task", "pour", "--out", str(out), "--connect", ep,
                         log=tmp_path / "teach.log")
             try:
                 assert proc.p.wait(120) == 2, proc.output()
@@ -316,7 +357,7 @@ def test_teach_stops_what_it_started_on_sigterm(tmp_path):
 
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    proc = sctd("teach", "--scene", "pour", "--demos", "10", "--then-learn", "vf", "--swap",
+    proc = sctd("teach", "--task", "pour", "--demos", "10", "--then-learn", "vf", "--swap",
                 "--out", str(tmp_path / "taught"), "--store", str(tmp_path / "store"),
                 "--listen", ep, "--logs", str(tmp_path / "logs"), log=tmp_path / "teach.log")
     try:

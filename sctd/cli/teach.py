@@ -1,6 +1,6 @@
 """``sctd teach``: demonstrations shown on the simulated arm and recorded, on this machine.
 
-Starts ``sctd sim --scene SCENE`` on a free loopback port (unless ``--connect`` or
+Starts ``sctd sim --task TASK`` on a free loopback port (unless ``--connect`` or
 ``--zenoh-config`` names a running simulator to join), then the demonstrator
 (:func:`sctd_services.teach.teach`): it moves the arm itself, with the variation a
 person shows between demonstrations, records each one, keeps those that succeed in the
@@ -23,6 +23,7 @@ import time
 
 import zenoh
 
+from sctd.task import Task
 from sctd_services.record import LINGER
 from sctd_services.teach import (
     Attempt,
@@ -36,7 +37,7 @@ from sctd_services.teach import (
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from ..app.logs import log_folder
-from ..app.options import add_arguments, from_namespace
+from ..app.options import add_arguments, add_task_argument, from_namespace
 from ..wire import Keys
 from ..wire.session import add_zenoh_arguments, session
 from .procs import Child, free_port
@@ -53,7 +54,9 @@ STATE_INGRESS = 250.0  # Hz of the simulator's state that teaching takes in
 
 def add_teach_arguments(p: argparse.ArgumentParser) -> None:
     own_default = ("out", "max_attempts", "mistakes")  # their help says what the default does
-    add_arguments(p, TeachOptions, exclude=own_default, show_default=True)
+    add_task_argument(p, help="the task to demonstrate: a name sctd tasks lists, or a task file "
+                              "(the simulator's scene)")
+    add_arguments(p, TeachOptions, exclude=(*own_default, "task"), show_default=True)
     add_arguments(p, TeachOptions, only=own_default[:2])
     mistakes = next(f for f in dataclasses.fields(TeachOptions) if f.name == "mistakes")
     p.add_argument("--mistake", dest="mistakes", type=int, action="append", default=[],
@@ -87,7 +90,7 @@ def main_teach(args: argparse.Namespace) -> int:
             watch = start_learner(stack, s, args, args.logdir) if args.then_learn else None
             kept = teach_demos(s, options)
             if watch is not None and len(kept) == options.demos:
-                reply = learn_and_swap(stack, s, args, options.scene, kept, watch, args.logdir)
+                reply = learn_and_swap(stack, s, args, options.name, kept, watch, args.logdir)
         except (CommanderConflict, WrongScene) as e:
             return fail("teach", str(e), EXIT_USAGE)
         except (SimulatorLost, LoopError) as e:
@@ -99,14 +102,14 @@ def main_teach(args: argparse.Namespace) -> int:
         return EXIT_OK
     print_reply(reply)
     if reply.get("passed") and args.eval_trials > 0:
-        evaluate_taught(reply, options.scene, args.then_learn, args.eval_trials)
+        evaluate_taught(reply, options.name, args.then_learn, args.eval_trials)
     return EXIT_OK if reply.get("swapped") or (reply.get("passed") and not args.swap) else EXIT_FAILED
 
 
 def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
                    options: TeachOptions) -> zenoh.Session:
     """The session teaching goes through, entered on ``stack``: connected to the
-    simulator ``--connect`` / ``--zenoh-config`` names, else to a ``sctd sim --scene``
+    simulator ``--connect`` / ``--zenoh-config`` names, else to a ``sctd sim --task``
     started here on a free loopback port (stopped when ``stack`` closes, after the
     session, which lingers a moment so that the last demonstration leaves)."""
     logdir = args.logdir = log_folder(args.logs, "sctd-teach-")
@@ -118,16 +121,16 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
         s = stack.enter_context(session(args.listen, args.connect, args.zenoh_config, ingress))
         args.child_zenoh = (["--zenoh-config", args.zenoh_config] if args.zenoh_config
                             else [x for ep in args.connect for x in ("--connect", ep)])
-        print(f"sctd teach: {options.scene} on the simulator at "
+        print(f"sctd teach: {options.name} on the simulator at "
               f"{', '.join(args.connect or [args.zenoh_config])}", flush=True)
     else:
         args.sim_log = logdir / "sim.log"
         ep = f"tcp/127.0.0.1:{free_port()}"
         args.child_zenoh = ["--connect", ep]  # how the learner and the daemon join it
-        stack.enter_context(Child("sctd_sim.service", "--task", options.scene, "--robot",
+        stack.enter_context(Child("sctd_sim.service", "--task", options.task, "--robot",
                                   options.robot, "--listen", ep, log=args.sim_log))
         s = stack.enter_context(session(args.listen, [ep], rate_limits=ingress))
-        print(f"sctd teach: {options.scene} on a simulator started at {ep} (log {args.sim_log})",
+        print(f"sctd teach: {options.name} on a simulator started at {ep} (log {args.sim_log})",
               flush=True)
     stack.callback(time.sleep, LINGER)  # runs before the session closes
     return s
@@ -144,7 +147,7 @@ def teach_demos(s: zenoh.Session, options: TeachOptions) -> list[Attempt]:
 
     def report(a: Attempt) -> None:
         seen.append(a)
-        _print_attempt(a)
+        _print_attempt(a, options.the_task)
     t0 = time.monotonic()
     kept = teach(s, options, on_attempt=report)
     wall = time.monotonic() - t0
@@ -156,9 +159,9 @@ def teach_demos(s: zenoh.Session, options: TeachOptions) -> list[Attempt]:
     return kept
 
 
-def _print_attempt(a: Attempt) -> None:
+def _print_attempt(a: Attempt, task: Task) -> None:
     state = "kept" if a.kept else "discarded"
-    what = describe_outcome(a.outcome) if a.kept else a.reason
+    what = describe_outcome(a.outcome, task) if a.kept else a.reason
     print(f"  attempt {a.number:2d}  {a.name:8s}  {state:9s}  {a.rows:5d} rows  {a.duration:5.2f} s"
           f"  {what}   ({a.plan.describe()}; {a.elapsed:.1f} s)", flush=True)
 

@@ -12,7 +12,8 @@ A task knows nothing of any skill. It holds:
   the task is done, whether it then succeeded, what ends it early as a failure, what
   counts as progress, when the completion clock starts, and the time limit;
 - the **intent**: what a person doing the task wants, as ordered sub-goals (:class:`Step`)
-  in the task object's frame: reach a region, tilt, bring upright, move a joint.
+  in the task object's frame: reach a region, tilt, bring upright, move a joint;
+- **teach**: how a person's demonstrations of it vary (:class:`Teach`).
 
 Every pose is in the world frame, the arm's base (x forward, z up), in metres and
 radians.
@@ -440,6 +441,81 @@ class Step:
     action: Action
 
 
+# -- how demonstrations vary ---------------------------------------------------------------
+@dataclass(frozen=True)
+class TeachStep:
+    """How a person's demonstrations vary one step of the intent (``sctd teach``).
+
+    Attributes
+    ----------
+    yaw : float
+        A reach: the hand's orientation turned about the vertical within this either way,
+        rad (towards a point goal the hand faces the task object's vertical axis from where
+        it starts; towards a handle it starts so turned from the handle's orientation and
+        takes the handle's on the way).
+    height : tuple of float or None
+        A reach to a point (``to``): the goal's height in the task object's frame drawn
+        from this range, m (None: the goal's own).
+    to : tuple of float or None
+        A tilt: the tilt drawn from this range, rad; a joint's move: the position it is
+        moved to drawn from this range (m or rad). None: the step's own target.
+    miss : float
+        A reach: how far a mistaken demonstration misses its goal, m (a point goal in a
+        random horizontal direction, a handle to its side, along its y).
+    """
+
+    yaw: float = 0.0
+    height: tuple[float, float] | None = None
+    to: tuple[float, float] | None = None
+    miss: float = 0.05
+
+
+@dataclass(frozen=True)
+class Teach:
+    """How a person's demonstrations of the task vary, and how fast they go.
+
+    Attributes
+    ----------
+    start : float
+        The hand starts within this of the scene's start position, each axis, m.
+    start_height : tuple of float or None
+        The start's height within these offsets instead (None: +-``start``), m.
+    via : float
+        Each reach bends through a via point within this of the straight path, along each
+        of the two directions across it, m.
+    via_at : tuple of float
+        Where along the path the via point lies (fractions of it).
+    speed : float
+        A demonstration's speeds are the nominal ones times a factor within this of 1.
+    reach_speed : float
+        Mean speed of a reach, m/s.
+    turn_rate : float
+        Mean turn rate of a reach's change of orientation, rad/s.
+    tilt_rate : float
+        Mean turn rate of a tilt, rad/s.
+    joint_speed : float
+        Mean speed of the handle along its path while moving a joint, m/s.
+    steps : dict of str to TeachStep
+        By the intent step's name; a step not named varies by :class:`TeachStep`'s
+        defaults.
+    """
+
+    start: float = 0.10
+    start_height: tuple[float, float] | None = None
+    via: float = 0.03
+    via_at: tuple[float, float] = (0.35, 0.65)
+    speed: float = 0.30
+    reach_speed: float = 0.10
+    turn_rate: float = 0.6
+    tilt_rate: float = 0.65
+    joint_speed: float = 0.08
+    steps: dict[str, TeachStep] = field(default_factory=dict)
+
+    def step(self, name: str) -> TeachStep:
+        """How the step ``name`` varies."""
+        return self.steps.get(name, TeachStep())
+
+
 @dataclass(frozen=True)
 class Task:
     """A task, as its file says it.
@@ -456,6 +532,8 @@ class Task:
     outcome : Outcome
     intent : tuple of Step
         What a person doing it wants, in order (done after the last).
+    teach : Teach
+        How a person's demonstrations of it vary.
     file : str
         Where it was read from (for messages).
     """
@@ -468,4 +546,5 @@ class Task:
     scene: Scene
     outcome: Outcome
     intent: tuple[Step, ...]
+    teach: Teach = field(default_factory=Teach)
     file: str = ""

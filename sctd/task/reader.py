@@ -47,6 +47,8 @@ from .model import (
     Start,
     Step,
     Task,
+    Teach,
+    TeachStep,
     Tilt,
     Upright,
     Vary,
@@ -171,7 +173,7 @@ def task_from_document(doc: Any, file: str) -> Task:
     """The task a parsed YAML document describes."""
     r = _Reader(file)
     d = r.fields(doc, "", {"sctd_task", "name", "object", "scene", "outcome", "intent"},
-                 {"title", "description", "source"})
+                 {"title", "description", "source", "teach"})
     version = d["sctd_task"]
     if version != VERSION:
         raise r.fail("sctd_task", f"this sctd reads task files of version {VERSION}, got {version!r}")
@@ -182,9 +184,10 @@ def task_from_document(doc: Any, file: str) -> Task:
         raise r.fail("object", f"unknown body {obj!r} (bodies: {', '.join(scene.bodies)})")
     outcome = _outcome(r, d["outcome"], "outcome", scene)
     intent = _intent(r, d["intent"], "intent", scene, outcome)
+    teach = _teach(r, d["teach"], "teach", intent, scene) if "teach" in d else Teach()
     text = {k: (r.string(d[k], k) if k in d else "") for k in ("title", "description", "source")}
     return Task(name, text["title"] or name, text["description"], text["source"], obj, scene, outcome,
-                intent, file)
+                intent, teach, file)
 
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
@@ -486,3 +489,72 @@ def _orientation(r: _Reader, v: Any, path: str) -> float | None:
         raise r.fail(path, f"expected free or {{upright: <tilt>}}, got {v!r}")
     d = r.fields(v, path, {"upright"})
     return r.tilt(d["upright"], f"{path}.upright")
+
+
+TEACH_SPEEDS = {"reach": "reach_speed", "turn": "turn_rate", "tilt": "tilt_rate", "joint": "joint_speed"}
+"""``teach.speeds``' keys and the :class:`~.model.Teach` fields they set."""
+
+
+def _teach(r: _Reader, v: Any, path: str, intent: tuple[Step, ...], scene: Scene) -> Teach:
+    """How demonstrations vary: ``start``, ``start_height``, ``via``, ``via_at``,
+    ``speed``, ``speeds`` (reach, turn, tilt, joint) and ``steps`` by the intent's step
+    names."""
+    d = r.fields(v, path, set(), {"start", "start_height", "via", "via_at", "speed", "speeds", "steps"})
+    out: dict[str, Any] = {}
+    for k in ("start", "via"):
+        if k in d:
+            out[k] = r.nonneg(d[k], f"{path}.{k}")
+    if "speed" in d:
+        out["speed"] = r.number(d["speed"], f"{path}.speed", lo=0.0, hi=0.9)
+    if "start_height" in d:
+        out["start_height"] = r.pair(d["start_height"], f"{path}.start_height")
+    if "via_at" in d:
+        lo, hi = out["via_at"] = r.pair(d["via_at"], f"{path}.via_at")
+        if not (0.0 < lo and hi < 1.0):
+            raise r.fail(f"{path}.via_at", f"expected fractions strictly between 0 and 1, got [{lo}, {hi}]")
+    if "speeds" in d:
+        sp = r.fields(d["speeds"], f"{path}.speeds", set(), set(TEACH_SPEEDS))
+        for k, f in TEACH_SPEEDS.items():
+            if k in sp:
+                out[f] = r.positive(sp[k], f"{path}.speeds.{k}")
+    if "steps" in d:
+        by_name = {s.name: s.action for s in intent}
+        steps = r.fields(d["steps"], f"{path}.steps", set(), set(by_name))
+        out["steps"] = {str(n): _teach_step(r, x, f"{path}.steps.{n}", by_name[str(n)], scene)
+                        for n, x in steps.items()}
+    return Teach(**out)
+
+
+def _teach_step(r: _Reader, v: Any, path: str, action: Action, scene: Scene) -> TeachStep:
+    """A step's variation: what a step of its kind can vary."""
+    allowed = {Reach: {"yaw", "height", "miss"}, Tilt: {"to"}, MoveJoint: {"to"}, Upright: set()}
+    d = r.fields(v, path, set(), allowed[type(action)])
+    out: dict[str, Any] = {}
+    if "yaw" in d:
+        out["yaw"] = r.angle(d["yaw"], f"{path}.yaw", lo=0.0, hi=math.pi)
+    if "miss" in d:
+        out["miss"] = r.positive(d["miss"], f"{path}.miss")
+    if "height" in d:
+        if not isinstance(action, Reach) or action.to is None:
+            raise r.fail(f"{path}.height", "only a reach to a point (to) has a goal height to vary")
+        out["height"] = r.pair(d["height"], f"{path}.height")
+    if "to" in d:
+        if isinstance(action, Tilt):
+            two = _two(r, d["to"], f"{path}.to")
+            out["to"] = tuple(r.tilt(a, f"{path}.to[{i}]") for i, a in enumerate(two))
+            if not out["to"][0] < out["to"][1]:
+                raise r.fail(f"{path}.to", "expected [low, high] with low < high")
+        else:
+            assert isinstance(action, MoveJoint)  # (the only other kind with a target)
+            lo, hi = out["to"] = r.pair(d["to"], f"{path}.to")
+            travel = scene.joints[action.joint].travel
+            if not (0.0 < lo and hi <= travel):
+                raise r.fail(f"{path}.to", f"expected positions within the joint's travel (0, {travel:g}], "
+                                           f"got [{lo}, {hi}]")
+    return TeachStep(**out)
+
+
+def _two(r: _Reader, v: Any, path: str) -> list:
+    if not isinstance(v, list) or len(v) != 2:
+        raise r.fail(path, f"expected a list of 2 angles, got {kind_of(v)}")
+    return v

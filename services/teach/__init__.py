@@ -15,12 +15,10 @@ discarded.
 from .demonstrator import Attempt, TeachOptions, describe_outcome, judge, teach
 from .motion import Line, TipTurn, move, task_motions, upright
 from .plan import (
-    MISTAKE_OFF_AXIS,
-    TASK_OBJECT,
     DemoPlan,
     SceneGeometry,
     Speeds,
-    Variation,
+    StepPlan,
     facing,
     plan_demonstration,
     scene_geometry,
@@ -35,8 +33,6 @@ from .stream import (
 )
 
 __all__ = [
-    "MISTAKE_OFF_AXIS",
-    "TASK_OBJECT",
     "Attempt",
     "CommanderConflict",
     "DemoPlan",
@@ -44,12 +40,12 @@ __all__ = [
     "SceneGeometry",
     "SimulatorLost",
     "Speeds",
+    "StepPlan",
     "StreamLimits",
     "TeachOptions",
     "Teacher",
     "TeachingError",
     "TipTurn",
-    "Variation",
     "WrongScene",
     "describe_outcome",
     "facing",

@@ -3,17 +3,17 @@
 Per attempt (:func:`teach`):
 
 1. move, unrecorded, to the planned start (:mod:`.plan`: the seeded variation);
-2. reset the scene (``sim/reset``: the bottle full, the drawer closed);
-3. record (:class:`~sctd_services.record.Take`) the task motion: pour, the carry through
-   the via point and the pour, until the scene says the fill target is reached (or a
-   drop is spilled); drawer, the reach to the handle (grasped on arrival) and the pull;
-4. stop recording, finish unrecorded (pour: the bottle back upright about its opening,
-   so the last drops land where the stream did) and judge from the scene's outcome: a
-   pour must reach the fill target without a drop spilled, once the bottle is upright
-   (the evaluation judges a pour once it stops pouring, too); a drawer must be open to
-   the success opening while still held;
+2. reset the scene (``sim/reset``: a bottle full, a drawer closed);
+3. record (:class:`~sctd_services.record.Take`) the task motion, one motion per step of
+   the task's intent (:mod:`.motion`): a reach (a handle is grasped on arrival), a tilt
+   held until its predicate holds (the fill target reached), a joint moved; a step ends
+   early when one of the task's failure rules holds (a drop spilled);
+4. stop recording, finish unrecorded (the intent's last uprights: a bottle back upright
+   about its opening, so the last drops land where the stream did) and judge from the
+   scene's outcome: the task done and successful, no failure rule holding (the
+   evaluation judges a pour once it stops pouring, too);
 5. keep it (``demo_NNN.csv``, published on ``sctd/<robot>/demos/<task>/<name>``) or
-   discard it, saying why; the drawer's handle is let go by resetting the scene (the
+   discard it, saying why; a grasped handle is let go by resetting the scene (the
    simulated hand has no gripper to open, and pulling it off would take more than the
    arm's guard admits).
 
@@ -36,16 +36,19 @@ import zenoh
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import Task, TaskError, find_task
+from sctd.task.judge import holds, thresholds
+from sctd.task.model import AllOf, AnyOf, Compare, Not, Predicate, Tilt
 from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
 from .motion import Motion, move, task_motions, upright
-from .plan import TASK_OBJECT, DemoPlan, SceneGeometry, Speeds, Variation, plan_demonstration, scene_geometry
+from .plan import DemoPlan, SceneGeometry, Speeds, StepPlan, plan_demonstration, scene_geometry
 from .stream import SimulatorLost, StreamLimits, Teacher, TeachingError, WrongScene
 
 Array = NDArray[np.float64]
 COMMANDER_WINDOW = 1.0  # s of listening for another commander's status before the first target
-POUR_TIMEOUT = 15.0  # s the tilted bottle may take to fill the mug
+TILT_TIMEOUT = 15.0  # s a tilt may be held for its predicate (the tilted bottle to fill the mug)
 
 
 def _option(default: Any, help: str, **meta: Any) -> Any:
@@ -56,8 +59,8 @@ def _option(default: Any, help: str, **meta: Any) -> Any:
 class TeachOptions:
     """A teaching session. Each documented field is a ``sctd teach`` flag of the same name."""
 
-    scene: str = _option("pour", "the task to demonstrate (the simulator's scene)",
-                         choices=("pour", "drawer"))
+    task: str = _option("", "the task to demonstrate: a name sctd tasks lists, or a task file "
+                            "(the simulator's scene)", metavar="NAME|FILE")
     demos: int = _option(10, "demonstrations to keep")
     out: str = _option("", "folder the kept demonstrations go to, as demo_NNN.csv after any "
                            "already there (default demos/<scene>-taught)", metavar="DIR")
@@ -68,9 +71,10 @@ class TeachOptions:
     record_rate: float = _option(100.0, "recording rate, Hz (as sctd record's --rate)")
     wait: float = _option(60.0, "s to wait for the simulator's first state, object and scene")
     mistakes: tuple[int, ...] = _option((), "attempt numbers (from 1) in which the demonstrator "
-                                            "makes a mistake (pour: the opening 6 cm off the mug's "
-                                            "axis, it spills; drawer: the hand 5 cm beside the "
-                                            "handle, it never grasps), to see one discarded",
+                                            "makes a mistake (every reach misses its goal by the "
+                                            "task's miss: a bottle's opening beside the mug, it "
+                                            "spills; a hand beside a handle, it never grasps), to "
+                                            "see one discarded",
                                         metavar="N")
 
     def __post_init__(self) -> None:
@@ -79,14 +83,29 @@ class TeachOptions:
                     (self.record_rate > 0, "--record-rate: must be > 0"),
                     (self.wait > 0, "--wait: must be > 0"),
                     (all(n >= 1 for n in self.mistakes), "--mistake: attempt numbers start at 1"),
-                    (self.scene in TASK_OBJECT, f"--scene: one of {', '.join(TASK_OBJECT)}")]
+                    (bool(self.task), "--task: a task is needed")]
         for ok, problem in problems:
             if not ok:
                 raise ValueError(problem)
+        try:
+            object.__setattr__(self, "_task", find_task(self.task))
+        except TaskError as e:
+            raise ValueError(f"--task: {e}") from None
+
+    @property
+    def the_task(self) -> Task:
+        """The task ``task`` names (read when the options were made)."""
+        return self.__dict__["_task"]
+
+    @property
+    def name(self) -> str:
+        """The task's name (a file's ``name`` field): its demonstrations' key and the
+        simulator's scene."""
+        return self.the_task.name
 
     @property
     def out_dir(self) -> Path:
-        return Path(self.out) if self.out else Path("demos") / f"{self.scene}-taught"
+        return Path(self.out) if self.out else Path("demos") / f"{self.name}-taught"
 
     @property
     def attempts(self) -> int:
@@ -136,9 +155,9 @@ class Attempt:
 
 
 def teach(session: zenoh.Session, options: TeachOptions,
-          on_attempt: Callable[[Attempt], None] | None = None, variation: Variation | None = None,
-          speeds: Speeds | None = None, limits: StreamLimits | None = None) -> list[Attempt]:
-    """Teach ``options.demos`` demonstrations of ``options.scene`` on the simulator that
+          on_attempt: Callable[[Attempt], None] | None = None, speeds: Speeds | None = None,
+          limits: StreamLimits | None = None) -> list[Attempt]:
+    """Teach ``options.demos`` demonstrations of ``options.task`` on the simulator that
     ``session`` reaches; the kept attempts, in order (fewer when ``max_attempts`` ran
     out). ``on_attempt`` hears of every attempt as it ends.
 
@@ -155,18 +174,19 @@ def teach(session: zenoh.Session, options: TeachOptions,
     WrongScene
         The simulator runs another scene.
     """
-    geometry = scene_geometry(options.scene)
-    variation, speeds = variation or Variation(), speeds or Speeds()
+    task = options.the_task
+    geometry = scene_geometry(task)
+    speeds = speeds or Speeds()
     out = options.out_dir
     kept: list[Attempt] = []
-    with Recorder(session, options.robot, TASK_OBJECT[options.scene], task=options.scene) as rec, \
+    with Recorder(session, options.robot, task.object, task=task.name) as rec, \
             Teacher(session, rec, limits or StreamLimits()) as teacher:
         _wait_for_simulator(teacher, rec, options)
         out.mkdir(parents=True, exist_ok=True)
         for n in range(1, options.attempts + 1):
             if len(kept) >= options.demos:
                 break
-            plan = plan_demonstration(geometry, options.seed, n, variation, n in options.mistakes)
+            plan = plan_demonstration(geometry, options.seed, n, n in options.mistakes)
             attempt = _attempt(teacher, rec, plan, geometry, out, options, speeds)
             if on_attempt is not None:
                 on_attempt(attempt)
@@ -198,11 +218,11 @@ def _wait_for_simulator(teacher: Teacher, rec: Recorder, options: TeachOptions) 
 
 
 def _check_scene(rec: Recorder, options: TeachOptions) -> None:
-    """WrongScene when the simulator announces another scene than ``options.scene``."""
+    """WrongScene when the simulator announces another scene than ``options.task``'s."""
     running = rec.scene.get("scene") if rec.scene is not None else None
-    if running is not None and running != options.scene:
+    if running is not None and running != options.name:
         raise WrongScene(f"the simulator on sctd/{options.robot} runs scene {running!r}, not "
-                         f"{options.scene!r}")
+                         f"{options.name!r}")
 
 
 def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeometry, out: Path,
@@ -213,7 +233,7 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
     try:
         T_world_obj = teacher.object_pose()
         _move_to(teacher, plan.T_obj_start, T_world_obj, speeds)
-        teacher.reset_scene(options.scene)
+        teacher.reset_scene(options.name)
         teacher.scene_after(time.time())  # from now on the scene shows the reset state
         with Take(rec, out, options.record_rate) as take:
             _record(teacher, take, attempt, geometry, T_world_obj, speeds)
@@ -235,15 +255,19 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
 
 def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: TeachOptions,
            speeds: Speeds) -> None:
-    """After an attempt, unrecorded: the bottle upright about its opening if it is still
-    tilted (an attempt that ended early); the drawer's handle let go by resetting the
-    scene (see the module doc)."""
-    if plan.task == "drawer":
-        teacher.reset_scene(options.scene)
+    """After an attempt, unrecorded: a grasped handle let go by resetting the scene (see
+    the module doc); else a tilted frame brought upright about its point if it is still
+    tilted (an attempt that ended early)."""
+    task = geometry.task
+    if task.scene.joints:
+        teacher.reset_scene(options.name)
+        return
+    tilts = [s for s in plan.steps if s.kind == "tilt"]
+    if not tilts:
         return
     T_world_obj = teacher.object_pose()
     T_obj_ee = se3.invert_transform(T_world_obj) @ teacher.target()
-    back = upright(T_obj_ee, geometry, speeds)
+    back = upright(T_obj_ee, geometry.frame(tilts[-1].frame)[:3, 3], speeds)
     if back.angle > 0.05:
         teacher.phase = "upright"
         teacher.follow(back, T_world_obj)
@@ -253,44 +277,55 @@ def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeome
             T_world_obj: Array, speeds: Speeds) -> None:
     """Record the task motion into ``take`` (stopped on return), finish it unrecorded
     and judge it: fills ``attempt``'s rows, duration, outcome and reason."""
-    plan = attempt.plan
+    task = geometry.task
+    motions = task_motions(attempt.plan, geometry)
+    recorded = geometry.recorded
     take.start()
     try:
         if not teacher.hold(lambda: len(take.rows) > 0, 2.0):  # the take has its first row
             raise TeachingError("the recorder took no sample within 2 s")
-        first, second = task_motions(plan, geometry, speeds)
-        teacher.phase = "carry" if plan.task == "pour" else "reach"
-        teacher.follow(first, T_world_obj)
-        teacher.phase = "pour" if plan.task == "pour" else "pull"
-        if plan.task == "pour":
-            _pour(teacher, second, T_world_obj)
-        else:
-            teacher.follow(second, T_world_obj)
+        for step, motion in motions[:recorded]:
+            if not _show(teacher, task, step, motion, T_world_obj):
+                break  # a failure rule holds: nothing more to show
     finally:
         attempt.rows = take.stop()
         attempt.duration = take.rows[-1][0] if take.rows else 0.0
-    if plan.task == "pour":
-        teacher.phase = "upright"
+    for step, _ in motions[recorded:]:  # the finish (uprights), from where the hand is
+        teacher.phase = step.name
         T_obj_ee = se3.invert_transform(T_world_obj) @ teacher.target()
-        teacher.follow(upright(T_obj_ee, geometry, speeds), T_world_obj)
+        teacher.follow(upright(T_obj_ee, geometry.frame(step.frame)[:3, 3], speeds), T_world_obj)
     teacher.settle()
     attempt.outcome = teacher.scene_after(time.time())
-    attempt.reason = judge(attempt.outcome)
+    attempt.reason = judge(attempt.outcome, task)
 
 
-def _pour(teacher: Teacher, turn: Motion, T_world_obj: Array) -> None:
-    """Tilt the bottle (``turn``) and hold it until the fill target is reached or a drop
-    spilled (a person stops pouring then); TeachingError when neither comes in time."""
+def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_obj: Array) -> bool:
+    """Show one step: its motion, stopped when a failure rule holds; a tilt then held
+    until its predicate holds (TeachingError when it does not in TILT_TIMEOUT s). False
+    when a failure rule holds."""
+    teacher.phase = step.name
+    failed = _failing(teacher, task)
+    action = next(s.action for s in task.intent if s.name == step.name)
+    if not isinstance(action, Tilt):
+        teacher.follow(motion, T_world_obj, stop_when=failed)
+        return not failed()
+
     def enough() -> bool:
-        sc = teacher.rec.scene or {}
-        return bool(sc.get("spilled")) or float(sc.get("poured", 0.0)) >= float(
-            sc.get("fill_target", 0.5))
-    if not teacher.follow(turn, T_world_obj, stop_when=enough):
-        return
-    if not teacher.hold(enough, POUR_TIMEOUT):
-        sc = teacher.rec.scene or {}
-        raise TeachingError(f"the fill target was not reached in {POUR_TIMEOUT:g} s of pouring "
-                            f"(poured {float(sc.get('poured', 0.0)):.2f})")
+        return failed() or holds(action.until, _readings(teacher), {})
+    if teacher.follow(motion, T_world_obj, stop_when=enough) and not teacher.hold(enough, TILT_TIMEOUT):
+        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
+                            f"{TILT_TIMEOUT:g} s of holding the tilt")
+    return not failed()
+
+
+def _readings(teacher: Teacher) -> dict:
+    return dict((teacher.rec.scene or {}).get("readings", {}))
+
+
+def _failing(teacher: Teacher, task: Task) -> Callable[[], bool]:
+    """Whether one of the task's failure rules holds on the scene's newest readings."""
+    rules = task.outcome.fail
+    return lambda: any(holds(r.when, _readings(teacher), {}) for r in rules)
 
 
 def _move_to(teacher: Teacher, T_obj_goal: Array, T_world_obj: Array, speeds: Speeds) -> None:
@@ -301,33 +336,52 @@ def _move_to(teacher: Teacher, T_obj_goal: Array, T_world_obj: Array, speeds: Sp
     teacher.settle()
 
 
-def judge(outcome: dict) -> str:
-    """Why the scene's ``outcome`` (a scene message) is no successful demonstration, or
-    "" when it is: the scene's own ``success`` (pour: the fill target reached, nothing
-    spilled; drawer: open to the success opening)."""
-    if outcome.get("success") is True and not outcome.get("spilled"):
+def judge(outcome: dict, task: Task) -> str:
+    """Why the scene's ``outcome`` (a scene message) is no successful demonstration of
+    ``task``, or "" when it is: the scene's own ``success`` with no failure rule holding.
+    Otherwise the failure rules that hold (their reasons), or what the task's ``done``
+    still lacks, with the readings that say so."""
+    readings = outcome.get("readings", {})
+    failing = [r for r in task.outcome.fail if holds(r.when, readings, {})]
+    if outcome.get("success") is True and not failing:
         return ""
-    if outcome.get("scene") == "pour":
-        if outcome.get("spilled"):
-            return (f"spilled {float(outcome.get('spilled_amount', 0.0)):.3f} of the bottle "
-                    f"(poured {float(outcome.get('poured', 0.0)):.2f})")
-        return (f"poured {float(outcome.get('poured', 0.0)):.2f}, short of the fill target "
-                f"{float(outcome.get('fill_target', 0.5)):.2f}")
-    opening = float(outcome.get("opening", 0.0))
-    needed = float(outcome.get("target_opening", 0.2))
-    text = f"the drawer opened {opening:.3f} m of the {needed:.2f} m needed"
-    if not outcome.get("grasps"):
-        text += "; the hand never grasped the handle"
-    return text
+    if failing:
+        why = "; ".join(f"{r.reason} ({_explain(readings, r.when)})" for r in failing)
+    elif outcome.get("done"):
+        why = f"done but not successful ({_explain(readings, task.outcome.success)})"
+    else:
+        why = f"not done: {_explain(readings, task.outcome.done)}"
+    never = [j for j in task.scene.joints if not readings.get(f"{j}.grasps")]
+    return why + "".join(f"; the hand never grasped the handle of {j}" for j in never)
 
 
-def describe_outcome(outcome: dict) -> str:
-    """The outcome in a few words (pour: poured and spilled; drawer: the opening)."""
-    if outcome.get("scene") == "pour":
-        return (f"poured {float(outcome.get('poured', 0.0)):.2f}, spilled "
-                f"{float(outcome.get('spilled_amount', 0.0)):.3f}")
-    if outcome.get("scene") == "drawer":
-        return f"opened {float(outcome.get('opening', 0.0)):.3f} m"
-    return ""
+def describe_outcome(outcome: dict, task: Task) -> str:
+    """The outcome in a few words: the readings the task's ``done`` asks to reach."""
+    return _explain(outcome.get("readings", {}), task.outcome.done)
 
 
+def _explain(readings: dict, predicate: Predicate) -> str:
+    """The readings a predicate names with their values (and the bound a conjunction
+    sets, ``bottle.poured 0.30 of 0.50``)."""
+    bounds = thresholds(predicate)
+    out = []
+    for name in _names(predicate):
+        x = readings.get(name)
+        if x is None:
+            out.append(f"{name} not reported")
+        elif isinstance(x, bool):
+            out.append(f"{name} {str(x).lower()}")
+        else:
+            out.append(f"{name} {float(x):.3f}" + (f" of {bounds[name]:g}" if name in bounds else ""))
+    return ", ".join(dict.fromkeys(out)) or "nothing to report"
+
+
+def _names(p: Predicate) -> list[str]:
+    """The readings a predicate names, in order."""
+    if isinstance(p, Compare):
+        return [str(p.reading)]
+    if isinstance(p, AllOf | AnyOf):
+        return [n for t in p.terms for n in _names(t)]
+    if isinstance(p, Not):
+        return _names(p.term)
+    return []

@@ -5,12 +5,13 @@ translated along a curve through a via point while it turns from one orientation
 another) or a :class:`TipTurn` (the hand turned about a point fixed in it, the bottle's
 opening, about one of its own axes). Each runs along a speed profile in ``tau = t /
 duration`` (:data:`PROFILES`): from rest to its mean speed (a demonstration's first
-phase, as :mod:`sctd_sim.demogen`'s: a person does not stop between carrying and
-pouring), from its mean speed to rest (the second), or rest to rest (minimum jerk, the
-moves between demonstrations).
+step, as :mod:`sctd_sim.demogen`'s: a person does not stop between carrying and
+pouring), at its mean speed (a step between two others), from its mean speed to rest
+(the last), or rest to rest (minimum jerk, the moves between demonstrations).
 
-:func:`task_motions` turns a :class:`~sctd_services.teach.plan.DemoPlan` into the
-demonstration's two phases; :func:`move` is the unrecorded move from anywhere to a pose.
+:func:`task_motions` turns a :class:`~sctd_services.teach.plan.DemoPlan` into one
+motion per step of the task's intent; :func:`move` is the unrecorded move from anywhere
+to a pose.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 
-from .plan import DemoPlan, SceneGeometry, Speeds
+from .plan import DemoPlan, SceneGeometry, Speeds, StepPlan
 
 Array = NDArray[np.float64]
 
@@ -40,15 +41,20 @@ def _to_rest(tau: float) -> float:
     return 1.0 - _from_rest(1.0 - tau)
 
 
+def _through(tau: float) -> float:
+    """s = tau: at its mean speed throughout (a step between two others)."""
+    return tau
+
+
 def _rest_to_rest(tau: float) -> float:
     """Minimum jerk: s, s', s'' zero at both ends (peak speed 15/8 of the mean)."""
     return tau ** 3 * (10.0 - 15.0 * tau + 6.0 * tau * tau)
 
 
 PROFILES: dict[str, Callable[[float], float]] = {
-    "from_rest": _from_rest, "to_rest": _to_rest, "rest_to_rest": _rest_to_rest}
+    "from_rest": _from_rest, "to_rest": _to_rest, "through": _through, "rest_to_rest": _rest_to_rest}
 """Speed profiles ``s(tau)`` by name: the fraction of the motion done at ``tau``."""
-PEAK = {"from_rest": 4.0 / 3.0, "to_rest": 4.0 / 3.0, "rest_to_rest": 15.0 / 8.0}
+PEAK = {"from_rest": 4.0 / 3.0, "to_rest": 4.0 / 3.0, "through": 1.0, "rest_to_rest": 15.0 / 8.0}
 """Each profile's peak speed over its mean."""
 
 
@@ -150,26 +156,59 @@ class TipTurn:
         return self.T_start @ T_turn
 
 
-def task_motions(plan: DemoPlan, geometry: SceneGeometry, speeds: Speeds | None = None
-                 ) -> tuple[Motion, Motion]:
-    """The two recorded phases of ``plan``: pour, the carry (a :class:`Line`, the bottle
-    upright) and the pour (a :class:`TipTurn` about the opening's y axis, the hand's);
-    drawer, the reach (a :class:`Line` turning to the handle's orientation) and the pull
-    (a :class:`Line` along the handle's x)."""
-    speeds = speeds or Speeds()
-    k = plan.speed
-    if plan.task == "pour":
-        first = line(plan.T_obj_start, plan.T_obj_goal, k * speeds.carry, k * speeds.pour,
-                     "from_rest", plan.via, plan.via_at)
-        second: Motion = TipTurn(plan.T_obj_goal, geometry.T_ee_tip[:3, 3].copy(),
-                                 np.array([0.0, 1.0, 0.0]), plan.tilt,
-                                 plan.tilt / (k * speeds.pour), "to_rest")
-        return first, second
-    first = line(plan.T_obj_start, plan.T_obj_goal, k * speeds.reach, k * speeds.turn,
-                 "from_rest", plan.via, plan.via_at)
-    T_end = plan.T_obj_goal.copy()
-    T_end[:3, 3] += plan.pull * plan.T_obj_goal[:3, 0]
-    return first, line(plan.T_obj_goal, T_end, k * speeds.pull, k * speeds.turn, "to_rest")
+def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan, Motion]]:
+    """The motion of each step of ``plan``, in order (each starts where the one before
+    ends): a reach is a :class:`Line` through its via point; a tilt a :class:`TipTurn`
+    about the frame's point and the hand's y axis; an upright a :class:`TipTurn` bringing
+    the frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis.
+
+    The recorded steps (:attr:`SceneGeometry.recorded`) run as one movement: from rest
+    into the first, at their mean speeds through the middle ones, to rest at the end of
+    the last; the ones after (uprights) rest to rest at the moves' turn rate."""
+    V, k, n = geometry.teach, plan.speed, geometry.recorded
+    out: list[tuple[StepPlan, Motion]] = []
+    here = plan.T_obj_start
+    for i, s in enumerate(plan.steps):
+        profile = _profile(i, n)
+        m: Motion
+        if s.kind == "reach":
+            assert s.T_obj_goal is not None and s.via is not None
+            m = line(here, s.T_obj_goal, k * V.reach_speed, k * V.turn_rate, profile, s.via, s.via_at)
+        elif s.kind == "tilt":
+            pivot = geometry.frame(s.frame)[:3, 3].copy()
+            angle = s.value - _tilt(here, geometry.frame(s.frame))
+            m = TipTurn(here, pivot, np.array([0.0, 1.0, 0.0]), angle, abs(angle) / (k * V.tilt_rate),
+                        profile)
+        elif s.kind == "upright":
+            m = upright(here, geometry.frame(s.frame)[:3, 3], Speeds(), profile if i < n else "rest_to_rest")
+        else:
+            m = _joint_motion(here, s, geometry, k * V.joint_speed, k * V.turn_rate, profile)
+        out.append((s, m))
+        here = s.T_obj_goal if s.T_obj_goal is not None else m.pose(m.duration)
+    return out
+
+
+def _profile(i: int, recorded: int) -> str:
+    """The speed profile of step ``i`` of a demonstration recording ``recorded`` steps."""
+    if i >= recorded or recorded == 1:
+        return "rest_to_rest"
+    return "from_rest" if i == 0 else "to_rest" if i == recorded - 1 else "through"
+
+
+def _tilt(T_obj_ee: Array, T_ee_frame: Array) -> float:
+    """How far the frame's z axis is tilted from the vertical, rad."""
+    z = T_obj_ee[:3, :3] @ T_ee_frame[:3, 2]
+    return math.acos(min(1.0, max(-1.0, float(z[2]))))
+
+
+def _joint_motion(here: Array, s: StepPlan, geometry: SceneGeometry, speed: float, turn_rate: float,
+                  profile: str) -> Motion:
+    """The hand taking the joint's handle from 0 to the planned position: along a
+    prismatic joint's axis (the handle's x)."""
+    T_handle = geometry.handle(s.joint)
+    T_end = here.copy()
+    T_end[:3, 3] += s.value * T_handle[:3, 0]
+    return line(here, T_end, speed, turn_rate, profile)
 
 
 def move(T_a: Array, T_b: Array, speeds: Speeds | None = None) -> Line:
@@ -179,16 +218,18 @@ def move(T_a: Array, T_b: Array, speeds: Speeds | None = None) -> Line:
     return line(T_a, T_b, speeds.move, speeds.turn, "rest_to_rest")
 
 
-def upright(T_obj_ee: Array, geometry: SceneGeometry, speeds: Speeds | None = None) -> TipTurn:
-    """Turn the bottle upright about its opening (which stays where it is), rest to
-    rest at the moves' turn rate: after a pour, the drops land where the stream did."""
+def upright(T_obj_ee: Array, pivot: Array, speeds: Speeds | None = None,
+            profile: str = "rest_to_rest") -> TipTurn:
+    """Turn the frame whose point is ``pivot`` (in the hand's frame) upright about that
+    point (which stays where it is) at the moves' turn rate: after a pour, the drops land
+    where the stream did. The frame's axis is taken to be the hand's z."""
     speeds = speeds or Speeds()
-    pivot = geometry.T_ee_tip[:3, 3].copy()
+    pivot = np.asarray(pivot, dtype=float).copy()
     z = T_obj_ee[:3, 2]
     axis_obj = np.cross(z, [0.0, 0.0, 1.0])  # turning about it brings z up
     n = float(np.linalg.norm(axis_obj))
     angle = math.atan2(n, float(z[2]))
     if n < 1e-9:
-        return TipTurn(T_obj_ee, pivot, np.array([0.0, 1.0, 0.0]), 0.0, 1e-3, "rest_to_rest")
+        return TipTurn(T_obj_ee, pivot, np.array([0.0, 1.0, 0.0]), 0.0, 1e-3, profile)
     axis = T_obj_ee[:3, :3].T @ (axis_obj / n)  # in the hand's frame
-    return TipTurn(T_obj_ee, pivot, axis, angle, angle / speeds.turn, "rest_to_rest")
+    return TipTurn(T_obj_ee, pivot, axis, angle, angle / speeds.turn, profile)
