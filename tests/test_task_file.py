@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -14,7 +15,15 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sctd.task import TaskError, find_task, known_tasks, load_task, shipped_folder, task_from_document
+from sctd.task import (
+    TaskError,
+    add_to_path,
+    find_task,
+    known_tasks,
+    load_task,
+    shipped_folder,
+    task_from_document,
+)
 from sctd.task import catalog as catalog_module
 from sctd.task.judge import holds, thresholds
 from sctd.task.model import (
@@ -269,6 +278,39 @@ def test_a_file_is_found_by_path_and_named_by_its_name_field(tmp_path):
     assert find_task(str(f)).name == "pour_tea"
     with pytest.raises(TaskError, match=r"no task of that name \(known: drawer, pour.*did you mean 'pour'"):
         find_task("pout")
+
+
+def test_tasks_on_the_path_are_found_by_their_name_field(tmp_path, monkeypatch):
+    """$SCTD_TASK_PATH's folders: a file found by its name field whatever the file is
+    called, a shipped name shadows one on the path, a file that is no task is passed
+    over, the first folder wins; add_to_path puts a file's folder first."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir()
+    b.mkdir()
+    doc = pour_doc()
+    doc["name"] = "pour_tea"
+    (a / "my-task.yaml").write_text(yaml.safe_dump(doc))
+    doc["name"] = "pour"  # shadowed by the shipped one
+    (a / "pour.yaml").write_text(yaml.safe_dump(doc))
+    (a / "skill.yaml").write_text("sctd_skill: 1\n")  # no task: passed over
+    doc["name"], doc["title"] = "pour_tea", "the second"
+    (b / "tea.yaml").write_text(yaml.safe_dump(doc))
+    monkeypatch.delenv("SCTD_TASK_PATH", raising=False)
+    with pytest.raises(TaskError, match="no task of that name"):
+        find_task("pour_tea")
+    monkeypatch.setenv("SCTD_TASK_PATH", f"{a}:{b}")
+    t = find_task("pour_tea")
+    assert t.file == str(a / "my-task.yaml") and t.title != "the second"
+    assert find_task("pour").file == str(shipped_folder() / "pour.yaml")
+    listed = [(k.name, k.origin) for k in known_tasks()]
+    assert ("pour_tea", f"SCTD_TASK_PATH {a}") in listed and [n for n, _ in listed].count("pour") == 1
+    with pytest.raises(TaskError, match=r"known: .*pour_tea.*did you mean 'pour_tea'"):
+        find_task("pour_te")
+    monkeypatch.setenv("SCTD_TASK_PATH", str(a))
+    add_to_path(b / "tea.yaml")
+    assert os.environ["SCTD_TASK_PATH"] == f"{b}:{a}" and find_task("pour_tea").title == "the second"
+    add_to_path("pour")  # a name: nothing to add
+    assert os.environ["SCTD_TASK_PATH"] == f"{b}:{a}"
 
 
 def test_packages_register_tasks_by_entry_point(tmp_path, monkeypatch):

@@ -23,7 +23,7 @@ import time
 
 import zenoh
 
-from sctd.task import Task
+from sctd.task import Task, add_to_path
 from sctd_services.record import LINGER
 from sctd_services.teach import (
     Attempt,
@@ -83,6 +83,7 @@ def main_teach(args: argparse.Namespace) -> int:
         return fail("teach", str(e))
     if args.swap and not args.then_learn:
         return fail("teach", "--swap: needs --then-learn METHOD")
+    add_to_path(options.task)  # the learner and the evaluation find a task file by its name
     reply = None
     with contextlib.ExitStack() as stack:
         try:

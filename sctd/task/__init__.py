@@ -5,9 +5,9 @@ judged), read from a YAML file that names no skill (``docs/tasks.md``).
 file says (:mod:`.model`); :class:`TaskError` names the file, the field and the problem.
 """
 
-from .catalog import find_task, known_tasks, load_task, shipped_folder, task_for_object
+from .catalog import add_to_path, find_task, known_tasks, load_task, shipped_folder, task_for_object
 from .model import Task
 from .reader import TaskError, task_from_document
 
-__all__ = ["Task", "TaskError", "find_task", "known_tasks", "load_task", "shipped_folder",
+__all__ = ["Task", "TaskError", "add_to_path", "find_task", "known_tasks", "load_task", "shipped_folder",
            "task_for_object", "task_from_document"]

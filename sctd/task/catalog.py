@@ -14,7 +14,13 @@
        [project.entry-points."sctd.tasks"]
        tap = "mypackage.tasks:tap_file"
 
-A shipped name wins over a registered one of the same name. An unknown name is a
+4. task files in the folders ``$SCTD_TASK_PATH`` lists (separated as ``PATH`` is), by
+   their ``name`` field: a learner on another host finds a task written there by the
+   name the demonstrations carry. ``sctd teach --task FILE`` adds the file's folder for
+   the processes it starts.
+
+A shipped name wins over a registered one of the same name, and both over one on the
+path. An unknown name is a
 :class:`~.reader.TaskError` that lists the known ones and the closest.
 """
 
@@ -34,6 +40,7 @@ from .model import Task
 from .reader import TaskError, task_from_document
 
 SHIPPED_PACKAGE = "sctd_tasks"
+PATH_VARIABLE = "SCTD_TASK_PATH"
 GROUP = "sctd.tasks"
 MAX_TASK_BYTES = 256 * 1024
 
@@ -80,13 +87,45 @@ def _entry_point_path(name: str, value: str) -> Path:
                                               f"file: {type(e).__name__}: {e}") from e
 
 
+def _on_path() -> list[Known]:
+    """The task files in the folders of ``$SCTD_TASK_PATH``, by their ``name`` field, in
+    the variable's order (a file that does not load as a task is passed over: a folder
+    may hold skills too)."""
+    out = []
+    for folder in filter(None, os.environ.get(PATH_VARIABLE, "").split(os.pathsep)):
+        for f in sorted(Path(folder).glob("*.yaml")):
+            try:
+                name = load_task(f).name
+            except TaskError:
+                continue
+            out.append(Known(name, f"{PATH_VARIABLE} {folder}", f))
+    return out
+
+
+def add_to_path(ref: str | Path) -> None:
+    """When ``ref`` is a task file, put its folder first on ``$SCTD_TASK_PATH`` of this
+    process (and so of the processes it starts), so that they find the task by name."""
+    path = Path(ref)
+    if path.is_file():
+        now = filter(None, os.environ.get(PATH_VARIABLE, "").split(os.pathsep))
+        folders = [str(path.resolve().parent), *now]
+        os.environ[PATH_VARIABLE] = os.pathsep.join(dict.fromkeys(folders))
+
+
 def known_tasks() -> list[Known]:
-    """The shipped tasks, then the registered ones not shadowed by a shipped name."""
+    """The shipped tasks, then the registered ones not shadowed by a shipped name, then
+    the ones on ``$SCTD_TASK_PATH`` not shadowed by either (nor by one earlier on it)."""
     shipped = [Known(p.stem, "shipped", p) for p in sorted(shipped_folder().glob("*.yaml"))]
     names = {k.name for k in shipped}
     extra = [Known(n, f"entry point {v}", _entry_point_path(n, v))
              for n, v in _registered() if n not in names]
-    return shipped + extra
+    names |= {k.name for k in extra}
+    on_path = []
+    for k in _on_path():
+        if k.name not in names:
+            names.add(k.name)
+            on_path.append(k)
+    return shipped + extra + on_path
 
 
 def find_task(ref: str | Path) -> Task:
@@ -101,13 +140,18 @@ def find_task(ref: str | Path) -> Task:
         found = shipped
     else:
         value = dict(_registered()).get(name)
-        if value is None:
-            names = [*sorted(p.stem for p in shipped_folder().glob("*.yaml")), *(n for n, _ in _registered())]
+        on_path = {k.name: k.path for k in reversed(_on_path())} if value is None else {}
+        if value is not None:
+            found = _entry_point_path(name, value)
+        elif name in on_path:
+            found = on_path[name]
+        else:
+            names = [*sorted(p.stem for p in shipped_folder().glob("*.yaml")), *(n for n, _ in _registered()),
+                     *sorted(on_path)]
             close = difflib.get_close_matches(name, names, n=1)
             hint = f"; did you mean {close[0]!r}?" if close else ""
             raise TaskError(str(ref), "", f"no such file, and no task of that name (known: "
                                           f"{', '.join(names)}){hint}")
-        found = _entry_point_path(name, value)
     task = load_task(found)
     if task.name != name:
         raise TaskError(str(found), "name", f"the task found as {name!r} is named {task.name!r}")
