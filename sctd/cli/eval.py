@@ -139,8 +139,9 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     results = evaluate(ents, spec, args.trials, args.seed, job, jobs, args.demos, keep=bool(args.report),
                        logdir=logdir, progress=_progress_bar())
     print(file=sys.stderr)
-    header = {"task": task, "trials": args.trials, "seed": args.seed, "user": args.user,
-              "lockstep": args.lockstep}
+    found = find_task(task)  # (checked above: it loads)
+    header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
+              "user": args.user, "lockstep": args.lockstep}
     if args.report:
         for f in write_report(results, Path(args.report), header):
             print(f"sctd eval: wrote {f}", file=sys.stderr)
