@@ -15,8 +15,9 @@ import yaml
 
 from sctd.cli import eval_realtime as realtime
 from sctd.skill import load_skill
+from sctd.task import find_task
 from sctd_services.eval import lockstep
-from sctd_services.eval.evaluate import entries, task_of, with_limits
+from sctd_services.eval.evaluate import control_frame, entries, task_of, with_limits
 from sctd_services.eval.trial import TaskSpec
 from tests.conftest import ROOT
 
@@ -128,6 +129,39 @@ def test_baseline_runs_with_the_assisted_skills_limits(tmp_path):
     assert task_of([e.skill for e in ents], None) == "pour"
     p = with_limits(ROOT / "skills" / "pour-vf.yaml", pour.limits, tmp_path / "vf")
     assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf.npz").exists()
+
+
+def test_the_baseline_turns_about_the_tip_of_what_the_hand_holds(tmp_path):
+    """The competent baseline: where the task tilts a held frame (the bottle's opening)
+    the teleop copy's rotations turn about that frame (a JACO user's control frame at
+    the tool tip); its translations and everything else stay the shipped teleop's.
+    A task that tilts nothing held (the drawer) leaves the copy as it is."""
+    pour, drawer = find_task("pour"), find_task("drawer")
+    name, T = control_frame(pour)
+    assert name == "bottle_tip" and np.array_equal(T, pour.scene.held.frames["bottle_tip"])
+    assert control_frame(drawer) is None
+    teleop = load_skill(ROOT / "skills" / "teleop.yaml")
+    ents = entries([str(POUR)], baseline=True, workdir=tmp_path, task=pour)
+    (base,) = [e for e in ents if e.baseline_of]
+    assert base.label.endswith(", control frame bottle_tip)")
+    b = base.skill
+    np.testing.assert_allclose(b.frames["bottle_tip"].T_parent_frame, T, atol=1e-12)
+    assert b.frames["bottle_tip"].parent == "ee"
+    assert [m.frame for m in _state(b, "rotate").input_mappings] == ["bottle_tip"]
+    assert [m.frame for m in _state(b, "translate").input_mappings] == ["ee"]
+    for state in ("rotate", "translate"):
+        pairs = zip(_state(b, state).input_mappings, _state(teleop, state).input_mappings, strict=True)
+        for got, shipped in pairs:
+            np.testing.assert_array_equal(got.matrix, shipped.matrix)
+            assert (got.translation, got.rotation) == (shipped.translation, shipped.rotation)
+    ents = entries([str(ROOT / "skills" / "drawer-vf.yaml")], baseline=True, workdir=tmp_path / "d",
+                   task=drawer)
+    (base,) = [e for e in ents if e.baseline_of]
+    assert [m.frame for m in _state(base.skill, "rotate").input_mappings] == ["ee"]
+
+
+def _state(skill, name):
+    return next(st for st in skill.states if st.name == name)
 
 
 @pytest.mark.slow

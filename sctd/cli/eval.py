@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sctd.skill import SkillError
+from sctd.skill import SkillError, load_skill
 from sctd.skill.catalog import find_skill
 from sctd.task import TaskError, find_task
 from sctd_services.eval.evaluate import (
@@ -126,8 +126,9 @@ def main_eval(args: argparse.Namespace) -> int:
 
 def _evaluate(args: argparse.Namespace, work: Path) -> int:
     try:
-        ents = entries([str(find_skill(k)) for k in args.skill], args.baseline, work)
-        task = task_of([e.skill for e in ents], args.task)
+        paths = [str(find_skill(k)) for k in args.skill]
+        task = task_of([load_skill(p) for p in paths], args.task)
+        ents = entries(paths, args.baseline, work, find_task(task))
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))
     spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit)

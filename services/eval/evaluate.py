@@ -3,7 +3,9 @@
 ``sctd eval`` is a thin wrapper over :func:`evaluate`. Each skill runs the same trials
 (seeds ``seed .. seed + trials - 1``: the same starts for every skill) with the same
 simulated user. An unassisted baseline (``skills/teleop.yaml``, object ``world``) runs
-with the speed limits of the assisted skill it is compared with.
+with the speed limits of the assisted skill it is compared with, and with its control
+frame at the tip of what the hand holds where the task tilts it (:func:`control_frame`):
+a competent user of a teleoperated arm, not a naive one.
 """
 
 from __future__ import annotations
@@ -19,11 +21,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from sctd import se3
 from sctd.files import parse_yaml
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
 from sctd.skill.catalog import shipped_folder
-from sctd.task import task_for_object
+from sctd.task import Task, task_for_object
+from sctd.task.model import Reach, Tilt, Upright
 from sctd_services.user import PROFILES
 
 from .lockstep import run_trial
@@ -57,12 +61,23 @@ def task_of(skills: list[Skill], task: str | None) -> str:
     return found.name
 
 
-def with_limits(path: Path, limits: Limits, directory: Path) -> Path:
-    """A copy of the skill file at ``path`` (and its model files) with other limits."""
+def with_limits(path: Path, limits: Limits, directory: Path,
+                control: tuple[str, np.ndarray] | None = None) -> Path:
+    """A copy of the skill file at ``path`` (and its model files) with other limits; with
+    ``control`` (a frame's name and ``T_ee_frame``), a teleoperation skill's control
+    frame: its rotations turn about that frame's origin (:func:`control_frame`)."""
     bundle = bundle_from_file(path)
     doc = parse_yaml(bundle.yaml_text, bundle.name)
     doc["limits"] = {"max_linear_speed": limits.max_linear_speed,
                      "max_angular_speed": limits.max_angular_speed}
+    if control is not None:
+        name, T = control
+        doc.setdefault("frames", {})[name] = {"parent": "ee", "pose": se3.pose_from_flat(
+            se3.flat_from_transform(T))}
+        for state in doc.get("states", {}).values():
+            for m in state.get("input_mapping", []):
+                if m.get("type") == "linear" and any(a in ROTATIONS for a in m.get("axes", ())):
+                    m["frame"] = name
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / Path(bundle.name).name
     out.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -72,16 +87,40 @@ def with_limits(path: Path, limits: Limits, directory: Path) -> Path:
     return out
 
 
-def entries(paths: list[str], baseline: bool, workdir: Path) -> list[Entry]:
+ROTATIONS = ("rx", "ry", "rz")
+
+
+def control_frame(task: Task | None) -> tuple[str, np.ndarray] | None:
+    """The control frame a skilled user of a teleoperated arm sets at the tool's tip, as
+    a JACO's user does: the frame of what the hand holds that the task's intent tilts or
+    brings upright (a bottle's opening), so that turning the hand turns about it instead
+    of swinging it round the wrist. None when the task tilts nothing the hand holds."""
+    if task is None or task.scene.held is None:
+        return None
+    frames = task.scene.held.frames
+    anchor = None
+    for s in task.intent:
+        if isinstance(s.action, Reach):
+            anchor = s.action.frame
+        elif isinstance(s.action, Tilt | Upright) and anchor in frames:
+            return anchor, frames[anchor]
+    return None
+
+
+def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None = None) -> list[Entry]:
     """The skills to evaluate; a world-object skill (the baseline) gets the first
-    assisted skill's limits, and ``baseline`` adds one teleop run per assisted skill."""
+    assisted skill's limits and the task's control frame (:func:`control_frame`), and
+    ``baseline`` adds one teleop run per assisted skill."""
     given = [Entry(p, Path(p), load_skill(p)) for p in paths]
     assisted = [e for e in given if e.skill.object != WORLD_OBJECT]
+    control = control_frame(task)
+    at = f", control frame {control[0]}" if control is not None else ""
     out: list[Entry] = []
     for e in given:
         if e.skill.object == WORLD_OBJECT and assisted:
             ref = assisted[0]
-            p = with_limits(e.path, ref.skill.limits, workdir / f"{e.skill.name}-as-{ref.skill.name}")
+            copy = workdir / f"{e.skill.name}-as-{ref.skill.name}"
+            p = with_limits(e.path, ref.skill.limits, copy, control)
             e = Entry(e.label, p, load_skill(p), ref.label)
         out.append(e)
     if baseline:  # one baseline per set of limits: same limits, same seeds, same trials
@@ -90,8 +129,8 @@ def entries(paths: list[str], baseline: bool, workdir: Path) -> list[Entry]:
             if ref.skill.limits in done:
                 continue
             done.append(ref.skill.limits)
-            p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}")
-            out.append(Entry(f"teleop (limits of {ref.label})", p, load_skill(p), ref.label))
+            p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}", control)
+            out.append(Entry(f"teleop (limits of {ref.label}{at})", p, load_skill(p), ref.label))
     return out
 
 
@@ -264,5 +303,15 @@ def strip_trajectories(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
                                 for t in r["per_trial"]]} for r in results]
 
 
-__all__ = ["Entry", "TaskSpec", "TrialResult", "entries", "evaluate", "summarise", "table",
-           "task_of", "with_limits"]
+__all__ = [
+    "Entry",
+    "TaskSpec",
+    "TrialResult",
+    "control_frame",
+    "entries",
+    "evaluate",
+    "summarise",
+    "table",
+    "task_of",
+    "with_limits",
+]
