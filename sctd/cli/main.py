@@ -101,6 +101,8 @@ COMMANDS: dict[str, Command] = {
                    "add_dtw_arguments", "main_dtw"),
     "eval": Command("measure a skill's assistance with the simulated user (success, time, effort; "
                     "lockstep or real time)", "sctd.cli.eval", "add_eval_arguments", "main_eval"),
+    "suite": Command("every task x its skills x the competent baseline in lockstep: one table and "
+                     "figures", "sctd.cli.suite", "add_suite_arguments", "main_suite"),
     # the simulator and the recorder define their flags where they live, once: the same
     # as python -m sctd_sim.service / python -m sctd_services.record take
     "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd_sim.service",

@@ -1,0 +1,204 @@
+"""The evaluation suite: every task x its skills x the competent baseline, in lockstep.
+
+For each task (:func:`sctd.task.known_tasks`, or those asked for) the skills are the
+shipped ones whose object is the task's object (a hand-written reference and the
+learned ones), and the unassisted baseline runs once per set of their speed limits
+with the task's control frame (:func:`~.evaluate.entries`). Every skill of a task runs
+the same seeded trials. :func:`run_suite` returns one row per task and skill with the
+figures a reader compares (success, time distribution, mode switches, effort, the time
+against the baseline's); :func:`floor` is the time the task cannot be done under at the
+skill's speed limits, whatever the assistance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from sctd.skill import WORLD_OBJECT, Limits, load_skill
+from sctd.skill.catalog import shipped_skills
+from sctd.task import Task
+from sctd.task.judge import thresholds
+from sctd.task.model import MoveJoint, Near, Reach, Tilt
+
+from .evaluate import (
+    TELEOP,
+    Entry,
+    control_frame,
+    entries,
+    evaluate,
+    lockstep_job,
+    strip_trajectories,
+    with_limits,
+)
+from .trial import TaskSpec
+
+
+@dataclass
+class TaskRun:
+    """One task of the suite: its skills' results (the baseline's among them)."""
+
+    task: Task
+    skills: list[str]
+    results: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def baseline(self) -> dict[str, Any] | None:
+        return next((r for r in self.results if r.get("baseline_of")), None)
+
+
+def skills_for(task: Task, shipped: list[Path] | None = None) -> list[str]:
+    """The shipped skills whose object is ``task``'s object, by file name."""
+    out = []
+    for p in sorted(shipped if shipped is not None else shipped_skills()):
+        s = load_skill(p)
+        if s.object != WORLD_OBJECT and s.object == task.object:
+            out.append(str(p))
+    return out
+
+
+def floor(task: Task, limits: Limits) -> float:
+    """A lower bound of the completion time at ``limits``: the first reach's frame from
+    where it starts (or from where the completion clock starts, when that is nearer: a
+    ``near`` clock on the task object) straight to its goal at full linear speed, then
+    every joint's travel to its threshold at full linear speed and every tilt at full
+    angular speed."""
+    done = thresholds(task.outcome.done)
+    sc = task.scene
+    obj = sc.bodies[task.object].T_world
+    travel = spin = 0.0
+    first = next(s.action for s in task.intent if isinstance(s.action, Reach))
+    assert isinstance(first, Reach)  # (the reader: the first step is a reach)
+    held = sc.held.frames if sc.held is not None else {}
+    start = (sc.start.T_world @ held.get(first.frame, np.eye(4)))[:3, 3]
+    if first.to is not None:
+        goal = obj[:3, :3] @ first.to + obj[:3, 3]
+    else:
+        assert first.handle is not None  # (the reader asks for one goal)
+        goal = sc.bodies[sc.joints[first.handle].handle].T_world[:3, 3]
+    travel = float(np.linalg.norm(goal - start))
+    clock = task.outcome.clock
+    if isinstance(clock, Near) and clock.to == task.object:
+        travel = min(travel, clock.within)
+    for s in task.intent:
+        if isinstance(s.action, MoveJoint):
+            travel += done.get(f"{s.action.joint}.position", 0.0)
+        elif isinstance(s.action, Tilt):
+            spin += s.action.to
+    return travel / limits.max_linear_speed + spin / limits.max_angular_speed
+
+
+def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, workdir: Path,
+              progress: Callable[[int, int, str], None] | None = None) -> list[TaskRun]:
+    """Every task's skills and its competent baseline, ``trials`` lockstep trials each
+    from seed ``seed``; a task with no shipped skill runs the baseline alone. ``tasks``:
+    (how the task was named: a name or a file, the task)."""
+    runs = []
+    for ref, task in tasks:
+        skills = skills_for(task)
+        paths = skills or [str(TELEOP)]
+        ents = entries(paths, baseline=bool(skills), workdir=workdir / task.name, task=task)
+        if not skills:  # the baseline alone: with the task's control frame all the same
+            p = with_limits(TELEOP, ents[0].skill.limits, workdir / task.name / "teleop", control_frame(task))
+            ents = [Entry("teleop", p, load_skill(p), "-")]
+        spec = TaskSpec(ref, time_limit=task.outcome.time_limit)
+        results = evaluate(ents, spec, trials, seed, lockstep_job, jobs, progress=progress)
+        runs.append(TaskRun(task, skills, strip_trajectories(results)))
+    return runs
+
+
+def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
+    """One row per task and skill: what the table and the figures show. A baseline's
+    row is named after the skill whose speed limits it ran with; a skill's time is
+    compared with the baseline's of the same limits."""
+    out = []
+    for run in runs:
+        names = {r["skill"]: r["name"] for r in run.results}
+        for r in run.results:
+            lim = Limits(**r["limits"])
+            median = r["time_s"]["median"]
+            base = next((b for b in run.results if b.get("baseline_of") and b["limits"] == r["limits"]), None)
+            b = base["time_s"]["median"] if base is not None and base is not r else None
+            of = r.get("baseline_of")
+            skill = r["name"] if not of else "baseline" if of not in names else f"baseline ({names[of]})"
+            out.append({
+                "task": run.task.name, "skill": skill, "label": r["skill"], "trials": r["trials"],
+                "successes": r["successes"], "success_rate": r["success_rate"], "median_s": median,
+                "times_s": [t["time_s"] for t in r["per_trial"] if t["outcome"] == "success"],
+                "vs_baseline": round(median / b, 3) if median is not None and b else None,
+                "floor_s": round(floor(run.task, lim), 2),
+                "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
+                "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
+                "failures": _failures(r["per_trial"]),
+            })
+    return out
+
+
+def _failures(per_trial: list[dict[str, Any]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for t in per_trial:
+        if t["outcome"] != "success":
+            why = str(t.get("reason") or t["outcome"])
+            out[why] = out.get(why, 0) + 1
+    return out
+
+
+def table(rows_: list[dict[str, Any]]) -> list[str]:
+    """The suite's table, one line per task and skill."""
+    head = (f"{'task':<14} {'skill':<24} {'success':>9} {'median [s]':>10} {'vs base':>8} "
+            f"{'floor [s]':>9} {'switches':>8} {'effort':>7}  failures")
+    lines = [head, "-" * len(head)]
+    for r in rows_:
+        med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
+        vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
+        why = ", ".join(f"{k} x{v}" for k, v in r["failures"].items())
+        lines.append(f"{r['task']:<14} {r['skill']:<24} {r['successes']:>4}/{r['trials']:<4} {med:>10} "
+                     f"{vs:>8} {r['floor_s']:>9.2f} {r['mode_switches']:>8.1f} {r['effort']:>7.2f}  {why}")
+    return lines
+
+
+def markdown(rows_: list[dict[str, Any]]) -> str:
+    """The table as Markdown, for the docs."""
+    out = ["| task | skill | success | median time [s] | vs baseline | floor [s] | mode switches | effort |",
+           "|---|---|---|---|---|---|---|---|"]
+    for r in rows_:
+        med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
+        vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
+        out.append(f"| {r['task']} | {r['skill']} | {r['successes']}/{r['trials']} | {med} | {vs} | "
+                   f"{r['floor_s']:.2f} | {r['mode_switches']:.1f} | {r['effort']:.2f} |")
+    return "\n".join(out) + "\n"
+
+
+def figure(rows_: list[dict[str, Any]]) -> Figure:
+    """Success, completion times (each task's floor marked) and mode switches and effort
+    per task and skill, side by side: the suite at a glance."""
+    fig = Figure(figsize=(15, 4.5))
+    ax_s, ax_t, ax_e = fig.subplots(1, 3)
+    labels = [f"{r['task']}\n{r['skill']}" for r in rows_]
+    x = np.arange(len(rows_))
+    colours = [_COLOURS[sorted({r['task'] for r in rows_}).index(r["task"]) % len(_COLOURS)] for r in rows_]
+    ax_s.bar(x, [100 * r["success_rate"] for r in rows_], color=colours)
+    ax_s.axhline(90, color="k", lw=0.8, ls="--")
+    ax_s.set(title="success [%] (dashed: 90 %)", ylim=(0, 105))
+    data = [r["times_s"] or [math.nan] for r in rows_]
+    ax_t.boxplot(data, positions=x, widths=0.6)
+    ax_t.scatter(x, [r["floor_s"] for r in rows_], marker="_", s=300, color="r", label="floor")
+    ax_t.set(title="completion time of successful trials [s]")
+    ax_t.legend(loc="upper left")
+    ax_e.bar(x - 0.2, [r["mode_switches"] for r in rows_], width=0.4, color=colours, label="mode switches")
+    ax_e.bar(x + 0.2, [r["effort"] / 10 for r in rows_], width=0.4, color="0.6", label="effort / 10")
+    ax_e.set(title="mode switches and effort (per trial)")
+    ax_e.legend(loc="upper left")
+    for ax in (ax_s, ax_t, ax_e):
+        ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:olive")

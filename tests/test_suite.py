@@ -1,0 +1,83 @@
+"""`sctd suite`: every task x its shipped skills x the competent baseline, one table;
+each task's floor (the time no assistance can beat at the skill's speed limits)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from sctd.skill import Limits
+from sctd.task import find_task
+from sctd_services.eval.suite import TaskRun, figure, floor, markdown, rows, skills_for, table
+from tests.conftest import run_sctd
+
+
+def test_floor_is_travel_and_tilt_over_the_speed_limits():
+    """Drawer: the hand's 27 cm to the handle counted from the clock's 20 cm, then the
+    20 cm pull, at 0.1 m/s; pour: the bottle's opening (12 cm above the hand) 31.6 cm to
+    5 cm over the mug, then the 1.65 rad tilt at 0.5 rad/s."""
+    assert floor(find_task("drawer"), Limits()) == pytest.approx(0.40 / 0.10)
+    pour = math.hypot(0.30, 0.10) / 0.10 + 1.65 / 0.5
+    assert floor(find_task("pour"), Limits()) == pytest.approx(pour)
+    assert floor(find_task("pour"), Limits(0.2, 1.0)) == pytest.approx(pour / 2)
+
+
+def _result(name, limits, times, baseline_of=None, label=None):
+    per_trial = [{"outcome": "success" if t else "failure", "time_s": t,
+                  "reason": None if t else "time limit"} for t in times]
+    ok = [t for t in times if t]
+    return {"skill": label or name, "name": name, "baseline_of": baseline_of, "trials": len(times),
+            "successes": len(ok), "success_rate": len(ok) / len(times),
+            "time_s": {"median": sorted(ok)[len(ok) // 2] if ok else None}, "limits": limits,
+            "mode_switches_mean": 1.0, "effort_mean": 5.0, "stuck": 0, "time_s_limited_median": 10.0,
+            "per_trial": per_trial}
+
+
+def test_rows_compare_each_skill_with_the_baseline_of_its_limits():
+    slow, fast = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}, {"max_linear_speed": 0.2,
+                                                                        "max_angular_speed": 0.5}
+    run = TaskRun(find_task("drawer"), ["a.yaml", "b.yaml"], [
+        _result("a", slow, [4.0, 5.0, 6.0], label="a.yaml"),
+        _result("b", fast, [3.0, None], label="b.yaml"),
+        _result("teleop", slow, [10.0, 10.0, 10.0], baseline_of="a.yaml"),
+        _result("teleop", fast, [6.0, 6.0], baseline_of="b.yaml"),
+    ])
+    out = rows([run])
+    assert [r["skill"] for r in out] == ["a", "b", "baseline (a)", "baseline (b)"]
+    assert [r["vs_baseline"] for r in out] == [0.5, 0.5, None, None]
+    assert out[1]["failures"] == {"time limit": 1} and out[1]["times_s"] == [3.0]
+    assert [r["floor_s"] for r in out] == [4.0, 2.0, 4.0, 2.0]
+    lines = table(out)
+    assert len(lines) == 2 + 4 and "time limit x1" in lines[3]
+    md = markdown(out).splitlines()
+    assert len(md) == 2 + 4 and md[2] == "| drawer | a | 3/3 | 5.00 | 0.50 | 4.00 | 1.0 | 5.00 |"
+
+
+def test_the_figure_draws(tmp_path):
+    limits = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}
+    run = TaskRun(find_task("pour"), [], [_result("teleop", limits, [None, None], baseline_of="-")])
+    out = tmp_path / "suite.png"
+    figure(rows([run])).savefig(out, dpi=50)  # no successful trial: an empty box, not an error
+    assert out.stat().st_size > 5000
+
+
+def test_skills_for_a_task_are_the_shipped_ones_on_its_object():
+    names = sorted(p.rsplit("/", 1)[-1] for p in skills_for(find_task("drawer")))
+    assert names == ["drawer-vf.yaml", "drawer.yaml"]
+
+
+@pytest.mark.slow
+def test_sctd_suite_writes_the_table_and_the_figures(tmp_path):
+    run = run_sctd("suite", "--task", "drawer", "--trials", "1", "--jobs", "2", "--out", str(tmp_path),
+                   "--json", timeout=600)
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(run.stdout)
+    assert doc["tasks"] == ["drawer"] and doc["trials"] == 1
+    skills = [r["skill"] for r in doc["rows"]]
+    assert skills == ["drawer-vf", "drawer", "baseline (drawer-vf)", "baseline (drawer)"]
+    assert all(r["trials"] == 1 and r["floor_s"] > 0 for r in doc["rows"])
+    assert (tmp_path / "suite.md").read_text().count("| drawer |") == 4
+    assert (tmp_path / "suite.png").stat().st_size > 10000
+    assert json.loads((tmp_path / "suite.json").read_text())["rows"] == doc["rows"]
