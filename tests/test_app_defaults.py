@@ -98,24 +98,26 @@ def test_sctd_reports_a_broken_defaults_file_and_exits_2(broken_defaults, capsys
     assert f"sctd bench latency: {broken_defaults}: task: missing" in capsys.readouterr().err
 
 
-def test_the_simulator_reports_a_broken_defaults_file(broken_defaults, capsys):
-    from sctd_sim import service
+def test_the_simulator_and_the_stand_in_report_a_broken_defaults_file(broken_defaults, capsys):
+    from sctd_sim import kinematic, service
 
     assert service.main([]) == 2
     assert f"sctd sim: {broken_defaults}: task: missing" in capsys.readouterr().err
+    assert kinematic.main([]) == 2
+    assert f"sctd kinematic: {broken_defaults}: task: missing" in capsys.readouterr().err
 
 
 def test_the_flags_take_their_defaults_from_the_file():
     from sctd.bench.eval import add_bench_eval_arguments
     from sctd.bench.latency import add_latency_arguments
     from sctd.cli.demo import add_demo_arguments
-    from sctd_sim.options import add_service_arguments
+    from sctd_sim.kinematic import add_arguments as add_kinematic_arguments
 
     d = defaults()
     for add, dest, value in ((add_demo_arguments, "skill", d.skill),
                              (add_latency_arguments, "skill", d.skill),
                              (add_bench_eval_arguments, "skill", d.learned_skill),
-                             (add_service_arguments, "task", d.task)):
+                             (add_kinematic_arguments, "task", d.task)):
         p = argparse.ArgumentParser()
         add(p)
         assert getattr(p.parse_args([]), dest) == value
