@@ -1,11 +1,12 @@
 """Seeded demonstrations with ground truth for tasks shaped as the two thesis tasks (Ch.
 5.2, 5.3), and two shapes of no task file.
 
-Pure numpy. Every demonstration is the end-effector pose ``T_obj_ee`` over time in
-the task object's frame, sampled at ``rate`` Hz, with Gaussian noise and optional
-gross outliers, plus the truth the learner should recover. :func:`generate` takes a
-task (its name or file, :func:`sctd.task.find_task`) and makes the shape its file
-describes, with the task's object, names and geometry; or ``crank`` or ``wipe``:
+Pure numpy (and the task files, read by :mod:`sctd.task`). Every demonstration is
+the end-effector pose ``T_obj_ee`` over time in the task object's frame, sampled at
+``rate`` Hz, with Gaussian noise and optional gross outliers, plus the truth the
+learner should recover. :func:`generate` takes a task (its name or file,
+:func:`sctd.task.find_task`) and makes the shape its file describes, with the task's
+object, names and geometry; or ``crank`` or ``wipe``:
 
 *tilt*, a task whose held object has contents (pour: object ``mug``, origin at the
 centre of the mug's opening, z up). The end-effector's z axis is the held object's
@@ -18,18 +19,19 @@ its tip, about the ee's y axis, tilting its top towards the mug. In the tip fram
 tilt is a rotation only; the ee moves on a sphere about the pour point (the truth
 ``sphere_centre``).
 
-``crank`` (no task file; object ``crank``: origin on the crank's vertical axis at the handle's height,
-z up; the handle starts on +x at the radius, 12-20 cm, drawn once per task from the
-seed). *reach*: translate to the handle from in front and above; *turn*: the hand,
-holding the handle, goes round the axis counter-clockwise (seen from above) by
-90-180 deg, turning with it (its yaw follows the crank), so the axis is fixed in the
-hand's frame. A fixed-axis rotation: the truth is a cylinder (``axis``, ``point``).
+``crank`` (no task file; object ``crank``: origin on the crank's vertical axis at the
+handle's height, z up; the handle starts on +x at the radius, 12-20 cm, drawn once per
+task from the seed). *reach*: translate to the handle from in front and above; *turn*:
+the hand, holding the handle, goes round the axis counter-clockwise (seen from above)
+by 90-180 deg, turning with it (its yaw follows the crank), so the axis is fixed in
+the hand's frame. A fixed-axis rotation: the truth is a cylinder (``axis``,
+``point``).
 
-``wipe`` (no task file; object ``table``: origin at the middle of the stroke, z up). *reach*:
-translate down to the table; *wipe*: an S-shaped stroke over it, ``y = A sin(2 pi x /
-L)`` over one wavelength ``L`` (25-30 cm) with ``A`` 5 cm, the same stroke in every
-demonstration up to +-5 mm: its direction swings by +-50 deg, none of the three
-shapes (the truth is ``general``).
+``wipe`` (no task file; object ``table``: origin at the middle of the stroke, z up).
+*reach*: translate down to the table; *wipe*: an S-shaped stroke over it, ``y = A
+sin(2 pi x / L)`` over one wavelength ``L`` (25-30 cm) with ``A`` 5 cm, the same
+stroke in every demonstration up to +-5 mm: its direction swings by +-50 deg, none of
+the three shapes (the truth is ``general``).
 
 *pull*, a task with a prismatic joint (drawer: object ``drawer_handle``, origin at
 the grasp point of the *closed* drawer, x out of the drawer, z up; the frame stays

@@ -1,8 +1,8 @@
 """A kinematic stand-in robot: follows ``target`` with a first-order lag and publishes
 ``state`` and the ``objects`` of a task's scene, where its task file puts them (the
-same file the Pinocchio simulator builds its scene from). No dynamics; the Pinocchio simulator replaces it
-where dynamics matter. Useful for runtime tests and benchmarks, where it keeps the
-robot side cheap and deterministic.
+same file the Pinocchio simulator builds its scene from). No dynamics; the Pinocchio
+simulator replaces it where dynamics matter. Useful for runtime tests and benchmarks,
+where it keeps the robot side cheap and deterministic.
 
     python -m sctd_sim.kinematic --task pour --connect tcp/127.0.0.1:7447
 """
