@@ -4,7 +4,8 @@ package data ``sctd_skills`` (the shipped skills, their model files and
 demonstrations, found by name: ``sctd run --skill pour``) and ``tasks/`` as ``sctd_tasks``
 (the shipped task files: ``sctd sim --task pour``). Whatever else an installed
 command reads ships as package data too: the Zenoh config templates ``sctd certs``
-renders (``sctd/deploy/zenoh/``), the input maps, the robot model and its CAN database.
+renders (``sctd/deploy/zenoh/``), the tasks and skills the commands take when not told
+(``sctd/app/defaults.yaml``), the input maps, the robot model and its CAN database.
 Metadata is in pyproject.toml."""
 
 from setuptools import find_packages, setup
@@ -19,6 +20,7 @@ setup(
     packages=packages,
     package_dir=MAPPED,
     package_data={"sctd.deploy": ["zenoh/*.json5"],  # the Zenoh configs `sctd certs` renders
+                  "sctd.app": ["defaults.yaml"],  # the tasks and skills commands take when not told
                   "sctd_sim": ["*.dbc", "robot/*", "robot/**/*"], "sctd_services": ["input/maps/*.yaml"],
                   "sctd_skills": ["*.yaml", "*.npz", "*.md", "demos/*/*.csv", "demos/*/*.json"],
                   "sctd_tasks": ["*.yaml", "*.md"]},

@@ -1,34 +1,43 @@
-"""Seeded demonstrations with ground truth for the two thesis tasks (Ch. 5.2, 5.3).
+"""Seeded demonstrations with ground truth for tasks shaped as the two thesis tasks (Ch.
+5.2, 5.3), and two shapes of no task file.
 
-Pure numpy. Every demonstration is the end-effector pose ``T_obj_ee`` over time in
-the task object's frame, sampled at ``rate`` Hz, with Gaussian noise and optional
-gross outliers, plus the truth the learner should recover:
+Pure numpy (and the task files, read by :mod:`sctd.task`). Every demonstration is
+the end-effector pose ``T_obj_ee`` over time in the task object's frame, sampled at
+``rate`` Hz, with Gaussian noise and optional gross outliers, plus the truth the
+learner should recover. :func:`generate` takes a task (its name or file,
+:func:`sctd.task.find_task`) and makes the shape its file describes, with the task's
+object, names and geometry; or ``crank`` or ``wipe``:
 
-``pour`` (object ``mug``: origin at the centre of the mug's opening, z up). The
-end-effector's z axis is the bottle's axis and the bottle tip sits at ``TIP_OFFSET``
-(``[0, 0, 0.12]`` in the ee frame). *carry*: the bottle, upright, is translated along
-a straight line until its tip reaches the pour point (above the opening); *pour*: the
-bottle rotates about its tip, about the ee's y axis, tilting its top towards the mug.
-In the tip frame the pour is a rotation only; the ee moves on a sphere about the
-pour point (the truth ``sphere_centre``).
+*tilt*, a task whose held object has contents (pour: object ``mug``, origin at the
+centre of the mug's opening, z up). The end-effector's z axis is the held object's
+axis and its outlet sits where the task file's held frame puts it (the bottle's tip,
+``[0, 0, 0.12]`` in the ee frame: the truth ``tip_offset``). *carry*: the bottle,
+upright, is translated along a straight line until its tip reaches the pour point,
+the goal of the intent's reach that comes before its tilt (5 cm above the opening);
+then the tilt (the phase is named as the intent's tilt step): the bottle rotates about
+its tip, about the ee's y axis, tilting its top towards the mug. In the tip frame the
+tilt is a rotation only; the ee moves on a sphere about the pour point (the truth
+``sphere_centre``).
 
-``crank`` (object ``crank``: origin on the crank's vertical axis at the handle's height,
-z up; the handle starts on +x at the radius, 12-20 cm, drawn once per task from the
-seed). *reach*: translate to the handle from in front and above; *turn*: the hand,
-holding the handle, goes round the axis counter-clockwise (seen from above) by
-90-180 deg, turning with it (its yaw follows the crank), so the axis is fixed in the
-hand's frame. A fixed-axis rotation: the truth is a cylinder (``axis``, ``point``).
+``crank`` (no task file; object ``crank``: origin on the crank's vertical axis at the
+handle's height, z up; the handle starts on +x at the radius, 12-20 cm, drawn once per
+task from the seed). *reach*: translate to the handle from in front and above; *turn*:
+the hand, holding the handle, goes round the axis counter-clockwise (seen from above)
+by 90-180 deg, turning with it (its yaw follows the crank), so the axis is fixed in
+the hand's frame. A fixed-axis rotation: the truth is a cylinder (``axis``,
+``point``).
 
-``wipe`` (object ``table``: origin at the middle of the stroke, z up). *reach*:
-translate down to the table; *wipe*: an S-shaped stroke over it, ``y = A sin(2 pi x /
-L)`` over one wavelength ``L`` (25-30 cm) with ``A`` 5 cm, the same stroke in every
-demonstration up to +-5 mm: its direction swings by +-50 deg, none of the three
-shapes (the truth is ``general``).
+``wipe`` (no task file; object ``table``: origin at the middle of the stroke, z up).
+*reach*: translate down to the table; *wipe*: an S-shaped stroke over it, ``y = A
+sin(2 pi x / L)`` over one wavelength ``L`` (25-30 cm) with ``A`` 5 cm, the same
+stroke in every demonstration up to +-5 mm: its direction swings by +-50 deg, none of
+the three shapes (the truth is ``general``).
 
-``drawer`` (object ``drawer_handle``: origin at the grasp point of the *closed*
-drawer, x out of the drawer, z up; the frame stays where the closed handle was, so
-the pull shows as motion along +x). *reach*: translate to the handle from above and
-in front while the hand turns to its grasp orientation; *pull*: translate along +x.
+*pull*, a task with a prismatic joint (drawer: object ``drawer_handle``, origin at
+the grasp point of the *closed* drawer, x out of the drawer, z up; the frame stays
+where the closed handle was, so the pull shows as motion along +x). *reach*:
+translate to the handle from above and in front while the hand turns to its grasp
+orientation; *pull*: translate along +x.
 
 The speed profiles do not stop between phases (the carry ends at its mean speed and
 the pour starts at it), as a person moves.
@@ -48,18 +57,82 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import Task, find_task
+from sctd.task.model import Reach, Tilt
 
 Array = NDArray[np.float64]
 
-TIP_OFFSET = np.array([0.0, 0.0, 0.12])  # bottle tip in the ee frame (m)
-POUR_POINT = np.array([0.0, 0.0, 0.05])  # tip position while pouring, mug frame (m)
-TASKS = ("pour", "drawer", "crank", "wipe")
-PHASES = {"pour": ("carry", "pour"), "drawer": ("reach", "pull"), "crank": ("reach", "turn"),
-          "wipe": ("reach", "wipe")}
-OBJECTS = {"pour": "mug", "drawer": "drawer_handle", "crank": "crank", "wipe": "table"}
-FIELD_TRUTH = {"pour": ("translation", "sphere"), "drawer": ("translation", "translation"),
+SHAPES = ("tilt", "pull", "crank", "wipe")
+FIELD_TRUTH = {"tilt": ("translation", "sphere"), "pull": ("translation", "translation"),
                "crank": ("translation", "cylinder"), "wipe": ("translation", "general")}
-"""The kind of field each phase of a task is (``general``: none of the three shapes)."""
+"""The kind of field each phase of a shape is (``general``: none of the three shapes)."""
+
+
+@dataclass(frozen=True)
+class Kind:
+    """What :func:`generate` makes for one name: the shape of the motion, and the names
+    and geometry its truth reports.
+
+    ``tip_offset`` (the outlet in the ee frame) and ``pour_point`` (where the outlet
+    tilts, in the object's frame), m: the tilt's alone.
+    """
+
+    name: str
+    shape: str
+    object: str
+    phases: tuple[str, str]
+    tip_offset: Array | None = None
+    pour_point: Array | None = None
+
+    @property
+    def fields(self) -> tuple[str, str]:
+        """The kind of field each phase is."""
+        return FIELD_TRUTH[self.shape]
+
+
+SYNTHETIC = {"crank": Kind("crank", "crank", "crank", ("reach", "turn")),
+             "wipe": Kind("wipe", "wipe", "table", ("reach", "wipe"))}
+"""The kinds of no task file: their objects and geometry are the generator's own."""
+
+
+def kind_of(task: str | Path | Task) -> Kind:
+    """The kind :func:`generate` makes for ``task``: ``crank`` or ``wipe``, or a task (a
+    :class:`~sctd.task.Task`, or its name or file) whose held object has contents (a
+    tilt) or that has a prismatic joint (a pull).
+
+    Raises
+    ------
+    ValueError
+        An unknown task (:class:`~sctd.task.TaskError`), or one of neither shape.
+    """
+    if isinstance(task, str) and task in SYNTHETIC:
+        return SYNTHETIC[task]
+    t = task if isinstance(task, Task) else find_task(task)
+    held = t.scene.held
+    if held is not None and held.contents is not None:
+        return _tilt_kind(t)
+    joint = next((j for j in t.scene.joints.values() if j.kind == "prismatic"), None)
+    if joint is not None:
+        return Kind(t.name, "pull", t.object, ("reach", "pull"))
+    raise ValueError(f"{t.file or t.name}: the generator makes demonstrations of a task whose held "
+                     "object's contents are tilted out or whose prismatic joint is pulled; this one has "
+                     "neither")
+
+
+def _tilt_kind(t: Task) -> Kind:
+    """A tilt: the outlet as the held frame puts it, the pour point as the goal of the
+    intent's reach with that frame before its tilt, the tilt's phase named as its step."""
+    held = t.scene.held
+    assert held is not None and held.contents is not None
+    outlet = held.contents.outlet
+    k = next((i for i, s in enumerate(t.intent) if isinstance(s.action, Tilt)), None)
+    reach = next((s.action for s in reversed(t.intent[:k or 0]) if isinstance(s.action, Reach)), None)
+    if k is None or reach is None or reach.frame != outlet or reach.to is None:
+        raise ValueError(f"{t.file or t.name}: intent: the generator tilts the held object about its "
+                         f"outlet {outlet!r} at the goal of a reach with that frame before a tilt step")
+    return Kind(t.name, "tilt", t.object, ("carry", t.intent[k].name),
+                tip_offset=np.array(held.frames[outlet][:3, 3], dtype=float),
+                pour_point=np.array(reach.to, dtype=float))
 
 
 @dataclass
@@ -82,11 +155,13 @@ class GeneratedDemo:
 
 @dataclass
 class DemoSet:
-    """Demonstrations of one task plus the truth shared by all of them."""
+    """Demonstrations of one task plus the truth shared by all of them, and the shape
+    they were made with (:data:`SHAPES`)."""
 
     task: str
     demos: list[GeneratedDemo]
     truth: dict
+    shape: str = ""
 
 
 def _carry_profile(tau: Array) -> Array:
@@ -133,11 +208,12 @@ def _corrupt(rng: np.random.Generator, clean: Array, noise: float, rot_noise: fl
     return np.concatenate([pos, q], axis=1), rows.astype(np.int64)
 
 
-def _pour_demo(rng: np.random.Generator, rate: float, pour_jitter: float) -> tuple:
+def _tilt_demo(rng: np.random.Generator, rate: float, pour_jitter: float, tip_offset: Array,
+               pour_point: Array) -> tuple:
     phi = rng.uniform(-np.pi / 4, np.pi / 4)  # approach azimuth, from the +x side
     dist = rng.uniform(0.25, 0.35)
     height = rng.uniform(0.0, 0.15)
-    P = POUR_POINT + rng.normal(0.0, pour_jitter, 3) if pour_jitter > 0 else POUR_POINT.copy()
+    P = pour_point + rng.normal(0.0, pour_jitter, 3) if pour_jitter > 0 else pour_point.copy()
     start_tip = P + np.array([dist * np.cos(phi), dist * np.sin(phi), height])
     # Upright bottle (ee z up), ee x horizontal towards the mug (+- 10 deg of yaw).
     yaw = phi + np.pi + rng.uniform(-np.radians(10), np.radians(10))
@@ -158,7 +234,7 @@ def _pour_demo(rng: np.random.Generator, rate: float, pour_jitter: float) -> tup
             s = _final_profile(np.array(min(1.0, (ti - d1) / d2)))
             R = R0 @ se3.matrix_from_rotvec(np.array([0.0, s * theta_max, 0.0]))
             tip = P
-        p_ee = tip - R @ TIP_OFFSET
+        p_ee = tip - R @ tip_offset
         poses[i, :3] = p_ee
         poses[i, 3:] = se3.quaternion_from_matrix(R)
     info = {"pour_point": P.tolist(), "pour_axis": (R0 @ np.array([0.0, 1.0, 0.0])).tolist(),
@@ -167,7 +243,7 @@ def _pour_demo(rng: np.random.Generator, rate: float, pour_jitter: float) -> tup
     return t, poses, phase, info
 
 
-def _drawer_demo(rng: np.random.Generator, rate: float) -> tuple:
+def _pull_demo(rng: np.random.Generator, rate: float) -> tuple:
     start = np.array([rng.uniform(0.20, 0.30), rng.uniform(-0.06, 0.06), rng.uniform(0.08, 0.14)])
     pull = rng.uniform(0.20, 0.30)
     axis = rng.normal(size=3)
@@ -249,14 +325,15 @@ def _wipe_demo(rng: np.random.Generator, rate: float, length: float) -> tuple:
     return t, poses, phase, info
 
 
-def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: float | None = None,
-             outliers: float = 0.0, rate: float = 50.0, seed: int = 0,
-             pour_jitter: float = 0.0) -> DemoSet:
-    """Generate ``n_demos`` demonstrations of ``task`` (``pour`` or ``drawer``).
+def generate(task: str | Path | Task, n_demos: int = 10, noise: float = 0.001,
+             rot_noise: float | None = None, outliers: float = 0.0, rate: float = 50.0,
+             seed: int = 0, pour_jitter: float = 0.0) -> DemoSet:
+    """Generate ``n_demos`` demonstrations of ``task`` (a task's name or file, or
+    ``crank`` or ``wipe``: :func:`kind_of`).
 
     Parameters
     ----------
-    task : str
+    task : str, Path or Task
     n_demos : int
     noise : float
         Standard deviation of the Gaussian position noise (m).
@@ -270,59 +347,60 @@ def generate(task: str, n_demos: int = 10, noise: float = 0.001, rot_noise: floa
     seed : int
         Seed of the numpy ``Generator``; the same arguments give the same data.
     pour_jitter : float
-        Standard deviation (m) of the pour point between demonstrations (pour only).
+        Standard deviation (m) of the pour point between demonstrations (tilt only).
     """
-    if task not in TASKS:
-        raise ValueError(f"task must be one of {TASKS}, got {task!r}")
+    kind = kind_of(task)
     if n_demos < 1 or rate <= 0 or noise < 0 or not 0 <= outliers < 0.5:
         raise ValueError("need n_demos >= 1, rate > 0, noise >= 0, 0 <= outliers < 0.5")
     rng = np.random.default_rng(seed)
     rn = noise if rot_noise is None else rot_noise
-    radius = float(rng.uniform(0.12, 0.20)) if task == "crank" else 0.0
-    length = float(rng.uniform(0.25, 0.30)) if task == "wipe" else 0.0
+    radius = float(rng.uniform(0.12, 0.20)) if kind.shape == "crank" else 0.0
+    length = float(rng.uniform(0.25, 0.30)) if kind.shape == "wipe" else 0.0
     demos = []
     for k in range(n_demos):
-        t, clean, phase, info = _clean_demo(task, rng, rate, pour_jitter, radius, length)
+        t, clean, phase, info = _clean_demo(kind, rng, rate, pour_jitter, radius, length)
         poses, rows = _corrupt(rng, clean, noise, rn, outliers)
         demos.append(GeneratedDemo(f"demo_{k:02d}.csv", t, poses, clean, phase, rows, info))
-    truth = _task_truth(task, demos, radius, length)
+    truth = _task_truth(kind, demos, radius, length)
     truth.update({
-        "task": task, "object": OBJECTS[task], "fields": list(FIELD_TRUTH[task]),
-        "phases": list(PHASES[task]),
+        "task": kind.name, "object": kind.object, "fields": list(kind.fields),
+        "phases": list(kind.phases),
         "labels": {d.name: d.phase.tolist() for d in demos},
         "outlier_rows": {d.name: d.outlier_rows.tolist() for d in demos},
         "params": {"n_demos": n_demos, "noise": noise, "rot_noise": rn, "outliers": outliers,
                    "rate": rate, "seed": seed, "pour_jitter": pour_jitter},
     })
-    return DemoSet(task, demos, truth)
+    return DemoSet(kind.name, demos, truth, kind.shape)
 
 
-def _clean_demo(task: str, rng: np.random.Generator, rate: float, pour_jitter: float,
+def _clean_demo(kind: Kind, rng: np.random.Generator, rate: float, pour_jitter: float,
                 radius: float, length: float) -> tuple:
-    """One noise-free demonstration of ``task``: ``(t, poses, phase, info)``."""
-    if task == "pour":
-        return _pour_demo(rng, rate, pour_jitter)
-    if task == "drawer":
-        return _drawer_demo(rng, rate)
-    if task == "crank":
+    """One noise-free demonstration of ``kind``: ``(t, poses, phase, info)``."""
+    if kind.shape == "tilt":
+        assert kind.tip_offset is not None and kind.pour_point is not None
+        return _tilt_demo(rng, rate, pour_jitter, kind.tip_offset, kind.pour_point)
+    if kind.shape == "pull":
+        return _pull_demo(rng, rate)
+    if kind.shape == "crank":
         return _crank_demo(rng, rate, radius)
     return _wipe_demo(rng, rate, length)
 
 
-def _task_truth(task: str, demos: list[GeneratedDemo], radius: float, length: float) -> dict:
-    """What the demonstrations of ``task`` were generated from, the part that depends on
-    the task: its directions and its geometry (pour point, crank axis, wipe length)."""
-    if task == "pour":
+def _task_truth(kind: Kind, demos: list[GeneratedDemo], radius: float, length: float) -> dict:
+    """What the demonstrations of ``kind`` were generated from, the part that depends on
+    its shape: its directions and its geometry (pour point, crank axis, wipe length)."""
+    if kind.shape == "tilt":
+        assert kind.tip_offset is not None
         dirs = np.array([d.info["carry_direction"] for d in demos])
         centre = np.mean([d.info["pour_point"] for d in demos], axis=0)
-        return {"sphere_centre": centre.tolist(), "tip_offset": TIP_OFFSET.tolist(),
+        return {"sphere_centre": centre.tolist(), "tip_offset": kind.tip_offset.tolist(),
                 "directions": {"carry": _unit_mean(dirs).tolist()},
                 "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
     dirs = np.array([d.info["reach_direction"] for d in demos])
     truth: dict = {"directions": {"reach": _unit_mean(dirs).tolist()}}
-    if task == "drawer":
+    if kind.shape == "pull":
         truth["directions"]["pull"] = [1.0, 0.0, 0.0]
-    elif task == "crank":
+    elif kind.shape == "crank":
         truth.update({"axis": [0.0, 0.0, 1.0], "point": [0.0, 0.0, 0.0], "radius": radius,
                       "axis_ee_offset": [radius, 0.0, 0.0]})
     else:
@@ -353,8 +431,9 @@ def write_demo_set(demo_set: DemoSet, directory: str | Path, digits: int = 6) ->
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sctd_sim.demogen", description=__doc__.split("\n")[0])
-    ap.add_argument("task", choices=TASKS)
+    ap = argparse.ArgumentParser(prog="python -m sctd_sim.demogen", description=__doc__.split("\n\n")[0])
+    ap.add_argument("task", help="a task's name or file (its held contents tilted out, or its joint "
+                                 "pulled), or crank or wipe")
     ap.add_argument("out", type=Path, help="output directory (CSV files and truth.json)")
     ap.add_argument("--n-demos", type=int, default=10)
     ap.add_argument("--noise", type=float, default=0.001, help="position noise std (m)")
@@ -364,6 +443,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pour-jitter", type=float, default=0.0)
     args = ap.parse_args(argv)
+    try:
+        kind_of(args.task)
+    except ValueError as e:
+        ap.error(f"task: {e}")
     ds = generate(args.task, n_demos=args.n_demos, noise=args.noise, rot_noise=args.rot_noise,
                   outliers=args.outliers, rate=args.rate, seed=args.seed,
                   pour_jitter=args.pour_jitter)

@@ -1,7 +1,8 @@
 """A kinematic stand-in robot: follows ``target`` with a first-order lag and publishes
-``state`` and the scene's ``objects``. No dynamics; the Pinocchio simulator replaces it
-where dynamics matter. Useful for runtime tests and benchmarks, where it keeps the
-robot side cheap and deterministic.
+``state`` and the ``objects`` of a task's scene, where its task file puts them (the
+same file the Pinocchio simulator builds its scene from). No dynamics; the Pinocchio
+simulator replaces it where dynamics matter. Useful for runtime tests and benchmarks,
+where it keeps the robot side cheap and deterministic.
 
     python -m sctd_sim.kinematic --task pour --connect tcp/127.0.0.1:7447
 """
@@ -16,12 +17,17 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import zenoh
 
 from sctd import se3
+from sctd.app.defaults import DefaultsError, defaults
+from sctd.app.errors import fail
 from sctd.app.options import add_robot_argument
+from sctd.task import Task, TaskError, find_task
+from sctd.task.model import Joint
 from sctd.timing import Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import add_zenoh_arguments, session_from_args
@@ -31,37 +37,33 @@ from .guard import TargetGuard, TargetLimits
 
 @dataclass
 class KinematicScene:
-    """World poses of the task objects and the arm's start pose."""
+    """World poses of the task's bodies, the arm's start pose, the frames the hand
+    carries and the joint whose handle it can pull (from the task file)."""
 
     name: str
     objects: dict[str, np.ndarray]
     T_world_ee0: np.ndarray
     attached: dict[str, np.ndarray] = field(default_factory=dict)  # name -> T_ee_object
+    joint: Joint | None = None
 
 
-def kinematic_scene(name: str) -> KinematicScene:
-    """The pour and drawer scenes of the shipped skills (see skills/*.yaml).
+def kinematic_scene(task: str | Path | Task) -> KinematicScene:
+    """The scene of ``task`` (a :class:`~sctd.task.Task`, or a task's name or file, see
+    :func:`sctd.task.find_task`) as the stand-in robot plays it: the bodies where the
+    task file puts them, the hand at the task's start, the held object's frames carried
+    by the hand, and the task's first prismatic joint, if any.
 
-    Task-object frames have z up and x pointing towards the robot (the generated
-    demonstrations and the Pinocchio scenes use the same convention); the hand starts
-    with its x axis towards the object.
+    Raises
+    ------
+    sctd.task.TaskError
+        An unknown task, or a task file that does not validate (a ``ValueError``).
     """
-    yaw180 = se3.quaternion_from_rotvec([0, 0, math.pi])
-    if name == "pour":
-        return KinematicScene(
-            "pour",
-            {"mug": se3.transform_from_pose([0.60, 0.0, 0.78, *yaw180])},
-            se3.transform_from_pose([0.35, 0.10, 0.90, 0, 0, 0, 1]),
-            attached={"bottle_tip": se3.transform_from_pose([0, 0, 0.12, 0, 0, 0, 1])},
-        )
-    if name == "drawer":
-        # Handle x axis points out of the drawer, towards the robot (world -x).
-        return KinematicScene(
-            "drawer",
-            {"drawer_handle": se3.transform_from_pose([0.70, 0.0, 0.80, *yaw180])},
-            se3.transform_from_pose([0.50, 0.15, 0.90, 0, 0, 0, 1]),
-        )
-    raise ValueError(f"unknown scene {name!r} (pour, drawer)")
+    t = task if isinstance(task, Task) else find_task(task)
+    sc = t.scene
+    held = sc.held.frames if sc.held is not None else {}
+    joint = next((j for j in sc.joints.values() if j.kind == "prismatic"), None)
+    return KinematicScene(t.name, {name: b.T_world.copy() for name, b in sc.bodies.items()},
+                          sc.start.T_world.copy(), {name: T.copy() for name, T in held.items()}, joint)
 
 
 def towards(T_a: np.ndarray, T_b: np.ndarray, s: float) -> np.ndarray:
@@ -78,21 +80,26 @@ def towards(T_a: np.ndarray, T_b: np.ndarray, s: float) -> np.ndarray:
 class KinematicRobot:
     """Per-cycle model: the ee pose relaxes towards the target with time constant tau.
 
-    In the drawer scene the handle is grasped once the ee is within ``grasp_radius``;
-    from then on the drawer slides along the handle's x axis with the ee (0 to 0.4 m).
-    ``drawer_handle`` is the handle's pose with the drawer closed (it does not move, as
-    in the Pinocchio scene and the demonstrations); ``drawer_open`` tells how far it is.
+    In a scene with a joint (a drawer) its handle is grasped once the ee is within
+    ``grasp_radius`` (default: the joint's grasp radius); from then on the joint slides
+    along the handle's x axis with the ee, from 0 to its travel. The handle's published
+    frame is its pose with the joint at 0 (it does not move, as in the Pinocchio scene
+    and the demonstrations); ``drawer_open`` tells how far the joint is.
     """
 
-    def __init__(self, scene: KinematicScene, tau: float = 0.02, grasp_radius: float = 0.02):
+    def __init__(self, scene: KinematicScene, tau: float = 0.02, grasp_radius: float | None = None):
         self.scene = scene
         self.tau = tau
+        joint = scene.joint
+        if grasp_radius is None:
+            grasp_radius = joint.grasp.radius if joint is not None else 0.0
         self.grasp_radius = grasp_radius
+        self.travel = joint.travel if joint is not None else 0.0
         self.T_world_ee = scene.T_world_ee0.copy()
         self.T_world_target: np.ndarray | None = None
         self.grasped = False
         self.drawer_open = 0.0
-        self._handle0 = scene.objects.get("drawer_handle")
+        self._handle0 = scene.objects[joint.handle] if joint is not None else None
 
     def step(self, dt: float) -> None:
         if self.T_world_target is not None:
@@ -105,7 +112,7 @@ class KinematicRobot:
             if self.grasped:
                 axis = self._handle0[:3, 0]
                 ee_along = float(np.dot(self.T_world_ee[:3, 3] - self._handle0[:3, 3], axis))
-                self.drawer_open = min(0.4, max(0.0, ee_along))
+                self.drawer_open = min(self.travel, max(0.0, ee_along))
 
     def objects(self) -> dict[str, np.ndarray]:
         out = dict(self.scene.objects)
@@ -116,8 +123,9 @@ class KinematicRobot:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the kinematic robot's flags to ``p``."""
-    p.add_argument("--task", "--scene", dest="task", default="pour", choices=("pour", "drawer"),
-                   help="the stand-in geometry of the shipped skill of that name (default %(default)s)")
+    p.add_argument("--task", "--scene", dest="task", default=defaults().task, metavar="NAME|FILE",
+                   help="the task whose scene to stand in for: the path of a task file, or the name of a "
+                        "shipped or registered one; sctd tasks lists them (default %(default)s)")
     add_robot_argument(p)
     p.add_argument("--rate", type=float, default=1000.0, help="state rate, Hz")
     p.add_argument("--object-rate", type=float, default=50.0, help="objects rate, Hz")
@@ -130,10 +138,16 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m sctd_sim.kinematic``: follow targets until SIGINT/SIGTERM or
     ``--duration``."""
     p = argparse.ArgumentParser(prog="sctd-kinematic", description=__doc__.split("\n\n")[0])
-    add_arguments(p)
+    try:
+        add_arguments(p)  # --task's default is in sctd/app/defaults.yaml
+    except DefaultsError as e:
+        return fail("kinematic", str(e))
     args = p.parse_args(argv)
     keys = Keys(args.robot)
-    robot = KinematicRobot(kinematic_scene(args.task), tau=args.tau)
+    try:
+        robot = KinematicRobot(kinematic_scene(args.task), tau=args.tau)
+    except TaskError as e:
+        return fail("kinematic", f"--task: {e}")
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from sctd.app.defaults import defaults
 from sctd.app.options import add_robot_argument, add_task_argument
 from sctd.wire.ros_options import add_ros_arguments
 from sctd.wire.session import add_zenoh_arguments
@@ -19,8 +20,9 @@ from .guard import add_limit_arguments
 
 def add_service_arguments(p: argparse.ArgumentParser) -> None:
     """Add the simulator service's flags (see :func:`sctd_sim.service.run`) to ``p``."""
-    add_task_argument(p, help="the task whose scene to simulate: the path of a task file, or the name of "
-                              "a shipped or registered one; sctd tasks lists them")
+    add_task_argument(p, defaults().task,
+                      help="the task whose scene to simulate: the path of a task file, or the name of "
+                           "a shipped or registered one; sctd tasks lists them")
     add_robot_argument(p)
     p.add_argument("--trial-seed", type=int, default=None, metavar="N",
                    help="start from the seeded random start N of an evaluation trial (the hand and the "

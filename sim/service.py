@@ -50,6 +50,7 @@ import can
 import zenoh
 
 from sctd import se3
+from sctd.app.defaults import DefaultsError
 from sctd.app.errors import fail
 from sctd.task import Task, TaskError, find_task
 from sctd.timing import Histogram, Ticker, set_timer_slack
@@ -564,7 +565,10 @@ def can_bus_choice(interface: str, channel: str | None
 def main(argv: list[str] | None = None) -> int:
     """``python -m sctd_sim.service``: parse the flags (the same as ``sctd sim``) and run."""
     p = argparse.ArgumentParser(prog="sctd-sim", description=__doc__.split("\n\n")[0])
-    add_service_arguments(p)
+    try:
+        add_service_arguments(p)  # --task's default is in sctd/app/defaults.yaml
+    except DefaultsError as e:
+        return fail("sim", str(e))
     return run(p.parse_args(argv))
 
 

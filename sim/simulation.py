@@ -35,8 +35,10 @@ class Simulation:
 
     Parameters
     ----------
-    scene : str or Scene, optional
-        ``"pour"``, ``"drawer"``, ``"empty"`` or a scene object.
+    scene : str, Task or Scene
+        A task (its name or file, :func:`sctd.task.find_task`, or a :class:`~sctd.task.Task`;
+        :func:`~sctd_sim.scenes.make_scene` builds its scene), ``"empty"``, or a scene
+        object.
     rate : float, optional
         Cycle rate, Hz.
     q0 : array_like, shape (7,), optional
@@ -63,7 +65,7 @@ class Simulation:
 
     def __init__(
         self,
-        scene: str | Scene = "pour",
+        scene: str | Task | Scene,
         rate: float = 1000.0,
         *,
         q0: np.ndarray | None = None,
@@ -76,7 +78,7 @@ class Simulation:
         compensate_payload: bool = True,
     ) -> None:
         self.compensate_payload = compensate_payload
-        self.scene: Scene = make_scene(scene) if isinstance(scene, str) else scene
+        self.scene: Scene = make_scene(scene) if isinstance(scene, (str, Task)) else scene
         model = arm or load_arm_model()
         if q0 is None:
             q0 = start_posture(model, self.scene.start_pose(), getattr(self.scene, "default_start_pose",

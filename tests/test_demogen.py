@@ -91,3 +91,45 @@ def test_rejects_bad_arguments():
         demogen.generate("juggle")
     with pytest.raises(ValueError):
         demogen.generate("pour", outliers=0.7)
+
+
+def test_the_kinds_come_from_the_task_files():
+    """A task's shape, object, tilt phase and geometry are its file's: the pour is a tilt
+    about the bottle's tip 0.12 m up the hand to 5 cm over the mug, the drawer a pull."""
+    pour, drawer = demogen.kind_of("pour"), demogen.kind_of("drawer")
+    assert (pour.shape, pour.object, pour.phases, pour.fields) == ("tilt", "mug", ("carry", "pour"),
+                                                                   ("translation", "sphere"))
+    np.testing.assert_array_equal(pour.tip_offset, [0.0, 0.0, 0.12])
+    np.testing.assert_array_equal(pour.pour_point, [0.0, 0.0, 0.05])
+    assert (drawer.shape, drawer.object, drawer.phases) == ("pull", "drawer_handle", ("reach", "pull"))
+    assert demogen.kind_of("crank").object == "crank" and demogen.kind_of("wipe").object == "table"
+
+
+def test_a_task_file_sets_what_is_generated(tmp_path):
+    """Another task file of the same shape: its name, object, outlet and pour point go into
+    the demonstrations and their truth."""
+    from sctd.task import shipped_folder
+
+    text = (shipped_folder() / "pour.yaml").read_text()
+    for old, new in (("name: pour", "name: tap"), ("object: mug", "object: glass"),
+                     ("    mug:", "    glass:"), ("into: mug", "into: glass"), ("to: mug", "to: glass"),
+                     ("position: [0.0, 0.0, 0.12]", "position: [0.0, 0.0, 0.15]"),
+                     ("to: [0.0, 0.0, 0.05]", "to: [0.0, 0.0, 0.07]")):
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "tap.yaml"
+    path.write_text(text)
+    ds = demogen.generate(path, 2, noise=0.0, seed=1)
+    assert (ds.task, ds.shape, ds.truth["object"]) == ("tap", "tilt", "glass")
+    assert ds.truth["tip_offset"] == [0.0, 0.0, 0.15]
+    np.testing.assert_allclose(ds.truth["sphere_centre"], [0.0, 0.0, 0.07], atol=1e-12)
+
+
+def test_a_task_of_neither_shape_is_refused(tmp_path):
+    from sctd.task import shipped_folder
+
+    text = (shipped_folder() / "pour.yaml").read_text().replace("contents: {", "# contents: {")
+    path = tmp_path / "hold.yaml"
+    path.write_text(text.replace("name: pour", "name: hold"))
+    with pytest.raises(ValueError, match="neither"):
+        demogen.kind_of(path)

@@ -37,8 +37,26 @@ def test_the_kinematic_robot_relaxes_towards_its_target_and_carries_the_bottle_t
     tip = robot.objects()["bottle_tip"]
     np.testing.assert_allclose(tip, robot.T_world_ee @ robot.scene.attached["bottle_tip"])
     assert "mug" in robot.objects()
-    with pytest.raises(ValueError, match="unknown scene 'kitchen'"):
+    with pytest.raises(ValueError, match="kitchen: no such file, and no task of that name"):
         kinematic_scene("kitchen")
+
+
+def test_the_kinematic_scene_is_the_task_files():
+    """The stand-in puts the bodies where the task file does, starts the hand at its
+    start and carries the held object's frames: the numbers come from the file."""
+    from sctd.task import find_task
+
+    for name in ("pour", "drawer"):
+        task, scene = find_task(name), kinematic_scene(name)
+        assert set(scene.objects) == set(task.scene.bodies)
+        for body in task.scene.bodies.values():
+            np.testing.assert_array_equal(scene.objects[body.name], body.T_world)
+        np.testing.assert_array_equal(scene.T_world_ee0, task.scene.start.T_world)
+        held = task.scene.held.frames if task.scene.held else {}
+        assert set(scene.attached) == set(held)
+        for frame, T in held.items():
+            np.testing.assert_array_equal(scene.attached[frame], T)
+    np.testing.assert_array_equal(kinematic_scene("pour").attached["bottle_tip"][:3, 3], [0.0, 0.0, 0.12])
 
 
 def test_the_kinematic_drawer_opens_once_grasped_and_only_up_to_its_stop():
@@ -52,7 +70,8 @@ def test_the_kinematic_drawer_opens_once_grasped_and_only_up_to_its_stop():
     robot.T_world_target = handle @ se3.transform_from_pose([0.6, 0, 0, 0, 0, 0, 1])  # along +x
     for _ in range(50):
         robot.step(0.001)
-    assert robot.drawer_open == 0.4, "the drawer stops at 0.4 m"
+    assert scene.joint is not None and robot.travel == scene.joint.travel == 0.30
+    assert robot.drawer_open == 0.30, "the drawer stops at the end of its travel"
 
 
 def test_the_kinematic_robot_follows_what_its_guard_admits_and_ignores_garbage():

@@ -161,9 +161,10 @@ class _DeprecatedAlias(argparse.Action):
 
 
 def add_task_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
-                      default: str | None = "pour", help: str | None = None) -> None:
+                      default: str | None, help: str | None = None) -> None:
     """``--task NAME|FILE`` (:func:`sctd.task.find_task` resolves it), and ``--scene``, its
-    deprecated alias of the previous release, which says so on stderr."""
+    deprecated alias of the previous release, which says so on stderr. ``default``: a
+    command's default task (from :mod:`sctd.app.defaults`), or None for none."""
     parser.add_argument("--task", default=default, metavar="NAME|FILE",
                         help=(help or TASK_HELP) + (" (default %(default)s)" if default else ""))
     parser.add_argument("--scene", dest="task", action=_DeprecatedAlias, instead="--task",

@@ -15,7 +15,9 @@ import time
 from collections import Counter
 from typing import Any
 
+from sctd.app.defaults import defaults
 from sctd.app.errors import fail
+from sctd.app.options import SKILL_HELP, TASK_HELP
 from sctd.skill import load_skill
 from sctd.skill.catalog import find_skill
 from sctd_services.eval.evaluate import task_of
@@ -68,10 +70,10 @@ def format_report(r: dict[str, Any]) -> str:
 
 def add_bench_eval_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of ``sctd bench eval``."""
-    p.add_argument("--skill", default="pour-vf",
-                   help="a skill path or shipped name (default %(default)s)")
-    p.add_argument("--task", choices=("pour", "drawer"),
-                   help="the task (default: from the skill's object)")
+    p.add_argument("--skill", default=defaults().learned_skill,
+                   help=SKILL_HELP + " (default %(default)s)")
+    p.add_argument("--task", metavar="NAME|FILE",
+                   help=TASK_HELP + " (default: the task whose object is the skill's)")
     p.add_argument("--trials", type=int, default=3, help="trials, run one after the other "
                                                          "(default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default %(default)s)")

@@ -3,18 +3,22 @@ against the thesis' inlier score in the same run; centre and axis errors; automa
 feature frames against given ones; learning times.
 
 ``run_field_bench(seeds, n_demos) -> dict`` and ``format_field_bench(result) -> list of
-str``, called by ``sctd bench learn``. It prints figures; it asserts nothing.
+str``, called by ``sctd bench learn``. It prints figures; it asserts nothing. Which
+tasks it generates is data: ``bench_learn`` in ``sctd/app/defaults.yaml``
+(:mod:`sctd.app.defaults`).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from sctd_sim import demogen
 
+from ..app.defaults import defaults
 from ..learn import (
     LinearIMLearner,
     VectorFieldLearner,
@@ -27,7 +31,6 @@ from ..learn.results import VectorFieldResult
 from ..skill.fields import CylinderField, SphereField
 from .demos import demos_of
 
-TASKS = ("pour", "drawer", "crank", "wipe")
 SELECTIONS = ("likelihood", "inliers")
 
 
@@ -39,16 +42,16 @@ def phase_kinds(ds: demogen.DemoSet, res: VectorFieldResult) -> tuple[str | None
 
 
 def _geometry(ds: demogen.DemoSet, res: VectorFieldResult) -> dict[str, float]:
-    """The pour's sphere-centre error (m), the crank's axis angle (deg) and axis-point
+    """A tilt's sphere-centre error (m), the crank's axis angle (deg) and axis-point
     distance from the true axis (m), where the learner found that field."""
     out: dict[str, float] = {}
     fields = res.learner.fields_
-    if ds.task == "pour":
+    if ds.shape == "tilt":
         true = np.asarray(ds.truth["sphere_centre"])
         errs = [float(np.linalg.norm(f.centre - true)) for f in fields if isinstance(f, SphereField)]
         if errs:
             out["centre_error_m"] = min(errs)
-    if ds.task == "crank":
+    if ds.shape == "crank":
         axis, point = np.asarray(ds.truth["axis"]), np.asarray(ds.truth["point"])
         cyl = [f for f in fields if isinstance(f, CylinderField)]
         if cyl:
@@ -60,11 +63,16 @@ def _geometry(ds: demogen.DemoSet, res: VectorFieldResult) -> dict[str, float]:
 
 
 def run_field_bench(seeds: int = 10, n_demos: int = 10, noise: float = 0.001,
-                    outliers: float = 0.05) -> dict[str, Any]:
-    """Field types by both selections on every task and seed; automatic frames."""
+                    outliers: float = 0.05, tasks: Sequence[str] | None = None,
+                    tilt: str | None = None) -> dict[str, Any]:
+    """Field types by both selections on every task of ``tasks`` (the generator's
+    names; default ``bench_learn.fields`` of the defaults) and seed; automatic frames on
+    the tilt task ``tilt`` (default ``bench_learn.tilt``)."""
+    tasks = defaults().bench_learn.fields if tasks is None else tasks
     out: dict[str, Any] = {"seeds": seeds, "n_demos": n_demos, "tasks": {}}
-    for task in TASKS:
-        row: dict[str, Any] = {"truth": list(demogen.FIELD_TRUTH[task])}
+    for task in tasks:
+        truth = demogen.kind_of(task).fields
+        row: dict[str, Any] = {"truth": list(truth)}
         for sel in SELECTIONS:
             right, geo, times, wrong = 0, [], [], []
             for seed in range(seeds):
@@ -74,7 +82,7 @@ def run_field_bench(seeds: int = 10, n_demos: int = 10, noise: float = 0.001,
                     random_state=seed, selection=sel))
                 times.append(time.perf_counter() - t)
                 kinds = phase_kinds(ds, res)
-                if kinds == demogen.FIELD_TRUTH[task]:
+                if kinds == truth:
                     right += 1
                 else:
                     wrong.append({"seed": seed, "found": list(kinds)})
@@ -83,18 +91,25 @@ def run_field_bench(seeds: int = 10, n_demos: int = 10, noise: float = 0.001,
             row[sel] = {"accuracy": right / seeds, "wrong": wrong, "time_s_max": max(times),
                         **{f"{k}_max": max(g[k] for g in geo if k in g) for k in keys}}
         out["tasks"][task] = row
-    out["frames"] = _frames_bench(seeds, n_demos, noise, outliers)
+    out["frames"] = _frames_bench(seeds, n_demos, noise, outliers,
+                                  defaults().bench_learn.tilt if tilt is None else tilt)
     return out
 
 
-def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float) -> dict[str, Any]:
+def tip_frame(ds: demogen.DemoSet) -> list[float]:
+    """The candidate frame ``tip`` the linear learner is given on a tilt's
+    demonstrations: the true outlet, ``[x, y, z, qx, qy, qz, qw]`` in the ee frame."""
+    return [*ds.truth["tip_offset"], 0.0, 0.0, 0.0, 1.0]
+
+
+def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float, tilt: str) -> dict[str, Any]:
     """The linear learner with automatic frames against the given tip frame on the
-    pour (segmentation accuracy against the generator's phases), and the crank axis
+    tilt task (segmentation accuracy against the generator's phases), and the crank axis
     offset found, over seeds; learning times."""
-    tip = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
     acc_auto, acc_given, tip_err, t_auto, crank_err = [], [], [], [], []
     for seed in range(seeds):
-        pour = demogen.generate("pour", n_demos, noise=noise, outliers=outliers, seed=seed)
+        pour = demogen.generate(tilt, n_demos, noise=noise, outliers=outliers, seed=seed)
+        tip = tip_frame(pour)
         t = time.perf_counter()
         auto = learn_linear(demos_of(pour), learner=LinearIMLearner(random_state=seed))
         t_auto.append(time.perf_counter() - t)

@@ -36,6 +36,16 @@ TARGETS = ("input", "state", "object", "target", "demo", "can", "bundle", "skill
 IMPORT_ROOT = Path(__file__).resolve().parents[2]
 
 
+def _default_task() -> tuple[str, str]:
+    """The name and object of the task the seeds' demonstrations and objects are of (the
+    default task, ``sctd/app/defaults.yaml``)."""
+    from ..app.defaults import defaults
+    from ..task import find_task
+
+    task = find_task(defaults().task)
+    return task.name, task.object
+
+
 def _seeds(target: str, skills: Path) -> list[bytes]:
     """Valid inputs a target starts from (libFuzzer mutates them)."""
     import msgpack
@@ -53,7 +63,8 @@ def _seeds(target: str, skills: Path) -> list[bytes]:
     if target == "target":
         return [codec.encode_target(1, 1.0, pose, "carry", "abc", 3)]
     if target == "demo":
-        return [codec.encode_demo("pour", "demo_000", "mug",
+        task, obj = _default_task()
+        return [codec.encode_demo(task, "demo_000", obj,
                                   [[0.01 * k, 0.3, 0.0, 0.03, 0.0, 0.0, 0.0, 1.0] for k in range(12)])]
     if target == "can":
         return [msgpack.packb({"v": 1, "frames": [[1.0, 0x80, False, 0, b""],
@@ -93,7 +104,7 @@ def _log_seed() -> bytes:
         for k in range(5):
             log.add(keys.state, "state", codec.encode_state(k, 1.0 + k, pose), 1.0 + k)
         log.add(keys.target, "target", codec.encode_target(1, 2.0, pose, "carry", "abc", 3), 2.0)
-        log.add(keys.objects("mug"), "objects", codec.encode_object(1, 2.0, pose), 2.0)
+        log.add(keys.objects(_default_task()[1]), "objects", codec.encode_object(1, 2.0, pose), 2.0)
         log.add(keys.input("pad"), "input", codec.encode_input(1, 2.0, [0.1, 0.0, 0.0], [0, 1, 0]), 2.0)
         log.close()
         return (Path(d) / "seed.mcap").read_bytes()

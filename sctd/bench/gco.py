@@ -4,7 +4,8 @@ The instances are Potts energies shaped like the segmentation
 :class:`~sctd.learn.LinearIMLearner` solves (Ch. 4.1.4), alternately of two families:
 
 - :func:`segmentation_instance`: the learner's own energy on generated demonstrations
-  (:mod:`sctd_sim.demogen`, pour and drawer in turn, 10 demonstrations, 5 % outliers),
+  (:mod:`sctd_sim.demogen`, pour and drawer in turn, 10 demonstrations, 5 % outliers;
+  ``sctd bench learn`` takes the two from ``bench_learn`` in ``sctd/app/defaults.yaml``),
   preprocessed as ``learn_linear`` does: the 41 ``ee`` labels' costs (eq. 4.14) as
   unary, the temporal chains plus spatial k-NN edges of
   :func:`~sctd.learn.neighbour_graph` with weights ``exp(-tf-norm)``, lambda 0.005
@@ -27,7 +28,7 @@ when ``import gco`` fails.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -36,6 +37,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd_sim import demogen
 
+from ..app.defaults import defaults
 from ..learn import (
     LinearIMLearner,
     Preprocessing,
@@ -53,7 +55,7 @@ GCO_INSTALL = "pip install gco-wrapper; it is in the dev extra"
 _GCO_TERM_RANGE = 2**20  # the largest scaled node term; GCO's capacities are int32
 
 
-def segmentation_instance(seed: int, task: str = "pour", n_demos: int = 10,
+def segmentation_instance(seed: int, task: str, n_demos: int = 10,
                           outliers: float = 0.05, noise: float = 0.001,
                           learner: LinearIMLearner | None = None) -> Problem:
     """The Potts problem ``(unary (n, 41), edges (m, 2), weights (m,), lambda)`` that
@@ -149,28 +151,33 @@ def _import_gco() -> Any:
     return gco
 
 
-def instances(n_instances: int, seed: int = 0) -> Iterator[tuple[str, int, Problem]]:
+def instances(n_instances: int, seed: int = 0, tasks: Sequence[str] | None = None
+              ) -> Iterator[tuple[str, int, Problem]]:
     """``n_instances`` problems ``(family, seed, (U, E, w, lambda))``: alternately the
-    learner's own (:func:`segmentation_instance`, pour then drawer) and the harder
+    learner's own (:func:`segmentation_instance`, on the generated ``tasks`` in turn:
+    default ``bench_learn``'s tilt then pull, the pour then the drawer) and the harder
     :func:`chain_instance`."""
+    if tasks is None:
+        tasks = (defaults().bench_learn.tilt, defaults().bench_learn.pull)
     for k in range(n_instances):
         s = seed + k // 2
         if k % 2 == 0:
-            task = demogen.TASKS[(k // 2) % 2]
+            task = tasks[(k // 2) % len(tasks)]
             yield task, s, segmentation_instance(s, task)
         else:
             yield "chains", s, chain_instance(s)
 
 
-def run_gco_bench(n_instances: int = 20, seed: int = 0) -> dict[str, Any]:
+def run_gco_bench(n_instances: int = 20, seed: int = 0, tasks: Sequence[str] | None = None
+                  ) -> dict[str, Any]:
     """Our swap and GCO's on ``n_instances`` segmentation-shaped instances
-    (:func:`instances`). Ratios are ours / GCO's."""
+    (:func:`instances` of ``tasks``). Ratios are ours / GCO's."""
     try:
         gco = _import_gco()
     except (ImportError, OSError) as e:  # absent, or its compiled library will not load
         return {"available": False, "reason": f"{type(e).__name__}: {e}", "install": GCO_INSTALL}
     rows = []
-    for task, s, (U, E, w, lam) in instances(n_instances, seed):
+    for task, s, (U, E, w, lam) in instances(n_instances, seed, tasks):
         f0 = np.argmin(U, axis=1)
         t = time.perf_counter()
         f_ours = alpha_beta_swap(U, E, w, lam)

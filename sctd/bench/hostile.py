@@ -12,8 +12,9 @@ names that are paths, and demonstrations that are too long, misnamed or over a t
 quota; the figures are what the learner replied or said on its status.
 
 All of it next to ``sctd sim --scene pour``, ``sctd run`` and ``sctd learner`` (a
-private store), with the daemon's worst lateness window over a quiet phase, while the
-tools read the files, and while the learner is attacked.
+private store; the task and skill of ``sctd/app/defaults.yaml``), with the daemon's
+worst lateness window over a quiet phase, while the tools read the files, and while the
+learner is attacked.
 """
 
 from __future__ import annotations
@@ -30,9 +31,11 @@ from typing import Any
 import msgpack
 import zenoh
 
+from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.skill.catalog import shipped_folder
+from sctd.task import find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, session
 
@@ -236,8 +239,8 @@ BAD_REQUESTS: list[tuple[str, dict[str, Any]]] = [
 ]
 
 
-def _demo(task: str, name: str, rows: int) -> bytes:
-    return codec.encode_demo(task, name, "mug", [[0.01 * k, 0.3, 0.0, 0.05, 0, 0, 0, 1] for k in range(rows)])
+def _demo(task: str, name: str, obj: str, rows: int) -> bytes:
+    return codec.encode_demo(task, name, obj, [[0.01 * k, 0.3, 0.0, 0.05, 0, 0, 0, 1] for k in range(rows)])
 
 
 def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
@@ -245,6 +248,7 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
     to the tools (:func:`files_phase`), then the learner attacked; the daemon's lateness
     over each."""
     keys = Keys()
+    task, skill = defaults().task, defaults().skill
     hub = f"tcp/127.0.0.1:{free_port()}"
     store = d / "store"
     status: list[dict] = []
@@ -256,9 +260,9 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
             status.append(msgpack.unpackb(sample.payload.to_bytes(), raw=False))
 
     with session(listen=[hub]) as s, \
-            Child("sctd.cli.main", "sim", "--task", "pour", "--connect", hub, "--listen",
+            Child("sctd.cli.main", "sim", "--task", task, "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
-            Child("sctd.cli.main", "run", "--skill", "pour", "--connect", hub, "--listen",
+            Child("sctd.cli.main", "run", "--skill", skill, "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "daemon.log"), \
             Child("sctd.cli.main", "learner", "--store", str(store), "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "learner.log"), \
@@ -277,8 +281,8 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
         files_changed = _flips_changed(d / "logs")
         tools = _windows(status, lock, k0)
         k0 = len(status)
-        replies = _bad_requests(s, keys)
-        _bad_demos(s, keys, events)
+        replies = _bad_requests(s, keys, task)
+        _bad_demos(s, keys, events, task)
         attacked = _windows(status, lock, k0)
     stored = sum(1 for e in events if e.get("event") == "stored")
     rejected = [e for e in events if e.get("event") == "rejected"]
@@ -290,12 +294,12 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
             "lateness_quiet": quiet, "lateness_attacked": attacked}
 
 
-def _bad_requests(s: zenoh.Session, keys: Keys) -> list[dict[str, Any]]:
-    """Each of :data:`BAD_REQUESTS` asked of the learner: whether it was refused, and
-    what it said."""
+def _bad_requests(s: zenoh.Session, keys: Keys, task: str) -> list[dict[str, Any]]:
+    """Each of :data:`BAD_REQUESTS` asked of the learner (to train on ``task``): whether
+    it was refused, and what it said."""
     replies = []
     for what, over in BAD_REQUESTS:
-        req = {"task": "pour", "method": "vf", **over}
+        req = {"task": task, "method": "vf", **over}
         got = list(s.get(keys.learner, payload=msgpack.packb(req), timeout=30.0))
         answer = (got[0].err or got[0].ok) if got else None
         body = msgpack.unpackb(answer.payload.to_bytes(), raw=False) if answer is not None else {}
@@ -304,14 +308,15 @@ def _bad_requests(s: zenoh.Session, keys: Keys) -> list[dict[str, Any]]:
     return replies
 
 
-def _bad_demos(s: zenoh.Session, keys: Keys, events: list[dict]) -> None:
-    """Demonstrations the learner must refuse (too long, names that are paths) and more
-    than a task's quota; returns once the learner's status ``events`` account for each
-    of them, or after 120 s."""
+def _bad_demos(s: zenoh.Session, keys: Keys, events: list[dict], task: str) -> None:
+    """Demonstrations of ``task`` the learner must refuse (too long, names that are
+    paths) and more than a task's quota (of a task ``quota``); returns once the
+    learner's status ``events`` account for each of them, or after 120 s."""
+    obj = find_task(task).object
     for name, rows in (("long", 100_001), ("..", 12), (".h", 12), ("a\x00b", 12)):
-        s.put(keys.demos("pour", name.replace("\x00", "_")), _demo("pour", name, rows), encoding=MSGPACK)
+        s.put(keys.demos(task, name.replace("\x00", "_")), _demo(task, name, obj, rows), encoding=MSGPACK)
     for k in range(1200):  # distinct names, small: past the task's quota of 1,000
-        s.put(keys.demos("quota", f"d{k:04d}"), _demo("quota", f"d{k:04d}", 10), encoding=MSGPACK)
+        s.put(keys.demos("quota", f"d{k:04d}"), _demo("quota", f"d{k:04d}", obj, 10), encoding=MSGPACK)
     sent = 1200 + 4
 
     def handled() -> int:

@@ -2,7 +2,8 @@
 echo of the same run; and the EMG chain's processing latency.
 
 Processes, on one free loopback port: ``sctd run`` (pour, 1 kHz), the kinematic
-stand-in robot and the echo of ``sctd bench latency``. This process holds SDL's virtual
+stand-in robot (the skill and task of ``sctd/app/defaults.yaml``) and the echo of
+``sctd bench latency``. This process holds SDL's virtual
 game controller (it exists only in the process that creates it) and runs the gamepad
 bridge on it, in one thread: every 0.1 s, once the previous move was answered (or given
 up as lost after 1 s), it moves the stick at a random moment within a bridge period (an
@@ -24,6 +25,7 @@ from typing import Any
 
 import zenoh
 
+from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.bench.latency import PING, PONG, wait_for_targets
 from sctd.cli.procs import Child, free_port
@@ -157,9 +159,10 @@ def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds
     from sctd_services.input.emg.bench import bench_processing
 
     ep = f"tcp/127.0.0.1:{free_port()}"
-    with Child("sctd.cli.main", "run", "--skill", "pour", "--listen", ep, "--rate", str(rate),
+    d = defaults()
+    with Child("sctd.cli.main", "run", "--skill", d.skill, "--listen", ep, "--rate", str(rate),
                log=logdir / "daemon.log") as daemon, \
-         Child("sctd_sim.kinematic", "--task", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd_sim.kinematic", "--task", d.task, "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         wait_for_targets(ep, daemon, logdir)
         pad = gamepad_events(ep, bridge_rate, seconds)

@@ -2,7 +2,8 @@
 
 Processes, all on one free loopback port:
 - ``sctd run`` (the daemon under test), with the pour skill by default;
-- the kinematic stand-in robot (state at 1 kHz, objects at 50 Hz);
+- the kinematic stand-in robot (state at 1 kHz, objects at 50 Hz) in the pour's scene
+  (the skill and the task of ``sctd/app/defaults.yaml``);
 - an echo process that republishes ``sctd/bench/ping`` on ``sctd/bench/pong``;
 - the probe (``python -m sctd.bench.latency probe``): first measures the echo round
   trip, then publishes input and measures input -> target latency (send time of input
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import zenoh
 
+from sctd.app.defaults import defaults
 from sctd.app.options import SKILL_HELP
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
@@ -182,7 +184,7 @@ def run_latency_bench(skill: str, rate: float, seconds: float, input_rate: float
     with Child("sctd.cli.main", "run", "--skill", skill, "--listen", ep, "--rate", str(rate),
                "--rt-priority", str(rt_priority), "--stats-json", *pin,
                log=logdir / "daemon.log") as daemon, \
-         Child("sctd_sim.kinematic", "--task", "pour", "--connect", ep, log=logdir / "robot.log"), \
+         Child("sctd_sim.kinematic", "--task", defaults().task, "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         wait_for_targets(ep, daemon, logdir)
         probe = Child("sctd.bench.latency", "probe", "--connect", ep, "--rate", str(input_rate),
@@ -249,7 +251,7 @@ def add_latency_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
     p.add_argument("--seconds", type=float, default=10.0, help="latency measurement length")
     p.add_argument("--input-rate", type=float, default=500.0, help="probe input rate, Hz")
-    p.add_argument("--skill", default="pour", help=f"{SKILL_HELP} (default %(default)s)")
+    p.add_argument("--skill", default=defaults().skill, help=f"{SKILL_HELP} (default %(default)s)")
     p.add_argument("--rt-priority", type=int, default=10, help="daemon SCHED_FIFO priority (0: off)")
     p.add_argument("--cpu", type=int, default=None, help="pin the daemon's tick thread to this CPU")
     p.add_argument("--json", action="store_true")

@@ -13,6 +13,9 @@ nothing (timings depend on the machine).
   itself is reported separately);
 - alpha-beta swap against GCO's, the C++ reference, when ``gco-wrapper`` is installed
   (:mod:`sctd.bench.gco`; ``--gco-instances N`` segmentation-shaped energies).
+
+The pour and the drawer are the generated tasks ``bench_learn`` of
+``sctd/app/defaults.yaml`` names: a tilt and a pull (:mod:`sctd.app.defaults`).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from sctd_sim import demogen
 
+from ..app.defaults import defaults
 from ..learn import (
     LinearIMLearner,
     VectorFieldLearner,
@@ -35,7 +39,7 @@ from ..learn import (
 )
 from ..skill.fields import SphereField, TranslationField
 from .demos import demos_of
-from .fields import format_field_bench, run_field_bench
+from .fields import format_field_bench, run_field_bench, tip_frame
 from .gco import format_gco_bench, run_gco_bench
 
 
@@ -48,17 +52,18 @@ def _angle(a, b) -> float:
 def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: float = 0.001,
               n_seeds: int = 5, gco_instances: int = 20, field_seeds: int = 10) -> dict[str, Any]:
     """Run every benchmark; returns plain data (see module doc)."""
+    workload = defaults().bench_learn
     out: dict[str, Any] = {"seed": seed, "n_demos": n_demos, "outliers": outliers, "noise": noise}
     t = time.perf_counter()
     import sklearn.svm  # noqa: F401  (the cold import is not learning time)
 
     out["sklearn_import_s"] = time.perf_counter() - t
-    pour = demogen.generate("pour", n_demos, noise=noise, outliers=outliers, seed=seed)
+    pour = demogen.generate(workload.tilt, n_demos, noise=noise, outliers=outliers, seed=seed)
     _bench_linear(pour, seed, out)
     _bench_vf_pour(pour, seed, n_seeds, out)
-    drawer = demogen.generate("drawer", n_demos, noise=noise, outliers=outliers, seed=seed)
+    drawer = demogen.generate(workload.pull, n_demos, noise=noise, outliers=outliers, seed=seed)
     _bench_vf_drawer(drawer, seed, out)
-    out["swap_vs_gco"] = run_gco_bench(gco_instances, seed)
+    out["swap_vs_gco"] = run_gco_bench(gco_instances, seed, (workload.tilt, workload.pull))
     if field_seeds > 0:
         out["fields"] = run_field_bench(field_seeds, n_demos, noise, outliers)
     return out
@@ -66,7 +71,7 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
 
 def _bench_linear(pour: demogen.DemoSet, seed: int, out: dict[str, Any]) -> None:
     """Linear IMs on the pour task: accuracy, states, transitions, time."""
-    tip = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
+    tip = tip_frame(pour)
     t = time.perf_counter()
     lin = learn_linear(demos_of(pour), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
     out["linear_time_s"] = time.perf_counter() - t

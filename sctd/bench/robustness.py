@@ -2,7 +2,8 @@
 bundles and a jumping state, with the quiet run as the baseline of the same bench.
 
 Processes, all on one free loopback port held by this (the bench's) session:
-``sctd sim --scene pour`` (the Pinocchio arm at 1 kHz), ``sctd run`` (the pour skill),
+``sctd sim --scene pour`` (the Pinocchio arm at 1 kHz; the task of
+``sctd/app/defaults.yaml``), ``sctd run`` (the pour skill, ``pour.yaml`` of ``--skills``),
 and per phase a flooder (``python -m sctd.bench.robustness flood ...``). Every
 figure comes from what the daemon publishes: its targets (by ``seq``, with their
 ``stamp``), its status (tick counters, the per-second ``recent_ms`` windows, the drop
@@ -34,6 +35,7 @@ from typing import Any
 import msgpack
 import zenoh
 
+from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.bench.bundles import big_bundle, malformed_bundles
 from sctd.cli.procs import Child, free_port
@@ -401,7 +403,7 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
     hub = f"tcp/127.0.0.1:{free_port()}"
     out: dict[str, Any] = {"seconds_per_phase": seconds}
     with session(listen=[hub]) as s, \
-            Child("sctd.cli.main", "sim", "--task", "pour", "--connect", hub, "--listen",
+            Child("sctd.cli.main", "sim", "--task", defaults().task, "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
             Child("sctd.cli.main", "run", "--skill", str(skills / "pour.yaml"), "--connect", hub,
                   "--listen", f"tcp/127.0.0.1:{free_port()}", "--stats-json",

@@ -17,6 +17,7 @@ import numpy as np
 
 from sctd import se3
 from sctd.app.errors import fail
+from sctd.task import TaskError, find_task
 from sctd_sim.arm import SimArm
 from sctd_sim.robot import ArmModel, load_arm_model
 from sctd_sim.simulation import Simulation, start_posture
@@ -371,9 +372,10 @@ def add_bench_sim_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=3.0,
                    help="simulated seconds of the real-time-factor run (default %(default)s)")
     p.add_argument("--rate", type=float, default=1000.0, help="cycle rate, Hz (default %(default)s)")
-    p.add_argument("--scene", choices=("pour", "drawer"), default=None,
-                   help="measure the step (5 cm along world x) and tracking in this scene, with "
-                        "its load, instead of the empty-workspace figures")
+    p.add_argument("--scene", metavar="NAME|FILE", default=None,
+                   help="measure the step (5 cm along world x) and tracking in the scene of this task "
+                        "(the path of a task file, or the name of a shipped or registered one; sctd tasks "
+                        "lists them), with its load, instead of the empty-workspace figures")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
@@ -381,6 +383,10 @@ def main_bench_sim(args: argparse.Namespace) -> int:
     if args.seconds <= 0 or args.rate <= 0:
         return fail("bench sim", "--seconds, --rate: must be > 0")
     if args.scene is not None:
+        try:
+            find_task(args.scene)
+        except TaskError as e:
+            return fail("bench sim", f"--scene: {e}")
         result = run_scene_bench(args.scene, args.rate)
         print(json.dumps(result, default=float) if args.json else format_scene_report(result))
         return 0

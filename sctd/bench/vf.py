@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from sctd.app.defaults import defaults
 from sctd.app.errors import fail
 from sctd.bench.latency import run_latency_bench, tick_histogram
 from sctd.skill import SkillError, VectorFieldModel, load_skill, vector_field_model_to_bytes
@@ -169,10 +170,10 @@ def _skill_path(name: str) -> str:
 
 def add_bench_vf_arguments(p: argparse.ArgumentParser) -> None:
     """The flags of ``sctd bench vf``."""
-    p.add_argument("--skill", default="pour-vf", type=_skill_path,
+    p.add_argument("--skill", default=defaults().learned_skill, type=_skill_path,
                    help="the vector-field skill whose model files are resized: a path or a shipped "
                         "or stored skill's name (default %(default)s)")
-    p.add_argument("--baseline", default="pour", type=_skill_path,
+    p.add_argument("--baseline", default=defaults().skill, type=_skill_path,
                    help="the hand-written skill timed next to it (default %(default)s)")
     p.add_argument("--points", type=_counts, default=[300, 1000, 5000, 20000],
                    help="demonstration point counts, comma-separated: the skill's model files are "

@@ -19,6 +19,7 @@ from typing import Any
 
 import zenoh
 
+from ..app.defaults import defaults
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.logs import log_folder
 from ..app.options import SKILL_HELP, TASK_HELP
@@ -33,7 +34,7 @@ ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
 
 
 def add_demo_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", default="pour", help=SKILL_HELP + " (default %(default)s)")
+    p.add_argument("--skill", default=defaults().skill, help=SKILL_HELP + " (default %(default)s)")
     p.add_argument("--task", metavar="NAME|FILE",
                    help="what the simulated user tries to do: " + TASK_HELP + " (default: the task whose "
                         "object is the skill's)")

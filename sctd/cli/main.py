@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from importlib.metadata import version
 
 from ..app import logs
+from ..app.defaults import DefaultsError
 from ..app.errors import EXIT_FAILED, EXIT_USAGE, Parser, fail
 
 
@@ -164,13 +165,19 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    args = build_parser(argv).parse_args(argv)
+    try:  # a command's flags may take their defaults from sctd/app/defaults.yaml
+        parser = build_parser(argv)
+    except DefaultsError as e:
+        return fail(" ".join(argv[:2] if argv[:1] == ["bench"] else argv[:1]), str(e))
+    args = parser.parse_args(argv)
+    name = " ".join(n for n in (args.command, getattr(args, "bench", None)) if n)
     rc = EXIT_FAILED
     try:
         rc = int(args.func(args) or 0)
     except ModuleNotFoundError as e:  # an optional library imported once the command runs
-        name = " ".join(n for n in (args.command, getattr(args, "bench", None)) if n)
         rc = fail(name, _missing_extra(e))
+    except DefaultsError as e:  # a benchmark's workload, read as it runs
+        rc = fail(name, str(e))
     except BrokenPipeError:  # the reader went away (sctd skills | head): not our error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         rc = 0

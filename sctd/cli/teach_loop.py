@@ -26,13 +26,36 @@ import zenoh
 from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
 
-from ..skill.catalog import shipped_folder
+from .. import se3
+from ..skill import SkillError
+from ..skill.catalog import find_skill, shipped_folder
+from ..task import Task, find_task
 from ..wire import Keys, client, codec
 from .procs import Child
 
 METHODS = ("linear", "vf")
-FRAMES = {"pour": ["tip=0,0,0.12,0,0,0,1"]}  # linear IMs need the bottle tip as a candidate
-START_SKILL = {"pour": "pour", "drawer": "drawer"}  # what the daemon runs before the swap
+
+
+def candidate_frames(task: Task) -> list[str]:
+    """The candidate frames of a linear-IM request on ``task``'s demonstrations: ``tip``,
+    the outlet of what the hand holds (the bottle's tip, as its task file puts it in the
+    hand's frame), which linear IMs need as a candidate; none for a task whose hand holds
+    no contents."""
+    held = task.scene.held
+    if held is None or held.contents is None:
+        return []
+    pose = se3.pose_from_transform(held.frames[held.contents.outlet])
+    return ["tip=" + ",".join(f"{x:g}" for x in pose)]
+
+
+def start_skill(task: str) -> str:
+    """The skill the daemon runs before the swap: the task's hand-written skill, the one
+    named as the task (``sctd run --skill <task>``)."""
+    try:
+        find_skill(task)
+    except SkillError as e:
+        raise LoopError(f"--swap: no skill named as the task {task!r} to start the daemon on: {e}") from None
+    return task
 
 
 def add_then_learn_arguments(p: argparse.ArgumentParser) -> None:
@@ -144,13 +167,15 @@ def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse
     keys = Keys(args.robot)
     names = _demo_names(watch, keys, scene, kept)
     if args.swap:
-        stack.enter_context(Child("sctd.cli.main", "run", "--skill", START_SKILL[scene], "--robot",
+        skill = start_skill(scene)
+        stack.enter_context(Child("sctd.cli.main", "run", "--skill", skill, "--robot",
                                   args.robot, *args.child_zenoh, log=logdir / "run.log"))
-        print(f"sctd teach: daemon started on the shipped {START_SKILL[scene]!r} (log "
+        print(f"sctd teach: daemon started on the shipped {skill!r} (log "
               f"{logdir / 'run.log'}); the arm is the daemon's from now on", flush=True)
     req: dict[str, Any] = {"task": scene, "method": args.then_learn, "demos": names, "swap": args.swap}
-    if args.then_learn == "linear" and scene in FRAMES:
-        req["frames"] = FRAMES[scene]
+    frames = candidate_frames(find_task(scene)) if args.then_learn == "linear" else []
+    if frames:
+        req["frames"] = frames
     print(f"sctd teach: training {args.then_learn} on {len(names)} demonstrations, then "
           f"{args.check_trials} lockstep trials{' and the swap' if args.swap else ''}", flush=True)
     got = client.query(s, keys.learner, codec.pack(req), timeout=900, find=10)

@@ -4,9 +4,10 @@
 In the namespaces of :class:`~sctd.deploy.netns.Hosts`,
 - ``router``: ``sctd router``, on ``tcp/<router>:7447`` or, with ``sctd certs``'s
   configs (mutual TLS and the roles' access control), ``tls/<router>:7448``;
-- ``robot``: ``sctd sim --scene pour``;
-- ``runtime``: ``sctd run --skill pour``;
-- ``input``: the simulated user, or a steady input source;
+- ``robot``: ``sctd sim --scene pour`` (the cluster's task: by default the one of
+  ``sctd/app/defaults.yaml``);
+- ``runtime``: ``sctd run --skill pour`` (its skill, by default that file's);
+- ``input``: the simulated user (on the cluster's task), or a steady input source;
 - ``learner``: ``sctd learner``;
 - ``observer``: a recorder of the contract's keys (JSON lines, see
   ``python -m sctd.deploy.probe record``);
@@ -25,6 +26,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from sctd.app.defaults import defaults
+from sctd.task import Task, find_task
 from sctd.wire import Keys
 
 from .configs import (
@@ -45,9 +48,15 @@ CLIENT_ROLES = ("sctd-robot", "sctd-runtime", "sctd-input", "sctd-learner", "sct
                 "sctd-operator")
 STEADY_INPUT = {"v": 1, "u": [0.0, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held, stick at rest
 TLS_PORT = 7448
-# Every key of the wire contract an intruder could write to, as suffixes of sctd/<robot>/.
-CONTRACT_KEYS = ("input/intruder", "state", "objects/mug", "target", "status", "scene", "can",
-                 "demos/pour/intruder", "learner/status")
+
+
+def contract_keys(task: Task) -> tuple[str, ...]:
+    """Every key of the wire contract an intruder could write to while ``task`` runs, as
+    suffixes of ``sctd/<robot>/``: its object's and its demonstrations' among them."""
+    return ("input/intruder", "state", f"objects/{task.object}", "target", "status", "scene", "can",
+            f"demos/{task.name}/intruder", "learner/status")
+
+
 # The intruders: who tries (the name is also the mark on its messages).
 INTRUDERS = ("no-certificate", "other-ca", "unlisted-name", "observer")
 N_PER_KEY = 20
@@ -68,9 +77,17 @@ class Cluster:
         Logs, configs and the observer's records.
     robot : str
         Key prefix ``sctd/<robot>``.
+    secure : bool, optional
+        Mutual TLS and the roles' access control (default: when ``sctd certs`` is there).
+    task, skill : str, optional
+        The robot host's scene and the simulated user's task, and the runtime's skill
+        (default: the task and skill of ``sctd/app/defaults.yaml``).
     """
 
-    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None):
+    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None,
+                 task: str | None = None, skill: str | None = None):
+        self.task = find_task(defaults().task if task is None else task)
+        self.skill = defaults().skill if skill is None else skill
         self.logdir = Path(logdir)
         self.keys = Keys(robot)
         self.hosts = Hosts(HOSTS, self.logdir)
@@ -166,10 +183,12 @@ class Cluster:
                                  str(self.logdir / "store"), *self.zenoh_args("learner"), log="learner.log")
 
     def start_robot(self, *extra: str) -> Process:
-        return self.hosts.python("robot", "sctd_sim.service", "--task", "pour", *extra,
+        return self.hosts.python("robot", "sctd_sim.service", "--task", self.task.name, *extra,
                                  *self.zenoh_args("robot"), log="robot.log")
 
-    def start_runtime(self, skill: str = "pour", *extra: str) -> Process:
+    def start_runtime(self, skill: str | None = None, *extra: str) -> Process:
+        """``sctd run`` with ``skill`` (default the cluster's)."""
+        skill = self.skill if skill is None else skill
         return self.hosts.python("runtime", "sctd.cli.main", "run", "--skill", skill, "--stats-json",
                                  *extra, *self.zenoh_args("runtime"), log="runtime.log")
 
@@ -193,22 +212,22 @@ class Cluster:
                                  "--payload", json.dumps(STEADY_INPUT), log="steady-input.log")
 
     def user(self, seconds: float = 90.0) -> dict:
-        """The simulated user doing the pour task until done; its JSON report."""
-        return self.hosts.call("input", "sctd_services.simulated_user", "--task", "pour",
+        """The simulated user doing the cluster's task until done; its JSON report."""
+        return self.hosts.call("input", "sctd_services.simulated_user", "--task", self.task.name,
                                "--duration", str(seconds), "--until-done", "--json",
                                *self.zenoh_args("input"), timeout=seconds + 60)
 
     # -- the intruders
     def intrude(self, intruders: tuple[str, ...] = INTRUDERS, n: int = N_PER_KEY) -> dict:
         """Each intruder (on the intruder host, at once) puts ``n`` marked messages on
-        every key of :data:`CONTRACT_KEYS`, subscribes to all of them, asks for a skill
+        every key of :func:`contract_keys`, subscribes to all of them, asks for a skill
         swap and for training; an operator on the observer host counts the marked
         messages that arrive. The input host puts ``n`` marked input messages too (the
         control: what an allowed sender delivers), the operator asks for a swap and for
         training (the control: the runtime and the learner answer). Per intruder:
         ``delivered`` (key -> marked messages the operator got), ``received`` (key ->
         messages it got), ``swap`` and ``train`` (ok and error replies)."""
-        keys = [f"{self.keys.prefix}/{suffix}" for suffix in CONTRACT_KEYS]
+        keys = [f"{self.keys.prefix}/{suffix}" for suffix in contract_keys(self.task)]
         configs = {name: self.intruder_configs.get(name, self.config("sctd-observer"))
                    for name in intruders}
         listeners = self._start_listeners(keys, configs)  # each ready before anyone sends
@@ -277,7 +296,7 @@ class Cluster:
         k = self.keys
         return [("swap-on-skill", k.skill, '{"bundle": "intruder"}'),
                 ("swap", k.skill + "/swap", '{"bundle": "intruder"}'),
-                ("train", k.learner, '{"task": "pour", "intruder": true}')]
+                ("train", k.learner, json.dumps({"task": self.task.name, "intruder": True}))]
 
     # -- what the observer recorded
     def seen(self, key: str, since: float = 0.0) -> Iterator[dict[str, Any]]:
