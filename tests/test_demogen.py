@@ -111,7 +111,7 @@ def test_a_task_file_sets_what_is_generated(tmp_path):
     from sctd.task import shipped_folder
 
     text = (shipped_folder() / "pour.yaml").read_text()
-    for old, new in (("name: pour", "name: tap"), ("object: mug", "object: glass"),
+    for old, new in (("\nname: pour\n", "\nname: tap\n"), ("object: mug", "object: glass"),
                      ("    mug:", "    glass:"), ("into: mug", "into: glass"), ("to: mug", "to: glass"),
                      ("position: [0.0, 0.0, 0.12]", "position: [0.0, 0.0, 0.15]"),
                      ("to: [0.0, 0.0, 0.05]", "to: [0.0, 0.0, 0.07]")):

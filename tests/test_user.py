@@ -232,6 +232,8 @@ def _watering():
         {"name": "water", "tilt": {"to": 1.5, "until": {"reading": "can.poured", "at_least": 0.3}}},
         {"name": "level", "upright": {"below": 0.2}},
     ]
+    doc["teach"]["steps"] = {"carry": {"yaw": 0.2, "height": [0.07, 0.09]},
+                             "water": {"to": ["90 deg", "100 deg"]}}
     return task_from_document(doc, "water.yaml")
 
 

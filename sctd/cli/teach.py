@@ -35,6 +35,7 @@ from sctd_services.teach import (
     teach,
 )
 
+from ..app.defaults import defaults
 from ..app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from ..app.logs import log_folder
 from ..app.options import add_arguments, add_task_argument, from_namespace
@@ -54,8 +55,8 @@ STATE_INGRESS = 250.0  # Hz of the simulator's state that teaching takes in
 
 def add_teach_arguments(p: argparse.ArgumentParser) -> None:
     own_default = ("out", "max_attempts", "mistakes")  # their help says what the default does
-    add_task_argument(p, help="the task to demonstrate: a name sctd tasks lists, or a task file "
-                              "(the simulator's scene)")
+    add_task_argument(p, defaults().task, help="the task to demonstrate: a name sctd tasks lists, or a "
+                                               "task file (the simulator's scene)")
     add_arguments(p, TeachOptions, exclude=(*own_default, "task"), show_default=True)
     add_arguments(p, TeachOptions, only=own_default[:2])
     mistakes = next(f for f in dataclasses.fields(TeachOptions) if f.name == "mistakes")
