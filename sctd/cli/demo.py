@@ -25,7 +25,7 @@ from ..app.logs import log_folder
 from ..app.options import SKILL_HELP, TASK_HELP
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
-from ..task import TaskError, find_task, task_for_object
+from ..task import TaskError, add_to_path, find_task, task_for_object
 from ..wire import Keys, codec
 from ..wire.session import session as zsession
 from .procs import Child, free_port
@@ -165,6 +165,8 @@ def main_demo(args: argparse.Namespace) -> int:
         return fail("demo", f"{args.skill}: object: no task has the object {skill.object!r}; pass --task "
                             "(sctd tasks lists them)")
     task = found.name
+    if args.task:
+        add_to_path(args.task)  # the children find a task file by its name
     logdir = log_folder(args.logs, "sctd-demo-")
     ep = f"tcp/127.0.0.1:{free_port()}"
     print(f"sctd demo: skill {skill.name}@{skill.id} ({args.skill}), task {task}, "
