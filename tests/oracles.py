@@ -4,11 +4,16 @@ fails when either is wrong; nothing in the package uses them."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from sctd.learn import energy
+from sctd.task import handle_jacobian, handle_pose
+from sctd.task.model import Joint
 
 
 def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float = 1e6,
@@ -73,3 +78,45 @@ def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float 
     return f
 
 
+
+
+@dataclass
+class HandleState:
+    """A joint's state as :func:`reference_handle_step` steps it."""
+
+    position: float = 0.0
+    speed: float = 0.0
+    attached: bool = False
+    grasps: int = 0
+
+
+def reference_handle_step(joint: Joint, s: HandleState, T_world_ee: np.ndarray, twist: np.ndarray,
+                          T_world_handle0: np.ndarray, dt: float) -> np.ndarray:
+    """A joint's handle stepped on 3-vectors, as the scene's documentation states it:
+    the handle where :func:`~sctd.task.handle_pose` puts it, ``J`` its derivative, a
+    spring-damper between it and the hand once grasped, the joint driven by ``J . F`` on
+    the handle against its spring, damper and tanh friction, of inertia ``mass |J|^2``
+    (``mass`` for a prismatic joint, whose ``J`` is the unit axis), semi-implicit Euler,
+    end stops at 0 and the travel. Returns the force on the hand (3,)."""
+    G = joint.grasp
+    handle = handle_pose(joint, T_world_handle0, s.position)[:3, 3]
+    J = handle_jacobian(joint, T_world_handle0, s.position)
+    d = T_world_ee[:3, 3] - handle
+    dist = float(np.linalg.norm(d))
+    if not s.attached and dist <= G.radius:
+        s.attached, s.grasps = True, s.grasps + 1
+    elif s.attached and dist > G.release:
+        s.attached = False
+    f = np.zeros(3)
+    if s.attached:
+        f = -G.stiffness * d - G.damping * (twist[:3] - s.speed * J)
+    resist = (-joint.spring * s.position - joint.damping * s.speed
+              - joint.friction * math.tanh(s.speed / joint.friction_speed))
+    inertia = joint.mass if joint.kind == "prismatic" else joint.mass * float(J @ J)
+    s.speed += (float(-f @ J) + resist) / inertia * dt
+    s.position += s.speed * dt
+    if s.position <= 0.0:
+        s.position, s.speed = 0.0, max(s.speed, 0.0)
+    elif s.position >= joint.travel:
+        s.position, s.speed = joint.travel, min(s.speed, 0.0)
+    return f

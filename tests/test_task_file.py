@@ -5,6 +5,7 @@ mean what docs/tasks.md says."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import os
 from types import SimpleNamespace
@@ -50,7 +51,7 @@ def pour_doc() -> dict:
 
 def test_the_shipped_tasks_load_under_their_file_names():
     names = sorted(p.stem for p in shipped_folder().glob("*.yaml"))
-    assert {"pour", "drawer"} <= set(names)
+    assert {"pour", "drawer", "cabinet"} <= set(names)
     for name in names:
         t = find_task(name)
         assert t.name == name and t.object in t.scene.bodies and t.outcome.time_limit > 0
@@ -214,6 +215,85 @@ def test_the_teach_section_reads_as_the_file_says():
     assert task_from_document(doc, "d.yaml").teach == Teach()
 
 
+CABINET = shipped_folder() / "cabinet.yaml"
+
+
+def test_a_revolute_joint_reads_as_the_file_says():
+    """The cabinet's door: its hinge line in the handle's frame (the axis normalised), its
+    travel and thresholds in radians (written in degrees), its inertia from the mass felt
+    at the handle and the lever."""
+    task = find_task("cabinet")
+    door = task.scene.joints["door"]
+    assert (door.kind, door.handle, door.unit) == ("revolute", "door_handle", "rad")
+    np.testing.assert_array_equal(door.hinge.point, [-0.03, 0.32, 0.0])
+    np.testing.assert_array_equal(door.hinge.axis, [0.0, 0.0, 1.0])
+    assert door.hinge.lever == pytest.approx(math.hypot(0.03, 0.32))
+    assert door.travel == math.radians(100.0)
+    assert door.inertia == pytest.approx(1.5 * (0.03**2 + 0.32**2))
+    assert (door.spring, door.damping, door.friction, door.friction_speed) == (0.5, 0.8, 0.3, 0.03)
+    assert thresholds(task.outcome.done) == {"door.position": math.radians(65.0)}
+    swing = task.intent[1].action
+    assert isinstance(swing, MoveJoint) and swing.overshoot == math.radians(5.0)
+    lost = task.outcome.fail[0].when.terms[2]
+    assert lost == Compare(Reading("door", "position"), above=math.radians(2.0))
+    drawer = find_task("drawer").scene.joints["drawer"]
+    assert (drawer.kind, drawer.hinge, drawer.unit, drawer.inertia) == ("prismatic", None, "m", 2.0)
+    doc = yaml.safe_load(CABINET.read_text())
+    doc["scene"]["joints"]["door"]["hinge"]["axis"] = [0, 0, -2.0]
+    assert task_from_document(doc, "x").scene.joints["door"].hinge.axis.tolist() == [0.0, 0.0, -1.0]
+
+
+@pytest.mark.parametrize(("file", "path", "value", "where", "problem"), [
+    (CABINET, "scene.joints.door.type", "hinged", "scene.joints.door.type",
+     "expected one of prismatic, revolute, got 'hinged'"),
+    (CABINET, "scene.joints.door.type", DELETE, "scene.joints.door.type", "missing"),
+    (CABINET, "scene.joints.door.hinge", DELETE, "scene.joints.door.hinge", "missing"),
+    (CABINET, "scene.joints.door.hinge.axis", [0, 0, 0], "scene.joints.door.hinge.axis",
+     "direction of zero length"),
+    (CABINET, "scene.joints.door.hinge.axis", [0, 1], "scene.joints.door.hinge.axis",
+     "expected a list of 3 numbers"),
+    (CABINET, "scene.joints.door.hinge.point", DELETE, "scene.joints.door.hinge.point", "missing"),
+    (CABINET, "scene.joints.door.hinge.point", [0.0, 0.0, 0.4], "scene.joints.door.hinge.point",
+     "the handle (the frame's origin) is 0 m from the hinge line: it must be at least 0.01 m off it"),
+    (CABINET, "scene.joints.door.hinge.point", [0.005, 0.0, 0.3], "scene.joints.door.hinge.point",
+     "is 0.005 m from the hinge line"),
+    (CABINET, "scene.joints.door.hinge.spring", 1.0, "scene.joints.door.hinge.spring", "unknown field"),
+    (CABINET, "scene.joints.door.travel", 0, "scene.joints.door.travel", "must be > 0.0"),
+    (CABINET, "scene.joints.door.travel", "400 deg", "scene.joints.door.travel", "must be <= 6.28"),
+    (CABINET, "scene.joints.door.travel", "wide", "scene.joints.door.travel", "expected an angle in rad"),
+    (CABINET, "scene.joints.door.mass", 0, "scene.joints.door.mass", "must be > 0.0"),
+    (CABINET, "scene.joints.door.inertia", 0.2, "scene.joints.door.inertia", "unknown field"),
+    (CABINET, "scene.joints.door.friction", -0.1, "scene.joints.door.friction", "must be >= 0.0"),
+    (CABINET, "scene.joints.door.friction_speed", 0, "scene.joints.door.friction_speed", "must be > 0.0"),
+    (CABINET, "scene.joints.door.grasp.release", 0.01, "scene.joints.door.grasp.release",
+     "must be above the grasp radius 0.02"),
+    (CABINET, "outcome.done", {"reading": "door.position", "at_least": "a lot"}, "outcome.done.at_least",
+     "expected an angle in rad"),
+    (CABINET, "intent.1.move_joint.overshoot", "-5 deg", "intent[1].move_joint.overshoot", "must be >= 0.0"),
+    (DRAWER, "scene.joints.drawer.hinge", {"point": [0, 0.3, 0], "axis": [0, 0, 1]},
+     "scene.joints.drawer.hinge", "unknown field"),
+    (DRAWER, "outcome.done", {"reading": "drawer.position", "at_least": "20 deg"}, "outcome.done.at_least",
+     "expected a number, got str"),
+    (DRAWER, "intent.1.move_joint.overshoot", "3 deg", "intent[1].move_joint.overshoot",
+     "expected a number, got str"),
+])
+def test_a_bad_joint_is_refused_naming_the_field(file, path, value, where, problem):
+    doc = yaml.safe_load(file.read_text())
+    _set(doc, path, value)
+    with pytest.raises(TaskError) as e:
+        task_from_document(doc, "mine.yaml")
+    assert str(e.value).startswith(f"mine.yaml: {where}: "), str(e.value)
+    assert problem in str(e.value)
+
+
+def test_a_joint_knows_its_kind_by_its_hinge():
+    door = find_task("cabinet").scene.joints["door"]
+    with pytest.raises(ValueError, match="a revolute joint has a hinge"):
+        dataclasses.replace(door, hinge=None)
+    with pytest.raises(ValueError, match="a prismatic one none"):
+        dataclasses.replace(door, kind="prismatic")
+
+
 def test_a_joint_is_moved_by_the_reach_to_its_handle():
     doc = yaml.safe_load(DRAWER.read_text())
     doc["intent"][0]["reach"] = {"frame": "hand", "to": [0, 0, 0],
@@ -276,7 +356,8 @@ def test_a_file_is_found_by_path_and_named_by_its_name_field(tmp_path):
     f = tmp_path / "anything.yaml"
     f.write_text(yaml.safe_dump(doc))
     assert find_task(str(f)).name == "pour_tea"
-    with pytest.raises(TaskError, match=r"no task of that name \(known: drawer, pour.*did you mean 'pour'"):
+    with pytest.raises(TaskError, match=r"no task of that name \(known: cabinet, drawer, pour.*did you "
+                                        r"mean 'pour'"):
         find_task("pout")
 
 
@@ -379,6 +460,15 @@ def test_sctd_tasks_lists_and_shows(capsys):
     out = capsys.readouterr().out
     assert "held: bottle" in out and "done (poured) at bottle.poured >= 0.5" in out
     assert "intent: bring (reach), pour (tilt), upright (upright)" in out
+    assert main(["tasks"]) == 0
+    assert "Open a cabinet door" in capsys.readouterr().out
+    assert main(["tasks", "show", "cabinet"]) == 0
+    out = capsys.readouterr().out
+    assert "joint door: revolute, handle door_handle, travel 1.74533 rad (100 deg)" in out
+    assert "done (opened) at door.position >= 1.13446" in out
+    assert "intent: reach (reach), swing (move_joint)" in out
+    assert main(["tasks", "show", "drawer"]) == 0
+    assert "joint drawer: prismatic, handle drawer_handle, travel 0.3 m\n" in capsys.readouterr().out
     assert main(["tasks", "show", "juggle"]) == 2
     assert "sctd tasks show: juggle: no such file" in capsys.readouterr().err
 

@@ -1,6 +1,8 @@
 """The simulated user's parts: the device model it learns, the task files' intents, and
 the whole user driving a toy device whose mapping it does not know."""
 
+import math
+
 import numpy as np
 import pytest
 import yaml
@@ -8,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd import se3
-from sctd.task import find_task, shipped_folder, task_from_document
+from sctd.task import find_task, handle_jacobian, handle_pose, shipped_folder, task_from_document
 from sctd_services.user import DeviceModel, Observation, SimulatedUser, TaskIntent
 from sctd_services.user.human import PROFILES
 
@@ -61,6 +63,73 @@ def test_drawer_intent_reaches_then_pulls_along_the_handle_axis():
     assert d.phase == "pull" and d.twist[0] < -0.05  # out of the drawer: world -x
     d = it.desire(_drawer_obs(2.0, [0.3, 0.0, 0.6], 0.21, True))
     assert d.phase == "done" and d.done and not np.any(d.twist)
+
+
+def test_the_drawer_intent_pulls_along_the_axis_to_the_bit():
+    """On a prismatic joint the intent's numbers are the axis formula's, to the bit: onto
+    the axis, then along it towards the target, at most ``ahead`` m ahead."""
+    it = TaskIntent(DRAWER)
+    obs = _drawer_obs(0.0, [0.43, 0.012, 0.607], 0.05, True)
+    d = it.desire(obs)
+    H = obs.objects["drawer_handle"]
+    axis, p = H[:3, 0], obs.T_world_ee[:3, 3]
+    handle = H[:3, 3] + 0.05 * axis
+    lateral = handle - p - float((handle - p) @ axis) * axis
+    v = it.gain * (lateral + min(0.23 - 0.05, it.ahead) * axis)
+    v = v if np.linalg.norm(v) <= it.v_max else v * (it.v_max / float(np.linalg.norm(v)))
+    assert d.phase == "pull"
+    np.testing.assert_array_equal(d.twist, np.concatenate([v, np.zeros(3)]))
+    assert d.error == pytest.approx(0.18 + float(np.linalg.norm(lateral)), abs=1e-15)
+
+
+CABINET = find_task("cabinet")
+DOOR = CABINET.scene.joints["door"]
+H_DOOR = CABINET.scene.bodies["door_handle"].T_world
+
+
+def _door_obs(t, p, angle, held):
+    return Observation(t, se3.transform_from_rt(np.eye(3), p), {"door_handle": H_DOOR},
+                       {"readings": {"door.position": angle, "door.held": held}})
+
+
+def _on_door(angle):
+    return handle_pose(DOOR, H_DOOR, angle)[:3, 3]
+
+
+def test_the_door_intent_reaches_for_the_handle_where_the_door_has_moved_it():
+    it = TaskIntent(CABINET)
+    p = _on_door(0.6) + np.array([0.05, 0.05, 0.03])
+    d = it.desire(_door_obs(0.0, p, 0.6, False))
+    to_handle = _on_door(0.6) - p
+    assert d.phase == "reach" and d.error == pytest.approx(float(np.linalg.norm(to_handle)))
+    assert d.twist[:3] @ to_handle / np.linalg.norm(d.twist[:3]) / np.linalg.norm(to_handle) > 0.9999
+
+
+def test_the_door_intent_swings_the_handle_along_its_arc():
+    """Along the arc's tangent at the handle, at most ``ahead`` m ahead (so slowing down
+    into the target, 65 + 5 deg); back onto the handle when off it; the error is the arc
+    still to go plus the distance off the path; done 1 mm of arc past 65 deg; back to the
+    reach when the handle is let go."""
+    it = TaskIntent(CABINET)
+    lever, target = DOOR.hinge.lever, math.radians(70.0)
+    for angle in (0.1, 0.6, 1.0, 1.12):  # (the last 64 deg: 3.3 cm of arc to go)
+        d = it.desire(_door_obs(0.0, _on_door(angle), angle, True))
+        tangent = handle_jacobian(DOOR, H_DOOR, angle) / lever
+        v = d.twist[:3]
+        assert d.phase == "swing" and v @ tangent / np.linalg.norm(v) == pytest.approx(1.0, abs=1e-12)
+        assert np.linalg.norm(v) == pytest.approx(it.gain * min(it.ahead, (target - angle) * lever))
+        assert d.error == pytest.approx((target - angle) * lever, abs=1e-12)
+    hinge = (H_DOOR @ [*DOOR.hinge.point, 1.0])[:3]
+    out = (_on_door(0.6) - hinge) / lever  # away from the hinge, across the arc
+    d = it.desire(_door_obs(0.0, _on_door(0.6) + 0.01 * out, 0.6, True))
+    assert d.twist[:3] @ out < -0.015 and d.error == pytest.approx((target - 0.6) * lever + 0.01, abs=1e-9)
+    past = math.radians(65.0) + 1e-3 / lever  # 1 mm of arc past the target
+    assert it.desire(_door_obs(0.0, _on_door(past - 1e-4), past - 1e-4, True)).phase == "swing"
+    d = it.desire(_door_obs(0.0, _on_door(past + 1e-4), past + 1e-4, True))
+    assert d.phase == "done" and d.done and not np.any(d.twist)
+    it = TaskIntent(CABINET)
+    assert it.desire(_door_obs(0.0, _on_door(0.3), 0.3, True)).phase == "swing"
+    assert it.desire(_door_obs(0.1, _on_door(0.3) + np.array([0.0, 0.0, 0.1]), 0.3, False)).phase == "reach"
 
 
 class ToyDrawer:

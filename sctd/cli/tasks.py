@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from typing import Any
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
@@ -37,7 +38,8 @@ def summary(task: Task) -> dict[str, Any]:
             "name": held.name, "mass": held.mass, "frames": sorted(held.frames),
             "contents": None if held.contents is None else {
                 "mass": held.contents.mass, "outlet": held.contents.outlet, "into": held.contents.into}},
-        "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel} for n, j in sc.joints.items()},
+        "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel, "unit": j.unit}
+                   for n, j in sc.joints.items()},
         "frames": sc.frames(),
         "thresholds": thresholds(task.outcome.done),
         "done_reason": task.outcome.done_reason,
@@ -82,7 +84,10 @@ def main_tasks(args: argparse.Namespace) -> int:
             contents = f", contents into {h['contents']['into']}" if h["contents"] else ""
             print(f"  held: {h['name']} ({h['mass']} kg{contents})")
         for n, j in s["joints"].items():
-            print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {j['travel']} m")
+            travel = f"{j['travel']:g} {j['unit']}"
+            if j["unit"] == "rad":
+                travel += f" ({math.degrees(j['travel']):g} deg)"
+            print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {travel}")
         targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or "see the file"
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")

@@ -5,8 +5,8 @@ A task knows nothing of any skill. It holds:
 - the **scene**: where the hand starts and how much that varies between trials; the
   bodies standing in the world (each a frame, optionally a container whose opening is
   at its origin); what the hand holds (mass, centre of mass, named frames such as a
-  bottle's opening, contents that flow out when it is tilted); joints (a prismatic
-  joint moving a handle the hand grasps);
+  bottle's opening, contents that flow out when it is tilted); joints moving a handle
+  the hand grasps (prismatic: a drawer; revolute: a hinged door);
 - the **task object**: the body whose frame demonstrations and skills are expressed in;
 - the **outcome**: predicates on the scene's readings (:class:`Reading`) saying when
   the task is done, whether it then succeeded, what ends it early as a failure, what
@@ -164,31 +164,65 @@ class Grasp:
 
 
 @dataclass(frozen=True)
-class Joint:
-    """A handle on a prismatic joint (a drawer).
+class Hinge:
+    """The line a revolute joint turns its handle about, in the handle's frame at 0.
 
-    The handle is the body ``handle``; the joint moves it along that body's own x axis
-    from 0 (its default pose) to ``travel``. The body's published frame stays at 0.
+    Attributes
+    ----------
+    point : ndarray, shape (3,)
+        A point on the line, m.
+    axis : ndarray, shape (3,)
+        Its unit direction: a positive joint position turns the handle about it by the
+        right-hand rule.
+    """
+
+    point: Array
+    axis: Array
+
+    @property
+    def lever(self) -> float:
+        """The handle's distance from the line, m (the handle is the frame's origin)."""
+        d = -self.point
+        return float(np.linalg.norm(d - float(d @ self.axis) * self.axis))
+
+
+JOINT_KINDS = ("prismatic", "revolute")
+"""The kinds of joint, as a file's ``type`` names them."""
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A handle on a joint: a drawer (prismatic) or a hinged door (revolute).
+
+    The handle is the body ``handle``. A prismatic joint moves it along that body's own x
+    axis from 0 (its default pose) to ``travel`` (m); a revolute joint turns it about
+    ``hinge`` from 0 (its default pose) to ``travel`` (rad). The body's published frame
+    stays at 0 (:func:`~sctd.task.kinematics.handle_pose` gives it at a position).
+    Quantities are in the joint's unit: m for a prismatic joint, rad for a revolute one.
 
     Attributes
     ----------
     name : str
-    kind : {"prismatic"}
+    kind : {"prismatic", "revolute"}
     handle : str
         The body that moves with the joint.
     travel : float
-        Range of the joint, m, from its default pose (0) to the end stop.
+        Range of the joint from its default pose (0) to the end stop, m or rad.
     mass : float
-        Moving mass, kg.
+        Moving mass as the hand feels it at the handle, kg; a revolute joint's inertia
+        about its hinge is ``mass * hinge.lever**2`` (:attr:`inertia`).
     spring, damping, friction : float
-        Towards 0 (N/m), viscous (N s/m) and Coulomb friction (N).
+        Towards 0 (N/m or N m/rad), viscous (N s/m or N m s/rad) and Coulomb friction
+        (N or N m).
     friction_speed : float
-        Speed over which the friction builds up (tanh), m/s.
+        Speed over which the friction builds up (tanh), m/s or rad/s.
     grasp : Grasp
+    hinge : Hinge or None
+        A revolute joint's hinge line; None for a prismatic joint.
     """
 
     name: str
-    kind: Literal["prismatic"]
+    kind: Literal["prismatic", "revolute"]
     handle: str
     travel: float
     mass: float
@@ -197,6 +231,22 @@ class Joint:
     friction: float
     friction_speed: float
     grasp: Grasp
+    hinge: Hinge | None = None
+
+    def __post_init__(self) -> None:
+        if (self.kind == "revolute") != (self.hinge is not None):
+            raise ValueError(f"joint {self.name!r}: a revolute joint has a hinge, a prismatic one none")
+
+    @property
+    def inertia(self) -> float:
+        """What resists the joint's acceleration: kg (prismatic, the mass) or kg m^2
+        (revolute, ``mass * lever**2``)."""
+        return self.mass if self.hinge is None else self.mass * self.hinge.lever ** 2
+
+    @property
+    def unit(self) -> str:
+        """The unit of its position: ``m`` or ``rad``."""
+        return "rad" if self.kind == "revolute" else "m"
 
 
 @dataclass(frozen=True)
@@ -229,7 +279,8 @@ READINGS = {
 """What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
 left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
-is held, how often it was grasped and the furthest position reached."""
+is held, how often it was grasped and the furthest position reached (m, m/s; rad, rad/s
+for a revolute joint)."""
 
 
 @dataclass(frozen=True)
@@ -367,8 +418,9 @@ class Reach:
         The goal in the task object's frame, m (the reference frame of ``reached`` and
         ``accept``).
     handle : str or None
-        Or a joint: the goal is its handle, moved along the handle's x by the joint's
-        position (the reference frame is the handle's frame so moved).
+        Or a joint: the goal is its handle where the joint's position has moved it
+        (:func:`~sctd.task.kinematics.handle_pose`; the reference frame is the handle's
+        frame so moved).
     lift : Lift or None
     reached : Reached or None
         The tolerances that complete the step.
@@ -417,9 +469,10 @@ class Upright:
 
 @dataclass(frozen=True)
 class MoveJoint:
-    """Move ``joint``'s handle (held by the frame of the reach before it) along its axis
-    to the joint's threshold in the task's ``done`` plus ``overshoot`` (m); back to the
-    previous step when ``back`` holds (the handle let go)."""
+    """Move ``joint``'s handle (held by the frame of the reach before it) along its path
+    (a prismatic joint's axis, a revolute joint's arc) to the joint's threshold in the
+    task's ``done`` plus ``overshoot`` (the joint's unit: m or rad); back to the previous
+    step when ``back`` holds (the handle let go)."""
 
     joint: str
     overshoot: float = 0.0

@@ -20,6 +20,7 @@ from sctd.skill.reader import Reader, kind_of
 from .judge import thresholds
 from .model import (
     DONE,
+    JOINT_KINDS,
     READINGS,
     VERSION,
     Accept,
@@ -33,6 +34,7 @@ from .model import (
     FailRule,
     Grasp,
     Held,
+    Hinge,
     Joint,
     Lift,
     MoveJoint,
@@ -255,10 +257,19 @@ def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
                 r.vector(d["com"], f"{path}.com", 3), frames, contents)
 
 
+JOINT_FIELDS = {"prismatic": set(), "revolute": {"hinge"}}
+"""The fields a kind of joint has besides those every joint has."""
+MIN_LEVER = 0.01
+"""m: the nearest a revolute joint's handle may be to its hinge line."""
+
+
 def _joint(r: _Reader, name: str, v: Any, path: str, bodies: dict[str, Body]) -> Joint:
-    d = r.fields(v, path, {"type", "handle", "travel", "mass", "grasp"},
+    m = r.mapping(v, path)
+    if "type" not in m:  # (it says which other fields there are)
+        raise r.fail(f"{path}.type", "missing")
+    kind = r.choice(m["type"], f"{path}.type", JOINT_KINDS)
+    d = r.fields(v, path, {"type", "handle", "travel", "mass", "grasp", *JOINT_FIELDS[kind]},
                  {"spring", "damping", "friction", "friction_speed"})
-    r.choice(d["type"], f"{path}.type", ("prismatic",))  # the one kind so far
     handle = r.string(d["handle"], f"{path}.handle")
     if handle not in bodies:
         raise r.fail(f"{path}.handle", f"unknown body {handle!r} (bodies: {', '.join(bodies)})")
@@ -271,9 +282,26 @@ def _joint(r: _Reader, name: str, v: Any, path: str, bodies: dict[str, Body]) ->
                                               f"got {grasp.release}")
     spring, viscous, friction = (r.nonneg(d.get(k, 0.0), f"{path}.{k}")
                                  for k in ("spring", "damping", "friction"))
-    return Joint(name, "prismatic", handle, r.positive(d["travel"], f"{path}.travel"),
-                 r.positive(d["mass"], f"{path}.mass"), spring, viscous, friction,
-                 r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed"), grasp)
+    mass = r.positive(d["mass"], f"{path}.mass")
+    friction_speed = r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed")
+    if kind == "prismatic":
+        return Joint(name, "prismatic", handle, r.positive(d["travel"], f"{path}.travel"), mass, spring,
+                     viscous, friction, friction_speed, grasp)
+    # at most a full turn: past it the handle would come round to where it was
+    travel = r.angle(d["travel"], f"{path}.travel", lo=0.0, hi=2 * math.pi, lo_open=True)
+    return Joint(name, "revolute", handle, travel, mass, spring, viscous, friction, friction_speed, grasp,
+                 _hinge(r, d["hinge"], f"{path}.hinge"))
+
+
+def _hinge(r: _Reader, v: Any, path: str) -> Hinge:
+    """``{point: [3], axis: [3]}`` in the handle's frame; the axis normalised, the handle
+    (the frame's origin) at least :data:`MIN_LEVER` from the line."""
+    d = r.fields(v, path, {"point", "axis"})
+    hinge = Hinge(r.vector(d["point"], f"{path}.point", 3), r.vector(d["axis"], f"{path}.axis", 3, unit=True))
+    if not hinge.lever >= MIN_LEVER:
+        raise r.fail(f"{path}.point", f"the handle (the frame's origin) is {hinge.lever:.4g} m from the "
+                                      f"hinge line: it must be at least {MIN_LEVER} m off it")
+    return hinge
 
 
 # -- the outcome ----------------------------------------------------------------------
@@ -301,6 +329,14 @@ def _reading(r: _Reader, v: Any, path: str, scene: Scene) -> Reading:
 COMPARISONS = ("at_least", "at_most", "above", "below", "is")
 
 
+def _angular(reading: Reading, scene: Scene) -> bool:
+    """Whether ``reading`` is an angle (a revolute joint's position): its bounds may be
+    written in degrees."""
+    joint = scene.joints.get(reading.element)
+    return joint is not None and joint.kind == "revolute" and reading.quantity in ("position",
+                                                                                   "max_position")
+
+
 def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:
     """``true``/``false``, ``{reading, at_least|at_most|above|below|is}``, ``{near: {frame,
     to, within}}``, ``{all: [...]}``, ``{any: [...]}`` or ``{not: ...}``."""
@@ -322,7 +358,8 @@ def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:
             if not isinstance(bounds["is"], bool):
                 raise r.fail(f"{path}.is", f"expected true or false, got {kind_of(bounds['is'])}")
             return Compare(reading, is_=bounds["is"])
-        nums = {k: r.number(x, f"{path}.{k}") for k, x in bounds.items()}
+        bound = r.angle if _angular(reading, scene) else r.number
+        nums = {k: bound(x, f"{path}.{k}") for k, x in bounds.items()}
         return Compare(reading, nums.get("at_least"), nums.get("at_most"), nums.get("above"),
                        nums.get("below"))
     if len(d) != 1:
@@ -426,7 +463,9 @@ def _action(r: _Reader, kind: str, v: Any, path: str, scene: Scene, outcome: Out
     if anchor is None or anchor.handle != joint:
         raise r.fail(f"{path}.joint", f"the reach before it must go to the handle of {joint!r} "
                                       f"(handle: {joint}): that is what moves it")
-    return MoveJoint(joint, r.nonneg(d.get("overshoot", 0.0), f"{path}.overshoot"),
+    read = r.angle if scene.joints[joint].kind == "revolute" else r.number  # (in the joint's unit)
+    overshoot = read(d.get("overshoot", 0.0), f"{path}.overshoot", lo=0.0)
+    return MoveJoint(joint, overshoot,
                      predicate(r, d["back"], f"{path}.back", scene) if "back" in d else None)
 
 

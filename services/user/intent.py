@@ -25,13 +25,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.task import Task
+from sctd.task import Task, handle_jacobian, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.model import (
     DONE,
     Action,
     AllOf,
     AnyOf,
+    Joint,
     Lift,
     MoveJoint,
     Near,
@@ -90,6 +91,12 @@ def _saturate(v: Array, limit: float) -> Array:
 def _lifted(lift: Lift, radial: float) -> float:
     """How far the goal is raised at ``radial`` m from its vertical."""
     return lift.height * min(1.0, max(0.0, (radial - lift.start) / lift.span))
+
+
+def _lever(joint: Joint) -> float:
+    """m of the handle's path per unit of the joint: 1 (prismatic), the handle's distance
+    from the hinge line (revolute)."""
+    return 1.0 if joint.hinge is None else joint.hinge.lever
 
 
 def _has_near(p: Predicate | None) -> bool:
@@ -161,9 +168,11 @@ class TaskIntent:
         leans less, about the hand's y axis (a lean of a few degrees left over from
         carrying it is no decision to tilt sideways).
     ahead : float
-        m: how far ahead along a joint's axis the user aims while moving its handle.
+        m: how far ahead along a joint's path (a drawer's axis, a door's arc) the user
+        aims while moving its handle.
     past : float
-        m: how far past its target a joint must be for the user to see it there.
+        m: how far along its path past its target a joint's handle must be for the user
+        to see it there.
     free_weight : float
         Weight of the hand's angular velocity where its orientation is free (it hardly
         matters).
@@ -198,6 +207,8 @@ class TaskIntent:
         self._waits = [thresholds(s.action.until) if isinstance(s.action, Tilt) else {} for s in steps]
         self._ends = [done[f"{s.action.joint}.position"] + s.action.overshoot
                       if isinstance(s.action, MoveJoint) else 0.0 for s in steps]
+        self._pasts = [self.past / _lever(self.task.scene.joints[s.action.joint])  # (the joint's unit)
+                       if isinstance(s.action, MoveJoint) else 0.0 for s in steps]
         self._near = any(_has_near(getattr(s.action, k, None)) for s in steps for k in ("until", "back"))
         # the reaches whose frame's place about the goal's vertical is asked for
         self._placed = {self._anchors[i] for i, s in enumerate(steps)
@@ -291,24 +302,37 @@ class TaskIntent:
             radial = math.hypot(mx - gx, my - gy)
             lift = 0.0 if reach.lift is None else _lifted(reach.lift, radial)
             wx, wy, wz = (T_ref[:3, :3] @ np.array([gx, gy, gz + lift]) + T_ref[:3, 3]).tolist()
-        else:  # the handle where the joint has moved it, along the handle's x
+        else:  # the handle where the joint has moved it
             assert reach.handle is not None  # (the reader asks for one goal)
-            joint = self.task.scene.joints[reach.handle]
-            H = obs.objects[joint.handle]
-            o = self._joint_position(joint.name, readings)
-            (a0, _, c0, h0), (a1, _, c1, h1), (a2, _, c2, h2), _ = H.tolist()  # its x, z, origin
-            wx, wy, wz = h0 + o * a0, h1 + o * a1, h2 + o * a2
-            gz, height, radial = 0.0, math.nan, math.nan
-            if placed:
-                mx, my, height, _ = (self._inverse(joint.handle, H) @ np.array(here)).tolist()
-                radial = math.hypot(mx - o, my)
-            if reach.lift is not None:
-                lift = _lifted(reach.lift, radial)
-                wx, wy, wz = wx + lift * c0, wy + lift * c1, wz + lift * c2
+            gz = 0.0
+            wx, wy, wz, height, radial = self._at_handle(self.task.scene.joints[reach.handle], reach, placed,
+                                                         obs, readings, here)
         ex, ey, ez = wx - tx, wy - ty, wz - tz
         tilt = math.acos(max(-1.0, min(1.0, zz)))
         return _Look(T_f[:3, 3], T_f[:3, 2], tilt, height, gz, radial, (wx, wy, wz),
                      math.sqrt(ex * ex + ey * ey + ez * ez))
+
+    def _at_handle(self, joint: Joint, reach: Reach, placed: bool, obs: Observation,
+                   readings: Mapping[str, Any], here: tuple[float, float, float, float]
+                   ) -> tuple[float, float, float, float, float]:
+        """The goal at ``joint``'s handle where the joint has moved it (world, lifted),
+        and the frame's height and distance from the goal's vertical in the handle's
+        frame so moved (NaN unless ``placed``)."""
+        H = obs.objects[joint.handle]
+        o = self._joint_position(joint.name, readings)
+        T = handle_pose(joint, H, o)
+        (_, _, c0, wx), (_, _, c1, wy), (_, _, c2, wz), _ = T.tolist()  # its z, origin
+        height = radial = math.nan
+        if placed and joint.hinge is None:  # the frame at 0, moved along its x
+            mx, my, height, _ = (self._inverse(joint.handle, H) @ np.array(here)).tolist()
+            radial = math.hypot(mx - o, my)
+        elif placed:  # turned: the frame at the handle now
+            mx, my, height, _ = (self._inverse(joint.name, T) @ np.array(here)).tolist()
+            radial = math.hypot(mx, my)
+        if reach.lift is not None:
+            lift = _lifted(reach.lift, radial)
+            wx, wy, wz = wx + lift * c0, wy + lift * c1, wz + lift * c2
+        return wx, wy, wz, height, radial
 
     # -- the steps -----------------------------------------------------------------------
 
@@ -329,7 +353,8 @@ class TaskIntent:
             return 1 if seen.tilt < a.below else 0
         if a.back is not None and holds(a.back, readings, positions):  # let go: that first
             return -1
-        return 1 if self._joint_position(a.joint, readings) >= self._ends[i] - a.overshoot + self.past else 0
+        reached = self._ends[i] - a.overshoot + self._pasts[i]
+        return 1 if self._joint_position(a.joint, readings) >= reached else 0
 
     def _close(self, seen: _Look) -> bool:
         """Whether the frame is within the current reach's ``accept`` region."""
@@ -359,18 +384,29 @@ class TaskIntent:
             return seen.to_goal + self.per_rad * seen.tilt
         return self._joint_error(i, a, seen, obs, readings)
 
+    def _path(self, a: MoveJoint, obs: Observation, readings: Mapping[str, Any]
+              ) -> tuple[float, Array, Array, float]:
+        """Joint ``a.joint``'s position, its handle there (world), the unit direction the
+        handle moves in as the joint opens (a drawer's axis, a door's arc's tangent) and
+        m of that path per unit of the joint (1 for a prismatic joint, the lever for a
+        revolute one)."""
+        joint = self.task.scene.joints[a.joint]
+        H = obs.objects[joint.handle]
+        o = self._joint_position(a.joint, readings)
+        lever = _lever(joint)
+        return o, handle_pose(joint, H, o)[:3, 3], handle_jacobian(joint, H, o) / lever, lever
+
     def _joint_error(self, i: int, a: MoveJoint, seen: _Look, obs: Observation,
                      readings: Mapping[str, Any]) -> float:
-        """The joint's travel still to go and the frame's distance off the handle's axis."""
-        H = obs.objects[self.task.scene.joints[a.joint].handle]
-        o = self._joint_position(a.joint, readings)
+        """The handle's path still to go (m) and the frame's distance off that path."""
+        o, handle, axis, lever = self._path(a, obs, readings)
         target = self._ends[self._last(i)]
-        (a0, _, _, h0), (a1, _, _, h1), (a2, _, _, h2), _ = H.tolist()  # the axis, the handle
+        (a0, a1, a2), (h0, h1, h2) = axis.tolist(), handle.tolist()
         x, y, z = seen.p.tolist()
-        d0, d1, d2 = h0 + o * a0 - x, h1 + o * a1 - y, h2 + o * a2 - z  # to the handle
+        d0, d1, d2 = h0 - x, h1 - y, h2 - z  # to the handle
         da = 0.0 + d0 * a0 + d1 * a1 + d2 * a2  # (summed as numpy's dot)
         l0, l1, l2 = d0 - da * a0, d1 - da * a1, d2 - da * a2  # lateral
-        err = max(0.0, target - o) + math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
+        err = max(0.0, target - o) * lever + math.sqrt(l0 * l0 + l1 * l1 + l2 * l2)
         upright = self._reach(self._anchors[i]).upright
         return err if upright is None else err + self.per_rad * max(0.0, seen.tilt - upright)
 
@@ -420,16 +456,14 @@ class TaskIntent:
 
     def _along_joint(self, i: int, a: MoveJoint, seen: _Look, obs: Observation,
                      readings: Mapping[str, Any]) -> Array:
-        """The frame's velocity moving the handle: onto the axis, and along it towards
-        the target (aiming at most ``ahead`` m ahead)."""
-        H = obs.objects[self.task.scene.joints[a.joint].handle]
-        o = self._joint_position(a.joint, readings)
+        """The frame's velocity moving the handle: onto the handle across its path, and
+        along the path towards the target (aiming at most ``ahead`` m ahead; on a door's
+        arc, along its tangent at the handle)."""
+        o, handle, axis, lever = self._path(a, obs, readings)
         target = self._ends[i]
-        axis = H[:3, 0]
-        handle = H[:3, 3] + o * axis
         p = seen.p
         lateral = handle - p - float((handle - p) @ axis) * axis
-        along = max(0.0, target - o)
+        along = max(0.0, target - o) * lever
         return _saturate(self.gain * (lateral + min(along, self.ahead) * axis), self.v_max)
 
     def _uprighting(self, seen: _Look, excess: float) -> Array:
