@@ -85,7 +85,8 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--max-n", "--C", "--cut", "--min-segment", "--axis-support", "--margin", "--dtw-align",
         "--no-auto-frames",
         "--n-fields", "--em-iterations", "--angle-sphere", "--angle-translation",
-        "--angle-cylinder", "--max-radius", "--chance-weight", "--selection", "--demo-tolerance",
+        "--angle-cylinder", "--max-radius", "--max-cylinder-radius", "--chance-weight", "--selection",
+        "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
         "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine", "--vf-states",
         "--max-linear-speed", "--max-angular-speed"}

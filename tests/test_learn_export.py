@@ -36,7 +36,8 @@ def pour10_dir(tmp_path_factory):
 SUMMARY_HYPERPARAMETERS = {
     "spacing", "vf_spacing", "smooth", "despike", "alpha", "beta", "smoothness", "radius", "max_n", "C",
     "cut", "min_segment", "axis_support", "margin", "dtw_align", "n_fields", "em_iterations",
-    "angle_sphere", "angle_translation", "angle_cylinder", "max_radius", "chance_weight", "min_v",
+    "angle_sphere", "angle_translation", "angle_cylinder", "max_radius", "max_cylinder_radius",
+    "chance_weight", "min_v",
     "max_d", "k_s", "vf_max_n", "vf_combine", "vf_rotation_weight", "vf_motion", "object",
     "max_linear_speed", "max_angular_speed", "seed"}
 

@@ -101,6 +101,9 @@ class VectorFieldLearner:
     min_radius, max_radius : float
         Sphere and cylinder radii (m) allowed for inliers (very large spheres look
         like any motion).
+    max_cylinder_radius : float
+        The largest cylinder radius instead (m): a door's hinge or a crank's axis lies
+        further from the hand than a held tool's tip a sphere is about.
     refine_steps : int
         Least-squares refinements of each RANSAC winner.
     chance_weight : float
@@ -161,8 +164,12 @@ class VectorFieldLearner:
     coherence_run: int = hyperparameter(3, valid=Interval(1, 1000, integer=True))
     coherence_radius: float = hyperparameter(0.05, valid=Interval(0, 1))
     min_radius: float = hyperparameter(0.02, valid=Interval(0, 1))
-    max_radius: float = hyperparameter(0.3, "largest sphere/cylinder radius (m)",
-                                       valid=Interval(0, 5, open="low"))
+    max_radius: float = hyperparameter(0.3, "largest sphere radius (m)", valid=Interval(0, 5, open="low"))
+    # a door's handle turns 0.3-0.5 m from its hinge (a cabinet's 0.32 m): at the
+    # spheres' 0.3 m its arc was no candidate, and one translation field stood for it
+    max_cylinder_radius: float = hyperparameter(
+        0.6, "largest cylinder radius (m): a door's or a crank's axis from the hand",
+        valid=Interval(0, 5, open="low"))
     refine_steps: int = hyperparameter(2, valid=Interval(0, 20, integer=True))
     chance_weight: float = hyperparameter(
         0.5, "weight of the chance-inlier correction when comparing field types", valid=Interval(0, 10))
@@ -216,7 +223,7 @@ class VectorFieldLearner:
         t0 = time.perf_counter()
         data = displacements(points, quaternions)
         self.points_, self.vectors_, self.quaternions_, self.demo_index_, self.sample_index_ = data
-        angles = FieldAngles(data, self.min_radius, self.max_radius)
+        angles = FieldAngles(data, self.min_radius, self.max_radius, self.max_cylinder_radius)
         self._sequential_ransac(rng, angles)
         if progress is not None:
             progress("ransac")

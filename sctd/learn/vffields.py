@@ -221,18 +221,21 @@ class FieldAngles:
     data: Displacements
     min_radius: float
     max_radius: float
+    max_cylinder_radius: float | None = None
 
     def __call__(self, f: Field, p: Array, v: Array) -> Array:
         """Deviation angles (n,) of directions ``v`` at ``p``; pi/2 where a sphere's or a
         cylinder's radius is out of range."""
         th = f.deviation_angles(p, v)
+        top = self.max_radius
         if isinstance(f, SphereField):
             r = np.linalg.norm(p - f.centre, axis=1)
         elif isinstance(f, CylinderField):
             r = np.linalg.norm(np.cross(f.axis, p - f.point), axis=1)
+            top = self.max_cylinder_radius if self.max_cylinder_radius is not None else top
         else:
             return th
-        bad = (r < self.min_radius) | (r > self.max_radius)
+        bad = (r < self.min_radius) | (r > top)
         return np.where(bad, np.pi / 2, th)
 
     def held_out(self, f: Field, p: Array, v: Array) -> Array:

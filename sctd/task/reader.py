@@ -585,8 +585,15 @@ def _teach_step(r: _Reader, v: Any, path: str, action: Action, scene: Scene) -> 
                 raise r.fail(f"{path}.to", "expected [low, high] with low < high")
         else:
             assert isinstance(action, MoveJoint)  # (the only other kind with a target)
-            lo, hi = out["to"] = r.pair(d["to"], f"{path}.to")
-            travel = scene.joints[action.joint].travel
+            joint = scene.joints[action.joint]
+            if joint.hinge is not None:  # a revolute joint's positions are angles
+                two = _two(r, d["to"], f"{path}.to")
+                lo, hi = out["to"] = tuple(r.angle(a, f"{path}.to[{i}]") for i, a in enumerate(two))
+                if not lo < hi:
+                    raise r.fail(f"{path}.to", "expected [low, high] with low < high")
+            else:
+                lo, hi = out["to"] = r.pair(d["to"], f"{path}.to")
+            travel = joint.travel
             if not (0.0 < lo and hi <= travel):
                 raise r.fail(f"{path}.to", f"expected positions within the joint's travel (0, {travel:g}], "
                                            f"got [{lo}, {hi}]")

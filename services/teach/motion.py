@@ -25,6 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.task import handle_jacobian, handle_pose
+from sctd.task.model import Joint
 
 from .plan import DemoPlan, SceneGeometry, Speeds, StepPlan
 
@@ -160,7 +162,8 @@ def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan
     """The motion of each step of ``plan``, in order (each starts where the one before
     ends): a reach is a :class:`Line` through its via point; a tilt a :class:`TipTurn`
     about the frame's point and the hand's y axis; an upright a :class:`TipTurn` bringing
-    the frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis.
+    the frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis or
+    a :class:`HandlePath` along a revolute joint's arc.
 
     The recorded steps (:attr:`SceneGeometry.recorded`) run as one movement: from rest
     into the first, at their mean speeds through the middle ones, to rest at the end of
@@ -204,11 +207,50 @@ def _tilt(T_obj_ee: Array, T_ee_frame: Array) -> float:
 def _joint_motion(here: Array, s: StepPlan, geometry: SceneGeometry, speed: float, turn_rate: float,
                   profile: str) -> Motion:
     """The hand taking the joint's handle from 0 to the planned position: along a
-    prismatic joint's axis (the handle's x)."""
+    prismatic joint's axis (the handle's x), along a revolute joint's arc (a
+    :class:`HandlePath`)."""
+    joint = geometry.task.scene.joints[s.joint]
     T_handle = geometry.handle(s.joint)
-    T_end = here.copy()
-    T_end[:3, 3] += s.value * T_handle[:3, 0]
-    return line(here, T_end, speed, turn_rate, profile)
+    if joint.hinge is None:
+        T_end = here.copy()
+        T_end[:3, 3] += s.value * T_handle[:3, 0]
+        return line(here, T_end, speed, turn_rate, profile)
+    lever = float(np.linalg.norm(handle_jacobian(joint, T_handle, 0.0)))
+    return HandlePath(here, joint, T_handle, s.value, max(lever * abs(s.value) / speed, 1e-3), profile)
+
+
+@dataclass(frozen=True)
+class HandlePath:
+    """The hand carrying a joint's handle along its path from 0 to ``end`` (a door's
+    handle along its arc), keeping its offset from the handle and its orientation (the
+    grasp couples positions only: a person's wrist turns as it must).
+
+    Attributes
+    ----------
+    T_start : ndarray, shape (4, 4)
+        The hand where it grasped the handle (the joint at 0).
+    joint : Joint
+    T_handle0 : ndarray, shape (4, 4)
+        The handle at 0, in the same frame as ``T_start``.
+    end : float
+        The joint's position at the end, m or rad.
+    duration : float
+    profile : str
+    """
+
+    T_start: Array
+    joint: Joint
+    T_handle0: Array
+    end: float
+    duration: float
+    profile: str
+
+    def pose(self, t: float) -> Array:
+        s = PROFILES[self.profile](_tau(t, self.duration))
+        T = self.T_start.copy()
+        moved = handle_pose(self.joint, self.T_handle0, s * self.end)[:3, 3] - self.T_handle0[:3, 3]
+        T[:3, 3] += moved
+        return T
 
 
 def move(T_a: Array, T_b: Array, speeds: Speeds | None = None) -> Line:

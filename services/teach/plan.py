@@ -14,7 +14,8 @@ one motion of the hand, planned in the task object's frame (``T_obj_ee``):
   step's predicate holds;
 - an **upright** turns the frame's axis back up about its point;
 - a **joint's move** takes the handle along its path (a prismatic joint's axis; a
-  revolute joint's arc about its hinge) to the planned position.
+  revolute joint's arc about its hinge, the hand keeping its orientation) to the
+  planned position.
 
 Between demonstrations (the task file's ``teach`` section, :class:`~sctd.task.model.Teach`)
 the hand starts elsewhere, each reach bends through a different via point, the hand
