@@ -79,3 +79,11 @@ def test_the_intent_alone_opens_the_cabinet_door_in_the_simulation(seed):
 def test_the_same_loop_opens_the_drawer():
     res, _ = steer(find_task("drawer"), 0)
     assert (res.outcome, res.reason) == ("success", "opened") and list(res.phase_s) == ["reach", "pull"], res
+
+
+def test_the_same_loop_lowers_the_oven_door_about_its_horizontal_hinge():
+    """The oven's door turns about a horizontal axis at its bottom edge: the handle goes
+    out towards the arm and down, to 60 deg."""
+    res, lag = steer(find_task("oven"), 1)
+    assert (res.outcome, res.reason) == ("success", "opened") and list(res.phase_s) == ["reach", "lower"], res
+    assert res.progress >= np.radians(60.0) and lag < 0.02, (res, lag)
