@@ -22,7 +22,7 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
     """Add the simulator service's flags (see :func:`sctd_sim.service.run`) to ``p``."""
     add_task_argument(p, defaults().task,
                       help="the task whose scene to simulate: the path of a task file, or the name of "
-                           "a shipped or registered one; sctd tasks lists them")
+                           "a shipped or registered one; sctd tasks lists them", several=True)
     add_robot_argument(p)
     p.add_argument("--trial-seed", type=int, default=None, metavar="N",
                    help="start from the seeded random start N of an evaluation trial (the hand and the "

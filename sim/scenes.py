@@ -437,11 +437,21 @@ class TaskScene:
         out: dict[str, Any] = {"scene": self.name, "readings": r, "done": done,
                                "success": done and holds(o.success, r, pos),
                                "progress": float(r[str(o.progress)]), "thresholds": dict(self.thresholds)}
+        if self.task.parts:  # several tasks in one room: each judged on the same readings
+            out["tasks"] = {t.name: _judged(t, r, pos) for t in self.task.parts}
         if self.flow is not None:
             out.update(self.flow.outcome(self.thresholds))
         for h in self.handles:
             out.update(h.outcome(self.thresholds))
         return out
+
+
+def _judged(task: Task, readings: dict[str, float | bool],
+            positions: dict[str, np.ndarray]) -> dict[str, Any]:
+    """One part of a composed task: done, success and progress on the room's readings."""
+    done = holds(task.outcome.done, readings, positions)
+    return {"done": done, "success": done and holds(task.outcome.success, readings, positions),
+            "progress": float(readings[str(task.outcome.progress)])}
 
 
 class EmptyScene:

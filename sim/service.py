@@ -53,6 +53,7 @@ from sctd import se3
 from sctd.app.defaults import DefaultsError
 from sctd.app.errors import fail
 from sctd.task import Task, TaskError, find_task
+from sctd.task.compose import compose
 from sctd.timing import Histogram, Ticker, set_timer_slack
 from sctd.wire import DEFAULT_ROBOT, Keys, codec
 from sctd.wire.ros_options import check_ros_arguments
@@ -455,8 +456,9 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
         A bad flag, with the message ``sctd sim`` prints.
     """
     faults = parse_faults(args.faults) if args.faults else None
+    refs = args.task if isinstance(args.task, list) else [args.task]
     try:
-        task = find_task(args.task)
+        task = compose([find_task(r) for r in refs])  # one task: itself
     except TaskError as e:
         raise ValueError(f"--task: {e}") from None
     Keys(args.robot)

@@ -160,12 +160,26 @@ class _DeprecatedAlias(argparse.Action):
         setattr(namespace, self.dest, values)
 
 
+class _Several(argparse.Action):
+    """A repeatable flag whose default is one value: the first one given replaces the
+    default, each further one is added (the destination becomes a list)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        now = getattr(namespace, self.dest, None)
+        setattr(namespace, self.dest, [*now, values] if isinstance(now, list) else [values])
+
+
 def add_task_argument(parser: argparse.ArgumentParser | argparse._ArgumentGroup,
-                      default: str | None, help: str | None = None) -> None:
+                      default: str | None, help: str | None = None, several: bool = False) -> None:
     """``--task NAME|FILE`` (:func:`sctd.task.find_task` resolves it), and ``--scene``, its
     deprecated alias of the previous release, which says so on stderr. ``default``: a
-    command's default task (from :mod:`sctd.app.defaults`), or None for none."""
-    parser.add_argument("--task", default=default, metavar="NAME|FILE",
-                        help=(help or TASK_HELP) + (" (default %(default)s)" if default else ""))
+    command's default task (from :mod:`sctd.app.defaults`), or None for none. With
+    ``several``, ``--task`` may be given more than once (several tasks in one room,
+    :func:`sctd.task.compose.compose`): the destination is then a list of them."""
+    more = " (repeatable: several tasks' objects in one room)" if several else ""
+    action: Any = _Several if several else "store"
+    parser.add_argument("--task", default=default, metavar="NAME|FILE", action=action,
+                        help=(help or TASK_HELP) + more + (" (default %(default)s)" if default else ""))
     parser.add_argument("--scene", dest="task", action=_DeprecatedAlias, instead="--task",
                         help=argparse.SUPPRESS)

@@ -587,6 +587,10 @@ class Task:
         What a person doing it wants, in order (done after the last).
     teach : Teach
         How a person's demonstrations of it vary.
+    parts : tuple of Task
+        A task composed of several (:func:`sctd.task.compose.compose`): each as placed
+        in the room, the first the one this task's outcome and intent are; empty for a
+        task of one file.
     file : str
         Where it was read from (for messages).
     """
@@ -601,3 +605,4 @@ class Task:
     intent: tuple[Step, ...]
     teach: Teach = field(default_factory=Teach)
     file: str = ""
+    parts: tuple[Task, ...] = ()

@@ -1,0 +1,123 @@
+"""Several tasks in one room: task files composed into one scene (pure).
+
+:func:`compose` makes one :class:`~.model.Task` out of several, as if a room held all
+their objects at once: the first task is the one whose outcome, intent and hand start
+the composed task keeps (the one a person goes for, in an evaluation); the others bring
+their bodies and joints. Each task keeps its objects' layout; a task whose objects would
+overlap those already placed is turned as a whole about the vertical through the arm's
+base (by 10 deg steps, alternately either way, up to 90 deg), which keeps every object
+at its distance from the arm, until its footprint (the ball around its bodies, joint
+paths and containers, plus :data:`CLEARANCE`) is clear of the others'.
+
+The composed task's ``parts`` are the tasks as placed, each judged on the composed
+scene's readings (an element's readings carry its own name, so they do not mix).
+Names must not clash: two bodies, joints or held objects of one name are an error, as
+is a second held object (the hand holds one thing).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sctd import se3
+
+from .kinematics import handle_pose
+from .model import Body, Joint, Scene, Task
+from .reader import TaskError
+
+Array = NDArray[np.float64]
+CLEARANCE = 0.10
+"""m between two tasks' footprints."""
+STEP = math.radians(10.0)
+"""The turn about the base's vertical tried at a time."""
+MAX_TURN = math.radians(90.0)
+
+
+def footprint(task: Task, T: Array | None = None) -> tuple[Array, float]:
+    """The ball (centre, radius) around ``task``'s bodies, the paths of its joints'
+    handles and its containers' openings, in the world (moved by ``T``, default none)."""
+    sc = task.scene
+    T = np.eye(4) if T is None else T
+    points = [b.T_world[:3, 3] for b in sc.bodies.values()]
+    pad = [b.container.radius if b.container is not None else 0.0 for b in sc.bodies.values()]
+    for j in sc.joints.values():
+        T0 = sc.bodies[j.handle].T_world
+        for q in np.linspace(0.0, j.travel, 9):
+            points.append(handle_pose(j, T0, float(q))[:3, 3])
+            pad.append(0.0)
+    P = (T[:3, :3] @ np.array(points).T).T + T[:3, 3]
+    centre = P.mean(axis=0)
+    radius = max(float(np.linalg.norm(p - centre)) + r for p, r in zip(P, pad, strict=True))
+    return centre, radius
+
+
+def _turned(task: Task, T: Array) -> Task:
+    """``task`` with its bodies (and so its joints' handles) and its start moved by ``T``."""
+    sc = task.scene
+    bodies = {n: replace(b, T_world=T @ b.T_world) for n, b in sc.bodies.items()}
+    start = replace(sc.start, T_world=T @ sc.start.T_world)
+    return replace(task, scene=replace(sc, bodies=bodies, start=start))
+
+
+def _clear(centre: Array, radius: float, placed: list[tuple[Array, float]]) -> bool:
+    return all(float(np.linalg.norm(centre - c)) >= radius + r + CLEARANCE for c, r in placed)
+
+
+def _place(task: Task, placed: list[tuple[Array, float]]) -> Task:
+    """``task`` turned about the base's vertical until clear of ``placed``."""
+    turns = [0.0]
+    k = 1
+    while k * STEP <= MAX_TURN + 1e-9:
+        turns += [k * STEP, -k * STEP]
+        k += 1
+    for a in turns:
+        T = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, a]), np.zeros(3))
+        centre, radius = footprint(task, T)
+        if _clear(centre, radius, placed):
+            return _turned(task, T) if a else task
+    raise TaskError(task.file or task.name, "", f"no place for task {task.name!r} clear of the others "
+                                                 f"within {math.degrees(MAX_TURN):.0f} deg either way")
+
+
+def compose(tasks: list[Task]) -> Task:
+    """One task out of ``tasks`` (see the module doc); one task is itself.
+
+    Raises
+    ------
+    TaskError
+        Clashing names, two held objects, or no place clear of the others.
+    """
+    if len(tasks) == 1:
+        return tasks[0]
+    first = tasks[0]
+    placed_tasks = [first]
+    placed = [footprint(first)]
+    for t in tasks[1:]:
+        t = _place(t, placed)
+        placed_tasks.append(t)
+        placed.append(footprint(t))
+    bodies: dict[str, Body] = {}
+    joints: dict[str, Joint] = {}
+    held = None
+    for t in placed_tasks:
+        sc = t.scene
+        names = set(sc.bodies) | set(sc.joints) | ({sc.held.name, *sc.held.frames} if sc.held else set())
+        taken = set(bodies) | set(joints) | ({held.name, *held.frames} if held else set())
+        clash = sorted(names & taken)
+        if clash:
+            raise TaskError(t.file or t.name, "", f"{clash[0]!r} is also a name in an earlier task: "
+                                                   "composed tasks need distinct names")
+        if sc.held is not None and held is not None:
+            raise TaskError(t.file or t.name, "scene.held", f"the hand already holds {held.name!r} "
+                                                            "for an earlier task: it holds one thing")
+        bodies.update(sc.bodies)
+        joints.update(sc.joints)
+        held = held or sc.held
+    scene = Scene(first.scene.start, bodies, held, joints)
+    name = "+".join(t.name for t in placed_tasks)
+    return replace(first, name=name, title=" and ".join(t.title for t in placed_tasks), scene=scene,
+                   parts=tuple(placed_tasks))
