@@ -27,9 +27,9 @@ from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
 
 from .. import se3
-from ..skill import SkillError
-from ..skill.catalog import find_skill, shipped_folder
-from ..task import Task, find_task
+from ..skill import SkillError, load_skill
+from ..skill.catalog import find_skill, shipped_folder, shipped_skills
+from ..task import Task, TaskError, find_task
 from ..wire import Keys, client, codec
 from .procs import Child
 
@@ -50,12 +50,22 @@ def candidate_frames(task: Task) -> list[str]:
 
 def start_skill(task: str) -> str:
     """The skill the daemon runs before the swap: the task's hand-written skill, the one
-    named as the task (``sctd run --skill <task>``)."""
+    named as the task (``sctd run --skill <task>``), else the first shipped skill on the
+    task's object (a learned one, for a task nobody wrote a skill for)."""
     try:
         find_skill(task)
+        return task
     except SkillError as e:
-        raise LoopError(f"--swap: no skill named as the task {task!r} to start the daemon on: {e}") from None
-    return task
+        why = str(e)
+    try:
+        obj = find_task(task).object
+    except TaskError as e:
+        raise LoopError(f"--swap: no skill named as the task {task!r}: {e}") from None
+    on_object = [p for p in sorted(shipped_skills()) if load_skill(p).object == obj]
+    if not on_object:
+        raise LoopError(f"--swap: no skill named as the task {task!r} and no shipped skill on its object "
+                        f"{obj!r} to start the daemon on: {why}")
+    return str(on_object[0])
 
 
 def add_then_learn_arguments(p: argparse.ArgumentParser) -> None:
