@@ -22,6 +22,9 @@ def test_floor_is_travel_and_tilt_over_the_speed_limits():
     pour = math.hypot(0.30, 0.10) / 0.10 + 1.65 / 0.5
     assert floor(find_task("pour"), Limits()) == pytest.approx(pour)
     assert floor(find_task("pour"), Limits(0.2, 1.0)) == pytest.approx(pour / 2)
+    # the cabinet: the clock's 20 cm, then 65 deg of the door at the handle's 0.321 m lever
+    lever = math.hypot(0.03, 0.32)
+    assert floor(find_task("cabinet"), Limits()) == pytest.approx((0.20 + math.radians(65.0) * lever) / 0.10)
 
 
 def _result(name, limits, times, baseline_of=None, label=None):

@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 
 from sctd.skill import WORLD_OBJECT, Limits, load_skill
 from sctd.skill.catalog import shipped_skills
-from sctd.task import Task
+from sctd.task import Task, handle_jacobian
 from sctd.task.judge import thresholds
 from sctd.task.model import MoveJoint, Near, Reach, Tilt
 
@@ -67,8 +67,8 @@ def floor(task: Task, limits: Limits) -> float:
     """A lower bound of the completion time at ``limits``: the first reach's frame from
     where it starts (or from where the completion clock starts, when that is nearer: a
     ``near`` clock on the task object) straight to its goal at full linear speed, then
-    every joint's travel to its threshold at full linear speed and every tilt at full
-    angular speed."""
+    every joint's handle along its path to its threshold (a revolute joint's angle times
+    its lever) at full linear speed and every tilt at full angular speed."""
     done = thresholds(task.outcome.done)
     sc = task.scene
     obj = sc.bodies[task.object].T_world
@@ -87,8 +87,10 @@ def floor(task: Task, limits: Limits) -> float:
     if isinstance(clock, Near) and clock.to == task.object:
         travel = min(travel, clock.within)
     for s in task.intent:
-        if isinstance(s.action, MoveJoint):
-            travel += done.get(f"{s.action.joint}.position", 0.0)
+        if isinstance(s.action, MoveJoint):  # a revolute joint's angle times its lever
+            j = sc.joints[s.action.joint]
+            lever = float(np.linalg.norm(handle_jacobian(j, sc.bodies[j.handle].T_world, 0.0)))
+            travel += done.get(f"{s.action.joint}.position", 0.0) * lever
         elif isinstance(s.action, Tilt):
             spin += s.action.to
     return travel / limits.max_linear_speed + spin / limits.max_angular_speed
