@@ -481,7 +481,8 @@ def test_scene_is_a_deprecated_alias_of_task(capsys):
     p = argparse.ArgumentParser(prog="sctd sim")
     add_service_arguments(p)
     assert p.parse_args([]).task == "pour"
-    assert p.parse_args(["--task", "drawer"]).task == "drawer"
+    assert p.parse_args(["--task", "drawer"]).task == ["drawer"]  # repeatable: a list once given
+    assert p.parse_args(["--task", "drawer", "--task", "oven"]).task == ["drawer", "oven"]
     assert capsys.readouterr().err == ""
     assert p.parse_args(["--scene", "drawer"]).task == "drawer"
     err = capsys.readouterr().err
