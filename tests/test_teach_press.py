@@ -51,7 +51,7 @@ def test_the_press_motion_pushes_in_along_the_axis_and_comes_back_out():
     lim = StreamLimits()
     for n in (1, 2, 5):
         p = plan_demonstration(G, 7, n)
-        (press, m), (retreat, r) = task_motions(p, G)
+        (press, m), (_, r) = task_motions(p, G)
         assert isinstance(m, PressMotion)
         A = _samples(m.inward)
         np.testing.assert_allclose(A[0], p.T_obj_start, atol=1e-12)
