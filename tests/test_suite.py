@@ -84,3 +84,18 @@ def test_sctd_suite_writes_the_table_and_the_figures(tmp_path):
     assert (tmp_path / "suite.md").read_text().count("| drawer |") == 4
     assert (tmp_path / "suite.png").stat().st_size > 10000
     assert json.loads((tmp_path / "suite.json").read_text())["rows"] == doc["rows"]
+
+
+def test_the_floor_of_a_press_is_its_approach():
+    """The light switch's first move is a press: the hand from its start to the switch's
+    face (23.5 cm), counted from the clock's 20 cm, at 0.1 m/s; without that clock, the
+    whole way."""
+    import dataclasses
+
+    task = find_task("light_switch")
+    sc = task.scene
+    way = math.dist(sc.start.T_world[:3, 3], sc.bodies["light_switch"].T_world[:3, 3])
+    assert way == pytest.approx(0.2354, abs=1e-4)
+    assert floor(task, Limits()) == pytest.approx(0.20 / 0.10)
+    free = dataclasses.replace(task, outcome=dataclasses.replace(task.outcome, clock=True))
+    assert floor(free, Limits()) == pytest.approx(way / 0.10)

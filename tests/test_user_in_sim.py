@@ -87,3 +87,17 @@ def test_the_same_loop_lowers_the_oven_door_about_its_horizontal_hinge():
     res, lag = steer(find_task("oven"), 1)
     assert (res.outcome, res.reason) == ("success", "opened") and list(res.phase_s) == ["reach", "lower"], res
     assert res.progress >= np.radians(60.0) and lag < 0.02, (res, lag)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_intent_alone_switches_on_the_light_in_the_simulation(seed):
+    """From three seeded starts (the hand and the wall placed as the file's vary says),
+    the hand comes onto the switch's axis, pushes it in until it clicks on, gently enough
+    for the task's 10 N bound, and takes the hand back off the wall, the arm never more
+    than 2 cm behind its target."""
+    task = find_task("light_switch")
+    res, lag = steer(task, seed)
+    assert (res.outcome, res.reason) == ("success", "switched on"), res
+    assert res.time_s is not None and res.time_s < 10.0 and res.duration_s < 15.0, res
+    assert list(res.phase_s) == ["press", "retreat"] and res.progress == 1.0, res
+    assert lag < 0.02, lag

@@ -13,6 +13,7 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import TASK_HELP
 from ..task import Task, TaskError, find_task, known_tasks, load_task
 from ..task.judge import thresholds
+from ..task.model import AllOf, Body, Compare, Predicate
 from ..task.reader import KINDS
 
 
@@ -40,8 +41,10 @@ def summary(task: Task) -> dict[str, Any]:
                 "mass": held.contents.mass, "outlet": held.contents.outlet, "into": held.contents.into}},
         "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel, "unit": j.unit}
                    for n, j in sc.joints.items()},
+        "surfaces": {n: _surface(b) for n, b in sc.bodies.items() if b.surface is not None},
         "frames": sc.frames(),
         "thresholds": thresholds(task.outcome.done),
+        "done": _flag_terms(task.outcome.done),
         "done_reason": task.outcome.done_reason,
         "fails": [f.reason for f in task.outcome.fail],
         "progress": str(task.outcome.progress),
@@ -49,6 +52,28 @@ def summary(task: Task) -> dict[str, Any]:
         "intent": [{"name": s.name, "kind": next(k for k, c in KINDS.items() if isinstance(s.action, c))}
                    for s in task.intent],
     }
+
+
+def _flag_terms(p: Predicate) -> list[str]:
+    """The flags a conjunction requires (``light_switch.on is true``), as text."""
+    if isinstance(p, Compare) and p.is_ is not None:
+        return [f"{p.reading} is {str(p.is_).lower()}"]
+    if isinstance(p, AllOf):
+        return [t for term in p.terms for t in _flag_terms(term)]
+    return []
+
+
+def _flags(terms: list[str]) -> str:
+    return ", ".join(terms) or "see the file"
+
+
+def _surface(body: Body) -> dict[str, Any]:
+    """A body's surface and the button in it, as ``sctd tasks show`` prints them."""
+    s, b = body.surface, body.button
+    assert s is not None
+    return {"stiffness": s.stiffness, "damping": s.damping, "friction": s.friction, "touch": list(s.touch),
+            "button": None if b is None else {"radius": b.radius, "travel": b.travel, "click": b.click,
+                                              "click_force": b.click_force}}
 
 
 def _rows() -> list[dict[str, Any]]:
@@ -88,7 +113,14 @@ def main_tasks(args: argparse.Namespace) -> int:
             if j["unit"] == "rad":
                 travel += f" ({math.degrees(j['travel']):g} deg)"
             print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {travel}")
-        targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or "see the file"
+        for n, f in s["surfaces"].items():
+            print(f"  surface {n}: {f['stiffness']:g} N/m, friction {f['friction']:g}, touched by "
+                  f"{', '.join(f['touch'])}")
+            if f["button"]:
+                b = f["button"]
+                print(f"  button {n}: radius {b['radius'] * 1000:g} mm, travel {b['travel'] * 1000:g} mm, "
+                      f"switches at {b['click'] * 1000:g} mm ({b['click_force']:g} N)")
+        targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
         steps = ", ".join(f"{st['name']} ({st['kind']})" for st in s["intent"])

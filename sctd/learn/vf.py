@@ -161,7 +161,10 @@ class VectorFieldLearner:
     min_inliers: int = hyperparameter(10, valid=Interval(3, 100_000, integer=True))
     min_weight: float = hyperparameter(0.05, valid=Interval(0, 1))
     coherence: bool = hyperparameter(True, valid=Flag())
-    coherence_run: int = hyperparameter(3, valid=Interval(1, 1000, integer=True))
+    coherence_run: int = hyperparameter(
+        3, "consecutive points a field must explain for them to count (a motion shorter than "
+           "this many times --vf-spacing, a button let out again, forms no field)",
+        valid=Interval(1, 1000, integer=True))
     coherence_radius: float = hyperparameter(0.05, valid=Interval(0, 1))
     min_radius: float = hyperparameter(0.02, valid=Interval(0, 1))
     max_radius: float = hyperparameter(0.3, "largest sphere radius (m)", valid=Interval(0, 5, open="low"))

@@ -6,13 +6,15 @@ A task knows nothing of any skill. It holds:
   bodies standing in the world (each a frame, optionally a container whose opening is
   at its origin); what the hand holds (mass, centre of mass, named frames such as a
   bottle's opening, contents that flow out when it is tilted); joints moving a handle
-  the hand grasps (prismatic: a drawer; revolute: a hinged door);
+  the hand grasps (prismatic: a drawer; revolute: a hinged door); a body's solid
+  surface the hand touches and the push button on it (a light switch);
 - the **task object**: the body whose frame demonstrations and skills are expressed in;
 - the **outcome**: predicates on the scene's readings (:class:`Reading`) saying when
   the task is done, whether it then succeeded, what ends it early as a failure, what
   counts as progress, when the completion clock starts, and the time limit;
 - the **intent**: what a person doing the task wants, as ordered sub-goals (:class:`Step`)
-  in the task object's frame: reach a region, tilt, bring upright, move a joint;
+  in the task object's frame: reach a region, tilt, bring upright, move a joint, press
+  a button;
 - **teach**: how a person's demonstrations of it vary (:class:`Teach`).
 
 Every pose is in the world frame, the arm's base (x forward, z up), in metres and
@@ -86,12 +88,19 @@ class Body:
     vary : Vary
         How far a trial's pose is from the default.
     container : Container or None
+    surface : Surface or None
+        A solid surface the hand touches (a wall): the plane through its origin normal to
+        its x axis.
+    button : Button or None
+        A push button in that surface, its face centred on the origin.
     """
 
     name: str
     T_world: Array
     vary: Vary = field(default_factory=Vary)
     container: Container | None = None
+    surface: Surface | None = None
+    button: Button | None = None
 
 
 @dataclass(frozen=True)
@@ -249,6 +258,77 @@ class Joint:
         return "rad" if self.kind == "revolute" else "m"
 
 
+# -- surfaces and buttons ---------------------------------------------------------------
+@dataclass(frozen=True)
+class Surface:
+    """A body's solid surface: the plane through the body's origin normal to its x axis,
+    solid behind it (towards -x).
+
+    A point of the hand (``touch``) that is ``d`` behind the plane is pushed out along
+    the normal by ``max(0, stiffness d + damping v_in)`` (``v_in`` its speed into the
+    surface) and held back along it by Coulomb friction, ``friction`` times that, built
+    up over ``friction_speed`` (tanh).
+
+    Attributes
+    ----------
+    stiffness : float
+        N/m of the contact (a fingertip's or a tool's against the wall).
+    damping : float
+        N s/m.
+    friction : float
+        The coefficient of friction (tangential over normal force).
+    friction_speed : float
+        m/s over which the friction builds up.
+    touch : tuple of str
+        The frames that touch it: ``hand`` (the end-effector's origin) and held frames.
+    """
+
+    stiffness: float
+    damping: float
+    friction: float
+    friction_speed: float
+    touch: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Button:
+    """A push button in a body's surface (a light switch, an elevator's call button): its
+    face, a disc of ``radius`` centred on the body's origin, flush with the surface at
+    rest, travels in (along -x) against a spring up to ``travel``, where it rests on the
+    wall; pushed in past ``click`` it switches (its flag ``on`` toggles), and switches
+    again only once it came back out to half that.
+
+    The button is light beside the hand: at every instant its face is where the contact
+    and its spring balance, ``stiffness (d - s) = preload + spring s`` for the hand's
+    point ``d`` past the face's rest plane and the face pushed in by ``s`` in [0,
+    travel] (the surface's contact stiffness).
+
+    Attributes
+    ----------
+    radius : float
+        m of the face.
+    travel : float
+        m from rest to where it rests on the wall.
+    click : float
+        m pushed in past which it switches; at most ``travel``.
+    spring : float
+        N/m of its return spring.
+    preload : float
+        N its spring holds it out with: the push it takes to start moving.
+    """
+
+    radius: float
+    travel: float
+    click: float
+    spring: float
+    preload: float
+
+    @property
+    def click_force(self) -> float:
+        """The push that takes the face to its click depth, N."""
+        return self.preload + self.spring * self.click
+
+
 @dataclass(frozen=True)
 class Start:
     """The hand's start: ``T_world`` and how much it varies between trials."""
@@ -275,12 +355,19 @@ class Scene:
 READINGS = {
     "contents": ("poured", "spilled", "remaining", "flowing"),
     "joint": ("position", "speed", "held", "grasps", "max_position"),
+    "surface": ("force", "max_force", "touching"),
+    "button": ("force", "max_force", "touching", "position", "on", "presses"),
 }
 """What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
 left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
 is held, how often it was grasped and the furthest position reached (m, m/s; rad, rad/s
-for a revolute joint)."""
+for a revolute joint); a body's surface (by the body's name) the normal force the hand
+presses it with now and the highest so far (N), and whether the hand touches it; a
+surface with a button besides how far the button is pushed in (m), whether it is on and
+how often it switched."""
+FLAGS = ("flowing", "held", "touching", "on")
+"""The readings that are flags (compared with ``is: true|false``)."""
 
 
 @dataclass(frozen=True)
@@ -479,7 +566,20 @@ class MoveJoint:
     back: Predicate | None = None
 
 
-Action = Reach | Tilt | Upright | MoveJoint
+@dataclass(frozen=True)
+class Press:
+    """Press ``button`` (a body with a button) with ``frame`` (``hand`` or a held frame):
+    bring the frame in front of the button's face, onto its axis, and push it in along
+    its inward normal (the body's -x), never harder than ``force`` (N), until ``until``
+    holds (the light on)."""
+
+    frame: str
+    button: str
+    until: Predicate
+    force: float
+
+
+Action = Reach | Tilt | Upright | MoveJoint | Press
 
 DONE = "done"
 """The phase after the intent's last step (no step may be called so)."""
@@ -514,13 +614,23 @@ class TeachStep:
         moved to drawn from this range (m or rad). None: the step's own target.
     miss : float
         A reach: how far a mistaken demonstration misses its goal, m (a point goal in a
-        random horizontal direction, a handle to its side, along its y).
+        random horizontal direction, a handle to its side, along its y); a press: how far
+        beside the button's centre it pushes (along the body's y).
+    margin : tuple of float or None
+        A press: how far past the button's click depth the frame is pushed, m, drawn
+        from this range (None: :data:`PRESS_MARGIN`).
     """
 
     yaw: float = 0.0
     height: tuple[float, float] | None = None
     to: tuple[float, float] | None = None
     miss: float = 0.05
+    margin: tuple[float, float] | None = None
+
+
+PRESS_MARGIN = (0.002, 0.004)
+"""m past a button's click depth a demonstration pushes its frame when the task's
+``teach`` section does not say (the arm and the contact yield a little under the push)."""
 
 
 @dataclass(frozen=True)
@@ -548,6 +658,8 @@ class Teach:
         Mean turn rate of a tilt, rad/s.
     joint_speed : float
         Mean speed of the handle along its path while moving a joint, m/s.
+    press_speed : float
+        Mean speed of a frame pushing a button in, m/s.
     steps : dict of str to TeachStep
         By the intent step's name; a step not named varies by :class:`TeachStep`'s
         defaults.
@@ -562,6 +674,7 @@ class Teach:
     turn_rate: float = 0.6
     tilt_rate: float = 0.65
     joint_speed: float = 0.08
+    press_speed: float = 0.02
     steps: dict[str, TeachStep] = field(default_factory=dict)
 
     def step(self, name: str) -> TeachStep:

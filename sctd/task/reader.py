@@ -7,6 +7,7 @@ str``); an unknown field is one, so that a misspelt key never passes silently.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Collection
@@ -20,6 +21,7 @@ from sctd.skill.reader import Reader, kind_of
 from .judge import thresholds
 from .model import (
     DONE,
+    FLAGS,
     JOINT_KINDS,
     READINGS,
     VERSION,
@@ -28,6 +30,7 @@ from .model import (
     AllOf,
     AnyOf,
     Body,
+    Button,
     Compare,
     Container,
     Contents,
@@ -42,12 +45,14 @@ from .model import (
     Not,
     Outcome,
     Predicate,
+    Press,
     Reach,
     Reached,
     Reading,
     Scene,
     Start,
     Step,
+    Surface,
     Task,
     Teach,
     TeachStep,
@@ -204,6 +209,7 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     if not bodies:
         raise r.fail(f"{path}.bodies", "expected at least one body")
     held = _held(r, d["held"], f"{path}.held", bodies) if "held" in d else None
+    bodies = _touching(r, bodies, held, f"{path}.bodies")
     joints: dict[str, Joint] = {}
     for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
         where = f"{path}.joints.{key}"
@@ -214,11 +220,12 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     if twice:
         raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints and "
                            f"{HAND!r} share one namespace)")
+    _in_front(r, scene, path)
     return scene
 
 
 def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
-    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container"})
+    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", "surface", "button"})
     container = None
     if "container" in d:
         c = r.fields(d["container"], f"{path}.container", {"radius", "depth"}, {"rim_margin", "max_drop"})
@@ -228,8 +235,9 @@ def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
             raise r.fail(f"{path}.container.rim_margin", f"must be below the radius {radius}, got {margin}")
         container = Container(radius, r.positive(c["depth"], f"{path}.container.depth"), margin,
                               r.positive(c.get("max_drop", 0.15), f"{path}.container.max_drop"))
+    surface, button = _contact(r, d, path)
     return Body(name, r.transform(d, path), r.vary(d["vary"], f"{path}.vary") if "vary" in d else Vary(),
-                container)
+                container, surface, button)
 
 
 def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
@@ -304,12 +312,95 @@ def _hinge(r: _Reader, v: Any, path: str) -> Hinge:
     return hinge
 
 
+# -- surfaces and buttons -------------------------------------------------------------
+MAX_STIFFNESS = 50000.0
+"""N/m: the stiffest contact the simulator's 1 kHz step integrates stably against the
+arm's effective mass at the hand."""
+
+
+def _contact(r: _Reader, d: dict, path: str) -> tuple[Surface | None, Button | None]:
+    """A body's ``surface`` and the ``button`` in it (a button needs the surface). The
+    surface's ``touch`` frames are names still to be checked (:func:`_touching`)."""
+    surface = _surface(r, d["surface"], f"{path}.surface") if "surface" in d else None
+    if "button" not in d:
+        return surface, None
+    if surface is None:
+        raise r.fail(f"{path}.button", "a button sits in its body's surface: the body needs a surface "
+                                       "(the wall it is pushed into)")
+    return surface, _button(r, d["button"], f"{path}.button")
+
+
+def _surface(r: _Reader, v: Any, path: str) -> Surface:
+    d = r.fields(v, path, {"stiffness"}, {"damping", "friction", "friction_speed", "touch"})
+    stiffness = r.number(d["stiffness"], f"{path}.stiffness", lo=0.0, hi=MAX_STIFFNESS, lo_open=True)
+    damping, friction = (r.nonneg(d.get(k, 0.0), f"{path}.{k}") for k in ("damping", "friction"))
+    touch: tuple[str, ...] = ()
+    if "touch" in d:
+        names = d["touch"]
+        if not isinstance(names, list) or not names:
+            raise r.fail(f"{path}.touch", f"expected a non-empty list of frames, got {kind_of(names)}")
+        touch = tuple(r.string(n, f"{path}.touch[{i}]") for i, n in enumerate(names))
+        if len(set(touch)) < len(touch):
+            raise r.fail(f"{path}.touch", f"a frame is listed twice: {', '.join(touch)}")
+    return Surface(stiffness, damping, friction,
+                   r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed"), touch)
+
+
+def _button(r: _Reader, v: Any, path: str) -> Button:
+    d = r.fields(v, path, {"radius", "travel", "click"}, {"spring", "preload"})
+    radius, travel, click = (r.positive(d[k], f"{path}.{k}") for k in ("radius", "travel", "click"))
+    if click > travel:
+        raise r.fail(f"{path}.click", f"must be at most the travel {travel}, got {click}")
+    spring, preload = (r.nonneg(d.get(k, 0.0), f"{path}.{k}") for k in ("spring", "preload"))
+    return Button(radius, travel, click, spring, preload)
+
+
+def _touching(r: _Reader, bodies: dict[str, Body], held: Held | None, path: str) -> dict[str, Body]:
+    """The bodies with each surface's ``touch`` checked against the frames that move with
+    the hand (``hand`` and the held frames), or set to all of them when not given."""
+    moving = (HAND, *(held.frames if held else ()))
+    out = {}
+    for name, b in bodies.items():
+        if b.surface is not None:
+            for i, f in enumerate(b.surface.touch):
+                if f not in moving:
+                    raise r.fail(f"{path}.{name}.surface.touch[{i}]", f"expected a frame that moves with "
+                                                                      f"the hand, got {f!r} (frames: "
+                                                                      f"{', '.join(moving)})")
+            if held is not None and name == held.name:
+                raise r.fail(f"{path}.{name}.surface", f"the held object is called {name!r} too: a "
+                                                       "surface reports its readings by its body's name")
+            surface = dataclasses.replace(b.surface, touch=b.surface.touch or moving)
+            b = dataclasses.replace(b, surface=surface)
+        out[name] = b
+    return out
+
+
+def _in_front(r: _Reader, scene: Scene, path: str) -> None:
+    """Every frame that touches a surface starts in front of it (a surface is solid
+    behind its plane)."""
+    T_start = scene.start.T_world
+    frames = scene.held.frames if scene.held is not None else {}
+    for name, b in scene.bodies.items():
+        if b.surface is None:
+            continue
+        T_body_world = se3.invert_transform(b.T_world)
+        for f in b.surface.touch:
+            T = T_start @ frames[f] if f != HAND else T_start
+            x = float((T_body_world @ T)[0, 3])
+            if not x > 0.0:
+                raise r.fail(f"{path}.start", f"{f} starts {-x:.3g} m behind the surface of {name!r}: "
+                                              "a surface is solid behind its plane (the body's -x side)")
+
+
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
     out = {j: "joint" for j in scene.joints}
     if scene.held is not None and scene.held.contents is not None:
         out[scene.held.name] = "contents"
+    out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
+                if b.surface is not None})
     return out
 
 
@@ -349,7 +440,7 @@ def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:
         bounds = {k: d[k] for k in COMPARISONS if k in d}
         if not bounds:
             raise r.fail(path, f"expected a comparison: one or two of {', '.join(COMPARISONS)}")
-        flag = reading.quantity in ("flowing", "held")
+        flag = reading.quantity in FLAGS
         if flag != ("is" in bounds) or (flag and len(bounds) > 1):
             how = ("a flag: compare it with is: true|false" if flag
                    else "a number: compare it with at_least, at_most, above or below")
@@ -408,7 +499,8 @@ def _outcome(r: _Reader, v: Any, path: str, scene: Scene) -> Outcome:
 
 
 # -- the intent ---------------------------------------------------------------------------
-KINDS: dict[str, type] = {"reach": Reach, "tilt": Tilt, "upright": Upright, "move_joint": MoveJoint}
+KINDS: dict[str, type] = {"reach": Reach, "tilt": Tilt, "upright": Upright, "move_joint": MoveJoint,
+                          "press": Press}
 """The kinds of step, by the key that gives one (each step has one besides its ``name``)."""
 
 
@@ -433,9 +525,10 @@ def _intent(r: _Reader, v: Any, path: str, scene: Scene, outcome: Outcome) -> tu
         if len(kinds) != 1:
             raise r.fail(where, f"expected one of {', '.join(KINDS)}; got {', '.join(kinds) or 'none'}")
         kind = kinds[0]
-        if anchor is None and kind != "reach":
+        if anchor is None and kind not in ("reach", "press"):  # (a press names its frame)
             raise r.fail(f"{where}.{kind}", f"a {kind} step moves the frame of a reach before it: "
-                                            "the first step must be a reach")
+                                            + ("the first step must be a reach" if not steps
+                                               else "no reach comes before it"))
         action = _action(r, kind, d[kind], f"{where}.{kind}", scene, outcome, anchor)
         if isinstance(action, Reach):
             anchor = action
@@ -455,6 +548,8 @@ def _action(r: _Reader, kind: str, v: Any, path: str, scene: Scene, outcome: Out
     if kind == "upright":
         d = r.fields(v, path, {"below"})
         return Upright(r.tilt(d["below"], f"{path}.below"))
+    if kind == "press":
+        return _press(r, v, path, scene)
     d = r.fields(v, path, {"joint"}, {"overshoot", "back"})
     joint = _joint_name(r, d["joint"], f"{path}.joint", scene)
     if f"{joint}.position" not in thresholds(outcome.done):
@@ -467,6 +562,29 @@ def _action(r: _Reader, kind: str, v: Any, path: str, scene: Scene, outcome: Out
     overshoot = read(d.get("overshoot", 0.0), f"{path}.overshoot", lo=0.0)
     return MoveJoint(joint, overshoot,
                      predicate(r, d["back"], f"{path}.back", scene) if "back" in d else None)
+
+
+def _press(r: _Reader, v: Any, path: str, scene: Scene) -> Press:
+    """``{frame, button, until, force}``: a frame that touches the button's surface, a
+    body with a button, what completes the step, and a push bound the button can be
+    switched under."""
+    d = r.fields(v, path, {"frame", "button", "until", "force"})
+    name = r.string(d["button"], f"{path}.button")
+    body = scene.bodies.get(name)
+    if body is None or body.button is None or body.surface is None:
+        buttons = [n for n, b in scene.bodies.items() if b.button is not None]
+        raise r.fail(f"{path}.button", f"expected a body with a button, got {name!r} (buttons: "
+                                       f"{', '.join(buttons) or 'none'})")
+    frame = r.string(d["frame"], f"{path}.frame")
+    if frame not in body.surface.touch:
+        raise r.fail(f"{path}.frame", f"expected a frame that touches the surface of {name!r}, got "
+                                      f"{frame!r} (its touch: {', '.join(body.surface.touch)})")
+    force = r.positive(d["force"], f"{path}.force")
+    needs = body.button.click_force
+    if not force > needs:
+        raise r.fail(f"{path}.force", f"the button takes {needs:g} N to push to its click depth: a push "
+                                      f"of at most {force:g} N never switches it")
+    return Press(frame, name, predicate(r, d["until"], f"{path}.until", scene), force)
 
 
 def _joint_name(r: _Reader, v: Any, path: str, scene: Scene) -> str:
@@ -530,14 +648,15 @@ def _orientation(r: _Reader, v: Any, path: str) -> float | None:
     return r.tilt(d["upright"], f"{path}.upright")
 
 
-TEACH_SPEEDS = {"reach": "reach_speed", "turn": "turn_rate", "tilt": "tilt_rate", "joint": "joint_speed"}
+TEACH_SPEEDS = {"reach": "reach_speed", "turn": "turn_rate", "tilt": "tilt_rate", "joint": "joint_speed",
+                "press": "press_speed"}
 """``teach.speeds``' keys and the :class:`~.model.Teach` fields they set."""
 
 
 def _teach(r: _Reader, v: Any, path: str, intent: tuple[Step, ...], scene: Scene) -> Teach:
     """How demonstrations vary: ``start``, ``start_height``, ``via``, ``via_at``,
-    ``speed``, ``speeds`` (reach, turn, tilt, joint) and ``steps`` by the intent's step
-    names."""
+    ``speed``, ``speeds`` (reach, turn, tilt, joint, press) and ``steps`` by the intent's
+    step names."""
     d = r.fields(v, path, set(), {"start", "start_height", "via", "via_at", "speed", "speeds", "steps"})
     out: dict[str, Any] = {}
     for k in ("start", "via"):
@@ -566,13 +685,18 @@ def _teach(r: _Reader, v: Any, path: str, intent: tuple[Step, ...], scene: Scene
 
 def _teach_step(r: _Reader, v: Any, path: str, action: Action, scene: Scene) -> TeachStep:
     """A step's variation: what a step of its kind can vary."""
-    allowed = {Reach: {"yaw", "height", "miss"}, Tilt: {"to"}, MoveJoint: {"to"}, Upright: set()}
+    allowed = {Reach: {"yaw", "height", "miss"}, Tilt: {"to"}, MoveJoint: {"to"}, Upright: set(),
+               Press: {"margin", "miss"}}
     d = r.fields(v, path, set(), allowed[type(action)])
     out: dict[str, Any] = {}
     if "yaw" in d:
         out["yaw"] = r.angle(d["yaw"], f"{path}.yaw", lo=0.0, hi=math.pi)
     if "miss" in d:
         out["miss"] = r.positive(d["miss"], f"{path}.miss")
+    if "margin" in d:
+        lo, hi = out["margin"] = r.pair(d["margin"], f"{path}.margin")
+        if lo < 0.0:
+            raise r.fail(f"{path}.margin", f"expected depths >= 0 past the click, got [{lo}, {hi}]")
     if "height" in d:
         if not isinstance(action, Reach) or action.to is None:
             raise r.fail(f"{path}.height", "only a reach to a point (to) has a goal height to vary")

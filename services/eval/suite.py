@@ -25,7 +25,7 @@ from sctd.skill import WORLD_OBJECT, Limits, load_skill
 from sctd.skill.catalog import shipped_skills
 from sctd.task import Task, handle_jacobian
 from sctd.task.judge import thresholds
-from sctd.task.model import MoveJoint, Near, Reach, Tilt
+from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
 
 from .evaluate import (
     TELEOP,
@@ -64,20 +64,23 @@ def skills_for(task: Task, shipped: list[Path] | None = None) -> list[str]:
 
 
 def floor(task: Task, limits: Limits) -> float:
-    """A lower bound of the completion time at ``limits``: the first reach's frame from
-    where it starts (or from where the completion clock starts, when that is nearer: a
-    ``near`` clock on the task object) straight to its goal at full linear speed, then
-    every joint's handle along its path to its threshold (a revolute joint's angle times
-    its lever) at full linear speed and every tilt at full angular speed."""
+    """A lower bound of the completion time at ``limits``: the first reach's (or press's)
+    frame from where it starts (or from where the completion clock starts, when that is
+    nearer: a ``near`` clock on the task object) straight to its goal (a button's face) at
+    full linear speed, then every joint's handle along its path to its threshold (a
+    revolute joint's angle times its lever) at full linear speed and every tilt at full
+    angular speed."""
     done = thresholds(task.outcome.done)
     sc = task.scene
     obj = sc.bodies[task.object].T_world
     travel = spin = 0.0
-    first = next(s.action for s in task.intent if isinstance(s.action, Reach))
-    assert isinstance(first, Reach)  # (the reader: the first step is a reach)
+    first = next(s.action for s in task.intent if isinstance(s.action, Reach | Press))
+    assert isinstance(first, Reach | Press)  # (the reader: the first step is a reach or a press)
     held = sc.held.frames if sc.held is not None else {}
     start = (sc.start.T_world @ held.get(first.frame, np.eye(4)))[:3, 3]
-    if first.to is not None:
+    if isinstance(first, Press):
+        goal = sc.bodies[first.button].T_world[:3, 3]
+    elif first.to is not None:
         goal = obj[:3, :3] @ first.to + obj[:3, 3]
     else:
         assert first.handle is not None  # (the reader asks for one goal)

@@ -6,8 +6,10 @@ Per attempt (:func:`teach`):
 2. reset the scene (``sim/reset``: a bottle full, a drawer closed);
 3. record (:class:`~sctd_services.record.Take`) the task motion, one motion per step of
    the task's intent (:mod:`.motion`): a reach (a handle is grasped on arrival), a tilt
-   held until its predicate holds (the fill target reached), a joint moved; a step ends
-   early when one of the task's failure rules holds (a drop spilled);
+   held until its predicate holds (the fill target reached), a joint moved, a button
+   pushed in, held until its predicate holds (the light on) and let out; a step ends
+   early when one of the task's failure rules holds (a drop spilled, a switch pushed too
+   hard);
 4. stop recording, finish unrecorded (the intent's last uprights: a bottle back upright
    about its opening, so the last drops land where the stream did) and judge from the
    scene's outcome: the task done and successful, no failure rule holding (the
@@ -15,7 +17,7 @@ Per attempt (:func:`teach`):
 5. keep it (``demo_NNN.csv``, published on ``sctd/<robot>/demos/<task>/<name>``) or
    discard it, saying why; a grasped handle is let go by resetting the scene (the
    simulated hand has no gripper to open, and pulling it off would take more than the
-   arm's guard admits).
+   arm's guard admits); a hand left pressing a surface is pulled back off it.
 
 Until ``demos`` are kept or ``max_attempts`` made. An attempt the arm cannot follow
 (a start out of its reach) is discarded like a failed one; a lost simulator or another
@@ -38,17 +40,26 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task, TaskError, find_task
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import AllOf, AnyOf, Compare, Not, Predicate, Tilt
+from sctd.task.model import AllOf, AnyOf, Compare, Not, Predicate, Press, Tilt
 from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
-from .motion import Motion, move, task_motions, upright
-from .plan import DemoPlan, SceneGeometry, Speeds, StepPlan, plan_demonstration, scene_geometry
+from .motion import Motion, PressMotion, move, task_motions, upright
+from .plan import (
+    PRESS_STANDOFF,
+    DemoPlan,
+    SceneGeometry,
+    Speeds,
+    StepPlan,
+    plan_demonstration,
+    scene_geometry,
+)
 from .stream import SimulatorLost, StreamLimits, Teacher, TeachingError, WrongScene
 
 Array = NDArray[np.float64]
 COMMANDER_WINDOW = 1.0  # s of listening for another commander's status before the first target
 TILT_TIMEOUT = 15.0  # s a tilt may be held for its predicate (the tilted bottle to fill the mug)
+PRESS_TIMEOUT = 5.0  # s a pushed button may be held for its predicate (the light to come on)
 
 
 def _option(default: Any, help: str, **meta: Any) -> Any:
@@ -262,6 +273,10 @@ def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: T
     if task.scene.joints:
         teacher.reset_scene(options.name)
         return
+    presses = [s for s in plan.steps if s.kind == "press"]
+    if presses:
+        _pull_back(teacher, geometry, presses[-1], speeds)
+        return
     tilts = [s for s in plan.steps if s.kind == "tilt"]
     if not tilts:
         return
@@ -271,6 +286,17 @@ def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: T
     if back.angle > 0.05:
         teacher.phase = "upright"
         teacher.follow(back, T_world_obj)
+
+
+def _pull_back(teacher: Teacher, geometry: SceneGeometry, press: StepPlan, speeds: Speeds) -> None:
+    """The hand moved out along the button's outward normal by the press's standoff,
+    from where it is (off the wall, if an attempt ended pressing it)."""
+    T_world_obj = teacher.object_pose()
+    T_obj_ee = se3.invert_transform(T_world_obj) @ teacher.target()
+    T_out = T_obj_ee.copy()
+    T_out[:3, 3] += PRESS_STANDOFF * geometry.body(press.button)[:3, 0]
+    teacher.phase = "move"
+    teacher.follow(move(T_obj_ee, T_out, speeds), T_world_obj)
 
 
 def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeometry,
@@ -306,6 +332,9 @@ def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_
     teacher.phase = step.name
     failed = _failing(teacher, task)
     action = next(s.action for s in task.intent if s.name == step.name)
+    if isinstance(action, Press):
+        assert isinstance(motion, PressMotion)  # (a press's motion)
+        return _press(teacher, step, motion, action, T_world_obj, failed)
     if not isinstance(action, Tilt):
         teacher.follow(motion, T_world_obj, stop_when=failed)
         return not failed()
@@ -316,6 +345,22 @@ def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_
         raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
                             f"{TILT_TIMEOUT:g} s of holding the tilt")
     return not failed()
+
+
+def _press(teacher: Teacher, step: StepPlan, motion: PressMotion, action: Press, T_world_obj: Array,
+           failed: Callable[[], bool]) -> bool:
+    """Show a press: in to the planned depth, held until the step's predicate holds
+    (TeachingError when it does not in PRESS_TIMEOUT s), out again; stopped when a
+    failure rule holds (False then)."""
+    if not teacher.follow(motion.inward, T_world_obj, stop_when=failed):
+        return False
+
+    def enough() -> bool:
+        return failed() or holds(action.until, _readings(teacher), {})
+    if not teacher.hold(enough, PRESS_TIMEOUT):
+        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
+                            f"{PRESS_TIMEOUT:g} s of holding the button pushed in")
+    return not failed() and teacher.follow(motion.outward, T_world_obj, stop_when=failed)
 
 
 def _readings(teacher: Teacher) -> dict:

@@ -2,12 +2,14 @@
 
 A motion is ``T_obj_ee(t)`` for ``t`` in ``[0, duration]``: a :class:`Line` (the hand
 translated along a curve through a via point while it turns from one orientation to
-another) or a :class:`TipTurn` (the hand turned about a point fixed in it, the bottle's
-opening, about one of its own axes). Each runs along a speed profile in ``tau = t /
-duration`` (:data:`PROFILES`): from rest to its mean speed (a demonstration's first
-step, as :mod:`sctd_sim.demogen`'s: a person does not stop between carrying and
-pouring), at its mean speed (a step between two others), from its mean speed to rest
-(the last), or rest to rest (minimum jerk, the moves between demonstrations).
+another), a :class:`TipTurn` (the hand turned about a point fixed in it, the bottle's
+opening, about one of its own axes), or motions one after another (:class:`Chain`; a
+press, :class:`PressMotion`, is in two parts, with a hold between them). Each runs
+along a speed profile in ``tau = t / duration`` (:data:`PROFILES`): from rest to its
+mean speed (a demonstration's first step, as :mod:`sctd_sim.demogen`'s: a person does
+not stop between carrying and pouring), at its mean speed (a step between two others),
+from its mean speed to rest (the last), or rest to rest (minimum jerk, the moves between
+demonstrations).
 
 :func:`task_motions` turns a :class:`~sctd_services.teach.plan.DemoPlan` into one
 motion per step of the task's intent; :func:`move` is the unrecorded move from anywhere
@@ -28,7 +30,7 @@ from sctd import se3
 from sctd.task import handle_jacobian, handle_pose
 from sctd.task.model import Joint
 
-from .plan import DemoPlan, SceneGeometry, Speeds, StepPlan
+from .plan import PRESS_STANDOFF, DemoPlan, SceneGeometry, Speeds, StepPlan
 
 Array = NDArray[np.float64]
 
@@ -163,16 +165,19 @@ def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan
     ends): a reach is a :class:`Line` through its via point; a tilt a :class:`TipTurn`
     about the frame's point and the hand's y axis; an upright a :class:`TipTurn` bringing
     the frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis or
-    a :class:`HandlePath` along a revolute joint's arc.
+    a :class:`HandlePath` along a revolute joint's arc; a press a :class:`PressMotion`.
 
     The recorded steps (:attr:`SceneGeometry.recorded`) run as one movement: from rest
     into the first, at their mean speeds through the middle ones, to rest at the end of
-    the last; the ones after (uprights) rest to rest at the moves' turn rate."""
+    the last; the ones after (uprights) rest to rest at the moves' turn rate. A press ends
+    at rest (it held the button), so the step after it starts from rest."""
     V, k, n = geometry.teach, plan.speed, geometry.recorded
     out: list[tuple[StepPlan, Motion]] = []
     here = plan.T_obj_start
     for i, s in enumerate(plan.steps):
         profile = _profile(i, n)
+        if i > 0 and plan.steps[i - 1].kind == "press":
+            profile = _from_rest_profile(profile)
         m: Motion
         if s.kind == "reach":
             assert s.T_obj_goal is not None and s.via is not None
@@ -184,6 +189,9 @@ def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan
                         profile)
         elif s.kind == "upright":
             m = upright(here, geometry.frame(s.frame)[:3, 3], Speeds(), profile if i < n else "rest_to_rest")
+        elif s.kind == "press":
+            m = press_motion(here, s, geometry, k * V.reach_speed, k * V.press_speed, k * V.turn_rate,
+                             profile)
         else:
             m = _joint_motion(here, s, geometry, k * V.joint_speed, k * V.turn_rate, profile)
         out.append((s, m))
@@ -196,6 +204,11 @@ def _profile(i: int, recorded: int) -> str:
     if i >= recorded or recorded == 1:
         return "rest_to_rest"
     return "from_rest" if i == 0 else "to_rest" if i == recorded - 1 else "through"
+
+
+def _from_rest_profile(profile: str) -> str:
+    """``profile`` starting at rest instead of at its mean speed."""
+    return {"through": "from_rest", "to_rest": "rest_to_rest"}.get(profile, profile)
 
 
 def _tilt(T_obj_ee: Array, T_ee_frame: Array) -> float:
@@ -251,6 +264,68 @@ class HandlePath:
         moved = handle_pose(self.joint, self.T_handle0, s * self.end)[:3, 3] - self.T_handle0[:3, 3]
         T[:3, 3] += moved
         return T
+
+
+@dataclass(frozen=True)
+class Chain:
+    """Motions one after another, each starting where the one before ends.
+
+    Attributes
+    ----------
+    parts : tuple of Motion
+    """
+
+    parts: tuple[Motion, ...]
+
+    @property
+    def duration(self) -> float:
+        return sum(m.duration for m in self.parts)
+
+    def pose(self, t: float) -> Array:
+        for m in self.parts[:-1]:
+            if t <= m.duration:
+                return m.pose(t)
+            t -= m.duration
+        return self.parts[-1].pose(t)
+
+
+@dataclass(frozen=True)
+class PressMotion:
+    """A press: ``inward`` (onto the button's axis in front of its face, then in along
+    it to the planned depth) and ``outward`` (back out along it); the demonstrator holds
+    between them until the step's predicate holds. As a motion, the two one after the
+    other.
+
+    Attributes
+    ----------
+    inward : Chain
+    outward : Line
+    """
+
+    inward: Chain
+    outward: Line
+
+    @property
+    def duration(self) -> float:
+        return self.inward.duration + self.outward.duration
+
+    def pose(self, t: float) -> Array:
+        return Chain((*self.inward.parts, self.outward)).pose(t)
+
+
+def press_motion(here: Array, s: StepPlan, geometry: SceneGeometry, speed: float, press_speed: float,
+                 turn_rate: float, profile: str) -> PressMotion:
+    """Press ``s`` from ``here``: through its via point onto the button's axis (coming to
+    rest there; from rest too when ``profile`` starts at rest), in along the button's -x
+    by :data:`~.plan.PRESS_STANDOFF` and the planned depth at ``press_speed``, rest to
+    rest, and back out at ``speed``."""
+    assert s.T_obj_goal is not None and s.via is not None  # (a press's plan has both)
+    onto = "rest_to_rest" if profile in ("from_rest", "rest_to_rest") else "to_rest"
+    approach = line(here, s.T_obj_goal, speed, turn_rate, onto, s.via, s.via_at)
+    T_in = s.T_obj_goal.copy()
+    T_in[:3, 3] -= (PRESS_STANDOFF + s.value) * geometry.body(s.button)[:3, 0]
+    push = line(s.T_obj_goal, T_in, press_speed, turn_rate, "rest_to_rest")
+    return PressMotion(Chain((approach, push)), line(T_in, s.T_obj_goal, speed, turn_rate, "rest_to_rest"))
 
 
 def move(T_a: Array, T_b: Array, speeds: Speeds | None = None) -> Line:

@@ -15,12 +15,17 @@ one motion of the hand, planned in the task object's frame (``T_obj_ee``):
 - an **upright** turns the frame's axis back up about its point;
 - a **joint's move** takes the handle along its path (a prismatic joint's axis; a
   revolute joint's arc about its hinge, the hand keeping its orientation) to the
-  planned position.
+  planned position;
+- a **press** brings the step's frame, the hand keeping its orientation, through a via
+  point onto the button's axis :data:`PRESS_STANDOFF` in front of its face, pushes it
+  in to the planned depth (past the click), holds until the step's predicate holds and
+  pulls back out to where it came onto the axis.
 
 Between demonstrations (the task file's ``teach`` section, :class:`~sctd.task.model.Teach`)
 the hand starts elsewhere, each reach bends through a different via point, the hand
 moves faster or slower, and each step varies as the file says (a reach's yaw and goal
-height, a tilt's angle, how far a joint is moved).
+height, a tilt's angle, how far a joint is moved, how far past its click a button is
+pushed).
 
 :func:`plan_demonstration` is a pure function of the task, the seed and the attempt's
 number: the same seed gives the same variations.
@@ -28,6 +33,7 @@ number: the same seed gives the same variations.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -37,11 +43,14 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task, find_task
 from sctd.task.judge import thresholds
-from sctd.task.model import MoveJoint, Reach, Teach, Tilt, Upright
+from sctd.task.model import PRESS_MARGIN, MoveJoint, Press, Reach, Teach, TeachStep, Tilt, Upright
 
 Array = NDArray[np.float64]
 HAND = "hand"
 UP = np.array([0.0, 0.0, 1.0])
+PRESS_STANDOFF = 0.03
+"""m in front of a button's face where a demonstration comes onto its axis, before it
+pushes in along it (and where it pulls back out to)."""
 
 
 @dataclass(frozen=True)
@@ -96,6 +105,14 @@ class SceneGeometry:
         bodies = self.task.scene.bodies
         return se3.invert_transform(bodies[self.task.object].T_world) @ bodies[body].T_world
 
+    def body(self, name: str) -> Array:
+        """``T_obj_body``: a body's pose in the task object's frame (from the file's
+        defaults)."""
+        bodies = self.task.scene.bodies
+        if name == self.task.object:
+            return np.eye(4)
+        return se3.invert_transform(bodies[self.task.object].T_world) @ bodies[name].T_world
+
     @property
     def recorded(self) -> int:
         """How many of the intent's steps a demonstration records: up to the last one that
@@ -127,22 +144,26 @@ class StepPlan:
     ----------
     name : str
         The intent step's name (the targets' ``state`` while it runs).
-    kind : {"reach", "tilt", "upright", "move_joint"}
+    kind : {"reach", "tilt", "upright", "move_joint", "press"}
     frame : str
         The frame it moves (the reach's, or the frame of the reach before it).
     T_obj_goal : ndarray (4, 4) or None
-        A reach: the hand's pose where it ends.
+        A reach: the hand's pose where it ends; a press: where it comes onto the button's
+        axis (and ends).
     via : ndarray (3,) or None
-        A reach: the hand's via point.
+        A reach, a press: the hand's via point.
     via_at : float
-        A reach: where along the path the via point lies.
+        A reach, a press: where along the path the via point lies.
     yaw : float
         A reach: its yaw (from facing the object, or from the handle's orientation), rad.
     value : float
         A reach to a point: the goal's height (m); a tilt: its tilt (rad); a joint's
-        move: the position it moves the joint to (m or rad); else nan.
+        move: the position it moves the joint to (m or rad); a press: how far past the
+        face's rest plane the frame is pushed (m); else nan.
     joint : str
         A reach to a handle, a joint's move: the joint.
+    button : str
+        A press: the button's body.
     """
 
     name: str
@@ -154,6 +175,7 @@ class StepPlan:
     yaw: float = 0.0
     value: float = math.nan
     joint: str = ""
+    button: str = ""
 
     def describe(self) -> str:
         if self.kind == "reach":
@@ -163,6 +185,8 @@ class StepPlan:
             return f"{self.name}: tilt {math.degrees(self.value):.0f} deg"
         if self.kind == "move_joint":
             return f"{self.name}: {self.joint} to {self.value:.3f}"
+        if self.kind == "press":
+            return f"{self.name}: {self.button} {self.value * 1000:.1f} mm in"
         return self.name
 
 
@@ -246,6 +270,10 @@ def plan_demonstration(geometry: SceneGeometry, seed: int, attempt: int, mistake
             end = float(rng.uniform(*var.to)) if var.to is not None else \
                 done[f"{a.joint}.position"] + a.overshoot
             steps.append(StepPlan(s.name, "move_joint", frame, value=end, joint=a.joint))
+        elif isinstance(a, Press):
+            T_goal, depth = _press_goal(geometry, a, var, mistake, here, rng)
+            steps.append(StepPlan(s.name, "press", a.frame, T_goal, value=depth, button=a.button))
+            here = T_goal
         else:
             steps.append(StepPlan(s.name, "upright", frame))
     a_point = T_start[:3, 3]
@@ -254,7 +282,7 @@ def plan_demonstration(geometry: SceneGeometry, seed: int, attempt: int, mistake
         if p.T_obj_goal is not None:  # (a reach)
             b_point = p.T_obj_goal[:3, 3]
             via, via_at = _via_point(a_point, b_point, rng, V)
-            p = StepPlan(p.name, p.kind, p.frame, p.T_obj_goal, via, via_at, p.yaw, p.value, p.joint)
+            p = dataclasses.replace(p, via=via, via_at=via_at)
             a_point = b_point
         with_vias.append(p)
     return DemoPlan(task.name, attempt, T_start, speed, tuple(with_vias), mistake)
@@ -285,6 +313,24 @@ def _reach_goal(geometry: SceneGeometry, a: Reach, yaw_range: float, height: tup
     if side:
         T_goal[:3, 3] += side * T_handle[:3, 1]
     return T_goal, R, yaw, math.nan
+
+
+def _press_goal(geometry: SceneGeometry, a: Press, var: TeachStep, mistake: bool, here: Array,
+                rng: np.random.Generator) -> tuple[Array, float]:
+    """The hand's pose where press ``a`` comes onto the button's axis (the frame
+    :data:`PRESS_STANDOFF` in front of the face's centre, the hand's orientation kept from
+    ``here``; a mistake's beside it by the step's ``miss`` along the body's y) and how far
+    past the face it pushes the frame (the button's click depth and a margin drawn from
+    the step's). Draws the margin, then the mistake's side."""
+    button = geometry.task.scene.bodies[a.button].button
+    assert button is not None  # (the reader checks a press names a button)
+    depth = button.click + float(rng.uniform(*(var.margin or PRESS_MARGIN)))
+    side = var.miss * float(rng.choice([-1.0, 1.0]))  # drawn always: a mistake changes nothing else
+    T_obj_button = geometry.body(a.button)
+    x, y = T_obj_button[:3, 0], T_obj_button[:3, 1]
+    p = T_obj_button[:3, 3] + PRESS_STANDOFF * x + (side if mistake else 0.0) * y
+    R = here[:3, :3]
+    return se3.transform_from_rt(R, p - R @ geometry.frame(a.frame)[:3, 3]), depth
 
 
 def facing(p_obj_ee: Array, geometry: SceneGeometry) -> Array:

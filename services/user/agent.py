@@ -12,7 +12,9 @@ for a while, it tries the stick out again, or, when it is as close as the task n
 on to the next step. Where the current mode cannot produce the
 wanted motion, or nothing of its most wanted part, for a while it lets go and tries the
 mode switch (button 0), as a person who knows the device has modes; if pressing it
-changes nothing, it stops trying.
+changes nothing, it stops trying. While the hand presses against a surface (a wall, a
+button) the hand's motion shows the surface, not the stick: the user neither learns
+from it nor tries the stick out there.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
 stick only every update period, its deflections are noisy and never smaller than its
 dead zone, and a mode switch costs it time with the stick released.
@@ -154,6 +156,8 @@ class SimulatedUser:
         last, self._perceived = self._perceived, now
         if last is None or last.mode != now.mode or self._switch is not None:
             return
+        if self.intent.touching(last) or self.intent.touching(now):  # (the surface held the hand)
+            return
         dt = now.t - last.t
         if dt < 1e-3:
             return
@@ -178,7 +182,8 @@ class SimulatedUser:
         if desire.done:
             return zero, (0, 1, 0)
         model = self.models.setdefault(obs.mode, DeviceModel(self.n))
-        if self._no_progress(t, desire) and model.known and obs.mode not in self._probes:
+        if self._no_progress(t, desire) and model.known and obs.mode not in self._probes \
+                and not self.intent.touching(obs):
             if desire.close_enough:
                 # Not quite there, but as close as the task needs and no closer for a
                 # while: on to the next step.

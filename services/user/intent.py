@@ -2,7 +2,8 @@
 
 The intent is written in the task file (``intent``, ``docs/tasks.md``), once per task and
 independent of any skill: ordered sub-goals in the task object's frame (reach a region,
-tilt until a reading holds, bring the frame upright, move a joint's handle).
+tilt until a reading holds, bring the frame upright, move a joint's handle, press a
+button).
 :class:`TaskIntent` runs them on what a person in the chair sees (the hand, the objects,
 the scene's readings: how full the mug is, how far the drawer is open) and says how the
 hand should move next, as a desired twist of the end-effector in the world frame, with a
@@ -10,8 +11,8 @@ weight matrix saying which components matter. It never looks at the skill, its s
 its mappings.
 
 What belongs to the person rather than to the task (how fast they want the hand to move,
-how much a radian of tilt counts against a metre, which way they tilt) are
-:class:`TaskIntent`'s own parameters.
+how much a radian of tilt counts against a metre, which way they tilt, how gently they
+push a button) are :class:`TaskIntent`'s own parameters.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from sctd.task.model import (
     Near,
     Not,
     Predicate,
+    Press,
     Reach,
     Tilt,
     Upright,
@@ -176,6 +178,18 @@ class TaskIntent:
     free_weight : float
         Weight of the hand's angular velocity where its orientation is free (it hardly
         matters).
+    press_speed : float
+        m/s: how fast the user comes onto a button's face and pushes it in; slower once
+        the force is past half the step's bound, not at all at the bound, backing off
+        beyond it (``v = press_speed min(1, 2 (1 - F / force))``, at most
+        ``press_speed`` back).
+    slow : float
+        m: within this of a button's face the user comes on at ``press_speed`` only.
+    clearance : float
+        m: how far in front of a button's face the user brings the frame onto its axis.
+    aim : float
+        The frame is on a button's axis within this fraction of its face's radius (and,
+        once touching it, within the face).
 
     Attributes
     ----------
@@ -192,6 +206,10 @@ class TaskIntent:
     ahead: float = 0.05
     past: float = 1e-3
     free_weight: float = 0.1
+    press_speed: float = 0.008
+    slow: float = 0.02
+    clearance: float = 0.02
+    aim: float = 0.5
     index: int = 0
     _axis: tuple[int, Array] | None = field(default=None, repr=False)  # (step, axis) being tilted about
     _inverses: dict[str, tuple[bytes, Array]] = field(default_factory=dict, repr=False, compare=False)
@@ -199,8 +217,8 @@ class TaskIntent:
     def __post_init__(self) -> None:
         steps = self.task.intent
         self._anchors: list[int] = []  # per step (and done): the reach whose frame it moves
-        for i, s in enumerate(steps):
-            self._anchors.append(i if isinstance(s.action, Reach) else self._anchors[-1])
+        for i, s in enumerate(steps):  # (a press may come first: it names its own frame)
+            self._anchors.append(i if isinstance(s.action, Reach) or not self._anchors else self._anchors[-1])
         self._anchors.append(self._anchors[-1])
         done = thresholds(self.task.outcome.done)  # (the reader checks a moved joint has one)
         # per step: the readings a tilt waits for, a joint's position to move it to
@@ -215,6 +233,7 @@ class TaskIntent:
                         if (isinstance(s.action, Tilt) and s.action.off_by is not None)
                         or (isinstance(s.action, Reach) and (s.action.to is not None or s.action.lift
                                                              or s.action.reached or s.action.accept))}
+        self._surfaces = [n for n, b in self.task.scene.bodies.items() if b.surface is not None]
 
     @property
     def phase(self) -> str:
@@ -230,6 +249,11 @@ class TaskIntent:
         looks: dict[int, _Look] = {}
 
         def look(i: int) -> _Look:
+            a = self._action(i)
+            if isinstance(a, Press):  # its own frame, against its button
+                if -1 - i not in looks:
+                    looks[-1 - i] = self._press_look(a, obs, readings)
+                return looks[-1 - i]
             k = self._anchors[i]
             if k not in looks:
                 looks[k] = self._look(self._reach(k), k in self._placed, obs, readings)
@@ -247,6 +271,12 @@ class TaskIntent:
             return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
         return Desire(self._twist(i, seen, obs, readings), self._weights(i, seen), err, self.phase, done,
                       close)
+
+    def touching(self, obs: Observation) -> bool:
+        """Whether the scene reports the hand pressed against a surface (a wall, a
+        button)."""
+        readings = obs.scene.get("readings", {})
+        return any(readings.get(f"{n}.touching") for n in self._surfaces)
 
     def settle(self) -> None:
         """Take the reach as done although short of its goal (the frame is within its
@@ -334,6 +364,41 @@ class TaskIntent:
             wx, wy, wz = wx + lift * c0, wy + lift * c1, wz + lift * c2
         return wx, wy, wz, height, radial
 
+    def _press_look(self, a: Press, obs: Observation, readings: Mapping[str, Any]) -> _Look:
+        """The press's frame against its button: its goal the face's centre pushed in to
+        the button's travel; its height and radial in the button's frame, the radial its
+        distance from the button's axis (the body's x)."""
+        T_f = obs.T_world_ee if a.frame == HAND else obs.objects[a.frame]
+        T_B = obs.objects[a.button]
+        button = self.task.scene.bodies[a.button].button
+        assert button is not None  # (the reader checks the press names a button)
+        _, y, z, _ = (self._inverse(a.button, T_B) @ np.append(T_f[:3, 3], 1.0)).tolist()
+        goal = T_B[:3, 3] - button.travel * T_B[:3, 0]
+        tilt = math.acos(max(-1.0, min(1.0, float(T_f[2, 2]))))
+        return _Look(T_f[:3, 3], T_f[:3, 2], tilt, z, 0.0, math.hypot(y, z), tuple(goal.tolist()),
+                     float(np.linalg.norm(goal - T_f[:3, 3])))
+
+    def _pressing(self, a: Press, seen: _Look, obs: Observation, readings: Mapping[str, Any]) -> Array:
+        """The press's frame's velocity: onto the button's axis, ``clearance`` in front of
+        its face while off the axis; on it, in towards the face (at ``press_speed`` within
+        ``slow`` of it) and, once the scene reports a push, at ``press_speed`` slowed as
+        the force grows past half the step's bound, backing off beyond it."""
+        T_B = obs.objects[a.button]
+        button = self.task.scene.bodies[a.button].button
+        assert button is not None
+        x, y, z, _ = (self._inverse(a.button, T_B) @ np.append(seen.p, 1.0)).tolist()
+        face = -float(readings.get(f"{a.button}.position", 0.0))  # where the face is now
+        force = float(readings.get(f"{a.button}.force", 0.0))
+        on_axis = seen.radial < self.aim * button.radius or (force > 0.0 and seen.radial < button.radius)
+        if not on_axis:
+            along = self.gain * (face + self.clearance - x)
+        elif force > 0.0:
+            along = -self.press_speed * max(-1.0, min(1.0, 2.0 * (1.0 - force / a.force)))
+        else:
+            along = -(self.gain * max(0.0, x - face - self.slow) + self.press_speed)
+        v = T_B[:3, :3] @ np.array([along, -self.gain * y, -self.gain * z])
+        return _saturate(v, self.v_max)
+
     # -- the steps -----------------------------------------------------------------------
 
     def _move(self, i: int, a: Action, seen: _Look, readings: Mapping[str, Any],
@@ -351,6 +416,8 @@ class TaskIntent:
             return -1 if a.off_by is not None and seen.radial > a.off_by else 0
         if isinstance(a, Upright):
             return 1 if seen.tilt < a.below else 0
+        if isinstance(a, Press):
+            return 1 if holds(a.until, readings, positions) else 0
         if a.back is not None and holds(a.back, readings, positions):  # let go: that first
             return -1
         reached = self._ends[i] - a.overshoot + self._pasts[i]
@@ -382,6 +449,8 @@ class TaskIntent:
             return err
         if isinstance(a, Upright):
             return seen.to_goal + self.per_rad * seen.tilt
+        if isinstance(a, Press):  # to the face's centre pushed in to its travel
+            return seen.to_goal
         return self._joint_error(i, a, seen, obs, readings)
 
     def _path(self, a: MoveJoint, obs: Observation, readings: Mapping[str, Any]
@@ -416,6 +485,8 @@ class TaskIntent:
         """Whether only the frame's axis matters at step ``i`` (its spin about it does
         not), rather than nothing of its orientation."""
         a = self._action(i)
+        if isinstance(a, Press):  # (a press's orientation is free)
+            return False
         return isinstance(a, Tilt | Upright) or self._reach(self._anchors[i]).upright is not None
 
     def _weights(self, i: int, seen: _Look) -> Array:
@@ -437,6 +508,8 @@ class TaskIntent:
             return np.zeros(6)
         if isinstance(a, MoveJoint):
             v = self._along_joint(i, a, seen, obs, readings)
+        elif isinstance(a, Press):
+            v = self._pressing(a, seen, obs, readings)
         else:
             v = _saturate(self.gain * (np.array(seen.goal) - seen.p), self.v_max)
         if not self._spin_free(i):
