@@ -17,7 +17,7 @@ pytestmark = pytest.mark.slow  # runs sctd bench as a process
 
 def test_bench_input_answers_every_stick_event_and_reports_the_emg_chain(tmp_path):
     out = subprocess.run([sys.executable, "-m", "sctd.cli.main", "bench", "input", "--seconds", "3",
-                          "--emg-seconds", "1", "--json", "--logs", str(tmp_path)],
+                          "--events", "20", "--emg-seconds", "1", "--json", "--logs", str(tmp_path)],
                          capture_output=True, text=True, cwd=ROOT, timeout=240,
                          env={**__import__("os").environ, "SDL_VIDEODRIVER": "dummy"})
     assert out.returncode == 0, out.stderr

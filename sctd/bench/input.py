@@ -98,9 +98,12 @@ def _echo_rtt(s: zenoh.Session, seconds: float, rate: float = 200.0) -> dict[str
     return trips.histogram.summary_ms()
 
 
-def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -> dict[str, Any]:
+def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0,
+                   min_events: int = 0) -> dict[str, Any]:
     """Stick moves on a virtual pad, through the gamepad bridge to the daemon's targets
-    (see the module doc); the figures."""
+    (see the module doc), for ``seconds`` and until ``min_events`` were made (each waits
+    for its answer: on a busy machine fewer fit in the time; at most a minute longer);
+    the figures."""
     from sctd_services.input.bridge import Bridge
     from sctd_services.input.gamepad import Gamepad
     from sctd_services.input.mapping import shipped_mapping
@@ -127,7 +130,11 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
             start = time.monotonic()
             moved: float | None = None
             try:
-                while time.monotonic() < start + seconds + 1.0:
+                def more() -> bool:
+                    t = time.monotonic()
+                    made = times.answered + times.lost
+                    return t < start + seconds + 1.0 or (made < min_events and t < start + seconds + 61.0)
+                while more():
                     now = time.monotonic()
                     if k % every == 0 and now > start + 1.0 and moved is None and times.idle(now):
                         time.sleep(rng.uniform(0.0, 0.9) * period)
@@ -154,7 +161,7 @@ def gamepad_events(ep: str, bridge_rate: float, seconds: float, seed: int = 0) -
 
 
 def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds: float,
-                    logdir: Path) -> dict[str, Any]:
+                    logdir: Path, min_events: int = 0) -> dict[str, Any]:
     """The processes of the module doc, the gamepad figures, then the EMG chain's."""
     from sctd_services.input.emg.bench import bench_processing
 
@@ -165,7 +172,7 @@ def run_input_bench(bridge_rate: float, seconds: float, rate: float, emg_seconds
          Child("sctd_sim.kinematic", "--task", d.task, "--connect", ep, log=logdir / "robot.log"), \
          Child("sctd.bench.latency", "echo", "--connect", ep, log=logdir / "echo.log"):
         wait_for_targets(ep, daemon, logdir)
-        pad = gamepad_events(ep, bridge_rate, seconds)
+        pad = gamepad_events(ep, bridge_rate, seconds, min_events=min_events)
     bound = 1e3 / bridge_rate + 1e3 / rate + 2 * pad["echo_rtt_ms"]["p99"]
     emg = bench_processing(seconds=emg_seconds)
     emg_p99 = emg["p99_ms"]
@@ -202,6 +209,8 @@ def add_bench_input_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bridge-rate", type=float, default=100.0, help="the gamepad bridge's rate, Hz")
     p.add_argument("--rate", type=float, default=1000.0, help="the daemon's tick rate, Hz")
     p.add_argument("--seconds", type=float, default=20.0, help="seconds of stick events")
+    p.add_argument("--events", type=int, default=0,
+                   help="at least this many stick events, however long they take (default %(default)s)")
     p.add_argument("--emg-seconds", type=float, default=10.0, help="seconds of EMG signal processed")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
@@ -209,4 +218,4 @@ def add_bench_input_arguments(p: argparse.ArgumentParser) -> None:
 
 def main_bench_input(args: argparse.Namespace) -> int:
     return run_and_report("input", args, lambda logdir: run_input_bench(
-        args.bridge_rate, args.seconds, args.rate, args.emg_seconds, logdir), print_report)
+        args.bridge_rate, args.seconds, args.rate, args.emg_seconds, logdir, args.events), print_report)
