@@ -358,6 +358,7 @@ class TaskScene:
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._hand = np.zeros(3)
+        self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.reset()
 
     def reset(self) -> None:
@@ -376,6 +377,7 @@ class TaskScene:
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
         """Advance by ``dt``; return the wrench of the held load and the grasped handles."""
         self._hand = T_world_ee[:3, 3].copy()
+        self._T_world_ee = T_world_ee.copy()
         if self.flow is not None:
             self.flow.step(T_world_ee, self.poses[self.flow.contents.into], dt)
         wrench = np.zeros(6)
@@ -419,10 +421,8 @@ class TaskScene:
     def positions(self) -> dict[str, np.ndarray]:
         """World positions of the hand (as last stepped), the bodies and the held frames."""
         out = {n: T[:3, 3] for n, T in self.poses.items()}
-        if self.held is not None:
-            T_ee = np.eye(4)
-            T_ee[:3, 3] = self._hand
-            out.update({n: (T_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
+        if self.held is not None:  # (where the hand holds them: turned with it)
+            out.update({n: (self._T_world_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
         out["hand"] = self._hand
         return out
 
