@@ -17,6 +17,9 @@ knows a task:
   joint resists with a spring, viscous damping and Coulomb friction, and stops at its
   end stops. The handle's published frame stays at the joint's 0, so opening a drawer
   shows as hand motion along the frame's +x, and a door as motion along its arc.
+- **heads** (:class:`HeadContact`): a person's head, a sphere behind a body's frame
+  (the mouth), whose contact spring pushes back on the hand and the held object's frames
+  inside it, and reports the force.
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -38,7 +41,7 @@ import numpy as np
 from sctd import se3
 from sctd.task import Task, find_task, handle_pose
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import Container, Contents, Held, Joint
+from sctd.task.model import Container, Contents, Head, Held, Joint
 
 GRAVITY = 9.81
 
@@ -325,6 +328,64 @@ HANDLES: dict[str, type[Handle]] = {"prismatic": PrismaticHandle, "revolute": Re
 """The handle element of each kind of joint (:data:`sctd.task.model.JOINT_KINDS`)."""
 
 
+# -- a person's head --------------------------------------------------------------------
+class HeadContact:
+    """A person's head (:class:`~sctd.task.model.Head`): a sphere behind a body's frame
+    (the mouth) that pushes back on the hand's points inside it.
+
+    The points are the hand's origin and the held object's frames (``T_ee_points``).
+    Each one at depth ``e = r - |p - c|`` inside the sphere (centre ``c``, radius
+    ``r``), moving along the outward normal ``n`` at ``v_n``, is pushed out by
+    ``f = max(0, k e - d v_n) n``: a spring and a damper that push and never pull.
+    The forces act on the hand at their points, as a wrench at the ee's origin.
+
+    Attributes
+    ----------
+    force : float
+        The norm of the contact force on the head now, N.
+    max_force : float
+        The highest ``force`` so far, N.
+    """
+
+    def __init__(self, head: Head, T_ee_points: list[np.ndarray]):
+        self.head = head
+        self.name = head.name
+        self.points = [T[:3, 3].copy() for T in T_ee_points]
+        self.reset()
+
+    def reset(self) -> None:
+        """No contact."""
+        self.force = 0.0
+        self.max_force = 0.0
+
+    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_front: np.ndarray) -> np.ndarray:
+        """The wrench the head exerts on the hand (world axes at the ee's origin), shape (6,)."""
+        h = self.head
+        c = h.centre(T_world_front)
+        R, p_ee = T_world_ee[:3, :3], T_world_ee[:3, 3]
+        v, w = twist[:3], twist[3:]
+        wrench = np.zeros(6)
+        for offset in self.points:
+            arm = R @ offset  # from the ee's origin to the point
+            d = p_ee + arm - c
+            dist = float(np.linalg.norm(d))
+            depth = h.radius - dist
+            if depth <= 0.0 or dist < 1e-9:  # (outside, or at the centre: no normal)
+                continue
+            n = d / dist
+            v_n = float((v + np.cross(w, arm)) @ n)
+            push = max(0.0, h.stiffness * depth - h.damping * v_n)
+            wrench[:3] += push * n
+            wrench[3:] += np.cross(arm, push * n)
+        self.force = float(np.linalg.norm(wrench[:3]))
+        self.max_force = max(self.max_force, self.force)
+        return wrench
+
+    def readings(self) -> dict[str, float | bool]:
+        n = self.name
+        return {f"{n}.force": self.force, f"{n}.max_force": self.max_force}
+
+
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -356,6 +417,8 @@ class TaskScene:
             assert container is not None  # (the reader checks: contents go into a container)
             self.flow = Flow(sc.held, sc.held.contents, container)
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
+        points = [np.eye(4), *(sc.held.frames.values() if sc.held is not None else ())]
+        self.heads = [HeadContact(h, points) for h in sc.heads.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._hand = np.zeros(3)
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
@@ -367,6 +430,8 @@ class TaskScene:
             self.flow.reset()
         for h in self.handles:
             h.reset()
+        for head in self.heads:
+            head.reset()
 
     def start_pose(self) -> np.ndarray:
         """The hand's start: the file's orientation turned by ``start_yaw`` about the
@@ -375,7 +440,8 @@ class TaskScene:
         return se3.transform_from_rt(R, self.start_position)
 
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """Advance by ``dt``; return the wrench of the held load and the grasped handles."""
+        """Advance by ``dt``; return the wrench of the held load, the grasped handles and
+        the heads pressed into."""
         self._hand = T_world_ee[:3, 3].copy()
         self._T_world_ee = T_world_ee.copy()
         if self.flow is not None:
@@ -383,6 +449,8 @@ class TaskScene:
         wrench = np.zeros(6)
         for h in self.handles:
             wrench[:3] += h.step(T_world_ee, twist, self.poses[h.joint.handle], dt)
+        for head in self.heads:
+            wrench += head.step(T_world_ee, twist, self.poses[head.head.behind])
         load = self.payload()
         if load is not None:
             mass, com = load
@@ -416,6 +484,8 @@ class TaskScene:
             out.update(self.flow.readings())
         for h in self.handles:
             out.update(h.readings())
+        for head in self.heads:
+            out.update(head.readings())
         return out
 
     def positions(self) -> dict[str, np.ndarray]:

@@ -79,3 +79,18 @@ def test_the_intent_alone_opens_the_cabinet_door_in_the_simulation(seed):
 def test_the_same_loop_opens_the_drawer():
     res, _ = steer(find_task("drawer"), 0)
     assert (res.outcome, res.reason) == ("success", "opened") and list(res.phase_s) == ["reach", "pull"], res
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_intent_alone_gives_the_person_a_sip_in_the_simulation(seed):
+    """From three seeded starts (the cup and the person's head placed as the file's vary
+    says), the cup's rim comes to the lips, the cup tilts until a fifth of it is in the
+    mouth, comes upright and backs off: a success (nothing spilled, under 5 N on the face,
+    no more than a sip), the arm never more than 2 cm behind its target."""
+    task = find_task("drink")
+    res, lag = steer(task, seed)
+    assert (res.outcome, res.reason) == ("success", "drunk"), res
+    assert list(res.phase_s) == ["bring", "sip", "upright", "away"], res
+    assert res.spill == 0.0 and 0.2 <= res.progress <= 0.3, res
+    assert res.time_s is not None and res.time_s < 12.0, res
+    assert lag < 0.02, lag

@@ -40,6 +40,8 @@ def summary(task: Task) -> dict[str, Any]:
                 "mass": held.contents.mass, "outlet": held.contents.outlet, "into": held.contents.into}},
         "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel, "unit": j.unit}
                    for n, j in sc.joints.items()},
+        "heads": {n: {"behind": h.behind, "radius": h.radius, "stiffness": h.stiffness, "damping": h.damping}
+                  for n, h in sc.heads.items()},
         "frames": sc.frames(),
         "thresholds": thresholds(task.outcome.done),
         "done_reason": task.outcome.done_reason,
@@ -88,6 +90,9 @@ def main_tasks(args: argparse.Namespace) -> int:
             if j["unit"] == "rad":
                 travel += f" ({math.degrees(j['travel']):g} deg)"
             print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {travel}")
+        for n, h in s["heads"].items():
+            print(f"  head {n}: a sphere of {h['radius']:g} m behind {h['behind']}, contact "
+                  f"{h['stiffness']:g} N/m, {h['damping']:g} N s/m")
         targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or "see the file"
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
