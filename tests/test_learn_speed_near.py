@@ -88,3 +88,15 @@ def test_the_cap_is_a_hyperparameter_of_both_methods():
             check_hyperparameters(method, {"speed_near": "-1:0.03:0.3"})
     c = speed_near_from_text("0.1:0.03:0.3:0.035,0,0.1")
     np.testing.assert_array_equal(c.point, [0.035, 0.0, 0.1])
+
+
+def test_the_shipped_drink_skill_caps_the_rim_near_the_mouth():
+    from sctd.skill.catalog import shipped_folder
+
+    skill = load_skill(shipped_folder() / "drink-vf.yaml")
+    assert skill.object == "mouth"
+    for state in skill.states:
+        cap = state.active_constraints[-1]
+        assert isinstance(cap, SpeedNear) and cap.frame == "ee"
+        assert (cap.within, cap.max_linear_speed, cap.max_angular_speed) == (0.1, 0.03, 0.3)
+        assert cap.point is not None and cap.point.tolist() == [0.035, 0.0, 0.1]
