@@ -21,7 +21,10 @@ knows a task:
   its x axis) that pushes the points of the hand touching it back out with a contact
   spring-damper and friction, and a **button** in it (:class:`PushButton`, a light
   switch) that gives way under the push against its spring and switches when pushed past
-  its click depth.
+  its click depth;
+- **heads** (:class:`HeadContact`): a person's head, a sphere behind a body's frame
+  (the mouth), whose contact spring pushes back on the hand and the held object's frames
+  inside it, and reports the force.
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -43,7 +46,7 @@ import numpy as np
 from sctd import se3
 from sctd.task import Task, find_task, handle_pose
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import Body, Button, Container, Contents, Held, Joint
+from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint
 from sctd.task.reader import HAND
 
 GRAVITY = 9.81
@@ -489,6 +492,62 @@ def contacts(task: Task) -> list[Contact]:
     frames = {HAND: np.eye(4), **(sc.held.frames if sc.held is not None else {})}
     return [(PushButton if b.button is not None else Contact)(b, [frames[f] for f in b.surface.touch])
             for b in sc.bodies.values() if b.surface is not None]
+# -- a person's head --------------------------------------------------------------------
+class HeadContact:
+    """A person's head (:class:`~sctd.task.model.Head`): a sphere behind a body's frame
+    (the mouth) that pushes back on the hand's points inside it.
+
+    The points are the hand's origin and the held object's frames (``T_ee_points``).
+    Each one at depth ``e = r - |p - c|`` inside the sphere (centre ``c``, radius
+    ``r``), moving along the outward normal ``n`` at ``v_n``, is pushed out by
+    ``f = max(0, k e - d v_n) n``: a spring and a damper that push and never pull.
+    The forces act on the hand at their points, as a wrench at the ee's origin.
+
+    Attributes
+    ----------
+    force : float
+        The norm of the contact force on the head now, N.
+    max_force : float
+        The highest ``force`` so far, N.
+    """
+
+    def __init__(self, head: Head, T_ee_points: list[np.ndarray]):
+        self.head = head
+        self.name = head.name
+        self.points = [T[:3, 3].copy() for T in T_ee_points]
+        self.reset()
+
+    def reset(self) -> None:
+        """No contact."""
+        self.force = 0.0
+        self.max_force = 0.0
+
+    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_front: np.ndarray) -> np.ndarray:
+        """The wrench the head exerts on the hand (world axes at the ee's origin), shape (6,)."""
+        h = self.head
+        c = h.centre(T_world_front)
+        R, p_ee = T_world_ee[:3, :3], T_world_ee[:3, 3]
+        v, w = twist[:3], twist[3:]
+        wrench = np.zeros(6)
+        for offset in self.points:
+            arm = R @ offset  # from the ee's origin to the point
+            d = p_ee + arm - c
+            dist = float(np.linalg.norm(d))
+            depth = h.radius - dist
+            if depth <= 0.0 or dist < 1e-9:  # (outside, or at the centre: no normal)
+                continue
+            n = d / dist
+            v_n = float((v + np.cross(w, arm)) @ n)
+            push = max(0.0, h.stiffness * depth - h.damping * v_n)
+            wrench[:3] += push * n
+            wrench[3:] += np.cross(arm, push * n)
+        self.force = float(np.linalg.norm(wrench[:3]))
+        self.max_force = max(self.max_force, self.force)
+        return wrench
+
+    def readings(self) -> dict[str, float | bool]:
+        n = self.name
+        return {f"{n}.force": self.force, f"{n}.max_force": self.max_force}
 
 
 # -- the scene of a task ----------------------------------------------------------------
@@ -523,8 +582,11 @@ class TaskScene:
             self.flow = Flow(sc.held, sc.held.contents, container)
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
         self.contacts = contacts(task)
+        points = [np.eye(4), *(sc.held.frames.values() if sc.held is not None else ())]
+        self.heads = [HeadContact(h, points) for h in sc.heads.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._hand = np.zeros(3)
+        self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.reset()
 
     def reset(self) -> None:
@@ -536,6 +598,8 @@ class TaskScene:
             h.reset()
         for c in self.contacts:
             c.reset()
+        for head in self.heads:
+            head.reset()
 
     def start_pose(self) -> np.ndarray:
         """The hand's start: the file's orientation turned by ``start_yaw`` about the
@@ -546,7 +610,10 @@ class TaskScene:
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
         """Advance by ``dt``; return the wrench of the held load, the grasped handles and the
         surfaces the hand touches."""
+        """Advance by ``dt``; return the wrench of the held load, the grasped handles and
+        the heads pressed into."""
         self._hand = T_world_ee[:3, 3].copy()
+        self._T_world_ee = T_world_ee.copy()
         if self.flow is not None:
             self.flow.step(T_world_ee, self.poses[self.flow.contents.into], dt)
         wrench = np.zeros(6)
@@ -554,6 +621,8 @@ class TaskScene:
             wrench[:3] += h.step(T_world_ee, twist, self.poses[h.joint.handle], dt)
         for c in self.contacts:
             wrench += c.step(T_world_ee, twist, self.poses[c.name], dt)
+        for head in self.heads:
+            wrench += head.step(T_world_ee, twist, self.poses[head.head.behind])
         load = self.payload()
         if load is not None:
             mass, com = load
@@ -589,15 +658,15 @@ class TaskScene:
             out.update(h.readings())
         for c in self.contacts:
             out.update(c.readings())
+        for head in self.heads:
+            out.update(head.readings())
         return out
 
     def positions(self) -> dict[str, np.ndarray]:
         """World positions of the hand (as last stepped), the bodies and the held frames."""
         out = {n: T[:3, 3] for n, T in self.poses.items()}
-        if self.held is not None:
-            T_ee = np.eye(4)
-            T_ee[:3, 3] = self._hand
-            out.update({n: (T_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
+        if self.held is not None:  # (where the hand holds them: turned with it)
+            out.update({n: (self._T_world_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
         out["hand"] = self._hand
         return out
 

@@ -185,3 +185,17 @@ def test_a_cylinder_of_planted_arcs_about_one_axis_beats_the_sphere():
     f = vf.fields_[0]
     assert f.type == "cylinder"
     assert np.degrees(np.arccos(abs(f.axis @ axis))) < 2.0
+
+
+def test_the_pour_pivot_is_the_bottle_tip():
+    """The sphere's pivot is the point of the hand the tilts turn about: the bottle's
+    tip, to a millimetre along the hand's x and z (every tilt turns about the
+    hand's y, which leaves the point free along it: there it is the sphere centre's mean
+    offset, to 2 mm)."""
+    ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=5)
+    demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
+    res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0))
+    sph = next(f for f in res.learner.fields_ if f.type == "sphere")
+    tip = np.asarray(ds.truth["tip_offset"])
+    np.testing.assert_allclose(sph.pivot[[0, 2]], tip[[0, 2]], atol=1e-3)
+    np.testing.assert_allclose(sph.pivot, tip, atol=2e-3)

@@ -1,5 +1,6 @@
 """The vector-field learner's parts on their own: the coherence filter, the chance
-correction of the MSAC score, and one shape's RANSAC."""
+correction of the MSAC score, one shape's RANSAC, and the point of the hand a field's
+steps turn about."""
 
 from __future__ import annotations
 
@@ -7,8 +8,10 @@ import math
 
 import numpy as np
 
+from sctd import se3
 from sctd.learn.vfcoherence import coherent
 from sctd.learn.vffields import Displacements, FieldAngles
+from sctd.learn.vfframes import turning_point
 from sctd.learn.vfransac import Ransac, chance
 
 
@@ -54,3 +57,38 @@ def test_one_shapes_ransac_finds_a_planted_translation_among_outliers():
     assert f is not None and f.type == "translation"
     assert math.degrees(math.acos(min(1.0, float(f.direction @ d)))) < 2.0
     assert inliers[60:].all() and inliers[:60].sum() < 10 and score > 0
+
+
+def _tilted_about(point_ee, centre, angles, axis):
+    """ee poses (R (n, 3, 3), p (n, 3)) turned by ``angles`` about ``axis`` (object
+    frame) through ``centre``, where the point ``point_ee`` of the hand stays."""
+    R = np.array([se3.matrix_from_rotvec(np.asarray(axis) * a) for a in angles])
+    p = centre - np.einsum("nij,j->ni", R, point_ee)
+    return R, p
+
+
+def test_the_turning_point_is_the_point_of_the_hand_that_stays_put():
+    """Tilts about a cup's rim, among steps that only carry the hand and steps of an arm
+    that overshoots (turning and moving at once): the rim comes back to 0.1 mm; along
+    the axis it always turned about, the start's component is kept."""
+    rng = np.random.default_rng(0)
+    rim = np.array([0.035, 0.0, 0.10])
+    R1, p1 = _tilted_about(rim, np.array([0.01, 0.0, 0.01]), np.linspace(0.0, 1.0, 40), [0, 1, 0])
+    R2, p2 = _tilted_about(rim, np.array([0.02, 0.01, 0.0]), np.linspace(0.9, 0.0, 30), [0, 1, 0])
+    carried = np.repeat(R1[:1], 20, axis=0), p1[0] + np.linspace(0.2, 0.0, 20)[:, None] * [1.0, 0.0, 0.0]
+    R = np.concatenate([carried[0], R1, R2])
+    p = np.concatenate([carried[1], p1, p2]) + rng.normal(0.0, 2e-5, (90, 3))
+    # an overshooting arm: six steps that turn and slide at once
+    p[25:31] += np.linspace(0.0, 0.01, 6)[:, None] * [-1.0, 0.0, 0.5]
+    steps = np.array([i for i in range(89) if i not in (19, 59)])  # (a demonstration ends at 59)
+    start = np.array([0.03, 0.02, 0.09])
+    x = turning_point(R, p, steps, start)
+    assert abs(x[0] - rim[0]) < 1e-4 and abs(x[2] - rim[2]) < 1e-4
+    assert x[1] == start[1]  # along the turning axis: free
+    # turned about two axes: the point is fixed in all three directions
+    R3, p3 = _tilted_about(rim, np.array([0.0, 0.0, 0.0]), np.linspace(0.0, 0.8, 30), [1, 0, 0])
+    R = np.concatenate([R1, R3])
+    p = np.concatenate([p1, p3])
+    x = turning_point(R, p, np.array([i for i in range(69) if i != 39]), start)
+    np.testing.assert_allclose(x, rim, atol=1e-9)
+    assert np.array_equal(turning_point(R, p, np.array([], dtype=int), start), start)

@@ -2,8 +2,8 @@
 
 Every ``.py`` under the packages ``sctd``, ``sctd_services`` (``services/``) and
 ``sctd_sim`` (``sim/``) is parsed, and no string constant outside a docstring may equal
-a name a task file gives: a known task's name, its object, its bodies, its joints, the
-held object's name and its frames. The names come from the task files
+a name a task file gives: a known task's name, its object, its bodies, its joints, its
+heads, the held object's name and its frames. The names come from the task files
 (:func:`sctd.task.known_tasks`), not from a list here. Tests may name tasks freely; the
 defaults a command takes are data (``sctd/app/defaults.yaml``).
 """
@@ -27,7 +27,7 @@ def names_of(task: Task) -> dict[str, str]:
     """Each name ``task``'s file gives, and what it names."""
     sc = task.scene
     named = [(task.name, "task"), (task.object, "object"), *((b, "body") for b in sc.bodies),
-             *((j, "joint") for j in sc.joints)]
+             *((j, "joint") for j in sc.joints), *((h, "head") for h in sc.heads)]
     if sc.held is not None:
         named += [(sc.held.name, "held object"), *((f, "held frame") for f in sc.held.frames)]
     out: dict[str, str] = {}

@@ -13,6 +13,7 @@ from can.interfaces import virtual as can_virtual
 from sctd import se3
 from sctd.task import TaskError, handle_jacobian, handle_pose
 from sctd.task.judge import holds
+from sctd.task.model import Near
 from sctd_sim.scenes import TaskScene, joint_force, make_scene, pour_flow, pour_geometry
 from sctd_sim.simulation import Simulation
 from tests.oracles import HandleState, reference_handle_step
@@ -140,6 +141,19 @@ def test_pour_objects():
     assert list(objs) == ["mug", TIP]
     np.testing.assert_allclose(objs[TIP], T_ee @ scene.held.frames[TIP])
     assert scene.task_object == "mug"
+
+
+def test_a_held_frame_is_judged_where_the_turned_hand_holds_it():
+    """The scene's predicates (a ``near`` on a held frame) see the frame where the hand
+    holds it, turned with the hand: a bottle tilted on its side has its opening beside
+    the hand, not above it."""
+    scene = pour_scene()
+    T_ee = ee_for_tip(scene, mug_opening(scene, above=0.05), math.pi / 2)
+    scene.step(T_ee, np.zeros(6), DT)
+    tip = scene.positions()[TIP]
+    np.testing.assert_allclose(tip, mug_opening(scene, above=0.05), atol=1e-12)
+    assert np.linalg.norm(tip - (T_ee[:3, 3] + [0.0, 0.0, 0.12])) > 0.1  # not above the hand
+    assert holds(Near(TIP, "mug", 0.06), {}, scene.positions())
 
 
 # -- drawer ---------------------------------------------------------------------------

@@ -34,7 +34,7 @@ from sctd.skill.workspace import Workspace
 def test_registries_hold_the_format_kinds_in_their_documented_order():
     """The order is the one the loader's "expected one of ..." messages list."""
     assert MAPPINGS.names() == ("linear", "vector_field")
-    assert CONSTRAINTS.names() == ("tilt_cone", "band", "box", "neighbour_orientation")
+    assert CONSTRAINTS.names() == ("tilt_cone", "band", "box", "neighbour_orientation", "speed_near")
     assert TRANSITIONS.names() == ("hyperplane", "distance", "timeout", "force", "button")
     assert FIELDS.names() == ("translation", "cylinder", "sphere", "general")
     for registry in (MAPPINGS, CONSTRAINTS, TRANSITIONS, FIELDS):
@@ -95,7 +95,7 @@ def test_an_unknown_type_lists_the_registered_ones():
     with pytest.raises(SkillError) as e:
         skill_from_bundle(Bundle("t.yaml", _doc({"type": "cage"}), {}))
     assert str(e.value) == ("t.yaml: states.s.active_constraints[0].type: expected one of "
-                            "tilt_cone, band, box, neighbour_orientation, got 'cage'")
+                            "tilt_cone, band, box, neighbour_orientation, speed_near, got 'cage'")
     with pytest.raises(SkillError, match=r"m.json: fields\[0\].type: expected translation, cylinder, "
                                          r"sphere or general, got 'torus'"):
         Field.from_yaml({"type": "torus"}, "fields[0]", "m.json")

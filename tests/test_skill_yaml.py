@@ -146,6 +146,14 @@ def neighbour_orientation(draw) -> dict[str, Any]:
         pivot=st.none() | vec3(), rotation_weight=number(0, 10)))
 
 
+@st.composite
+def speed_near(draw) -> dict[str, Any]:
+    return draw(with_optional(
+        {"type": "speed_near", "within": draw(number(1e-6, 2)), "max_linear_speed": draw(number(1e-6, 1)),
+         "max_angular_speed": draw(number(1e-6, 3))},
+        frame=st.sampled_from(EE_FRAMES), point=st.none() | vec3(-0.5, 0.5)))
+
+
 def transition(kind: str, **optional: st.SearchStrategy) -> st.SearchStrategy[dict[str, Any]]:
     return with_optional({"from": "a", "to": "b", "type": kind}, margin=number(0, 1), **optional)
 
@@ -184,6 +192,7 @@ DOCS: dict[str, st.SearchStrategy[dict[str, Any]]] = {
     "band": band(),
     "box": box(),
     "neighbour_orientation": neighbour_orientation(),
+    "speed_near": speed_near(),
     "hyperplane": transition("hyperplane", frame=st.sampled_from(EE_FRAMES), offset=number())
     .flatmap(lambda d: st.builds(lambda n: d | {"normal": n}, direction)),
     "distance": distance(),

@@ -101,3 +101,18 @@ def test_the_intent_alone_switches_on_the_light_in_the_simulation(seed):
     assert res.time_s is not None and res.time_s < 10.0 and res.duration_s < 15.0, res
     assert list(res.phase_s) == ["press", "retreat"] and res.progress == 1.0, res
     assert lag < 0.02, lag
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_intent_alone_gives_the_person_a_sip_in_the_simulation(seed):
+    """From three seeded starts (the cup and the person's head placed as the file's vary
+    says), the cup's rim comes to the lips, the cup tilts until a fifth of it is in the
+    mouth, comes upright and backs off: a success (nothing spilled, under 5 N on the face,
+    no more than a sip), the arm never more than 2 cm behind its target."""
+    task = find_task("drink")
+    res, lag = steer(task, seed)
+    assert (res.outcome, res.reason) == ("success", "drunk"), res
+    assert list(res.phase_s) == ["bring", "sip", "upright", "away"], res
+    assert res.spill == 0.0 and 0.2 <= res.progress <= 0.3, res
+    assert res.time_s is not None and res.time_s < 12.0, res
+    assert lag < 0.02, lag

@@ -42,6 +42,8 @@ def summary(task: Task) -> dict[str, Any]:
         "joints": {n: {"type": j.kind, "handle": j.handle, "travel": j.travel, "unit": j.unit}
                    for n, j in sc.joints.items()},
         "surfaces": {n: _surface(b) for n, b in sc.bodies.items() if b.surface is not None},
+        "heads": {n: {"behind": h.behind, "radius": h.radius, "stiffness": h.stiffness, "damping": h.damping}
+                  for n, h in sc.heads.items()},
         "frames": sc.frames(),
         "thresholds": thresholds(task.outcome.done),
         "done": _flag_terms(task.outcome.done),
@@ -120,6 +122,9 @@ def main_tasks(args: argparse.Namespace) -> int:
                 b = f["button"]
                 print(f"  button {n}: radius {b['radius'] * 1000:g} mm, travel {b['travel'] * 1000:g} mm, "
                       f"switches at {b['click'] * 1000:g} mm ({b['click_force']:g} N)")
+        for n, h in s["heads"].items():
+            print(f"  head {n}: a sphere of {h['radius']:g} m behind {h['behind']}, contact "
+                  f"{h['stiffness']:g} N/m, {h['damping']:g} N s/m")
         targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")

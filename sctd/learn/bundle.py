@@ -36,7 +36,7 @@ from ..skill.frames import builtin_frames
 from ..skill.reader import Reader
 from ..skill.summary import field_summary
 from .linear import AXIS_NAMES
-from .results import LinearResult, VectorFieldResult
+from .results import LinearResult, VectorFieldResult, speed_near_from_text
 
 
 def rounded(x: Any, nd: int = 6) -> Any:
@@ -59,6 +59,15 @@ def state_name(k: int) -> str:
 def _limits(result: LinearResult | VectorFieldResult) -> Limits:
     o = result.options
     return Limits(max_linear_speed=o.max_linear_speed, max_angular_speed=o.max_angular_speed)
+
+
+def _capped(states: tuple[State, ...], result: LinearResult | VectorFieldResult) -> tuple[State, ...]:
+    """The states with the options' ``speed_near`` cap added last to each, if any."""
+    text = result.options.speed_near
+    if not text:
+        return states
+    cap = speed_near_from_text(text)
+    return tuple(dataclasses.replace(s, active_constraints=(*s.active_constraints, cap)) for s in states)
 
 
 def linear_skill(result: LinearResult, name: str) -> Skill:
@@ -89,7 +98,7 @@ def linear_skill(result: LinearResult, name: str) -> Skill:
         transitions.append(Hyperplane(source=b, target=a, frame=h.frame, normal=-n, offset=-o,
                                       margin=h.margin))
     return Skill(
-        name=name, object=result.options.object, frames=frames, states=states,
+        name=name, object=result.options.object, frames=frames, states=_capped(states, result),
         transitions=tuple(transitions), start=state_name(0), end=state_name(len(L.states_) - 1),
         limits=_limits(result), min_dwell=0.1,
         description=(f"Learned by sctd learn --method linear from {len(result.prepared)} "
@@ -204,7 +213,8 @@ def vf_skill(result: VectorFieldResult, name: str) -> Skill:
                      direction="below", margin=0.0)
             for h in plan.transitions)
         min_dwell = 0.1
-    return Skill(name=name, object=result.options.object, frames=builtin_frames(), states=states,
+    return Skill(name=name, object=result.options.object, frames=builtin_frames(),
+                 states=_capped(states, result),
                  transitions=transitions, start=names[0], end=names[-1], limits=_limits(result),
                  min_dwell=min_dwell, description=description,
                  candidate_frames=tuple(L.candidate_frames_))

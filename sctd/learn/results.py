@@ -13,9 +13,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..skill import SkillError, SpeedNear
+from ..skill.frames import builtin_frames
+from ..skill.reader import Reader
 from .frames import FoundFrame
 from .linear import LinearIMLearner
-from .params import Interval, OneOf, Text, get_params, hyperparameter
+from .params import Interval, OneOf, Text, Valid, get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
 from .traps import TrapFinding
 from .vf import VectorFieldLearner
@@ -26,6 +29,58 @@ Array = NDArray[np.float64]
 VF_COMBINE = ("intent", "weighted", "most_probable")
 VF_STATES = ("auto", "blend")
 VF_MOTION = ("rigid", "translate")
+
+
+SPEED_NEAR = "WITHIN:V:W[:X,Y,Z]"
+"""How ``--speed-near`` is written: m, m/s, rad/s and optionally the point of the hand
+(an offset from the ee, m)."""
+
+
+def speed_near_from_text(text: str) -> SpeedNear:
+    """The ``speed_near`` constraint (on the ee) that ``--speed-near`` text describes:
+    ``WITHIN:V:W`` (the hand's origin within WITHIN m of the object moves at most V m/s
+    and turns at most W rad/s) or ``WITHIN:V:W:X,Y,Z`` (that point of the hand instead),
+    checked as a skill file's is.
+
+    Raises
+    ------
+    ValueError
+        Not so written, or a value a skill file may not hold (the message says which).
+    """
+    parts = text.split(":")
+    if len(parts) not in (3, 4):
+        raise ValueError(f"expected {SPEED_NEAR}, got {text!r}")
+    try:
+        within, v, w = (float(x) for x in parts[:3])
+        point = [float(x) for x in parts[3].split(",")] if len(parts) == 4 else None
+    except ValueError:
+        raise ValueError(f"expected numbers as in {SPEED_NEAR}, got {text!r}") from None
+    doc: dict[str, Any] = {"within": within, "max_linear_speed": v, "max_angular_speed": w}
+    if point is not None:
+        doc["point"] = point
+    r = Reader("--speed-near", {})
+    r.frames = builtin_frames()
+    try:
+        c = SpeedNear.from_yaml(r, {"type": SpeedNear.type, "frame": "ee", **doc}, "speed_near")
+    except SkillError as e:
+        raise ValueError(f"{e.path.removeprefix('speed_near.')}: {e.problem}") from None
+    return c
+
+
+@dataclass(frozen=True)
+class SpeedNearText(Valid):
+    """Empty (no cap), or what :func:`speed_near_from_text` reads."""
+
+    def problem(self, value: Any) -> str:
+        if value == "":
+            return ""
+        if not isinstance(value, str):
+            return f"expected {SPEED_NEAR} or nothing, got {value!r}"
+        try:
+            speed_near_from_text(value)
+        except ValueError as e:
+            return str(e)
+        return ""
 
 
 @dataclass(frozen=True)
@@ -40,6 +95,9 @@ class SkillOptions:
         m/s at full input.
     max_angular_speed : float
         rad/s at full input.
+    speed_near : str
+        ``WITHIN:V:W[:X,Y,Z]`` (:func:`speed_near_from_text`): every state of the skill
+        gets a ``speed_near`` constraint so written; empty for none.
     """
 
     object: str = hyperparameter("object", "task object name (the skill frame)", valid=Text())
@@ -47,6 +105,11 @@ class SkillOptions:
                                              valid=Interval(0, 1, open="low"))
     max_angular_speed: float = hyperparameter(0.50, "rad/s at full input (default %(default)s)",
                                               valid=Interval(0, 3, open="low"))
+    speed_near: str = hyperparameter(
+        "", "cap the speed near the object in every state: within WITHIN m of its origin the "
+        "hand's origin (or the point X,Y,Z of the hand, m from the ee) moves at most V m/s "
+        "and the hand turns at most W rad/s (a speed_near constraint; default none)",
+        valid=SpeedNearText(), metavar=SPEED_NEAR)
 
 
 @dataclass(frozen=True)

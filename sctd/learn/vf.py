@@ -128,8 +128,9 @@ class VectorFieldLearner:
         explain the motion.
     pivot_spread : float
         A rotational field whose centre (or axis point) stays within this RMS distance
-        (m) of one point of the hand over its inliers gets that point as its ``pivot``
-        (the demonstrations turned about it: a bottle's opening).
+        (m) of one point of the hand over its inliers gets a point of the hand as its
+        ``pivot`` (the demonstrations turned about it: a bottle's opening): the one that
+        moves least over the field's steps (:func:`.vfframes.turning_point`).
     random_state : int or None
         Seed of RANSAC (flag ``--seed``).
 
@@ -234,8 +235,10 @@ class VectorFieldLearner:
         fields, self.responsibilities_, self.assignment_ = self._em(angles)
         if progress is not None:
             progress("em")
+        demo, sample = self.demo_index_, self.sample_index_
+        steps = np.flatnonzero((demo[1:] == demo[:-1]) & (sample[1:] == sample[:-1] + 1))
         self.candidate_frames_, self.fields_ = candidate_frames(
-            fields, self.assignment_, self.points_, self.quaternions_, self.pivot_spread)
+            fields, self.assignment_, self.points_, self.quaternions_, self.pivot_spread, steps)
         self.timings_ = {"ransac": t1 - t0, "em": time.perf_counter() - t1}
         return self
 

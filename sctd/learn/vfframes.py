@@ -1,6 +1,7 @@
 """Candidate feature frames from vector fields (Ch. 4.2.7): sphere centres and cylinder
 axis points, with the centre's mean offset in the ee frame over the points the field
-explains (for the pour: the bottle tip)."""
+explains (for the pour: the bottle tip); and, for a field the demonstrations turned the
+hand about one point of, that point (:func:`turning_point`)."""
 
 from __future__ import annotations
 
@@ -16,14 +17,18 @@ Array = NDArray[np.float64]
 
 
 def candidate_frames(fields: list[Field], assignment: NDArray[np.int64], points: Array,
-                     quaternions: Array, pivot_spread: float) -> tuple[list[dict], list[Field]]:
+                     quaternions: Array, pivot_spread: float,
+                     steps: NDArray[np.int64] | None = None) -> tuple[list[dict], list[Field]]:
     """One candidate frame per sphere or cylinder of ``fields``, named by kind and
     number (``sphere0``, ``cylinder0``, ...): its position (and axis), and where the
     points it explains (``assignment``, (n,)) have the ee (``points`` (n, 3),
     ``quaternions`` (n, 4)), its mean offset in the ee frame and that offset's RMS
     spread. Returns the frames and the fields, a field whose offset spreads less than
-    ``pivot_spread`` (m) given that point of the hand as its ``pivot`` (the
-    demonstrations turned about it: a bottle's opening)."""
+    ``pivot_spread`` (m) given a point of the hand as its ``pivot`` (the demonstrations
+    turned about it: a bottle's opening): with ``steps`` (the indices i of the points
+    whose next point i + 1 follows them in the same demonstration), the point of the
+    hand that stays put over the field's steps (:func:`turning_point`, from the mean
+    offset where they leave it free), else the mean offset."""
     out = []
     fields = list(fields)
     counts = {"sphere": 0, "cylinder": 0}
@@ -48,6 +53,63 @@ def candidate_frames(fields: list[Field], assignment: NDArray[np.int64], points:
             entry["ee_offset"] = [round(float(x), 6) for x in mean]
             entry["ee_offset_spread"] = round(spread, 6)
             if spread < pivot_spread:  # the demonstrations turned about a point of the hand
-                fields[m] = replace(f, pivot=mean)
+                pivot = mean
+                if steps is not None:
+                    own = steps[sel[steps] & sel[steps + 1]]
+                    pivot = turning_point(se3.matrix_from_quaternion(quaternions), points, own, mean)
+                fields[m] = replace(f, pivot=pivot)
         out.append(entry)
     return out, fields
+
+
+FREE = 0.1
+"""A direction the steps determine less than this share of the best-determined one
+(the singular values' ratio) is left where the start puts it: along the axis the hand
+turned about, when it always turned about one."""
+ITERATIONS = 20
+"""Reweightings of :func:`turning_point`'s robust least squares."""
+TUKEY = 4.685
+"""Tukey's biweight constant, in robust standard deviations of the residuals."""
+
+
+def turning_point(R: Array, p: Array, steps: NDArray[np.int64], start: Array) -> Array:
+    """The point ``x`` of the hand (ee frame) that moves least over the steps ``i -> i + 1``
+    (``i`` in ``steps``) of the ee poses (``R`` (n, 3, 3), ``p`` (n, 3), object frame):
+    the robust least-squares solution of ``(R_{i+1} - R_i) x = -(p_{i+1} - p_i)``.
+
+    A step that turns the hand about x satisfies it; one that only translates the hand
+    says nothing of x (its matrix is 0) and so does not pull it; one that both turns and
+    translates (the hand carried while it wobbles, an arm that overshoots) is
+    down-weighted by Tukey's biweight on the residuals (their scale the median absolute
+    residual, 1.4826 times), reweighted :data:`ITERATIONS` times. Directions the steps
+    leave (nearly) free (:data:`FREE`) keep ``start``'s component. Without steps,
+    ``start``. Deterministic, pure numpy.
+    """
+    if len(steps) == 0:
+        return np.asarray(start, dtype=float)
+    dR = R[steps + 1] - R[steps]
+    dp = p[steps + 1] - p[steps]
+    x = np.asarray(start, dtype=float)
+    w = np.ones(len(steps))
+    for _ in range(ITERATIONS):
+        x = _weighted_point(dR, dp, w, start)
+        r = np.linalg.norm(np.einsum("nij,j->ni", dR, x) + dp, axis=1)
+        scale = 1.4826 * float(np.median(r))
+        if not scale > 1e-12:  # (every step agrees: done)
+            break
+        u = r / (TUKEY * scale)
+        w = np.where(u < 1.0, (1.0 - u * u) ** 2, 0.0)
+    return x
+
+
+def _weighted_point(dR: Array, dp: Array, w: Array, start: Array) -> Array:
+    """The weighted least-squares ``x`` of ``dR x = -dp``, ``start`` along the directions
+    the weighted steps leave free."""
+    sw = np.sqrt(w)
+    A = (dR * sw[:, None, None]).reshape(-1, 3)
+    b = (-dp * sw[:, None]).reshape(-1)
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    if not s[0] > 0.0:
+        return np.asarray(start, dtype=float)
+    keep = s >= FREE * s[0]
+    return start + Vt[keep].T @ ((U[:, keep].T @ (b - A @ start)) / s[keep])

@@ -10,7 +10,16 @@ constraints in :mod:`.constraints` (:data:`CONSTRAINTS`), transitions in
 :mod:`.loader` reads a whole skill, :mod:`.writer` writes one.
 """
 
-from .constraints import CONSTRAINTS, ActiveConstraint, Band, Box, NeighbourOrientation, TiltCone
+from .constraints import (
+    CONSTRAINTS,
+    ActiveConstraint,
+    Band,
+    Box,
+    NeighbourOrientation,
+    SpeedNear,
+    StepLimit,
+    TiltCone,
+)
 from .engine import SkillEngine
 from .errors import SkillError
 from .fields import FIELDS, CylinderField, Field, SphereField, TranslationField, sigmoid
@@ -52,8 +61,10 @@ __all__ = [
     "Skill",
     "SkillEngine",
     "SkillError",
+    "SpeedNear",
     "SphereField",
     "State",
+    "StepLimit",
     "StuckDetector",
     "TiltCone",
     "Timeout",

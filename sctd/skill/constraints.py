@@ -332,3 +332,133 @@ class NeighbourOrientation(ActiveConstraint):
              G[10] + G[3] * px + G[4] * py + G[5] * pz,
              G[11] + G[6] * px + G[7] * py + G[8] * pz)
         return se3.compose_flat(se3.flat_rotation_about(R9, *o), F)
+
+
+# -- limits on the step, not the pose ------------------------------------------------------
+class StepLimit(ActiveConstraint, ABC):
+    """An active constraint on how far the pose moves in one command, not on where it
+    is: every pose satisfies it (:meth:`project` leaves it), and the engine bounds each
+    command's step with :meth:`limit` after the state's other constraints, wherever it
+    stands in the list."""
+
+    def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        return F
+
+    @abstractmethod
+    def limit(self, F_prev: Flat, F_new: Flat, ws: Workspace, dt: float) -> Flat:
+        """The step F_prev -> F_new (ee poses, object frame) bounded for a command of
+        ``dt`` s: F_new itself when it is within the bound, else a pose on the way to
+        it (:func:`_along`)."""
+
+
+def _along(F_a: Flat, F_b: Flat, s: float, q: tuple[float, float, float, float]) -> Flat:
+    """The ee pose a fraction ``s`` of the way from F_a to F_b, on the path the daemon's
+    own step bound scales steps along: the origin on the straight line, the rotation
+    ``R_a exp(s log(R_a^T R_b))`` (``q``: the unit quaternion of ``R_a^T R_b``, w >= 0).
+    Scaling a step on it again stays on it."""
+    x, y, z, w = q
+    n = math.sqrt(x * x + y * y + z * z)
+    k = 2.0 / w if n < 1e-12 else 2.0 * math.atan2(n, w) / n
+    R = np.array(F_a[:9]).reshape(3, 3) @ se3.matrix3_from_rotvec(s * (x * k), s * (y * k), s * (z * k))
+    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R.tolist()
+    ax, ay, az = F_a[9], F_a[10], F_a[11]
+    return (r0, r1, r2, r3, r4, r5, r6, r7, r8,
+            ax + s * (F_b[9] - ax), ay + s * (F_b[10] - ay), az + s * (F_b[11] - az))
+
+
+def _relative_quaternion(F_a: Flat, F_b: Flat) -> tuple[float, float, float, float]:
+    """The unit quaternion (w >= 0) of ``R_a^T R_b``."""
+    M = np.array(F_a[:9]).reshape(3, 3).T @ np.array(F_b[:9]).reshape(3, 3)
+    (a, b, c), (d, e, f), (g, h, i) = M.tolist()
+    return se3.quaternion_from_flat((a, b, c, d, e, f, g, h, i, 0.0, 0.0, 0.0))
+
+
+@CONSTRAINTS.register
+@dataclass(frozen=True, kw_only=True, eq=False)
+class SpeedNear(StepLimit):
+    """Slow near the object: while ``point`` (3,; an offset in ``frame``, default its
+    origin) is within ``within`` m of the object's origin at either end of a command's
+    step, the step moves that point at most ``max_linear_speed`` (m/s) and turns the hand
+    at most ``max_angular_speed`` (rad/s) over the command's ``dt``, whatever the input
+    and the other elements ask for.
+
+    The step is scaled back along :func:`_along`, on which the point's displacement after
+    a fraction ``s`` of a step that turns by ``theta`` is at most ``s d + theta^2 r / 4``
+    (``d`` the whole step's displacement, ``r`` the point's distance from the ee's
+    origin: the chord of the turn against its share of the whole) and at most ``s (|t| +
+    theta r)`` (``t`` the ee origin's displacement); the fraction is the largest that
+    keeps either bound within the cap, so that any smaller one does too (the daemon's
+    own step bound scales steps further along the same path).
+    """
+
+    type: ClassVar[str] = "speed_near"
+    within: float
+    max_linear_speed: float
+    max_angular_speed: float
+    point: Array | None = None
+    _point3: Vec3 = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _set(self, _point3=(0.0, 0.0, 0.0) if self.point is None else _floats3(self.point))
+
+    @classmethod
+    def from_yaml(cls, r: Reader, cd: dict, path: str) -> SpeedNear:
+        r.known_keys(cd, path, {"type", "frame", "within", "max_linear_speed", "max_angular_speed", "point"})
+        return cls(
+            frame=r.ee_frame_ref(cd.get("frame", "ee"), f"{path}.frame"),
+            within=r.number(cd.get("within"), f"{path}.within", 0.0, 2.0, lo_open=True),
+            max_linear_speed=r.number(cd.get("max_linear_speed"), f"{path}.max_linear_speed", 0.0, 1.0,
+                                      lo_open=True),
+            max_angular_speed=r.number(cd.get("max_angular_speed"), f"{path}.max_angular_speed", 0.0, 3.0,
+                                       lo_open=True),
+            point=None if cd.get("point") is None else _offset(r, cd["point"], f"{path}.point"),
+        )
+
+    def to_yaml(self) -> dict[str, Any]:
+        out = {"type": self.type, "frame": self.frame, "within": self.within,
+               "max_linear_speed": self.max_linear_speed, "max_angular_speed": self.max_angular_speed}
+        if self.point is not None:
+            out["point"] = self.point.tolist()
+        return out
+
+    def _point(self, G: Flat) -> Vec3:
+        px, py, pz = self._point3
+        return (G[9] + G[0] * px + G[1] * py + G[2] * pz, G[10] + G[3] * px + G[4] * py + G[5] * pz,
+                G[11] + G[6] * px + G[7] * py + G[8] * pz)
+
+    def limit(self, F_prev: Flat, F_new: Flat, ws: Workspace, dt: float) -> Flat:
+        if F_new is F_prev:
+            return F_new
+        ax, ay, az = self._point(ws.frame_pose(F_prev, self.frame))
+        bx, by, bz = self._point(ws.frame_pose(F_new, self.frame))
+        w2 = self.within * self.within
+        if ax * ax + ay * ay + az * az > w2 and bx * bx + by * by + bz * bz > w2:
+            return F_new  # far from the object at both ends
+        lin, ang = self.max_linear_speed * dt, self.max_angular_speed * dt
+        q = _relative_quaternion(F_prev, F_new)
+        theta = 2.0 * math.atan2(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
+        d = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
+        r = math.sqrt((ax - F_prev[9]) ** 2 + (ay - F_prev[10]) ** 2 + (az - F_prev[11]) ** 2)
+        move = math.sqrt((F_new[9] - F_prev[9]) ** 2 + (F_new[10] - F_prev[10]) ** 2
+                         + (F_new[11] - F_prev[11]) ** 2)
+        chord = 0.25 * theta * theta * r  # what a fraction of the turn may add to s d
+        s = ang / theta if theta > ang else 1.0
+        if not d + chord <= lin:
+            reach = move + theta * r
+            s_lin = lin / reach if reach > 0.0 else 0.0
+            if lin > chord and d > 0.0:
+                s_lin = max(s_lin, (lin - chord) / d)
+            s = min(s, s_lin)
+        if s >= 1.0:
+            return F_new
+        if not s > 0.0:  # (nothing may move: dt 0; NaN fails closed)
+            return F_prev
+        return _along(F_prev, F_new, s, q)
+
+
+def _offset(r: Reader, v: Any, path: str) -> Array:
+    """A point of the hand as an offset in a frame: 3 numbers, at most 1 m from it."""
+    p = r.vector(v, path, 3)
+    if float(np.linalg.norm(p)) > 1.0:
+        raise r.fail(path, f"must be within 1 m of the frame's origin, got {float(np.linalg.norm(p)):.3f} m")
+    return p

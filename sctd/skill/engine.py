@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
-from .constraints import ActiveConstraint
+from .constraints import ActiveConstraint, StepLimit
 from .model import Skill
 from .transitions import Transition
 from .workspace import Workspace
@@ -54,6 +54,12 @@ class SkillEngine:
             () if s.name == skill.end else tuple(t for t in out if math.isfinite(t.progress_step))
             for s, out in zip(skill.states, self._out_of, strict=True)]
         self._steps = [tuple(t.progress_step for t in w) for w in self._watched]
+        # per state: the constraints that move the pose, in order, then those that bound
+        # the step (they have the last word on how far a command moves)
+        self._projected: list[tuple[ActiveConstraint, ...]] = [
+            tuple(c for c in s.active_constraints if not isinstance(c, StepLimit)) for s in skill.states]
+        self._limits: list[tuple[StepLimit, ...]] = [
+            tuple(c for c in s.active_constraints if isinstance(c, StepLimit)) for s in skill.states]
         self._axes: list[tuple[int, ...]] = []
         for s in skill.states:
             axes: set[int] = set()
@@ -195,7 +201,8 @@ class SkillEngine:
 
     def command(self, F_obj_ee: Flat, u: Array | Sequence[float], dt: float) -> Flat:
         """Apply the active state's input mappings to a pose for input ``u`` over ``dt``
-        seconds, then project it onto the state's active constraints.
+        seconds, then project it onto the state's active constraints, then bound the step
+        by its step limits (:class:`~sctd.skill.constraints.StepLimit`: ``speed_near``).
 
         Parameters
         ----------
@@ -228,12 +235,14 @@ class SkillEngine:
             F = m.apply(F, uu, dt, ws)
         G = None  # the constraint frame's pose, reused while F and the frame stay
         frame = None
-        for c in state.active_constraints:
+        for c in self._projected[self.index]:
             if c.frame != frame or G is None:
                 G, frame = ws.frame_pose(F, c.frame), c.frame
             F_next = c.project(F, G, ws)
             if F_next is not F:
                 F, G = F_next, None
+        for limit in self._limits[self.index]:
+            F = limit.limit(F_obj_ee, F, ws, dt)
         ws.turn_budget = math.inf  # a projection outside a command is a whole one
         return F
 

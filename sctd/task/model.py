@@ -7,7 +7,8 @@ A task knows nothing of any skill. It holds:
   at its origin); what the hand holds (mass, centre of mass, named frames such as a
   bottle's opening, contents that flow out when it is tilted); joints moving a handle
   the hand grasps (prismatic: a drawer; revolute: a hinged door); a body's solid
-  surface the hand touches and the push button on it (a light switch);
+  surface the hand touches and the push button on it (a light switch); a person's head
+  the hand and what it holds must not press into (its mouth a body on its surface);
 - the **task object**: the body whose frame demonstrations and skills are expressed in;
 - the **outcome**: predicates on the scene's readings (:class:`Reading`) saying when
   the task is done, whether it then succeeded, what ends it early as a failure, what
@@ -327,6 +328,39 @@ class Button:
     def click_force(self) -> float:
         """The push that takes the face to its click depth, N."""
         return self.preload + self.spring * self.click
+# -- a person's head --------------------------------------------------------------------
+@dataclass(frozen=True)
+class Head:
+    """A person's head: a sphere the hand and what it holds must not press into.
+
+    The sphere's surface passes through the origin of the body ``behind`` (the mouth:
+    the middle of the lips), its centre ``radius`` behind it along that frame's -x (x
+    points out of the mouth), so the head moves with the mouth where a trial puts it.
+    A frame of the hand (its origin, the held object's frames) inside the sphere meets a
+    contact spring: ``stiffness`` (N/m) times its depth inside, plus ``damping`` (N s/m)
+    times its speed inwards, pushing it out along the normal (never pulling).
+
+    Attributes
+    ----------
+    name : str
+        What its readings are called (``<name>.force``).
+    behind : str
+        The body on its surface, in front of it.
+    radius : float
+        m.
+    stiffness, damping : float
+    """
+
+    name: str
+    behind: str
+    radius: float
+    stiffness: float
+    damping: float
+
+    def centre(self, T_world_front: Array) -> Array:
+        """The sphere's centre (world, shape (3,)) for the body ``behind`` at
+        ``T_world_front``."""
+        return T_world_front[:3, 3] - self.radius * T_world_front[:3, 0]
 
 
 @dataclass(frozen=True)
@@ -345,6 +379,7 @@ class Scene:
     bodies: dict[str, Body]
     held: Held | None = None
     joints: dict[str, Joint] = field(default_factory=dict)
+    heads: dict[str, Head] = field(default_factory=dict)
 
     def frames(self) -> list[str]:
         """The names of every published frame: the bodies', then the held object's."""
@@ -357,6 +392,7 @@ READINGS = {
     "joint": ("position", "speed", "held", "grasps", "max_position"),
     "surface": ("force", "max_force", "touching"),
     "button": ("force", "max_force", "touching", "position", "on", "presses"),
+    "head": ("force", "max_force"),
 }
 """What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
@@ -365,7 +401,8 @@ is held, how often it was grasped and the furthest position reached (m, m/s; rad
 for a revolute joint); a body's surface (by the body's name) the normal force the hand
 presses it with now and the highest so far (N), and whether the hand touches it; a
 surface with a button besides how far the button is pushed in (m), whether it is on and
-how often it switched."""
+how often it switched; a head the force of its contact now and the
+highest so far (N)."""
 FLAGS = ("flowing", "held", "touching", "on")
 """The readings that are flags (compared with ``is: true|false``)."""
 

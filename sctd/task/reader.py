@@ -36,6 +36,7 @@ from .model import (
     Contents,
     FailRule,
     Grasp,
+    Head,
     Held,
     Hinge,
     Joint,
@@ -191,6 +192,7 @@ def task_from_document(doc: Any, file: str) -> Task:
         raise r.fail("object", f"unknown body {obj!r} (bodies: {', '.join(scene.bodies)})")
     outcome = _outcome(r, d["outcome"], "outcome", scene)
     intent = _intent(r, d["intent"], "intent", scene, outcome)
+    _goals_outside_heads(r, intent, scene, obj)
     teach = _teach(r, d["teach"], "teach", intent, scene) if "teach" in d else Teach()
     text = {k: (r.string(d[k], k) if k in d else "") for k in ("title", "description", "source")}
     return Task(name, text["title"] or name, text["description"], text["source"], obj, scene, outcome,
@@ -198,7 +200,7 @@ def task_from_document(doc: Any, file: str) -> Task:
 
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
-    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints"})
+    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "heads"})
     s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
     start = Start(r.transform(s, f"{path}.start"),
                   r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
@@ -214,13 +216,15 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
         where = f"{path}.joints.{key}"
         joints[r.name(key, where)] = _joint(r, key, j, where, bodies)
-    scene = Scene(start, bodies, held, joints)
-    names = [*scene.frames(), *joints, HAND]
+    heads = _heads(r, d["heads"], f"{path}.heads", bodies) if "heads" in d else {}
+    scene = Scene(start, bodies, held, joints, heads)
+    names = [*scene.frames(), *joints, *heads, HAND]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints and "
+        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints, heads and "
                            f"{HAND!r} share one namespace)")
     _in_front(r, scene, path)
+    _outside_heads(r, scene, path)
     return scene
 
 
@@ -391,6 +395,62 @@ def _in_front(r: _Reader, scene: Scene, path: str) -> None:
             if not x > 0.0:
                 raise r.fail(f"{path}.start", f"{f} starts {-x:.3g} m behind the surface of {name!r}: "
                                               "a surface is solid behind its plane (the body's -x side)")
+# -- a person's head ----------------------------------------------------------------------
+def _heads(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> dict[str, Head]:
+    """``{name: {behind, radius, contact: {stiffness, damping}}}``, at least one."""
+    heads: dict[str, Head] = {}
+    items = r.mapping(v, path).items()
+    if not items:
+        raise r.fail(path, "expected at least one head (or no heads field)")
+    for key, h in items:
+        where = f"{path}.{key}"
+        name = r.name(key, where)
+        d = r.fields(h, where, {"behind", "radius", "contact"})
+        front = r.string(d["behind"], f"{where}.behind")
+        if front not in bodies:
+            raise r.fail(f"{where}.behind", f"unknown body {front!r} (bodies: {', '.join(bodies)})")
+        radius = r.number(d["radius"], f"{where}.radius", lo=MIN_HEAD, hi=MAX_HEAD)
+        c = r.fields(d["contact"], f"{where}.contact", {"stiffness", "damping"})
+        heads[name] = Head(name, front, radius, r.positive(c["stiffness"], f"{where}.contact.stiffness"),
+                           r.nonneg(c["damping"], f"{where}.contact.damping"))
+    return heads
+
+
+MIN_HEAD, MAX_HEAD = 0.03, 0.30
+"""m: the radii a head's sphere may have."""
+
+
+def _outside_heads(r: _Reader, scene: Scene, path: str) -> None:
+    """Refuse a scene whose hand starts inside a head (it, or a frame of what it holds),
+    at the file's poses: the first contact would be a blow, not a touch."""
+    T_start = scene.start.T_world
+    points = {HAND: T_start[:3, 3]}
+    if scene.held is not None:
+        points |= {n: (T_start @ T)[:3, 3] for n, T in scene.held.frames.items()}
+    for head in scene.heads.values():
+        centre = head.centre(scene.bodies[head.behind].T_world)
+        for name, p in points.items():
+            depth = head.radius - float(np.linalg.norm(p - centre))
+            if depth >= 0.0:
+                raise r.fail(f"{path}.start", f"{name} starts {depth:.3f} m inside the head "
+                                              f"{head.name!r} (its sphere of {head.radius} m behind "
+                                              f"{head.behind!r})")
+
+
+def _goals_outside_heads(r: _Reader, intent: tuple[Step, ...], scene: Scene, obj: str) -> None:
+    """Refuse a reach whose goal (``to``, in the task object's frame) lies inside a head
+    at the file's poses: a person never wants the hand pressed into a face."""
+    T_obj = scene.bodies[obj].T_world
+    for i, s in enumerate(intent):
+        a = s.action
+        if not isinstance(a, Reach) or a.to is None:
+            continue
+        goal = T_obj[:3, :3] @ a.to + T_obj[:3, 3]
+        for head in scene.heads.values():
+            depth = head.radius - float(np.linalg.norm(goal - head.centre(scene.bodies[head.behind].T_world)))
+            if depth >= 0.0:
+                raise r.fail(f"intent[{i}].reach.to", f"the goal lies {depth:.3f} m inside the head "
+                                                      f"{head.name!r}")
 
 
 # -- the outcome ----------------------------------------------------------------------
@@ -401,6 +461,7 @@ def _elements(scene: Scene) -> dict[str, str]:
         out[scene.held.name] = "contents"
     out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
                 if b.surface is not None})
+    out |= {h: "head" for h in scene.heads}
     return out
 
 
