@@ -56,14 +56,16 @@ def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
     path = _renamed_and_permuted(tmp_path)
     skill = load_skill(path)
     assert {s.name for s in skill.states} == {"mode_0", "mode_1", "mode_2"}
-    # One seed: the same person pours with either file, and about as fast (measured:
-    # 18.2 s and 18.4 s; the user reads the permuted mapping, so the inputs, and with
-    # them the times, differ a little)
-    a = lockstep.run_trial(load_skill(POUR), TaskSpec("pour"), 0)
-    b = lockstep.run_trial(skill, TaskSpec("pour"), 0)
-    assert a.outcome == "success" and b.outcome == "success", (a, b)
-    assert a.time_s is not None and b.time_s is not None, (a, b)
-    assert abs(a.time_s - b.time_s) <= 0.1 * a.time_s, (a, b)
+    # Five seeds: the same person pours with either file, and about as fast (the user
+    # reads the permuted mapping, so its inputs, and with them single trials' times,
+    # differ: measured over seeds 0-4, medians 16.1 s and 16.0 s, single trials up to
+    # 10 % apart)
+    a = [lockstep.run_trial(load_skill(POUR), TaskSpec("pour"), s) for s in range(5)]
+    b = [lockstep.run_trial(skill, TaskSpec("pour"), s) for s in range(5)]
+    assert all(r.outcome == "success" and r.time_s is not None for r in a + b), (a, b)
+    ta = float(np.median([r.time_s for r in a]))
+    tb = float(np.median([r.time_s for r in b]))
+    assert abs(ta - tb) <= 0.1 * ta, (a, b)
 
 
 KEPT_TIME = 0.9  # a simulator below this real-time factor fell behind the wall clock

@@ -109,7 +109,8 @@ def control_frame(task: Task | None) -> tuple[str, np.ndarray] | None:
 
 def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None = None) -> list[Entry]:
     """The skills to evaluate; a world-object skill (the baseline) gets the first
-    assisted skill's limits and the task's control frame (:func:`control_frame`), and
+    assisted skill's limits (its own when none is given) and the task's control frame
+    (:func:`control_frame`), and
     ``baseline`` adds one teleop run per assisted skill."""
     given = [Entry(p, Path(p), load_skill(p)) for p in paths]
     assisted = [e for e in given if e.skill.object != WORLD_OBJECT]
@@ -122,6 +123,9 @@ def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None =
             copy = workdir / f"{e.skill.name}-as-{ref.skill.name}"
             p = with_limits(e.path, ref.skill.limits, copy, control)
             e = Entry(e.label, p, load_skill(p), ref.label)
+        elif e.skill.object == WORLD_OBJECT and control is not None:  # alone: its own limits
+            p = with_limits(e.path, e.skill.limits, workdir / f"{e.skill.name}-competent", control)
+            e = Entry(e.label, p, load_skill(p))
         out.append(e)
     if baseline:  # one baseline per set of limits: same limits, same seeds, same trials
         done: list = []

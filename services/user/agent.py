@@ -39,6 +39,7 @@ Array = NDArray[np.float64]
 PROBE = 0.6  # deflection of a trial push
 PROGRESS = 0.003  # decrease of the intent's error that counts as getting closer
 LACKING = 0.9  # a mode that leaves this much of the most wanted part undone cannot give it
+SMALL_WISH = 0.2  # a wish this small (a share of full speed) is no reason to switch modes
 REPROBE_AFTER = 2.0  # s without getting closer before the user tries the stick out again
 
 
@@ -282,6 +283,11 @@ class SimulatedUser:
         """Switch when this mode has not been able to give the wanted motion for a while
         and another mode might (or one known to do better exists)."""
         if self.switch_works is False or t - self._mode_since < 1.0:
+            return False
+        if float(np.linalg.norm(desire.W @ desire.twist)) < SMALL_WISH:
+            # Almost nothing wanted (the bottle held tilted while it pours): no mode
+            # does better at that, and the next step may want the mode there is now.
+            self._bad_since = None
             return False
         better = [m for name, m in self.models.items() if name != mode and m.known
                   and m.command(desire.twist, desire.W)[1] < residual - 0.3]

@@ -4,9 +4,15 @@ stick moves, in each mode the display shows.
 A person does not know a skill's mappings, fields or constraints; they learn the
 device from the robot's response to their own inputs. Here that is a linear model per
 displayed mode, ``twist ~= B u`` (the hand's world-frame twist for input ``u``),
-fitted by recursive least squares with exponential forgetting over the user's own
-input/motion pairs, so it follows a mapping that changes with the hand's position (a
-vector field, a constraint) or over time.
+fitted by recursive least squares over the user's own input/motion pairs, forgetting
+only along the direction the stick is pushed now (directional forgetting, Kulhavý 1987),
+so it follows a mapping that changes with the hand's position (a vector field, a
+constraint) or over time in the directions the person uses, and keeps what it saw of the
+other axes. Plain exponential forgetting would let the covariance of the axes not pushed
+for a while grow without bound (wind-up), and then the hand's small transient turns when
+it starts or stops a translation are read as what those axes do: the model would
+promise that a translation mode turns the hand, and the user would never look for the
+mode that does.
 """
 
 from __future__ import annotations
@@ -25,8 +31,8 @@ class DeviceModel:
     n_axes : int
         Input axes.
     forgetting : float
-        Weight of the past per informative update (0.9 at ~7 updates/s: a memory of a
-        couple of seconds).
+        Weight of the past per informative update along the pushed direction (0.9 at ~7
+        updates/s: a memory of a couple of seconds).
     prior : float
         Initial covariance: how little the user knows before trying.
     """
@@ -35,7 +41,7 @@ class DeviceModel:
         self.n = n_axes
         self.forgetting = forgetting
         self.B = np.zeros((6, n_axes))
-        self.P = np.eye(n_axes) * prior
+        self.R = np.eye(n_axes) / prior  # information: the inverse of the covariance
         self.updates = 0
         self.tried = np.zeros(n_axes, dtype=bool)  # axes pushed clearly at least once
 
@@ -45,13 +51,14 @@ class DeviceModel:
         model does not forget while the user rests."""
         if float(np.max(np.abs(u))) < min_input:
             return
-        lam = self.forgetting
-        Pu = self.P @ u
-        g = Pu / (lam + float(u @ Pu))
+        Ru = self.R @ u
+        uRu = float(u @ Ru)
+        if uRu > 1e-12:  # forget the old information along u only
+            self.R = self.R - (1.0 - self.forgetting) * np.outer(Ru, Ru) / uRu
+        self.R = self.R + np.outer(u, u)
+        self.R = 0.5 * (self.R + self.R.T)
+        g = np.linalg.solve(self.R, u)
         self.B += np.outer(twist - self.B @ u, g)
-        self.P = (self.P - np.outer(g, Pu)) / lam
-        self.P = 0.5 * (self.P + self.P.T)
-        np.clip(self.P, -1e6, 1e6, out=self.P)
         self.updates += 1
         self.tried |= np.abs(u) >= 0.3
 
@@ -63,7 +70,7 @@ class DeviceModel:
         """Doubt what was learned (it no longer predicts the hand): keep the estimate as
         a starting point but let new pairs overwrite it quickly, and try every axis
         again."""
-        self.P = np.eye(self.n) * prior
+        self.R = np.eye(self.n) / prior
         self.tried[:] = False
 
     @property

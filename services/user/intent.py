@@ -66,8 +66,9 @@ class Observation:
 @dataclass
 class Desire:
     """How the hand should move: ``twist`` [v, w] (world axes, at the ee origin; m/s,
-    rad/s), ``W`` (6, 6) the weight of each component's error (so m/s and rad/s
-    compare), ``error`` a distance to the current sub-goal (progress), ``phase`` the
+    rad/s), ``W`` (6, 6) the weights of the errors of the frame's twist, as a map from the
+    hand's twist (its first three rows weigh where the frame goes, the last three how it
+    turns; m/s and rad/s compare), ``error`` a distance to the current sub-goal (progress), ``phase`` the
     intent's own step, ``done`` the task is achieved as far as the user can tell,
     ``close_enough`` the hand is short of the sub-goal but within what the task
     tolerates (a user who cannot get any closer moves on: :meth:`TaskIntent.settle`)."""
@@ -83,6 +84,16 @@ class Desire:
 NO_TWIST = np.zeros(6)  # what an observer's desire() holds instead of a twist and weights
 NO_WEIGHTS = np.zeros((6, 6))
 NO_TWIST.flags.writeable = NO_WEIGHTS.flags.writeable = False
+
+
+def _at_point(r: Array) -> Array:
+    """The (6, 6) map from a twist [v, w] at the hand's origin to the twist at the point
+    ``r`` from it (world axes): ``v_p = v + w x r``. The person's wish is about the frame
+    (the bottle's opening): its weights apply there, so that "the position" of a wish
+    is where the frame goes, not where the wrist goes while the bottle turns about it."""
+    S = np.eye(6)
+    S[:3, 3:] = -np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return S
 
 
 def _saturate(v: Array, limit: float) -> Array:
@@ -269,8 +280,8 @@ class TaskIntent:
         close = self._close(seen)
         if not steer:
             return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
-        return Desire(self._twist(i, seen, obs, readings), self._weights(i, seen), err, self.phase, done,
-                      close)
+        W = self._weights(i, seen) @ _at_point(seen.p - obs.T_world_ee[:3, 3])
+        return Desire(self._twist(i, seen, obs, readings), W, err, self.phase, done, close)
 
     def touching(self, obs: Observation) -> bool:
         """Whether the scene reports the hand pressed against a surface (a wall, a
