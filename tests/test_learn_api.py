@@ -89,7 +89,7 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--selection",
         "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
-        "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine", "--vf-states",
+        "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine", "--vf-direction", "--vf-states",
         "--max-linear-speed", "--max-angular-speed", "--speed-near"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])
     assert ns.smoothness == 0.005 and ns.random_state == 0 and ns.vf_max_n == 5 and ns.despike

@@ -11,8 +11,9 @@ import numpy as np
 from sctd import se3
 from sctd.learn.vfcoherence import coherent
 from sctd.learn.vffields import Displacements, FieldAngles
-from sctd.learn.vfframes import turning_point
+from sctd.learn.vfframes import candidate_frames, turning_point
 from sctd.learn.vfransac import Ransac, chance
+from sctd.skill.fields import SphereField
 
 
 def test_coherence_keeps_runs_of_consecutive_points_with_a_neighbour():
@@ -70,7 +71,7 @@ def _tilted_about(point_ee, centre, angles, axis):
 def test_the_turning_point_is_the_point_of_the_hand_that_stays_put():
     """Tilts about a cup's rim, among steps that only carry the hand and steps of an arm
     that overshoots (turning and moving at once): the rim comes back to 0.1 mm; along
-    the axis it always turned about, the start's component is kept."""
+    the axis it always turned about, the point nearest the hand's origin."""
     rng = np.random.default_rng(0)
     rim = np.array([0.035, 0.0, 0.10])
     R1, p1 = _tilted_about(rim, np.array([0.01, 0.0, 0.01]), np.linspace(0.0, 1.0, 40), [0, 1, 0])
@@ -84,7 +85,7 @@ def test_the_turning_point_is_the_point_of_the_hand_that_stays_put():
     start = np.array([0.03, 0.02, 0.09])
     x = turning_point(R, p, steps, start)
     assert abs(x[0] - rim[0]) < 1e-4 and abs(x[2] - rim[2]) < 1e-4
-    assert x[1] == start[1]  # along the turning axis: free
+    assert abs(x[1]) < 1e-3  # along the turning axis: free, nearest the hand's origin
     # turned about two axes: the point is fixed in all three directions
     R3, p3 = _tilted_about(rim, np.array([0.0, 0.0, 0.0]), np.linspace(0.0, 0.8, 30), [1, 0, 0])
     R = np.concatenate([R1, R3])
@@ -92,3 +93,26 @@ def test_the_turning_point_is_the_point_of_the_hand_that_stays_put():
     x = turning_point(R, p, np.array([i for i in range(69) if i != 39]), start)
     np.testing.assert_allclose(x, rim, atol=1e-9)
     assert np.array_equal(turning_point(R, p, np.array([], dtype=int), start), start)
+
+
+def test_a_sphere_turned_about_a_rim_is_centred_on_it():
+    """Tilts about a cup's rim, all about one axis (the hand's y), fitted by a sphere whose
+    centre the arcs leave free along that axis and which the fit put 6 cm aside: the
+    candidate frame and the field end up centred where the rim was, the pivot on the rim,
+    the radius the hand's distance from it."""
+    rim = np.array([0.035, 0.0, 0.10])
+    at = np.array([0.01, 0.0, 0.01])
+    R, p = _tilted_about(rim, at, np.linspace(0.0, 1.0, 40), [0, 1, 0])
+    aside = at + np.array([0.0, 0.06, 0.0])
+    fitted = SphereField(centre=aside, radius=float(np.linalg.norm(p[0] - aside)), weight=1.0)
+    q = se3.quaternion_from_matrix(R)
+    frames, fields = candidate_frames([fitted], np.zeros(40, dtype=np.int64), p, q, 0.02,
+                                      np.arange(39))
+    f = fields[0]
+    assert isinstance(f, SphereField) and f.pivot is not None
+    np.testing.assert_allclose(f.pivot, rim, atol=1e-6)
+    np.testing.assert_allclose(f.centre, at, atol=1e-6)
+    assert f.radius is not None and abs(f.radius - np.linalg.norm(rim)) < 1e-6
+    assert frames[0]["position"] == [round(float(x), 6) for x in at]
+    np.testing.assert_allclose(frames[0]["ee_offset"], rim, atol=1e-6)
+    assert frames[0]["ee_offset_spread"] < 1e-6

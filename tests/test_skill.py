@@ -313,6 +313,31 @@ def test_vector_field_scaling(fmt):
     assert np.allclose(se3.rotvec_from_matrix(project(eng, T, c)[:3, :3]), [0, 0, 0.4], atol=1e-9)
 
 
+@pytest.mark.parametrize("mode", ["scale", "blend"])
+def test_a_field_both_ways_takes_a_push_back_along_it_at_full_speed(mode):
+    """``direction: both``: back along the field (out of a drawer, off the lips) as fast
+    as along it, across it as slow as ever (scale) or bent onto the field's line the way
+    the push goes (blend); zero input still never moves the hand."""
+    files = {"m.json": vector_field_model_to_bytes(x_field_model(), "m.json")}
+    doc = vf_skill_doc("m.json", mode)
+    doc["states"]["go"]["input_mapping"][0]["direction"] = "both"
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    assert eng.skill.states[0].input_mappings[0].to_yaml()["direction"] == "both"
+    T, dt = np.eye(4), 0.01
+    back = command(eng, T, np.array([-1.0, 0, 0]), dt)[:3, 3]
+    assert np.allclose(back, [-0.1 * dt, 0, 0])
+    if mode == "scale":
+        across = command(eng, T, np.array([0, 1.0, 0]), dt)[:3, 3]
+        assert np.allclose(across, [0, 0.1 * 0.1 * dt, 0])
+    else:  # a push mostly back and a little across: bent towards -x, not +x
+        bent = command(eng, T, np.array([-0.8, 0.6, 0]), dt)[:3, 3]
+        assert bent[0] < -0.8 * 0.1 * dt and 0 < bent[1] < 0.6 * 0.1 * dt
+    assert np.array_equal(command(eng, T, np.zeros(3), dt)[:3, 3], T[:3, 3])
+    doc["states"]["go"]["input_mapping"][0]["direction"] = "backwards"
+    with pytest.raises(SkillError, match=r"input_mapping\[0\]\.direction"):
+        load_text(yaml.safe_dump(doc), files)
+
+
 def two_field_model() -> VectorFieldModel:
     """A reach along -x next to the end of a pull along +x (the drawer's overlap):
     points of both at x in [0, 0.2]; those of the pull upright, of the reach turned

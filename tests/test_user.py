@@ -34,6 +34,29 @@ def test_device_model_recovers_a_linear_device(seed):
     assert residual < 0.05 and np.allclose(B @ u, want, atol=5e-3)
 
 
+def test_device_model_keeps_what_it_saw_of_axes_it_has_not_pushed_since():
+    """Every axis tried once, then a long push along one with a person's small stray
+    deflections on the others and the hand's small transient turns: what the others do
+    is not forgotten and not made up from the turns (a translation mode is never taken
+    for one that tilts the bottle)."""
+    rng = np.random.default_rng(3)
+    B = np.zeros((6, 3))
+    B[:3, :3] = np.eye(3) * 0.1  # a translation mode
+    m = DeviceModel(3)
+    for i in range(3):
+        for sign in (1.0, -1.0):
+            u = np.zeros(3)
+            u[i] = 0.6 * sign
+            m.update(u, B @ u)
+    for _ in range(300):  # ~40 s of carrying along x
+        u = np.array([1.0, *rng.normal(0.0, 0.02, 2)])
+        turn = np.concatenate([np.zeros(3), rng.normal(0.0, 0.01, 3)])
+        m.update(u, B @ u + turn)
+    np.testing.assert_allclose(m.B[:, 1:], B[:, 1:], atol=0.02)
+    want = np.array([0.0, 0.0, 0.0, 0.0, 0.5, 0.0])  # a tilt
+    assert m.command(want, np.eye(6))[1] > 0.95  # it knows this mode cannot tilt
+
+
 def test_device_model_ignores_rest_and_command_stays_in_bounds():
     m = DeviceModel(3)
     m.update(np.zeros(3), np.ones(6))  # no input: nothing to learn
@@ -201,6 +224,26 @@ def test_pour_intent_takes_an_opening_inside_the_rim_as_close_enough():
     for far in ([0.033, 0.0, 0.075], [0.0, 0.0, 0.13], [0.0, 0.0, 0.01]):  # off the rim, too high, too low
         d = TaskIntent(POUR).desire(_pour_obs(0.0, _hand_with_tip_at(far)))
         assert d.phase == "bring" and not d.close_enough, far
+
+
+def test_the_wish_is_weighed_where_the_frame_is_not_at_the_wrist():
+    """Over the mug, wanting to tilt: a turn of the hand about the bottle's opening moves
+    the opening nowhere, so its weighted position part is nothing, and a translation of
+    the wrist by the swing that turn would give (which carries the opening off the mug)
+    counts as moving the opening."""
+    it = TaskIntent(POUR)
+    T = _hand_with_tip_at([0.0, 0.0, 0.05])
+    it.desire(_pour_obs(0.0, T))
+    it.settle()
+    d = it.desire(_pour_obs(0.1, T))
+    assert d.phase == "pour" and np.linalg.norm(d.twist[3:]) > 0.1
+    w = d.twist[3:]
+    r = (T @ T_EE_TIP)[:3, 3] - T[:3, 3]
+    about_opening = np.concatenate([-np.cross(w, r), w])  # v_ee = -w x r: the opening stays
+    assert np.linalg.norm(np.cross(w, r)) > 0.01  # the wrist swings
+    np.testing.assert_allclose((d.W @ about_opening)[:3], 0.0, atol=1e-9)
+    swing = np.concatenate([-np.cross(w, r), np.zeros(3)])  # the wrist's part alone
+    assert np.linalg.norm((d.W @ swing)[:3]) > 0.1  # moves the opening: weighed as such
 
 
 class ToyTilter:

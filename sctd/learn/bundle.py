@@ -174,7 +174,8 @@ def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorField
         pivot = np.array(rounded(max(pivots, key=lambda f: f.weight).pivot))
     mapping = VectorFieldMapping(model_file=rel, model=model, frame="ee", mode="scale",
                                  combine=p.vf_combine, min_v=p.min_v, k_s=p.k_s,  # type: ignore[arg-type]
-                                 max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion)  # type: ignore[arg-type]
+                                 max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion,  # type: ignore[arg-type]
+                                 direction=p.vf_direction)  # type: ignore[arg-type]
     constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
                                       max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot)
     return State(name=name, input_mappings=(mapping,), active_constraints=(constraint,))

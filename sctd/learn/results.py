@@ -29,6 +29,7 @@ Array = NDArray[np.float64]
 VF_COMBINE = ("intent", "weighted", "most_probable")
 VF_STATES = ("auto", "blend")
 VF_MOTION = ("rigid", "translate")
+VF_DIRECTION = ("forward", "both")
 
 
 SPEED_NEAR = "WITHIN:V:W[:X,Y,Z]"
@@ -134,6 +135,9 @@ class VectorFieldOptions:
     vf_motion : {"rigid", "translate"}
         Rotational fields turn the hand about their centre (rigid) or only move it
         (translate, the thesis).
+    vf_direction : {"forward", "both"}
+        A push back along a field goes against it (forward, the thesis: scaled down to
+        ``min_v``) or follows it (both).
     vf_states : {"auto", "blend"}
         Sequential fields become states (:func:`~sctd.learn.vfstates.plan_states`) or
         all blend in one state (the thesis).
@@ -155,6 +159,11 @@ class VectorFieldOptions:
         "intent", "how fields' agreements combine: intent weighs them by the membership given "
         "the position and the command; weighted (eq. 4.32) and most_probable (eq. 4.31) by the "
         "position's alone (default %(default)s)", choices=VF_COMBINE, valid=OneOf(VF_COMBINE))
+    vf_direction: str = hyperparameter(
+        "forward", "forward: a push back along a field goes against it and is scaled down to "
+        "min-v, as in the thesis; both: it follows the field as fast as a push along it (out "
+        "of a drawer, off the lips) (default %(default)s)", choices=VF_DIRECTION,
+        valid=OneOf(VF_DIRECTION))
     vf_states: str = hyperparameter(
         "blend", "auto: fields the demonstrations use one after the other, in separate places, "
         "become states with hyperplane transitions between them; blend: one state blends all "

@@ -327,6 +327,12 @@ class VectorFieldMapping(InputMapping):
     the membership mixed with 10 % of the fields' weights: where fields overlap in
     space (the start of a reach and the end of a pull), the one the user's push
     follows is the one the user means.
+
+    ``direction``: ``forward`` (the thesis) takes a field's direction as the only way
+    along it, so a push back along the demonstrated path agrees least (``s = -1``) and is
+    scaled down to ``min_v``; ``both`` takes the field's line both ways (``|s|``, and in
+    ``blend`` the bend towards whichever way the push goes): the hand goes back the way
+    it came (out of a drawer, off a person's lips) as fast as it came.
     """
 
     type: ClassVar[str] = "vector_field"
@@ -341,11 +347,12 @@ class VectorFieldMapping(InputMapping):
     max_d: float = 0.15
     blend: float = 0.5
     motion: Literal["translate", "rigid"] = "translate"
+    direction: Literal["forward", "both"] = "forward"
 
     @classmethod
     def from_yaml(cls, r: Reader, md: dict, path: str) -> VectorFieldMapping:
         r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s",
-                                "max_n", "max_d", "blend", "motion", "intent_kappa"})
+                                "max_n", "max_d", "blend", "motion", "intent_kappa", "direction"})
         model_file = r.string(md.get("model"), f"{path}.model")
         return cls(
             model_file=model_file,
@@ -362,13 +369,15 @@ class VectorFieldMapping(InputMapping):
             blend=r.number(md.get("blend", 0.5), f"{path}.blend", 0.0, 10.0),
             motion=r.choice(md.get("motion", "translate"), f"{path}.motion",  # type: ignore[arg-type]
                             ("translate", "rigid")),
+            direction=r.choice(md.get("direction", "forward"), f"{path}.direction",  # type: ignore[arg-type]
+                               ("forward", "both")),
         )
 
     def to_yaml(self) -> dict[str, Any]:
         return {"type": self.type, "model": self.model_file, "frame": self.frame, "mode": self.mode,
                 "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
                 "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
-                "motion": self.motion}
+                "motion": self.motion, "direction": self.direction}
 
     def summary(self) -> dict[str, Any]:
         """:meth:`to_yaml` and how many fields the model has."""
@@ -415,27 +424,37 @@ class VectorFieldMapping(InputMapping):
         fields = self.model.fields
         agree = None
         if self.combine == "intent":
-            agree = [f.agreement3(p, unit) for f in fields]
+            agree = self._agreements(p, unit)
             P = intent_membership(P.tolist(), nb.prior.tolist(), agree, self.intent_kappa)
         if self.mode == "blend":
             return P, self._blend(p, unit, mag, P), 1.0
         if self.combine == "most_probable":
             s = fields[int(np.argmax(P))].agreement3(p, unit)
+            s = abs(s) if self.direction == "both" else s
         else:
             if agree is None:
-                agree = [f.agreement3(p, unit) for f in fields]
+                agree = self._agreements(p, unit)
             Pk = P.tolist()
             s = sum(Pk[k] * a for k, a in enumerate(agree))
         scale = min(1.0, max(self.min_v, float(sigmoid(s, self.k_s))))
         return P, (u[0] * scale, u[1] * scale, u[2] * scale), scale
 
+    def _agreements(self, p: Vec3, unit: Vec3) -> list[float]:
+        """Each field's agreement with the unit command (both ways along it, with
+        ``direction: both``)."""
+        agree = [f.agreement3(p, unit) for f in self.model.fields]
+        return [abs(a) for a in agree] if self.direction == "both" else agree
+
     def _blend(self, p: Vec3, unit: Vec3, mag: float, P: Array) -> Vec3:
         """Eq. 4.35: the command's direction bent towards the fields' (the step at full
-        speed)."""
+        speed); with ``direction: both`` towards each field's way the command goes."""
         p_a, unit_a = np.array(p), np.array(unit)
         bend = np.zeros(3)
         for k, f in enumerate(self.model.fields):
-            bend += P[k] * f.guided_direction(p_a, unit_a)
+            g = f.guided_direction(p_a, unit_a)
+            if self.direction == "both" and float(g @ unit_a) < 0.0:
+                g = -g
+            bend += P[k] * g
         direction = unit_a + self.blend * bend
         dn = float(np.linalg.norm(direction))
         direction = direction / dn if dn > 1e-6 else unit_a
