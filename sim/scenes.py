@@ -24,7 +24,9 @@ knows a task:
   its click depth;
 - **heads** (:class:`HeadContact`): a person's head, a sphere behind a body's frame
   (the mouth), whose contact spring pushes back on the hand and the held object's frames
-  inside it, and reports the force.
+  inside it, and reports the force;
+- **zones** (:class:`ZoneWatch`): a goal pose of a frame of the hand within tolerances,
+  timed while the frame stays inside (a cup held at the lips for 2 s).
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -46,7 +48,7 @@ import numpy as np
 from sctd import se3
 from sctd.task import Task, find_task, handle_pose
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint
+from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint, Zone
 from sctd.task.reader import HAND
 
 GRAVITY = 9.81
@@ -550,6 +552,32 @@ class HeadContact:
         return {f"{n}.force": self.force, f"{n}.max_force": self.max_force}
 
 
+class ZoneWatch:
+    """Times a :class:`~sctd.task.model.Zone`: ``dwell`` grows by each step's ``dt``
+    while the frame is inside and falls to 0 when it leaves; ``max_dwell`` is the
+    longest so far."""
+
+    def __init__(self, zone: Zone, T_ee_frame: np.ndarray):
+        self.zone = zone
+        self.name = zone.name
+        self.T_ee_frame = T_ee_frame
+        self.reset()
+
+    def reset(self) -> None:
+        self.inside = False
+        self.dwell = 0.0
+        self.max_dwell = 0.0
+
+    def step(self, T_world_ee: np.ndarray, T_world_around: np.ndarray, dt: float) -> None:
+        self.inside = self.zone.inside(T_world_around, T_world_ee @ self.T_ee_frame)
+        self.dwell = self.dwell + dt if self.inside else 0.0
+        self.max_dwell = max(self.max_dwell, self.dwell)
+
+    def readings(self) -> dict[str, float | bool]:
+        n = self.name
+        return {f"{n}.inside": self.inside, f"{n}.dwell": self.dwell, f"{n}.max_dwell": self.max_dwell}
+
+
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -584,6 +612,8 @@ class TaskScene:
         self.contacts = contacts(task)
         points = [np.eye(4), *(sc.held.frames.values() if sc.held is not None else ())]
         self.heads = [HeadContact(h, points) for h in sc.heads.values()]
+        frames = sc.held.frames if sc.held is not None else {}
+        self.zones = [ZoneWatch(z, frames.get(z.frame, np.eye(4))) for z in sc.zones.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._hand = np.zeros(3)
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
@@ -600,6 +630,8 @@ class TaskScene:
             c.reset()
         for head in self.heads:
             head.reset()
+        for z in self.zones:
+            z.reset()
 
     def start_pose(self) -> np.ndarray:
         """The hand's start: the file's orientation turned by ``start_yaw`` about the
@@ -608,10 +640,8 @@ class TaskScene:
         return se3.transform_from_rt(R, self.start_position)
 
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """Advance by ``dt``; return the wrench of the held load, the grasped handles and the
-        surfaces the hand touches."""
-        """Advance by ``dt``; return the wrench of the held load, the grasped handles and
-        the heads pressed into."""
+        """Advance by ``dt``; return the wrench of the held load, the grasped handles, the
+        surfaces the hand touches and the heads pressed into."""
         self._hand = T_world_ee[:3, 3].copy()
         self._T_world_ee = T_world_ee.copy()
         if self.flow is not None:
@@ -623,6 +653,8 @@ class TaskScene:
             wrench += c.step(T_world_ee, twist, self.poses[c.name], dt)
         for head in self.heads:
             wrench += head.step(T_world_ee, twist, self.poses[head.head.behind])
+        for z in self.zones:
+            z.step(T_world_ee, self.poses[z.zone.around], dt)
         load = self.payload()
         if load is not None:
             mass, com = load
@@ -660,6 +692,8 @@ class TaskScene:
             out.update(c.readings())
         for head in self.heads:
             out.update(head.readings())
+        for z in self.zones:
+            out.update(z.readings())
         return out
 
     def positions(self) -> dict[str, np.ndarray]:

@@ -72,7 +72,7 @@ HEAD = {"behind": "mouth", "radius": 0.09, "contact": {"stiffness": 1, "damping"
     ("scene.heads.face", "round", "scene.heads.face", "expected a mapping"),
     ("scene.heads", {"Face": HEAD}, "scene.heads.Face", "expected a name of lower-case letters"),
     ("scene.heads", {"cup_rim": HEAD}, "scene",
-     "the name 'cup_rim' is used twice (bodies, held frames, joints, heads and 'hand'"),
+     "the name 'cup_rim' is used twice (bodies, held frames, joints, heads, zones and 'hand'"),
     # the mouth moved to where the cup starts: the rim starts inside the face
     ("scene.bodies.mouth.position", [0.65, -0.27, 0.82], "scene.start", "cup_rim starts"),
     ("intent.0.reach.to", [-0.03, 0.0, 0.0], "intent[0].reach.to",

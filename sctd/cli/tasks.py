@@ -44,6 +44,9 @@ def summary(task: Task) -> dict[str, Any]:
         "surfaces": {n: _surface(b) for n, b in sc.bodies.items() if b.surface is not None},
         "heads": {n: {"behind": h.behind, "radius": h.radius, "stiffness": h.stiffness, "damping": h.damping}
                   for n, h in sc.heads.items()},
+        "zones": {n: {"frame": z.frame, "around": z.around, "position": z.position.tolist(),
+                      "within": z.within.tolist(), "axis": z.axis.tolist() if z.tilt is not None else None,
+                      "tilt": z.tilt} for n, z in sc.zones.items()},
         "frames": sc.frames(),
         "thresholds": thresholds(task.outcome.done),
         "done": _flag_terms(task.outcome.done),
@@ -125,6 +128,10 @@ def main_tasks(args: argparse.Namespace) -> int:
         for n, h in s["heads"].items():
             print(f"  head {n}: a sphere of {h['radius']:g} m behind {h['behind']}, contact "
                   f"{h['stiffness']:g} N/m, {h['damping']:g} N s/m")
+        for n, z in s["zones"].items():
+            turned = f", z within {math.degrees(z['tilt']):.0f} deg of {_vec(z['axis'])}" if z["tilt"] else ""
+            print(f"  zone {n}: {z['frame']} within {_vec(z['within'])} m of {_vec(z['position'])} in "
+                  f"{z['around']}{turned}")
         targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
         print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
               f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
@@ -146,3 +153,7 @@ def main_tasks(args: argparse.Namespace) -> int:
         print(f"{r['name']:<{width}}  {r['title']:<24}  object {r['object']:<14}  {r['origin']:<8}  "
               f"{r['path']}")
     return EXIT_FAILED if any("error" in r for r in rows) else EXIT_OK
+
+
+def _vec(v: list[float]) -> str:
+    return "[" + ", ".join(f"{x:g}" for x in v) + "]"

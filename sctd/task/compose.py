@@ -3,7 +3,7 @@
 :func:`compose` makes one :class:`~.model.Task` out of several, as if a room held all
 their objects at once: the first task is the one whose outcome, intent and hand start
 the composed task keeps (the one a person goes for, in an evaluation); the others bring
-their bodies and joints. Each task keeps its objects' layout; a task whose objects would
+their bodies, joints, heads and zones. Each task keeps its objects' layout; a task whose objects would
 overlap those already placed is turned as a whole about the vertical through the arm's
 base (by 10 deg steps, alternately either way, up to 90 deg), which keeps every object
 at its distance from the arm, until its footprint (the ball around its bodies, joint
@@ -11,8 +11,8 @@ paths and containers, plus :data:`CLEARANCE`) is clear of the others'.
 
 The composed task's ``parts`` are the tasks as placed, each judged on the composed
 scene's readings (an element's readings carry its own name, so they do not mix).
-Names must not clash: two bodies, joints or held objects of one name are an error, as
-is a second held object (the hand holds one thing).
+Names must not clash: two bodies, joints, heads, zones or held objects of one name are
+an error, as is a second held object (the hand holds one thing).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from sctd import se3
 
 from .kinematics import handle_pose
-from .model import Body, Joint, Scene, Task
+from .model import Body, Head, Joint, Scene, Task, Zone
 from .reader import TaskError
 
 Array = NDArray[np.float64]
@@ -39,11 +39,15 @@ MAX_TURN = math.radians(90.0)
 
 def footprint(task: Task, T: Array | None = None) -> tuple[Array, float]:
     """The ball (centre, radius) around ``task``'s bodies, the paths of its joints'
-    handles and its containers' openings, in the world (moved by ``T``, default none)."""
+    handles, its containers' openings and its heads, in the world (moved by ``T``,
+    default none)."""
     sc = task.scene
     T = np.eye(4) if T is None else T
     points = [b.T_world[:3, 3] for b in sc.bodies.values()]
     pad = [b.container.radius if b.container is not None else 0.0 for b in sc.bodies.values()]
+    for h in sc.heads.values():  # a person's head: its sphere
+        points.append(h.centre(sc.bodies[h.behind].T_world))
+        pad.append(h.radius)
     for j in sc.joints.values():
         T0 = sc.bodies[j.handle].T_world
         for q in np.linspace(0.0, j.travel, 9):
@@ -102,11 +106,15 @@ def compose(tasks: list[Task]) -> Task:
         placed.append(footprint(t))
     bodies: dict[str, Body] = {}
     joints: dict[str, Joint] = {}
+    heads: dict[str, Head] = {}
+    zones: dict[str, Zone] = {}
     held = None
     for t in placed_tasks:
         sc = t.scene
-        names = set(sc.bodies) | set(sc.joints) | ({sc.held.name, *sc.held.frames} if sc.held else set())
-        taken = set(bodies) | set(joints) | ({held.name, *held.frames} if held else set())
+        names = set(sc.bodies) | set(sc.joints) | set(sc.heads) | set(sc.zones) | \
+            ({sc.held.name, *sc.held.frames} if sc.held else set())
+        taken = set(bodies) | set(joints) | set(heads) | set(zones) | \
+            ({held.name, *held.frames} if held else set())
         clash = sorted(names & taken)
         if clash:
             raise TaskError(t.file or t.name, "", f"{clash[0]!r} is also a name in an earlier task: "
@@ -116,8 +124,10 @@ def compose(tasks: list[Task]) -> Task:
                                                             "for an earlier task: it holds one thing")
         bodies.update(sc.bodies)
         joints.update(sc.joints)
+        heads.update(sc.heads)
+        zones.update(sc.zones)
         held = held or sc.held
-    scene = Scene(first.scene.start, bodies, held, joints)
+    scene = Scene(first.scene.start, bodies, held, joints, heads, zones)
     name = "+".join(t.name for t in placed_tasks)
     return replace(first, name=name, title=" and ".join(t.title for t in placed_tasks), scene=scene,
                    parts=tuple(placed_tasks))

@@ -24,6 +24,7 @@ radians.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -363,6 +364,46 @@ class Head:
         return T_world_front[:3, 3] - self.radius * T_world_front[:3, 0]
 
 
+# -- a goal pose held for a time ------------------------------------------------------
+@dataclass(frozen=True)
+class Zone:
+    """A goal pose of a frame of the hand, within tolerances: the frame ``frame`` (``hand``
+    or a frame of what the hand holds) is inside while its origin is within ``within``
+    (half-widths, m, along the axes of the body ``around``) of ``position`` (in that
+    body's frame) and, with ``tilt``, its z axis within ``tilt`` rad of ``axis`` (a unit
+    vector in the body's frame; its spin about it is free). Its readings: ``inside``, how
+    long it has been inside without a break (``dwell``, s) and the longest so far
+    (``max_dwell``): "the cup held at the lips for 2 s" is ``{reading: <zone>.dwell,
+    at_least: 2}``.
+
+    Attributes
+    ----------
+    name, frame, around : str
+    position, within, axis : ndarray (3,)
+    tilt : float or None
+        rad; None: any orientation.
+    """
+
+    name: str
+    frame: str
+    around: str
+    position: Array
+    within: Array
+    axis: Array
+    tilt: float | None = None
+
+    def inside(self, T_world_around: Array, T_world_frame: Array) -> bool:
+        """Whether the frame at ``T_world_frame`` is inside, the body at ``T_world_around``."""
+        R, o = T_world_around[:3, :3], T_world_around[:3, 3]
+        d = R.T @ (T_world_frame[:3, 3] - o) - self.position
+        if bool(np.any(np.abs(d) > self.within)):
+            return False
+        if self.tilt is None:
+            return True
+        c = float((R.T @ T_world_frame[:3, 2]) @ self.axis)
+        return math.acos(max(-1.0, min(1.0, c))) <= self.tilt
+
+
 @dataclass(frozen=True)
 class Start:
     """The hand's start: ``T_world`` and how much it varies between trials."""
@@ -380,6 +421,7 @@ class Scene:
     held: Held | None = None
     joints: dict[str, Joint] = field(default_factory=dict)
     heads: dict[str, Head] = field(default_factory=dict)
+    zones: dict[str, Zone] = field(default_factory=dict)
 
     def frames(self) -> list[str]:
         """The names of every published frame: the bodies', then the held object's."""
@@ -393,6 +435,7 @@ READINGS = {
     "surface": ("force", "max_force", "touching"),
     "button": ("force", "max_force", "touching", "position", "on", "presses"),
     "head": ("force", "max_force"),
+    "zone": ("inside", "dwell", "max_dwell"),
 }
 """What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
@@ -402,8 +445,9 @@ for a revolute joint); a body's surface (by the body's name) the normal force th
 presses it with now and the highest so far (N), and whether the hand touches it; a
 surface with a button besides how far the button is pushed in (m), whether it is on and
 how often it switched; a head the force of its contact now and the
-highest so far (N)."""
-FLAGS = ("flowing", "held", "touching", "on")
+highest so far (N); a zone whether its frame is inside, for how long it has been inside
+without a break and the longest such time so far (s)."""
+FLAGS = ("flowing", "held", "touching", "on", "inside")
 """The readings that are flags (compared with ``is: true|false``)."""
 
 

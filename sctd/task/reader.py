@@ -60,6 +60,7 @@ from .model import (
     Tilt,
     Upright,
     Vary,
+    Zone,
 )
 
 NAME = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
@@ -200,7 +201,7 @@ def task_from_document(doc: Any, file: str) -> Task:
 
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
-    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "heads"})
+    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "heads", "zones"})
     s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
     start = Start(r.transform(s, f"{path}.start"),
                   r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
@@ -217,12 +218,13 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
         where = f"{path}.joints.{key}"
         joints[r.name(key, where)] = _joint(r, key, j, where, bodies)
     heads = _heads(r, d["heads"], f"{path}.heads", bodies) if "heads" in d else {}
-    scene = Scene(start, bodies, held, joints, heads)
-    names = [*scene.frames(), *joints, *heads, HAND]
+    zones = _zones(r, d["zones"], f"{path}.zones", bodies, held) if "zones" in d else {}
+    scene = Scene(start, bodies, held, joints, heads, zones)
+    names = [*scene.frames(), *joints, *heads, *zones, HAND]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints, heads and "
-                           f"{HAND!r} share one namespace)")
+        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints, heads, "
+                           f"zones and {HAND!r} share one namespace)")
     _in_front(r, scene, path)
     _outside_heads(r, scene, path)
     return scene
@@ -416,6 +418,39 @@ def _heads(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> dict[str, 
     return heads
 
 
+# -- a goal pose held for a time -----------------------------------------------------------
+def _zones(r: _Reader, v: Any, path: str, bodies: dict[str, Body], held: Held | None) -> dict[str, Zone]:
+    """``{name: {frame, around, position, within, axis?, tilt?}}``, at least one."""
+    zones: dict[str, Zone] = {}
+    items = r.mapping(v, path).items()
+    if not items:
+        raise r.fail(path, "expected at least one zone (or no zones field)")
+    frames = [HAND, *(held.frames if held is not None else ())]
+    for key, z in items:
+        where = f"{path}.{key}"
+        name = r.name(key, where)
+        d = r.fields(z, where, {"frame", "around", "position", "within"}, {"axis", "tilt"})
+        frame = r.string(d["frame"], f"{where}.frame")
+        if frame not in frames:
+            raise r.fail(f"{where}.frame", f"expected {HAND!r} or a frame of what the hand holds "
+                                           f"({', '.join(frames)}), got {frame!r}")
+        around = r.string(d["around"], f"{where}.around")
+        if around not in bodies:
+            raise r.fail(f"{where}.around", f"unknown body {around!r} (bodies: {', '.join(bodies)})")
+        w = d["within"]
+        within = (np.full(3, r.positive(w, f"{where}.within")) if not isinstance(w, list)
+                  else r.vector(w, f"{where}.within", 3))
+        if not np.all(within > 0.0):
+            raise r.fail(f"{where}.within", "must be > 0 on every axis")
+        if ("axis" in d) != ("tilt" in d):
+            raise r.fail(where, "axis and tilt go together: the frame's z within tilt of axis")
+        axis = r.vector(d["axis"], f"{where}.axis", 3, unit=True) if "axis" in d else np.eye(3)[2]
+        tilt = r.tilt(d["tilt"], f"{where}.tilt") if "tilt" in d else None
+        zones[name] = Zone(name, frame, around, r.vector(d["position"], f"{where}.position", 3), within,
+                           axis, tilt)
+    return zones
+
+
 MIN_HEAD, MAX_HEAD = 0.03, 0.30
 """m: the radii a head's sphere may have."""
 
@@ -462,6 +497,7 @@ def _elements(scene: Scene) -> dict[str, str]:
     out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
                 if b.surface is not None})
     out |= {h: "head" for h in scene.heads}
+    out |= {z: "zone" for z in scene.zones}
     return out
 
 

@@ -11,9 +11,10 @@ Per attempt (:func:`teach`):
    early when one of the task's failure rules holds (a drop spilled, a switch pushed too
    hard);
 4. stop recording, finish unrecorded (the intent's last uprights: a bottle back upright
-   about its opening, so the last drops land where the stream did) and judge from the
-   scene's outcome: the task done and successful, no failure rule holding (the
-   evaluation judges a pour once it stops pouring, too);
+   about its opening, so the last drops land where the stream did), hold still until the
+   task is done or has failed (a frame held in a zone for its time; at most
+   ``DONE_TIMEOUT`` s) and judge from the scene's outcome: the task done and successful,
+   no failure rule holding (the evaluation judges a pour once it stops pouring, too);
 5. keep it (``demo_NNN.csv``, published on ``sctd/<robot>/demos/<task>/<name>``) or
    discard it, saying why; a grasped handle is let go by resetting the scene (the
    simulated hand has no gripper to open, and pulling it off would take more than the
@@ -60,6 +61,7 @@ Array = NDArray[np.float64]
 COMMANDER_WINDOW = 1.0  # s of listening for another commander's status before the first target
 TILT_TIMEOUT = 15.0  # s a tilt may be held for its predicate (the tilted bottle to fill the mug)
 PRESS_TIMEOUT = 5.0  # s a pushed button may be held for its predicate (the light to come on)
+DONE_TIMEOUT = 10.0  # s the finished hand is held still for the task to be done (a dwell in a zone)
 
 
 def _option(default: Any, help: str, **meta: Any) -> Any:
@@ -321,6 +323,10 @@ def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeome
         T_obj_ee = se3.invert_transform(T_world_obj) @ teacher.target()
         teacher.follow(upright(T_obj_ee, geometry.frame(step.frame)[:3, 3], speeds), T_world_obj)
     teacher.settle()
+    # a person who has shown every step stays still until the task is over (the cup held
+    # at the lips for its time), or it has failed, for at most DONE_TIMEOUT s
+    failed = _failing(teacher, task)
+    teacher.hold(lambda: failed() or bool((teacher.rec.scene or {}).get("done")), DONE_TIMEOUT)
     attempt.outcome = teacher.scene_after(time.time())
     attempt.reason = judge(attempt.outcome, task)
 
