@@ -115,6 +115,25 @@ def test_any_fraction_of_a_capped_step_keeps_the_cap(skill, p, q, u, dt, s):
     assert within_cap(F, F_part, c, eng, dt)
 
 
+def test_a_step_that_would_leap_across_the_zone_is_capped():
+    """Both ends outside the zone, the path through it: a band on a frame 12 cm above
+    the hand pulls the hand 19.5 cm down through the object's origin in one command. Found
+    by the property test above (a fraction of that step landed inside the zone): the cap
+    holds anywhere along a step, not only at its ends."""
+    c = cap(within=0.0625, v=0.125, w=1.0, frame="ee")
+    band = {"type": "band", "lower": -0.05, "upper": 0.05, "frame": "tip"}
+    eng = engine(skill_doc([c, band], frame="ee"))
+    F = se3.flat_from_pose([0.0, 0.0, 0.125, 0.0, 0.0, 0.0, 1.0])
+    dt = 1.0 / 64
+    F_new = eng.command(F, [0.0] * 6, dt)
+    moved = math.dist(F[9:], F_new[9:])
+    assert 0.0 < moved <= 0.125 * dt * (1 + 1e-9)
+    # a step beside the zone, its nearest point 7 cm from the origin: not capped
+    eng = engine(skill_doc([c], frame="ee"))
+    F = se3.flat_from_pose([0.07, -0.1, 0.0, 0.0, 0.0, 0.0, 1.0])
+    assert math.dist(F[9:], eng.command(F, [0.0, 1.0, 0.0, 0.0, 0.0, 0.0], 0.4)[9:]) == pytest.approx(0.2)
+
+
 def tick_samples(T_world_obj: np.ndarray):
     F_obj = se3.flat_from_transform(T_world_obj)
 

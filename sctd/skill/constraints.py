@@ -376,11 +376,13 @@ def _relative_quaternion(F_a: Flat, F_b: Flat) -> tuple[float, float, float, flo
 @CONSTRAINTS.register
 @dataclass(frozen=True, kw_only=True, eq=False)
 class SpeedNear(StepLimit):
-    """Slow near the object: while ``point`` (3,; an offset in ``frame``, default its
-    origin) is within ``within`` m of the object's origin at either end of a command's
-    step, the step moves that point at most ``max_linear_speed`` (m/s) and turns the hand
-    at most ``max_angular_speed`` (rad/s) over the command's ``dt``, whatever the input
-    and the other elements ask for.
+    """Slow near the object: when ``point`` (3,; an offset in ``frame``, default its
+    origin) comes within ``within`` m of the object's origin anywhere along a command's
+    step (the segment between its ends, widened by how far a turn may take the point off
+    it: a step that would leap across the zone is capped too), the step moves that point
+    at most ``max_linear_speed`` (m/s) and turns the hand at most ``max_angular_speed``
+    (rad/s) over the command's ``dt``, whatever the input and the other elements ask
+    for.
 
     The step is scaled back along :func:`_along`, on which the point's displacement after
     a fraction ``s`` of a step that turns by ``theta`` is at most ``s d + theta^2 r / 4``
@@ -431,17 +433,16 @@ class SpeedNear(StepLimit):
             return F_new
         ax, ay, az = self._point(ws.frame_pose(F_prev, self.frame))
         bx, by, bz = self._point(ws.frame_pose(F_new, self.frame))
-        w2 = self.within * self.within
-        if ax * ax + ay * ay + az * az > w2 and bx * bx + by * by + bz * bz > w2:
-            return F_new  # far from the object at both ends
-        lin, ang = self.max_linear_speed * dt, self.max_angular_speed * dt
         q = _relative_quaternion(F_prev, F_new)
         theta = 2.0 * math.atan2(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
-        d = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
         r = math.sqrt((ax - F_prev[9]) ** 2 + (ay - F_prev[10]) ** 2 + (az - F_prev[11]) ** 2)
+        chord = 0.25 * theta * theta * r  # how far the point's path may leave the segment a-b
+        if _nearest(ax, ay, az, bx, by, bz) > self.within + chord:
+            return F_new  # far from the object all along the step
+        lin, ang = self.max_linear_speed * dt, self.max_angular_speed * dt
+        d = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
         move = math.sqrt((F_new[9] - F_prev[9]) ** 2 + (F_new[10] - F_prev[10]) ** 2
                          + (F_new[11] - F_prev[11]) ** 2)
-        chord = 0.25 * theta * theta * r  # what a fraction of the turn may add to s d
         s = ang / theta if theta > ang else 1.0
         if not d + chord <= lin:
             reach = move + theta * r
@@ -454,6 +455,14 @@ class SpeedNear(StepLimit):
         if not s > 0.0:  # (nothing may move: dt 0; NaN fails closed)
             return F_prev
         return _along(F_prev, F_new, s, q)
+
+
+def _nearest(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
+    """The distance from the origin of the segment from a to b."""
+    ex, ey, ez = bx - ax, by - ay, bz - az
+    e2 = ex * ex + ey * ey + ez * ez
+    t = 0.0 if e2 <= 0.0 else min(1.0, max(0.0, -(ax * ex + ay * ey + az * ez) / e2))
+    return math.sqrt((ax + t * ex) ** 2 + (ay + t * ey) ** 2 + (az + t * ez) ** 2)
 
 
 def _offset(r: Reader, v: Any, path: str) -> Array:
