@@ -160,6 +160,11 @@ def test_the_baseline_turns_about_the_tip_of_what_the_hand_holds(tmp_path):
                    task=drawer)
     (base,) = [e for e in ents if e.baseline_of]
     assert [m.frame for m in _state(base.skill, "rotate").input_mappings] == ["ee"]
+    # the baseline alone (sctd eval --skill teleop --task pour): its own limits, the frame
+    (alone,) = entries([str(ROOT / "skills" / "teleop.yaml")], baseline=False, workdir=tmp_path / "a",
+                       task=pour)
+    assert alone.skill.limits == teleop.limits and alone.baseline_of is None
+    assert [m.frame for m in _state(alone.skill, "rotate").input_mappings] == ["bottle_tip"]
 
 
 def _state(skill, name):

@@ -384,3 +384,22 @@ def test_the_user_client_refuses_what_is_no_task(capsys):
     assert simulated_user.main(["--task", "juggle", "--duration", "0"]) == 2
     err = capsys.readouterr().err
     assert "sctd-simulated-user: --task: juggle: no such file, and no task of that name" in err
+
+
+def test_user_does_not_switch_modes_for_a_wish_of_almost_nothing():
+    """In a mode that cannot give the wish, with another mode known to do better, the
+    user switches, but not while almost nothing is wanted (the cup held tilted while it
+    pours): the next step may want the mode it is in."""
+    from sctd_services.user import Desire
+
+    user = SimulatedUser(POUR, 3, PROFILES["steady"], seed=0)
+    translate, rotate = DeviceModel(3), DeviceModel(3)
+    translate.B[:3, :3], rotate.B[3:, :3] = np.eye(3) * 0.1, np.eye(3) * 0.5
+    translate.tried[:] = rotate.tried[:] = True  # both tried out
+    user.models = {"translate": translate, "rotate": rotate}
+    W = np.eye(6) / np.array([0.1, 0.1, 0.1, 0.5, 0.5, 0.5])
+    tilt = Desire(np.array([0.0, 0.0, 0.0, 0.0, 0.5, 0.0]), W, 0.3, "pour")
+    residual = translate.command(tilt.twist, W)[1]
+    assert residual > 0.9 and user._wants_switch(5.0, "translate", residual, tilt)
+    barely = Desire(tilt.twist * 0.05, W, 0.01, "pour")  # 5 % of full speed
+    assert not user._wants_switch(5.0, "translate", residual, barely)

@@ -30,12 +30,10 @@ from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
 from .evaluate import (
     TELEOP,
     Entry,
-    control_frame,
     entries,
     evaluate,
     lockstep_job,
     strip_trajectories,
-    with_limits,
 )
 from .trial import TaskSpec
 
@@ -109,9 +107,8 @@ def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, 
         skills = skills_for(task)
         paths = skills or [str(TELEOP)]
         ents = entries(paths, baseline=bool(skills), workdir=workdir / task.name, task=task)
-        if not skills:  # the baseline alone: with the task's control frame all the same
-            p = with_limits(TELEOP, ents[0].skill.limits, workdir / task.name / "teleop", control_frame(task))
-            ents = [Entry("teleop", p, load_skill(p), "-")]
+        if not skills:  # the baseline alone (with the task's control frame: entries)
+            ents = [Entry("teleop", e.path, e.skill, "-") for e in ents]
         spec = TaskSpec(ref, time_limit=task.outcome.time_limit)
         results = evaluate(ents, spec, trials, seed, lockstep_job, jobs, progress=progress)
         runs.append(TaskRun(task, skills, strip_trajectories(results)))
