@@ -27,6 +27,32 @@ def test_floor_is_travel_and_tilt_over_the_speed_limits():
     assert floor(find_task("cabinet"), Limits()) == pytest.approx((0.20 + math.radians(65.0) * lever) / 0.10)
 
 
+def test_a_skills_speed_cap_near_the_object_raises_its_floor():
+    """The drink's learned skill caps the rim at 3 cm/s and the hand's turn at 0.3 rad/s
+    within 10 cm of the mouth: the floor goes the way inside those 10 cm at the cap and
+    tilts at the cap (the baseline, uncapped, keeps the plain floor); a skill with a
+    state that has no cap is not capped."""
+    import numpy as np
+
+    from sctd.skill import load_skill
+    from sctd.skill.catalog import shipped_folder
+    from sctd_services.eval.suite import _inside, cap_of
+
+    assert _inside(np.array([-1.0, 0, 0]), np.array([1.0, 0, 0]), np.zeros(3), 0.1) == pytest.approx(0.2)
+    assert _inside(np.array([-1.0, 0.2, 0]), np.array([1.0, 0.2, 0]), np.zeros(3), 0.1) == 0.0
+    assert _inside(np.array([-1.0, 0, 0]), np.array([0.05, 0, 0]), np.zeros(3), 0.1) == pytest.approx(0.15)
+    drink = find_task("drink")
+    skill = load_skill(shipped_folder() / "drink-vf.yaml")
+    c = cap_of(skill)
+    assert c is not None and (c.within, c.max_linear_speed, c.max_angular_speed) == (0.1, 0.03, 0.3)
+    plain = floor(drink, skill.limits)
+    assert plain == pytest.approx(0.25 / 0.10 + 1.0 / 0.5)  # the clock's 25 cm, the 1 rad tilt
+    capped = floor(drink, skill.limits, c)
+    slow = (capped - 1.0 / 0.3 - 0.25 / 0.10) / (1 / 0.03 - 1 / 0.10)  # the way inside the 10 cm
+    assert 0.09 < slow <= 0.10 and capped > plain + 3.0
+    assert cap_of(load_skill(shipped_folder() / "pour.yaml")) is None
+
+
 def _result(name, limits, times, baseline_of=None, label=None):
     per_trial = [{"outcome": "success" if t else "failure", "time_s": t,
                   "reason": None if t else "time limit"} for t in times]

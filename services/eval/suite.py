@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from sctd.skill import WORLD_OBJECT, Limits, load_skill
+from sctd.skill import WORLD_OBJECT, Limits, Skill, load_skill
 from sctd.skill.catalog import shipped_skills
+from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, handle_jacobian
 from sctd.task.judge import thresholds
 from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
@@ -61,17 +62,20 @@ def skills_for(task: Task, shipped: list[Path] | None = None) -> list[str]:
     return out
 
 
-def floor(task: Task, limits: Limits) -> float:
+def floor(task: Task, limits: Limits, cap: SpeedNear | None = None) -> float:
     """A lower bound of the completion time at ``limits``: the first reach's (or press's)
     frame from where it starts (or from where the completion clock starts, when that is
     nearer: a ``near`` clock on the task object) straight to its goal (a button's face) at
     full linear speed, then every joint's handle along its path to its threshold (a
     revolute joint's angle times its lever) at full linear speed and every tilt at full
-    angular speed."""
+    angular speed. With ``cap`` (a skill's ``speed_near``, :func:`cap_of`) the part of
+    that straight way within the cap's distance of the task object, and a tilt whose
+    frame's goal is there, go at the cap's speeds (the reach's frame taken for the cap's
+    point: a cup's rim)."""
     done = thresholds(task.outcome.done)
     sc = task.scene
     obj = sc.bodies[task.object].T_world
-    travel = spin = 0.0
+    spin = 0.0
     first = next(s.action for s in task.intent if isinstance(s.action, Reach | Press))
     assert isinstance(first, Reach | Press)  # (the reader: the first step is a reach or a press)
     held = sc.held.frames if sc.held is not None else {}
@@ -85,8 +89,14 @@ def floor(task: Task, limits: Limits) -> float:
         goal = sc.bodies[sc.joints[first.handle].handle].T_world[:3, 3]
     travel = float(np.linalg.norm(goal - start))
     clock = task.outcome.clock
-    if isinstance(clock, Near) and clock.to == task.object:
-        travel = min(travel, clock.within)
+    if isinstance(clock, Near) and clock.to == task.object and clock.within < travel:
+        start = goal + (start - goal) * (clock.within / travel)
+        travel = clock.within
+    slow = 0.0 if cap is None else _inside(start, goal, obj[:3, 3], cap.within)
+    v_slow = limits.max_linear_speed if cap is None else min(limits.max_linear_speed, cap.max_linear_speed)
+    near = cap is not None and float(np.linalg.norm(goal - obj[:3, 3])) < cap.within
+    w = min(limits.max_angular_speed, cap.max_angular_speed) if near and cap is not None \
+        else limits.max_angular_speed
     for s in task.intent:
         if isinstance(s.action, MoveJoint):  # a revolute joint's angle times its lever
             j = sc.joints[s.action.joint]
@@ -94,8 +104,34 @@ def floor(task: Task, limits: Limits) -> float:
             travel += done.get(f"{s.action.joint}.position", 0.0) * lever
         elif isinstance(s.action, Tilt):
             spin += s.action.to
-    return travel / limits.max_linear_speed + spin / limits.max_angular_speed
+    return (travel - slow) / limits.max_linear_speed + slow / v_slow + spin / w
 
+
+def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> float:
+    """The length of the segment from a to b inside the ball about ``centre``."""
+    d = b - a
+    L = float(np.linalg.norm(d))
+    if L <= 0.0:
+        return 0.0
+    u = d / L
+    t = float((centre - a) @ u)  # the segment's point nearest the centre, along it
+    h2 = radius * radius - float(np.linalg.norm(a + t * u - centre)) ** 2
+    if h2 <= 0.0:
+        return 0.0
+    h = math.sqrt(h2)
+    return max(0.0, min(L, t + h) - max(0.0, t - h))
+
+
+def cap_of(skill: Skill) -> SpeedNear | None:
+    """The loosest of a skill's ``speed_near`` caps when every state has one (else the
+    hand may be in an uncapped state: None)."""
+    caps = []
+    for state in skill.states:
+        mine = [c for c in state.active_constraints if isinstance(c, SpeedNear)]
+        if not mine:
+            return None
+        caps.append(max(mine, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)))
+    return max(caps, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)) if caps else None
 
 def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, workdir: Path,
               progress: Callable[[int, int, str], None] | None = None) -> list[TaskRun]:
@@ -134,12 +170,19 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "successes": r["successes"], "success_rate": r["success_rate"], "median_s": median,
                 "times_s": [t["time_s"] for t in r["per_trial"] if t["outcome"] == "success"],
                 "vs_baseline": round(median / b, 3) if median is not None and b else None,
-                "floor_s": round(floor(run.task, lim), 2),
+                "floor_s": round(floor(run.task, lim, None if of else _cap(r["skill"])), 2),
                 "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
                 "failures": _failures(r["per_trial"]),
             })
     return out
+
+
+def _cap(path: str) -> SpeedNear | None:
+    try:
+        return cap_of(load_skill(path))
+    except (OSError, ValueError):  # (a result whose skill file is gone: no cap known)
+        return None
 
 
 def _failures(per_trial: list[dict[str, Any]]) -> dict[str, int]:
