@@ -101,6 +101,17 @@ def test_an_unknown_type_lists_the_registered_ones():
         Field.from_yaml({"type": "torus"}, "fields[0]", "m.json")
 
 
+def test_a_field_entry_with_an_unknown_key_is_refused_naming_it():
+    """A misspelt parameter would silently take its default: it is refused, named."""
+    with pytest.raises(SkillError, match=r"m.json: fields\[0\]\.pviot: unknown field of a sphere field "
+                                         r"\(allowed: centre, inliers, pivot, radius, sigma, type, weight\)"):
+        Field.from_yaml({"type": "sphere", "centre": [0, 0, 0], "pviot": [0, 0, 0.1]}, "fields[0]", "m.json")
+    with pytest.raises(SkillError, match=r"fields\[0\]\.radius: unknown field of a translation"):
+        Field.from_yaml({"type": "translation", "direction": [1, 0, 0], "radius": 0.1}, "fields[0]", "m.json")
+    f = Field.from_yaml({"type": "sphere", "centre": [0, 0, 0], "pivot": None}, "fields[0]", "m.json")
+    assert f.pivot is None  # an optional key left unset is fine
+
+
 @pytest.mark.parametrize("field", [
     TranslationField(direction=np.array([0.6, 0.0, 0.8]), weight=0.3, sigma=0.2, inliers=7),
     CylinderField(point=np.array([0.1, 0.0, 0.0]), axis=np.array([0.0, 0.6, 0.8]),

@@ -118,6 +118,8 @@ class Field(ByValue, ABC):
     """
 
     type: ClassVar[str]
+    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot"})
+    """Keys an entry may hold that :meth:`to_yaml` leaves out when they are unset."""
     weight: float = 1.0
     sigma: float = 0.3
     inliers: int = 0
@@ -135,7 +137,12 @@ class Field(ByValue, ABC):
         if not isinstance(kind, str) or kind not in FIELDS:
             names = FIELDS.names()
             raise r.fail("type", f"expected {', '.join(names[:-1])} or {names[-1]}, got {kind!r}")
-        return FIELDS[kind].read(r, common)
+        field = FIELDS[kind].read(r, common)
+        known = set(field.to_yaml()) | field.optional_keys
+        unknown = sorted(str(k) for k in fd if k not in known)
+        if unknown:  # a misspelt parameter would silently take its default
+            raise r.fail(unknown[0], f"unknown field of a {kind} field (allowed: {', '.join(sorted(known))})")
+        return field
 
     @classmethod
     @abstractmethod
@@ -303,6 +310,7 @@ class SphereField(Field):
     """
 
     type: ClassVar[str] = "sphere"
+    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot", "radius"})
     centre: Array
     radius: float | None = None
 
