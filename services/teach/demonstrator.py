@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task, TaskError, find_task
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import AllOf, AnyOf, Compare, Not, Predicate, Press, Tilt
+from sctd.task.model import AllOf, AnyOf, Compare, MoveJoint, Not, Predicate, Press, Tilt
 from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
@@ -59,6 +59,7 @@ from .stream import SimulatorLost, StreamLimits, Teacher, TeachingError, WrongSc
 
 Array = NDArray[np.float64]
 COMMANDER_WINDOW = 1.0  # s of listening for another commander's status before the first target
+GRASP_WAIT = 3.0  # s at most a hand at a handle waits to close on it before it pulls
 TILT_TIMEOUT = 15.0  # s a tilt may be held for its predicate (the tilted bottle to fill the mug)
 PRESS_TIMEOUT = 5.0  # s a pushed button may be held for its predicate (the light to come on)
 DONE_TIMEOUT = 10.0  # s the finished hand is held still for the task to be done (a dwell in a zone)
@@ -341,6 +342,12 @@ def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_
     if isinstance(action, Press):
         assert isinstance(motion, PressMotion)  # (a press's motion)
         return _press(teacher, step, motion, action, T_world_obj, failed)
+    if isinstance(action, MoveJoint):
+        # a person at the handle waits until the hand has closed on it before pulling:
+        # an arm still behind the reach's end (a loaded host) would turn away short of
+        # the grasp radius. A hand beside the handle (a mistake) stops once it is still.
+        held = f"{action.joint}.held"
+        teacher.hold(lambda: bool(_readings(teacher).get(held)) or teacher.settled(), GRASP_WAIT)
     if not isinstance(action, Tilt):
         teacher.follow(motion, T_world_obj, stop_when=failed)
         return not failed()

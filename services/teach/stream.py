@@ -252,11 +252,13 @@ class Teacher:
     def settle(self, tolerance: float = 0.005, tolerance_rotation: float = 0.03,
                timeout: float = 3.0) -> bool:
         """Hold the last target until the arm is within the tolerances of it."""
-        def settled() -> bool:
-            assert self._F_last is not None
-            d, a = separation(se3.flat_from_transform(self.measured()), self._F_last)
-            return d <= tolerance and a <= tolerance_rotation
-        return self.hold(settled, timeout)
+        return self.hold(lambda: self.settled(tolerance, tolerance_rotation), timeout)
+
+    def settled(self, tolerance: float = 0.005, tolerance_rotation: float = 0.03) -> bool:
+        """Whether the arm is within the tolerances (m, rad) of the last target."""
+        assert self._F_last is not None
+        d, a = separation(se3.flat_from_transform(self.measured()), self._F_last)
+        return d <= tolerance and a <= tolerance_rotation
 
     # -- the scene --------------------------------------------------------------------
     def reset_scene(self, scene: str, timeout: float = 10.0) -> dict:
