@@ -85,7 +85,8 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--max-n", "--C", "--cut", "--min-segment", "--axis-support", "--margin", "--dtw-align",
         "--no-auto-frames",
         "--n-fields", "--em-iterations", "--angle-sphere", "--angle-translation",
-        "--angle-cylinder", "--coherence-run", "--max-radius", "--max-cylinder-radius", "--chance-weight",
+        "--angle-cylinder", "--angle-point", "--vf-models", "--coherence-run", "--max-radius",
+        "--max-cylinder-radius", "--chance-weight",
         "--selection",
         "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
@@ -93,6 +94,9 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--max-linear-speed", "--max-angular-speed", "--speed-near"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])
     assert ns.smoothness == 0.005 and ns.random_state == 0 and ns.vf_max_n == 5 and ns.despike
+    assert ns.models == ("translation", "cylinder", "sphere", "point", "general")
+    ns = parser.parse_args(["d", "--out", "x.yaml", "--vf-models", "translation, sphere"])
+    assert ns.models == ("translation", "sphere")
 
 
 def _modules_and_calls(path: Path) -> tuple[set[str], set[str]]:

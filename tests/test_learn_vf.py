@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from sctd.learn import Demo, VectorFieldLearner, field_kinds_by_phase, learn_vector_fields, ransac_iterations
-from sctd.learn.vf import cylinder_field, sphere_field
+from sctd.learn.vf import THESIS_FIELDS, cylinder_field, sphere_field
 from sctd_sim import demogen
 
 
@@ -92,7 +92,7 @@ def test_pour_sphere_centre_is_stable_and_gives_the_tip():
     for s in range(3):
         res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=s))
         kinds = sorted(f.type for f in res.learner.fields_)
-        assert kinds == ["sphere", "translation"]
+        assert kinds == ["point", "sphere"]  # the carry converges on where the pour starts
         sph = next(f for f in res.learner.fields_ if f.type == "sphere")
         centres.append(sph.centre)
         cf = res.learner.candidate_frames_[0]
@@ -105,9 +105,10 @@ def test_pour_sphere_centre_is_stable_and_gives_the_tip():
 
 
 def test_drawer_two_translation_fields():
+    """The thesis' known answer (Fig. 4.8(b)), with the thesis' field kinds."""
     ds = demogen.generate("drawer", 8, noise=0.001, outliers=0.05, seed=6)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
-    res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0))
+    res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0, models=THESIS_FIELDS))
     dirs = [f.direction for f in res.learner.fields_ if f.type == "translation"]
     assert len(dirs) == 2
     for true in ds.truth["directions"].values():
@@ -132,7 +133,7 @@ def _phase_kinds(task: str, seed: int, **kw):
 @pytest.mark.parametrize("seed", range(8))
 def test_crank_is_a_cylinder_about_its_axis_not_a_sphere(seed):
     _, res, kinds = _phase_kinds("crank", seed)
-    assert kinds == ("translation", "cylinder")
+    assert kinds == ("point", "cylinder")
     cyl = next(f for f in res.learner.fields_ if f.type == "cylinder")
     assert np.degrees(np.arccos(abs(cyl.axis @ [0.0, 0.0, 1.0]))) < 3.0
     assert np.hypot(*cyl.point[:2]) < 0.01  # on the vertical axis through the origin
@@ -141,14 +142,17 @@ def test_crank_is_a_cylinder_about_its_axis_not_a_sphere(seed):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_pour_stays_a_sphere_and_drawer_two_translations(seed):
-    assert _phase_kinds("pour", seed)[2] == ("translation", "sphere")
-    assert _phase_kinds("drawer", seed)[2] == ("translation", "translation")
+    assert _phase_kinds("pour", seed)[2] == ("point", "sphere")
+    assert _phase_kinds("drawer", seed)[2] == ("point", "translation")
+    assert _phase_kinds("drawer", seed, models=THESIS_FIELDS)[2] == ("translation", "translation")
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_wipe_is_a_general_field_after_a_translation(seed):
     _, res, kinds = _phase_kinds("wipe", seed)
-    assert kinds == ("translation", "general")
+    # (its starts lie within 3 cm of one another over a 20 cm drop to the stroke: a
+    # point and a translation describe the reach about as well)
+    assert kinds[0] in ("point", "translation") and kinds[1] == "general"
     g = next(f for f in res.learner.fields_ if f.type == "general")
     assert np.all(np.isfinite(g.centres)) and len(g.centres) == len(g.directions)
 

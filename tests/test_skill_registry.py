@@ -36,7 +36,7 @@ def test_registries_hold_the_format_kinds_in_their_documented_order():
     assert MAPPINGS.names() == ("linear", "vector_field")
     assert CONSTRAINTS.names() == ("tilt_cone", "band", "box", "neighbour_orientation", "speed_near")
     assert TRANSITIONS.names() == ("hyperplane", "distance", "timeout", "force", "button")
-    assert FIELDS.names() == ("translation", "cylinder", "sphere", "general")
+    assert FIELDS.names() == ("translation", "cylinder", "sphere", "point", "general")
     for registry in (MAPPINGS, CONSTRAINTS, TRANSITIONS, FIELDS):
         assert all(registry[name].type == name for name in registry.names())
 
@@ -97,7 +97,7 @@ def test_an_unknown_type_lists_the_registered_ones():
     assert str(e.value) == ("t.yaml: states.s.active_constraints[0].type: expected one of "
                             "tilt_cone, band, box, neighbour_orientation, speed_near, got 'cage'")
     with pytest.raises(SkillError, match=r"m.json: fields\[0\].type: expected translation, cylinder, "
-                                         r"sphere or general, got 'torus'"):
+                                         r"sphere, point or general, got 'torus'"):
         Field.from_yaml({"type": "torus"}, "fields[0]", "m.json")
 
 

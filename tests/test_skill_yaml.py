@@ -205,6 +205,7 @@ DOCS: dict[str, st.SearchStrategy[dict[str, Any]]] = {
         lambda d: with_optional(d, pivot=vec3())),
     "sphere": field_doc("sphere", centre=vec3()).flatmap(
         lambda d: with_optional(d, radius=number(0, 1), pivot=vec3())),
+    "point": field_doc("point", point=vec3()),
     "general": general(),
 }
 

@@ -59,6 +59,11 @@ def _scalar_type(hint: Any) -> Any:
     return hint
 
 
+def _names(text: str) -> tuple[str, ...]:
+    """A flag's comma-separated names (``a,b``) as a tuple."""
+    return tuple(x.strip() for x in text.split(",") if x.strip())
+
+
 def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: type,
                   only: Collection[str] | None = None, exclude: Collection[str] = (),
                   show_default: bool = False, dest_prefix: str = "", help_prefix: str = "") -> None:
@@ -97,6 +102,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         kind = _scalar_type(hints[f.name])
         kwargs: dict[str, Any] = {"dest": dest_prefix + f.name, "help": help_prefix + f.metadata["help"],
                                   "default": f.default}
+        if typing.get_origin(kind) is tuple:  # a list of names, given comma-separated
+            kind = _names
         if kind is bool:
             kwargs["action"] = "store_false" if f.default else "store_true"
         else:

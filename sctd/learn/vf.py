@@ -66,7 +66,8 @@ __all__ = [
     "ransac_iterations", "sphere_field", "translation_field", "unit_vectors",
 ]
 
-FIELD_TYPES = ("translation", "cylinder", "sphere", "general")
+FIELD_TYPES = ("translation", "cylinder", "sphere", "point", "general")
+THESIS_FIELDS = ("translation", "cylinder", "sphere")  # the thesis' basic fields (Ch. 4.2.2)
 SELECTIONS = ("likelihood", "inliers")
 Array = NDArray[np.float64]
 
@@ -156,7 +157,12 @@ class VectorFieldLearner:
     angle_sphere: float = hyperparameter(15.0, "degrees", valid=Interval(0, 90, open="low"))
     angle_translation: float = hyperparameter(25.0, "degrees", valid=Interval(0, 90, open="low"))
     angle_cylinder: float = hyperparameter(20.0, "degrees", valid=Interval(0, 90, open="low"))
-    models: tuple[str, ...] = hyperparameter(FIELD_TYPES, valid=OneOf(FIELD_TYPES, subset=True))
+    angle_point: float = hyperparameter(25.0, "degrees (a reach's goal; the translation's by default)",
+                                        valid=Interval(0, 90, open="low"))
+    models: tuple[str, ...] = hyperparameter(
+        FIELD_TYPES, "the field kinds to fit, comma-separated (default " + ",".join(FIELD_TYPES)
+        + "; the thesis' are translation,cylinder,sphere)", flag="--vf-models", metavar="KINDS",
+        valid=OneOf(FIELD_TYPES, subset=True))
     p_success: float = hyperparameter(0.99, valid=Interval(0.5, 1, open="high"))
     outlier_ratio: float = hyperparameter(0.7, valid=Interval(0, 0.99))
     min_inliers: int = hyperparameter(10, valid=Interval(3, 100_000, integer=True))
@@ -199,7 +205,7 @@ class VectorFieldLearner:
     def _thresholds(self) -> dict[str, float]:
         """The inlier threshold (rad) of each field shape."""
         degrees = {"sphere": self.angle_sphere, "translation": self.angle_translation,
-                   "cylinder": self.angle_cylinder}
+                   "cylinder": self.angle_cylinder, "point": self.angle_point}
         return {kind: math.radians(d) for kind, d in degrees.items()}
 
     def chance(self, kind: str) -> float:

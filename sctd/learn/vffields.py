@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from ..skill.fields import CylinderField, Field, GeneralField, SphereField, TranslationField
+from ..skill.fields import CylinderField, Field, GeneralField, PointField, SphereField, TranslationField
 
 Array = NDArray[np.float64]
 
@@ -113,6 +113,35 @@ def translation_field(v: Array, w: Array | None = None) -> Field | None:
     return None if n < 1e-9 else TranslationField(direction=m / n)
 
 
+def point_field(p: Array, v: Array, w: Array | None = None, iterations: int = 5) -> Field | None:
+    """Point field whose point best lies ahead of every point ``p`` along its ``v``.
+
+    It minimises ``sum w sin^2(angle)``, the angle between ``v`` and the way to the
+    point, by reweighted least squares: each step solves the linear problem ``sum w'
+    |(I - v v^T)(c - p)|^2`` (the squared distance of c from the line through p along
+    v) with ``w' = w / |c - p|^2`` from the last step, so that a far point's line
+    counts by its angle, not by how far it passes; lines the point lies behind (the
+    motion has gone past it) count for nothing. None when the lines are (nearly)
+    parallel (a translation field describes them) or the point lies behind them all."""
+    w = np.ones(len(v)) if w is None else np.asarray(w, dtype=float)
+    proj = np.eye(3)[None, :, :] - v[:, :, None] * v[:, None, :]  # (n, 3, 3)
+    wk = w
+    c = None
+    for _ in range(iterations + 1):
+        wk = wk / max(float(wk.sum()), 1e-12)
+        A = np.einsum("n,nij->ij", wk, proj)
+        if np.linalg.eigvalsh(A)[0] < 1e-4:  # lines all (nearly) parallel: no point
+            return None if c is None else PointField(point=c)
+        c = np.linalg.solve(A, np.einsum("n,nij,nj->i", wk, proj, p))
+        ahead = np.sum(v * (c - p), axis=1)
+        if not np.any(ahead > 0.0):
+            return None
+        d2 = np.sum((c - p) ** 2, axis=1)
+        wk = np.where(ahead > 0.0, w / np.maximum(d2, 1e-6), 0.0)
+    assert c is not None
+    return PointField(point=c)
+
+
 def sphere_field(p: Array, v: Array, w: Array | None = None) -> Field:
     """Sphere field whose centre best makes ``v`` tangent at ``p`` (linear LSQ)."""
     w = np.ones(len(v)) if w is None else w
@@ -198,6 +227,7 @@ ESTIMATORS: dict[str, Callable[[Array, Array, Array | None], Field | None]] = {
     "translation": lambda p, v, w: translation_field(v, w),
     "sphere": sphere_field,
     "cylinder": cylinder_field,
+    "point": point_field,
 }
 
 def estimate(kind: str, p: Array, v: Array, w: Array | None = None, bandwidth: float = 0.02

@@ -15,8 +15,8 @@ from numpy.typing import ArrayLike, NDArray
 Array = NDArray[np.float64]
 
 # Free parameters of each kind's direction model (BIC), besides its spread and share:
-# a direction; an axis and a point on it (in the plane normal to it); a centre.
-PARAMETERS = {"translation": 2, "cylinder": 4, "sphere": 3}
+# a direction; an axis and a point on it (in the plane normal to it); a centre; a goal.
+PARAMETERS = {"translation": 2, "cylinder": 4, "sphere": 3, "point": 3}
 PLANE_KINDS = ("sphere",)  # kinds that predict a plane of directions, not one direction
 LOG_4PI = math.log(4.0 * math.pi)  # -log density of a uniformly random direction
 

@@ -26,7 +26,7 @@ Array = NDArray[np.float64]
 Mask = NDArray[np.bool_]
 Candidate = tuple[Field, Mask, float]  # a shape's winner: field, inliers, score
 
-SAMPLE_SIZE = {"translation": 1, "cylinder": 2, "sphere": 3}
+SAMPLE_SIZE = {"translation": 1, "cylinder": 2, "sphere": 3, "point": 2}
 
 
 def ransac_iterations(p_success: float, outlier_ratio: float, sample_size: int) -> int:

@@ -299,6 +299,8 @@ class NeighbourOrientation(ActiveConstraint):
         return nb.mean_orientation(answer)
 
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
+        if not ws.turn_budget > 0.0:  # no push: no turn, not even an identity's round-off
+            return F
         q_G = se3.quaternion_from_flat(G)
         goal = self._goal(G, q_G, ws)
         if goal is None:

@@ -24,6 +24,7 @@ from .registry import ByValue, Registry, summarised, unit_divisor
 
 Array = NDArray[np.float64]
 
+POINT_UNDEFINED = 1e-3  # m: a point field has no direction this close to its point
 RIGID_MIN_RADIUS = 0.02  # m: closer to a field's centre or axis than this, no turning
 RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the field's
 RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
@@ -378,6 +379,38 @@ class SphereField(Field):
         t = (d[0] - dn * n[0], d[1] - dn * n[1], d[2] - dn * n[2])  # tangent to the sphere
         x, y, z = _cross3(n, t)
         return t, (x / rho, y / rho, z / rho), centre
+
+
+@FIELDS.register
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PointField(Field):
+    """Motion towards ``point`` (3,): a reach's goal, where demonstrations from different
+    starts converge (a field of negative divergence, beyond the thesis' basic set: a
+    translation field is the same direction from every start, so a reach from a start
+    off its mean line agrees with it less the further off it starts, and ``scale`` mode
+    slows a push straight at the goal). The direction is undefined (zero) within
+    ``POINT_UNDEFINED`` of the point."""
+
+    type: ClassVar[str] = "point"
+    point: Array
+
+    @classmethod
+    def read(cls, r: FieldReader, common: dict[str, Any]) -> PointField:
+        return cls(**common, point=r.vec("point"))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"point": self.point.tolist()}
+
+    def vectors(self, points: ArrayLike) -> Array:
+        v = self.point - np.atleast_2d(np.asarray(points, dtype=float))
+        n = np.linalg.norm(v, axis=1, keepdims=True)
+        return np.where(n > POINT_UNDEFINED, v / np.maximum(n, POINT_UNDEFINED), 0.0)
+
+    def vector3(self, x: float, y: float, z: float) -> tuple[float, float, float]:
+        cx, cy, cz = self.point.tolist()
+        vx, vy, vz = cx - x, cy - y, cz - z
+        n = math.sqrt(vx * vx + vy * vy + vz * vz)
+        return (vx / n, vy / n, vz / n) if n > POINT_UNDEFINED else (0.0, 0.0, 0.0)
 
 
 GENERAL_MAX_CENTRES = 20000  # kernel centres of one general field in a model file
