@@ -167,6 +167,42 @@ def test_the_baseline_turns_about_the_tip_of_what_the_hand_holds(tmp_path):
     assert [m.frame for m in _state(alone.skill, "rotate").input_mappings] == ["bottle_tip"]
 
 
+def test_the_baseline_of_a_capped_skill_is_as_capped_near_the_face(tmp_path):
+    """The drink's skill caps the rim near the mouth (speed_near in its state): its
+    baseline gets the same cap in both modes, measured from the mouth, so that a full
+    push there moves the rim no faster than the assisted skill may; the pour's baseline,
+    whose skills have no cap, stays uncapped in world axes."""
+    from sctd import se3
+    from sctd.skill.constraints import SpeedNear
+    from sctd.skill.engine import SkillEngine
+    from sctd_services.eval.evaluate import cap_of
+
+    drink = load_skill(ROOT / "skills" / "drink-vf.yaml")
+    cap = cap_of(drink)
+    assert cap is not None and cap.max_linear_speed == 0.03
+    (base,) = [e for e in entries([str(ROOT / "skills" / "drink-vf.yaml")], baseline=True,
+                                  workdir=tmp_path / "d", task=find_task("drink")) if e.baseline_of]
+    assert base.skill.object == "mouth" and base.label.endswith(", capped near mouth)")
+    for state in base.skill.states:
+        (c,) = [c for c in state.active_constraints if isinstance(c, SpeedNear)]
+        assert c.to_yaml() == cap.to_yaml()
+    eng = SkillEngine(base.skill)
+    eng.reset(0.0)
+    rim = np.asarray(cap.point)
+    F = se3.flat_from_pose([*(-rim + [0.05, 0.0, 0.0]), 0.0, 0.0, 0.0, 1.0])  # the rim 5 cm out
+    dt = 0.001
+    G = eng.command(F, (1.0, 1.0, 1.0), dt)
+    step = np.linalg.norm(np.asarray(G[9:]) - np.asarray(F[9:]))
+    assert 0.0 < step <= 0.03 * dt + 1e-12  # uncapped: 0.1 m/s
+    far = se3.flat_from_pose([0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    G = eng.command(far, (1.0, 0.0, 0.0), dt)
+    assert np.linalg.norm(np.asarray(G[9:]) - np.asarray(far[9:])) == pytest.approx(0.1 * dt, rel=1e-6)
+    (pour_base,) = [e for e in entries([str(POUR)], baseline=True, workdir=tmp_path / "p",
+                                       task=find_task("pour")) if e.baseline_of]
+    assert pour_base.skill.object == "world"
+    assert not any(isinstance(c, SpeedNear) for s in pour_base.skill.states for c in s.active_constraints)
+
+
 def _state(skill, name):
     return next(st for st in skill.states if st.name == name)
 

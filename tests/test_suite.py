@@ -36,7 +36,8 @@ def test_a_skills_speed_cap_near_the_object_raises_its_floor():
 
     from sctd.skill import load_skill
     from sctd.skill.catalog import shipped_folder
-    from sctd_services.eval.suite import _inside, cap_of
+    from sctd_services.eval.evaluate import cap_of
+    from sctd_services.eval.suite import _inside
 
     assert _inside(np.array([-1.0, 0, 0]), np.array([1.0, 0, 0]), np.zeros(3), 0.1) == pytest.approx(0.2)
     assert _inside(np.array([-1.0, 0.2, 0]), np.array([1.0, 0.2, 0]), np.zeros(3), 0.1) == 0.0

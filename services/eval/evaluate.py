@@ -26,6 +26,7 @@ from sctd.files import parse_yaml
 from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
 from sctd.skill.catalog import shipped_folder
+from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, task_for_object
 from sctd.task.model import Reach, Tilt, Upright
 from sctd_services.user import PROFILES
@@ -62,10 +63,13 @@ def task_of(skills: list[Skill], task: str | None) -> str:
 
 
 def with_limits(path: Path, limits: Limits, directory: Path,
-                control: tuple[str, np.ndarray] | None = None) -> Path:
+                control: tuple[str, np.ndarray] | None = None,
+                cap: tuple[str, SpeedNear] | None = None) -> Path:
     """A copy of the skill file at ``path`` (and its model files) with other limits; with
     ``control`` (a frame's name and ``T_ee_frame``), a teleoperation skill's control
-    frame: its rotations turn about that frame's origin (:func:`control_frame`)."""
+    frame: its rotations turn about that frame's origin (:func:`control_frame`); with
+    ``cap`` (an object's name and a ``speed_near``), that cap near that object
+    (:func:`_capped`)."""
     bundle = bundle_from_file(path)
     doc = parse_yaml(bundle.yaml_text, bundle.name)
     doc["limits"] = {"max_linear_speed": limits.max_linear_speed,
@@ -78,6 +82,8 @@ def with_limits(path: Path, limits: Limits, directory: Path,
             for m in state.get("input_mapping", []):
                 if m.get("type") == "linear" and any(a in ROTATIONS for a in m.get("axes", ())):
                     m["frame"] = name
+    if cap is not None:
+        _capped(doc, cap)
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / Path(bundle.name).name
     out.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -88,6 +94,30 @@ def with_limits(path: Path, limits: Limits, directory: Path,
 
 
 ROTATIONS = ("rx", "ry", "rz")
+
+
+def cap_of(skill: Skill) -> SpeedNear | None:
+    """The loosest of a skill's ``speed_near`` caps when every state has one (else the
+    hand may be in an uncapped state: None)."""
+    caps = []
+    for state in skill.states:
+        mine = [c for c in state.active_constraints if isinstance(c, SpeedNear)]
+        if not mine:
+            return None
+        caps.append(max(mine, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)))
+    return max(caps, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)) if caps else None
+
+
+def _capped(doc: dict[str, Any], cap: tuple[str, SpeedNear]) -> None:
+    """A teleoperation skill's document (``doc``, changed in place) measured from the
+    object ``cap[0]`` with the ``speed_near`` cap ``cap[1]`` in every state: the
+    baseline near a person's face is as slow as the assisted skill there. Its axes are
+    then the object's, not the world's: a task object's z is up as the world's, so they
+    differ by a turn about the vertical, which the user learns as it learns any axes."""
+    obj, c = cap
+    doc["object"] = obj
+    for state in doc.get("states", {}).values():
+        state.setdefault("active_constraints", []).append(c.to_yaml())
 
 
 def control_frame(task: Task | None) -> tuple[str, np.ndarray] | None:
@@ -127,14 +157,18 @@ def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None =
             p = with_limits(e.path, e.skill.limits, workdir / f"{e.skill.name}-competent", control)
             e = Entry(e.label, p, load_skill(p))
         out.append(e)
-    if baseline:  # one baseline per set of limits: same limits, same seeds, same trials
+    if baseline:  # one baseline per set of limits: same limits and caps, same seeds and trials
         done: list = []
         for ref in assisted:
-            if ref.skill.limits in done:
+            c = cap_of(ref.skill)
+            key = (ref.skill.limits, None if c is None else c.to_yaml())
+            if key in done:
                 continue
-            done.append(ref.skill.limits)
-            p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}", control)
-            out.append(Entry(f"teleop (limits of {ref.label}{at})", p, load_skill(p), ref.label))
+            done.append(key)
+            cap = None if c is None else (ref.skill.object, c)
+            p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}", control, cap)
+            near = "" if c is None else f", capped near {ref.skill.object}"
+            out.append(Entry(f"teleop (limits of {ref.label}{at}{near})", p, load_skill(p), ref.label))
     return out
 
 
@@ -282,14 +316,37 @@ def limits_line(r: dict[str, Any]) -> str:
     return f"  {r['skill']}: {lim['max_linear_speed']} m/s, {lim['max_angular_speed']} rad/s{of}"
 
 
+def cap_in(path: str) -> SpeedNear | None:
+    """:func:`cap_of` the skill file at ``path`` (None when it is gone: a result read
+    back after its work folder)."""
+    try:
+        return cap_of(load_skill(path))
+    except (OSError, ValueError):
+        return None
+
+
+def baseline_for(ref: dict[str, Any], results: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The baseline among ``results`` that ran with the speed limits and the
+    ``speed_near`` cap of the result ``ref`` (:func:`entries` makes one per such set)."""
+    cap = cap_in(ref["skill"])
+    text = None if cap is None else cap.to_yaml()
+    for b in results:
+        if b.get("baseline_of") and b["limits"] == ref["limits"]:
+            c = cap_in(b["skill"])
+            if (None if c is None else c.to_yaml()) == text:
+                return b
+    return None
+
+
 def median_ratio(results: list[dict[str, Any]]) -> list[str]:
-    """Each assisted skill's median time against the baseline's with the same limits:
+    """Each assisted skill's median time against the baseline's with the same limits
+    (:func:`baseline_for`):
     over successful trials, and with every other trial counted at the time limit."""
     out = []
     for ref in results:
         if ref.get("baseline_of") or ref["name"] == "teleop":
             continue
-        b = next((r for r in results if r.get("baseline_of") and r["limits"] == ref["limits"]), None)
+        b = baseline_for(ref, results)
         if b is None:
             continue
         a, u = ref["time_s"]["median"], b["time_s"]["median"]
@@ -311,6 +368,9 @@ __all__ = [
     "Entry",
     "TaskSpec",
     "TrialResult",
+    "baseline_for",
+    "cap_in",
+    "cap_of",
     "control_frame",
     "entries",
     "evaluate",

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from sctd.skill import WORLD_OBJECT, Limits, Skill, load_skill
+from sctd.skill import WORLD_OBJECT, Limits, load_skill
 from sctd.skill.catalog import shipped_skills
 from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, handle_jacobian
@@ -31,6 +31,8 @@ from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
 from .evaluate import (
     TELEOP,
     Entry,
+    baseline_for,
+    cap_in,
     entries,
     evaluate,
     lockstep_job,
@@ -122,17 +124,6 @@ def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> 
     return max(0.0, min(L, t + h) - max(0.0, t - h))
 
 
-def cap_of(skill: Skill) -> SpeedNear | None:
-    """The loosest of a skill's ``speed_near`` caps when every state has one (else the
-    hand may be in an uncapped state: None)."""
-    caps = []
-    for state in skill.states:
-        mine = [c for c in state.active_constraints if isinstance(c, SpeedNear)]
-        if not mine:
-            return None
-        caps.append(max(mine, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)))
-    return max(caps, key=lambda c: (c.max_linear_speed, c.max_angular_speed, -c.within)) if caps else None
-
 def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, workdir: Path,
               progress: Callable[[int, int, str], None] | None = None) -> list[TaskRun]:
     """Every task's skills and its competent baseline, ``trials`` lockstep trials each
@@ -161,7 +152,7 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
         for r in run.results:
             lim = Limits(**r["limits"])
             median = r["time_s"]["median"]
-            base = next((b for b in run.results if b.get("baseline_of") and b["limits"] == r["limits"]), None)
+            base = baseline_for(r, run.results)
             b = base["time_s"]["median"] if base is not None and base is not r else None
             of = r.get("baseline_of")
             skill = r["name"] if not of else "baseline" if of not in names else f"baseline ({names[of]})"
@@ -170,19 +161,12 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "successes": r["successes"], "success_rate": r["success_rate"], "median_s": median,
                 "times_s": [t["time_s"] for t in r["per_trial"] if t["outcome"] == "success"],
                 "vs_baseline": round(median / b, 3) if median is not None and b else None,
-                "floor_s": round(floor(run.task, lim, None if of else _cap(r["skill"])), 2),
+                "floor_s": round(floor(run.task, lim, cap_in(r["skill"])), 2),
                 "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
                 "failures": _failures(r["per_trial"]),
             })
     return out
-
-
-def _cap(path: str) -> SpeedNear | None:
-    try:
-        return cap_of(load_skill(path))
-    except (OSError, ValueError):  # (a result whose skill file is gone: no cap known)
-        return None
 
 
 def _failures(per_trial: list[dict[str, Any]]) -> dict[str, int]:
