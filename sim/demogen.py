@@ -63,11 +63,9 @@ from sctd.task.model import Reach, Tilt
 Array = NDArray[np.float64]
 
 SHAPES = ("tilt", "pull", "crank", "wipe")
-FIELD_TRUTH = {"tilt": ("point", "sphere"), "pull": ("point", "translation"),
-               "crank": ("point", "cylinder"), "wipe": ("point", "general")}
-"""The kind of field each phase of a shape is (``general``: none of the parametric kinds):
-every reach converges from its varied start on one goal, a ``point`` field (with the
-thesis' kinds only, a ``translation``)."""
+FIELD_TRUTH = {"tilt": ("translation", "sphere"), "pull": ("translation", "translation"),
+               "crank": ("translation", "cylinder"), "wipe": ("translation", "general")}
+"""The kind of field each phase of a shape is (``general``: none of the three shapes)."""
 
 
 @dataclass(frozen=True)

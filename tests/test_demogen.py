@@ -98,7 +98,7 @@ def test_the_kinds_come_from_the_task_files():
     about the bottle's tip 0.12 m up the hand to 5 cm over the mug, the drawer a pull."""
     pour, drawer = demogen.kind_of("pour"), demogen.kind_of("drawer")
     assert (pour.shape, pour.object, pour.phases, pour.fields) == ("tilt", "mug", ("carry", "pour"),
-                                                                   ("point", "sphere"))
+                                                                   ("translation", "sphere"))
     np.testing.assert_array_equal(pour.tip_offset, [0.0, 0.0, 0.12])
     np.testing.assert_array_equal(pour.pour_point, [0.0, 0.0, 0.05])
     assert (drawer.shape, drawer.object, drawer.phases) == ("pull", "drawer_handle", ("reach", "pull"))

@@ -94,7 +94,7 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--max-linear-speed", "--max-angular-speed", "--speed-near"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])
     assert ns.smoothness == 0.005 and ns.random_state == 0 and ns.vf_max_n == 5 and ns.despike
-    assert ns.models == ("translation", "cylinder", "sphere", "point", "general")
+    assert ns.models == ("translation", "cylinder", "sphere", "general")
     ns = parser.parse_args(["d", "--out", "x.yaml", "--vf-models", "translation, sphere"])
     assert ns.models == ("translation", "sphere")
 

@@ -23,9 +23,9 @@ def pour_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def pour10_dir(tmp_path_factory):
-    """The shipped pour's demonstrations (10, seed 1): the carries from azimuths +-45
-    deg apart converge on where the pour starts, a point field before the pour's
-    sphere."""
+    """The shipped pour's demonstrations (10, seed 1): with 6 from azimuths +-45 deg
+    apart, the likelihood explains the carry by two translations before the pour's
+    sphere (each sharper than the sphere's plane)."""
     d = tmp_path_factory.mktemp("pour10")
     demogen.write_demo_set(demogen.generate("pour", 10, outliers=0.05, seed=1), d)
     return d
@@ -92,7 +92,7 @@ def test_learn_vf_writes_model_and_candidate_frames(pour10_dir, tmp_path):
     assert skill.states[0].active_constraints[0].type == "neighbour_orientation"
     assert any(c["kind"] == "sphere" for c in skill.candidate_frames)
     summary = json.loads((tmp_path / "r" / "summary.json").read_text())
-    assert {f["type"] for f in summary["fields"]} == {"sphere", "point"}
+    assert {f["type"] for f in summary["fields"]} == {"sphere", "translation"}
     assert SUMMARY_HYPERPARAMETERS <= set(summary["hyperparameters"])
     assert "candidate_frame.png" in summary["figures"]
 

@@ -61,12 +61,14 @@ from .vfransac import (
 from .vfselect import ModelSelection
 
 __all__ = [
-    "ESTIMATORS", "FIELD_TYPES", "SAMPLE_SIZE", "SELECTIONS", "VectorFieldLearner", "cylinder_field",
-    "general_field", "held_out_angles", "mixture_fit", "mixture_log_likelihood", "point_log_ratios",
-    "ransac_iterations", "sphere_field", "translation_field", "unit_vectors",
+    "DEFAULT_FIELDS", "ESTIMATORS", "FIELD_TYPES", "SAMPLE_SIZE", "SELECTIONS", "THESIS_FIELDS",
+    "VectorFieldLearner", "cylinder_field", "general_field", "held_out_angles", "mixture_fit",
+    "mixture_log_likelihood", "point_log_ratios", "ransac_iterations", "sphere_field",
+    "translation_field", "unit_vectors",
 ]
 
-FIELD_TYPES = ("translation", "cylinder", "sphere", "point", "general")
+FIELD_TYPES = ("translation", "cylinder", "sphere", "point", "general")  # every kind the learner fits
+DEFAULT_FIELDS = ("translation", "cylinder", "sphere", "general")  # what it fits unless told
 THESIS_FIELDS = ("translation", "cylinder", "sphere")  # the thesis' basic fields (Ch. 4.2.2)
 SELECTIONS = ("likelihood", "inliers")
 Array = NDArray[np.float64]
@@ -160,9 +162,10 @@ class VectorFieldLearner:
     angle_point: float = hyperparameter(25.0, "degrees (a reach's goal; the translation's by default)",
                                         valid=Interval(0, 90, open="low"))
     models: tuple[str, ...] = hyperparameter(
-        FIELD_TYPES, "the field kinds to fit, comma-separated (default " + ",".join(FIELD_TYPES)
-        + "; the thesis' are translation,cylinder,sphere)", flag="--vf-models", metavar="KINDS",
-        valid=OneOf(FIELD_TYPES, subset=True))
+        DEFAULT_FIELDS, "the field kinds to fit, comma-separated, of " + ",".join(FIELD_TYPES)
+        + " (default " + ",".join(DEFAULT_FIELDS) + "; the thesis' are translation,cylinder,sphere; "
+        "add point where reaches from scattered starts end at one goal, docs/learning.md)",
+        flag="--vf-models", metavar="KINDS", valid=OneOf(FIELD_TYPES, subset=True))
     p_success: float = hyperparameter(0.99, valid=Interval(0.5, 1, open="high"))
     outlier_ratio: float = hyperparameter(0.7, valid=Interval(0, 0.99))
     min_inliers: int = hyperparameter(10, valid=Interval(3, 100_000, integer=True))
