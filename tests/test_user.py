@@ -403,3 +403,44 @@ def test_user_does_not_switch_modes_for_a_wish_of_almost_nothing():
     assert residual > 0.9 and user._wants_switch(5.0, "translate", residual, tilt)
     barely = Desire(tilt.twist * 0.05, W, 0.01, "pour")  # 5 % of full speed
     assert not user._wants_switch(5.0, "translate", residual, barely)
+
+
+def _step_until(user, t0, obs_at, until, steps=60):
+    """Step ``user`` every 10 ms from ``t0`` on observations ``obs_at(t)`` until
+    ``until(user)`` or ``steps`` corrections; the time it got there (None: never)."""
+    t = t0
+    for _ in range(steps * 15):
+        user.step(t, obs_at(t))
+        if until(user):
+            return t
+        t += 0.01
+    return None
+
+
+@pytest.mark.parametrize("asked", [False, True])
+def test_a_mode_change_the_user_did_not_ask_for_ends_a_sub_goal_close_enough(asked):
+    """The opening over the mug, inside the rim but not centred (the pour's ``bring``
+    close enough): when the display shows a new mode the user did not press for (a
+    template's pour state), the user goes on to the next sub-goal (``pour``) as soon as
+    it sees it; after its own mode switch it keeps at the sub-goal until it has been
+    no closer for a while (REPROBE_AFTER), as before."""
+    from sctd_services.user.agent import REPROBE_AFTER, _Switch
+
+    user = SimulatedUser(POUR, 3, PROFILES["steady"], seed=0)
+    model = DeviceModel(3)
+    model.B[:3, :3] = np.eye(3) * 0.1
+    model.tried[:] = True
+    user.models = {"carry": model}
+    T = _hand_with_tip_at([0.028, 0.0, 0.075])  # close enough, and it stays there
+    user.step(0.0, _pour_obs(0.0, T, "carry"))
+    user.step(0.5, _pour_obs(0.5, T, "carry"))
+    assert user.desire is not None and user.desire.phase == "bring" and user.desire.close_enough
+    if asked:
+        user._switch = _Switch(0.5, "carry")  # the user's own press, still under way
+    t = _step_until(user, 0.6, lambda t: _pour_obs(t, T, "pour"),
+                    lambda u: u.desire is not None and u.desire.phase == "pour")
+    assert t is not None
+    if asked:
+        assert t > 0.6 + REPROBE_AFTER
+    else:
+        assert t < 0.6 + 2 * PROFILES["steady"].reaction_delay + PROFILES["steady"].update_period

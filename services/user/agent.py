@@ -9,10 +9,11 @@ correction the input whose predicted motion comes closest to what the intent wan
 and updating the model from what the hand then did; when that stops bringing it closer
 for a while, it tries the stick out again, or, when it is as close as the task needs
 (within the step's ``accept`` region: the bottle's opening inside the mug's rim), goes
-on to the next step. Where the current mode cannot produce the
-wanted motion, or nothing of its most wanted part, for a while it lets go and tries the
-mode switch (button 0), as a person who knows the device has modes; if pressing it
-changes nothing, it stops trying. While the hand presses against a surface (a wall, a
+on to the next step; so it does at once when the display shows a mode it did not
+press for while it is that close (the template has moved on: a pour state). Where the
+current mode cannot produce the wanted motion, or nothing of its most wanted part, for
+a while it lets go and tries the mode switch (button 0), as a person who knows the
+device has modes; if pressing it changes nothing, it stops trying. While the hand presses against a surface (a wall, a
 button) the hand's motion shows the surface, not the stick: the user neither learns
 from it nor tries the stick out there.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
@@ -89,6 +90,7 @@ class SimulatedUser:
         self._bad_since: float | None = None
         self._mode_since = 0.0
         self._mode = ""
+        self._moved_on: str | None = None  # the sub-goal during which the mode changed unasked
         self.switch_works: bool | None = None  # unknown until tried
         self._best_error = np.inf  # the intent's error at its best since the last re-try
         self._improved = 0.0  # when it last got better
@@ -111,6 +113,9 @@ class SimulatedUser:
         self._next = t + self.profile.update_period
         self._learn(perceived)
         if perceived.mode != self._mode:
+            # a change of mode the user did not press for: the skill has moved on
+            unasked = bool(self._mode) and self._switch is None
+            self._moved_on = self.desire.phase if unasked and self.desire is not None else None
             self._mode, self._mode_since = perceived.mode, t
         u, buttons = self._decide(t, perceived)
         self._out = self._as_made(u)
@@ -180,6 +185,17 @@ class SimulatedUser:
                 self._bad_since = None
             return zero, (0, 1, 0)
         desire = self.desire = self.intent.desire(obs)
+        if desire.phase != self._moved_on:
+            self._moved_on = None  # (that sub-goal is over)
+        elif desire.close_enough:
+            # The display shows a new mode the user did not ask for, and the hand is as
+            # close to the sub-goal as the task needs: the template has taken it there
+            # and moved on (a pour state once the bottle is over the mug), and so does
+            # the user, instead of trying to finish the sub-goal in the new mode.
+            self._moved_on = None
+            self.intent.settle()
+            self.settled += 1
+            desire = self.desire = self.intent.desire(obs)
         if desire.done:
             return zero, (0, 1, 0)
         model = self.models.setdefault(obs.mode, DeviceModel(self.n))
