@@ -13,9 +13,9 @@ on to the next step; so it does at once when the display shows a mode it did not
 press for while it is that close (the template has moved on: a pour state). Where the
 current mode cannot produce the wanted motion, or nothing of its most wanted part, for
 a while it lets go and tries the mode switch (button 0), as a person who knows the
-device has modes; if pressing it changes nothing, it stops trying. While the hand presses against a surface (a wall, a
-button) the hand's motion shows the surface, not the stick: the user neither learns
-from it nor tries the stick out there.
+device has modes; if pressing it changes nothing, it stops trying. While the hand
+presses against a surface (a wall, a button) the hand's motion shows the surface, not
+the stick: the user neither learns from it nor tries the stick out there.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
 stick only every update period, its deflections are noisy and never smaller than its
 dead zone, and a mode switch costs it time with the stick released.
