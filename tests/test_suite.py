@@ -11,7 +11,7 @@ import pytest
 from sctd.skill import Limits
 from sctd.task import find_task
 from sctd_services.eval.suite import TaskRun, figure, floor, markdown, rows, skills_for, table
-from tests.conftest import run_sctd
+from tests.conftest import ROOT, run_sctd
 
 
 def test_floor_is_travel_and_tilt_over_the_speed_limits():
@@ -83,6 +83,31 @@ def test_rows_compare_each_skill_with_the_baseline_of_its_limits():
     assert len(lines) == 2 + 4 and "time limit x1" in lines[3]
     md = markdown(out).splitlines()
     assert len(md) == 2 + 4 and md[2] == "| drawer | a | 3/3 | 5.00 | 0.50 | 4.00 | 1.0 | 5.00 |"
+
+
+def test_a_capped_skill_is_compared_with_its_capped_baseline_when_its_copy_is_gone(tmp_path):
+    """The drink's skill caps the rim near the mouth: of two baselines with its limits,
+    its row is compared with the one made for it (capped), found by the skill it was made
+    for, not by its own copy (in the suite's work folder, gone when the rows are made);
+    both rows get the capped floor. An uncapped skill with the same limits gets the
+    uncapped baseline."""
+    drink = str(ROOT / "skills" / "drink-vf.yaml")
+    plain = tmp_path / "plain.yaml"  # the drink's skill without its cap: the same limits
+    text = (ROOT / "skills" / "drink-vf.yaml").read_text()
+    plain.write_text(text[:text.index("    - type: speed_near")] + text[text.index("candidate_frames:"):])
+    (tmp_path / "drink-vf.npz").write_bytes((ROOT / "skills" / "drink-vf.npz").read_bytes())
+    limits = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}
+    gone = str(tmp_path / "work" / "teleop.yaml")
+    run = TaskRun(find_task("drink"), [drink, str(plain)], [
+        _result("drink-vf", limits, [18.0], label=drink),
+        _result("plain", limits, [12.0], label=str(plain)),
+        _result("teleop", limits, [14.0], baseline_of=str(plain), label=gone),
+        _result("teleop", limits, [20.0], baseline_of=drink, label=gone + "2"),
+    ])
+    out = rows([run])
+    assert [r["vs_baseline"] for r in out] == [0.9, round(12.0 / 14.0, 3), None, None]
+    capped, uncapped = out[0]["floor_s"], out[1]["floor_s"]
+    assert capped > uncapped and out[3]["floor_s"] == capped and out[2]["floor_s"] == uncapped
 
 
 def test_the_figure_draws(tmp_path):

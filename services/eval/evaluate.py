@@ -325,14 +325,21 @@ def cap_in(path: str) -> SpeedNear | None:
         return None
 
 
+def result_cap(r: dict[str, Any]) -> SpeedNear | None:
+    """The ``speed_near`` cap a result ran with: its skill's, or for a baseline the cap
+    of the skill it was made for (:func:`entries` gives it that skill's; its own copy is
+    in a work folder that may be gone)."""
+    return cap_in(r.get("baseline_of") or r["skill"])
+
+
 def baseline_for(ref: dict[str, Any], results: list[dict[str, Any]]) -> dict[str, Any] | None:
     """The baseline among ``results`` that ran with the speed limits and the
     ``speed_near`` cap of the result ``ref`` (:func:`entries` makes one per such set)."""
-    cap = cap_in(ref["skill"])
+    cap = result_cap(ref)
     text = None if cap is None else cap.to_yaml()
     for b in results:
         if b.get("baseline_of") and b["limits"] == ref["limits"]:
-            c = cap_in(b["skill"])
+            c = result_cap(b)
             if (None if c is None else c.to_yaml()) == text:
                 return b
     return None
@@ -374,6 +381,7 @@ __all__ = [
     "control_frame",
     "entries",
     "evaluate",
+    "result_cap",
     "summarise",
     "table",
     "task_of",

@@ -32,10 +32,10 @@ from .evaluate import (
     TELEOP,
     Entry,
     baseline_for,
-    cap_in,
     entries,
     evaluate,
     lockstep_job,
+    result_cap,
     strip_trajectories,
 )
 from .trial import TaskSpec
@@ -161,7 +161,7 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "successes": r["successes"], "success_rate": r["success_rate"], "median_s": median,
                 "times_s": [t["time_s"] for t in r["per_trial"] if t["outcome"] == "success"],
                 "vs_baseline": round(median / b, 3) if median is not None and b else None,
-                "floor_s": round(floor(run.task, lim, cap_in(r["skill"])), 2),
+                "floor_s": round(floor(run.task, lim, result_cap(r)), 2),
                 "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
                 "failures": _failures(r["per_trial"]),
