@@ -87,6 +87,15 @@ def _logs(c: Cluster) -> str:
     return "\n".join(f"--- {p.log_path.name}\n{p.output()[-3000:]}" for p in c.hosts._procs)
 
 
+def _brief(record: dict | None) -> str:
+    """A scene message's outcome first (what a failed pour's assertion needs to say)."""
+    if record is None:
+        return "none"
+    msg = record["msg"]
+    first = {k: msg[k] for k in ("success", "done", "poured", "spill", "readings", "reason") if k in msg}
+    return f"{first} (keys {sorted(msg)})"
+
+
 def _status(c: Cluster, since: float = 0.0) -> list[dict]:
     return [r["msg"] for r in c.seen(c.keys.status, since)]
 
@@ -97,7 +106,7 @@ def test_pour_completes_across_hosts(cluster):
     assert report["done"] and report["final_state"] == "pour", report
     # the robot host's own verdict, as the observer host received it
     assert wait_for(lambda: any(r["msg"].get("success") for r in c.seen(c.keys.scene)), 10), \
-        (c.last(c.keys.scene), _logs(c))
+        f"the user's report {report}\nthe last scene {_brief(c.last(c.keys.scene))}\n{_logs(c)}"
     assert all(p.running() for p in c.procs.values()), _logs(c)
 
 

@@ -10,7 +10,8 @@ and updating the model from what the hand then did; when that stops bringing it 
 for a while, it tries the stick out again, or, when it is as close as the task needs
 (within the step's ``accept`` region: the bottle's opening inside the mug's rim), goes
 on to the next step; so it does at once when the display shows a mode it did not
-press for while it is that close (the template has moved on: a pour state). Where the
+press for while it is that close (within MOVED_ON_WINDOW of the change: the template
+has moved on, a pour state; an earlier change, far from the sub-goal, is no such cue). Where the
 current mode cannot produce the wanted motion, or nothing of its most wanted part, for
 a while it lets go and tries the mode switch (button 0), as a person who knows the
 device has modes; if pressing it changes nothing, it stops trying. While the hand
@@ -42,6 +43,7 @@ PROGRESS = 0.003  # decrease of the intent's error that counts as getting closer
 LACKING = 0.9  # a mode that leaves this much of the most wanted part undone cannot give it
 SMALL_WISH = 0.2  # a wish this small (a share of full speed) is no reason to switch modes
 REPROBE_AFTER = 2.0  # s without getting closer before the user tries the stick out again
+MOVED_ON_WINDOW = 0.5  # s after an unasked mode change in which being close enough ends the sub-goal
 
 
 def twist_between(T_a: Array, T_b: Array, dt: float) -> Array:
@@ -90,7 +92,8 @@ class SimulatedUser:
         self._bad_since: float | None = None
         self._mode_since = 0.0
         self._mode = ""
-        self._moved_on: str | None = None  # the sub-goal during which the mode changed unasked
+        # the sub-goal during which the mode changed unasked, and when the user saw it
+        self._moved_on: tuple[str, float] | None = None
         self.switch_works: bool | None = None  # unknown until tried
         self._best_error = np.inf  # the intent's error at its best since the last re-try
         self._improved = 0.0  # when it last got better
@@ -115,7 +118,7 @@ class SimulatedUser:
         if perceived.mode != self._mode:
             # a change of mode the user did not press for: the skill has moved on
             unasked = bool(self._mode) and self._switch is None
-            self._moved_on = self.desire.phase if unasked and self.desire is not None else None
+            self._moved_on = (self.desire.phase, t) if unasked and self.desire is not None else None
             self._mode, self._mode_since = perceived.mode, t
         u, buttons = self._decide(t, perceived)
         self._out = self._as_made(u)
@@ -185,9 +188,10 @@ class SimulatedUser:
                 self._bad_since = None
             return zero, (0, 1, 0)
         desire = self.desire = self.intent.desire(obs)
-        if desire.phase != self._moved_on:
-            self._moved_on = None  # (that sub-goal is over)
-        elif desire.close_enough:
+        if self._moved_on is not None and (desire.phase != self._moved_on[0]
+                                           or t - self._moved_on[1] > MOVED_ON_WINDOW):
+            self._moved_on = None  # that sub-goal is over, or the change was no cue for it
+        if self._moved_on is not None and desire.close_enough:
             # The display shows a new mode the user did not ask for, and the hand is as
             # close to the sub-goal as the task needs: the template has taken it there
             # and moved on (a pour state once the bottle is over the mug), and so does
