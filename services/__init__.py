@@ -5,6 +5,8 @@
 - :mod:`sctd_services.eval`: evaluations of skills with the simulated user (lockstep
   trials, the recorder of a trial, the figures); the real-time trial, which starts
   processes, is the application layer's (:mod:`sctd.cli.eval_realtime`);
+- :mod:`sctd_services.view`: a skill and its task's scene as shapes, drawn in the browser
+  with Viser (``sctd inspect --view``);
 - :mod:`sctd_services.record`: the demonstration recorder (``sctd record``), against the
   simulator or any robot that publishes the wire contract.
 

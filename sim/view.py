@@ -55,9 +55,37 @@ def open_viewer(port: int = 0) -> ViserView:
     ViewerUnavailable
         ``viser`` cannot be imported, or ``port`` is taken.
     """
+    return ViserView(port)
+
+
+def viser_server(port: int = 0) -> Any:
+    """A ``viser.ViserServer`` on ``127.0.0.1:port`` (0: a free port), its banner on
+    stderr (stdout stays for ``--json``).
+
+    Raises
+    ------
+    ViewerUnavailable
+        ``viser`` cannot be imported, or ``port`` is taken (viser would silently move
+        on to the next free one).
+    """
     if importlib.util.find_spec("viser") is None:
         raise ViewerUnavailable("needs the viser package: pip install 'sctd[view]' (or pip install viser)")
-    return ViserView(port)
+    import viser
+
+    # Viser prints a banner (and "Server stopped") on stdout; its "Connection
+    # opened/closed" lines are off (verbose=False).
+    with contextlib.redirect_stdout(sys.stderr):
+        server = viser.ViserServer(host=HOST, port=port, verbose=False)
+    if port and server.get_port() != port:
+        stop_server(server)
+        raise ViewerUnavailable(f"port {port} on {HOST} is in use")
+    return server
+
+
+def stop_server(server: Any) -> None:
+    """Stop a server of :func:`viser_server` (its port is free afterwards)."""
+    with contextlib.redirect_stdout(sys.stderr):
+        server.stop()
 
 
 def wxyz_from_pose(pose) -> tuple[float, float, float, float]:
@@ -91,16 +119,8 @@ class ViserView:
     """
 
     def __init__(self, port: int = 0) -> None:
-        import viser
-
-        # Viser prints a banner (and "Server stopped") on stdout, which sctd sim keeps
-        # for --json; its "Connection opened/closed" lines are off (verbose=False).
-        with contextlib.redirect_stdout(sys.stderr):
-            self.server = viser.ViserServer(host=HOST, port=port, verbose=False)
+        self.server = viser_server(port)
         self.port = self.server.get_port()
-        if port and self.port != port:  # viser moves on to the next free port silently
-            self._stop_server()
-            raise ViewerUnavailable(f"port {port} on {HOST} is in use")
         self.url = f"http://{HOST}:{self.port}"
         self.handles: dict[str, Any] = {}
         self._cond = threading.Condition()
@@ -232,8 +252,7 @@ class ViserView:
 
     # -- lifetime ----------------------------------------------------------------------
     def _stop_server(self) -> None:
-        with contextlib.redirect_stdout(sys.stderr):
-            self.server.stop()
+        stop_server(self.server)
 
     def close(self) -> None:
         """Stop the drawing thread, then the server (the port is free afterwards)."""

@@ -35,7 +35,7 @@ MARKERS = {
 EXTRAS = {
     "learn": ("sklearn", "maxflow", "matplotlib"),
     "sim": ("pinocchio", "can", "cantools"),
-    "dev": ("pytest", "hypothesis", "atheris", "gco", "importlinter", "setuptools"),
+    "dev": ("pytest", "hypothesis", "atheris", "gco", "importlinter", "setuptools", "playwright"),
     "view": ("viser",),
     "inputs": ("sdl2", "hid", "brainflow"),
     "logs": ("mcap",),

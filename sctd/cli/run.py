@@ -29,6 +29,7 @@ from ..wire.session import (
     make_config,
     session_from_args,
 )
+from .view import add_view_arguments, check_view_arguments, serve_skill_view
 
 ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (the rest must be > 0)
 
@@ -157,13 +158,19 @@ def main_run(args: argparse.Namespace) -> int:
 def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("skill", help=SKILL_HELP)
     p.add_argument("--json", action="store_true", help="machine-readable output")
+    add_view_arguments(p)
 
 
 def main_inspect(args: argparse.Namespace) -> int:
+    problem = check_view_arguments(args)
+    if problem is not None:
+        return fail("inspect", problem)
     try:
         skill = load_skill(find_skill(args.skill))
     except SkillError as e:
         return fail("inspect", str(e))
+    if args.view:
+        return serve_skill_view(skill, args)
     s = skill_summary(skill)
     if args.json:
         print(json.dumps(s, indent=2))

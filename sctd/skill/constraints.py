@@ -21,6 +21,7 @@ from .. import se3
 from .modelfile import VectorFieldModel
 from .reader import Reader
 from .registry import ByValue, Registry, summarised
+from .sketch import Cone, Cuboid, Dots, Plane, Shape, Sphere, direction_words
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -64,6 +65,11 @@ class ActiveConstraint(ByValue, ABC):
         """The model files this constraint reads, as (relative path, model)."""
         return ()
 
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        """What the constraint looks like (:mod:`sctd.skill.sketch`, object frame) with
+        its ``frame`` at pose G: none for a kind with no shape."""
+        return ()
+
     @abstractmethod
     def project(self, F: Flat, G: Flat, ws: Workspace) -> Flat:
         """Project the ee pose F (object frame) onto the constraint.
@@ -90,6 +96,10 @@ CONSTRAINTS: Registry[ActiveConstraint] = Registry("active constraint")
 def _rotate_about(F: Flat, G: Flat, R: Array) -> Flat:
     """Rotate the pose F by R (3, 3; object axes) about the origin of frame pose G."""
     return se3.compose_flat(se3.flat_rotation_about(R.ravel().tolist(), *G[9:]), F)
+
+
+TILT_CONE_LENGTH = 0.08  # m: how long a tilt cone is drawn
+BAND_SIZE = 0.3  # m: the side of a band's bounds as drawn
 
 
 @CONSTRAINTS.register
@@ -144,6 +154,11 @@ class TiltCone(ActiveConstraint):
         boundary = math.cos(self.max_angle) * self.reference + math.sin(self.max_angle) * perp / pn
         return _rotate_about(F, G, se3.rotation_between(a, boundary))
 
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        """The cone the frame's axis stays in, at the frame's origin."""
+        return (Cone(f"{self.frame} tilts at most {math.degrees(self.max_angle):.0f} deg",
+                     np.asarray(G[9:]), self.reference, self.max_angle, TILT_CONE_LENGTH),)
+
 
 @CONSTRAINTS.register
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -190,6 +205,15 @@ class Band(ActiveConstraint):
             return F
         return se3.translate_flat(F, delta * nx, delta * ny, delta * nz)
 
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        """The band's two bounds, squares centred under and over the frame's origin."""
+        p = np.asarray(G[9:], dtype=float)
+        foot = p - float(self.normal @ (p - self.point)) * self.normal  # in the plane through point
+        along = direction_words(self.normal)
+        return tuple(Plane(f"{self.frame} {word} {d:g} m along {along}", foot + d * self.normal, self.normal,
+                           BAND_SIZE)
+                     for word, d in (("at least", self.lower), ("at most", self.upper)))
+
 
 @CONSTRAINTS.register
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -225,6 +249,9 @@ class Box(ActiveConstraint):
         if q[0] == p[0] and q[1] == p[1] and q[2] == p[2]:
             return F
         return (*F[:9], F[9] + q[0] - p[0], F[10] + q[1] - p[1], F[11] + q[2] - p[2])
+
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        return (Cuboid(f"{self.frame} stays in this box", self.lower, self.upper),)
 
 
 def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, ...]:
@@ -285,6 +312,10 @@ class NeighbourOrientation(ActiveConstraint):
 
     def models(self) -> tuple[tuple[str, VectorFieldModel], ...]:
         return ((self.model_file, self.model),)
+
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        """The demonstration points whose orientations it takes."""
+        return (Dots(f"{self.frame} turns as the demonstrations did here", self.model.points),)
 
     def _goal(self, G: Flat, q_G: tuple[float, float, float, float], ws: Workspace
               ) -> tuple[float, float, float, float] | None:
@@ -424,6 +455,11 @@ class SpeedNear(StepLimit):
         if self.point is not None:
             out["point"] = self.point.tolist()
         return out
+
+    def sketch(self, G: Flat) -> tuple[Shape, ...]:
+        """The zone about the object's origin where the cap holds."""
+        return (Sphere(f"at most {self.max_linear_speed:g} m/s, {self.max_angular_speed:g} rad/s within "
+                       f"{self.within:g} m", np.zeros(3), self.within),)
 
     def _point(self, G: Flat) -> Vec3:
         px, py, pz = self._point3

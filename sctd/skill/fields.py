@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import SkillError
 from .registry import ByValue, Registry, summarised, unit_divisor
+from .sketch import Arrow, Dots, Line, Shape, Sphere, direction_words
 
 Array = NDArray[np.float64]
 
@@ -55,6 +56,8 @@ def _pivot_centre(G: Sequence[float], pivot: Array) -> Vec3:
     px, py, pz = pivot.tolist()
     return (G[9] + G[0] * px + G[1] * py + G[2] * pz, G[10] + G[3] * px + G[4] * py + G[5] * pz,
             G[11] + G[6] * px + G[7] * py + G[8] * pz)
+
+SKETCH_LENGTH = 0.08  # m: how long a field's direction or axis is drawn
 
 
 class FieldReader:
@@ -171,6 +174,11 @@ class Field(ByValue, ABC):
     def _parameters(self) -> dict[str, Any]:
         """This kind's own parameters for :meth:`to_yaml`."""
 
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        """Its fitted parameters as shapes (:mod:`sctd.skill.sketch`, object frame),
+        placed by the demonstration points it explains (n, 3): a centre, an axis."""
+        return ()
+
     @abstractmethod
     def vectors(self, points: ArrayLike) -> Array:
         """Unit field direction at each point (shape (n, 3)); zero where undefined."""
@@ -235,6 +243,12 @@ class TranslationField(Field):
     def _parameters(self) -> dict[str, Any]:
         return {"direction": self.direction.tolist()}
 
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        at = p.mean(axis=0) if len(p) else np.zeros(3)
+        return (Arrow(f"translation along {direction_words(self.direction)}", at,
+                      SKETCH_LENGTH * self.direction),)
+
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
         return np.broadcast_to(self.direction, p.shape).copy()
@@ -261,6 +275,14 @@ class CylinderField(Field):
 
     def _parameters(self) -> dict[str, Any]:
         return {"point": self.point.tolist(), "axis": self.axis.tolist()}
+
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        """Its axis, centred where the points it explains lie along it."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        s = float(np.mean((p - self.point) @ self.axis)) if len(p) else 0.0
+        mid = self.point + s * self.axis
+        return (Line(f"turning about {direction_words(self.axis)}", mid - SKETCH_LENGTH * self.axis,
+                     mid + SKETCH_LENGTH * self.axis),)
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))
@@ -327,6 +349,13 @@ class SphereField(Field):
         if self.radius is not None:
             out["radius"] = self.radius
         return out
+
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        """Its centre, and the sphere of the demonstrations' mean radius when known."""
+        shapes: list[Shape] = [Dots("sphere's centre", self.centre)]
+        if self.radius is not None and self.radius > 0.0:
+            shapes.append(Sphere(f"sphere of {self.radius:.3f} m", self.centre, self.radius))
+        return tuple(shapes)
 
     def vectors(self, points: ArrayLike) -> Array:
         v = np.atleast_2d(np.asarray(points, dtype=float)) - self.centre
@@ -401,6 +430,9 @@ class PointField(Field):
     def _parameters(self) -> dict[str, Any]:
         return {"point": self.point.tolist()}
 
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        return (Dots("the point it goes to", self.point),)
+
     def vectors(self, points: ArrayLike) -> Array:
         v = self.point - np.atleast_2d(np.asarray(points, dtype=float))
         n = np.linalg.norm(v, axis=1, keepdims=True)
@@ -473,6 +505,9 @@ class GeneralField(Field):
     @property
     def _k(self) -> int:
         return min(GENERAL_NEIGHBOURS, len(self.centres))
+
+    def sketch(self, points: ArrayLike) -> tuple[Shape, ...]:
+        return (Dots(f"{len(self.centres)} demonstrated directions", self.centres),)
 
     def vectors(self, points: ArrayLike) -> Array:
         p = np.atleast_2d(np.asarray(points, dtype=float))

@@ -20,12 +20,15 @@ from numpy.typing import NDArray
 from .. import se3
 from .reader import Reader
 from .registry import ByValue, Registry, summarised, unit_divisor
+from .sketch import Arrow, Plane, Shape, Sphere
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
 Flat = se3.Flat
 
 COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
+HYPERPLANE_SIZE = 0.2  # m: the side of a hyperplane guard as drawn
+HYPERPLANE_ARROW = 0.05  # m: the arrow to the side it fires on
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -51,6 +54,11 @@ class Transition(ByValue, ABC):
     def summary(self) -> dict[str, Any]:
         """The transition as plain data (``sctd inspect --json``, the skill query)."""
         return summarised(self.to_yaml())
+
+    def sketch(self) -> tuple[Shape, ...]:
+        """Where the guard fires (:mod:`sctd.skill.sketch`, object frame): none for a
+        kind that is no region of space (a time, a force, a button)."""
+        return ()
 
     @abstractmethod
     def _parameters(self) -> dict[str, Any]:
@@ -138,6 +146,14 @@ class Hyperplane(Transition):
         nx, ny, nz = self._normal3
         return nx * G[9] + ny * G[10] + nz * G[11] + self.offset
 
+    def sketch(self) -> tuple[Shape, ...]:
+        """The plane (through its point nearest the object's origin) and an arrow to
+        the side where it fires."""
+        p0 = -self.offset * self.normal
+        return (Plane(f"{self.source} -> {self.target}: {self.frame} crosses", p0, self.normal,
+                      HYPERPLANE_SIZE),
+                Arrow(f"to {self.target}", p0, HYPERPLANE_ARROW * self.normal))
+
 
 @TRANSITIONS.register
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -185,6 +201,14 @@ class Distance(Transition):
         """The distance (m), negated for ``below``: it grows as the frame nears firing."""
         d = self._distance(F, ws)
         return -d if self.direction == "below" else d
+
+    def sketch(self) -> tuple[Shape, ...]:
+        """The sphere the frame's origin enters (``below``) or leaves (``above``)."""
+        word = "within" if self.direction == "below" else "beyond"
+        of = "the object's origin" if not np.any(self.point) else \
+            "(" + ", ".join(f"{x:.3g}" for x in self.point.tolist()) + ")"
+        return (Sphere(f"{self.source} -> {self.target}: {self.frame} {word} {self.threshold:g} m of {of}",
+                       self.point, self.threshold),)
 
     def _distance(self, F: Flat, ws: Workspace) -> float:
         G = ws.frame_pose(F, self.frame)

@@ -1,0 +1,159 @@
+"""A task's scene as solid parts: what the view draws of the mug, the bottle, the drawer.
+
+A task file (:mod:`sctd.task`) describes the physics of its scene, not its looks: a
+container's radius and depth, a wall's plane, a button's radius, a head's sphere, a
+joint's handle and hinge, what the hand holds and its frames. Each becomes a part
+(:class:`Part`): a triangle mesh in the frame of what it moves with, so that a view
+places it once and only moves that frame:
+
+- a body's container (an open cylinder below its opening), surface (a slab behind its
+  plane), button (a disc on its face);
+- a head (its sphere, behind the body it is behind);
+- a joint's moving part: a drawer's front and box behind a prismatic handle, a door's
+  panel from a revolute handle's hinge to past the handle; it moves with the handle
+  (:func:`sctd.task.kinematics.handle_pose` at the joint's position);
+- what the hand holds: a cylinder from the hand to its furthest frame (the bottle's
+  opening), moving with the hand.
+
+The sizes a file does not give (a drawer front's width, a wall's extent) are drawn at
+the constants below: they show where things are, not what collides.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import trimesh
+from numpy.typing import NDArray
+
+from sctd import se3
+from sctd.task import Task
+from sctd.task.kinematics import handle_pose
+
+Array = NDArray[np.float64]
+
+WALL = 0.6  # m: the side of a surface's slab as drawn
+WALL_DEPTH = 0.02  # m: its thickness behind the plane
+DRAWER_FRONT = (0.40, 0.16)  # m: a drawer front's width and height
+DRAWER_DEPTH = 0.30  # m: the drawer's box behind its front
+HANDLE_OUT = 0.03  # m: how far a handle stands out of its drawer front or door
+DOOR_THICKNESS = 0.02  # m
+HELD_RADIUS = 0.03  # m: the held object's cylinder
+RGB = {"container": (110, 110, 130), "surface": (170, 170, 160), "button": (200, 60, 60),
+       "head": (225, 185, 150), "joint": (150, 110, 70), "held": (70, 150, 70)}
+
+
+@dataclass(frozen=True)
+class Part:
+    """One solid part of the scene.
+
+    ``anchor`` says what it moves with: ``("body", name)`` the body's pose,
+    ``("handle", joint)`` the joint's handle at the joint's position, ``("hand", "")``
+    the end-effector. ``vertices`` (n, 3; in the anchor's frame) and ``faces`` (m, 3)
+    make its mesh; ``kind`` picks its colour (:data:`RGB`).
+    """
+
+    name: str
+    label: str
+    kind: str
+    anchor: tuple[Literal["body", "handle", "hand"], str]
+    vertices: Array
+    faces: NDArray[np.int64]
+    opacity: float = 1.0
+
+    @property
+    def rgb(self) -> tuple[int, int, int]:
+        return RGB[self.kind]
+
+
+def task_parts(task: Task) -> list[Part]:
+    """Every part of ``task``'s scene."""
+    parts: list[Part] = []
+    sc = task.scene
+    for name, b in sc.bodies.items():
+        if b.container is not None:
+            c = b.container
+            m = trimesh.creation.cylinder(radius=c.radius, height=c.depth)
+            m.apply_translation((0.0, 0.0, -c.depth / 2))
+            parts.append(_part(f"{name}/container", f"{name} ({c.radius * 200:.0f} cm wide)", "container",
+                               ("body", name), m, 0.7))
+        if b.surface is not None:
+            m = trimesh.creation.box(extents=(WALL_DEPTH, WALL, WALL))
+            m.apply_translation((-WALL_DEPTH / 2 - 1e-3, 0.0, 0.0))
+            parts.append(_part(f"{name}/surface", f"{name}'s surface", "surface", ("body", name), m))
+        if b.button is not None:
+            m = trimesh.creation.cylinder(radius=b.button.radius, height=0.01)
+            m.apply_transform(_turn_z_to_x())
+            parts.append(_part(f"{name}/button", f"{name}", "button", ("body", name), m))
+    for name, h in sc.heads.items():
+        m = trimesh.creation.icosphere(subdivisions=2, radius=h.radius)
+        m.apply_translation((-h.radius, 0.0, 0.0))
+        parts.append(_part(f"{name}/head", f"{name}", "head", ("body", h.behind), m, 0.8))
+    for name, j in sc.joints.items():
+        parts.append(_part(f"{name}/moving", f"{name} ({j.kind})", "joint", ("handle", name),
+                           _joint_mesh(j), 0.8))
+    if sc.held is not None and sc.held.frames:
+        far = max(sc.held.frames.values(), key=lambda T: float(np.linalg.norm(T[:3, 3])))[:3, 3]
+        length = float(np.linalg.norm(far))
+        if length > 1e-3:
+            m = trimesh.creation.cylinder(radius=HELD_RADIUS, segment=np.array([np.zeros(3), far]))
+            parts.append(_part(f"{sc.held.name}/held", sc.held.name, "held", ("hand", ""), m, 0.6))
+    return parts
+
+
+def part_pose(part: Part, task: Task, T_world: dict[str, Array], T_world_ee: Array | None,
+              readings: dict[str, float] | None = None) -> Array | None:
+    """Where ``part``'s anchor is: the body's pose in ``T_world`` (name -> (4, 4)), the
+    handle at its joint's position in ``readings`` (``<joint>.position``, 0 when
+    missing), or the hand ``T_world_ee``; None when that is not known."""
+    kind, name = part.anchor
+    if kind == "hand":
+        return T_world_ee
+    if kind == "body":
+        return T_world.get(name)
+    joint = task.scene.joints[name]
+    T0 = T_world.get(joint.handle)
+    if T0 is None:
+        return None
+    return handle_pose(joint, T0, float((readings or {}).get(f"{name}.position", 0.0)))
+
+
+def default_poses(task: Task) -> dict[str, Array]:
+    """Every body's default pose (world)."""
+    return {name: b.T_world for name, b in task.scene.bodies.items()}
+
+
+def _part(name: str, label: str, kind: str, anchor, m: trimesh.Trimesh, opacity: float = 1.0) -> Part:
+    return Part(name, label, kind, anchor, np.asarray(m.vertices, dtype=float),
+                np.asarray(m.faces, dtype=np.int64), opacity)
+
+
+def _turn_z_to_x() -> Array:
+    """A transform turning a shape along z onto x."""
+    return se3.transform_from_pose([0.0, 0.0, 0.0, 0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)])
+
+
+def _joint_mesh(j) -> trimesh.Trimesh:
+    """The part that moves with a joint's handle, in the handle's frame (x out of it)."""
+    if j.hinge is None:  # a drawer: its front behind the handle and the box behind it
+        w, h = DRAWER_FRONT
+        box = trimesh.creation.box(extents=(DRAWER_DEPTH, w, h))
+        box.apply_translation((-HANDLE_OUT - DRAWER_DEPTH / 2, 0.0, 0.0))
+        return box
+    # a door: the panel from the hinge line past the handle, in the plane of the hinge's
+    # axis and the handle's arm, behind the handle
+    a = j.hinge.axis / np.linalg.norm(j.hinge.axis)
+    p = j.hinge.point
+    arm = -p - float(-p @ a) * a
+    lever = float(np.linalg.norm(arm))
+    u = arm / lever
+    n = np.cross(a, u)
+    height = min(max(1.5 * lever, 0.3), 0.6)
+    foot = p + float(-p @ a) * a  # the hinge line's point level with the handle
+    back = -(np.sign(float(n[0])) or 1.0) * n  # the panel's thickness goes away from the handle (-x)
+    corners = [foot + s * u + t * a + d * back for s in (0.0, lever + 0.05)
+               for t in (-height / 2, height / 2) for d in (0.0, DOOR_THICKNESS)]
+    return trimesh.convex.convex_hull(np.array(corners))

@@ -1,0 +1,234 @@
+"""`sctd inspect SKILL --view` in a real headless Chromium (tests/browser.py): the skill's
+elements, the task's bodies and the demonstrations are drawn where they project, and the
+state picker, worked by clicks, shows one state at a time.
+
+"Drawn where it projects" is checked by difference: hiding one node from the server
+changes the screenshot around the pixel its points project to, and nowhere far from
+them; so the check holds whatever else overlaps it (translucent regions tint what is
+behind them).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sctd.learn.demos import read_demos
+from sctd.skill import load_skill
+from sctd.skill.catalog import shipped_folder
+from sctd.task import find_task
+from tests import browser
+from tests.browser import Camera
+from tests.conftest import free_port, port_is_free, run_sctd, sctd, wait_for
+from tests.test_sim_view import get_page, listeners
+
+SKILLS = shipped_folder()
+W, H = 800, 600
+SHOTS = os.environ.get("SCTD_VIEW_SHOTS")  # a folder: save the screenshots there (docs/view.md's)
+URL = re.compile(r"view of \S+ at (http://127\.0\.0\.1:(\d+))")
+
+
+@pytest.fixture
+def skill_view():
+    """Makes (server, view) for a shipped skill's file name; stops every server after."""
+    from sctd_services.view.draw import SkillView
+    from sctd_services.view.skill_scene import skill_scene
+    from sctd_sim.view import stop_server, viser_server
+
+    servers = []
+
+    def make(name: str, task: str | None = None, demos: str | None = None):
+        skill = load_skill(SKILLS / name)
+        scene = skill_scene(skill, read_demos(SKILLS / "demos" / demos) if demos else None)
+        server = viser_server(0)
+        servers.append(server)
+        return server, SkillView(server, scene, task=find_task(task) if task else None)
+
+    yield make
+    for s in servers:
+        stop_server(s)
+
+
+def save(view, name: str) -> None:
+    if SHOTS:
+        Path(SHOTS).mkdir(parents=True, exist_ok=True)
+        view.page.screenshot(path=str(Path(SHOTS) / name))
+
+
+def changed(a: np.ndarray, b: np.ndarray, tol: int = 25) -> np.ndarray:
+    """Pixels that differ by more than ``tol`` in a channel (H, W bool)."""
+    return np.any(np.abs(a.astype(int) - b.astype(int)) > tol, axis=-1)
+
+
+def near(mask: np.ndarray, rc, radius: int = 6) -> bool:
+    r, c = (int(x) for x in rc)
+    return bool(mask[max(r - radius, 0):r + radius + 1, max(c - radius, 0):c + radius + 1].any())
+
+
+def drawn_where_projected(view, handle, points: np.ndarray, radius: int = 6) -> None:
+    """Hiding ``handle`` changes pixels near the projection of ``points`` (n, 3; world)
+    and the changed pixels all lie near some projected point (within the box around
+    them, widened by the shape's size on screen)."""
+    view.settle()
+    shown = view.screenshot()
+    handle.visible = False
+    view.settle()
+    hidden = view.screenshot()
+    handle.visible = True
+    diff = changed(shown, hidden)
+    px = view.pixels(points)
+    inside = (px[:, 0] >= 0) & (px[:, 0] < H) & (px[:, 1] >= 0) & (px[:, 1] < W)
+    assert inside.any(), "none of its points is in the view"
+    assert diff.any(), "hiding it changed nothing"
+    assert any(near(diff, p, radius) for p in px[inside]), "nothing changed where it projects"
+    rows, cols = np.nonzero(diff)
+    lo, hi = px.min(axis=0) - 4 * radius, px.max(axis=0) + 4 * radius  # (a part may leave the view)
+    assert lo[0] <= rows.min() and rows.max() <= hi[0] and lo[1] <= cols.min() and cols.max() <= hi[1], \
+        f"changed rows {rows.min()}-{rows.max()}, columns {cols.min()}-{cols.max()}; projected {lo}-{hi}"
+
+
+def reddish(rgb) -> bool:
+    r, g, b = (int(x) for x in rgb)
+    return r > 140 and r - max(g, b) > 60
+
+
+def has_colour(image: np.ndarray, rc, rgb, radius: int = 4, tol: int = 60) -> bool:
+    r, c = (int(x) for x in rc)
+    patch = image[max(r - radius, 0):r + radius + 1, max(c - radius, 0):c + radius + 1].astype(int)
+    return bool((np.abs(patch - np.asarray(rgb)).max(axis=-1) < tol).any())
+
+
+POUR_CAMERA = Camera(position=(0.55, -0.65, 0.45), look_at=(0.0, 0.0, 0.08), fov=0.8)
+
+
+@pytest.mark.slow
+def test_the_skill_and_the_task_are_drawn_where_they_project(skill_view):
+    server, view = skill_view("pour.yaml", task="pour")
+    with browser.open_viser(server, W, H) as page:
+        page.set_camera(POUR_CAMERA)
+        save(page, "view-pour-carry.png")
+        nodes, handles = view.nodes, view.handles
+        _, a, b = nodes["/skill/states/carry/axis1"]
+        image = page.screenshot()
+        mid = page.pixels(np.array([(a + b) / 2]))[0]
+        assert any(reddish(image[r, c]) for r in range(mid[0] - 3, mid[0] + 4)
+                   for c in range(mid[1] - 3, mid[1] + 4)), "axis 1 is a red arrow along its motion"
+        for name in ("/skill/states/carry/axis1", "/skill/states/carry/axis3",
+                     "/skill/task/mug/container", "/skill/states/carry/held/bottle/held"):
+            kind, *vals = nodes[name]
+            points = np.array([vals[0], vals[1]]) if kind == "arrow" else vals[0]
+            drawn_where_projected(page, handles[name], points)
+        kind, centre, radius = nodes["/skill/states/carry/transition3"]
+        assert kind == "sphere" and radius == 0.15
+        drawn_where_projected(page, handles["/skill/states/carry/transition3"],
+                              centre + radius * np.array([[1, 0, 0], [-1, 0, 0], [0, 0, 1], [0, 0, -1],
+                                                          [0, 1, 0], [0, -1, 0]]), radius=12)
+
+
+@pytest.mark.slow
+def test_the_state_picker_shows_one_state_at_a_time(skill_view):
+    server, view = skill_view("pour.yaml", task="pour")
+    with browser.open_viser(server, W, H) as page:
+        page.set_camera(POUR_CAMERA)
+        assert page.value_of("state") == "carry"
+        assert "axis 1: moves tip along mug +x at 0.10 m/s" in page.text()
+        before = page.screenshot()
+        _, a, b = view.nodes["/skill/states/carry/axis1"]
+        carry_arrow = page.pixels(np.array([(a + b) / 2]))[0]
+        _, lower, upper = view.nodes["/skill/states/pour/constraint1"]  # the pour's box
+        pour_box = page.pixels(np.array([(lower + upper) / 2]))[0]
+
+        page.choose("state", "pour")
+        page.wait_for_text("turns about mug +y at 0.35 rad/s")
+        assert "moves tip along mug +x" not in page.text()
+        page.settle()
+        after = page.screenshot()
+        save(page, "view-pour-pour.png")
+        assert view.picker.value == "pour"
+        assert not view.handles["/skill/states/carry"].visible and view.handles["/skill/states/pour"].visible
+        diff = changed(before, after)
+        assert near(diff, carry_arrow) and near(diff, pour_box)
+        assert not any(reddish(after[r, c]) for r in range(carry_arrow[0] - 2, carry_arrow[0] + 3)
+                       for c in range(carry_arrow[1] - 2, carry_arrow[1] + 3))
+
+        page.choose("state", "every state")
+        page.wait_for_text("approach")
+        assert all(view.handles[f"/skill/states/{s}"].visible for s in ("carry", "approach", "pour"))
+
+
+@pytest.mark.slow
+def test_demonstrations_are_coloured_by_the_state_the_fsm_gives_them(skill_view):
+    from sctd_services.view.draw import state_rgb
+
+    server, view = skill_view("pour-linear.yaml", task="pour", demos="pour")
+    path = view.scene.demos[0]
+    with browser.open_viser(server, W, H) as page:
+        page.set_camera(Camera(position=(0.45, -0.55, 0.35), look_at=(0.15, 0.0, 0.0), fov=0.8))
+        page.choose("state", "every state")
+        page.settle()
+        image = page.screenshot()
+        save(page, "view-pour-linear-demos.png")
+        for state in (0, 1):
+            idx = np.flatnonzero(path.states == state)
+            assert len(idx) > 20
+            # well inside the stretch, and no outlier (the shipped pour's demonstrations
+            # have 5 % gross outliers, drawn as they are)
+            steps = np.linalg.norm(np.diff(path.points, axis=0), axis=1)
+            calm = [i for i in idx[len(idx) // 4: 3 * len(idx) // 4]
+                    if 0 < i < len(steps) and steps[i - 1] < 0.01 and steps[i] < 0.01]
+            samples = path.points[calm[::5]]
+            px = page.pixels(samples)
+            hits = sum(has_colour(image, p, state_rgb(state)) for p in px)
+            assert hits >= 0.6 * len(px), (state, hits, len(px))
+        drawn_where_projected(page, view.handles["/skill/demos/0"], path.points, radius=4)
+
+
+@pytest.mark.slow
+def test_a_vector_field_skill_shows_its_fields_where_they_are(skill_view):
+    server, view = skill_view("drawer-vf.yaml", task="drawer", demos="drawer")
+    with browser.open_viser(server, W, H) as page:
+        page.set_camera(Camera(position=(0.45, -0.45, 0.3), look_at=(0.12, 0.0, 0.02), fov=0.8))
+        save(page, "view-drawer-vf.png")
+        assert "field" in " ".join(view.nodes) and "axis 1: moves ee along drawer_handle +x" in page.text()
+        for name, node in view.nodes.items():
+            if node[0] == "arrows":
+                drawn_where_projected(page, view.handles[name], node[1], radius=6)
+        drawer = "/skill/task/drawer/moving"
+        drawn_where_projected(page, view.handles[drawer], view.nodes[drawer][1], radius=8)
+
+
+# -- the command -----------------------------------------------------------------------
+def test_view_flags_need_the_view(capsys):
+    from sctd.cli.main import main
+
+    assert main(["inspect", str(SKILLS / "pour.yaml"), "--demos", str(SKILLS / "demos" / "pour")]) == 2
+    assert "need --view" in capsys.readouterr().err
+    assert main(["inspect", str(SKILLS / "pour.yaml"), "--view", "--view-port", "70000"]) == 2
+    assert "not a TCP port: 70000" in capsys.readouterr().err
+    assert main(["inspect", str(SKILLS / "pour.yaml"), "--view", "--view-for", "0"]) == 2
+    assert "--view-for: must be > 0" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sctd_inspect_view_serves_on_loopback_until_stopped(tmp_path):
+    port = free_port()
+    proc = sctd("inspect", str(SKILLS / "drawer.yaml"), "--view", "--view-port", str(port),
+                log=tmp_path / "inspect.log")
+    try:
+        assert wait_for(lambda: URL.search(proc.output()) is not None, 60), proc.output()
+        assert URL.search(proc.output()).group(2) == str(port)
+        assert listeners(port) == ["127.0.0.1"]
+        assert get_page(port)[0] == 200
+        second = run_sctd("inspect", str(SKILLS / "drawer.yaml"), "--view", "--view-port", str(port))
+        assert second.returncode == 2 and f"port {port} on 127.0.0.1 is in use" in second.stderr
+        proc.p.send_signal(signal.SIGINT)
+        assert proc.p.wait(20) == 0, proc.output()
+    finally:
+        proc.stop()
+    assert "view stopped" in proc.output()
+    assert port_is_free(port) and listeners(port) == []
