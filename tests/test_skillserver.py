@@ -165,3 +165,31 @@ def test_a_skill_server_killed_mid_swap_ends_the_query_and_comes_back(rig):
     assert rig.summary() is not None
     ok, body = client.swap(rig.session, KEYS, big_bundle(ROOT / "skills", 6), timeout=60.0)
     assert ok, body
+
+
+def test_the_active_bundle_is_read_byte_for_byte_across_swaps_and_restarts(rig):
+    """``get skill?bundle`` answers the bundle the daemon runs (the id it reports), the
+    file it started with, then each one swapped in; a skill server started again after
+    one was killed still has it; the summary stays a summary."""
+    started = bundle_from_file(ROOT / "skills" / "pour.yaml")
+    got = client.active_bundle(rig.session, KEYS)
+    assert not isinstance(got, str), got
+    bundle, meta = got
+    assert bundle.pack() == started.pack() and meta == {"v": 1, "id": started.id, "name": "pour",
+                                                         "state": "carry"}
+    assert "bundle" not in rig.summary()
+
+    vf = bundle_from_file(ROOT / "skills" / "drawer-vf.yaml")
+    ok, body = client.swap(rig.session, KEYS, vf, timeout=30.0)
+    assert ok, body
+    bundle, meta = client.active_bundle(rig.session, KEYS)  # type: ignore[misc]
+    assert bundle.pack() == vf.pack() and meta["id"] == vf.id == rig.summary()["id"]
+    assert set(bundle.files) == {"drawer-vf.npz"}  # the field model comes with it
+
+    server = rig.skill_server()
+    os.kill(server, signal.SIGKILL)
+    assert wait_for(lambda: _children(rig.proc.p.pid) not in ([], [server]), 30)
+    assert wait_for(lambda: rig.summary(find=5.0) is not None, 30)
+    again = client.active_bundle(rig.session, KEYS)
+    assert not isinstance(again, str), again
+    assert again[0].pack() == vf.pack()

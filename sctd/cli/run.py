@@ -113,7 +113,8 @@ def _stop_on_signals() -> threading.Event:
 def main_run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
     try:
-        skill = load_skill(find_skill(args.skill))
+        bundle = bundle_from_file(find_skill(args.skill))
+        skill = skill_from_bundle(bundle)
         config = runtime_config(args)
         check_ros_arguments(args)
     except (SkillError, ValueError) as e:
@@ -148,7 +149,7 @@ def main_run(args: argparse.Namespace) -> int:
                         # wire contract v1: on the loopback defaults, bundles sent to the
                         # skill key still swap; with a config file only skill/swap does
                         swap_on_skill_key=args.zenoh_config is None, ros=ros,
-                        settings=SessionSettings.from_args(args))
+                        settings=SessionSettings.from_args(args), bundle=bundle.pack())
         stats = daemon.run(args.duration)
     if args.stats_json:
         print(json.dumps(stats))

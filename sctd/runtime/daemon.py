@@ -24,7 +24,9 @@ import gc
 import json
 import logging
 import os
+import shutil
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -37,6 +39,7 @@ from ..skill import Skill
 from ..timing import Ticker, set_realtime, set_timer_slack
 from ..wire import Keys
 from ..wire.session import MSGPACK, SessionSettings
+from . import bundles
 from .controller import RuntimeConfig
 from .driver import TickDriver
 from .ingress import Ingress
@@ -141,13 +144,18 @@ class Daemon:
     settings : SessionSettings
         What ``session`` was opened from: the skill server's session is opened from
         them (:func:`~sctd.wire.session.outbound_config`).
+    bundle : bytes, optional
+        The packed bundle ``skill`` was read from (:meth:`~sctd.skill.Bundle.pack`):
+        kept on disk before the first tick for ``skill?bundle`` (:mod:`.bundles`).
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
                  spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
                  stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
-                 ros: Any = None, settings: SessionSettings | None = None):
+                 ros: Any = None, settings: SessionSettings | None = None,
+                 bundle: bytes | None = None):
         self.config = config
+        self.bundle = bundle  # the packed bundle ``skill`` was read from: kept for ``skill?bundle``
         self.session = session
         self.settings = settings if settings is not None else SessionSettings()
         self.swap_on_skill_key = swap_on_skill_key
@@ -186,8 +194,13 @@ class Daemon:
         keys, s = Keys(self.config.robot), self.session
         # Started before the tick thread's own settings (its threads set theirs); a swap
         # it hands over waits for the loop (and the ingress) to start.
+        folder = tempfile.mkdtemp(prefix="sctd-bundles-")  # mode 0700: the daemon's alone
+        stack.callback(shutil.rmtree, folder, ignore_errors=True)
+        if self.bundle is not None:
+            bundles.keep(folder, self.driver.skill.id, self.bundle)
+            self.bundle = None  # on disk now: not held by the process that ticks
         stack.enter_context(self.swap.serve(
-            ServerOptions(self.config.robot, self.settings, self.swap_on_skill_key, str(s.zid())),
+            ServerOptions(self.config.robot, self.settings, self.swap_on_skill_key, str(s.zid()), folder),
             self.rt_priority))
         # Only the objects the active skill needs, by name: a wildcard would let any number
         # of names cost memory, and a ring per wildcard would lose the task object's

@@ -63,12 +63,14 @@ from ..skill import Skill, SkillError
 from ..skill.loader import MAX_BUNDLE_BYTES
 from ..wire import Keys
 from ..wire.session import MSGPACK, SessionSettings, close_session, outbound_config
-from . import frames
+from . import bundles, frames
 from .worker import WHERE, BundleWorker
 
 log = logging.getLogger("sctd.skillserver")
 
 READY_WAIT = 10.0  # s the skill server waits to be connected to the daemon before it says ready
+BUNDLE_PARAMETER = "bundle"  # ``get sctd/<robot>/skill?bundle``: the active bundle, not the summary
+BUNDLE_VERSION = 1  # of that reply's map
 SUMMARY_WAIT = 10.0  # s the skill server waits for the daemon's summary
 SWAP_WAIT = 60.0  # s it waits for the daemon's answer to a swap (the daemon's own limit is 5 s)
 RESTART_MIN, RESTART_MAX = 0.5, 5.0  # s between restarts of a skill server that died
@@ -83,6 +85,7 @@ class ServerOptions:
     session: SessionSettings
     swap_on_skill_key: bool  # wire contract v1: a bundle sent to ``skill`` swaps too
     daemon_zid: str = ""  # the daemon's session: the skill server is ready once it reaches it
+    bundles: str = ""  # the folder the active skill's bundle is kept in (sctd.runtime.bundles)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -345,9 +348,11 @@ class _Link:
 class _Queries:
     """The two queryables' handlers (on Zenoh's threads, in the skill server)."""
 
-    def __init__(self, keys: Keys, link: _Link, worker: BundleWorker, swap_on_skill_key: bool):
+    def __init__(self, keys: Keys, link: _Link, worker: BundleWorker, swap_on_skill_key: bool,
+                 bundles: str = ""):
         self.keys, self.link, self.worker = keys, link, worker
         self.swap_on_skill_key = swap_on_skill_key
+        self.bundles = bundles
         self._swap_lock = threading.Lock()
 
     def on_skill(self, query: zenoh.Query) -> None:
@@ -382,6 +387,8 @@ class _Queries:
         empty = payload is None or len(payload) == 0
         if key == self.keys.skill and empty:
             ok, body = self.link.call("summary", None, SUMMARY_WAIT)
+            if ok and query.parameters.get(BUNDLE_PARAMETER) is not None:
+                ok, body = self._bundle(body)
             if ok:
                 query.reply(key, _reply(body), encoding=MSGPACK)
             else:
@@ -410,8 +417,22 @@ class _Queries:
         if not ok:
             self._refuse(query, state)
             return
+        if self.bundles:
+            try:
+                bundles.keep(self.bundles, skill.id, payload.to_bytes())
+            except OSError as e:  # the swap stands; only a view's fetch of it will fail
+                log.error("cannot keep the bundle of %s: %s", skill.id, e)
         query.reply(key, _reply({"ok": True, "id": skill.id, "name": skill.name, "state": state}),
                     encoding=MSGPACK)
+
+    def _bundle(self, summary: dict[str, Any]) -> tuple[bool, Any]:
+        """``skill?bundle``: the active skill's bundle as kept, with its id, name and FSM
+        state (``{v, id, name, state, bundle}``), or an error naming why not."""
+        data = bundles.kept(self.bundles, str(summary.get("id", "")))
+        if data is None:
+            return False, f"{WHERE}: the bundle of the active skill {summary.get('id')} is not kept"
+        return True, {"v": BUNDLE_VERSION, "id": summary.get("id"), "name": summary.get("name"),
+                      "state": summary.get("state"), "bundle": data}
 
 
 def _wait_connected(session: zenoh.Session, daemon_zid: str, link: _Link, timeout: float) -> bool:
@@ -442,7 +463,7 @@ def main(argv: list[str]) -> int:
     keys = Keys(opts.robot)
     try:
         with BundleWorker() as worker:
-            queries = _Queries(keys, link, worker, opts.swap_on_skill_key)
+            queries = _Queries(keys, link, worker, opts.swap_on_skill_key, opts.bundles)
             with session.declare_queryable(keys.skill, queries.on_skill), \
                     session.declare_queryable(keys.skill_swap, queries.on_swap):
                 if not _wait_connected(session, opts.daemon_zid, link, READY_WAIT) \

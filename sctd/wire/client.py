@@ -17,7 +17,7 @@ from typing import Any
 import msgpack
 import zenoh
 
-from ..skill import Bundle
+from ..skill import Bundle, SkillError
 from . import Keys
 from .session import MSGPACK
 
@@ -34,17 +34,19 @@ def reply_body(data: bytes) -> dict[str, Any]:
 
 
 def query(session: zenoh.Session, key: str, payload: bytes | None = None, timeout: float = 10.0,
-          find: float = FIND) -> tuple[bool, dict[str, Any]] | None:
-    """One ``get`` on ``key`` once a queryable matches it: (ok, the reply's map; an error
-    reply's is ``{error}``, Zenoh's own timeout ``{error: "Timeout"}``), or None when no
-    queryable was known within ``find`` s or none replied."""
+          find: float = FIND, parameters: str | None = None) -> tuple[bool, dict[str, Any]] | None:
+    """One ``get`` on ``key`` (with the selector's ``parameters``) once a queryable
+    matches it: (ok, the reply's map; an error reply's is ``{error}``, Zenoh's own
+    timeout ``{error: "Timeout"}``), or None when no queryable was known within ``find``
+    s or none replied."""
     with session.declare_querier(key, timeout=timeout) as querier:
         give_up = time.monotonic() + find
         while not querier.matching_status.matching:  # type: ignore[attr-defined]
             if time.monotonic() > give_up:
                 return None
             time.sleep(0.02)
-        for reply in querier.get(payload=payload, encoding=None if payload is None else MSGPACK):
+        for reply in querier.get(payload=payload, encoding=None if payload is None else MSGPACK,
+                                 parameters=parameters):
             sample = reply.ok if reply.ok is not None else reply.err
             if sample is not None:
                 return reply.ok is not None, reply_body(sample.payload.to_bytes())
@@ -57,6 +59,26 @@ def active_skill(session: zenoh.Session, keys: Keys, timeout: float = 3.0,
     None when no daemon answers."""
     got = query(session, keys.skill, None, timeout, find)
     return got[1] if got is not None and got[0] else None
+
+
+def active_bundle(session: zenoh.Session, keys: Keys, timeout: float = 10.0,
+                  find: float = FIND) -> tuple[Bundle, dict[str, Any]] | str:
+    """The running daemon's active skill as its bundle (``get skill?bundle``), with the
+    reply's ``{v, id, name, state}``; or why not, as a sentence. The bundle is unpacked
+    with the size limits of a swap (:meth:`~sctd.skill.Bundle.unpack`)."""
+    got = query(session, keys.skill, None, timeout, find, parameters="bundle")
+    if got is None:
+        return f"no daemon answered on {keys.skill} (none found within {find:g} s, or no reply)"
+    ok, body = got
+    if not ok:
+        return str(body.get("error"))
+    if body.get("v") != 1 or not isinstance(body.get("bundle"), bytes):
+        return f"{keys.skill}?bundle: unexpected reply (v {body.get('v')!r})"
+    try:
+        bundle = Bundle.unpack(body["bundle"])
+    except SkillError as e:
+        return f"{keys.skill}?bundle: {e}"
+    return bundle, {k: body.get(k) for k in ("v", "id", "name", "state")}
 
 
 def swap(session: zenoh.Session, keys: Keys, bundle: Bundle, timeout: float = 10.0,
