@@ -49,8 +49,8 @@ import pytest
 
 from tests import tiers
 
-CHROMIUM = Path("/usr/bin/chromium")  # Debian's launcher script; it runs the binaries here:
-CHROMIUM_LIB = "/usr/lib/chromium/"
+STARTED: list[Path] = []  # the folders of the browsers this process started
+CHROMIUM = Path("/usr/bin/chromium")  # Debian's launcher script
 FLAGS = (
     "--no-sandbox",
     "--disable-gpu",
@@ -139,15 +139,10 @@ def _end(folder: Path, seen: list[int], timeout: float = 10.0) -> None:
 
 
 def chromium_pids() -> set[int]:
-    """The processes of Debian's Chromium, ended ones not yet reaped included: what
-    ``pgrep -f chromium`` lists, less other commands that only name it."""
-    pids = set()
-    for entry in Path("/proc").iterdir():
-        with contextlib.suppress(OSError):  # not ours to read, or it ended meanwhile
-            if entry.name.isdigit() and ((entry / "comm").read_text().startswith("chrom")
-                                         or os.readlink(entry / "exe").startswith(CHROMIUM_LIB)):
-                pids.add(int(entry.name))
-    return pids
+    """The live processes of the browsers this process started (:data:`STARTED`): those
+    whose command line names one of their folders. Not every Chromium on the machine:
+    another test process (a pytest-xdist worker) may be running its own meanwhile."""
+    return {pid for folder in STARTED for pid in processes_of(folder)}
 
 
 def rgb_from_png(png: bytes) -> np.ndarray:
@@ -217,6 +212,7 @@ def open_page(url: str, width: int = 800, height: int = 600,
     chromium = require_chromium()
     sync_playwright = _sync_playwright()
     folder = Path(tempfile.mkdtemp(prefix="sctd-chromium-"))
+    STARTED.append(folder)
     seen: list[int] = []
     try:
         with sync_playwright() as pw:

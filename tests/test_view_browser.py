@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sctd import se3
 from sctd.learn.demos import read_demos
 from sctd.skill import load_skill
 from sctd.skill.catalog import shipped_folder
@@ -157,8 +158,9 @@ def test_the_state_picker_shows_one_state_at_a_time(skill_view):
                        for c in range(carry_arrow[1] - 2, carry_arrow[1] + 3))
 
         page.choose("state", "every state")
-        page.wait_for_text("approach")
-        assert all(view.handles[f"/skill/states/{s}"].visible for s in ("carry", "approach", "pour"))
+        page.wait_for_text("carry (start)")  # (the pour's own text names approach already)
+        assert wait_for(lambda: all(view.handles[f"/skill/states/{s}"].visible
+                                    for s in ("carry", "approach", "pour")), 10)
 
 
 @pytest.mark.slow
@@ -232,3 +234,121 @@ def test_sctd_inspect_view_serves_on_loopback_until_stopped(tmp_path):
         proc.stop()
     assert "view stopped" in proc.output()
     assert port_is_free(port) and listeners(port) == []
+
+
+# -- live: next to a running simulator and daemon -----------------------------------------
+class Recording:
+    """A Zenoh session that records what is declared on it (kind, key), forwarding the
+    rest: the view must only subscribe, and query ``skill``."""
+
+    def __init__(self, session):
+        self._session = session
+        self.declared: list[tuple[str, str]] = []
+
+    def __getattr__(self, name):
+        attr = getattr(self._session, name)
+        if name.startswith("declare_") or name in ("put", "get", "delete"):
+            def recorded(key, *args, **kwargs):
+                self.declared.append((name, str(key)))
+                return attr(key, *args, **kwargs)
+            return recorded
+        return attr
+
+
+def _drive(session, keys, stop, u=(-0.6, 0.0, 0.0)):
+    """Push the stick with the deadman held at 50 Hz until ``stop`` (a person's input)."""
+    import time
+
+    from sctd.wire import codec
+
+    pub = session.declare_publisher(keys.input("test"))
+    seq = 0
+    while not stop.is_set():
+        seq += 1
+        pub.put(codec.encode_input(seq, time.time(), list(u), [0, 1, 0]))
+        stop.wait(0.02)
+    for _ in range(3):
+        seq += 1
+        pub.put(codec.encode_input(seq, time.time(), [0.0, 0.0, 0.0], [0, 0, 0]))
+    pub.undeclare()
+
+
+@pytest.mark.slow
+def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_path):
+    import threading
+
+    from sctd.wire import Keys
+    from sctd.wire.session import close_session, open_session
+    from sctd_services.view.arm import ArmGeometry
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.service import run_view
+    from sctd_sim.robot import URDF_PATH
+    from sctd_sim.view import stop_server, viser_server
+
+    keys, ep = Keys("edan"), f"tcp/127.0.0.1:{free_port()}"
+    sim = sctd("sim", "--task", "pour", "--listen", ep, log=tmp_path / "sim.log")
+    run = sctd("run", "--skill", str(SKILLS / "pour.yaml"), "--connect", ep, log=tmp_path / "run.log")
+    ours, driver = open_session(connect=[ep]), open_session(connect=[ep])
+    recording = Recording(ours)
+    server = viser_server(0)
+    view = LiveView(server, ArmGeometry(URDF_PATH), find_task("pour"))
+    stop, pushed = threading.Event(), threading.Event()
+    threads = [threading.Thread(target=run_view, args=(recording, keys, view, stop), daemon=True),
+               threading.Thread(target=_drive, args=(driver, keys, pushed), daemon=True)]
+    try:
+        threads[0].start()
+        assert wait_for(lambda: view.skill_view is not None and view.handles["/arm/0"].visible, 60), \
+            sim.output() + run.output()
+        threads[1].start()  # towards the mug: carry -> approach
+        assert wait_for(lambda: view.skill_view.active == "approach", 60), run.output()
+        pushed.set()
+        threads[1].join(10)
+        assert wait_for(lambda: "stopped" in view.person.content, 20), view.person.content
+        drawn = view.redraws
+        assert wait_for(lambda: view.redraws > drawn + 1, 10)  # the hand at rest, drawn at it
+        stop.set()  # the scene as it was last drawn stays: the pixels are checked on it
+        threads[0].join(10)
+        with browser.open_viser(server, W, H) as page:
+            page.wait_for_text("mode: approach")
+            # the scene left of the GUI's panel (the right 40 % of the page)
+            page.set_camera(Camera(position=(1.0, -1.2, 1.0), look_at=(0.95, 0.0, 0.55), fov=0.8))
+            save(page, "view-live-pour.png")
+            assert view.arm is not None
+            wrist = len(view.arm.links) - 4  # the last link before the hand's three parts
+            meshes = {f"/arm/{wrist}": view.arm.links[wrist].vertices,
+                      "mug/container": next(p.vertices for p in view.parts if p.name == "mug/container"),
+                      "/hand": np.zeros((1, 3)), "/target": np.zeros((1, 3))}
+            for name, vertices in meshes.items():
+                h = view.handles[name]
+                T = se3.transform_from_pose(np.r_[h.position, np.asarray(h.wxyz)[[1, 2, 3, 0]]])
+                # at rest the target is where the hand is, inside the hand's larger frame
+                view.handles["/hand"].visible = name != "/target"
+                drawn_where_projected(page, h, (T[:3, :3] @ vertices.T).T + T[:3, 3], radius=12)
+            sv = view.skill_view
+            states = sv.handles
+            assert states["/skill/states/approach"].visible and not states["/skill/states/carry"].visible
+            _, a, b = sv.nodes["/skill/states/approach/axis1"]  # object frame: placed at the mug
+            T_mug = se3.transform_from_pose(
+                np.r_[sv.root.position, np.asarray(sv.root.wxyz)[[1, 2, 3, 0]]])
+            ends = (T_mug[:3, :3] @ np.array([a, b]).T).T + T_mug[:3, 3]
+            # the active state is drawn with the hand where it is
+            hand = T_mug[:3, :3] @ sv.nodes["/skill/states/approach/hand"][1] + T_mug[:3, 3]
+            assert np.allclose(hand, view.handles["/hand"].position, atol=2e-3)
+            drawn_where_projected(page, sv.handles["/skill/states/approach/axis1"], ends, radius=8)
+    finally:
+        stop.set()
+        pushed.set()
+        for t in threads:
+            t.join(10)
+        stop_server(server)
+        close_session(ours)
+        close_session(driver)
+        run.stop()
+        sim.stop()
+    # an observer: subscriptions, and queries on skill alone
+    kinds = {k for k, _ in recording.declared}
+    assert kinds <= {"declare_subscriber", "declare_querier"}, recording.declared
+    assert {key for k, key in recording.declared if k == "declare_querier"} == {keys.skill}
+    subscribed = {key for k, key in recording.declared if k == "declare_subscriber"}
+    assert {keys.state, keys.target, keys.status, keys.scene, keys.objects("mug")} <= subscribed
+    assert not any(key.startswith(keys.skill_swap) for _, key in recording.declared)

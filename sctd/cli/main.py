@@ -87,6 +87,8 @@ COMMANDS: dict[str, Command] = {
     "run": Command("run a skill: the fixed-rate daemon", "sctd.cli.run", "add_run_arguments", "main_run"),
     "inspect": Command("validate a skill and show its structure", "sctd.cli.run",
                        "add_inspect_arguments", "main_inspect"),
+    "view": Command("the live view in a browser: the arm, the task, the active skill where the hand is",
+                    "sctd.cli.view", "add_live_arguments", "main_view"),
     "swap": Command("hot-swap a skill into the running daemon", "sctd.cli.run",
                     "add_swap_arguments", "main_swap"),
     "skills": Command("list the skills --skill NAME finds (stored and shipped); skills show NAME "

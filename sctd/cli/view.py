@@ -1,8 +1,11 @@
-"""``sctd inspect SKILL --view``: the skill in 3D in the browser, before it ever runs.
+"""The view in the browser (:mod:`sctd_services.view`, ``docs/view.md``).
 
-The view (:mod:`sctd_services.view`) is served on 127.0.0.1 only, on ``--view-port`` or
-a free port (the URL goes to stderr), until Ctrl-C, SIGTERM or ``--view-for`` seconds.
-It reads no Zenoh key and publishes none: it shows a file.
+- ``sctd inspect SKILL --view``: the skill in 3D before it ever runs; it reads no Zenoh
+  key and publishes none: it shows a file.
+- ``sctd view``: live, next to a running daemon and robot; an observer of their keys.
+
+Both serve on 127.0.0.1 only, on ``--view-port`` or a free port (the URL goes to
+stderr), until Ctrl-C, SIGTERM or ``--view-for`` seconds.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import argparse
 import signal
 import sys
 import threading
+import time
 
 from ..app.errors import EXIT_OK, fail
 from ..skill import Skill
@@ -24,16 +28,20 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--demos", metavar="DIR",
                    help="with --view: the demonstrations (CSV, object frame) to draw, coloured by the "
                         "state the skill's FSM is in at each sample")
+    _add_serving(p)
+
+
+def _add_serving(p: argparse.ArgumentParser) -> None:
+    """``--view-port`` and ``--view-for``: where and how long the page is served."""
     p.add_argument("--view-port", type=int, default=0, metavar="PORT",
-                   help="port of the --view page on 127.0.0.1 (default 0: a free one; the URL goes "
-                        "to stderr)")
+                   help="port of the page on 127.0.0.1 (default 0: a free one; the URL goes to stderr)")
     p.add_argument("--view-for", type=float, default=None, metavar="S",
                    help="stop serving after S seconds (default: until Ctrl-C or SIGTERM)")
 
 
 def check_view_arguments(args: argparse.Namespace) -> str | None:
     """What is wrong with the view's flags, or None."""
-    if not args.view and (args.demos or args.view_port or args.view_for is not None):
+    if not args.view and (getattr(args, "demos", None) or args.view_port or args.view_for is not None):
         return "--demos, --view-port and --view-for need --view"
     if not 0 <= args.view_port <= 65535:
         return f"--view-port: not a TCP port: {args.view_port}"
@@ -76,3 +84,109 @@ def serve_skill_view(skill: Skill, args: argparse.Namespace) -> int:
         stop_server(server)
     print("sctd inspect: view stopped", file=sys.stderr, flush=True)
     return EXIT_OK
+
+
+# -- sctd view: live ---------------------------------------------------------------------
+SCENE_WAIT = 3.0  # s to wait for the simulator's scene message naming the task
+
+
+def add_live_arguments(p: argparse.ArgumentParser) -> None:
+    """``sctd view``'s flags."""
+    from ..app.options import add_robot_argument
+    from ..wire.session import add_zenoh_arguments
+
+    p.description = ("The live view of a robot running sctd: the arm, the task's scene, the active skill "
+                     "where the hand is, a panel for the person and plots, in a browser on 127.0.0.1. "
+                     "An observer: it only subscribes, and queries the active skill.")
+    add_robot_argument(p)
+    p.add_argument("--task", metavar="NAME|FILE",
+                   help="the task whose scene to draw (default: the one the simulator's scene key names, "
+                        "if any)")
+    p.add_argument("--urdf", metavar="FILE",
+                   help="the arm's URDF, its <visual> primitives drawn at state.q (default: the simulated "
+                        "arm's)")
+    _add_serving(p)
+    add_zenoh_arguments(p)
+
+
+def main_view(args: argparse.Namespace) -> int:
+    """``sctd view``: serve the live view until stopped."""
+    import logging
+
+    from sctd_services.view.arm import ArmGeometry
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.service import run_view
+    from sctd_sim.view import ViewerUnavailable, stop_server, viser_server
+
+    from ..wire import Keys
+    from ..wire.session import session_from_args
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
+    args.view = True
+    problem = check_view_arguments(args)
+    if problem is not None:
+        return fail("view", problem)
+    try:
+        arm = ArmGeometry(args.urdf or _default_urdf())
+    except (OSError, ValueError, RuntimeError) as e:
+        return fail("view", f"--urdf: {e}")
+    keys = Keys(args.robot)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        with session_from_args(args) as session:
+            task = _task(args.task, session, keys)
+            if isinstance(task, str):
+                return fail("view", task)
+            try:
+                server = viser_server(args.view_port)
+            except ViewerUnavailable as e:
+                return fail("view", str(e))
+            try:
+                print(f"sctd view: robot {args.robot} at http://127.0.0.1:{server.get_port()}",
+                      file=sys.stderr, flush=True)
+                if args.view_for is not None:
+                    threading.Timer(args.view_for, stop.set).start()
+                try:
+                    run_view(session, keys, LiveView(server, arm, task), stop)
+                except KeyboardInterrupt:
+                    pass
+            finally:
+                stop_server(server)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    print("sctd view: stopped", file=sys.stderr, flush=True)
+    return EXIT_OK
+
+
+def _default_urdf():
+    from sctd_sim.robot import URDF_PATH
+
+    return URDF_PATH
+
+
+def _task(ref: str | None, session, keys):
+    """The task to draw: ``--task``, else the one the scene key names (None when none
+    does within :data:`SCENE_WAIT`); a sentence when ``--task`` names none."""
+    from ..task import TaskError, find_task
+    from ..wire import codec
+
+    if ref is not None:
+        try:
+            return find_task(ref)
+        except (TaskError, OSError) as e:
+            return f"--task: {e}"
+    import zenoh
+
+    with session.declare_subscriber(keys.scene, zenoh.handlers.RingChannel(1)) as sub:
+        end = time.monotonic() + SCENE_WAIT
+        while time.monotonic() < end:
+            sample = sub.try_recv()
+            if sample is not None:
+                name = codec.unpack_map(sample.payload.to_bytes()).get("scene")
+                try:
+                    return find_task(str(name))
+                except (TaskError, OSError):
+                    return None
+            time.sleep(0.05)
+    return None

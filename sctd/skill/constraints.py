@@ -45,6 +45,9 @@ class ActiveConstraint(ByValue, ABC):
     """One active constraint of a state, on the pose of ``frame`` (on the end-effector)."""
 
     type: ClassVar[str]
+    bounds: ClassVar[bool] = True
+    """A limit the hand can be pushed against (a view says it holds the hand when its
+    projection moves the pose); False for a kind that guides rather than bounds."""
     frame: str = "ee"
 
     @classmethod
@@ -274,6 +277,7 @@ class NeighbourOrientation(ActiveConstraint):
     """
 
     type: ClassVar[str] = "neighbour_orientation"
+    bounds: ClassVar[bool] = False  # it turns the hand towards the demonstrations: guidance
     model_file: str
     model: VectorFieldModel
     max_n: int = 5

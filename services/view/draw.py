@@ -33,6 +33,7 @@ from .skill_scene import AxisEffect, FieldArrows, SkillScene, StateScene
 from .task_scene import Part, default_poses, part_pose, task_parts
 
 ALL = "every state"
+ACTIVE = "active state"  # the live view's picker: follow the state the daemon is in
 STATE_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
              (140, 86, 75), (227, 119, 194), (127, 127, 127))
 AXIS_RGB = ((230, 30, 30), (20, 170, 20), (30, 70, 235), (200, 160, 0), (160, 0, 200), (0, 170, 170))
@@ -64,11 +65,13 @@ class SkillView:
     """
 
     def __init__(self, server: Any, scene: SkillScene, T_world_obj: np.ndarray | None = None,
-                 task: Task | None = None):
+                 task: Task | None = None, live: bool = False):
         self.server = server
         self.scene = scene
+        self.live = live
         self.nodes: dict[str, tuple] = {}
         self.handles: dict[str, Any] = {}
+        self._gui_handles: list[Any] = []
         T = np.eye(4) if T_world_obj is None else T_world_obj
         pose = se3.pose_from_transform(T)
         self.root = server.scene.add_frame("/skill", show_axes=False, position=pose[:3],
@@ -80,12 +83,49 @@ class SkillView:
             self._draw_task(task, [p for p in parts if p.anchor[0] != "hand"])
         for k, d in enumerate(scene.demos):
             self._draw_demo(k, d)
+        self._held = [p for p in parts if p.anchor[0] == "hand"]
+        self.active = scene.skill.start
         for i, st in enumerate(scene.states):
-            self._draw_state(i, st, [p for p in parts if p.anchor[0] == "hand"])
+            self._draw_state(i, st, self._held)
         self._gui()
         self.look_at, self.camera = self._framing(T)
-        server.initial_camera.look_at = tuple(self.look_at)
-        server.initial_camera.position = tuple(self.camera)
+        if not live:
+            server.initial_camera.look_at = tuple(self.look_at)
+            server.initial_camera.position = tuple(self.camera)
+
+    def place(self, T_world_obj: np.ndarray) -> None:
+        """Put the skill where its object is now (world)."""
+        pose = se3.pose_from_transform(T_world_obj)
+        self.root.position = pose[:3]
+        self.root.wxyz = (pose[6], pose[3], pose[4], pose[5])
+
+    def follow(self, state: str) -> None:
+        """The daemon is in ``state``: shown when the picker follows the active state."""
+        self.active = state
+        if self.picker.value == ACTIVE:
+            self.show(state)
+
+    def redraw_state(self, st: StateScene) -> None:
+        """Draw a state again (its hand at another pose: the measured one, live)."""
+        i = next(k for k, s in enumerate(self.scene.states) if s.name == st.name)
+        base = f"/skill/states/{st.name}"
+        visible = self.handles[base].visible
+        self.handles[base].remove()
+        for name in [n for n in self.handles if n == base or n.startswith(base + "/")]:
+            del self.handles[name]
+            self.nodes.pop(name, None)
+        self.scene.states[i] = st
+        self._draw_state(i, st, self._held)
+        self.handles[base].visible = visible
+        if self.picker.value in (ACTIVE, st.name, ALL):
+            self._text.content = self._describe(self.picker.value if self.picker.value != ACTIVE
+                                                else self.active)
+
+    def close(self) -> None:
+        """Remove everything it drew and its controls."""
+        self.root.remove()
+        for h in self._gui_handles:
+            h.remove()
 
     def _framing(self, T_world_obj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where the camera looks (the middle of what was drawn, world) and stands (in
@@ -102,7 +142,9 @@ class SkillView:
 
     # -- what is shown -----------------------------------------------------------------
     def show(self, state: str) -> None:
-        """Show one state's elements (or every state's: :data:`ALL`)."""
+        """Show one state's elements (or every state's: :data:`ALL`; the active one:
+        :data:`ACTIVE`)."""
+        state = self.active if state == ACTIVE else state
         for st in self.scene.states:
             self.handles[f"/skill/states/{st.name}"].visible = state in (ALL, st.name)
         self._text.content = self._describe(state)
@@ -111,11 +153,15 @@ class SkillView:
         gui = self.server.gui
         names = [st.name for st in self.scene.states]
         skill = self.scene.skill
-        gui.add_markdown(f"**{skill.name}** on `{skill.object}`: {skill.description}")
-        self.picker = gui.add_dropdown("state", [*names, ALL], initial_value=skill.start)
-        self.demos_box = gui.add_checkbox("demonstrations", True, visible=bool(self.scene.demos))
-        self._text = gui.add_markdown("")
-        self.show(skill.start)
+        first = ACTIVE if self.live else skill.start
+        self._gui_handles = [
+            gui.add_markdown(f"**{skill.name}** on `{skill.object}`: {skill.description}"),
+            picker := gui.add_dropdown("state", [*([ACTIVE] if self.live else []), *names, ALL],
+                                       initial_value=first),
+            demos := gui.add_checkbox("demonstrations", True, visible=bool(self.scene.demos)),
+            text := gui.add_markdown("")]
+        self.picker, self.demos_box, self._text = picker, demos, text
+        self.show(first)
 
         @self.picker.on_update
         def _(_event: Any) -> None:

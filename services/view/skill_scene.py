@@ -105,29 +105,58 @@ class SkillScene:
 
 def skill_scene(skill: Skill, demos: list[Demo] | None = None) -> SkillScene:
     """The scene of ``skill``, with ``demos`` (object frame) when given."""
-    ws = Workspace(skill.limits.speeds, skill.frames, skill.models())
+    ws = workspace(skill)
     labelled = [(d, demo_states(skill, d)) for d in demos or []]
     paths = [DemoPath(d.name, d.poses[:, :3].copy(), s) for d, s in labelled]
     states: list[StateScene] = []
-    for i, state in enumerate(skill.states):
+    for i in range(len(skill.states)):
         T = _hand_pose(skill, i, labelled, states[-1].T_obj_ee if states else None)
-        scene = StateScene(state.name, T)
-        F = se3.flat_from_transform(T)
-        for m in state.input_mappings:
-            _add_mapping(scene, m, F, ws, skill.object)
-        for c in state.active_constraints:
-            shapes = c.sketch(ws.frame_pose(F, c.frame))
-            scene.shapes += [("constraint", s) for s in shapes]
-            scene.text += [f"{c.type}: {s.label}" for s in shapes[:1]] or [f"{c.type} on {c.frame}"]
-        for t in skill.transitions:
-            if t.source == state.name:
-                shapes = t.sketch()
-                scene.shapes += [("transition", s) for s in shapes]
-                scene.text.append(f"{shapes[0].label}" if shapes else f"{t.source} -> {t.target}: {t.type} "
-                                  + ", ".join(f"{k} {v}" for k, v in t.summary().items()
-                                              if k not in ("from", "to", "type")))
-        states.append(scene)
+        states.append(state_scene(skill, i, T, ws))
     return SkillScene(skill, states, paths)
+
+
+def workspace(skill: Skill) -> Workspace:
+    """A workspace of ``skill`` for drawing it (its own: not the runtime's)."""
+    return Workspace(skill.limits.speeds, skill.frames, skill.models())
+
+
+def state_scene(skill: Skill, i: int, T_obj_ee: Array, ws: Workspace) -> StateScene:
+    """State ``i`` of ``skill`` drawn with the hand at ``T_obj_ee`` (4, 4; object frame):
+    what each axis does there, where the constraints are, the guards out of it."""
+    state = skill.states[i]
+    scene = StateScene(state.name, T_obj_ee)
+    F = se3.flat_from_transform(T_obj_ee)
+    for m in state.input_mappings:
+        _add_mapping(scene, m, F, ws, skill.object)
+    for c in state.active_constraints:
+        shapes = c.sketch(ws.frame_pose(F, c.frame))
+        scene.shapes += [("constraint", s) for s in shapes]
+        scene.text += [f"{c.type}: {s.label}" for s in shapes[:1]] or [f"{c.type} on {c.frame}"]
+    for t in skill.transitions:
+        if t.source == state.name:
+            shapes = t.sketch()
+            scene.shapes += [("transition", s) for s in shapes]
+            scene.text.append(f"{shapes[0].label}" if shapes else f"{t.source} -> {t.target}: {t.type} "
+                              + ", ".join(f"{k} {v}" for k, v in t.summary().items()
+                                          if k not in ("from", "to", "type")))
+    return scene
+
+
+def holding(skill: Skill, i: int, T_obj_ee: Array, ws: Workspace) -> list[str]:
+    """The constraints of state ``i`` that hold the hand at ``T_obj_ee`` (object frame):
+    the bounding ones (``bounds``) whose projection moves it (by more than 0.1 mm or 1
+    mrad: the hand is on or past the limit), each as its sketch's label (or its kind)."""
+    F = se3.flat_from_transform(T_obj_ee)
+    out = []
+    for c in skill.states[i].active_constraints:
+        if not c.bounds:
+            continue
+        P = c.project(F, ws.frame_pose(F, c.frame), ws)
+        d = np.asarray(P) - np.asarray(F)
+        if P is not F and (np.max(np.abs(d[9:])) > 1e-4 or np.max(np.abs(d[:9])) > 1e-3):
+            shapes = c.sketch(ws.frame_pose(F, c.frame))
+            out.append(shapes[0].label if shapes else c.type)
+    return out
 
 
 def _add_mapping(scene: StateScene, m: InputMapping, F: se3.Flat, ws: Workspace, obj: str) -> None:

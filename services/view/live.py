@@ -1,0 +1,261 @@
+"""The live view: the arm, the task's scene and the active skill as they are now.
+
+:class:`LiveView` draws a :class:`Snapshot` of what the robot's keys said last (the
+service, :mod:`.service`, takes them from Zenoh with decimation and calls :meth:`draw`
+at about 30 Hz):
+
+- the arm's links (:mod:`.arm`) at the measured joint positions, when the robot
+  publishes them (``state.q``); the measured hand as a frame, the target as a smaller,
+  orange one;
+- the task's bodies (:mod:`.task_scene`) at the poses the robot publishes, a joint's
+  moving part at the position the scene reports (``<joint>.position``), what the hand
+  holds in the hand;
+- the active skill (fetched whole, ``skill?bundle``, whenever the daemon's skill id
+  changes) at its object's pose: the active state's elements redrawn with the hand
+  where it is (what each axis does *here*, the constraints at the hand's frames), a
+  state picker that follows the daemon's state unless a state is picked;
+- for the person in the chair, a panel readable at arm's length: the mode, what each
+  axis does now, what holds the hand (a constraint it presses against) and why the
+  runtime holds (its ``status.mode`` and stuck report);
+- plots of the last :data:`WINDOW` s: the input of the device that owns the motion, and
+  the hand's speed and the state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sctd import se3
+from sctd.skill import Skill
+from sctd.task import Task
+
+from .arm import ArmGeometry
+from .draw import SkillView, lights
+from .skill_scene import holding, skill_scene, state_scene, workspace
+from .task_scene import default_poses, part_pose, task_parts
+
+WINDOW = 10.0  # s of history in the plots
+REDRAW = 0.2  # s between redraws of the active state at the hand (the arrows follow it)
+PLOT_EVERY = 0.2  # s between updates of the plots
+HOLDS = {"waiting": "waiting for the robot's state and the object's pose",
+         "hold": "holding: the robot's state or the object's pose is stale",
+         "fault": "holding: the robot's state jumped; waiting to start again from where it is",
+         "stopped": "stopped: no input (or the deadman is released)"}
+
+
+@dataclass
+class Snapshot:
+    """What the robot's keys said last (plain data from their messages)."""
+
+    t: float = 0.0  # when it was taken (monotonic s)
+    pose: list | None = None  # the measured ee in the world [7]
+    q: list | None = None
+    target: dict | None = None  # the target message: pose, state, skill
+    objects: dict[str, list] = field(default_factory=dict)  # name -> pose [7]
+    status: dict | None = None
+    scene: dict | None = None
+    inputs: dict[str, tuple] = field(default_factory=dict)  # device -> (u, stamp)
+
+
+def _wxyz(pose) -> tuple[float, float, float, float]:
+    return float(pose[6]), float(pose[3]), float(pose[4]), float(pose[5])
+
+
+class LiveView:
+    """Draws snapshots on ``server`` (a ``viser.ViserServer``).
+
+    Parameters
+    ----------
+    server : viser.ViserServer
+    arm : ArmGeometry or None
+        The arm's links (None: the hand and target alone).
+    task : Task or None
+        The task whose scene to draw (None: none).
+    """
+
+    def __init__(self, server: Any, arm: ArmGeometry | None = None, task: Task | None = None):
+        self.server, self.arm, self.task = server, arm, task
+        self.skill: Skill | None = None
+        self.skill_view: SkillView | None = None
+        self.handles: dict[str, Any] = {}
+        self._redrawn = 0.0
+        self.redraws = 0  # of the active state at the hand
+        self._redrawn_state = ""
+        self._plotted = 0.0
+        self._history: deque[tuple[float, float, float, float, float, float]] = deque()
+        self._last_pose: tuple[float, np.ndarray] | None = None
+        lights(server)
+        sc = server.scene
+        sc.add_grid("/floor", width=2.0, height=2.0, cell_size=0.1, section_size=0.5)
+        self.handles["/hand"] = sc.add_frame("/hand", axes_length=0.06, axes_radius=0.004, visible=False)
+        self.handles["/target"] = sc.add_frame("/target", axes_length=0.04, axes_radius=0.002,
+                                               origin_radius=0.008, origin_color=(255, 140, 0),
+                                               visible=False)
+        for k, link in enumerate(arm.links if arm is not None else []):
+            self.handles[f"/arm/{k}"] = sc.add_mesh_simple(
+                f"/arm/{link.name}", link.vertices.astype(np.float32), link.faces.astype(np.uint32),
+                color=link.rgb, visible=False, cast_shadow=False, receive_shadow=False)
+        look_at = np.array([0.3, 0.0, 0.4])  # between the arm's base and its reach
+        if task is not None and task.object in task.scene.bodies:
+            look_at = (task.scene.bodies[task.object].T_world[:3, 3] + np.array([0.0, 0.0, 0.35])) / 2
+        server.initial_camera.look_at = tuple(look_at)
+        server.initial_camera.position = tuple(look_at + np.array([0.5, -1.3, 0.7]))
+        self.parts = task_parts(task) if task is not None else []
+        for part in self.parts:
+            self.handles[part.name] = sc.add_mesh_simple(
+                f"/task/{part.name}", part.vertices.astype(np.float32), part.faces.astype(np.uint32),
+                color=part.rgb, opacity=part.opacity if part.opacity < 1.0 else None, visible=False,
+                cast_shadow=False, receive_shadow=False)
+        self._panel()
+
+    # -- the skill ---------------------------------------------------------------------
+    def set_skill(self, skill: Skill) -> None:
+        """Draw ``skill`` (replacing the one drawn)."""
+        if self.skill_view is not None:
+            self.skill_view.close()
+        self.skill, self.ws = skill, workspace(skill)
+        self.skill_view = SkillView(self.server, skill_scene(skill), task=None, live=True)
+        self.skill_view.root.visible = False  # until its object's pose is known
+
+    # -- drawing -----------------------------------------------------------------------
+    def draw(self, snap: Snapshot) -> None:
+        """Everything from ``snap`` (on the caller's thread; one batch of messages)."""
+        with self.server.atomic():
+            self._draw_robot(snap)
+            self._draw_task(snap)
+            self._draw_skill(snap)
+        self._record(snap)
+        self._describe(snap)
+
+    def _draw_robot(self, snap: Snapshot) -> None:
+        if self.arm is not None and snap.q is not None and len(snap.q) == self.arm.nq:
+            for k, T in enumerate(self.arm.poses(np.asarray(snap.q, dtype=float))):
+                self._put(self.handles[f"/arm/{k}"], se3.pose_from_transform(T))
+        if snap.pose is not None:
+            self._put(self.handles["/hand"], snap.pose)
+        if snap.target is not None and snap.target.get("pose") is not None:
+            self._put(self.handles["/target"], snap.target["pose"])
+
+    def _draw_task(self, snap: Snapshot) -> None:
+        if self.task is None:
+            return
+        T_world = default_poses(self.task) | {n: se3.transform_from_pose(p) for n, p in snap.objects.items()}
+        T_ee = se3.transform_from_pose(snap.pose) if snap.pose is not None else None
+        readings = (snap.scene or {}).get("readings") or {}
+        for part in self.parts:
+            T = part_pose(part, self.task, T_world, T_ee, readings)
+            if T is not None:
+                self._put(self.handles[part.name], se3.pose_from_transform(T))
+
+    def _draw_skill(self, snap: Snapshot) -> None:
+        sv, skill = self.skill_view, self.skill
+        if sv is None or skill is None:
+            return
+        T_obj = self._object_pose(snap)
+        if T_obj is None:
+            return
+        sv.place(T_obj)
+        sv.root.visible = True
+        state = (snap.target or {}).get("state") or (snap.status or {}).get("state")
+        if state in [s.name for s in skill.states]:
+            sv.follow(state)
+        now = time.monotonic()
+        if snap.pose is not None and (now - self._redrawn > REDRAW or sv.active != self._redrawn_state):
+            self._redrawn, self._redrawn_state = now, sv.active  # a new state at once
+            T_obj_ee = se3.invert_transform(T_obj) @ se3.transform_from_pose(snap.pose)
+            i = skill.state_index(sv.active)
+            sv.redraw_state(state_scene(skill, i, T_obj_ee, self.ws))
+            self.redraws += 1
+
+    def _object_pose(self, snap: Snapshot) -> np.ndarray | None:
+        assert self.skill is not None
+        pose = snap.objects.get(self.skill.object)
+        if pose is not None:
+            return se3.transform_from_pose(pose)
+        if self.task is not None and self.skill.object in self.task.scene.bodies:
+            return self.task.scene.bodies[self.skill.object].T_world
+        return None
+
+    @staticmethod
+    def _put(handle: Any, pose) -> None:
+        handle.position = np.asarray(pose[:3], dtype=float)
+        handle.wxyz = _wxyz(pose)
+        handle.visible = True
+
+    # -- the person's panel and the plots ----------------------------------------------
+    def _panel(self) -> None:
+        from viser import uplot
+
+        gui = self.server.gui
+        with gui.add_folder("For the person"):
+            self.person = gui.add_markdown("<div style='font-size:20px'>waiting for the robot</div>")
+        with gui.add_folder("Plots", expand_by_default=True):
+            x = np.zeros(1)
+            colours = ("#e61e1e", "#14aa14", "#1e46eb")
+            self.input_plot = gui.add_uplot(
+                (x, x, x, x), (uplot.Series(label="t [s]"),
+                               *(uplot.Series(label=f"axis {k + 1}", stroke=c, width=2)
+                                 for k, c in enumerate(colours))),
+                title="input (the device that owns the motion)", aspect=2.0,
+                scales={"x": uplot.Scale(time=False), "y": uplot.Scale(auto=False, range=(-1.0, 1.0))})
+            self.motion_plot = gui.add_uplot(
+                (x, x, x), (uplot.Series(label="t [s]"), uplot.Series(label="hand speed [m/s]", stroke="#444",
+                                                                        width=2),
+                            uplot.Series(label="state", stroke="#ff7f0e", width=2, scale="state")),
+                title="hand speed and state", aspect=2.0, scales={"x": uplot.Scale(time=False)})
+
+    def _record(self, snap: Snapshot) -> None:
+        """The plots' history: owner's input, the hand's speed, the state's index."""
+        status = snap.status or {}
+        owner = (status.get("input") or {}).get("owner") or ""
+        newest = snap.inputs.get(owner) or next(iter(snap.inputs.values()), ((), 0.0))
+        u = [*newest[0], 0.0, 0.0, 0.0][:3]
+        speed = 0.0
+        if snap.pose is not None:
+            p = np.asarray(snap.pose[:3], dtype=float)
+            if self._last_pose is not None and snap.t > self._last_pose[0]:
+                speed = float(np.linalg.norm(p - self._last_pose[1]) / (snap.t - self._last_pose[0]))
+            self._last_pose = (snap.t, p)
+        state = (snap.target or {}).get("state")
+        index = float(self.skill.state_index(state)) if self.skill is not None and state in \
+            [s.name for s in self.skill.states] else float("nan")
+        self._history.append((snap.t, float(u[0]), float(u[1]), float(u[2]), speed, index))
+        while self._history and self._history[0][0] < snap.t - WINDOW:
+            self._history.popleft()
+        if snap.t - self._plotted >= PLOT_EVERY and len(self._history) > 1:
+            self._plotted = snap.t
+            h = np.array(self._history)
+            t = h[:, 0] - h[-1, 0]
+            self.input_plot.data = (t, h[:, 1], h[:, 2], h[:, 3])
+            self.motion_plot.data = (t, h[:, 4], h[:, 5])
+
+    def _describe(self, snap: Snapshot) -> None:
+        """The person's panel: mode, what each axis does now, what holds the hand, why
+        the runtime holds."""
+        status = snap.status or {}
+        lines = []
+        state = (snap.target or {}).get("state") or status.get("state")
+        lines.append(f"mode: <b>{state or '-'}</b>")
+        sv, skill = self.skill_view, self.skill
+        st = next((s for s in sv.scene.states if s.name == state), None) if sv is not None else None
+        if skill is not None and st is not None:
+            lines += [e.words(skill.object) for e in st.effects]
+            T_obj = self._object_pose(snap)
+            if T_obj is not None and snap.pose is not None:
+                T_obj_ee = se3.invert_transform(T_obj) @ se3.transform_from_pose(snap.pose)
+                held = holding(skill, skill.state_index(st.name), T_obj_ee, self.ws)
+                if held:
+                    lines.append("held by: " + "; ".join(held))
+        mode = status.get("mode")
+        if mode in HOLDS:
+            lines.append(f"<b>{HOLDS[mode]}</b>")
+        stuck = status.get("stuck")
+        if stuck:
+            lines.append(f"<b>stuck in {stuck.get('state')} for {stuck.get('since', 0):.0f} s: the escape "
+                         "button goes back</b>")
+        self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"

@@ -1,0 +1,122 @@
+"""The live view (sctd_services.view.live) draws what the robot's keys say: the arm's
+links at forward kinematics of ``q``, the hand and the target, the task's bodies at the
+published poses and a joint's part at its reading, the active skill at its object and
+state with its elements at the hand, a panel that says the mode, what each axis does,
+what holds the hand and why the runtime holds, and plots of the owner's input.
+
+Checked on the server's side of a Viser scene (no browser: tests/test_view_browser.py
+looks at the pixels)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sctd import se3
+from sctd.skill import load_skill
+from sctd.skill.catalog import shipped_folder
+from sctd.task import find_task
+
+viser = pytest.importorskip("viser")
+pin = pytest.importorskip("pinocchio")
+
+from sctd_services.view.arm import ArmGeometry  # noqa: E402
+from sctd_services.view.live import LiveView, Snapshot  # noqa: E402
+from sctd_sim.robot import FORWARD_POSTURE, URDF_PATH  # noqa: E402
+from sctd_sim.view import stop_server, viser_server  # noqa: E402
+
+SKILLS = shipped_folder()
+
+
+@pytest.fixture
+def server():
+    s = viser_server(0)
+    yield s
+    stop_server(s)
+
+
+def pose_of(T) -> list[float]:
+    return se3.pose_from_transform(T).tolist()
+
+
+def test_the_arm_the_hand_and_the_target_are_where_the_state_says(server):
+    arm = ArmGeometry(URDF_PATH)
+    view = LiveView(server, arm, None)
+    q = np.asarray(FORWARD_POSTURE, dtype=float) + 0.1
+    arm.poses(q)
+    T_ee = arm.data.oMf[arm.model.getFrameId("ee")].homogeneous
+    target = T_ee.copy()
+    target[:3, 3] += [0.01, 0.0, 0.02]
+    view.draw(Snapshot(t=1.0, pose=pose_of(T_ee), q=q.tolist(),
+                       target={"pose": pose_of(target), "state": "x"}))
+    for k, T in enumerate(arm.poses(q)):
+        h = view.handles[f"/arm/{k}"]
+        assert h.visible and np.allclose(h.position, T[:3, 3], atol=1e-6)
+    assert np.allclose(view.handles["/hand"].position, T_ee[:3, 3], atol=1e-6)
+    assert np.allclose(view.handles["/target"].position, target[:3, 3], atol=1e-6)
+    assert [link.name for link in arm.links][-3:] == ["hand_0", "hand_1", "hand_2"] and not arm.skipped
+
+
+def test_the_task_moves_with_what_the_robot_publishes(server):
+    task = find_task("drawer")
+    view = LiveView(server, None, task)
+    T0 = task.scene.bodies["drawer_handle"].T_world.copy()
+    T0[:3, 3] += [0.02, -0.03, 0.0]  # the trial put it elsewhere
+    view.draw(Snapshot(t=1.0, objects={"drawer_handle": pose_of(T0)},
+                       scene={"readings": {"drawer.position": 0.1}}))
+    moving = view.handles["drawer/moving"]
+    assert np.allclose(moving.position, T0[:3, 3] + 0.1 * T0[:3, 0], atol=1e-9)  # opened 10 cm along x
+
+
+def test_the_skill_follows_its_object_and_the_daemons_state(server):
+    task = find_task("pour")
+    view = LiveView(server, None, task)
+    view.set_skill(load_skill(SKILLS / "pour.yaml"))
+    T_mug = task.scene.bodies["mug"].T_world.copy()
+    T_mug[:3, 3] += [0.03, 0.01, 0.0]
+    T_obj_ee = se3.transform_from_pose([0.0, 0.02, -0.02, 0.0, 0.0, 0.0, 1.0])  # the tip 10 cm over it
+    T_ee = T_mug @ T_obj_ee
+    view.draw(Snapshot(t=1.0, pose=pose_of(T_ee), objects={"mug": pose_of(T_mug)},
+                       target={"pose": pose_of(T_ee), "state": "approach"}))
+    sv = view.skill_view
+    assert sv is not None and np.allclose(sv.root.position, T_mug[:3, 3])
+    assert sv.handles["/skill/states/approach"].visible and not sv.handles["/skill/states/carry"].visible
+    # the active state is drawn with the hand where it is (object frame)
+    assert np.allclose(sv.nodes["/skill/states/approach/hand"][1], T_obj_ee[:3, 3], atol=1e-9)
+    _, a, _ = sv.nodes["/skill/states/approach/axis1"]
+    assert np.allclose(a, T_obj_ee[:3, 3] + [0.0, 0.0, 0.12], atol=1e-9)  # at the tip
+
+
+def test_the_persons_panel_says_the_mode_the_axes_and_why_it_holds(server):
+    task = find_task("pour")
+    view = LiveView(server, None, task)
+    view.set_skill(load_skill(SKILLS / "pour.yaml"))
+    T_mug = task.scene.bodies["mug"].T_world
+    # the tip 3 cm beside the pour state's box (1.5 cm): the box holds it
+    T_ee = T_mug @ se3.transform_from_pose([0.045, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0])
+    snap = Snapshot(t=1.0, pose=pose_of(T_ee), objects={"mug": pose_of(T_mug)},
+                    target={"pose": pose_of(T_ee), "state": "pour"},
+                    status={"mode": "hold", "state": "pour", "stuck": {"state": "pour", "since": 6.2}})
+    view.draw(snap)
+    text = view.person.content
+    assert "mode: <b>pour</b>" in text
+    assert "axis 1: turns about mug +y at 0.35 rad/s" in text and "axis 3: moves tip along mug +z" in text
+    assert "held by: tip stays in this box" in text
+    assert "the robot's state or the object's pose is stale" in text
+    assert "stuck in pour for 6 s" in text
+    snap.status = {"mode": "running", "state": "pour"}
+    snap.pose = pose_of(T_mug @ se3.transform_from_pose([0.0, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0]))
+    view.draw(snap)
+    assert "held by" not in view.person.content and "holding" not in view.person.content
+
+
+def test_the_plots_show_the_input_of_the_device_that_owns_the_motion(server):
+    view = LiveView(server, None, None)
+    for k in range(12):
+        view.draw(Snapshot(t=0.1 * k, pose=[0.01 * k, 0.0, 0.5, 0.0, 0.0, 0.0, 1.0],
+                           inputs={"a": ([0.5, 0.0, 0.0], 0.0), "b": ([0.0, -0.7, 0.2], 0.0)},
+                           status={"input": {"owner": "b"}}))
+    t, u1, u2, u3 = view.input_plot.data
+    assert u1[-1] == 0.0 and u2[-1] == -0.7 and u3[-1] == 0.2 and t[-1] == 0.0 and t[0] < 0.0
+    _, speed, _ = view.motion_plot.data
+    assert np.allclose(speed[2:], 0.1)  # 1 cm per 0.1 s
