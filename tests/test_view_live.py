@@ -120,3 +120,80 @@ def test_the_plots_show_the_input_of_the_device_that_owns_the_motion(server):
     assert u1[-1] == 0.0 and u2[-1] == -0.7 and u3[-1] == 0.2 and t[-1] == 0.0 and t[0] < 0.0
     _, speed, _ = view.motion_plot.data
     assert np.allclose(speed[2:], 0.1)  # 1 cm per 0.1 s
+
+
+# -- from a log ----------------------------------------------------------------------------
+def _log(skill_id: str) -> list:
+    """Messages as ``read_log`` gives them: 2 s of a hand moving 10 cm along x."""
+    out = []
+    for k in range(201):
+        t = int(1e9 * (100.0 + 0.01 * k))
+        out.append(("sctd/edan/state", t, {"seq": k, "stamp": 0.0, "pose": [0.5 + 0.0005 * k, 0.0, 0.7,
+                                                                         0.0, 0.0, 0.0, 1.0]}))
+        if k % 10 == 0:
+            state = "carry" if k < 100 else "approach"
+            out.append(("sctd/edan/status", t, {"skill": skill_id, "state": state, "mode": "running",
+                                               "input": {"owner": "pad"}}))
+            out.append(("sctd/edan/objects/mug", t, {"seq": k, "stamp": 0.0,
+                                                     "pose": [0.75, 0.0, 0.65, 0.0, 0.0, 1.0, 0.0]}))
+            out.append(("sctd/edan/input/pad", t, {"seq": k, "stamp": 0.0, "u": [-0.5, 0.0, 0.0]}))
+            out.append(("sctd/other/state", t, {"pose": [9.0] * 7}))  # another robot: left out
+    return out
+
+
+def test_a_log_is_a_timeline_of_what_the_view_would_have_shown():
+    from sctd_services.view.timeline import Timeline
+
+    tl = Timeline(reversed(_log("abc")), "sctd/edan")  # any order
+    assert tl.duration == pytest.approx(2.0) and tl.keys("objects") == ["mug"] and tl.keys("input") == ["pad"]
+    snap = tl.at(0.505)  # the newest at or before: the state of 0.50 s
+    assert snap.pose[0] == pytest.approx(0.525) and snap.status["state"] == "carry"
+    assert snap.objects["mug"][:3] == [0.75, 0.0, 0.65] and snap.inputs["pad"][0] == [-0.5, 0.0, 0.0]
+    assert tl.at(1.5).status["state"] == "approach" and tl.at(-0.1).pose is None
+    assert tl.skill_ids() == ["abc"]
+
+
+def test_a_log_is_scrubbed_with_its_slider(server):
+    import threading
+
+    from sctd_services.view.timeline import Timeline, run_replay
+    from tests.conftest import wait_for
+
+    skill = load_skill(SKILLS / "pour.yaml")
+    view = LiveView(server, None, find_task("pour"))
+    view.set_skill(skill)
+    stop = threading.Event()
+    thread = threading.Thread(target=run_replay, args=(view, Timeline(_log(skill.id), "sctd/edan"), stop))
+    thread.start()
+    try:
+        assert wait_for(lambda: view.replay_slider is not None, 10)
+        for t in (1.5, 0.25):  # forwards, then back
+            view.replay_slider.value = t
+            assert wait_for(lambda t=t: view.drawn_at == t, 10)
+            assert wait_for(lambda t=t: np.allclose(view.handles["/hand"].position,
+                                                    [0.5 + 0.05 * t, 0.0, 0.7], atol=1e-9), 5)
+        assert "mode: <b>carry</b>" in view.person.content  # 0.25 s: before the change at 1 s
+    finally:
+        stop.set()
+        thread.join(10)
+
+
+def test_sctd_view_replays_a_log_file(tmp_path, capsys):
+    """`sctd view --log FILE`: an MCAP of `sctd log` opened on its timeline, its skill
+    found by the id its status names; a damaged file is refused naming it."""
+    from sctd.cli.log import McapLog
+    from sctd.cli.main import main
+    from sctd.wire import codec
+
+    skill = load_skill(SKILLS / "pour.yaml")
+    path = tmp_path / "run.mcap"
+    with McapLog(path) as log:
+        for key, t, value in _log(skill.id):
+            if key.startswith("sctd/edan/"):
+                log.add(key, key.split("/")[2], codec.pack(value), t * 1e-9)
+    assert main(["view", "--log", str(path), "--view-for", "1"]) == 0
+    err = capsys.readouterr().err
+    assert f"{path} (2.0 s) at http://127.0.0.1:" in err and "not found" not in err
+    path.write_bytes(path.read_bytes()[:200])
+    assert main(["view", "--log", str(path)]) == 2
+    assert f"--log: {path}" in capsys.readouterr().err

@@ -105,6 +105,12 @@ def add_live_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--urdf", metavar="FILE",
                    help="the arm's URDF, its <visual> primitives drawn at state.q (default: the simulated "
                         "arm's)")
+    p.add_argument("--log", metavar="FILE.mcap",
+                   help="show a log of sctd log --mcap instead of the live keys, with a timeline to scrub "
+                        "(no Zenoh session is opened)")
+    p.add_argument("--skill", metavar="SKILL",
+                   help="with --log: the skill to draw (default: the one whose id the log's status names, "
+                        "if sctd finds it: the learner's store, the shipped skills)")
     _add_serving(p)
     add_zenoh_arguments(p)
 
@@ -130,6 +136,8 @@ def main_view(args: argparse.Namespace) -> int:
         arm = ArmGeometry(args.urdf or _default_urdf())
     except (OSError, ValueError, RuntimeError) as e:
         return fail("view", f"--urdf: {e}")
+    if args.log is not None:
+        return _replay(args, arm)
     keys = Keys(args.robot)
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -146,7 +154,9 @@ def main_view(args: argparse.Namespace) -> int:
                 print(f"sctd view: robot {args.robot} at http://127.0.0.1:{server.get_port()}",
                       file=sys.stderr, flush=True)
                 if args.view_for is not None:
-                    threading.Timer(args.view_for, stop.set).start()
+                    timer = threading.Timer(args.view_for, stop.set)
+                    timer.daemon = True
+                    timer.start()
                 try:
                     run_view(session, keys, LiveView(server, arm, task), stop)
                 except KeyboardInterrupt:
@@ -190,3 +200,82 @@ def _task(ref: str | None, session, keys):
                     return None
             time.sleep(0.05)
     return None
+
+
+def _replay(args: argparse.Namespace, arm) -> int:
+    """``sctd view --log FILE``: the log on a timeline (no Zenoh)."""
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.timeline import Timeline, run_replay
+    from sctd_sim.view import ViewerUnavailable, stop_server, viser_server
+
+    from ..skill import SkillError, load_skill
+    from ..skill.catalog import find_skill
+    from ..task import TaskError, find_task
+    from ..wire import Keys
+    from .log import LogError, read_log
+
+    try:
+        timeline = Timeline(read_log(args.log), Keys(args.robot).prefix)
+    except (LogError, OSError) as e:
+        return fail("view", f"--log: {e}")
+    if not timeline.tracks:
+        return fail("view", f"--log: {args.log}: nothing logged under {Keys(args.robot).prefix}/")
+    scene = timeline.at(timeline.duration).scene or {}
+    try:
+        task = find_task(args.task or str(scene.get("scene"))) if args.task or scene.get("scene") else None
+    except (TaskError, OSError) as e:
+        if args.task:
+            return fail("view", f"--task: {e}")
+        task = None
+    refs = [args.skill] if args.skill else timeline.skill_ids()[:1]
+    skill = None
+    for ref in refs:
+        try:
+            skill = load_skill(find_skill(ref) if args.skill else _skill_by_id(ref))
+        except SkillError as e:
+            if args.skill:
+                return fail("view", f"--skill: {e}")
+            print(f"sctd view: the log's skill {ref} is not found here: drawn without it", file=sys.stderr)
+    try:
+        server = viser_server(args.view_port)
+    except ViewerUnavailable as e:
+        return fail("view", str(e))
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        view = LiveView(server, arm, task)
+        if skill is not None:
+            view.set_skill(skill)
+        print(f"sctd view: {args.log} ({timeline.duration:.1f} s) at http://127.0.0.1:{server.get_port()}",
+              file=sys.stderr, flush=True)
+        if args.view_for is not None:
+            timer = threading.Timer(args.view_for, stop.set)
+            timer.daemon = True
+            timer.start()
+        try:
+            run_replay(view, timeline, stop)
+        except KeyboardInterrupt:
+            pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        stop_server(server)
+    print("sctd view: stopped", file=sys.stderr, flush=True)
+    return EXIT_OK
+
+
+def _skill_by_id(skill_id: str):
+    """The skill file whose bundle has ``skill_id``: the learner's store (by id), else a
+    shipped skill. Raises SkillError naming the id when none has it."""
+    from ..skill import SkillError, bundle_from_file
+    from ..skill.catalog import find_stored, shipped_skills
+
+    stored = find_stored(skill_id)
+    if stored is not None:
+        return stored.path
+    for path in shipped_skills():
+        try:
+            if bundle_from_file(path).id == skill_id:
+                return path
+        except SkillError:
+            continue
+    raise SkillError(skill_id, "", "no stored or shipped skill has this id")

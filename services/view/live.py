@@ -23,6 +23,7 @@ at about 30 Hz):
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -85,6 +86,8 @@ class LiveView:
         self.handles: dict[str, Any] = {}
         self._redrawn = 0.0
         self.redraws = 0  # of the active state at the hand
+        self.drawn_at = 0.0  # a log's time last drawn (replay)
+        self.replay_slider: Any = None
         self._redrawn_state = ""
         self._plotted = 0.0
         self._history: deque[tuple[float, float, float, float, float, float]] = deque()
@@ -216,6 +219,10 @@ class LiveView:
         newest = snap.inputs.get(owner) or next(iter(snap.inputs.values()), ((), 0.0))
         u = [*newest[0], 0.0, 0.0, 0.0][:3]
         speed = 0.0
+        if self._history and snap.t < self._history[-1][0]:  # scrubbed back in a log
+            self._history.clear()
+            self._last_pose = None
+            self._plotted = -math.inf
         if snap.pose is not None:
             p = np.asarray(snap.pose[:3], dtype=float)
             if self._last_pose is not None and snap.t > self._last_pose[0]:
