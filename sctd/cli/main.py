@@ -54,6 +54,8 @@ EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pino
             "hid": "inputs", "brainflow": "inputs", "mcap": "logs"}
 
 BENCHES: dict[str, Command] = {
+    "view": Command("the daemon's tick with the live view and a browser attached, alternating with it "
+                    "closed", "sctd.bench.view", "add_view_bench_arguments", "main_view_bench"),
     "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
                        "sctd.bench.latency", "add_latency_arguments", "main_latency"),
     "robustness": Command("the daemon next to the sim under floods, bad bundles, swaps and a jumping "
