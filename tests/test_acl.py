@@ -34,8 +34,8 @@ OWNER = {"input/pad": "sctd-input", "state": "sctd-robot", "objects/cup": "sctd-
          "can": "sctd-robot", "demos/pour/d1": "sctd-recorder",
          "learner/status": "sctd-learner"}
 # queryables and the role that answers each
-ANSWERS = {"skill": "sctd-runtime", "skill/swap": "sctd-runtime", "learner": "sctd-learner",
-           "sim/reset": "sctd-robot"}
+ANSWERS = {"skill": "sctd-runtime", "skill/swap": "sctd-runtime", "skill/bundle": "sctd-runtime",
+           "learner": "sctd-learner", "sim/reset": "sctd-robot"}
 EVERY = set(OWNER)
 # the roles table: what each role may publish, subscribe, answer and query
 PUB = {"sctd-runtime": {"target", "status"},
@@ -48,11 +48,13 @@ SUB = {"sctd-runtime": {"input/pad", "state", "objects/cup"},
        "sctd-recorder": {"state", "objects/cup", "scene"},
        "sctd-learner": {"demos/pour/d1", "status"},
        "sctd-operator": EVERY,
-       "sctd-observer": {"target", "state", "status", "scene", "learner/status"}}
-ANSWER = {"sctd-runtime": {"skill", "skill/swap"}, "sctd-robot": {"sim/reset"},
+       # the view (sctd view) draws the input and the objects too
+       "sctd-observer": {"target", "state", "status", "scene", "learner/status", "input/pad", "objects/cup"}}
+ANSWER = {"sctd-runtime": {"skill", "skill/swap", "skill/bundle"}, "sctd-robot": {"sim/reset"},
           "sctd-learner": {"learner"}}
 QUERY = {"sctd-input": {"skill"}, "sctd-learner": {"skill", "skill/swap"},
-         "sctd-operator": {"skill", "skill/swap", "learner", "sim/reset"}}
+         "sctd-operator": {"skill", "skill/swap", "skill/bundle", "learner", "sim/reset"},
+         "sctd-observer": {"skill/bundle"}}
 
 
 def key(suffix: str) -> str:
@@ -254,14 +256,15 @@ def router_port(tls: Path) -> int:
 @pytest.mark.parametrize("kind", ["plain-tcp", "no-client-cert", "other-ca", "unlisted-cn",
                                   "observer"])
 def test_intruder_delivers_nothing(sessions, tmp_path, kind):
-    """A stranger publishes every key of the contract and asks skill/swap and learner:
-    nothing arrives, no queryable is asked. Without a certificate of the CA the router
+    """A stranger publishes every key of the contract and asks skill, skill/swap and
+    learner: nothing arrives, no queryable is asked (the observer reads the active bundle,
+    ``skill/bundle``, and nothing else). Without a certificate of the CA the router
     refuses the link itself."""
     got: Counter = Counter()
     watcher = sessions.role("sctd-operator")
     subs = counting(watcher, EVERY, got)
     asked: Counter = Counter()
-    qs = answering(sessions.role("sctd-runtime"), ["skill", "skill/swap"], "runtime", asked)
+    qs = answering(sessions.role("sctd-runtime"), ["skill", "skill/swap", "skill/bundle"], "runtime", asked)
     qs += answering(sessions.role("sctd-learner"), ["learner"], "learner", asked)
     control = sessions.role("sctd-robot")
     conf = (zenoh.Config.from_file(str(sessions.tls / "zenoh" / "sctd-observer.json5"))
@@ -280,7 +283,7 @@ def test_intruder_delivers_nothing(sessions, tmp_path, kind):
     put_all(intruder, EVERY)
     put_all(control, ["state"])
     # (the router takes the intruder's puts before its queries, which have ended here)
-    replies = {k: answers(intruder, k) for k in ("skill/swap", "learner", "skill")}
+    replies = {k: answers(intruder, k) for k in ("skill/swap", "learner", "skill", "skill/bundle")}
     assert wait_for(lambda: got["state"] >= N, 15), got
     asked_by_intruder = Counter(asked) - asked_before
     # The watcher reaches the queryables still (the denial is the stranger's), and the
@@ -288,8 +291,10 @@ def test_intruder_delivers_nothing(sessions, tmp_path, kind):
     # forwarded of the intruder's puts: the counts below are final.
     assert answers(watcher, "skill/swap") == {"runtime"}
     assert {k: got[k] for k in EVERY} == {k: N if k == "state" else 0 for k in EVERY}
-    assert replies == {"skill/swap": set(), "learner": set(), "skill": set()}
-    assert not asked_by_intruder, asked_by_intruder
+    reads = {"skill/bundle"} if kind == "observer" else set()
+    assert replies == {k: {"runtime"} if k in reads else set()
+                       for k in ("skill/swap", "learner", "skill", "skill/bundle")}, replies
+    assert asked_by_intruder == Counter(reads), asked_by_intruder
     del subs, qs
 
 
@@ -351,6 +356,7 @@ def test_client_query_finds_the_queryable_only_where_allowed(sessions):
     assert client.query(learner, key("skill/swap"), b"x", find=10.0) == refused
     assert client.query(observer, key("skill"), find=2.0) is None
     assert client.query(observer, key("skill/swap"), b"x", find=2.0) is None
+    assert client.query(observer, key("skill"), find=2.0, parameters="bundle") is None
     assert client.query(user, key("skill/swap"), b"x", find=2.0) is None
     assert client.query(learner, key("skill"), find=10.0) == (True, {"skill": "pour", "v": 1})
     assert asked == Counter({"skill": 2, "skill/swap": 1})

@@ -110,6 +110,33 @@ def test_pour_completes_across_hosts(cluster):
     assert all(p.running() for p in c.procs.values()), _logs(c)
 
 
+def test_the_view_reads_everything_it_draws_with_the_observer_certificate(cluster):
+    """``sctd view`` on the observer host, a Zenoh client of the router with the
+    ``sctd-observer`` certificate: the access policy lets it read the state, the target,
+    the status, the scene, the task's objects, the input and the active skill's bundle
+    (the skill it draws is the one the runtime runs)."""
+    from sctd.deploy.netns import last_json
+    from sctd.skill import bundle_from_file
+    from sctd.skill.catalog import find_skill
+
+    c = cluster
+    steady = c.start_steady_input()
+    view = c.start_view(15)
+    try:
+        assert wait_for(lambda: view.p.poll() is not None, 90), view.output()[-3000:]
+    finally:
+        view.stop()
+        steady.stop()
+    assert view.p.returncode == 0, view.output()[-3000:]
+    report = last_json(view.output())
+    assert report is not None, view.output()[-3000:]
+    assert report["skills"] == [bundle_from_file(find_skill(c.skill)).id], report
+    assert report["fetch_failures"] == 0 and report["dropped"] == 0, report
+    read = report["read"]
+    for k in ("state", "target", "status", "scene", f"objects/{c.task.object}", "input/steady"):
+        assert read.get(k, 0) > 0, (k, report)
+
+
 def _by_seq(c: Cluster, key: str) -> list[dict]:
     """The messages the observer recorded on ``key``, in their sender's ``seq`` order."""
     return sorted((r["msg"] for r in c.seen(key)), key=lambda m: m["seq"])
@@ -298,7 +325,7 @@ def test_allowed_senders_and_queries_get_through(intrusion):
 
 
 @pytest.mark.parametrize("who", ["no-certificate", "other-ca", "unlisted-name", "observer"])
-def test_intruder_delivers_nothing_and_cannot_swap_or_train(intrusion, who):
+def test_intruder_delivers_nothing_and_cannot_swap_or_train(cluster, intrusion, who):
     result, before, after = intrusion
     got = result[who]
     assert got["tried"] > 0
@@ -311,9 +338,12 @@ def test_intruder_delivers_nothing_and_cannot_swap_or_train(intrusion, who):
     assert after["swaps_refused"] - before["swaps_refused"] == control_swaps, (before, after)
     received = {k.rsplit("edan/", 1)[1]: n for k, n in got["received"].items() if n}
     if who == "observer":
-        # a tablet sees what the table allows it, and nothing else
-        assert set(received) <= {"target", "state", "status", "scene", "learner/status"}, received
-        assert {"target", "state", "status"} <= set(received), received
+        # a tablet sees what the table allows it (what the view draws), and nothing else:
+        # not can, not the demonstrations
+        obj = f"objects/{cluster.task.object}"
+        allowed = {"target", "state", "status", "scene", "learner/status", "input/intruder", obj}
+        assert set(received) <= allowed, received
+        assert {"target", "state", "status", obj, "input/intruder"} <= set(received), received
     else:  # it reads nothing at all
         assert received == {}, received
     if who in ("no-certificate", "other-ca"):

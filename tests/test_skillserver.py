@@ -168,7 +168,7 @@ def test_a_skill_server_killed_mid_swap_ends_the_query_and_comes_back(rig):
 
 
 def test_the_active_bundle_is_read_byte_for_byte_across_swaps_and_restarts(rig):
-    """``get skill?bundle`` answers the bundle the daemon runs (the id it reports), the
+    """``get skill/bundle`` answers the bundle the daemon runs (the id it reports), the
     file it started with, then each one swapped in; a skill server started again after
     one was killed still has it; the summary stays a summary."""
     started = bundle_from_file(ROOT / "skills" / "pour.yaml")
@@ -178,8 +178,16 @@ def test_the_active_bundle_is_read_byte_for_byte_across_swaps_and_restarts(rig):
     assert bundle.pack() == started.pack() and meta == {"v": 1, "id": started.id, "name": "pour",
                                                          "state": "carry"}
     assert "bundle" not in rig.summary()
-
+    # the same answer on the summary's key with the selector parameter (as first shipped)
+    same = client.query(rig.session, KEYS.skill, None, 10.0, parameters="bundle")
+    assert same is not None and same[0] and same[1]["bundle"] == started.pack(), same
+    # skill/bundle only reads: a bundle sent there is refused and swaps nothing
     vf = bundle_from_file(ROOT / "skills" / "drawer-vf.yaml")
+    refused = client.query(rig.session, KEYS.skill_bundle, vf.pack(), 10.0)
+    assert refused == (False, {"error": f"{KEYS.skill_bundle} is read-only: ask with no payload"}), \
+        refused
+    assert rig.summary()["id"] == started.id
+
     ok, body = client.swap(rig.session, KEYS, vf, timeout=30.0)
     assert ok, body
     bundle, meta = client.active_bundle(rig.session, KEYS)  # type: ignore[misc]

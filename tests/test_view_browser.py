@@ -239,7 +239,7 @@ def test_sctd_inspect_view_serves_on_loopback_until_stopped(tmp_path):
 # -- live: next to a running simulator and daemon -----------------------------------------
 class Recording:
     """A Zenoh session that records what is declared on it (kind, key), forwarding the
-    rest: the view must only subscribe, and query ``skill``."""
+    rest: the view must only subscribe, and query ``skill/bundle``."""
 
     def __init__(self, session):
         self._session = session
@@ -345,10 +345,10 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
         close_session(driver)
         run.stop()
         sim.stop()
-    # an observer: subscriptions, and queries on skill alone
+    # an observer: subscriptions, and queries on skill/bundle alone
     kinds = {k for k, _ in recording.declared}
     assert kinds <= {"declare_subscriber", "declare_querier"}, recording.declared
-    assert {key for k, key in recording.declared if k == "declare_querier"} == {keys.skill}
+    assert {key for k, key in recording.declared if k == "declare_querier"} == {keys.skill_bundle}
     subscribed = {key for k, key in recording.declared if k == "declare_subscriber"}
     assert {keys.state, keys.target, keys.status, keys.scene, keys.objects("mug")} <= subscribed
     assert not any(key.startswith(keys.skill_swap) for _, key in recording.declared)

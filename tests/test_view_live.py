@@ -197,3 +197,53 @@ def test_sctd_view_replays_a_log_file(tmp_path, capsys):
     path.write_bytes(path.read_bytes()[:200])
     assert main(["view", "--log", str(path)]) == 2
     assert f"--log: {path}" in capsys.readouterr().err
+
+
+def test_sctd_view_reports_what_it_read(capsys):
+    """`sctd view --stats-json`: on exit, the frames drawn, the messages read by key (the
+    task's objects by name, each input device), the undecodable ones and the skill fetches
+    (none can succeed here: no daemon answers ``skill/bundle``)."""
+    import json
+    import threading
+
+    from sctd.cli.main import main
+    from sctd.cli.procs import free_port
+    from sctd.wire import Keys, codec
+    from sctd.wire.session import close_session, open_session
+
+    ep, keys = f"tcp/127.0.0.1:{free_port()}", Keys("edan")
+    task = find_task("pour")
+    stop = threading.Event()
+
+    def publish():
+        s = open_session(connect=[ep])
+        try:
+            seq = 0
+            while not stop.wait(0.02):
+                seq += 1
+                if seq % 10 == 0:
+                    s.put(keys.status, b"\xc1 not msgpack")
+                s.put(keys.state, codec.encode_state(seq, 1.0, pose_of(np.eye(4)), q=list(FORWARD_POSTURE)))
+                s.put(keys.objects(task.object), codec.encode_object(seq, 1.0, pose_of(np.eye(4))))
+                s.put(keys.input("pad"), codec.encode_input(seq, 1.0, [0.1, 0.0, 0.0], [0, 1, 0]))
+                s.put(keys.status, codec.pack({"v": 1, "skill": "0123abcd", "state": "carry"}))
+        finally:
+            close_session(s)
+
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    try:
+        assert main(["view", "--task", "pour", "--listen", ep, "--view-for", "4", "--stats-json"]) == 0
+    finally:
+        stop.set()
+        thread.join(10)
+    out, err = capsys.readouterr()
+    report = json.loads(out.strip().splitlines()[-1])
+    assert report["frames"] > 0 and report["skills"] == [] and report["fetch_failures"] >= 1, report
+    read = report["read"]
+    assert read["state"] > 0 and read[f"objects/{task.object}"] > 0 and read["input/pad"] > 0, read
+    assert read["status"] > 0 and report["dropped"] >= 1, report
+    assert f"sctd view: stopped after {report['frames']} frames; read " in err
+    # --stats-json is the live view's: a log replay refuses it
+    assert main(["view", "--log", "x.mcap", "--stats-json"]) == 2
+    assert "--stats-json reports on the live view" in capsys.readouterr().err

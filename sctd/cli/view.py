@@ -111,6 +111,9 @@ def add_live_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", metavar="SKILL",
                    help="with --log: the skill to draw (default: the one whose id the log's status names, "
                         "if sctd finds it: the learner's store, the shipped skills)")
+    p.add_argument("--stats-json", action="store_true",
+                   help="on exit, print what the view did as JSON on stdout: frames drawn, messages read "
+                        "by key, undecodable messages, the skill ids it drew, failed fetches")
     _add_serving(p)
     add_zenoh_arguments(p)
 
@@ -137,6 +140,8 @@ def main_view(args: argparse.Namespace) -> int:
     except (OSError, ValueError, RuntimeError) as e:
         return fail("view", f"--urdf: {e}")
     if args.log is not None:
+        if args.stats_json:
+            return fail("view", "--stats-json reports on the live view: not with --log")
         return _replay(args, arm)
     keys = Keys(args.robot)
     stop = threading.Event()
@@ -158,15 +163,30 @@ def main_view(args: argparse.Namespace) -> int:
                     timer.daemon = True
                     timer.start()
                 try:
-                    run_view(session, keys, LiveView(server, arm, task), stop)
+                    report = run_view(session, keys, LiveView(server, arm, task), stop)
                 except KeyboardInterrupt:
-                    pass
+                    report = None
             finally:
                 stop_server(server)
     finally:
         signal.signal(signal.SIGTERM, previous)
-    print("sctd view: stopped", file=sys.stderr, flush=True)
+    _report(report, args.stats_json)
     return EXIT_OK
+
+
+def _report(report: dict | None, as_json: bool) -> None:
+    """The view's last words: a line for the person, and JSON when asked."""
+    if report is None:
+        print("sctd view: stopped", file=sys.stderr, flush=True)
+        return
+    read = ", ".join(f"{k} {n}" for k, n in report["read"].items()) or "nothing"
+    print(f"sctd view: stopped after {report['frames']} frames; read {read}; "
+          f"{report['dropped']} undecodable; skills drawn: {', '.join(report['skills']) or 'none'}",
+          file=sys.stderr, flush=True)
+    if as_json:
+        import json
+
+        print(json.dumps(report), flush=True)
 
 
 def _default_urdf():

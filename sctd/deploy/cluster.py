@@ -10,7 +10,7 @@ In the namespaces of :class:`~sctd.deploy.netns.Hosts`,
 - ``input``: the simulated user (on the cluster's task), or a steady input source;
 - ``learner``: ``sctd learner``;
 - ``observer``: a recorder of the contract's keys (JSON lines, see
-  ``python -m sctd.deploy.probe record``);
+  ``python -m sctd.deploy.probe record``), and the live view (``sctd view``) when asked;
 - ``intruder``: probes that try to read, write and query (:meth:`Cluster.intrude`).
 Every program is a Zenoh client of the router, configured only by its role's file.
 """
@@ -203,6 +203,13 @@ class Cluster:
         return self.hosts.python("observer", "sctd.deploy.probe", "record", "--config",
                                  str(self.config("sctd-observer")), "--out", str(self.records), *rec,
                                  log="observer.log")
+
+    def start_view(self, seconds: float) -> Process:
+        """``sctd view`` on the observer host with the observer's certificate, for
+        ``seconds``; it prints its report as JSON (``--stats-json``) when it stops."""
+        return self.hosts.python("observer", "sctd.cli.main", "view", "--task", self.task.name,
+                                 "--view-for", str(seconds), "--stats-json", *self.zenoh_args("observer"),
+                                 log="view.log")
 
     def start_steady_input(self) -> Process:
         """Input at 50 Hz, stick at rest and deadman held, until stopped."""

@@ -146,7 +146,7 @@ class Daemon:
         them (:func:`~sctd.wire.session.outbound_config`).
     bundle : bytes, optional
         The packed bundle ``skill`` was read from (:meth:`~sctd.skill.Bundle.pack`):
-        kept on disk before the first tick for ``skill?bundle`` (:mod:`.bundles`).
+        kept on disk before the first tick for ``skill/bundle`` (:mod:`.bundles`).
     """
 
     def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
@@ -155,7 +155,7 @@ class Daemon:
                  ros: Any = None, settings: SessionSettings | None = None,
                  bundle: bytes | None = None):
         self.config = config
-        self.bundle = bundle  # the packed bundle ``skill`` was read from: kept for ``skill?bundle``
+        self.bundle = bundle  # the packed bundle ``skill`` was read from: kept for ``skill/bundle``
         self.session = session
         self.settings = settings if settings is not None else SessionSettings()
         self.swap_on_skill_key = swap_on_skill_key

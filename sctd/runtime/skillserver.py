@@ -346,7 +346,7 @@ class _Link:
 
 
 class _Queries:
-    """The two queryables' handlers (on Zenoh's threads, in the skill server)."""
+    """The three queryables' handlers (on Zenoh's threads, in the skill server)."""
 
     def __init__(self, keys: Keys, link: _Link, worker: BundleWorker, swap_on_skill_key: bool,
                  bundles: str = ""):
@@ -360,6 +360,26 @@ class _Queries:
 
     def on_swap(self, query: zenoh.Query) -> None:
         self._on_query(query, self.keys.skill_swap)
+
+    def on_bundle(self, query: zenoh.Query) -> None:
+        """``skill/bundle``: the active bundle; it swaps nothing, so a payload is refused
+        without counting as a refused swap."""
+        with query:
+            try:
+                if query.payload is not None and len(query.payload) > 0:
+                    query.reply_err(_reply({"error": f"{self.keys.skill_bundle} is read-only: "
+                                                     f"ask with no payload"}), encoding=MSGPACK)
+                    return
+                ok, body = self.link.call("summary", None, SUMMARY_WAIT)
+                if ok:
+                    ok, body = self._bundle(body)
+                if ok:
+                    query.reply(self.keys.skill_bundle, _reply(body), encoding=MSGPACK)
+                else:
+                    query.reply_err(_reply({"error": body}), encoding=MSGPACK)
+            except Exception as e:  # every query gets a reply
+                log.exception("bundle query failed")
+                query.reply_err(_reply({"error": f"{WHERE}: {type(e).__name__}: {e}"}), encoding=MSGPACK)
 
     def _on_query(self, query: zenoh.Query, key: str) -> None:
         # The query ends (the asker stops waiting) when it is dropped: on leaving this
@@ -426,8 +446,8 @@ class _Queries:
                     encoding=MSGPACK)
 
     def _bundle(self, summary: dict[str, Any]) -> tuple[bool, Any]:
-        """``skill?bundle``: the active skill's bundle as kept, with its id, name and FSM
-        state (``{v, id, name, state, bundle}``), or an error naming why not."""
+        """``skill/bundle`` (and ``skill?bundle``): the active skill's bundle as kept, with
+        its id, name and FSM state (``{v, id, name, state, bundle}``), or why not."""
         data = bundles.kept(self.bundles, str(summary.get("id", "")))
         if data is None:
             return False, f"{WHERE}: the bundle of the active skill {summary.get('id')} is not kept"
@@ -465,7 +485,8 @@ def main(argv: list[str]) -> int:
         with BundleWorker() as worker:
             queries = _Queries(keys, link, worker, opts.swap_on_skill_key, opts.bundles)
             with session.declare_queryable(keys.skill, queries.on_skill), \
-                    session.declare_queryable(keys.skill_swap, queries.on_swap):
+                    session.declare_queryable(keys.skill_swap, queries.on_swap), \
+                    session.declare_queryable(keys.skill_bundle, queries.on_bundle):
                 if not _wait_connected(session, opts.daemon_zid, link, READY_WAIT) \
                         and not link.closed.is_set():
                     log.warning("not connected to the daemon's session after %g s; serving anyway",

@@ -63,21 +63,22 @@ def active_skill(session: zenoh.Session, keys: Keys, timeout: float = 3.0,
 
 def active_bundle(session: zenoh.Session, keys: Keys, timeout: float = 10.0,
                   find: float = FIND) -> tuple[Bundle, dict[str, Any]] | str:
-    """The running daemon's active skill as its bundle (``get skill?bundle``), with the
-    reply's ``{v, id, name, state}``; or why not, as a sentence. The bundle is unpacked
-    with the size limits of a swap (:meth:`~sctd.skill.Bundle.unpack`)."""
-    got = query(session, keys.skill, None, timeout, find, parameters="bundle")
+    """The running daemon's active skill as its bundle (``get skill/bundle``, which an
+    observer may ask), with the reply's ``{v, id, name, state}``; or why not, as a
+    sentence. The bundle is unpacked with the size limits of a swap
+    (:meth:`~sctd.skill.Bundle.unpack`)."""
+    got = query(session, keys.skill_bundle, None, timeout, find)
     if got is None:
-        return f"no daemon answered on {keys.skill} (none found within {find:g} s, or no reply)"
+        return f"no daemon answered on {keys.skill_bundle} (none found within {find:g} s, or no reply)"
     ok, body = got
     if not ok:
         return str(body.get("error"))
     if body.get("v") != 1 or not isinstance(body.get("bundle"), bytes):
-        return f"{keys.skill}?bundle: unexpected reply (v {body.get('v')!r})"
+        return f"{keys.skill_bundle}: unexpected reply (v {body.get('v')!r})"
     try:
         bundle = Bundle.unpack(body["bundle"])
     except SkillError as e:
-        return f"{keys.skill}?bundle: {e}"
+        return f"{keys.skill_bundle}: {e}"
     return bundle, {k: body.get(k) for k in ("v", "id", "name", "state")}
 
 

@@ -50,6 +50,13 @@ class Keys:
         return f"{self.prefix}/skill/swap"
 
     @property
+    def skill_bundle(self) -> str:
+        """The active skill's bundle, read-only (a policy can allow it alone: an observer's
+        view reads the skill it draws without the right to ask ``skill``, which swaps in
+        wire contract v1)."""
+        return f"{self.prefix}/skill/bundle"
+
+    @property
     def scene(self) -> str:
         return f"{self.prefix}/scene"
 

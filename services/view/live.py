@@ -10,7 +10,7 @@ at about 30 Hz):
 - the task's bodies (:mod:`.task_scene`) at the poses the robot publishes, a joint's
   moving part at the position the scene reports (``<joint>.position``), what the hand
   holds in the hand;
-- the active skill (fetched whole, ``skill?bundle``, whenever the daemon's skill id
+- the active skill (fetched whole, ``skill/bundle``, whenever the daemon's skill id
   changes) at its object's pose: the active state's elements redrawn with the hand
   where it is (what each axis does *here*, the constraints at the hand's frames), a
   state picker that follows the daemon's state unless a state is picked;

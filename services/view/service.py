@@ -1,7 +1,7 @@
 """``sctd view``: the live view's process, an observer of the robot's keys.
 
-It subscribes, and declares nothing else but one querier on ``skill`` (the active
-bundle, ``skill?bundle``, whenever the status names another skill id): no publisher,
+It subscribes, and declares nothing else but one querier on ``skill/bundle`` (the
+active bundle, whenever the status names another skill id): no publisher,
 no querier on ``input``, ``target``, ``skill/swap`` or any other key that commands
 (:data:`READS` lists what it reads). Deployed across hosts it runs with the
 ``sctd-observer`` role's certificate.
@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import Counter
 
 import zenoh
 
@@ -51,6 +52,7 @@ class Feed:
         self._status: dict | None = None
         self._scene: dict | None = None
         self.dropped = 0  # messages that did not decode
+        self.read: Counter[str] = Counter()  # messages read, by key under sctd/<robot>/
         self._last_state: tuple[list | None, list | None] = (None, None)
         self._last_target: dict | None = None
         ring = zenoh.handlers.RingChannel
@@ -71,6 +73,7 @@ class Feed:
                 return
             with self._lock:
                 setattr(self, f"_{what}", msg)
+                self.read[what] += 1
         return store
 
     def _on_object(self, name: str):
@@ -82,6 +85,7 @@ class Feed:
                 return
             with self._lock:
                 self._objects[name] = list(pose)
+                self.read[f"objects/{name}"] += 1
         return store
 
     def _on_input(self, sample: zenoh.Sample) -> None:
@@ -94,6 +98,7 @@ class Feed:
         with self._lock:
             if len(self._inputs) < 16 or device in self._inputs:  # a bound on what a key can cost
                 self._inputs[device] = (list(msg.u), msg.stamp)
+                self.read[f"input/{device}"] += 1
 
     def snapshot(self) -> Snapshot:
         """The newest of everything (the 1 kHz rings emptied)."""
@@ -103,8 +108,10 @@ class Feed:
             if state is not None:
                 msg = codec.decode_state(state.payload.to_bytes())
                 self._last_state = (list(msg.pose), msg.q)
+                self.read["state"] += 1
             if target is not None:
                 self._last_target = codec.decode_target(target.payload.to_bytes())
+                self.read["target"] += 1
         except Exception:
             self.dropped += 1
         snap.pose, snap.q = self._last_state
@@ -114,6 +121,11 @@ class Feed:
             snap.inputs = dict(self._inputs)
             snap.status, snap.scene = self._status, self._scene
         return snap
+
+    def counts(self) -> tuple[dict[str, int], int]:
+        """Messages read by key, and those that did not decode."""
+        with self._lock:
+            return dict(sorted(self.read.items())), self.dropped
 
     def close(self) -> None:
         for s in (self._state, self._target, *self._subs):
@@ -127,33 +139,85 @@ class Feed:
 
 
 def run_view(session: zenoh.Session, keys: Keys, view: LiveView, stop: threading.Event,
-             rate: float = RATE) -> None:
-    """Draw the robot's keys on ``view`` at ``rate`` until ``stop`` is set."""
+             rate: float = RATE) -> dict:
+    """Draw the robot's keys on ``view`` at ``rate`` until ``stop`` is set; what it did:
+    ``{frames, read: {key: messages}, dropped, skills: [ids drawn], fetch_failures}``
+    (the 1 kHz keys count the messages drawn from, one a frame at most). The active
+    bundle is fetched beside the drawing: a daemon slow to answer never stops the view."""
     task = view.task
     objects = set(task.scene.bodies) if task is not None else set()
-    with Feed(session, keys, objects) as feed:
+    report: dict = {"frames": 0, "skills": [], "fetch_failures": 0}
+    with Feed(session, keys, objects) as feed, _Fetcher(session, keys) as fetcher:
         skill_id, retry = None, 0.0
         period, due = 1.0 / rate, time.monotonic()
         while not stop.is_set():
             snap = feed.snapshot()
             wanted = (snap.status or {}).get("skill")
             if wanted and wanted != skill_id and snap.t >= retry:
-                got = _fetch(session, keys, view, wanted)
-                skill_id, retry = (got, 0.0) if got else (skill_id, snap.t + FETCH_RETRY)
+                fetcher.want(str(wanted))
+            done = fetcher.take()
+            if done is not None:
+                skill, got = done
+                if skill is not None:
+                    view.set_skill(skill)
+                    report["skills"].append(got)
+                    skill_id, retry = got, 0.0
+                else:
+                    report["fetch_failures"] += 1
+                    retry = time.monotonic() + FETCH_RETRY
             view.draw(snap)
+            report["frames"] += 1
             due += period
             stop.wait(max(0.0, due - time.monotonic()))
+        report["read"], report["dropped"] = feed.counts()
+    return report
 
 
-def _fetch(session: zenoh.Session, keys: Keys, view: LiveView, wanted: str) -> str | None:
-    """Fetch the active bundle and draw its skill; its id, or None when it failed."""
-    from sctd.skill import skill_from_bundle
+class _Fetcher:
+    """Fetches the active bundle on a thread of its own, one fetch at a time (a context
+    manager: waits for the fetch in flight at exit)."""
 
-    got = client.active_bundle(session, keys, timeout=5.0, find=2.0)
-    if isinstance(got, str):
-        log.warning("cannot fetch the active skill %s: %s", wanted, got)
-        return None
-    bundle, meta = got
-    view.set_skill(skill_from_bundle(bundle))
-    log.info("drawing skill %s@%s", meta.get("name"), meta.get("id"))
-    return str(meta.get("id"))
+    def __init__(self, session: zenoh.Session, keys: Keys):
+        self.session, self.keys = session, keys
+        self._thread: threading.Thread | None = None
+        self._done: tuple | None = None
+
+    def want(self, skill_id: str) -> None:
+        """Start fetching unless a fetch is in flight or waits to be taken."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._fetch, args=(skill_id,), name="sctd-view-fetch",
+                                            daemon=True)
+            self._thread.start()
+
+    def take(self) -> tuple | None:
+        """A finished fetch: (skill, its id), or (None, None) when it failed; None while
+        none has finished."""
+        if self._thread is None or self._thread.is_alive():
+            return None
+        self._thread, done, self._done = None, self._done, None
+        return done
+
+    def _fetch(self, wanted: str) -> None:
+        from sctd.skill import SkillError, skill_from_bundle
+
+        got = client.active_bundle(self.session, self.keys, timeout=5.0, find=2.0)
+        if isinstance(got, str):
+            log.warning("cannot fetch the active skill %s: %s", wanted, got)
+            self._done = (None, None)
+            return
+        bundle, meta = got
+        try:
+            skill = skill_from_bundle(bundle)
+        except SkillError as e:  # a bundle the daemon runs loads; if not, say so
+            log.warning("cannot load the active skill %s: %s", wanted, e)
+            self._done = (None, None)
+            return
+        log.info("drawing skill %s@%s", meta.get("name"), meta.get("id"))
+        self._done = (skill, str(meta.get("id")))
+
+    def __enter__(self) -> _Fetcher:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._thread is not None:
+            self._thread.join(10.0)
