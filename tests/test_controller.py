@@ -516,3 +516,28 @@ def test_the_stuck_detector_never_changes_a_target(events):
     for a, b in zip(on.run(steps), off.run(steps), strict=True):
         assert (a.mode, a.state, a.pose) == (b.mode, b.state, b.pose)
     assert off.c.counters.stuck == 0 and on.c.counters.escapes == off.c.counters.escapes
+
+
+def test_constraint_activity_counts_the_commands_each_constraint_changed():
+    """pour's carry state (tilt cone, then band 0.03-0.60 m above the mug): pushing up
+    until the band's top holds the tip, the band acts on every command and the cone on
+    none; pushing down it lets go; zero input computes no command; entering another
+    state starts a new count."""
+    c = ctl()
+    eng = c.engine
+    run(c, [[0, 0, 1]] * 6000)
+    assert eng.state == "carry" and eng.commands > 5000
+    tilt, band = eng.acted
+    assert tilt == 0 and band > 500, eng.acted
+    commands, acted = eng.commands, list(eng.acted)
+    run(c, [[0, 0, 1]] * 200, t0=6.0)
+    assert eng.commands - commands == 200 and eng.acted == [0, acted[1] + 200]
+    commands, acted = eng.commands, list(eng.acted)
+    run(c, [[0, 0, 0]] * 100, t0=6.2)  # at rest: no command
+    assert eng.commands == commands
+    run(c, [[0, 0, -1]] * 200, t0=6.3)  # away from the limit: free
+    assert eng.commands - commands == 200 and eng.acted == acted
+    entries = eng.entries
+    eng.reset(6.5, "approach")
+    assert eng.entries == entries + 1 and eng.commands == 0
+    assert eng.acted == [0] * len(SKILL.states[SKILL.state_index("approach")].active_constraints)

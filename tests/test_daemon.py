@@ -153,10 +153,33 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
         "stamp", "skill", "skill_name", "state", "finished", "stuck", "mode", "rate", "realtime",
         "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
-        "state_age", "object_age", "in_seq", "input", "vf_scale", "dropped", "counters"}
+        "state_age", "object_age", "in_seq", "input", "vf_scale", "constraints", "dropped", "counters"}
     assert (first["targets"], first["target_rate"], first["realtime"]) == (50, 100.0, True)
     assert first["publish_ms"] is None and first["mode"] == "waiting"
     assert stats.next_status == 0.75 and stats.window_targets == 50
     driver.target_seq = 60  # 10 more in the next 0.25 s
     assert status.close_window(ticker, 0.75)["target_rate"] == 40.0
     assert status.map(ticker, 0.75, 0.0)["target_rate"] is None  # the final statistics
+
+
+def test_the_status_says_how_often_each_constraint_acted_in_its_window(skills):
+    """``status.constraints``: the engine's counts since the last window closed, or
+    since the active state was entered when that was later (a new engine after a swap
+    counts from its start)."""
+    pour, _ = skills
+    driver = TickDriver(pour, RuntimeConfig())
+    status = DaemonStatus(driver, TickStats(0.0, driver.engine.state, status_period=0.25), SkillSwap(driver))
+    ticker, eng = Ticker(1e-3), driver.controller.engine
+
+    def window(t: float) -> tuple:
+        got = status.close_window(ticker, t)["constraints"]
+        return got["state"], got["commands"], got["acted"]
+    eng.commands, eng.acted = 10, [0, 3]
+    assert window(0.25) == ("carry", 10, [0, 3])
+    eng.commands, eng.acted = 25, [1, 10]
+    assert window(0.5) == ("carry", 15, [1, 7])
+    eng.reset(0.6, "pour")
+    eng.commands, eng.acted = 4, [0, 4]
+    assert window(0.75) == ("pour", 4, [0, 4])
+    driver.controller.engine = type(eng)(pour)  # a swap: a new engine, counting from 0
+    assert window(1.0) == ("carry", 0, [0, 0])

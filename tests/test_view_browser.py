@@ -304,6 +304,9 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
         pushed.set()
         threads[1].join(10)
         assert wait_for(lambda: "stopped" in view.person.content, 20), view.person.content
+        # the daemon's constraint activity is plotted: approach's cone and band, numbers
+        _, c1, c2, c3, _ = view.constraint_plot.data
+        assert np.isfinite(c1[-1]) and np.isfinite(c2[-1]) and np.isnan(c3[-1])
         drawn = view.redraws
         assert wait_for(lambda: view.redraws > drawn + 1, 10)  # the hand at rest, drawn at it
         stop.set()  # the scene as it was last drawn stays: the pixels are checked on it

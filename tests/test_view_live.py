@@ -122,6 +122,36 @@ def test_the_plots_show_the_input_of_the_device_that_owns_the_motion(server):
     assert np.allclose(speed[2:], 0.1)  # 1 cm per 0.1 s
 
 
+def test_the_constraints_plot_and_held_by_follow_the_runtimes_report(server):
+    """``status.constraints`` (the share of the window's commands each constraint
+    changed) is plotted per constraint of the active state, named under the plot, and
+    says what holds the hand: the runtime's word, not the view's guess from the pose."""
+    task = find_task("pour")
+    view = LiveView(server, None, task)
+    view.set_skill(load_skill(SKILLS / "pour.yaml"))
+    T_mug = task.scene.bodies["mug"].T_world
+    inside = T_mug @ se3.transform_from_pose([0.0, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0])  # tip in the box
+    for k in range(12):
+        acted = [0, 40] if k >= 6 else [0, 0]
+        view.draw(Snapshot(t=0.1 * k, pose=pose_of(inside), objects={"mug": pose_of(T_mug)},
+                           target={"pose": pose_of(inside), "state": "pour"},
+                           status={"mode": "running", "state": "pour",
+                                   "constraints": {"state": "pour", "commands": 50, "acted": acted}}))
+    t, c1, c2, c3, c4 = view.constraint_plot.data
+    assert list(c1) == [0.0] * 12 and list(c2[:6]) == [0.0] * 6 and list(c2[6:]) == [0.8] * 6
+    assert np.isnan(c3).all() and np.isnan(c4).all()  # pour's pour state has two constraints
+    assert "held by: tip stays in this box" in view.person.content
+    legend = view.constraint_legend.content
+    assert "constraints of **pour**" in legend and "2: tip stays in this box" in legend
+    # past the box by the pose, but the runtime says nothing acted: nothing holds
+    beside = T_mug @ se3.transform_from_pose([0.045, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0])
+    view.draw(Snapshot(t=1.3, pose=pose_of(beside), objects={"mug": pose_of(T_mug)},
+                       target={"pose": pose_of(beside), "state": "pour"},
+                       status={"mode": "running", "state": "pour",
+                               "constraints": {"state": "pour", "commands": 50, "acted": [0, 0]}}))
+    assert "held by" not in view.person.content
+
+
 # -- from a log ----------------------------------------------------------------------------
 def _log(skill_id: str) -> list:
     """Messages as ``read_log`` gives them: 2 s of a hand moving 10 cm along x."""

@@ -104,6 +104,9 @@ class DaemonStatus:
                  publisher: Publisher | None = None, ros: Any = None, realtime: bool = False):
         self.driver, self.stats, self.swap = driver, stats, swap
         self.publisher, self.ros, self.realtime = publisher, ros, realtime
+        # the engine's activity count when the last window closed: (engine, entries,
+        # commands, acted); a window's activity is the count since
+        self._activity_base: tuple[object, int, int, list[int]] | None = None
 
     def close_window(self, ticker: Ticker, now: float) -> dict[str, Any]:
         """The status map that closes a status window (and, each :data:`RECENT` s, the
@@ -112,7 +115,23 @@ class DaemonStatus:
         stats.roll_recent(now)
         status = self.map(ticker, now, now - stats.window_start)
         stats.next_window(now, self.driver.target_seq)
+        eng = self.driver.controller.engine
+        self._activity_base = (eng, eng.entries, eng.commands, list(eng.acted))
         return status
+
+    def activity(self) -> dict[str, Any]:
+        """``status.constraints``: in the status window, the commands computed in the
+        active state (since it was entered, if that was in the window) and, for each of
+        its active constraints (the skill file's order), how many of them it changed:
+        the constraint held the hand against the person's push."""
+        eng = self.driver.controller.engine
+        base = self._activity_base
+        if base is not None and base[0] is eng and base[1] == eng.entries:
+            commands = eng.commands - base[2]
+            acted = [a - b for a, b in zip(eng.acted, base[3], strict=True)]
+        else:
+            commands, acted = eng.commands, list(eng.acted)
+        return {"state": eng.state, "commands": commands, "acted": acted}
 
     def map(self, ticker: Ticker, now: float, window: float) -> dict[str, Any]:
         """The status map at ``now`` (monotonic), over a status window of ``window`` s
@@ -153,6 +172,7 @@ class DaemonStatus:
             "in_seq": last.msg.seq if last is not None and last.msg is not None else -1,
             "input": drv.inputs.summary(),
             "vf_scale": ctl.engine.last_scale,
+            "constraints": self.activity(),
             "dropped": dict(c.drops),
             "counters": {**c.as_dict(), "swaps_refused": self.swap.refused},
         }

@@ -55,11 +55,14 @@ class SkillEngine:
             for s, out in zip(skill.states, self._out_of, strict=True)]
         self._steps = [tuple(t.progress_step for t in w) for w in self._watched]
         # per state: the constraints that move the pose, in order, then those that bound
-        # the step (they have the last word on how far a command moves)
-        self._projected: list[tuple[ActiveConstraint, ...]] = [
-            tuple(c for c in s.active_constraints if not isinstance(c, StepLimit)) for s in skill.states]
-        self._limits: list[tuple[StepLimit, ...]] = [
-            tuple(c for c in s.active_constraints if isinstance(c, StepLimit)) for s in skill.states]
+        # the step (they have the last word on how far a command moves), each with its
+        # place among the state's active constraints (for :attr:`acted`)
+        self._projected: list[tuple[tuple[int, ActiveConstraint], ...]] = [
+            tuple((k, c) for k, c in enumerate(s.active_constraints) if not isinstance(c, StepLimit))
+            for s in skill.states]
+        self._limits: list[tuple[tuple[int, StepLimit], ...]] = [
+            tuple((k, c) for k, c in enumerate(s.active_constraints) if isinstance(c, StepLimit))
+            for s in skill.states]
         self._axes: list[tuple[int, ...]] = []
         for s in skill.states:
             axes: set[int] = set()
@@ -72,6 +75,11 @@ class SkillEngine:
         self.history: deque[int] = deque(maxlen=HISTORY)
         self.escaped = False  # the last update's change was an escape
         self._disarmed: set[int] = set()  # the active state's guards an escape disarmed
+        # Constraint activity since the active state was entered: commands computed, and
+        # for each of its active constraints (the skill's order) how many it changed.
+        self.entries = 0  # states entered (a new count of activity begins at each)
+        self.commands = 0
+        self.acted: list[int] = [0] * len(skill.states[self.index].active_constraints)
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -113,6 +121,7 @@ class SkillEngine:
         if index != self.index:
             self.history.clear()
             self._disarmed = set()
+            self._count_from(index)
         self.index = index
         self.entered = now
 
@@ -176,10 +185,17 @@ class SkillEngine:
             self.history.pop()  # back the way it came: the path gets shorter
         else:
             self.history.append(self.index)
+        self._count_from(index)
         self.index = index
         self.entered = now
         self._disarmed = set()
         return True
+
+    def _count_from(self, index: int) -> None:
+        """A new count of constraint activity, for state ``index`` entered."""
+        self.entries += 1
+        self.commands = 0
+        self.acted = [0] * len(self.skill.states[index].active_constraints)
 
     # --- progress (the stuck detector's view) -------------------------------------------
 
@@ -235,14 +251,20 @@ class SkillEngine:
             F = m.apply(F, uu, dt, ws)
         G = None  # the constraint frame's pose, reused while F and the frame stay
         frame = None
-        for c in self._projected[self.index]:
+        acted = self.acted
+        self.commands += 1
+        for k, c in self._projected[self.index]:
             if c.frame != frame or G is None:
                 G, frame = ws.frame_pose(F, c.frame), c.frame
             F_next = c.project(F, G, ws)
             if F_next is not F:
                 F, G = F_next, None
-        for limit in self._limits[self.index]:
-            F = limit.limit(F_obj_ee, F, ws, dt)
+                acted[k] += 1
+        for k, limit in self._limits[self.index]:
+            F_next = limit.limit(F_obj_ee, F, ws, dt)
+            if F_next is not F:
+                F = F_next
+                acted[k] += 1
         ws.turn_budget = math.inf  # a projection outside a command is a whole one
         return F
 

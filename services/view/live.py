@@ -17,8 +17,9 @@ at about 30 Hz):
 - for the person in the chair, a panel readable at arm's length: the mode, what each
   axis does now, what holds the hand (a constraint it presses against) and why the
   runtime holds (its ``status.mode`` and stuck report);
-- plots of the last :data:`WINDOW` s: the input of the device that owns the motion, and
-  the hand's speed and the state.
+- plots of the last :data:`WINDOW` s: the input of the device that owns the motion, the
+  hand's speed and the state, and the constraints' activity (``status.constraints``:
+  the share of the person's commands each constraint of the active state changed).
 """
 
 from __future__ import annotations
@@ -37,12 +38,14 @@ from sctd.task import Task
 
 from .arm import ArmGeometry
 from .draw import SkillView, lights
-from .skill_scene import holding, skill_scene, state_scene, workspace
+from .skill_scene import constraint_labels, holding, skill_scene, state_scene, workspace
 from .task_scene import default_poses, part_pose, task_parts
 
 WINDOW = 10.0  # s of history in the plots
 REDRAW = 0.2  # s between redraws of the active state at the hand (the arrows follow it)
 PLOT_EVERY = 0.2  # s between updates of the plots
+CONSTRAINT_SERIES = 4  # constraints plotted (the shipped skills have at most 2 a state)
+HELD = 0.5  # share of the window's commands a constraint changed for "held by" to name it
 HOLDS = {"waiting": "waiting for the robot's state and the object's pose",
          "hold": "holding: the robot's state or the object's pose is stale",
          "fault": "holding: the robot's state jumped; waiting to start again from where it is",
@@ -90,7 +93,8 @@ class LiveView:
         self.replay_slider: Any = None
         self._redrawn_state = ""
         self._plotted = 0.0
-        self._history: deque[tuple[float, float, float, float, float, float]] = deque()
+        self._history: deque[tuple[float, ...]] = deque()
+        self._legend_for: tuple[str, str] = ("", "")  # (skill id, state) the legend says
         self._last_pose: tuple[float, np.ndarray] | None = None
         lights(server)
         sc = server.scene
@@ -211,6 +215,14 @@ class LiveView:
                                                                         width=2),
                             uplot.Series(label="state", stroke="#ff7f0e", width=2, scale="state")),
                 title="hand speed and state", aspect=2.0, scales={"x": uplot.Scale(time=False)})
+            palette = ("#9467bd", "#d4a017", "#17becf", "#8c564b")
+            self.constraint_plot = gui.add_uplot(
+                (x,) * (1 + CONSTRAINT_SERIES),
+                (uplot.Series(label="t [s]"), *(uplot.Series(label=f"constraint {k + 1}", stroke=c, width=2)
+                                                 for k, c in enumerate(palette))),
+                title="constraints: share of the commands each changed", aspect=2.0,
+                scales={"x": uplot.Scale(time=False), "y": uplot.Scale(auto=False, range=(0.0, 1.05))})
+            self.constraint_legend = gui.add_markdown("")
 
     def _record(self, snap: Snapshot) -> None:
         """The plots' history: owner's input, the hand's speed, the state's index."""
@@ -231,7 +243,10 @@ class LiveView:
         state = (snap.target or {}).get("state")
         index = float(self.skill.state_index(state)) if self.skill is not None and state in \
             [s.name for s in self.skill.states] else float("nan")
-        self._history.append((snap.t, float(u[0]), float(u[1]), float(u[2]), speed, index))
+        shares = acting(status, self.skill)
+        acts = [shares[k] if shares is not None and k < len(shares) else float("nan")
+                for k in range(CONSTRAINT_SERIES)]
+        self._history.append((snap.t, float(u[0]), float(u[1]), float(u[2]), speed, index, *acts))
         while self._history and self._history[0][0] < snap.t - WINDOW:
             self._history.popleft()
         if snap.t - self._plotted >= PLOT_EVERY and len(self._history) > 1:
@@ -240,6 +255,17 @@ class LiveView:
             t = h[:, 0] - h[-1, 0]
             self.input_plot.data = (t, h[:, 1], h[:, 2], h[:, 3])
             self.motion_plot.data = (t, h[:, 4], h[:, 5])
+            self.constraint_plot.data = (t, *(h[:, 6 + k] for k in range(CONSTRAINT_SERIES)))
+
+    def _legend(self, skill: Skill, state: str, labels: list[str]) -> None:
+        """Under the constraints' plot: which constraint each series is, in ``state``."""
+        if self._legend_for == (skill.id, state):
+            return
+        self._legend_for = (skill.id, state)
+        lines = [f"{k + 1}: {label}" for k, label in enumerate(labels[:CONSTRAINT_SERIES])]
+        if len(labels) > CONSTRAINT_SERIES:
+            lines.append(f"(constraints {CONSTRAINT_SERIES + 1}-{len(labels)} are not plotted)")
+        self.constraint_legend.content = f"constraints of **{state}**: " + ("; ".join(lines) or "none")
 
     def _describe(self, snap: Snapshot) -> None:
         """The person's panel: mode, what each axis does now, what holds the hand, why
@@ -255,9 +281,16 @@ class LiveView:
             T_obj = self._object_pose(snap)
             if T_obj is not None and snap.pose is not None:
                 T_obj_ee = se3.invert_transform(T_obj) @ se3.transform_from_pose(snap.pose)
-                held = holding(skill, skill.state_index(st.name), T_obj_ee, self.ws)
+                i = skill.state_index(st.name)
+                labels = constraint_labels(skill, i, T_obj_ee, self.ws)
+                shares = acting(status, skill)
+                if shares is not None and status["constraints"].get("state") == st.name:
+                    held = [label for label, share in zip(labels, shares, strict=True) if share >= HELD]
+                else:  # the status does not say: where the hand is does
+                    held = holding(skill, i, T_obj_ee, self.ws)
                 if held:
                     lines.append("held by: " + "; ".join(held))
+                self._legend(skill, st.name, labels)
         mode = status.get("mode")
         if mode in HOLDS:
             lines.append(f"<b>{HOLDS[mode]}</b>")
@@ -266,3 +299,19 @@ class LiveView:
             lines.append(f"<b>stuck in {stuck.get('state')} for {stuck.get('since', 0):.0f} s: the escape "
                          "button goes back</b>")
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
+
+
+def acting(status: dict, skill: Skill | None) -> list[float] | None:
+    """The share of the status window's commands each active constraint changed
+    (``status.constraints``), or None when the status does not say it for a state of
+    ``skill`` (no command in the window: all 0)."""
+    got = status.get("constraints")
+    if skill is None or not isinstance(got, dict) or got.get("state") not in [s.name for s in skill.states]:
+        return None
+    acted, commands = got.get("acted"), got.get("commands")
+    n = len(skill.states[skill.state_index(got["state"])].active_constraints)
+    if not isinstance(acted, list) or len(acted) != n or not isinstance(commands, int) or commands < 0:
+        return None
+    if commands == 0:
+        return [0.0] * n
+    return [min(1.0, max(0.0, float(a) / commands)) if isinstance(a, int) else 0.0 for a in acted]

@@ -145,17 +145,30 @@ def state_scene(skill: Skill, i: int, T_obj_ee: Array, ws: Workspace) -> StateSc
 def holding(skill: Skill, i: int, T_obj_ee: Array, ws: Workspace) -> list[str]:
     """The constraints of state ``i`` that hold the hand at ``T_obj_ee`` (object frame):
     the bounding ones (``bounds``) whose projection moves it (by more than 0.1 mm or 1
-    mrad: the hand is on or past the limit), each as its sketch's label (or its kind)."""
+    mrad: the hand is on or past the limit), each as its sketch's label (or its kind).
+    (What the view infers from where the hand is, when the runtime's status does not
+    say which constraints acted: a log of an older daemon.)"""
     F = se3.flat_from_transform(T_obj_ee)
+    labels = constraint_labels(skill, i, T_obj_ee, ws)
     out = []
-    for c in skill.states[i].active_constraints:
+    for c, label in zip(skill.states[i].active_constraints, labels, strict=True):
         if not c.bounds:
             continue
         P = c.project(F, ws.frame_pose(F, c.frame), ws)
         d = np.asarray(P) - np.asarray(F)
         if P is not F and (np.max(np.abs(d[9:])) > 1e-4 or np.max(np.abs(d[:9])) > 1e-3):
-            shapes = c.sketch(ws.frame_pose(F, c.frame))
-            out.append(shapes[0].label if shapes else c.type)
+            out.append(label)
+    return out
+
+
+def constraint_labels(skill: Skill, i: int, T_obj_ee: Array, ws: Workspace) -> list[str]:
+    """Each active constraint of state ``i`` in words (its sketch's label at the hand
+    ``T_obj_ee``, object frame, or its kind), in the skill file's order."""
+    F = se3.flat_from_transform(T_obj_ee)
+    out = []
+    for c in skill.states[i].active_constraints:
+        shapes = c.sketch(ws.frame_pose(F, c.frame))
+        out.append(shapes[0].label if shapes else c.type)
     return out
 
 
