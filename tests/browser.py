@@ -381,6 +381,17 @@ class ViserPage(BrowserPage):
         uv = project(points_world, c.position, c.look_at, c.up, c.fov, round(width), round(height))
         return np.floor(uv[..., ::-1] + (top, left)).astype(int)
 
+    def panel_box(self) -> tuple[float, float, float, float] | None:
+        """Viser's GUI panel over the scene, ``(left, top, width, height)`` CSS px, or
+        None when there is none (its scroll bar and a focused input's label change
+        the pixels there: not the scene's)."""
+        panel = self.page.get_by_text("Connected", exact=True).locator(
+            "xpath=ancestor::div[contains(@class, 'mantine-Paper-root')][1]")
+        if panel.count() == 0:
+            return None
+        box = panel.first.bounding_box()
+        return None if box is None else (box["x"], box["y"], box["width"], box["height"])
+
     def choose(self, label: str, option: str) -> None:
         """Pick ``option`` in the GUI dropdown labelled ``label`` with clicks: the
         input (a Mantine Select), then the option in the list it opens."""

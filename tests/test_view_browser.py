@@ -74,7 +74,8 @@ def near(mask: np.ndarray, rc, radius: int = 6) -> bool:
 def drawn_where_projected(view, handle, points: np.ndarray, radius: int = 6) -> None:
     """Hiding ``handle`` changes pixels near the projection of ``points`` (n, 3; world)
     and the changed pixels all lie near some projected point (within the box around
-    them, widened by the shape's size on screen)."""
+    them, widened by the shape's size on screen). The GUI panel is not the scene: its
+    pixels are left out."""
     view.settle()
     shown = view.screenshot()
     handle.visible = False
@@ -82,6 +83,10 @@ def drawn_where_projected(view, handle, points: np.ndarray, radius: int = 6) -> 
     hidden = view.screenshot()
     handle.visible = True
     diff = changed(shown, hidden)
+    panel = view.panel_box()
+    if panel is not None:
+        left, top, width, height = (round(v) for v in panel)
+        diff[max(top, 0):top + height + 1, max(left, 0):left + width + 1] = False
     px = view.pixels(points)
     inside = (px[:, 0] >= 0) & (px[:, 0] < H) & (px[:, 1] >= 0) & (px[:, 1] < W)
     assert inside.any(), "none of its points is in the view"
@@ -178,8 +183,8 @@ def test_demonstrations_are_coloured_by_the_state_the_fsm_gives_them(skill_view)
         for state in (0, 1):
             idx = np.flatnonzero(path.states == state)
             assert len(idx) > 20
-            # well inside the stretch, and no outlier (the shipped pour's demonstrations
-            # have 5 % gross outliers, drawn as they are)
+            # well inside the stretch, away from a dropped outlier's gap (the shipped
+            # pour's demonstrations have 5 % gross outliers, drawn apart as grey dots)
             steps = np.linalg.norm(np.diff(path.points, axis=0), axis=1)
             calm = [i for i in idx[len(idx) // 4: 3 * len(idx) // 4]
                     if 0 < i < len(steps) and steps[i - 1] < 0.01 and steps[i] < 0.01]
@@ -187,7 +192,10 @@ def test_demonstrations_are_coloured_by_the_state_the_fsm_gives_them(skill_view)
             px = page.pixels(samples)
             hits = sum(has_colour(image, p, state_rgb(state)) for p in px)
             assert hits >= 0.6 * len(px), (state, hits, len(px))
-        drawn_where_projected(page, view.handles["/skill/demos/0"], path.points, radius=4)
+        drawn_where_projected(page, view.handles["/skill/demos/0"], np.vstack([path.points, path.spikes]),
+                              radius=4)
+        # the outliers are grey dots where they are, apart from the path
+        drawn_where_projected(page, view.handles["/skill/demos/0/spikes"], path.spikes, radius=4)
 
 
 @pytest.mark.slow
@@ -355,3 +363,50 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
     subscribed = {key for k, key in recording.declared if k == "declare_subscriber"}
     assert {keys.state, keys.target, keys.status, keys.scene, keys.objects("mug")} <= subscribed
     assert not any(key.startswith(keys.skill_swap) for _, key in recording.declared)
+
+
+# -- from a log: the timeline scrubbed in the page -------------------------------------------
+@pytest.mark.slow
+def test_a_logs_slider_dragged_in_the_page_scrubs_the_view():
+    """`sctd view --log`'s time slider, clicked in the page at three quarters of its
+    track: the view draws the log at that time (the server's slider and what was drawn
+    agree), with the hand where the log's state says, drawn there."""
+    import threading
+
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.timeline import Timeline, run_replay
+    from sctd_sim.view import stop_server, viser_server
+    from tests.test_view_live import _log
+
+    skill = load_skill(SKILLS / "pour.yaml")
+    timeline = Timeline(_log(skill.id), "sctd/edan")
+    server = viser_server(0)
+    view = LiveView(server, None, find_task("pour"))
+    view.set_skill(skill)
+    stop = threading.Event()
+    thread = threading.Thread(target=run_replay, args=(view, timeline, stop), daemon=True)
+    thread.start()
+    try:
+        assert wait_for(lambda: view.replay_slider is not None and view.drawn_at == 0.0, 10)
+        with browser.open_viser(server, W, H) as page:
+            track = page.page.locator(".mantine-Slider-trackContainer").first  # the Log folder's
+            box = track.bounding_box()
+            assert box is not None
+            page.page.mouse.click(box["x"] + 0.75 * box["width"], box["y"] + box["height"] / 2)
+            # off the slider, and not focused: its value label is not the scene's
+            page.page.mouse.move(5, H - 5)
+            page.page.evaluate("document.activeElement && document.activeElement.blur()")
+            assert wait_for(lambda: abs(view.drawn_at - 0.75 * timeline.duration) < 0.1, 10), view.drawn_at
+            assert view.replay_slider.value == view.drawn_at
+            hand = np.asarray(timeline.at(view.drawn_at).pose[:3])
+            assert np.allclose(view.handles["/hand"].position, hand)
+            assert "mode: <b>approach</b>" in view.person.content  # the log's state after 1 s
+            for part in view.parts:  # the bottle in the hand would change with the hand
+                view.handles[part.name].visible = False
+            page.set_camera(Camera(position=(0.75, -0.7, 0.95), look_at=(0.75, 0.0, 0.7), fov=0.8))
+            axes = hand + np.vstack([np.zeros(3), 0.06 * np.eye(3)])  # the frame's origin and axes' ends
+            drawn_where_projected(page, view.handles["/hand"], axes, radius=10)
+    finally:
+        stop.set()
+        thread.join(10)
+        stop_server(server)

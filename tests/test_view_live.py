@@ -137,7 +137,7 @@ def test_the_constraints_plot_and_held_by_follow_the_runtimes_report(server):
                            target={"pose": pose_of(inside), "state": "pour"},
                            status={"mode": "running", "state": "pour",
                                    "constraints": {"state": "pour", "commands": 50, "acted": acted}}))
-    t, c1, c2, c3, c4 = view.constraint_plot.data
+    _, c1, c2, c3, c4 = view.constraint_plot.data
     assert list(c1) == [0.0] * 12 and list(c2[:6]) == [0.0] * 6 and list(c2[6:]) == [0.8] * 6
     assert np.isnan(c3).all() and np.isnan(c4).all()  # pour's pour state has two constraints
     assert "held by: tip stays in this box" in view.person.content

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sctd import se3
-from sctd.learn.demos import read_demos
+from sctd.learn.demos import read_demos, spike_mask
 from sctd.skill import (
     CONSTRAINTS,
     FIELDS,
@@ -144,7 +144,14 @@ def test_each_state_is_shown_where_the_demonstrations_are_in_it():
         in_state = np.concatenate([d.points[d.states == i] for d in scene.demos])
         assert np.min(np.linalg.norm(in_state - st.T_obj_ee[:3, 3], axis=1)) < 1e-12
         assert st.effects and all(isinstance(s, Shape) for _, s in st.shapes)
-    assert [len(d.points) for d in scene.demos] == [len(d) for d in demos]
+    # the learner's outliers are set apart, every sample is one or the other
+    assert [len(d.points) + len(d.spikes) for d in scene.demos] == [len(d) for d in demos]
+    assert all(0 < len(d.spikes) < 0.2 * len(d.points) for d in scene.demos)  # the shipped demos have spikes
+    for d, raw in zip(scene.demos, demos, strict=True):
+        keep = spike_mask(raw.poses)
+        assert np.array_equal(d.points, raw.poses[keep, :3])
+        assert np.array_equal(d.spikes, raw.poses[~keep, :3])
+        assert np.linalg.norm(np.diff(d.points, axis=0), axis=1).max() < 0.02  # no 10 cm jumps left
 
 
 def test_a_hand_written_skill_shows_a_state_where_its_guard_leads_in():

@@ -226,6 +226,11 @@ class SkillView:
             self.server.scene.add_line_segments(f"{name}/{j}", segments, state_rgb(int(d.states[a])),
                                                 thickness=3.0, thickness_units="screen")
         self.nodes[name] = ("path", d.points, d.states)
+        if len(d.spikes):  # the outliers the learner drops: small grey dots, not the path
+            self.handles[f"{name}/spikes"] = self.server.scene.add_point_cloud(
+                f"{name}/spikes", d.spikes.astype(np.float32), colors=(150, 150, 150), point_size=0.004,
+                point_shape="circle")
+            self.nodes[f"{name}/spikes"] = ("dots", d.spikes)
 
     def _draw_state(self, i: int, st: StateScene, held: list[Part]) -> None:
         sc = self.server.scene

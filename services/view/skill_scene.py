@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.learn.demos import Demo
+from sctd.learn.demos import Demo, spike_mask
 from sctd.skill import Distance, InputMapping, Skill, SkillEngine, SphereField, Workspace
 from sctd.skill.sketch import Shape, direction_words
 
@@ -89,11 +89,14 @@ class StateScene:
 @dataclass
 class DemoPath:
     """A demonstration in the object frame: its frame positions (n, 3) and the index of
-    the state the skill's FSM is in at each sample (n,)."""
+    the state the skill's FSM is in at each sample (n,), without the isolated gross
+    outliers the learner drops (:func:`~sctd.learn.demos.spike_mask`), which are in
+    ``spikes`` (m, 3)."""
 
     name: str
     points: Array
     states: NDArray[np.int64]
+    spikes: Array = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 @dataclass
@@ -106,8 +109,11 @@ class SkillScene:
 def skill_scene(skill: Skill, demos: list[Demo] | None = None) -> SkillScene:
     """The scene of ``skill``, with ``demos`` (object frame) when given."""
     ws = workspace(skill)
-    labelled = [(d, demo_states(skill, d)) for d in demos or []]
-    paths = [DemoPath(d.name, d.poses[:, :3].copy(), s) for d, s in labelled]
+    kept = [spike_mask(d.poses) for d in demos or []]
+    clean = [Demo(d.name, d.t[k], d.poses[k]) for d, k in zip(demos or [], kept, strict=True)]
+    labelled = [(d, demo_states(skill, d)) for d in clean]
+    paths = [DemoPath(d.name, d.poses[:, :3].copy(), s, raw.poses[~k, :3].copy())
+             for (d, s), raw, k in zip(labelled, demos or [], kept, strict=True)]
     states: list[StateScene] = []
     for i in range(len(skill.states)):
         T = _hand_pose(skill, i, labelled, states[-1].T_obj_ee if states else None)

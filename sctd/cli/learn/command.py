@@ -23,6 +23,7 @@ from ...app.options import add_arguments, flag_name, from_namespace
 from ...learn import (
     METHODS,
     STAGES,
+    Demo,
     DemoError,
     HyperparameterError,
     LinearIMLearner,
@@ -112,10 +113,9 @@ def parse_frame(text: str) -> tuple[str, NDArray[np.float64]]:
     return name, np.asarray(vals)
 
 
-def _learn(args: argparse.Namespace,
+def _learn(args: argparse.Namespace, demos: list[Demo],
            progress: ProgressLine) -> LinearResult | VectorFieldResult:
-    """The learning run the arguments describe."""
-    demos = read_demos(args.demos)
+    """The learning run the arguments describe, on ``demos``."""
     preprocessing = from_namespace(Preprocessing, args)
     options = from_namespace(SkillOptions, args)
     if args.method == "linear":
@@ -144,13 +144,15 @@ def run_learn(args: argparse.Namespace) -> dict[str, Any]:
     progress = ProgressLine([*STAGES[args.method], "export"], enabled=not args.quiet)
     t0 = time.perf_counter()
     try:
-        result = _learn(args, progress)
+        demos = read_demos(args.demos)
+        result = _learn(args, demos, progress)
         skill = write_skill(result, args.out)
         result.timings["total_with_export"] = time.perf_counter() - t0
         progress("export")
     finally:
         progress.close()
-    return write_report(result, skill, args.report, demos_dir=str(args.demos), settings=_settings(args))
+    return write_report(result, skill, args.report, demos_dir=str(args.demos), settings=_settings(args),
+                        demos=demos)
 
 
 def main_learn(args: argparse.Namespace) -> int:
