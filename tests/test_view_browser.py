@@ -296,6 +296,7 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
     keys, ep = Keys("edan"), f"tcp/127.0.0.1:{free_port()}"
     sim = sctd("sim", "--task", "pour", "--listen", ep, log=tmp_path / "sim.log")
     run = sctd("run", "--skill", str(SKILLS / "pour.yaml"), "--connect", ep, log=tmp_path / "run.log")
+    logger = sctd("log", "--mcap", str(tmp_path / "pour.mcap"), "--connect", ep, log=tmp_path / "log.log")
     ours, driver = open_session(connect=[ep]), open_session(connect=[ep])
     recording = Recording(ours)
     server = viser_server(0)
@@ -354,8 +355,13 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
         stop_server(server)
         close_session(ours)
         close_session(driver)
+        assert logger.stop() == 0, logger.output()
         run.stop()
         sim.stop()
+    # the same run from its log: the pour in approach, where the log's state puts the hand
+    replayed(tmp_path / "pour.mcap", "pour", load_skill(SKILLS / "pour.yaml"), "approach",
+             "view-log-pour.png",
+             Camera(position=(1.0, -1.2, 1.0), look_at=(0.95, 0.0, 0.55), fov=0.8))
     # an observer: subscriptions, and queries on skill/bundle alone
     kinds = {k for k, _ in recording.declared}
     assert kinds <= {"declare_subscriber", "declare_querier"}, recording.declared
@@ -363,6 +369,129 @@ def test_the_live_view_draws_the_running_arm_and_skill_and_only_observes(tmp_pat
     subscribed = {key for k, key in recording.declared if k == "declare_subscriber"}
     assert {keys.state, keys.target, keys.status, keys.scene, keys.objects("mug")} <= subscribed
     assert not any(key.startswith(keys.skill_swap) for _, key in recording.declared)
+
+
+def replayed(mcap: Path, task: str, skill, state: str, shot: str, camera: Camera) -> None:
+    """``sctd view --log`` of a run's log: at the last time the log's status says
+    ``state``, the view shows that state, the arm and the hand where the log's state puts
+    them, drawn there in the page (screenshot ``shot``)."""
+    import threading
+
+    from sctd.cli.log import read_log
+    from sctd_services.view.arm import ArmGeometry
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.timeline import Timeline, run_replay
+    from sctd_sim.robot import URDF_PATH
+    from sctd_sim.view import stop_server, viser_server
+
+    timeline = Timeline(read_log(mcap), "sctd/edan")
+    assert timeline.skill_ids() == [skill.id]
+    times = [t / 100 for t in range(int(timeline.duration * 100))]
+    when = max(t for t in times if (timeline.at(t).status or {}).get("state") == state)
+    server = viser_server(0)
+    view = LiveView(server, ArmGeometry(URDF_PATH), find_task(task))
+    view.set_skill(skill)
+    stop = threading.Event()
+    thread = threading.Thread(target=run_replay, args=(view, timeline, stop), daemon=True)
+    thread.start()
+    try:
+        assert wait_for(lambda: view.replay_slider is not None, 10)
+        view.replay_slider.value = when
+        assert wait_for(lambda: view.drawn_at == when, 10)
+        snap = timeline.at(when)
+        assert np.allclose(view.handles["/hand"].position, snap.pose[:3])
+        assert view.skill_view is not None and view.skill_view.handles[f"/skill/states/{state}"].visible
+        with browser.open_viser(server, W, H) as page:
+            page.wait_for_text(f"mode: {state}")
+            page.set_camera(camera)
+            save(page, shot)
+            assert view.arm is not None
+            wrist = len(view.arm.links) - 4
+            h = view.handles[f"/arm/{wrist}"]
+            T = se3.transform_from_pose(np.r_[h.position, np.asarray(h.wxyz)[[1, 2, 3, 0]]])
+            drawn_where_projected(page, h, (T[:3, :3] @ view.arm.links[wrist].vertices.T).T + T[:3, 3],
+                                  radius=12)
+    finally:
+        stop.set()
+        thread.join(10)
+        stop_server(server)
+
+
+@pytest.mark.slow
+def test_the_live_view_and_the_log_of_a_vector_field_drawer(tmp_path):
+    """The learned drawer (`drawer-vf`) on the simulated arm: pushed along the drawer's
+    axis for 3 s, the live view draws the arm, the drawer's moving part at the reading
+    the scene reports, the hand and the target, and the active state's field arrows at
+    the drawer; then the same run from its `sctd log` file."""
+    import threading
+
+    from sctd.wire import Keys
+    from sctd.wire.session import close_session, open_session
+    from sctd_services.view.arm import ArmGeometry
+    from sctd_services.view.live import LiveView
+    from sctd_services.view.service import run_view
+    from sctd_sim.robot import URDF_PATH
+    from sctd_sim.view import stop_server, viser_server
+
+    keys, ep = Keys("edan"), f"tcp/127.0.0.1:{free_port()}"
+    skill = load_skill(SKILLS / "drawer-vf.yaml")
+    sim = sctd("sim", "--task", "drawer", "--listen", ep, log=tmp_path / "sim.log")
+    run = sctd("run", "--skill", str(SKILLS / "drawer-vf.yaml"), "--connect", ep, log=tmp_path / "run.log")
+    logger = sctd("log", "--mcap", str(tmp_path / "drawer.mcap"), "--connect", ep, log=tmp_path / "log.log")
+    ours, driver = open_session(connect=[ep]), open_session(connect=[ep])
+    server = viser_server(0)
+    view = LiveView(server, ArmGeometry(URDF_PATH), find_task("drawer"))
+    stop, pushed = threading.Event(), threading.Event()
+    threads = [threading.Thread(target=run_view, args=(ours, keys, view, stop), daemon=True),
+               threading.Thread(target=_drive, args=(driver, keys, pushed, (0.6, 0.0, 0.0)), daemon=True)]
+    state = skill.start
+    try:
+        threads[0].start()
+        assert wait_for(lambda: view.skill_view is not None and view.handles["/arm/0"].visible, 60), \
+            sim.output() + run.output()
+        start = np.array(view.handles["/hand"].position)
+        threads[1].start()
+        assert wait_for(lambda: np.linalg.norm(view.handles["/hand"].position - start) > 0.05, 30), \
+            run.output()
+        pushed.set()
+        threads[1].join(10)
+        assert wait_for(lambda: "stopped" in view.person.content, 20), view.person.content
+        stop.set()
+        threads[0].join(10)
+        with browser.open_viser(server, W, H) as page:
+            page.wait_for_text(f"mode: {state}")
+            page.set_camera(Camera(position=(1.0, -1.1, 0.9), look_at=(0.85, 0.0, 0.45), fov=0.8))
+            save(page, "view-live-drawer-vf.png")
+            assert view.arm is not None
+            wrist = len(view.arm.links) - 4
+            moving = next(p for p in view.parts if p.name.endswith("/moving"))
+            meshes = {f"/arm/{wrist}": view.arm.links[wrist].vertices, moving.name: moving.vertices,
+                      "/target": np.zeros((1, 3))}
+            for name, vertices in meshes.items():
+                h = view.handles[name]
+                T = se3.transform_from_pose(np.r_[h.position, np.asarray(h.wxyz)[[1, 2, 3, 0]]])
+                view.handles["/hand"].visible = name != "/target"
+                drawn_where_projected(page, h, (T[:3, :3] @ vertices.T).T + T[:3, 3], radius=12)
+            sv = view.skill_view
+            T_obj = se3.transform_from_pose(np.r_[sv.root.position, np.asarray(sv.root.wxyz)[[1, 2, 3, 0]]])
+            arrows = [n for n, node in sv.nodes.items() if node[0] == "arrows" and n.startswith(
+                f"/skill/states/{state}/")]
+            assert arrows, sorted(sv.nodes)
+            origins = sv.nodes[arrows[0]][1]
+            drawn_where_projected(page, sv.handles[arrows[0]], (T_obj[:3, :3] @ origins.T).T + T_obj[:3, 3])
+    finally:
+        stop.set()
+        pushed.set()
+        for t in threads:
+            t.join(10)
+        stop_server(server)
+        close_session(ours)
+        close_session(driver)
+        assert logger.stop() == 0, logger.output()
+        run.stop()
+        sim.stop()
+    replayed(tmp_path / "drawer.mcap", "drawer", skill, state, "view-log-drawer-vf.png",
+             Camera(position=(1.0, -1.1, 0.9), look_at=(0.85, 0.0, 0.45), fov=0.8))
 
 
 # -- from a log: the timeline scrubbed in the page -------------------------------------------

@@ -152,6 +152,26 @@ def test_the_constraints_plot_and_held_by_follow_the_runtimes_report(server):
     assert "held by" not in view.person.content
 
 
+def test_held_by_names_bounds_only(server):
+    """A neighbour orientation changes every command of a vector-field skill (it turns
+    the hand as the demonstrations did): plotted, but it holds nothing."""
+    task = find_task("drawer")
+    view = LiveView(server, None, task)
+    skill = load_skill(SKILLS / "drawer-vf.yaml")
+    view.set_skill(skill)
+    T = task.scene.bodies[skill.object].T_world
+    hand = T @ se3.transform_from_pose([-0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    state = skill.states[0]
+    assert [c.bounds for c in state.active_constraints] == [False]
+    for t in (1.0, 1.3):
+        view.draw(Snapshot(t=t, pose=pose_of(hand), objects={skill.object: pose_of(T)},
+                           target={"pose": pose_of(hand), "state": state.name},
+                           status={"mode": "running", "state": state.name,
+                                   "constraints": {"state": state.name, "commands": 50, "acted": [50]}}))
+    assert "held by" not in view.person.content
+    assert view.constraint_plot.data[1][-1] == 1.0
+
+
 # -- from a log ----------------------------------------------------------------------------
 def _log(skill_id: str) -> list:
     """Messages as ``read_log`` gives them: 2 s of a hand moving 10 cm along x."""

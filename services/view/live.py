@@ -285,7 +285,11 @@ class LiveView:
                 labels = constraint_labels(skill, i, T_obj_ee, self.ws)
                 shares = acting(status, skill)
                 if shares is not None and status["constraints"].get("state") == st.name:
-                    held = [label for label, share in zip(labels, shares, strict=True) if share >= HELD]
+                    # a bound that stops the push (a neighbour orientation acts on every
+                    # command: it turns the hand, it holds nothing)
+                    constraints = skill.states[i].active_constraints
+                    held = [label for c, label, share in zip(constraints, labels, shares, strict=True)
+                            if c.bounds and share >= HELD]
                 else:  # the status does not say: where the hand is does
                     held = holding(skill, i, T_obj_ee, self.ws)
                 if held:
