@@ -99,15 +99,21 @@ def test_a_stamp_past_int32_seconds_is_refused():
 
 
 def test_joy_decoding_and_what_is_dropped():
-    axes, buttons = ros.decode_joy(ros.encode_joy(1.0, [0.5, -1.0], [0, 1, 2]))
-    assert axes == (0.5, -1.0) and buttons == (0, 1, 1)
-    good = ros.encode_joy(1.0, [0.5], [1])
+    """A Joy's stamp is its header's, judged against the input timeout (0.1 s): an old
+    Joy is not fresh because it arrived now."""
+    now = 1000.0
+    stamp, axes, buttons = ros.decode_joy(ros.encode_joy(now - 0.05, [0.5, -1.0], [0, 1, 2]), now, 0.1)
+    assert stamp == pytest.approx(now - 0.05) and axes == (0.5, -1.0) and buttons == (0, 1, 1)
+    good = ros.encode_joy(now, [0.5], [1])
     cases = {"bad_cdr": good[:-3], "too_large": bytes(ros.MAX_JOY_BYTES + 1),
-             "nonfinite": ros.encode_joy(1.0, [math.nan], []),
-             "too_many": ros.encode_joy(1.0, [0.0] * (ros.MAX_JOY_VALUES + 1), [])}
+             "nonfinite": ros.encode_joy(now, [math.nan], []),
+             "too_many": ros.encode_joy(now, [0.0] * (ros.MAX_JOY_VALUES + 1), []),
+             "stale_stamp": ros.encode_joy(now - 0.2, [0.5], [1]),
+             "future_stamp": ros.encode_joy(now + 0.2, [0.5], [1]),
+             "zero_stamp": ros.encode_joy(0.0, [0.5], [1])}
     for reason, data in cases.items():
         with pytest.raises(ros.JoyError) as e:
-            ros.decode_joy(data)
+            ros.decode_joy(data, now, 0.1)
         assert e.value.reason == reason
 
 
@@ -279,9 +285,17 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
     moved = np.subtract(rig.last()["pose"][:3], start[:3])
     assert abs(moved[1]) < 1e-9 and abs(moved[2]) < 1e-9
     side.joy(None, None, raw=b"\x00\x01\x00\x00garbage")
-    side.joy(None, None, raw=ros.encode_joy(1.0, [math.nan], held))
+    side.joy(None, None, raw=ros.encode_joy(time.time(), [math.nan], held))
+    # an old Joy (the stick pushed 1 s ago) is stale, whenever it arrives: dropped, no motion
+    time.sleep(0.3)  # the last fresh push has timed out: the target is still
+    before = rig.last()["pose"]
+    for _ in range(20):
+        side.joy(None, None, raw=ros.encode_joy(time.time() - 1.0, [0.8, 0, 0, 0, 0, 0], held))
+        time.sleep(0.01)
     s = _status_with(rig, lambda s: s["ros"]["joy_dropped"].get("bad_cdr", 0) >= 1
-                     and s["ros"]["joy_dropped"].get("nonfinite", 0) >= 1)
+                     and s["ros"]["joy_dropped"].get("nonfinite", 0) >= 1
+                     and s["ros"]["joy_dropped"].get("stale_stamp", 0) >= 20)
+    assert np.allclose(rig.last()["pose"][:3], before[:3], atol=1e-9)
     assert s["ros"]["joy_received"] > 0 and s["ros"]["target_pose_sent"] > 0
 
 

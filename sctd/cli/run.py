@@ -79,7 +79,7 @@ def _runtime_ros(args: argparse.Namespace, session: zenoh.Session, config: Runti
 
     device = "ros" if config.device == "*" else config.device
     return ros.RuntimeRos(session, Keys(config.robot).input(device), _joy_map(args.ros_joy_map),
-                          args.ros_namespace, args.ros_domain, args.ros_rate)
+                          args.ros_namespace, args.ros_domain, args.ros_rate, config.input_timeout)
 
 
 def runtime_config(args: argparse.Namespace) -> RuntimeConfig:

@@ -21,7 +21,6 @@ decoded in the Zenoh subscriber's callback.
 from __future__ import annotations
 
 import itertools
-import math
 import threading
 import time
 from collections import Counter
@@ -34,7 +33,7 @@ import zenoh
 import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 
-from . import codec
+from . import codec, rosmsg
 from .ros_options import check_namespace
 from .session import MSGPACK
 
@@ -48,7 +47,7 @@ DEFAULT_QOS = "::,:,:,:,,"
 CDR = zenoh.Encoding.APPLICATION_CDR
 WORLD_FRAME = "world"
 MAX_JOY_BYTES = 4096  # a Joy with 6 axes and 21 buttons is under 200 bytes
-MAX_JOY_VALUES = 64  # axes or buttons in one Joy
+MAX_JOY_VALUES = rosmsg.MAX_VALUES  # axes or buttons in one Joy
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -129,10 +128,10 @@ def parse_attachment(data: bytes) -> tuple[int, int, bytes]:
 
 def _header(stamp: float, frame: str) -> Any:
     T = STORE.types["builtin_interfaces/msg/Time"]
-    if not -2**31 <= stamp < 2**31 - 1:  # builtin_interfaces/msg/Time: int32 seconds
-        raise RosError(f"stamp {stamp!r}: outside ROS Time's int32 seconds")
-    sec = math.floor(stamp)
-    nsec = min(round((stamp - sec) * 1e9), 999_999_999)
+    try:
+        sec, nsec = rosmsg.time_fields(stamp)
+    except ValueError as e:
+        raise RosError(str(e)) from None
     return STORE.types["std_msgs/msg/Header"](T(sec, nsec), frame)
 
 
@@ -161,29 +160,22 @@ def encode_joy(stamp: float, axes: Sequence[float], buttons: Sequence[int],
     return bytes(STORE.serialize_cdr(msg, JOY))
 
 
-class JoyError(ValueError):
-    """A Joy message that is not used; ``reason`` is its drop counter's name."""
-
-    def __init__(self, reason: str, detail: str):
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
+JoyError = rosmsg.Dropped  # a Joy that is not used; ``reason`` is its drop counter's name
 
 
-def decode_joy(data: bytes) -> tuple[tuple[float, ...], tuple[int, ...]]:
-    """``(axes, buttons)`` of a ``sensor_msgs/msg/Joy`` CDR; JoyError when it is too
-    large, not a Joy, or holds too many or non-finite values."""
+def decode_joy(data: bytes, now: float, timeout: float) -> tuple[float, tuple[float, ...], tuple[int, ...]]:
+    """``(stamp, axes, buttons)`` of a ``sensor_msgs/msg/Joy`` CDR whose header stamp is
+    fresh at ``now`` (:func:`~.rosmsg.judge_stamp`); JoyError (the shared
+    :class:`~.rosmsg.Dropped`) when it is too large, not a Joy, stale, or holds too many
+    or non-finite values."""
     if len(data) > MAX_JOY_BYTES:
         raise JoyError("too_large", f"{len(data)} bytes > {MAX_JOY_BYTES}")
     try:
         m: Any = STORE.deserialize_cdr(data, JOY)
     except Exception as e:  # rosbags raises SerdeError, struct and index errors
         raise JoyError("bad_cdr", str(e)[:80]) from None
-    if len(m.axes) > MAX_JOY_VALUES or len(m.buttons) > MAX_JOY_VALUES:
-        raise JoyError("too_many", f"{len(m.axes)} axes, {len(m.buttons)} buttons")
-    axes = tuple(float(a) for a in m.axes)
-    if not all(math.isfinite(a) for a in axes):
-        raise JoyError("nonfinite", "an axis is not finite")
-    return axes, tuple(1 if b else 0 for b in m.buttons)
+    axes, buttons = rosmsg.joy_values(m)
+    return rosmsg.judge_stamp(m.header, now, timeout), axes, buttons
 
 
 # --- a node ------------------------------------------------------------------------------
@@ -302,12 +294,13 @@ class PoseOut:
 
 class JoyIn:
     """``sensor_msgs/msg/Joy`` on ``<namespace>/joy`` decoded in the subscriber's
-    callback and handed to ``on_joy(axes, buttons)``; malformed ones are dropped and
-    counted by reason (:attr:`dropped`)."""
+    callback and handed to ``on_joy(stamp, axes, buttons)``, the stamp its header's;
+    malformed or stale ones (older or further ahead than ``timeout``, or stamped zero)
+    are dropped and counted by reason (:attr:`dropped`)."""
 
-    def __init__(self, node: RosNode, on_joy: Callable[[tuple[float, ...], tuple[int, ...]], None],
-                 name: str = "joy"):
-        self.on_joy = on_joy
+    def __init__(self, node: RosNode, on_joy: Callable[[float, tuple[float, ...], tuple[int, ...]], None],
+                 timeout: float, name: str = "joy"):
+        self.on_joy, self.timeout = on_joy, timeout
         self.received = 0
         self.dropped: Counter[str] = Counter()
         self._lock = threading.Lock()  # Zenoh may call back from more than one thread
@@ -316,12 +309,12 @@ class JoyIn:
     def _on_payload(self, data: bytes) -> None:
         with self._lock:
             try:
-                axes, buttons = decode_joy(data)
+                stamp, axes, buttons = decode_joy(data, time.time(), self.timeout)
             except JoyError as e:
                 self.dropped[e.reason] += 1
                 return
             self.received += 1
-            self.on_joy(axes, buttons)
+            self.on_joy(stamp, axes, buttons)
 
 
 JoyMap = Callable[[tuple[float, ...], tuple[int, ...]], tuple[list[float], list[int], bool]]
@@ -332,11 +325,13 @@ class RuntimeRos:
     target on ``<namespace>/target_pose`` (at most ``rate`` Hz, from the daemon's
     publisher thread through :meth:`target`) and taking ``<namespace>/joy``: each Joy is
     mapped by ``joy_map`` to ``u`` and ``[mode, enable, escape]`` and put as an sctd
-    input message on ``input_key``, where the daemon's input ring takes it like any
-    device's."""
+    input message on ``input_key``, stamped with its header's stamp (one older than
+    ``timeout``, the daemon's input timeout, is dropped), where the daemon's input ring
+    takes it like any device's."""
 
     def __init__(self, session: zenoh.Session, input_key: str, joy_map: JoyMap,
-                 namespace: str = "/sctd", domain: int = 0, rate: float = 100.0):
+                 namespace: str = "/sctd", domain: int = 0, rate: float = 100.0,
+                 timeout: float = 0.1):
         self.joy_map = joy_map
         self.input_key = input_key
         self.node = RosNode(session, "sctd_run", namespace, domain)
@@ -345,15 +340,15 @@ class RuntimeRos:
             self._input = session.declare_publisher(input_key, encoding=MSGPACK,
                                                     congestion_control=zenoh.CongestionControl.DROP)
             self._seq = 0
-            self.joy = JoyIn(self.node, self._on_joy)
+            self.joy = JoyIn(self.node, self._on_joy, timeout)
         except BaseException:
             self.node.close()
             raise
 
-    def _on_joy(self, axes: tuple[float, ...], buttons: tuple[int, ...]) -> None:
+    def _on_joy(self, stamp: float, axes: tuple[float, ...], buttons: tuple[int, ...]) -> None:
         u, roles, stop = self.joy_map(axes, buttons)
         self._seq += 1
-        self._input.put(codec.encode_input(self._seq, time.time(), u, roles, stop))
+        self._input.put(codec.encode_input(self._seq, stamp, u, roles, stop))
 
     def target(self, stamp: float, pose: Sequence[float]) -> None:
         self.target_pose.offer(stamp, pose)
