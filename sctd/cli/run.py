@@ -59,15 +59,9 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
 def _joy_map(path: str | None) -> Any:
     """``(axes, buttons) -> (u [6], [mode, enable, escape], stop)`` through the mapping
     file ``path`` (default: the shipped xbox map)."""
-    from sctd_services.input.device import Reading
-    from sctd_services.input.mapping import load_mapping, shipped_mapping
+    from sctd_services.input.mapping import joy_function
 
-    mapping = load_mapping(path) if path else shipped_mapping("xbox")
-
-    def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int], bool]:
-        reading = Reading(axes, buttons)
-        return (*mapping.apply(reading, 6), mapping.stop(reading))
-    return apply
+    return joy_function(path)
 
 
 def _runtime_ros(args: argparse.Namespace, session: zenoh.Session, config: RuntimeConfig) -> Any:

@@ -169,3 +169,18 @@ def shipped_mapping(name: str) -> Mapping:
     """A mapping shipped in ``sctd_services/input/maps`` (``xbox``, ``spacemouse``)."""
     f = resources.files("sctd_services.input").joinpath("maps", f"{name}.yaml")
     return parse_mapping(parse_yaml(f.read_text(), f"maps/{name}.yaml"), f"maps/{name}.yaml")
+
+
+def joy_function(path: str | Path | None = None):
+    """``(axes, buttons) -> (u [6], [mode, enable, escape], stop)`` through the mapping
+    file ``path`` (default: the shipped xbox map, which numbers a ROS Joy from the joy
+    package's ``game_controller_node`` as SDL does): how a ROS ``Joy`` becomes sctd
+    input (``sctd run --ros``, ``sctd ros``). MappingError when the file is bad."""
+    from .device import Reading
+
+    mapping = load_mapping(path) if path else shipped_mapping("xbox")
+
+    def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int], bool]:
+        reading = Reading(axes, buttons)
+        return (*mapping.apply(reading, 6), mapping.stop(reading))
+    return apply
