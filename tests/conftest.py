@@ -141,3 +141,15 @@ states:
   slide: {{input_mapping: [{{type: linear, axes: [tx]}}]}}
   done: {{input_mapping: [{{type: linear, axes: [tx, ty, tz]}}]}}
 """
+
+
+def require_namespaces() -> None:
+    """Skip the test, naming why, where network namespaces cannot be made (not root);
+    under CI (``$CI`` set), where they must run, fail it instead."""
+    from sctd.deploy.netns import can_make_namespaces
+
+    why = can_make_namespaces()
+    if why is not None:
+        if os.environ.get("CI"):
+            pytest.fail(f"network namespaces cannot be made in CI: {why}")
+        pytest.skip(f"network namespaces cannot be made here: {why}")

@@ -7,7 +7,6 @@ Needs root (``ip netns add``). Without it the tests skip and say why, except in 
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import time
@@ -16,9 +15,9 @@ import pytest
 
 from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import Cluster
-from sctd.deploy.netns import Hosts, NamespaceError, can_make_namespaces, namespaces
+from sctd.deploy.netns import Hosts, NamespaceError, namespaces
 from sctd.runtime.controller import RuntimeConfig
-from tests.conftest import wait_for
+from tests.conftest import require_namespaces, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # network namespaces, a process per host
 
@@ -33,11 +32,7 @@ HAND_BOUND_M = 1e-3  # m the hand at rest may move across the outage (derived in
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    why = can_make_namespaces()
-    if why is not None:
-        if os.environ.get("CI"):
-            pytest.fail(f"network namespaces cannot be made in CI: {why}")
-        pytest.skip(f"network namespaces cannot be made here: {why}")
+    require_namespaces()
     logdir = tmp_path_factory.mktemp("multihost")
     c = Cluster(logdir)
     try:
@@ -64,11 +59,7 @@ def cluster(tmp_path_factory):
 
 
 def test_hosts_clean_up_everything_after_an_exception(tmp_path):
-    why = can_make_namespaces()
-    if why is not None:
-        if os.environ.get("CI"):
-            pytest.fail(f"network namespaces cannot be made in CI: {why}")
-        pytest.skip(f"network namespaces cannot be made here: {why}")
+    require_namespaces()
     hosts = Hosts(["a", "b"], tmp_path)
     with pytest.raises(RuntimeError, match="a test failing inside"), hosts:
         assert len(hosts.leftovers()) == 3  # a, b and the switch

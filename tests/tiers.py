@@ -40,6 +40,7 @@ EXTRAS = {
     "inputs": ("sdl2", "hid", "brainflow"),
     "logs": ("mcap",),
     "ros": ("rosbags", "xxhash"),
+    "ros2": ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_msgs", "visualization_msgs"),
 }
 _EXTRA_OF = {module: extra for extra, modules in EXTRAS.items() for module in modules}
 

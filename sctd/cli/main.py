@@ -51,7 +51,8 @@ class Command:
 # The optional libraries and the extra (pyproject.toml) that installs each.
 EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
             "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev", "sdl2": "inputs",
-            "hid": "inputs", "brainflow": "inputs", "mcap": "logs"}
+            "hid": "inputs", "brainflow": "inputs", "mcap": "logs", "rclpy": "ros2", "geometry_msgs": "ros2",
+            "sensor_msgs": "ros2", "diagnostic_msgs": "ros2"}
 
 BENCHES: dict[str, Command] = {
     "view": Command("the daemon's tick with the live view and a browser attached, alternating with it "
@@ -114,6 +115,9 @@ COMMANDS: dict[str, Command] = {
                    "add_service_arguments", "run"),
     "record": Command("record a demonstration (ee in the task object's frame) as CSV",
                       "sctd_services.record", "add_arguments", "run"),
+    "ros": Command("a ROS 2 node (rclpy): a ROS 2 arm, its perception and joystick as sctd's robot, "
+                   "objects and input; the target and diagnostics out", "sctd_services.ros2.node",
+                   "add_arguments", "run"),
     "learner": Command("the learner service: stores demonstrations, trains on request, checks and "
                        "hot-swaps", "sctd_services.learner", "add_arguments", "run"),
     "train": Command("ask the learner to train a skill from stored demonstrations, check and swap it",

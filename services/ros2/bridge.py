@@ -205,12 +205,16 @@ class Bridge:
             self.counts.sent["target"] += 1
             if self.options.twist:
                 self._twist(stamp, pose)
-            self._last_pose = (stamp, pose)
 
     def _twist(self, stamp: float, pose: list[float]) -> None:
-        """The target's velocity since the last one published (world frame)."""
+        """The target's velocity since the pose the last twist ended at (world frame).
+        That pose moves on only with a twist sent, so that the twists add up to the
+        targets' motion (none is lost to a target stamped before a zero twist)."""
         last = self._last_pose
-        if last is None or not stamp > last[0]:
+        if last is None:
+            self._last_pose = (stamp, pose)
+            return
+        if not stamp > last[0]:
             return
         dt = stamp - last[0]
         v = [(a - b) / dt for a, b in zip(pose[:3], last[1][:3], strict=True)]
@@ -222,17 +226,24 @@ class Bridge:
         self.publish("twist", self.twist_stamped(stamp, v, w))
         self.counts.sent["twist"] += 1
         self._moving = any(x != 0.0 for x in (*v, *w))
+        self._last_pose = (stamp, pose)
 
     def stop_twist(self, why: str) -> None:
         """A zero ``TwistStamped`` once, unless the last twist sent was zero (``why``
         counts it)."""
         if not self.options.twist or not self._moving:
             return
-        self.publish("twist", self.twist_stamped(self.clock(), [0.0] * 3, [0.0] * 3))
+        last = self._last_pose
+        t = self.clock() if last is None else max(self.clock(), last[0])
+        self.publish("twist", self.twist_stamped(t, [0.0] * 3, [0.0] * 3))
         self.counts.sent["twist_zero"] += 1
         self.counts.sent[f"twist_zero_{why}"] += 1
         self._moving = False
-        self._last_pose = None
+        if last is not None:
+            # the next velocity is taken from here: the pose last sent, at the zero's stamp,
+            # so that the twists add up to the targets' motion (a consumer integrating
+            # them by their stamps ends where the targets end)
+            self._last_pose = (t, last[1])
 
     def on_status(self, payload: bytes) -> None:
         """``status`` -> ``DiagnosticArray`` (at most every :data:`DIAGNOSTICS_PERIOD`
