@@ -13,6 +13,8 @@ nodes, run as ``python -m tests.ros2_side`` inside a network namespace the test 
   axes ``u``, buttons ``[mode, enable, escape]``, stamped with the message's stamp.
 - ``twist``: a consumer of ``TwistStamped`` that integrates it into a pose and prints,
   at the end, what it integrated and the zero twists it saw (JSON).
+- ``rviz``: what RViz would get of the skill: the ``MarkerArray`` on
+  ``sctd/skill_markers``, whose labels it reports at the end.
 
 Also relays the simulator's ``scene`` (the task's progress, which no ROS message
 carries) to the daemon's prefix for the simulated person, who judges when it is done.
@@ -168,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init()
     session = open_session(connect=[args.connect])
     robot, sim = Keys(args.robot), Keys(args.arm)
-    nodes = {name: rclpy.create_node(f"test_{name}") for name in ("arm", "perception", "joy", "twist")}
+    nodes = {name: rclpy.create_node(f"test_{name}")
+             for name in ("arm", "perception", "joy", "twist", "rviz")}
     subs = arm(nodes["arm"], session, sim, args.joint)
     subs += perception(nodes["perception"], session, sim, args.frame)
     subs += joy(nodes["joy"], session, robot, args.joy_from)
@@ -179,6 +182,15 @@ def main(argv: list[str] | None = None) -> int:
         scene[0] = codec.unpack_map(data)
         session.put(robot.scene, data)
     subs.append(session.declare_subscriber(sim.scene, relay))
+    from visualization_msgs.msg import MarkerArray
+
+    labels: set[str] = set()
+    arrays = [0]
+
+    def on_markers(arr) -> None:
+        arrays[0] += 1
+        labels.update(m.text for m in arr.markers if m.ns == "labels" and ":" in m.text)
+    nodes["rviz"].create_subscription(MarkerArray, "sctd/skill_markers", on_markers, 10)
     integrator = Integrator()
     if args.twist:
         # a deep queue: the consumer integrates every twist, and this process's executor
@@ -212,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
             n.destroy_node()
         rclpy.try_shutdown()
         close_session(session)
-    out: dict = {"scene": scene[0]}
+    out: dict = {"scene": scene[0], "marker_arrays": arrays[0], "marker_labels": sorted(labels)}
     if args.twist:
         with integrator.lock:
             out.update(received=integrator.received, zeros=integrator.zeros,

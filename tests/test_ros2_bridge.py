@@ -312,3 +312,47 @@ def test_the_twists_add_up_to_the_targets_motion_across_zeros():
     end = rig.out("target")[-1].pose
     assert T[:3, 3] == pytest.approx([end.position.x, end.position.y, end.position.z], abs=1e-6)
     assert rig.bridge.counts.sent["twist_zero"] >= 3
+
+
+def test_the_active_state_is_drawn_for_rviz_at_the_hand():
+    """With the daemon's skill set, a hand and the mug known, each status draws the
+    active state as a MarkerArray (world frame): a DELETEALL first, an arrow per input
+    axis from where the state's mapping frame is, the constraints' shapes, a label; at
+    most every half second, and at once when the state changes."""
+    from sctd.skill import load_skill
+    from sctd.skill.catalog import shipped_folder
+    from sctd_services.ros2.markers import marker_messages
+    from sctd_services.view.skill_scene import state_scene, workspace
+
+    skill = load_skill(shipped_folder() / "pour.yaml")
+    rig = Rig(objects=("mug",))
+    rig.bridge.set_skill(skill, marker_messages())
+    mug = [0.6, 0.1, 0.75, 0.0, 0.0, 0.0, 1.0]
+    hand = [0.55, 0.1, 0.95, 0.0, 0.0, 0.0, 1.0]
+    rig.bridge.on_object("mug", pose_msg(NOW, mug))
+    rig.bridge.on_pose(pose_msg(NOW, hand))
+    status = {"mode": "running", "state": "carry", "skill": skill.id, "skill_name": "pour"}
+    rig.bridge.on_status(codec.pack(status))
+    (arr,) = rig.out("markers")
+    m = arr.markers
+    assert m[0].action == m[0].DELETEALL
+    arrows = [k for k in m if k.ns == "axes"]
+    assert len(arrows) == 3 and all(k.type == k.ARROW and k.header.frame_id == "world" for k in arrows)
+    T_mug, T_hand = se3.transform_from_pose(mug), se3.transform_from_pose(hand)
+    st = state_scene(skill, 0, se3.invert_transform(T_mug) @ T_hand, workspace(skill))
+    start = T_mug[:3, :3] @ st.effects[0].origin + T_mug[:3, 3]  # the bottle's opening, in the world
+    p = arrows[0].points[0]
+    assert [p.x, p.y, p.z] == pytest.approx(start.tolist(), abs=1e-9)
+    kinds = {(k.ns, k.type) for k in m}
+    assert ("constraint", m[0].LINE_LIST) in kinds and ("constraint", m[0].CUBE) in kinds  # cone, band
+    assert any(k.ns == "labels" and k.text == "pour: carry" for k in m)
+    rig.now += 0.1
+    rig.bridge.on_status(codec.pack(status))
+    assert len(rig.out("markers")) == 1  # within half a second, the same state: not again
+    rig.bridge.on_status(codec.pack({**status, "state": "approach"}))
+    assert len(rig.out("markers")) == 2
+    assert any(k.text == "pour: approach" for k in rig.out("markers")[-1].markers)
+    rig.bridge.on_status(codec.pack({**status, "skill": "another"}))  # a skill not fetched yet: none
+    rig.now += 1.0
+    rig.bridge.on_status(codec.pack({**status, "skill": "another"}))
+    assert len(rig.out("markers")) == 2

@@ -87,13 +87,17 @@ def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_pa
     assert report["done"] and report["final_state"] == "pour", (report, _logs(h))
     side.stop()
     bridge.stop()
-    scene = last_json(side.output())["scene"]
+    seen = last_json(side.output())
+    scene = seen["scene"]
     assert scene is not None and scene.get("success"), scene  # the simulator's own verdict
+    # what RViz shows: the pour's states, one array at a time, as the daemon went through them
+    assert {"pour: carry", "pour: approach", "pour: pour"} <= set(seen["marker_labels"]), seen
     counts = last_json(bridge.output())
     got = counts["received"]
     hand_key = "pose" if hand == "pose" else "joint_state"
     assert got[hand_key] > 1000 and got["objects/mug"] > 100 and got["joy"] > 100, counts
     assert counts["sent"]["target"] > 1000 and counts["sent"]["diagnostics"] > 10, counts
+    assert counts["sent"]["markers"] >= 10, counts
     print(json.dumps({"user": {k: report[k] for k in ("elapsed_s", "mode_switches", "final_state")},
                       "bridge": counts}))
 

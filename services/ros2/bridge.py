@@ -21,7 +21,10 @@ Out (sctd -> ROS):
   asked, ``TwistStamped``: the target's velocity over the last published interval, zero
   once when the daemon holds, faults or stops, or when targets stop coming;
 - ``status`` -> ``diagnostic_msgs/DiagnosticArray`` (at most 2 Hz, and at once when the
-  mode changes).
+  mode changes);
+- the active skill (:meth:`Bridge.set_skill`, the node fetches it) ->
+  ``visualization_msgs/MarkerArray``: its active state at the hand, for RViz
+  (:mod:`.markers`), at most 2 Hz and at once when the state changes.
 
 Nothing from ROS reaches ``target``: the daemon moves the target only with the person's
 input, as on its own keys; the bridge only carries what the robot and the perception
@@ -41,6 +44,7 @@ from sctd import se3
 from sctd.wire import Keys, codec, rosmsg
 
 DIAGNOSTICS_PERIOD = 0.5  # s between diagnostics (and at once on a change of mode)
+MARKERS_PERIOD = 0.5  # s between the skill's markers (and at once on a change of state)
 HOLDING = ("waiting", "hold", "fault", "stopped")  # the daemon's modes that move nothing
 
 JoyMap = Callable[[tuple[float, ...], tuple[int, ...]], tuple[list[float], list[int], bool]]
@@ -112,6 +116,12 @@ class Bridge:
         self._moving = False  # a non-zero twist was the last one sent
         self._mode: str | None = None
         self._last_diag = -math.inf
+        self.hand: list[float] | None = None  # the newest hand pose (world) used
+        self.object_poses: dict[str, list[float]] = {}  # the newest of each object used
+        self.skill_id: str | None = None  # the skill the daemon's status names
+        self._markers: Any = None  # SkillMarkers of the skill drawn
+        self._drawn: tuple[str, str] | None = None  # (skill id, state) of the last markers
+        self._last_markers = -math.inf
 
     # -- ROS -> sctd -------------------------------------------------------------------
     def _next(self, what: str) -> int:
@@ -128,6 +138,7 @@ class Bridge:
                 self.counts.drop("pose", e.reason)
                 return
             self.counts.received["pose"] += 1
+            self.hand = pose
             self.put(self.keys.state, codec.encode_state(self._next("state"), stamp, pose))
 
     def on_joint_state(self, msg: Any) -> None:
@@ -148,6 +159,7 @@ class Bridge:
                 self.counts.drop("joint_state", "nonfinite")
                 return
             self.counts.received["joint_state"] += 1
+            self.hand = pose
             self.put(self.keys.state, codec.encode_state(self._next("state"), stamp, pose, q=q))
 
     def on_object(self, name: str, msg: Any) -> None:
@@ -161,6 +173,7 @@ class Bridge:
                 self.counts.drop(kind, e.reason)
                 return
             self.counts.received[kind] += 1
+            self.object_poses[name] = pose
             self.put(self.keys.objects(name), codec.encode_object(self._next(kind), stamp, pose))
 
     def on_joy(self, msg: Any) -> None:
@@ -263,6 +276,31 @@ class Bridge:
                 self._mode, self._last_diag = mode, now
                 self.publish("diagnostics", self.diagnostics(now, status))
                 self.counts.sent["diagnostics"] += 1
+            self.skill_id = str(status["skill"]) if status.get("skill") else None
+            self._draw(now, status.get("state"))
+
+    def set_skill(self, skill: Any, messages: Any) -> None:
+        """Draw ``skill`` (the daemon's active one, fetched by the node) from now on."""
+        from .markers import SkillMarkers
+
+        with self._lock:
+            self._markers = SkillMarkers(skill, messages, self.options.world_frame)
+            self._drawn = None
+
+    def _draw(self, now: float, state: Any) -> None:
+        """The active state's markers, if the skill, its object and the hand are known."""
+        mk = self._markers
+        if mk is None or mk.skill.id != self.skill_id or state not in [s.name for s in mk.skill.states]:
+            return
+        obj, hand = self.object_poses.get(mk.skill.object), self.hand
+        if obj is None or hand is None:
+            return
+        if self._drawn == (mk.skill.id, state) and now - self._last_markers < MARKERS_PERIOD:
+            return
+        self._drawn, self._last_markers = (mk.skill.id, str(state)), now
+        T_obj, T_hand = se3.transform_from_pose(obj), se3.transform_from_pose(hand)
+        self.publish("markers", mk.array(str(state), T_obj, T_hand, rosmsg.time_fields(now)))
+        self.counts.sent["markers"] += 1
 
     def watch(self) -> None:
         """Called periodically: targets that stopped coming (the daemon gone, the link

@@ -68,6 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "input); a zero twist once on hold, fault, stop or when targets stop")
     p.add_argument("--diagnostics-topic", default="diagnostics", metavar="TOPIC",
                    help="status as diagnostic_msgs/DiagnosticArray (default diagnostics)")
+    p.add_argument("--markers-topic", default="sctd/skill_markers", metavar="TOPIC",
+                   help="the active skill's state at the hand as visualization_msgs/MarkerArray for RViz "
+                        "(default sctd/skill_markers; '' for none)")
     p.add_argument("--timeout", type=float, default=0.1, metavar="S",
                    help="a message stamped older (or further ahead) than this is stale: dropped and counted "
                         "(default 0.1, the daemon's input and state timeouts)")
@@ -129,7 +132,11 @@ class RosSide:
         self.publishers = {"target": pub(m.PoseStamped, args.target_topic, command),
                            "diagnostics": pub(m.DiagnosticArray, args.diagnostics_topic, 10)}
         if args.twist_topic:
-            self.publishers["twist"] = self.node.create_publisher(m.TwistStamped, args.twist_topic, command)
+            self.publishers["twist"] = pub(m.TwistStamped, args.twist_topic, command)
+        if args.markers_topic:
+            from visualization_msgs.msg import MarkerArray
+
+            self.publishers["markers"] = pub(MarkerArray, args.markers_topic, 1)
         self.bridge: Bridge = bridge_of(lambda what, msg: self.publishers[what].publish(msg))
         n, b = self.node, self.bridge
         if args.pose_topic:
@@ -207,6 +214,9 @@ def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading
                 session.declare_subscriber(keys.status, lambda s: bridge.on_status(s.payload.to_bytes()))]
         print(f"sctd ros: node {side.node.get_fully_qualified_name()} on sctd/{args.robot}, "
               f"domain {context.get_domain_id()}", file=sys.stderr, flush=True)
+        follower = _SkillFollower(session, keys, bridge)
+        if args.markers_topic:
+            side.node.create_timer(0.5, follower.step)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(side.node)
         end = None if args.seconds is None else time.monotonic() + args.seconds
@@ -221,7 +231,33 @@ def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading
             for pub in publishers.values():
                 pub.undeclare()
             executor.shutdown()
+            follower.close()
         return bridge.counts.as_dict()
+
+
+class _SkillFollower:
+    """Fetches the daemon's active skill (``skill/bundle``, beside the executor) whenever
+    the status names another, and hands it to the bridge for its markers."""
+
+    def __init__(self, session: Any, keys: Keys, bridge: Bridge):
+        from sctd_services.view.service import BundleFetcher
+
+        self.bridge, self.fetcher = bridge, BundleFetcher(session, keys)
+        self.drawn: str | None = None
+
+    def step(self) -> None:
+        wanted = self.bridge.skill_id
+        if wanted and wanted != self.drawn:
+            self.fetcher.want(wanted)
+        done = self.fetcher.take()
+        if done is not None and done[0] is not None:
+            from .markers import marker_messages
+
+            self.bridge.set_skill(done[0], marker_messages())
+            self.drawn = done[1]
+
+    def close(self) -> None:
+        self.fetcher.__exit__(None, None, None)
 
 
 def _kinematics(args: argparse.Namespace) -> Any:

@@ -147,7 +147,7 @@ def run_view(session: zenoh.Session, keys: Keys, view: LiveView, stop: threading
     task = view.task
     objects = set(task.scene.bodies) if task is not None else set()
     report: dict = {"frames": 0, "skills": [], "fetch_failures": 0}
-    with Feed(session, keys, objects) as feed, _Fetcher(session, keys) as fetcher:
+    with Feed(session, keys, objects) as feed, BundleFetcher(session, keys) as fetcher:
         skill_id, retry = None, 0.0
         period, due = 1.0 / rate, time.monotonic()
         while not stop.is_set():
@@ -173,7 +173,7 @@ def run_view(session: zenoh.Session, keys: Keys, view: LiveView, stop: threading
     return report
 
 
-class _Fetcher:
+class BundleFetcher:
     """Fetches the active bundle on a thread of its own, one fetch at a time (a context
     manager: waits for the fetch in flight at exit)."""
 
@@ -215,7 +215,7 @@ class _Fetcher:
         log.info("drawing skill %s@%s", meta.get("name"), meta.get("id"))
         self._done = (skill, str(meta.get("id")))
 
-    def __enter__(self) -> _Fetcher:
+    def __enter__(self) -> BundleFetcher:
         return self
 
     def __exit__(self, *exc: object) -> None:
