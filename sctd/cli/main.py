@@ -57,6 +57,8 @@ EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pino
 BENCHES: dict[str, Command] = {
     "view": Command("the daemon's tick with the live view and a browser attached, alternating with it "
                     "closed", "sctd.bench.view", "add_view_bench_arguments", "main_view_bench"),
+    "ros": Command("a person's Joy through sctd ros to the ROS target, against a bare rclpy round trip; "
+                   "the node's CPU", "sctd.bench.ros", "add_ros_bench_arguments", "main_ros_bench"),
     "latency": Command("daemon tick timing and input->target latency vs a Zenoh echo",
                        "sctd.bench.latency", "add_latency_arguments", "main_latency"),
     "robustness": Command("the daemon next to the sim under floods, bad bundles, swaps and a jumping "

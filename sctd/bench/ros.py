@@ -1,0 +1,107 @@
+"""``sctd bench ros``: a person's Joy through ``sctd ros`` to the target on ROS, against a
+bare rclpy round trip measured in the same run, and the node's CPU.
+
+Everything runs in a network namespace the bench makes (Fast DDS discovers by
+multicast: none of it leaves), as root: the simulator and the daemon (``--device
+ros``) on sctd's keys, ``sctd ros`` with Joy in and the target out, and the probes of
+:mod:`sctd_services.ros2.probe`. Per target rate (``--rates``, default 100 and 500 Hz):
+
+- **Joy -> target**: Joy at 100 Hz, centred, then pushed (deadman held) until the
+  ``PoseStamped`` target moves, ``--steps`` times: the time from the first pushed Joy
+  to the first moved target (two DDS hops, two Zenoh hops, the daemon's tick, and up
+  to one period of the node's target schedule);
+- **the node's CPU**: its user + system time over the whole Joy phase (targets in at
+  1 kHz from the daemon, Joy at 100 Hz, the target out at the rate), a share of one
+  core.
+
+And once, **the floor**: a bare rclpy round trip (``PoseStamped`` out, echoed back by
+another rclpy process), two DDS hops and two Python callbacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from ..app.defaults import defaults
+from ..app.options import SKILL_HELP
+from . import run_and_report
+
+EP = "tcp/127.0.0.1:7447"  # inside the bench's own namespace
+
+
+def add_ros_bench_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--skill", default=defaults().skill, help=f"{SKILL_HELP} (default %(default)s)")
+    p.add_argument("--task", default=defaults().task,
+                   help="the task the simulator runs (default %(default)s)")
+    p.add_argument("--rates", default="100,500", help="target rates of the node, Hz (default %(default)s)")
+    p.add_argument("--steps", type=int, default=40, help="pushes per rate (default %(default)s)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def _cpu(pid: int) -> float:
+    """User + system seconds of process ``pid`` so far."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run_ros_bench(skill: str, task: str, rates: list[float], steps: int, logdir: Path) -> dict[str, Any]:
+    from sctd.deploy.netns import Hosts, NamespaceError, can_make_namespaces
+
+    why = can_make_namespaces()
+    if why is not None:
+        raise RuntimeError(f"needs network namespaces (DDS stays inside one): {why}")
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as e:
+        raise RuntimeError(f"needs the ros2 extra ({e}): pip install 'sctd[ros2]'") from None
+    out: dict[str, Any] = {"skill": skill, "task": task, "steps": steps, "rates": {}}
+    try:
+        with Hosts(["ros"], logdir) as h:
+            h.python("ros", "sctd_sim.service", "--task", task, "--listen", EP, log="sim.log")
+            h.python("ros", "sctd.cli.main", "run", "--skill", skill, "--device", "ros", "--connect", EP,
+                     log="run.log")
+            echo = h.python("ros", "sctd_services.ros2.probe", "echo", log="echo.log")
+            out["bare_rclpy"] = h.call("ros", "sctd_services.ros2.probe", "ping", "--n", "500", timeout=120)
+            echo.stop()
+            for rate in rates:
+                node = h.python("ros", "sctd.cli.main", "ros", "--target-rate", str(rate), "--connect", EP,
+                                "--stats-json", log=f"ros-{rate:g}.log")
+                cpu0, t0 = _cpu(node.p.pid), time.monotonic()
+                got = h.call("ros", "sctd_services.ros2.probe", "joy", "--steps", str(steps), timeout=300)
+                cpu = (_cpu(node.p.pid) - cpu0) / (time.monotonic() - t0)
+                node.stop()
+                out["rates"][f"{rate:g}"] = {**got, "node_cpu": round(cpu, 3)}
+    except (NamespaceError, RuntimeError) as e:
+        raise RuntimeError(str(e)) from None
+    return out
+
+
+def print_report(r: dict[str, Any]) -> None:
+    bare = r["bare_rclpy"]["round_trip_ms"]
+    print(f"sctd bench ros: {r['skill']} on {r['task']}, Fast DDS in a network namespace; ms")
+    print(f"  bare rclpy round trip (PoseStamped out and echoed back): p50 {bare['p50']}  p99 {bare['p99']}  "
+          f"max {bare['max']}  (n {bare['n']}, lost {r['bare_rclpy']['lost']})")
+    print("  target rate   Joy -> target p50     p99     max     n    node CPU (share of a core)")
+    for rate, x in r["rates"].items():
+        j = x["joy_to_target_ms"]
+        print(f"  {rate:>8} Hz   {j.get('p50', '-'):>13}  {j.get('p99', '-'):>6}  {j.get('max', '-'):>6}  "
+              f"{j['n']:>4}    {x['node_cpu']:.3f}")
+
+
+def main_ros_bench(args: argparse.Namespace) -> int:
+    try:
+        rates = [float(x) for x in args.rates.split(",") if x.strip()]
+    except ValueError:
+        rates = []
+    if not rates or not all(x > 0 for x in rates):
+        from ..app.errors import fail
+
+        return fail("bench ros", f"--rates {args.rates!r}: comma-separated rates > 0")
+    return run_and_report("ros", args, lambda logdir: run_ros_bench(args.skill, args.task, rates, args.steps,
+                                                                     logdir), print_report)
