@@ -29,6 +29,7 @@ import time
 from typing import Any
 
 from sctd.app.errors import EXIT_OK, EXIT_USAGE, fail
+from sctd.app.options import add_robot_argument
 from sctd.wire import Keys
 from sctd.wire.session import add_zenoh_arguments, session_from_args
 
@@ -42,7 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("A ROS 2 node (rclpy) between a ROS 2 arm, its perception and joystick and sctd's "
                      "keys: the hand's pose or joint states, objects' poses and Joy in; the target "
                      "(PoseStamped, optionally TwistStamped) and diagnostics out (docs/ros2.md).")
-    p.add_argument("--robot", default="edan", help="sctd's robot name, the key prefix sctd/<robot>")
+    add_robot_argument(p)
     p.add_argument("--world-frame", default="world", metavar="FRAME",
                    help="the frame every pose is in (a message in another frame is dropped and counted: "
                         "there is no tf2 here)")
