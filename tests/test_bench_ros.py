@@ -11,7 +11,9 @@ from sctd.deploy.netns import last_json
 from tests.conftest import require_namespaces, run_sctd
 from tests.tiers import needs
 
-pytestmark = pytest.mark.slow  # processes in a network namespace
+# processes in a network namespace, at the wall clock's pace: beside another heavy test the
+# daemon holds on stale state and the pushes measure its re-seeds
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 
 def test_bench_ros_reports_the_round_trip_the_push_and_the_nodes_cpu(tmp_path):
