@@ -236,7 +236,7 @@ def print_report(r: dict) -> None:
     print(row("  same tick, no Zenoh, hot", r["baseline_tick_hot_ms"]))
     print(row("  same tick, no Zenoh, 1 kHz", r["baseline_tick_paced_ms"]))
     if r.get("publish_ms"):
-        print(row("target put (off-tick)", r["publish_ms"]))
+        print(row("target put (after the step)", r["publish_ms"]))
     print(row("input -> target", r["latency_ms"]))
     print(row("bare Zenoh echo RTT", r["echo_rtt_ms"]))
     c = r["criteria"]

@@ -39,7 +39,10 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     add_arguments(p, RuntimeConfig, exclude=("stamp_check",), show_default=True)
     add_arguments(p, RuntimeConfig, only=("stamp_check",))
     p.add_argument("--spin-us", type=float, default=100.0,
-                   help="us before each deadline spent spinning instead of sleeping (default %(default)s)")
+                   help="us before each deadline the tick thread wakes: it drains its inputs, then "
+                        "spins to the deadline; 0: it wakes at the deadline, cheapest, with the "
+                        "drain and the timer's wake-up delay as lateness (sctd bench cost prints "
+                        "CPU and lateness for each) (default %(default)s)")
     p.add_argument("--rt-priority", type=int, default=10,
                    help="SCHED_FIFO priority of the tick thread, 0 for none; falls back to normal "
                         "priority when not permitted (default %(default)s)")

@@ -7,15 +7,16 @@ stack:
   Input, state and the active skill's object poses arrive in Zenoh ring channels
   (:class:`~.ingress.Ingress`; newest wins, filled by Zenoh's own threads without Python,
   so a flood of messages costs the tick nothing but the few it drains), drained and
-  decoded just ahead of each deadline; the control step runs at the deadline;
+  decoded in the spin window just ahead of each deadline; the control step runs at the
+  deadline and its target is put at once (:class:`~.publisher.TargetOut`);
 - :class:`~.swap.SkillSwap`: the skill queryables, served by a child process, the skill
   server (:mod:`sctd.runtime.skillserver`), so that no bundle's bytes are ever in this
   process; each swapped-in skill is compiled on a thread of its own, handed over through
   a one-slot mailbox and installed between two ticks;
 - :class:`~.status.TickStats` and :class:`~.status.DaemonStatus`: the tick's timing and
   the status map;
-- :class:`~.publisher.Publisher`: targets and status encoded and put by a thread of its
-  own, so the tick's own work is draining its inputs and the control step.
+- :class:`~.publisher.Publisher`: the status encoded and put by a thread of its own (and
+  the ROS copy of the targets with ``--ros``).
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from .controller import RuntimeConfig
 from .driver import TickDriver
 from .ingress import Ingress
 from .loop import TickLoop
-from .publisher import Publisher
+from .publisher import Publisher, TargetOut
 from .skillserver import ServerOptions
 from .status import DaemonStatus, TickStats
 from .swap import SkillSwap
@@ -175,7 +176,7 @@ class Daemon:
         so a failure at any point releases what was opened before it.
         """
         with ExitStack() as stack:
-            ingress, publisher = self._open(stack)
+            ingress, publisher, target = self._open(stack)
             ticker = self.swap.ticker = Ticker(self.config.period, spin=self.spin)
             skill = self.driver.skill
             log.info("running skill %s@%s for robot %s at %.0f Hz", skill.name, skill.id,
@@ -183,13 +184,13 @@ class Daemon:
             end = None if duration is None else time.monotonic() + duration
             stats = TickStats(time.monotonic(), self.driver.engine.state, 1.0 / self.config.status_rate,
                               self.driver.target_seq)
-            status = self.status = DaemonStatus(self.driver, stats, self.swap, publisher, self.ros,
+            status = self.status = DaemonStatus(self.driver, stats, self.swap, target, self.ros,
                                                 self.realtime)
-            TickLoop(self.driver, ingress, self.swap, publisher.queue.put).run(
+            TickLoop(self.driver, ingress, self.swap, publisher.queue.put, target).run(
                 ticker, status, self.stop_event, end)
         return status.map(ticker, time.monotonic(), 0.0)
 
-    def _open(self, stack: ExitStack) -> tuple[Ingress, Publisher]:
+    def _open(self, stack: ExitStack) -> tuple[Ingress, Publisher, TargetOut]:
         """Declare and start what a run needs; each is closed by ``stack`` (in reverse)."""
         keys, s = Keys(self.config.robot), self.session
         # Started before the tick thread's own settings (its threads set theirs); a swap
@@ -212,12 +213,13 @@ class Daemon:
             encoding=MSGPACK))
         pub_status = stack.enter_context(s.declare_publisher(
             keys.status, congestion_control=zenoh.CongestionControl.DROP, encoding=MSGPACK))
-        publisher = stack.enter_context(Publisher(pub_target, pub_status, self.rt_priority, self.ros))
+        publisher = stack.enter_context(Publisher(pub_status, self.rt_priority, self.ros))
+        target = TargetOut(pub_target, publisher if self.ros is not None else None)
         self.realtime = stack.enter_context(_tick_thread_settings(self.rt_priority, self.cpu))
         # no new swaps once the loop ends; one under way fails its wait and is refused
         stack.callback(self.stop_event.set)
         self.swap.wait_served()
-        return ingress, publisher
+        return ingress, publisher, target
 
     def stop(self) -> None:
         self.stop_event.set()

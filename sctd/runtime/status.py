@@ -3,7 +3,7 @@
 
 :class:`TickStats` is what the loop measures on every tick (lateness, compute time, the
 FSM state) and the status windows it closes; :class:`DaemonStatus` puts the status map
-together from it and from the daemon's parts (the driver, the ticker, the publisher, the
+together from it and from the daemon's parts (the driver, the ticker, the target's puts, the
 swap, ROS). Only :meth:`TickStats.account` runs on every tick.
 """
 
@@ -15,7 +15,7 @@ from typing import Any
 
 from ..timing import Histogram, Ticker
 from .driver import TickDriver
-from .publisher import Publisher
+from .publisher import TargetOut
 from .swap import SkillSwap
 
 log = logging.getLogger("sctd.run")
@@ -92,7 +92,7 @@ class DaemonStatus:
     stats : TickStats
     swap : SkillSwap
         Its refusals are ``counters.swaps_refused``.
-    publisher : Publisher, optional
+    target : TargetOut, optional
         Its put times are ``publish_ms``.
     ros : optional
         ``sctd.wire.ros.RuntimeRos`` (``--ros``): its ``stats()`` are ``ros``.
@@ -101,9 +101,9 @@ class DaemonStatus:
     """
 
     def __init__(self, driver: TickDriver, stats: TickStats, swap: SkillSwap,
-                 publisher: Publisher | None = None, ros: Any = None, realtime: bool = False):
+                 target: TargetOut | None = None, ros: Any = None, realtime: bool = False):
         self.driver, self.stats, self.swap = driver, stats, swap
-        self.publisher, self.ros, self.realtime = publisher, ros, realtime
+        self.target, self.ros, self.realtime = target, ros, realtime
         # the engine's activity count when the last window closed: (engine, entries,
         # commands, acted); a window's activity is the count since
         self._activity_base: tuple[object, int, int, list[int]] | None = None
@@ -163,7 +163,7 @@ class DaemonStatus:
             "target_rate": round(targets / window, 1) if window > 0 else None,
             "lateness_ms": stats.lateness.summary_ms(),
             "compute_ms": stats.compute.summary_ms(),
-            "publish_ms": self.publisher.put_time.summary_ms() if self.publisher is not None else None,
+            "publish_ms": self.target.put_time.summary_ms() if self.target is not None else None,
             "compute_max_window_ms": round(stats.compute_max * 1e3, 4),
             "recent_ms": stats.recent,
             "input_age": age(last.received if last is not None else None),
