@@ -83,7 +83,7 @@ def _train(tmp_path: Path, ep: str, *extra: str, log: str = "train.log") -> tupl
 @pytest.fixture
 def loop(tmp_path, monkeypatch):
     """sim (drawer) + daemon (the hand-written drawer skill) + learner with its own store
-    (2 lockstep trials per check; also the store every child resolves names from), and
+    (at most 2 lockstep trials per check; also the store every child resolves names from), and
     a session watching them."""
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
@@ -124,11 +124,12 @@ def test_taught_demonstrations_are_stored_trained_checked_and_swapped(tmp_path, 
 
     rc, reply, out = _train(tmp_path, ep)
     assert rc == 0 and reply["swapped"] and reply["passed"], out + procs["learner"].output()
-    assert reply["evaluation"]["trials"] == 2 and reply["evaluation"]["successes"] >= 1
+    ev = reply["evaluation"]  # at most 2 trials: a first success already passes a floor of 0.5
+    assert 1 <= ev["trials"] <= 2 and ev["successes"] >= 1
     assert wait_for(lambda: watch.skill() == reply["id"], 10)  # the daemon runs the reply's id
     assert reply["id"] != first and reply["report"]["method"] == "vf"
     record = json.loads((store / "skills" / reply["id"] / "record.json").read_text())
-    assert record["demos"] == names and record["evaluation"]["drawer"]["trials"] == 2
+    assert record["demos"] == names and record["evaluation"]["drawer"]["trials"] == ev["trials"]
 
     # a skill that fails its check stays out: the daemon keeps the swapped one
     rc, slow, out = _train(tmp_path, ep, "--name", "slow", "--param", "max-linear-speed=0.0005",

@@ -4,6 +4,8 @@ the store as a place skill names resolve from (sctd.skill.catalog)."""
 from __future__ import annotations
 
 import json
+import math
+import random
 
 import msgpack
 import pytest
@@ -14,7 +16,7 @@ from sctd.learn.demos import read_demo_csv
 from sctd.skill import SkillError, bundle_from_file, load_skill
 from sctd.skill.catalog import find_skill, find_stored, shipped_folder, stored_skills
 from sctd.wire import codec
-from sctd_services.learner.check import CheckSettings, failed_already, verdict
+from sctd_services.learner.check import CheckSettings, decided, rule_for, simulate, verdict
 from sctd_services.learner.request import RequestError, parse_request
 from sctd_services.learner.store import Store
 from tests.conftest import ROOT
@@ -172,45 +174,65 @@ def _ev(k: int, n: int = 10) -> dict:
 
 
 def test_the_check_passes_at_the_floor_and_within_the_tolerance_of_the_active_skill():
-    s = CheckSettings(trials=10, floor=0.9, tolerance=0.1)
-    assert verdict(_ev(9), "pour", s, None)[0]
-    assert not verdict(_ev(8), "pour", s, None)[0]
-    assert verdict(_ev(9), "pour", s, _ev(10))[0]  # 0.9 >= 1.0 - 0.1
-    ok, why = verdict(_ev(9), "pour", CheckSettings(floor=0.5, tolerance=0.05), _ev(10))
-    assert not ok and "worse than the active skill's 1.00" in why
+    s = CheckSettings(trials=20, floor=0.9, tolerance=0.1)
+    ok, why = verdict(_ev(6, 6), "pour", s, None)
+    assert ok and "6/6 trials succeeded: accepted by the sequential test (success rate >= 0.95 " \
+                  "against <= 0.80, at most 20 trials; the floor 0.90)" in why
+    assert not verdict(_ev(5, 5), "pour", s, None)[0]  # undecided: too few
+    assert not verdict(_ev(0, 2), "pour", s, None)[0]
+    assert verdict(_ev(6, 6), "pour", s, _ev(10))[0]  # raised to 1.0 - 0.1: the same test
+    ok, why = verdict(_ev(9, 10), "pour", CheckSettings(floor=0.5, tolerance=0.05), _ev(10))
+    assert not ok and "the active skill's 1.00 minus the tolerance 0.05" in why
     ok, why = verdict(None, "crank", s, None)
     assert not ok and "no lockstep evaluation for task 'crank'" in why
 
 
-@given(st.lists(st.booleans(), min_size=1, max_size=12), st.sampled_from([0.5, 0.8, 0.9, 1.0]),
+def test_the_sequential_test_has_the_operating_points_it_promises():
+    """Known answers (exact, by dynamic programming over the truncated test) at the
+    default floor: accepts a skill of 80 % with probability 0.354 (<= 0.38, as a fixed rule
+    of at most one failure in ten trials: 0.376) and rejects one of 95 % with 0.065 (<=
+    0.09; that rule: 0.086); a perfect skill after 6 trials."""
+    rule = rule_for(CheckSettings(), None)
+    assert (rule.low, rule.high, rule.max_trials) == (0.8, 0.95, 20)
+    acc80, _ = rule.operating_point(0.8)
+    acc95, n95 = rule.operating_point(0.95)
+    acc100, n100 = rule.operating_point(1.0)
+    assert round(acc80, 3) == 0.354 and round(1 - acc95, 3) == 0.065 and round(n95, 2) == 8.35
+    assert acc100 == 1.0 and n100 == 6.0
+    assert rule.decide(6, 0) is True and rule.decide(5, 0) is None and rule.decide(0, 2) is False
+
+
+def test_ten_thousand_simulated_sequences_agree_with_the_exact_operating_points():
+    """The test run on 10,000 random outcome sequences per success rate (seeded): the
+    share accepted and the trials run are within 4 standard errors of the exact figures,
+    and within the bounds at 0.8 and 0.95."""
+    rng = random.Random(7)
+    rule = rule_for(CheckSettings(), None)
+    for p in (0.8, 0.9, 0.95):
+        accepted, trials = simulate(rule, p, 10_000, rng)
+        exact, n = rule.operating_point(p)
+        assert abs(accepted - exact) < 4 * math.sqrt(exact * (1 - exact) / 10_000)
+        assert abs(trials - n) < 0.15
+    assert simulate(rule, 0.8, 10_000, rng)[0] <= 0.38 + 4 * math.sqrt(0.38 * 0.62 / 10_000)
+    assert 1 - simulate(rule, 0.95, 10_000, rng)[0] <= 0.09 + 4 * math.sqrt(0.09 * 0.91 / 10_000)
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=25), st.sampled_from([0.5, 0.8, 0.9, 0.95]),
        st.sampled_from([0.0, 0.1]), st.one_of(st.none(), st.integers(0, 10)))
-def test_an_early_stop_never_changes_the_verdict(outcomes, floor, tolerance, active_ok):
-    """Stopped at any prefix that failed_already calls a fail, the verdict on that prefix
-    fails, and so does the verdict on the whole sequence, whatever the rest holds; and a
-    sequence that passes is never stopped."""
+def test_the_check_stops_where_the_test_decides_and_the_verdict_is_that_decision(
+        outcomes, floor, tolerance, active_ok):
+    """Run trial by trial, the check stops at the first prefix the test decides (at the
+    latest at ``trials``), and the verdict on what ran is that decision."""
     s = CheckSettings(trials=len(outcomes), floor=floor, tolerance=tolerance)
     active = None if active_ok is None else _ev(active_ok)
     runs = [{"outcome": "success" if ok else "failure"} for ok in outcomes]
-    whole = verdict(_ev(sum(outcomes), len(outcomes)), "pour", s, active)[0]
-    for k in range(1, len(outcomes)):
-        if failed_already(runs[:k], s, active):
-            ev = {**_ev(sum(outcomes[:k]), k), "stopped_early": True, "planned": len(outcomes)}
-            ok, why = verdict(ev, "pour", s, active)
-            assert not ok and not whole and f"stopped after {k} of {len(outcomes)}" in why
-            best = [*outcomes[:k], *[True] * (len(outcomes) - k)]  # the rest all succeed
-            assert not verdict(_ev(sum(best), len(best)), "pour", s, active)[0]
-            break
-    if whole:
-        assert not any(failed_already(runs[:k], s, active) for k in range(1, len(outcomes) + 1))
-
-
-def test_a_check_stops_after_the_second_failure_of_ten_at_floor_0_9():
-    s = CheckSettings(trials=10, floor=0.9)
-    fail, ok = {"outcome": "failure"}, {"outcome": "success"}
-    assert not failed_already([fail], s, None)
-    assert failed_already([fail, ok, fail], s, None)
-    assert failed_already([fail], s, _ev(10)) is False  # 9/10 would still pass 1.0 - 0.1
-    assert failed_already([fail], CheckSettings(trials=10, floor=0.5, tolerance=0.0), _ev(10))
+    k = next(k for k in range(1, len(runs) + 1) if decided(runs[:k], s, active) is not None)
+    d = decided(runs[:k], s, active)
+    assert verdict(_ev(sum(outcomes[:k]), k), "pour", s, active)[0] is d
+    if all(outcomes[:k]):
+        assert d  # successes alone never reject
+    if not any(outcomes[:k]):
+        assert not d
 
 
 def test_check_settings_are_bounded():

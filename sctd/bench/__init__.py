@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -17,12 +18,17 @@ from sctd.app.errors import EXIT_FAILED, EXIT_OK, fail
 from sctd.app.logs import log_folder
 
 
+def _exit_on_sigterm(*_: object) -> None:
+    raise SystemExit(143)  # unwinds the stack: the programs a benchmark started are stopped
+
+
 def run_and_report(name: str, args: argparse.Namespace, run: Callable[[Path], dict[str, Any]],
                    print_report: Callable[[dict[str, Any]], None]) -> int:
     """Run a benchmark of processes (``run(logdir)``, logs in ``--logs`` or a temporary
     folder) and print its figures: JSON with ``--json``, else the report. A benchmark
     that could not run (RuntimeError) exits 1 with ``sctd bench <name>: <why>``."""
     logdir = log_folder(args.logs, "sctd-bench-")
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)  # its programs are stopped on the way out
     try:
         r = run(logdir)
     except RuntimeError as e:

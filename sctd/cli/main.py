@@ -55,6 +55,12 @@ EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pino
             "sensor_msgs": "ros2", "diagnostic_msgs": "ros2"}
 
 BENCHES: dict[str, Command] = {
+    "check": Command("the learner's sequential check: its operating points (exact, simulated), and "
+                     "request -> swapped skill next to the daemon", "sctd.bench.check",
+                     "add_check_bench_arguments", "main_check_bench"),
+    "cost": Command("what the daemon and the simulator cost (CPU, lateness, latency for each spin) and "
+                    "the lockstep step, against a baseline tree in the same run", "sctd.bench.cost",
+                    "add_cost_bench_arguments", "main_cost_bench"),
     "view": Command("the daemon's tick with the live view and a browser attached, alternating with it "
                     "closed", "sctd.bench.view", "add_view_bench_arguments", "main_view_bench"),
     "ros": Command("a person's Joy through sctd ros to the ROS target, against a bare rclpy round trip; "

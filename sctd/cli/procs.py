@@ -108,16 +108,19 @@ class Child:
     log : Path, optional
         File receiving stdout and stderr; default: stderr passes through and stdout
         is captured (read it with :meth:`communicate`).
+    env : dict, optional
+        Its environment (default: this process's).
     """
 
-    def __init__(self, module: str, *args: str, log: Path | None = None, cwd: Path | None = None):
+    def __init__(self, module: str, *args: str, log: Path | None = None, cwd: Path | None = None,
+                 env: dict[str, str] | None = None):
         self.log_path = log
         self._log: IO[bytes] | None = open(log, "wb") if log is not None else None
         self.p = subprocess.Popen(
             [sys.executable, "-m", module, *args],
             stdout=self._log if self._log is not None else subprocess.PIPE,
             stderr=subprocess.STDOUT if self._log is not None else None,
-            cwd=cwd, start_new_session=True, preexec_fn=_default_signals,
+            cwd=cwd, env=env, start_new_session=True, preexec_fn=_default_signals,
         )
 
     def __enter__(self) -> Child:

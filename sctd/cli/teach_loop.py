@@ -80,8 +80,9 @@ def add_then_learn_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--store", default=None, metavar="DIR",
                    help="the learner's store (default: a temporary one; $SCTD_STORE or the user "
                         "data folder are for the long-running learner)")
-    g.add_argument("--check-trials", type=int, default=10,
-                   help="lockstep trials of the learner's check (default %(default)s)")
+    g.add_argument("--check-trials", type=int, default=20,
+                   help="at most this many lockstep trials in the learner's check (a sequential "
+                        "test; a skill that always succeeds passes after 6) (default %(default)s)")
     g.add_argument("--eval-trials", type=int, default=20,
                    help="lockstep trials of the evaluation of the swapped skill (default "
                         "%(default)s; 0: none)")
@@ -187,7 +188,7 @@ def learn_and_swap(stack: contextlib.ExitStack, s: zenoh.Session, args: argparse
     if frames:
         req["frames"] = frames
     print(f"sctd teach: training {args.then_learn} on {len(names)} demonstrations, then "
-          f"{args.check_trials} lockstep trials{' and the swap' if args.swap else ''}", flush=True)
+          f"at most {args.check_trials} lockstep trials{' and the swap' if args.swap else ''}", flush=True)
     got = client.query(s, keys.learner, codec.pack(req), timeout=900, find=10)
     if got is None or not got[0]:
         raise LoopError(f"the learner did not train: {got[1].get('error') if got else 'no reply'}")

@@ -1,0 +1,454 @@
+"""``sctd bench cost``: what the daemon and the simulator cost a computer, and the lockstep
+step, for this code and for a baseline measured in the same run, interleaved.
+
+The baseline (``--baseline``) is another sctd source tree: a folder (a checkout, e.g.
+``git worktree add /tmp/base v0.3``) or a commit of this checkout's repository
+(exported with ``git archive`` into a temporary folder). Its programs run with its own
+packages first on ``PYTHONPATH`` (the folders mapped to import names as the installed
+package maps them), on this interpreter and its libraries. Without one, only this code
+is measured.
+
+Per configuration (skill x input x spin), for each tree in turn (the order alternates
+from one configuration to the next, so that a drift of the machine does not favour
+one), one **phase**: ``sctd sim --task T`` and ``sctd run --skill S --spin-us N`` on a
+private loopback port, a person's input at 100 Hz (``zero``: centred sticks, the
+deadman released; ``full``: sines over the whole range on three axes, the deadman held),
+``--warmup`` s, then ``--window`` s measured:
+
+- **CPU**: user + system time from ``/proc`` of each program's whole process tree
+  (every thread: the tick, Zenoh's, the daemon's skill server and worker processes), as
+  a share of one core over the window;
+- **lateness** and **compute**: the median, over the window's seconds, of the p99 that
+  the daemon's ``status`` reports for each second (``recent_ms``; as ``sctd bench view``);
+- **latency**: input to target (from sending input ``seq`` to the first target whose
+  ``in_seq`` names it), p50 and p99 over the window.
+
+With ``--floor``, also the transport's floor in one more phase (this tree's simulator): a
+bare Zenoh peer in place of the daemon that drains the 1 kHz state and puts a target of the same
+size every millisecond, nothing else (what any 1 kHz Python process on Zenoh pays here).
+
+And the **lockstep step**: ``sctd bench eval`` (``--eval-trials`` trials of each skill,
+the same seeds) in each tree, ms of wall time per simulated 1 kHz step.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from ..app.defaults import defaults
+from ..cli.procs import Child, free_port
+from ..timing import RoundTrips, Ticker, set_timer_slack
+from ..wire import Keys, codec
+from ..wire.session import session
+from . import run_and_report
+from .latency import wait_for_targets
+
+IMPORT_FOLDERS = {"sctd": "sctd", "sctd_sim": "sim", "sctd_services": "services",
+                  "sctd_skills": "skills", "sctd_tasks": "tasks"}
+"""Import name -> folder of a source tree (as the package installs them)."""
+
+GOALS = {"daemon_spin_off": 0.12, "daemon_default_spin": 0.20, "sim": 0.20, "lateness_ms": 0.2,
+         "step_ms": 0.12}
+"""The figures this bench is judged by: CPU as a share of one core, ms."""
+
+DEFAULT_SPIN_US = 100.0  # sctd run's --spin-us when not told (the daemon's default)
+INPUT_RATE = 100.0  # Hz of the bench's person
+
+
+@dataclass(frozen=True)
+class Tree:
+    """One source tree's programs: ``label`` and the environment they run in (None: this
+    process's own)."""
+
+    label: str
+    env: dict[str, str] | None = None
+    source: str = ""  # what the baseline was made from
+
+
+def source_tree(spec: str, stack: ExitStack) -> Tree:
+    """The baseline tree named by ``spec``: a folder holding ``sctd/`` and ``sim/``, or a
+    commit of the repository this code was loaded from. Temporary folders are removed
+    by ``stack``.
+
+    Raises
+    ------
+    RuntimeError
+        Neither a source folder nor a commit ``git`` knows here.
+    """
+    folder = Path(spec).expanduser()
+    label = spec
+    if not folder.is_dir():
+        folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="sctd-baseline-")))
+        repo = Path(__file__).resolve().parents[2]
+        try:
+            archive = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", spec],
+                                     capture_output=True, check=True, timeout=60).stdout
+            subprocess.run(["tar", "-x", "-C", str(folder)], input=archive, check=True, timeout=60)
+        except (OSError, subprocess.SubprocessError) as e:
+            why = getattr(e, "stderr", b"") or b""
+            raise RuntimeError(f"--baseline {spec!r}: not a folder, and not a commit of {repo} "
+                               f"({why.decode(errors='replace').strip() or e})") from None
+    missing = [f for f in IMPORT_FOLDERS.values() if not (folder / f).is_dir()]
+    if missing:
+        raise RuntimeError(f"--baseline {spec!r}: {folder} is not an sctd source tree (no "
+                           f"{', '.join(missing)})")
+    links = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="sctd-baseline-path-")))
+    for name, sub in IMPORT_FOLDERS.items():
+        (links / name).symlink_to(folder.resolve() / sub, target_is_directory=True)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(links), env.get("PYTHONPATH", "")]))
+    return Tree("baseline", env, label)
+
+
+# --- CPU from /proc ---------------------------------------------------------------------
+
+def _descendants(pid: int) -> list[int]:
+    out = [pid]
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return []
+    for t in tasks:
+        try:
+            with open(f"/proc/{pid}/task/{t}/children") as f:
+                kids = [int(k) for k in f.read().split()]
+        except OSError:
+            continue
+        for k in kids:
+            out += _descendants(k)
+    return out
+
+
+def tree_cpu(pid: int) -> tuple[float, int]:
+    """User + system seconds so far of process ``pid`` and every process under it, and
+    the times their threads have slept (voluntary context switches: wake-ups)."""
+    total = sleeps = 0
+    for p in _descendants(pid):
+        try:
+            with open(f"/proc/{p}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            for t in os.listdir(f"/proc/{p}/task"):
+                with open(f"/proc/{p}/task/{t}/status") as f:
+                    sleeps += next(int(line.split()[1]) for line in f
+                                   if line.startswith("voluntary_ctxt_switches"))
+        except (OSError, StopIteration, ValueError):
+            continue  # ended meanwhile
+        total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK"), sleeps
+
+
+# --- one phase ----------------------------------------------------------------------------
+
+class _Seconds:
+    """The daemon's per-second p99s of lateness and compute, with their arrival times."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[float, float, float]] = []
+        self._lock = threading.Lock()
+
+    def __call__(self, sample: zenoh.Sample) -> None:
+        try:
+            recent = codec.unpack_map(sample.payload.to_bytes()).get("recent_ms") or {}
+            row = (time.monotonic(), float(recent["lateness"]["p99"]), float(recent["compute"]["p99"]))
+        except (KeyError, TypeError, ValueError, codec.DecodeError):
+            return
+        with self._lock:
+            if not self.rows or row[0] - self.rows[-1][0] >= 0.95:
+                self.rows.append(row)
+
+    def between(self, t0: float, t1: float) -> list[tuple[float, float, float]]:
+        with self._lock:
+            return [r for r in self.rows if t0 <= r[0] <= t1]
+
+
+def _person(ep: str, full: bool, trips: RoundTrips, stop: threading.Event) -> None:
+    """The bench's person at :data:`INPUT_RATE`: centred and released, or full sines with
+    the deadman held; every send timed for the latency."""
+    with session(connect=[ep]) as s:
+        pub = s.declare_publisher(Keys().input("bench"))
+        k = 0
+        while not stop.is_set():
+            k += 1
+            u = [math.sin(k * 0.013), math.cos(k * 0.009), math.sin(k * 0.005)] if full else [0.0] * 3
+            trips.sent(k)
+            pub.put(codec.encode_input(k, time.time(), u, [0, 1 if full else 0, 0]))
+            stop.wait(1.0 / INPUT_RATE)
+        pub.put(codec.encode_input(k + 1, time.time(), [0.0, 0.0, 0.0], [0, 0, 0]))
+
+
+@dataclass(frozen=True)
+class Phase:
+    """One phase's configuration (module doc); ``floor``: the bare peer instead of the
+    daemon."""
+
+    skill: str
+    task: str
+    full: bool
+    spin_us: float
+    window: float
+    warmup: float
+    floor: bool = False
+
+    @property
+    def name(self) -> str:
+        if self.floor:
+            return "floor: bare Zenoh peer"
+        return f"{self.skill} {'full' if self.full else 'zero'} spin {self.spin_us:g} us"
+
+
+def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
+    """One phase of ``tree`` (module doc); its figures."""
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    seconds, trips, stop = _Seconds(), RoundTrips(), threading.Event()
+    trips.counting = False
+    tick = (("sctd.bench.cost", "floor", "--connect", ep) if ph.floor else
+            ("sctd.cli.main", "run", "--skill", ph.skill, "--connect", ep, "--spin-us", f"{ph.spin_us:g}"))
+    with Child("sctd.cli.main", "sim", "--task", ph.task, "--listen", ep, log=logdir / f"sim-{k}.log",
+               env=tree.env) as sim, \
+         Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env) as daemon, \
+         session(connect=[ep]) as s:
+        wait_for_targets(ep, daemon, logdir, timeout=90.0)
+        subs = [s.declare_subscriber(Keys().status, seconds),
+                s.declare_subscriber(Keys().target, lambda x: _answered(trips, x))]
+        person = threading.Thread(target=_person, args=(ep, ph.full, trips, stop), daemon=True)
+        person.start()
+        try:
+            time.sleep(ph.warmup)
+            trips.counting = True
+            c_sim, c_run, t0 = tree_cpu(sim.p.pid), tree_cpu(daemon.p.pid), time.monotonic()
+            time.sleep(ph.window)
+            t1 = time.monotonic()
+            e_sim, e_run = tree_cpu(sim.p.pid), tree_cpu(daemon.p.pid)
+            trips.counting = False
+            if not (sim.running() and daemon.running()):
+                raise RuntimeError(f"a program ended during the phase; see {logdir}/*-{k}.log")
+        finally:
+            stop.set()
+            person.join(5.0)
+            for sub in subs:
+                sub.undeclare()
+    rows, dt = seconds.between(t0, t1), t1 - t0
+    return {"tree": tree.label, "phase": ph.name, "skill": ph.skill, "input": "full" if ph.full else "zero",
+            "spin_us": ph.spin_us, "floor": ph.floor, "daemon_cpu": round((e_run[0] - c_run[0]) / dt, 4),
+            "sim_cpu": round((e_sim[0] - c_sim[0]) / dt, 4),
+            "daemon_wakeups": round((e_run[1] - c_run[1]) / dt),
+            "sim_wakeups": round((e_sim[1] - c_sim[1]) / dt),
+            "lateness_p99_ms": _median([r[1] for r in rows]), "compute_p99_ms": _median([r[2] for r in rows]),
+            "latency_ms": trips.histogram.summary_ms() if trips.histogram.n else None}
+
+
+def _answered(trips: RoundTrips, sample: zenoh.Sample) -> None:
+    now = time.monotonic()
+    try:
+        trips.answered(int(codec.decode_target(sample.payload.to_bytes())["in_seq"]), now)
+    except (KeyError, TypeError, ValueError):
+        pass
+
+
+def _median(xs: list[float]) -> float | None:
+    return round(statistics.median(xs), 4) if xs else None
+
+
+# --- the lockstep step ------------------------------------------------------------------
+
+def lockstep_step(tree: Tree, skill: str, trials: int, logdir: Path) -> dict[str, Any]:
+    """``sctd bench eval --json`` of ``skill`` in ``tree``: its figures."""
+    log = logdir / f"eval-{skill}-{len(list(logdir.glob('eval-*')))}.log"
+    with Child("sctd.cli.main", "bench", "eval", "--skill", skill, "--trials", str(trials), "--json",
+               log=log, env=tree.env) as child:
+        if child.p.wait(timeout=60.0 * trials + 120.0) != 0:
+            raise RuntimeError(f"sctd bench eval failed in {tree.label}; see {log}")
+    out = json.loads(log.read_text().strip().splitlines()[-1])
+    return {"tree": tree.label, "skill": skill, "ms_per_step": out["ms_per_step"], "rtf": out["rtf"],
+            "outcomes": out["outcomes"], "sim_s": out["sim_s"]}
+
+
+# --- the run --------------------------------------------------------------------------------
+
+def phases_of(args: argparse.Namespace) -> list[Phase]:
+    out = [Phase(skill, args.task, full, spin, args.window, args.warmup)
+           for skill in args.skills for full in args.inputs for spin in args.spins]
+    if args.floor:
+        out.append(Phase(args.skills[0], args.task, False, 0.0, args.window, args.warmup, floor=True))
+    return out
+
+
+def run_cost_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
+    """Every phase and lockstep measurement of ``args``, trees interleaved."""
+    with ExitStack() as stack:
+        trees = [Tree("this")]
+        if args.baseline:
+            trees.insert(0, source_tree(args.baseline, stack))
+        rows: list[dict[str, Any]] = []
+        for k, ph in enumerate(phases_of(args)):
+            order = [trees[-1]] if ph.floor else trees if k % 2 == 0 else trees[::-1]
+            for tree in order:
+                rows.append(run_phase(tree, ph, logdir, len(rows)))
+                print(_row(rows[-1]), file=sys.stderr, flush=True)
+        steps = []
+        for k, skill in enumerate(args.skills if args.eval_trials else []):
+            for tree in (trees if k % 2 == 0 else trees[::-1]):
+                steps.append(lockstep_step(tree, skill, args.eval_trials, logdir))
+    return {"task": args.task, "window_s": args.window, "trees": {t.label: t.source for t in trees},
+            "phases": rows, "lockstep": steps, "goals": GOALS}
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:5.1f}"
+
+
+def _ms(x: float | None) -> str:
+    return "-" if x is None else f"{x:.3f}"
+
+
+def _row(r: dict[str, Any]) -> str:
+    lat = r["latency_ms"] or {}
+    return (f"  {r['phase']:<24s} {r['tree']:<9s} {_pct(r['daemon_cpu']):>7s} {r['daemon_wakeups']:>6d} "
+            f"{_pct(r['sim_cpu']):>6s} {r['sim_wakeups']:>6d} "
+            f"{_ms(r['lateness_p99_ms']):>9s} {_ms(r['compute_p99_ms']):>9s} "
+            f"{_ms(lat.get('p50')):>7s} {_ms(lat.get('p99')):>7s}")
+
+
+def print_report(r: dict[str, Any]) -> None:
+    print(f"sctd bench cost: task {r['task']}, {r['window_s']:g} s windows; CPU in % of one core "
+          "(each program's process tree, from /proc); lateness and compute: median of the daemon's "
+          "per-second p99, ms; latency input -> target, ms; wakes: the threads' sleeps per second")
+    if r["trees"].get("baseline"):
+        print(f"  baseline: {r['trees']['baseline']}")
+    print(f"  {'phase':<24s} {'tree':<9s} {'daemon':>7s} {'wakes':>6s} {'sim':>6s} {'wakes':>6s} "
+          f"{'late p99':>9s} {'comp p99':>9s} "
+          f"{'lat p50':>7s} {'lat p99':>7s}")
+    for row in r["phases"]:
+        print(_row(row))
+    if r["lockstep"]:
+        print("lockstep step (sctd bench eval, the same seeds in each tree):")
+        for s in r["lockstep"]:
+            outcomes = ", ".join(f"{n} {k}" for k, n in sorted(s["outcomes"].items()))
+            print(f"  {s['skill']:<12s} {s['tree']:<9s} {s['ms_per_step']:.4f} ms per step, real-time factor "
+                  f"{s['rtf']:.2f} ({s['sim_s']:.1f} s simulated; {outcomes})")
+    for line in verdicts(r):
+        print(line)
+
+
+def verdicts(r: dict[str, Any]) -> list[str]:
+    """This code's figures against :data:`GOALS` (the worst phase of each kind)."""
+    mine = [p for p in r["phases"] if p["tree"] == "this" and not p["floor"]]
+    out = []
+
+    def judge(what: str, values: list[float], goal: float, unit: str = "%") -> None:
+        if not values:
+            return
+        worst = max(values)
+        shown = f"{100 * worst:.1f} %" if unit == "%" else f"{worst:.3f} ms"
+        bound = f"{100 * goal:.0f} %" if unit == "%" else f"{goal:.2f} ms"
+        out.append(f"  {what}: worst {shown} (goal <= {bound}): {'met' if worst <= goal else 'NOT met'}")
+
+    print_goals = "this code against the goals:"
+    judge("daemon, spin off", [p["daemon_cpu"] for p in mine if p["spin_us"] == 0], GOALS["daemon_spin_off"])
+    judge("daemon, default spin", [p["daemon_cpu"] for p in mine if p["spin_us"] == DEFAULT_SPIN_US],
+          GOALS["daemon_default_spin"])
+    judge("simulator", [p["sim_cpu"] for p in mine], GOALS["sim"])
+    judge("lateness p99", [p["lateness_p99_ms"] for p in mine if p["lateness_p99_ms"] is not None],
+          GOALS["lateness_ms"], "ms")
+    judge("lockstep step", [s["ms_per_step"] for s in r["lockstep"] if s["tree"] == "this"],
+          GOALS["step_ms"], "ms")
+    return [print_goals, *out] if out else []
+
+
+# --- the floor's bare peer ---------------------------------------------------------------
+
+def floor_peer(ep: str) -> None:
+    """Drain the 1 kHz state and put a target-sized message every millisecond, nothing
+    else (on the daemon's keys, so that the phase's probes see it)."""
+    keys = Keys()
+    with session(connect=[ep]) as s:
+        sub = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(4))
+        pub = s.declare_publisher(keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP)
+        set_timer_slack(1)
+        ticker, seq, pose = Ticker(1e-3, spin=0.0), 0, [0.5, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0]
+        while True:
+            ticker.wait()
+            while (x := sub.try_recv()) is not None:
+                x.payload.to_bytes()
+            seq += 1
+            pub.put(codec.encode_target(seq, time.time(), pose, "floor", "floor", 0, "", False))
+
+
+def _csv(kind: type, what: str):
+    def parse(text: str) -> list:
+        try:
+            out = [kind(x) for x in text.split(",") if x.strip()]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: comma-separated {what}") from None
+        if not out:
+            raise argparse.ArgumentTypeError(f"{text!r}: at least one {what}")
+        return out
+    return parse
+
+
+def _inputs(text: str) -> list[bool]:
+    names = [x.strip() for x in text.split(",") if x.strip()]
+    bad = [n for n in names if n not in ("zero", "full")]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: comma-separated zero and/or full")
+    return [n == "full" for n in names]
+
+
+def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--baseline", metavar="DIR|COMMIT",
+                   help="another sctd source tree to measure beside this one: a folder, or a commit "
+                        "of this checkout's repository")
+    p.add_argument("--skills", type=_csv(str, "skills"), default=[defaults().skill, "pour-vf"],
+                   help="skills the daemon runs (default pour,pour-vf)")
+    p.add_argument("--task", default=defaults().task, help="the simulator's task (default %(default)s)")
+    p.add_argument("--inputs", type=_inputs, default=[False, True], help="zero,full (default both)")
+    p.add_argument("--spins", type=_csv(float, "spins in us"), default=[0.0, 25.0, 50.0, 100.0],
+                   help="the daemon's --spin-us values (default 0,25,50,100)")
+    p.add_argument("--window", type=float, default=10.0, help="s measured per phase (default %(default)s)")
+    p.add_argument("--warmup", type=float, default=3.0, help="s before each window (default %(default)s)")
+    p.add_argument("--floor", action=argparse.BooleanOptionalAction, default=True,
+                   help="also measure the bare Zenoh peer's floor (default on)")
+    p.add_argument("--eval-trials", type=int, default=2,
+                   help="lockstep trials per skill for the step's figure, 0: none (default %(default)s)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def main_cost_bench(args: argparse.Namespace) -> int:
+    if not args.window > 0 or args.warmup < 0 or args.eval_trials < 0:
+        from ..app.errors import fail
+
+        return fail("bench cost", "--window must be > 0, --warmup and --eval-trials >= 0")
+    return run_and_report("cost", args, lambda logdir: run_cost_bench(args, logdir), print_report)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sctd.bench.cost floor --connect EP``: the floor's bare peer."""
+    p = argparse.ArgumentParser(prog="sctd.bench.cost")
+    p.add_argument("role", choices=["floor"])
+    p.add_argument("--connect", required=True)
+    a = p.parse_args(argv)
+    try:
+        floor_peer(a.connect)
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

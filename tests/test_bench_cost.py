@@ -1,0 +1,104 @@
+"""``sctd bench cost`` and ``sctd bench check``: the baseline tree, the CPU and wake-up
+counts from /proc, the verdicts against the goals, and the check's operating points."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+
+import pytest
+
+from sctd.bench import check as bench_check
+from sctd.bench import cost
+from sctd.cli.main import main
+from sctd_services.learner.check import CheckSettings, SequentialRule
+from tests.conftest import ROOT
+
+
+def test_a_baseline_folder_runs_with_its_own_packages_first(tmp_path):
+    for sub in cost.IMPORT_FOLDERS.values():
+        (tmp_path / "tree" / sub).mkdir(parents=True)
+    with cost.ExitStack() as stack:
+        tree = cost.source_tree(str(tmp_path / "tree"), stack)
+        assert tree.label == "baseline" and tree.env is not None
+        links = tree.env["PYTHONPATH"].split(os.pathsep)[0]
+        for name, sub in cost.IMPORT_FOLDERS.items():
+            assert os.path.realpath(os.path.join(links, name)) == str((tmp_path / "tree" / sub).resolve())
+    assert not os.path.exists(links)  # removed with the stack
+
+
+def test_a_baseline_that_is_not_a_source_tree_is_refused_naming_what_is_missing(tmp_path):
+    (tmp_path / "sctd").mkdir()
+    with cost.ExitStack() as stack, pytest.raises(RuntimeError, match=r"not an sctd source tree .*sim"):
+        cost.source_tree(str(tmp_path), stack)
+
+
+def test_cpu_and_wakeups_are_read_from_proc():
+    cpu0, sleeps0 = cost.tree_cpu(os.getpid())
+    end = time.process_time() + 0.05
+    while time.process_time() < end:
+        pass
+    for _ in range(20):
+        time.sleep(0.001)
+    cpu1, sleeps1 = cost.tree_cpu(os.getpid())
+    assert cpu1 > cpu0 and sleeps1 >= sleeps0 + 20
+    assert cost.tree_cpu(2**22 + 12345) == (0.0, 0)  # no such process: nothing
+
+
+def _phase(tree: str, spin: float, daemon: float, sim: float, late: float) -> dict:
+    return {"tree": tree, "phase": f"pour zero spin {spin:g} us", "skill": "pour", "input": "zero",
+            "spin_us": spin, "floor": False, "daemon_cpu": daemon, "sim_cpu": sim, "daemon_wakeups": 5000,
+            "sim_wakeups": 5000, "lateness_p99_ms": late, "compute_p99_ms": 0.05, "latency_ms": None}
+
+
+def test_the_verdicts_judge_this_trees_worst_phase_of_each_kind():
+    r = {"phases": [_phase("this", 0, 0.11, 0.19, 0.15), _phase("this", 100, 0.21, 0.18, 0.01),
+                    _phase("baseline", 0, 0.5, 0.9, 0.9)],
+         "lockstep": [{"tree": "this", "ms_per_step": 0.1}, {"tree": "baseline", "ms_per_step": 0.3}]}
+    lines = cost.verdicts(r)
+    assert "  daemon, spin off: worst 11.0 % (goal <= 12 %): met" in lines
+    assert "  daemon, default spin: worst 21.0 % (goal <= 20 %): NOT met" in lines
+    assert "  simulator: worst 19.0 % (goal <= 20 %): met" in lines
+    assert "  lateness p99: worst 0.150 ms (goal <= 0.20 ms): met" in lines
+    assert "  lockstep step: worst 0.100 ms (goal <= 0.12 ms): met" in lines
+
+
+def test_bad_lists_are_refused_by_name(capsys):
+    with pytest.raises(SystemExit):
+        main(["bench", "cost", "--inputs", "zero,half"])
+    assert "'zero,half': comma-separated zero and/or full" in capsys.readouterr().err
+
+
+def test_the_fixed_rule_is_the_one_the_check_replaced():
+    assert round(bench_check.fixed_rule(0.8), 3) == 0.376 and round(bench_check.fixed_rule(0.95), 3) == 0.914
+
+
+def test_bench_check_prints_the_operating_points_without_processes(capsys):
+    assert main(["bench", "check", "--no-end-to-end", "--sequences", "3000", "--json"]) == 0
+    r = json.loads(capsys.readouterr().out)
+    rule = SequentialRule.around(CheckSettings().floor, CheckSettings().trials)
+    for p in r["points"]:
+        exact, n = rule.operating_point(p["p"])
+        assert p["accept_exact"] == round(exact, 4) and p["trials_exact"] == round(n, 2)
+        assert abs(p["accept_simulated"] - exact) <= 4 * math.sqrt(max(exact * (1 - exact), 1e-4) / 3000)
+    assert r["runs"] == []
+
+
+@pytest.mark.slow
+def test_bench_cost_measures_this_tree_and_a_commit_side_by_side(capsys, tmp_path):
+    """One phase in each tree (the baseline exported from this repository's HEAD) and the
+    floor: every figure there, and the programs ran (CPU and wake-ups counted)."""
+    if not (ROOT / ".git").exists():
+        pytest.skip("needs a git checkout")
+    assert main(["bench", "cost", "--baseline", "HEAD", "--skills", "pour", "--inputs", "full",
+                 "--spins", "50", "--window", "2", "--warmup", "1", "--eval-trials", "0", "--json",
+                 "--logs", str(tmp_path)]) == 0
+    r = json.loads(capsys.readouterr().out)
+    assert [(p["tree"], p["floor"]) for p in r["phases"]] == [
+        ("baseline", False), ("this", False), ("this", True)]
+    for p in r["phases"]:
+        assert p["daemon_cpu"] > 0 and p["sim_cpu"] > 0 and p["daemon_wakeups"] > 500
+    for p in r["phases"][:2]:
+        assert p["lateness_p99_ms"] is not None and p["latency_ms"]["n"] > 50  # the person's pushes answered
