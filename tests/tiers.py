@@ -41,6 +41,7 @@ EXTRAS = {
     "logs": ("mcap",),
     "ros": ("rosbags", "xxhash"),
     "ros2": ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_msgs", "visualization_msgs"),
+    "cluster": ("dask", "distributed"),
 }
 _EXTRA_OF = {module: extra for extra, modules in EXTRAS.items() for module in modules}
 

@@ -6,18 +6,21 @@ The evaluation lives in :mod:`sctd_services.eval`; this is its command line.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from sctd.skill import SkillError, load_skill
 from sctd.skill.catalog import find_skill
 from sctd.task import TaskError, find_task
+from sctd_services.eval.cluster import ClusterError, add_scheduler_arguments, executor_from_args
 from sctd_services.eval.evaluate import (
     entries,
     evaluate,
@@ -33,10 +36,12 @@ from sctd_services.eval.report import write_report
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import PROFILES
 
-from ..app.errors import fail
+from ..app.errors import EXIT_FAILED, fail
 from ..app.logs import log_folder
 from ..app.options import TASK_HELP
 from .eval_realtime import realtime_job
+
+CLIENT_ROLE = "sctd-operator"  # the key pair of a sctd certs folder that sctd eval presents
 
 
 def add_eval_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,6 +67,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
     p.add_argument("--report", metavar="DIR", help="write evaluation.json and figures here")
     p.add_argument("--logs", metavar="DIR", help="keep the real-time trials' process logs here")
+    add_scheduler_arguments(p, CLIENT_ROLE)
 
 
 def _check(args: argparse.Namespace) -> str | None:
@@ -72,6 +78,8 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--trials: must be >= 1"
     if args.jobs is not None and args.jobs < 1:
         return "--jobs: must be >= 1"
+    if args.scheduler is not None and not args.lockstep:
+        return "--scheduler: only with --lockstep (real-time trials start local processes)"
     if args.task is not None:
         try:
             find_task(args.task)  # its scene, outcome and intent: what a trial needs
@@ -137,12 +145,22 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     job = lockstep_job if args.lockstep else realtime_job
     jobs = (args.jobs or os.cpu_count() or 1) if args.lockstep else 1
     logdir = None if args.lockstep else log_folder(args.logs, "sctd-eval-logs-")  # lockstep: none
-    results = evaluate(ents, spec, args.trials, args.seed, job, jobs, args.demos, keep=bool(args.report),
-                       logdir=logdir, progress=_progress_bar())
+    try:
+        pool = executor_from_args(args, CLIENT_ROLE, lambda r: print(f"\nsctd eval: {r}", file=sys.stderr))
+    except ClusterError as e:
+        return fail("eval", str(e))
+    with pool if pool is not None else contextlib.nullcontext():
+        try:
+            results = evaluate(ents, spec, args.trials, args.seed, job, jobs, args.demos,
+                               keep=bool(args.report), logdir=logdir, progress=_progress_bar(), pool=pool)
+        except ClusterError as e:  # the scheduler gave up on a trial: every worker it ran on died
+            return fail("eval", str(e), EXIT_FAILED)
     print(file=sys.stderr)
     found = find_task(task)  # (checked above: it loads)
     header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
               "user": args.user, "lockstep": args.lockstep}
+    if pool is not None:
+        header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])
     if args.report:
         for f in write_report(results, Path(args.report), header):
             print(f"sctd eval: wrote {f}", file=sys.stderr)

@@ -32,12 +32,13 @@ class Command:
     add_arguments: str = ""
     main: str = ""
     group: Mapping[str, Command] = field(default_factory=dict)
+    metavar: str = "BENCH"  # a group's: what its subcommands are
 
     def attach(self, p: argparse.ArgumentParser, argv: list[str]) -> None:
         """Give ``p`` this command's flags (a group: its subcommands, the chosen one's
         flags only), importing the module of the chosen command alone."""
         if self.group:
-            _subcommands(p, self.group, argv, "BENCH")
+            _subcommands(p, self.group, argv, self.metavar)
             return
         try:
             mod = importlib.import_module(self.module)
@@ -52,7 +53,7 @@ class Command:
 EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
             "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev", "sdl2": "inputs",
             "hid": "inputs", "brainflow": "inputs", "mcap": "logs", "rclpy": "ros2", "geometry_msgs": "ros2",
-            "sensor_msgs": "ros2", "diagnostic_msgs": "ros2"}
+            "sensor_msgs": "ros2", "diagnostic_msgs": "ros2", "dask": "cluster", "distributed": "cluster"}
 
 BENCHES: dict[str, Command] = {
     "check": Command("the learner's sequential check: its operating points (exact, simulated), and "
@@ -92,6 +93,16 @@ BENCHES: dict[str, Command] = {
     "vf": Command("a vector-field skill's tick cost against its number of demonstration points "
                   "(300 to 20k), next to the hand-written pour; --daemon adds the daemon's",
                   "sctd.bench.vf", "add_bench_vf_arguments", "main_bench_vf"),
+    "cluster": Command("short lockstep trials on local processes and on a loopback Dask cluster with as "
+                       "many workers: the cluster's overhead per trial", "sctd.bench.cluster",
+                       "add_bench_cluster_arguments", "main_bench_cluster"),
+}
+
+CLUSTER: dict[str, Command] = {
+    "scheduler": Command("a Dask scheduler for lockstep trials (127.0.0.1, no dashboard; --certs: TLS)",
+                         "sctd.cli.cluster", "add_scheduler_arguments", "main_scheduler"),
+    "worker": Command("Dask worker processes for a scheduler (127.0.0.1, no dashboard; --certs: TLS)",
+                      "sctd.cli.cluster", "add_worker_arguments", "main_worker"),
 }
 
 COMMANDS: dict[str, Command] = {
@@ -148,6 +159,8 @@ COMMANDS: dict[str, Command] = {
     "replay": Command("publish a log's observation keys again (state, objects, scene, status; "
                       "--all: also target, input, can), never over a live daemon or robot",
                       "sctd.cli.log", "add_replay_arguments", "main_replay"),
+    "cluster": Command("a Dask scheduler or workers that sctd eval --scheduler and the learner run "
+                       "lockstep trials on", group=CLUSTER, metavar="ROLE"),
     "bench": Command("benchmarks that print figures", group=BENCHES),
 }
 

@@ -10,10 +10,11 @@ a competent user of a teleoperated arm, not a naive one.
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
 from concurrent.futures import Executor, ProcessPoolExecutor
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
@@ -24,10 +25,10 @@ import yaml
 from sctd import se3
 from sctd.files import parse_yaml
 from sctd.learn.demos import read_demos
-from sctd.skill import WORLD_OBJECT, Limits, Skill, bundle_from_file, load_skill
+from sctd.skill import WORLD_OBJECT, Bundle, Limits, Skill, bundle_from_file, load_skill, skill_from_bundle
 from sctd.skill.catalog import shipped_folder
 from sctd.skill.constraints import SpeedNear
-from sctd.task import Task, task_for_object
+from sctd.task import Task, find_task, task_for_object
 from sctd.task.model import Reach, Tilt, Upright
 from sctd_services.user import PROFILES
 
@@ -185,6 +186,65 @@ def lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, ke
     return run_trial(load_skill(path), spec, seed, demos).as_dict(with_trajectory=keep)
 
 
+@dataclass(frozen=True)
+class Shipped:
+    """What a lockstep trial reads, carried with it to a worker that has none of this
+    machine's files: the skill's packed bundle, the task file's text and the
+    demonstrations' poses (the DTW figure's, or None)."""
+
+    bundle: bytes
+    task_name: str
+    task_text: str
+    demos: list[np.ndarray] | None = None
+
+    @classmethod
+    def of(cls, path: str | Path, task: str, demos_dir: str | None) -> Shipped:
+        found = find_task(task)
+        return cls(bundle_from_file(path).pack(), found.name, Path(found.file).read_text(),
+                   read_demo_poses(demos_dir) if demos_dir else None)
+
+
+def shipped_job(shipped: Shipped, spec: TaskSpec, seed: int, keep: bool) -> dict[str, Any]:
+    """:func:`lockstep_job` from what ``shipped`` carries: the skill from its bundle,
+    the task from its text (written to a folder of its own for the trial and removed)."""
+    skill = skill_from_bundle(Bundle.unpack(shipped.bundle))
+    with tempfile.TemporaryDirectory(prefix="sctd-trial-") as tmp:
+        task = Path(tmp) / f"{shipped.task_name}.yaml"
+        task.write_text(shipped.task_text)
+        return run_trial(skill, replace(spec, task=str(task)), seed,
+                         shipped.demos).as_dict(with_trajectory=keep)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial as a pool runs it, ``job(*args)``, with the ``name`` reports use."""
+
+    name: str
+    job: Callable[..., dict[str, Any]]
+    args: tuple
+
+    def __call__(self) -> dict[str, Any]:
+        return self.job(*self.args)
+
+
+def ships_trials(pool: Executor | None) -> bool:
+    """Whether ``pool`` runs trials where this machine's files are not (a cluster's
+    executor says so: :class:`sctd_services.eval.cluster.ClusterExecutor`)."""
+    return bool(getattr(pool, "ships_trials", False))
+
+
+def _trials(e: Entry, spec: TaskSpec, seeds: list[int], job: TrialJob, demos: str | None, keep: bool,
+            folder: Path | None, ship: bool) -> list[Trial]:
+    """The trials of ``e``; shipped (:class:`Shipped`) for a pool on other hosts."""
+    if not ship:
+        return [Trial(f"{e.skill.name} seed {s}", job, (str(e.path), spec, s, demos, keep, folder))
+                for s in seeds]
+    if job is not lockstep_job:
+        raise ValueError("only lockstep trials run on a cluster (real-time ones start local processes)")
+    shipped = Shipped.of(e.path, spec.task, demos)
+    return [Trial(f"{e.skill.name} seed {s}", shipped_job, (shipped, spec, s, keep)) for s in seeds]
+
+
 def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
     """The demonstrations' poses (n, 7), object frame, for the DTW figure."""
     return [d.poses for d in read_demos(directory)]
@@ -199,7 +259,8 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
 
     With ``jobs`` > 1 the trials run in that many spawned processes (lockstep trials are
     independent; real-time ones compete for the CPU and should run one at a time); a
-    long-running caller (the learner service) passes its own warm ``pool`` instead.
+    long-running caller (the learner service) passes its own warm ``pool`` instead, and
+    a pool on other hosts (:mod:`.cluster`) gets each trial's skill and task with it.
     ``until(per_trial)``, asked after each trial (in seed order), ends an entry's trials
     early when it returns true: the trials not started are cancelled, and the entry's
     result has ``planned`` (the trials asked for) and ``stopped_early``.
@@ -214,9 +275,9 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
             pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn")))
         for e in ents:
             folder = logdir / e.skill.name if logdir else None  # None: the job's own choice
-            args = [(str(e.path), spec, s, demos, keep, folder) for s in seeds]
-            futures = [pool.submit(job, *a) for a in args] if pool is not None else []
-            runs = (f.result() for f in futures) if pool is not None else (job(*a) for a in args)
+            trials_of = _trials(e, spec, seeds, job, demos, keep, folder, ships_trials(pool))
+            futures = [pool.submit(t) for t in trials_of] if pool is not None else []
+            runs = (f.result() for f in futures) if pool is not None else (t() for t in trials_of)
             per_trial: list[dict[str, Any]] = []
             stopped = False
             for r in runs:
@@ -373,7 +434,9 @@ def strip_trajectories(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 __all__ = [
     "Entry",
+    "Shipped",
     "TaskSpec",
+    "Trial",
     "TrialResult",
     "baseline_for",
     "cap_in",

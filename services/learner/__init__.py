@@ -20,10 +20,13 @@ import threading
 from sctd.app.errors import fail
 from sctd.app.options import add_robot_argument
 from sctd.wire.session import add_zenoh_arguments, session_from_args
+from sctd_services.eval.cluster import ClusterError, Rerun, add_scheduler_arguments, executor_from_args
 
 from .check import CheckSettings
 from .store import Store
 from .training import TrainingLimits
+
+CLIENT_ROLE = "sctd-learner"  # the key pair of a sctd certs folder the learner presents to a cluster
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,10 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the store of demonstrations and skills (default $SCTD_STORE, else "
                         "$XDG_DATA_HOME/sctd/store, else ~/.local/share/sctd/store)")
     add_robot_argument(p)
-    g = p.add_argument_group("the check before a swap (sctd eval --lockstep)")
-    g.add_argument("--trials", type=int, default=d.trials, help="lockstep trials (default %(default)s)")
+    g = p.add_argument_group("the check before a swap (sctd eval --lockstep, docs/learner.md)")
+    g.add_argument("--trials", type=int, default=d.trials,
+                   help="at most this many lockstep trials: a sequential test stops as soon as it "
+                        "decides, after 6 for a skill that always succeeds (default %(default)s)")
     g.add_argument("--floor", type=float, default=d.floor,
-                   help="lowest success rate that may be swapped in (default %(default)s)")
+                   help="the success rate the sequential test is around: it passes a skill of "
+                        "half-way from it to 1, refuses one as far below it (default %(default)s)")
     g.add_argument("--tolerance", type=float, default=d.tolerance,
                    help="how much lower than the active skill's stored evaluation the new "
                         "one's success rate may be (default %(default)s)")
@@ -55,7 +61,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nice", type=int, default=10,
                    help="lower this process's (and its trials') CPU priority by this much, so "
                         "training never competes with the daemon's tick (default %(default)s)")
+    add_scheduler_arguments(p, CLIENT_ROLE)
     add_zenoh_arguments(p)
+
+
+def _say_rerun(learner: list, rerun: Rerun) -> None:
+    """A worker died with trials of the check on it: in the log and on learner/status."""
+    logging.getLogger("sctd.learner").warning("%s", rerun)
+    if learner:
+        learner[0].say("rerun", worker=rerun.worker, trials=list(rerun.trials))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,11 +85,15 @@ def run(args: argparse.Namespace) -> int:
         store = Store(store_path(args.store))
     except (ValueError, OSError) as e:
         return fail("learner", str(e))
+    learner: list[Learner] = []
+    try:  # the check's trials: on a Dask cluster (--scheduler), else local processes kept warm
+        pool = executor_from_args(args, CLIENT_ROLE, lambda r: _say_rerun(learner, r))
+    except ClusterError as e:
+        return fail("learner", str(e))
     if args.nice > 0:
         os.nice(args.nice)
     logging.basicConfig(level=logging.INFO, format="sctd learner: %(message)s", stream=sys.stderr)
     stop = threading.Event()
-    learner: list[Learner] = []
 
     def on_signal(*_: object) -> None:
         stop.set()
@@ -84,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
-    pool = trial_pool(settings.jobs) if settings.jobs > 1 else None
+    if pool is None and settings.jobs > 1:  # after nice: the trial processes inherit it
+        pool = trial_pool(settings.jobs)
     try:
         with session_from_args(args) as session, \
                 Learner(session, store, args.robot, settings, pool, Trainer(limits)) as ln:
