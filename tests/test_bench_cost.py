@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import subprocess
+import sys
 import time
 
 import pytest
@@ -84,6 +86,23 @@ def test_bench_check_prints_the_operating_points_without_processes(capsys):
         assert p["accept_exact"] == round(exact, 4) and p["trials_exact"] == round(n, 2)
         assert abs(p["accept_simulated"] - exact) <= 4 * math.sqrt(max(exact * (1 - exact), 1e-4) / 3000)
     assert r["runs"] == []
+
+
+@pytest.mark.slow
+def test_a_baseline_commit_is_what_its_programs_import(tmp_path):
+    """Exported from this repository, its programs import its packages, not the ones this
+    code was loaded from (``python -m`` puts the working folder first: not a source tree's)."""
+    if not (ROOT / ".git").exists():
+        pytest.skip("needs a git checkout")
+    with cost.ExitStack() as stack:
+        tree = cost.source_tree("HEAD", stack)
+        code = ("import sctd, sctd_sim, sctd_services; print(sctd.__file__); print(sctd_sim.__file__); "
+                "print(sctd_services.__file__)")
+        got = subprocess.run([sys.executable, "-c", code], env=tree.env, cwd=tree.cwd, capture_output=True,
+                             text=True, check=True)
+        links = tree.env["PYTHONPATH"].split(os.pathsep)[0]
+        for f in got.stdout.split():
+            assert f.startswith(links) and not f.startswith(str(ROOT)), got.stdout
 
 
 @pytest.mark.slow

@@ -138,7 +138,7 @@ def request_to_swap(tree: Tree, task: str, skill: str, method: str, quiet: float
                            ("learner", ("learner", "--store", str(store)))):
             stack.enter_context(Child("sctd.cli.main", *args, "--connect", hub, "--listen",
                                       f"tcp/127.0.0.1:{free_port()}", log=logdir / f"{name}-{k}.log",
-                                      env=tree.env))
+                                      env=tree.env, cwd=tree.cwd))
         _until(lambda: watch.skill is not None and watch.count("state") > 0, 90,
                f"the daemon or the learner did not come up; see {logdir}/*-{k}.log")
         names = _publish_demos(s, keys, task)
@@ -172,7 +172,7 @@ def run_check_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
     if not args.end_to_end:
         return out
     with ExitStack() as stack:
-        trees = [Tree("this")]
+        trees = [Tree("this", cwd=logdir)]
         if args.baseline:
             trees.insert(0, source_tree(args.baseline, stack))
             out["baseline"] = trees[0].source

@@ -78,6 +78,7 @@ class Tree:
     label: str
     env: dict[str, str] | None = None
     source: str = ""  # what the baseline was made from
+    cwd: Path | None = None  # where its programs start: ``python -m`` puts it first on sys.path
 
 
 def source_tree(spec: str, stack: ExitStack) -> Tree:
@@ -112,7 +113,7 @@ def source_tree(spec: str, stack: ExitStack) -> Tree:
         (links / name).symlink_to(folder.resolve() / sub, target_is_directory=True)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(links), env.get("PYTHONPATH", "")]))
-    return Tree("baseline", env, label)
+    return Tree("baseline", env, label, links)
 
 
 # --- CPU from /proc ---------------------------------------------------------------------
@@ -219,8 +220,8 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
     tick = (("sctd.bench.cost", "floor", "--connect", ep) if ph.floor else
             ("sctd.cli.main", "run", "--skill", ph.skill, "--connect", ep, "--spin-us", f"{ph.spin_us:g}"))
     with Child("sctd.cli.main", "sim", "--task", ph.task, "--listen", ep, log=logdir / f"sim-{k}.log",
-               env=tree.env) as sim, \
-         Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env) as daemon, \
+               env=tree.env, cwd=tree.cwd) as sim, \
+         Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env, cwd=tree.cwd) as daemon, \
          session(connect=[ep]) as s:
         wait_for_targets(ep, daemon, logdir, timeout=90.0)
         subs = [s.declare_subscriber(Keys().status, seconds),
@@ -270,7 +271,7 @@ def lockstep_step(tree: Tree, skill: str, trials: int, logdir: Path) -> dict[str
     """``sctd bench eval --json`` of ``skill`` in ``tree``: its figures."""
     log = logdir / f"eval-{skill}-{len(list(logdir.glob('eval-*')))}.log"
     with Child("sctd.cli.main", "bench", "eval", "--skill", skill, "--trials", str(trials), "--json",
-               log=log, env=tree.env) as child:
+               log=log, env=tree.env, cwd=tree.cwd) as child:
         if child.p.wait(timeout=60.0 * trials + 120.0) != 0:
             raise RuntimeError(f"sctd bench eval failed in {tree.label}; see {log}")
     out = json.loads(log.read_text().strip().splitlines()[-1])
@@ -291,7 +292,7 @@ def phases_of(args: argparse.Namespace) -> list[Phase]:
 def run_cost_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
     """Every phase and lockstep measurement of ``args``, trees interleaved."""
     with ExitStack() as stack:
-        trees = [Tree("this")]
+        trees = [Tree("this", cwd=logdir)]  # not a source tree's folder: its sctd would come first
         if args.baseline:
             trees.insert(0, source_tree(args.baseline, stack))
         rows: list[dict[str, Any]] = []

@@ -1,21 +1,28 @@
 """The daemon's tick loop, on the tick thread.
 
-The tick thread wakes once per period, ``spin`` before its deadline (the daemon's
-``--spin-us``): it installs a swapped-in skill (:class:`~.swap.SkillSwap`) and drains each
-ring (:class:`~.ingress.Ingress`): checks each message's size before copying it, decodes
-and validates it, counts every malformed one, and keeps the newest valid sample; then it
-spins to the deadline. At the deadline the control step runs on them
-(:class:`~.driver.TickDriver`), and its target is encoded and put at once, on this
-thread; the tick's timing is kept (:class:`~.status.TickStats`) and, when due, a status
-map handed to the publisher thread (:class:`~.publisher.Publisher`), which encodes and
-puts it. After it, the work the next tick would otherwise do itself.
+The tick thread wakes once per period, ahead of its deadline: it installs a swapped-in
+skill (:class:`~.swap.SkillSwap`) and drains each ring (:class:`~.ingress.Ingress`):
+checks each message's size before copying it, decodes and validates it, counts every
+malformed one, and keeps the newest valid sample; then it spins to the deadline. At the
+deadline the control step runs on them (:class:`~.driver.TickDriver`), and its target
+is encoded and put at once, on this thread; the tick's timing is kept
+(:class:`~.status.TickStats`) and, when due, a status map handed to the publisher thread
+(:class:`~.publisher.Publisher`), which encodes and puts it. After it, the work the next
+tick would otherwise do itself.
+
+How far ahead it wakes: ``spin`` (the daemon's ``--spin-us``) plus the drain's usual
+time (its :data:`LEAD_QUANTILE` quantile, tracked a step of :data:`LEAD_STEP` a tick, so
+that one slow drain moves it by a microsecond; at most :data:`MAX_LEAD`): the drain
+ends about ``spin`` before the deadline, and the timer's late wake-ups up to ``spin``
+cost no lateness. With ``spin`` 0 it wakes at the
+deadline and drains then: the cheapest, with the drain and the timer's delay as
+lateness. (Decoding costs far more after a sleep than in a hot loop: about 45 us for a
+state on this project's VM.)
 
 One wake-up per tick, and no thread between the step and its target: on a 2-core
 machine each wake-up of a thread costs about 25 us of CPU, so a second sleep before the
-drain, and a hand-over of every target to another thread, cost the daemon a tenth of a
-core (docs/benchmarks.md, ``sctd bench cost``). The spin window is the drain's: with the
-default spin (100 us) the inputs are decoded ahead of the deadline and the step starts on
-time; with no spin the drain runs at the deadline and its time shows as lateness.
+spin, and a hand-over of every target to another thread, cost the daemon a tenth of a
+core (``sctd bench cost``, docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -31,6 +38,18 @@ from .driver import TickDriver
 from .ingress import Ingress
 from .status import DaemonStatus
 from .swap import SkillSwap
+
+MAX_LEAD = 2.5e-4  # s: the most the tick thread wakes before its spin window to drain
+LEAD_QUANTILE = 0.95  # of the drain's time: how far before the spin window the tick wakes
+LEAD_STEP = 1e-6  # s a tick moves the tracked quantile (one outlier moves it 1 us)
+
+
+def next_lead(lead: float, drained: float) -> float:
+    """The tracked quantile of the drain's time after a drain of ``drained`` s: up by
+    ``LEAD_STEP * LEAD_QUANTILE`` when it took longer, down by the rest of a step when
+    not, so that it settles where that share of drains take longer; within [0,
+    MAX_LEAD]."""
+    return min(MAX_LEAD, max(0.0, lead + LEAD_STEP * (LEAD_QUANTILE - (drained <= lead))))
 
 
 class TickLoop:
@@ -61,15 +80,19 @@ class TickLoop:
     def run(self, ticker: Ticker, status: DaemonStatus, stop: threading.Event,
             end: float | None = None) -> None:
         """Tick on ``ticker`` until ``stop`` is set or the monotonic time ``end``: wake
-        ``ticker.spin`` ahead of each deadline and drain, step at it, put the target,
+        ahead of each deadline (module doc) and drain, spin to it, step, put the target,
         account after it. The compute time is the step's (the put is ``publish_ms``)."""
         send, tick, publish = self.send, self.driver.tick, self.publish
         stats = status.stats
+        spin, lead = ticker.spin, 0.0  # lead: the drain's time, its LEAD_QUANTILE tracked (s)
         while not stop.is_set():
-            ahead = ticker.due - ticker.spin - time.monotonic()
+            ahead = ticker.due - (spin + lead if spin > 0.0 else 0.0) - time.monotonic()
             if ahead > 0.0:
                 time.sleep(ahead)
-            self.before_tick(time.monotonic())
+            t = time.monotonic()
+            self.before_tick(t)
+            drained = time.monotonic() - t
+            lead = next_lead(lead, drained)
             now, lateness = ticker.wait()  # spins what the drain left of the window
             if end is not None and now >= end:
                 break
