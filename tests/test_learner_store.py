@@ -134,6 +134,20 @@ def _req(**fields):
     return msgpack.packb(fields)
 
 
+def test_a_request_names_the_vector_field_models_as_a_list_or_as_the_flag_does():
+    """``vf-models``, the one list-valued hyperparameter: a list of names, or sctd learn's
+    comma-separated form; anything else refused naming the field."""
+    models = ("translation", "cylinder", "sphere", "point", "general")
+    for names in (list(models), ",".join(models), " , ".join(models)):
+        assert parse_request(_req(task="pour", method="vf", params={"vf-models": names})).params == {
+            "models": models}
+    for bad, why in (("nope", "a non-empty list of translation"), ([1], "a list of at most 16 names"),
+                     (["point"] * 17, "a list of at most 16 names"), ("", "a list of at most 16 names"),
+                     ({"a": 1}, "a list of at most 16 names")):
+        with pytest.raises(RequestError, match=f"params.vf-models: expected {why}"):
+            parse_request(_req(task="pour", method="vf", params={"vf-models": bad}))
+
+
 def test_a_request_reads_learns_flags_by_their_names():
     r = parse_request(_req(task="pour", method="vf", params={"vf-combine": "weighted", "seed": 3,
                                                            "vf_max_n": 40, "despike": False}))

@@ -30,6 +30,7 @@ from math import comb
 from pathlib import Path
 from typing import Any
 
+import yaml
 import zenoh
 
 from sctd_services.learner.check import CheckSettings, SequentialRule, simulate
@@ -124,8 +125,15 @@ def _publish_demos(s: zenoh.Session, keys: Keys, task: str) -> list[str]:
     return names
 
 
-def request_to_swap(tree: Tree, task: str, skill: str, method: str, quiet: float, logdir: Path,
-                    k: int) -> dict[str, Any]:
+SHIPPED_RECIPE: dict[str, dict[str, Any]] = {
+    "vf": {"vf-models": ["translation", "cylinder", "sphere", "point", "general"], "seed": 0},
+    "linear": {"seed": 0}}
+"""The hyperparameters the shipped learned skills were made with (skills/README.md), for a
+request without ``--param``."""
+
+
+def request_to_swap(tree: Tree, task: str, skill: str, method: str, params: dict[str, Any], quiet: float,
+                    logdir: Path, k: int) -> dict[str, Any]:
     """One end-to-end run of ``tree`` (module doc): its figures."""
     keys, hub = Keys(), f"tcp/127.0.0.1:{free_port()}"
     watch = _Watch()
@@ -148,7 +156,7 @@ def request_to_swap(tree: Tree, task: str, skill: str, method: str, quiet: float
         t_quiet = time.monotonic()
         time.sleep(quiet)
         t0 = time.monotonic()
-        req: dict[str, Any] = {"task": task, "method": method, "demos": names, "swap": True}
+        req: dict[str, Any] = {"task": task, "method": method, "demos": names, "swap": True, "params": params}
         if method == "linear" and (frames := candidate_frames(find_task(task))):
             req["frames"] = frames
         got = client.query(s, keys.learner, codec.pack(req), timeout=900, find=10)
@@ -179,10 +187,21 @@ def run_check_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
         k = 0
         for r in range(args.rounds):
             for tree in (trees if r % 2 == 0 else trees[::-1]):
-                run = request_to_swap(tree, args.task, args.skill, args.method, args.quiet, logdir, k)
+                run = request_to_swap(tree, args.task, args.skill, args.method, _params(args), args.quiet,
+                                      logdir, k)
                 k += 1
                 out["runs"].append(run)
                 print(_run_line(run), file=sys.stderr, flush=True)
+    return out
+
+
+def _params(args: argparse.Namespace) -> dict[str, Any]:
+    if not args.param:
+        return dict(SHIPPED_RECIPE[args.method])
+    out: dict[str, Any] = {}
+    for item in args.param:
+        name, _, value = item.partition("=")
+        out[name] = yaml.safe_load(value)  # a scalar as sctd train reads it: 0.005, 3, true, intent
     return out
 
 
@@ -237,6 +256,9 @@ def add_check_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--skill", default=defaults().skill, help="the daemon's skill before the swap "
                                                              "(default %(default)s)")
     p.add_argument("--method", choices=["vf", "linear"], default="vf", help="(default %(default)s)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="a hyperparameter of the request, as sctd train --param takes it (default: the "
+                        "shipped skill's recipe, skills/README.md)")
     p.add_argument("--rounds", type=int, default=1, help="end-to-end runs per tree (default %(default)s)")
     p.add_argument("--quiet", type=float, default=5.0,
                    help="s of the daemon's lateness before the request (default %(default)s)")

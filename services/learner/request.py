@@ -85,19 +85,37 @@ def param_aliases(method: str) -> dict[str, str]:
     return out
 
 
+MAX_NAMES = 16  # names in a list-valued hyperparameter (vf-models has 5 to choose from)
+
+
+def _names(v: Any, where: str) -> tuple[str, ...]:
+    """A list-valued hyperparameter (``vf-models``): a list of names or ``"a,b,c"``."""
+    if isinstance(v, str):
+        v = [x.strip() for x in v.split(",")]
+    if not isinstance(v, list | tuple) or not 0 < len(v) <= MAX_NAMES or not all(
+            isinstance(x, str) and 0 < len(x) <= 64 for x in v):
+        raise RequestError(where, f"expected a list of at most {MAX_NAMES} names (or \"a,b,c\"), got "
+                                  f"{str(v)[:80]}")
+    return tuple(v)
+
+
 def _params(value: Any, method: str) -> dict[str, Any]:
     if value is None:
         return {}
     if not isinstance(value, dict):
         raise RequestError("params", "expected a map of hyperparameter name -> value")
     aliases = param_aliases(method)
+    lists = {f.name for f in hyperparameter_fields(method)
+             if getattr(f.metadata.get("valid"), "subset", False)}
     out: dict[str, Any] = {}
     for k, v in value.items():
         name = aliases.get(str(k).lstrip("-"))
         if name is None:
             raise RequestError(f"params.{k}", f"not a hyperparameter of method {method!r} (known: "
                                               f"{', '.join(hyperparameter_names(method))})")
-        if not isinstance(v, bool | int | float | str) or (isinstance(v, float) and not math.isfinite(v)):
+        if name in lists:  # a list of names, or the flag's comma-separated form: checked below
+            v = _names(v, f"params.{k}")
+        elif not isinstance(v, bool | int | float | str) or (isinstance(v, float) and not math.isfinite(v)):
             raise RequestError(f"params.{k}", f"expected a finite number, a string or a bool, got {v!r}")
         out[name] = v
     try:
