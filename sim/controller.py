@@ -146,7 +146,7 @@ class CartesianImpedanceController:
         self.T_world_target = np.eye(4)
         self._target_rows = self.T_world_target.tolist()  # its rows, for the float arithmetic
         self.v_target = np.zeros(6)
-        self.error = np.zeros(6)
+        self._error = (0.0,) * 6
         self.tau = np.zeros(arm.nq)
         self.holding = True
         self.t = 0.0
@@ -167,6 +167,11 @@ class CartesianImpedanceController:
         self._sqrt_kk = np.outer(sqrt_k, sqrt_k)
         self._payload_weight = 0.0  # m g of the configured load, N
         self._payload_com = (0.0, 0.0, 0.0)  # its centre of mass in the ee frame, m
+
+    @property
+    def error(self) -> np.ndarray:
+        """Last pose error ``[e_p, e_r]`` (m, rad), shape (6,)."""
+        return np.array(self._error)
 
     def set_payload(self, mass: float, com_in_ee) -> None:
         """Configure the load the arm holds: its weight is compensated from now on.
@@ -208,12 +213,10 @@ class CartesianImpedanceController:
             self._ff_until = self.t + g.target_timeout
         elif self._stamp is not None and not self.holding and 0.0 < stamp - self._stamp <= 0.05:
             dt = stamp - self._stamp
-            # on floats where they give the same numbers (the rotation's product stays
-            # numpy's: its rounding is BLAS's)
-            (_, _, _, x), (_, _, _, y), (_, _, _, z), _ = rows
-            (_, _, _, x0), (_, _, _, y0), (_, _, _, z0), _ = self._target_rows
-            vx, vy, vz = (x - x0) / dt, (y - y0) / dt, (z - z0) / dt
-            w0, w1, w2 = pin.log3(T_new[:3, :3] @ self.T_world_target[:3, :3].T).tolist()
+            # on floats: [p_new - p_old, log(R_new R_old^T)] is the pose error of the old
+            # target to the new one
+            ex, ey, ez, w0, w1, w2 = pose_error(rows, self._target_rows)
+            vx, vy, vz = ex / dt, ey / dt, ez / dt
             wx, wy, wz = w0 / dt, w1 / dt, w2 / dt
             if (vx * vx + vy * vy + vz * vz <= g.ff_max_speed**2
                     and wx * wx + wy * wy + wz * wz <= g.ff_max_rate**2):
@@ -299,7 +302,8 @@ class CartesianImpedanceController:
             ee = self._ee_frame_id
             J = pin.computeFrameJacobian(self.model, self.data, q, ee, _LWA)  # runs the kinematics
             T = pin.updateFramePlacement(self.model, self.data, ee).homogeneous
-            T.flags.writeable = J.flags.writeable = False
+            T.setflags(write=False)  # (half the cost of T.flags.writeable = False)
+            J.setflags(write=False)
             self._kin, self._kin_q = (T, J), key
         return self._kin
 
@@ -311,7 +315,7 @@ class CartesianImpedanceController:
         g = self.gains
         rows = T_world_ee.tolist()
         e0, e1, e2, e3, e4, e5 = self._saturated_error(rows)
-        self.error = np.array((e0, e1, e2, e3, e4, e5))
+        self._error = (e0, e1, e2, e3, e4, e5)
         v = J.dot(dq)
         if g.feedforward and t <= self._ff_until:
             v = np.subtract(self.v_target, v, out=v)

@@ -99,7 +99,8 @@ class ArmDynamics:
             # the Jacobian's kinematics give the same placement as forwardKinematics
             J = pin.computeFrameJacobian(self.model, self.data, self.q, self.arm.ee_frame_id, _LWA)
             T = pin.updateFramePlacement(self.model, self.data, self.arm.ee_frame_id).homogeneous
-            T.flags.writeable = J.flags.writeable = False
+            T.setflags(write=False)  # (half the cost of T.flags.writeable = False)
+            J.setflags(write=False)
             self._kin, self._kin_q = (T, J), key
         return self._kin
 
@@ -195,7 +196,7 @@ class ArmDynamics:
 
     def ee_velocity(self) -> np.ndarray:
         """End-effector twist ``[v, w]`` in world axes at the ee origin, shape (6,)."""
-        return self._kinematics()[1] @ self.dq
+        return self._kinematics()[1].dot(self.dq)
 
     def mass_matrix(self) -> np.ndarray:
         """Joint-space inertia ``M(q)`` (with armature), shape (7, 7)."""

@@ -140,6 +140,8 @@ class Flow:
         self.contents = contents
         self.container = container
         self.T_ee_outlet = held.frames[contents.outlet]
+        # the outlet's axis in the ee frame: the outlet's tilt from the hand's rotation
+        self._outlet_axis = tuple(self.T_ee_outlet[:3, 2].tolist())
         self._key = b""  # the container pose (bytes) _T_container_world inverts
         self._T_container_world = np.eye(4)
         self.reset()
@@ -149,18 +151,37 @@ class Flow:
         self.remaining = 1.0
         self.poured = 0.0
         self.spilled = 0.0
-        self.geometry: PourGeometry | None = None
+        self._tilt: float | None = None
+        self._at: tuple[np.ndarray, np.ndarray] | None = None  # (T_world_ee, T_container_world)
+        self._geometry: PourGeometry | None = None
 
     def step(self, T_world_ee: np.ndarray, T_world_container: np.ndarray, dt: float) -> None:
-        g = self.geometry = pour_geometry(T_world_ee @ self.T_ee_outlet, self.container,
-                                          self._inverse(T_world_container))
-        out = min(self.remaining, pour_flow(g.tilt, self.contents) * dt)
+        """Pour for ``dt`` s from the hand at ``T_world_ee`` (which must not change
+        afterwards: :attr:`geometry` is worked out from it when asked)."""
+        # Only the outlet's tilt decides the flow; where it points (the geometry) is
+        # worked out when something pours, or when asked.
+        a0, a1, a2 = self._outlet_axis
+        r20, r21, r22 = T_world_ee[2, :3].tolist()
+        self._tilt = tilt = math.acos(min(1.0, max(-1.0, r20 * a0 + r21 * a1 + r22 * a2)))
+        self._at = (T_world_ee, self._inverse(T_world_container))
+        self._geometry = None
+        out = min(self.remaining, pour_flow(tilt, self.contents) * dt)
         if out > 0.0:
             self.remaining -= out
-            if g.over_opening:
+            g = self.geometry
+            if g is not None and g.over_opening:
                 self.poured += out
             else:
                 self.spilled += out
+
+    @property
+    def geometry(self) -> PourGeometry | None:
+        """Where the outlet was at the last :meth:`step` (None before one)."""
+        if self._geometry is None and self._at is not None:
+            T_world_ee, T_container_world = self._at
+            self._geometry = pour_geometry(T_world_ee @ self.T_ee_outlet, self.container,
+                                           T_container_world)
+        return self._geometry
 
     def _inverse(self, T: np.ndarray) -> np.ndarray:
         """``T_container_world``, computed again only when the container moved."""
@@ -171,8 +192,8 @@ class Flow:
 
     @property
     def flowing(self) -> bool:
-        g = self.geometry
-        return g is not None and pour_flow(g.tilt, self.contents) > 0.0 and self.remaining > 0.0
+        tilt = self._tilt
+        return tilt is not None and pour_flow(tilt, self.contents) > 0.0 and self.remaining > 0.0
 
     def readings(self) -> dict[str, float | bool]:
         n = self.name
@@ -615,8 +636,8 @@ class TaskScene:
         frames = sc.held.frames if sc.held is not None else {}
         self.zones = [ZoneWatch(z, frames.get(z.frame, np.eye(4))) for z in sc.zones.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
-        self._hand = np.zeros(3)
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
+        self._held_com = tuple(sc.held.com.tolist()) if sc.held is not None else (0.0, 0.0, 0.0)
         self.reset()
 
     def reset(self) -> None:
@@ -642,8 +663,7 @@ class TaskScene:
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
         """Advance by ``dt``; return the wrench of the held load, the grasped handles, the
         surfaces the hand touches and the heads pressed into."""
-        self._hand = T_world_ee[:3, 3].copy()
-        self._T_world_ee = T_world_ee.copy()
+        self._T_world_ee = T_world_ee = T_world_ee.copy()  # (kept: never changed in place)
         if self.flow is not None:
             self.flow.step(T_world_ee, self.poses[self.flow.contents.into], dt)
         wrench = np.zeros(6)
@@ -657,11 +677,15 @@ class TaskScene:
             z.step(T_world_ee, self.poses[z.zone.around], dt)
         load = self.payload()
         if load is not None:
-            mass, com = load
+            mass, _ = load
             fz = -mass * GRAVITY
-            r0, r1, _ = T_world_ee[:3, :3].dot(com).tolist()
-            # [force, r x force] with force = (0, 0, fz), written out (np.cross costs ~25 us)
-            wrench += (0.0, 0.0, fz, r1 * fz, -r0 * fz, 0.0)
+            # r = R com, and [force, r x force] with force = (0, 0, fz), on floats
+            (a0, a1, a2, _), (b0, b1, b2, _), _, _ = T_world_ee.tolist()
+            c0, c1, c2 = self._held_com
+            r0, r1 = a0 * c0 + a1 * c1 + a2 * c2, b0 * c0 + b1 * c1 + b2 * c2
+            wrench[2] += fz
+            wrench[3] += r1 * fz
+            wrench[4] -= r0 * fz
         return wrench
 
     def payload(self) -> tuple[float, np.ndarray] | None:
@@ -701,7 +725,7 @@ class TaskScene:
         out = {n: T[:3, 3] for n, T in self.poses.items()}
         if self.held is not None:  # (where the hand holds them: turned with it)
             out.update({n: (self._T_world_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
-        out["hand"] = self._hand
+        out["hand"] = self._T_world_ee[:3, 3]
         return out
 
     def outcome(self) -> dict[str, Any]:

@@ -219,7 +219,9 @@ class SimService:
         self.pub_state = publisher(k.state, express=True)
         self.pub_objects = {n: publisher(k.objects(n)) for n in self.sim.objects()}
         self.pub_scene = publisher(k.scene)
-        self.pub_can = publisher(self.can_key)
+        # (remote listeners only: the service's own subscriber below, which takes remote
+        # frames only, would otherwise count as a listener and keep the mirror running)
+        self.pub_can = publisher(self.can_key, allowed_destination=zenoh.Locality.REMOTE)
         stack.enter_context(self.pub_can.declare_matching_listener(self._on_can_matching))
         self._can_watched = self.pub_can.matching_status.matching  # type: ignore[attr-defined]
         self.sub_can = stack.enter_context(session.declare_subscriber(

@@ -85,6 +85,7 @@ class Simulation:
                                                                        None))
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
+        self._load: tuple[float, Any] = (-1.0, None)  # the payload the controller was last given
         self._payload()
         self._wrench = np.zeros(6)
 
@@ -114,7 +115,9 @@ class Simulation:
     def _payload(self) -> None:
         """The arm's load data, as a real arm is configured with the object it holds."""
         payload = self.scene.payload() if self.compensate_payload else None
-        if payload is not None:
+        # (set again when it changes: as the bottle empties, or a scene's new load)
+        if payload is not None and (payload[0] != self._load[0] or payload[1] is not self._load[1]):
+            self._load = payload
             self.arm.controller.set_payload(*payload)
 
     def run(self, seconds: float) -> None:
@@ -140,7 +143,7 @@ class Simulation:
         _, _, _, qx, qy, qz, qw = p
         if math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) < 1e-6:
             return
-        self.arm.set_target(se3.transform_from_pose(p), stamp)
+        self.arm.set_target(se3.transform_from_flat(se3.flat_from_pose(p)), stamp)
 
     def state_message(self) -> dict[str, list[float]]:
         """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).

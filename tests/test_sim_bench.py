@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from sctd.bench.sim import format_report, measure_breakdown, measure_rtf, tracking
+from sctd.bench.sim import format_report, measure_breakdown, measure_rtf, parts_line, tracking
 
 
 def test_measure_rtf_reports_its_figures():
@@ -20,6 +20,16 @@ def test_measure_breakdown_accounts_for_the_whole_cycle():
     assert set(b) == {*parts, "cycle"}
     assert all(b[p] > 0 for p in parts if p != "other")
     assert math.isclose(sum(b[p] for p in parts), b["cycle"], rel_tol=1e-9)
+
+
+def test_the_breakdown_in_a_scene_adds_the_target_and_the_scene():
+    b = measure_breakdown(seconds=0.03, scene="pour")
+    parts = ("controller", "bus_controller_end", "bus_drives_end", "physics", "target", "scene", "other")
+    assert set(b) == {*parts, "cycle"}
+    assert all(b[p] > 0 for p in parts if p != "other")
+    assert math.isclose(sum(b[p] for p in parts), b["cycle"], rel_tol=1e-9)
+    line = parts_line({p: 10.0 for p in parts} | {"cycle": 70.0})
+    assert "physics 10, target 10, scene 10, other 10; whole timed cycle 70" in line
 
 
 def test_tracking_at_a_quarter_metre_per_second_is_within_5_mm():

@@ -273,3 +273,19 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
         rc = proc.stop()
     assert rc == 0, proc.output()
     assert port_is_free(port)
+
+
+def test_the_bus_mirror_runs_only_while_a_remote_listener_is_there():
+    """The service's own subscriber on the CAN key (for frames to inject) is no listener
+    of its mirror: with nobody else there, no cycle is encoded and published."""
+    from sctd_sim.service import SimService
+    from sctd_sim.simulation import Simulation
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    with open_session(listen=[ep]) as s, Simulation("pour") as sim, SimService(s, sim) as service:
+        assert not service._can_watched
+        with open_session(connect=[ep]) as other:
+            sub = other.declare_subscriber(service.can_key, lambda sample: None)
+            assert wait_for(lambda: service._can_watched, 10)
+            sub.undeclare()
+            assert wait_for(lambda: not service._can_watched, 10)

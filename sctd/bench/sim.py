@@ -8,6 +8,7 @@ same on every machine; only the real-time factor depends on the host.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import statistics
 import time
@@ -70,7 +71,8 @@ _PARTS = {
 """The parts of a cycle: the ``SimArm`` component methods each is made of."""
 
 
-def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0) -> dict[str, float]:
+def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0, scene: str | None = None
+                      ) -> dict[str, float]:
     """Per-cycle cost of the cycle's parts, us (mean over cycles, like the real-time
     factor, so it includes the controller's damping update every few cycles).
 
@@ -80,8 +82,39 @@ def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0) -> dict[str, f
     as :func:`measure_rtf` runs it. ``other`` is what the cycle spends outside them
     (and in the timers), ``cycle`` the whole timed cycle: a few microseconds more than
     an untimed one.
+
+    With ``scene`` (a task's name or file) the cycle is the simulation's in that
+    scene, as the ``sctd sim`` service and lockstep evaluation run it: a target (the
+    start pose) given every cycle, then :meth:`Simulation.step
+    <sctd_sim.simulation.Simulation.step>`; two more parts are timed, ``target``
+    (:meth:`Simulation.set_target <sctd_sim.simulation.Simulation.set_target>`) and
+    ``scene`` (the scene's own step: the load, the contents, contacts and handles).
     """
-    spent = dict.fromkeys(_PARTS, 0.0)
+    with contextlib.ExitStack() as stack:
+        if scene is None:
+            arm = stack.enter_context(SimArm(rate=rate))
+            cycle = arm.step
+            extra: dict[str, tuple[Any, str]] = {}
+        else:
+            sim = stack.enter_context(Simulation(scene=scene, rate=rate))
+            arm = sim.arm
+            pose0 = se3.pose_from_transform(arm.T_world_ee).tolist()
+
+            def cycle() -> None:
+                sim.set_target(pose0, sim.t)
+                sim.step()
+            extra = {"target": (sim, "set_target"), "scene": (sim.scene, "step")}
+        arm.run(0.05)
+        return _timed_cycles(arm, cycle, extra, max(1, round(seconds * rate)))
+
+
+def _timed_cycles(arm: SimArm, cycle: Any, extra: dict[str, tuple[Any, str]], n: int
+                  ) -> dict[str, float]:
+    """Mean us per cycle of each part (:data:`_PARTS` and ``extra``: part -> (object,
+    method)), ``other`` and the whole ``cycle`` over ``n`` calls of ``cycle()``."""
+    calls = {part: [(getattr(arm, owner), method) for owner, method in m] for part, m in _PARTS.items()}
+    calls.update({part: [where] for part, where in extra.items()})
+    spent = dict.fromkeys(calls, 0.0)
     pc = time.perf_counter
 
     def timed(fn: Any, part: str) -> Any:
@@ -92,23 +125,20 @@ def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0) -> dict[str, f
             return out
         return call
 
-    with SimArm(rate=rate) as arm:
-        arm.run(0.05)
-        for part, calls in _PARTS.items():
-            for owner, method in calls:
-                obj = getattr(arm, owner)
-                setattr(obj, method, timed(getattr(obj, method), part))
-        rows: dict[str, list[float]] = {part: [] for part in (*_PARTS, "other", "cycle")}
-        for _ in range(max(1, round(seconds * rate))):
-            for part in spent:
-                spent[part] = 0.0
-            t0 = pc()
-            arm.step()
-            total = pc() - t0
-            for part, x in spent.items():
-                rows[part].append(x)
-            rows["other"].append(total - sum(spent.values()))
-            rows["cycle"].append(total)
+    for part, where in calls.items():
+        for obj, method in where:
+            setattr(obj, method, timed(getattr(obj, method), part))
+    rows: dict[str, list[float]] = {part: [] for part in (*calls, "other", "cycle")}
+    for _ in range(n):
+        for part in spent:
+            spent[part] = 0.0
+        t0 = pc()
+        cycle()
+        total = pc() - t0
+        for part, x in spent.items():
+            rows[part].append(x)
+        rows["other"].append(total - sum(spent.values()))
+        rows["cycle"].append(total)
     return {part: 1e6 * statistics.fmean(x) for part, x in rows.items()}
 
 
@@ -266,12 +296,15 @@ def scene_tracking(scene: str, speed: float = 0.1, distance: float = 0.15, rate:
 
 
 def run_scene_bench(scene: str, rate: float = 1000.0) -> dict[str, Any]:
-    """The step (5 cm along world x) and tracking figures in ``scene``, and the targets
-    (settles below 1 mm in under 1 s, as in the empty workspace)."""
+    """The step (5 cm along world x) and tracking figures in ``scene``, the targets
+    (settles below 1 mm in under 1 s, as in the empty workspace) and the cost of a cycle
+    in the scene (``breakdown``, :func:`measure_breakdown`)."""
     step = scene_step(scene, 0.05, rate)
     track = scene_tracking(scene, 0.1, 0.15, rate)
     bare = scene_step(scene, 0.05, rate, compensate=False) if step["payload_kg"] is not None else None
+    breakdown = measure_breakdown(1.0, rate, scene)
     return {"scene": scene, "step": step, "tracking": track, "uncompensated_step": bare,
+            "breakdown": breakdown,
             "pass": {"settle<1s": step["settling_time_s"] < 1.0,
                      "final<1mm": step["final_error_m"] < 1e-3,
                      "tracking<5mm": track["max_error_m"] < 5e-3}}
@@ -296,8 +329,19 @@ def format_scene_report(result: dict[str, Any]) -> str:
             + ("never (within 2.5 s)" if b["settling_time_s"] == float("inf") else
                f"{b['settling_time_s'] * 1e3:.0f} ms")
             + f", final error {b['final_error_m'] * 1e3:.3f} mm")
+    if result.get("breakdown"):
+        lines.append(parts_line(result["breakdown"]))
     lines.append("targets: " + ", ".join(f"{k} {'ok' if v else 'MISSED'}" for k, v in result["pass"].items()))
     return "\n".join(lines)
+
+
+def parts_line(b: dict[str, float]) -> str:
+    """One line of :func:`measure_breakdown`'s figures (with a scene's parts, if any)."""
+    scene = "".join(f", {part} {b[part]:.0f}" for part in ("target", "scene") if part in b)
+    return (f"cycle parts (mean us): controller {b['controller']:.0f}, bus "
+            f"{b['bus_controller_end'] + b['bus_drives_end']:.0f} (controller end "
+            f"{b['bus_controller_end']:.0f}, drives end {b['bus_drives_end']:.0f}), physics "
+            f"{b['physics']:.0f}{scene}, other {b['other']:.0f}; whole timed cycle {b['cycle']:.0f}")
 
 
 def run_bench(seconds: float = 3.0, rate: float = 1000.0) -> dict[str, Any]:
@@ -349,11 +393,7 @@ def format_report(result: dict[str, Any]) -> str:
     ]
     b = result.get("breakdown")
     if b:
-        lines.append(
-            f"cycle parts (mean us): controller {b['controller']:.0f}, bus "
-            f"{b['bus_controller_end'] + b['bus_drives_end']:.0f} (controller end "
-            f"{b['bus_controller_end']:.0f}, drives end {b['bus_drives_end']:.0f}), physics "
-            f"{b['physics']:.0f}, other {b['other']:.0f}; whole timed cycle {b['cycle']:.0f}")
+        lines.append(parts_line(b))
     for s in result["step"]:
         lines.append(
             f"5 cm step along {s['axis']}: settles < 1 mm in {s['settling_time_s'] * 1e3:.0f} ms, "

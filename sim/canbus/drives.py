@@ -77,6 +77,7 @@ class JointDrives(BusEndpoint):
         self._enabled = np.zeros(n, dtype=bool)
         self._last_cmd_t = np.full(n, -np.inf)
         self._last_counter: list[int | None] = [None] * n
+        self._same_counter: int | None = None  # the counter of every _last_counter, if one
         self._sync_counter: int | None = None
         self._sync_last: int | None = None
         self._counter = 0
@@ -123,11 +124,16 @@ class JointDrives(BusEndpoint):
         st.received += n + 1
         st.accepted += n + 1
         st.lost += sync_lost
-        for prev in self._last_counter:
-            if prev is not None:
-                st.lost += (counter - prev - 1) & 0xF
+        same = self._same_counter
+        if same is not None:  # every joint's last command was of one cycle: lost alike
+            st.lost += n * ((counter - same - 1) & 0xF)
+        else:
+            for prev in self._last_counter:
+                if prev is not None:
+                    st.lost += (counter - prev - 1) & 0xF
         self._sync_last = self._sync_counter = self._counter = counter
         self._last_counter = [counter] * n
+        self._same_counter = counter
         self._last_cmd_t.fill(t)
         self.tau_cmd[:] = taus
         if modes == self._modes_on:  # (the usual case, without a loop)
@@ -145,6 +151,7 @@ class JointDrives(BusEndpoint):
     def _receive_each(self, frames: list[can.Message], t: float) -> None:
         """:meth:`receive`, frame by frame: any frames, in any order and state."""
         st = self.stats
+        self._same_counter = None  # (set below joint by joint)
         n = self.n
         got = [False] * n
         index, unpack, last = self._cmd_index, self._cmd_unpack, self._last_counter

@@ -49,6 +49,7 @@ class BusMaster(BusEndpoint):
         self.fresh = np.zeros(n, dtype=bool)
         self.age = np.full(n, 1 << 30)
         self._last_counter: list[int | None] = [None] * n
+        self._same_counter: int | None = None  # the counter of every _last_counter, if one
         self._state_index = {c.frame_id: i for i, c in enumerate(codecs.state)}
         self._status_seen: tuple[int, ...] | None = None  # status as last set from a tuple
         self._all_fresh = False  # fresh all True and age all 0
@@ -110,10 +111,15 @@ class BusMaster(BusEndpoint):
         st = self.stats
         st.received += n
         st.accepted += n
-        for prev in self._last_counter:
-            if prev is not None:
-                st.lost += (reference - prev - 1) & 0xF
+        same = self._same_counter
+        if same is not None:  # every joint's last frame was of one cycle: lost alike
+            st.lost += n * ((reference - same - 1) & 0xF)
+        else:
+            for prev in self._last_counter:
+                if prev is not None:
+                    st.lost += (reference - prev - 1) & 0xF
         self._last_counter = [reference] * n
+        self._same_counter = reference
         status, self.q[:], self.dq[:], self.tau[:] = vals
         if status != self._status_seen:  # (status bits rarely change)
             self.status[:] = self._status_seen = status
@@ -126,6 +132,7 @@ class BusMaster(BusEndpoint):
     def _receive_each(self, frames: list[can.Message], reference: int) -> np.ndarray:
         """:meth:`receive`, frame by frame: any frames, in any order and state."""
         st = self.stats
+        self._same_counter = None  # (set below joint by joint)
         fresh = [False] * self.n
         index, unpack, last = self._state_index, self._state_unpack, self._last_counter
         q, dq, tau, status = self.q, self.dq, self.tau, self.status

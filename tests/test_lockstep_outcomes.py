@@ -1,0 +1,85 @@
+"""Lockstep trials on fixed seeds come to the outcomes recorded in
+``tests/data/lockstep_outcomes.json``: the same outcome, the same times to the millisecond
+and mode switches, and the same spill and progress to 1e-4.
+
+The file was written once, by ``python -m tests.test_lockstep_outcomes`` on the code before
+the simulator's and the lockstep step's speed-ups, and is kept fixed: it is the proof that
+making a step cheaper did not change what a trial comes to. A change that is meant to
+change outcomes (a new skill, new physics) re-records it and says why in its commit.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.tiers import needs
+
+DATA = Path(__file__).parent / "data" / "lockstep_outcomes.json"
+SKILLS = ("pour", "pour-vf", "drawer", "drawer-vf")
+SEEDS = (0, 1, 2)
+TIME_LIMIT = 30.0  # s per trial: long enough for these skills' successes, short enough to test
+FIELDS = ("outcome", "reason", "time_s", "duration_s", "spill", "progress", "mode_switches")
+
+
+def outcome(skill: str, seed: int) -> dict[str, Any]:
+    """What the lockstep trial of ``skill`` (a catalogue name) from ``seed`` comes to: the
+    fields of :data:`FIELDS`, floats rounded to the millisecond (times) or to 1e-6."""
+    needs("pinocchio")
+    from sctd.skill import load_skill
+    from sctd.skill.catalog import find_skill
+    from sctd_services.eval.evaluate import task_of
+    from sctd_services.eval.lockstep import run_trial
+    from sctd_services.eval.trial import TaskSpec
+
+    loaded = load_skill(find_skill(skill))
+    spec = TaskSpec(task_of([loaded], None), time_limit=TIME_LIMIT)
+    r = run_trial(loaded, spec, seed).as_dict()
+    got = {k: r[k] for k in FIELDS}
+    for k in ("time_s", "duration_s"):
+        got[k] = None if got[k] is None else round(got[k], 3)
+    for k in ("spill", "progress"):
+        got[k] = round(got[k], 6)
+    return got
+
+
+def _recorded() -> dict[str, dict[str, Any]]:
+    return json.loads(DATA.read_text())["trials"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("skill", SKILLS)
+def test_lockstep_trials_come_to_the_recorded_outcomes(skill: str) -> None:
+    recorded = _recorded()
+    for seed in SEEDS:
+        got, want = outcome(skill, seed), recorded[f"{skill}/{seed}"]
+        exact = [k for k in FIELDS if k not in ("spill", "progress")]
+        assert {k: got[k] for k in exact} == {k: want[k] for k in exact}, f"{skill} seed {seed}"
+        # the scene's readings, to well within what a different rounding of the maths moves
+        assert got["spill"] == pytest.approx(want["spill"], abs=1e-4), f"{skill} seed {seed}"
+        assert got["progress"] == pytest.approx(want["progress"], abs=1e-4), f"{skill} seed {seed}"
+
+
+def test_the_recorded_outcomes_cover_every_skill_and_seed() -> None:
+    recorded = _recorded()
+    assert sorted(recorded) == sorted(f"{s}/{k}" for s in SKILLS for k in SEEDS)
+    assert {r["outcome"] for r in recorded.values()} >= {"success"}
+
+
+def record() -> None:
+    """Write :data:`DATA` from this checkout's code (see the module's docstring)."""
+    trials = {f"{s}/{k}": outcome(s, k) for s in SKILLS for k in SEEDS}
+    doc = {"about": "lockstep trials (tests/test_lockstep_outcomes.py), time limit "
+                    f"{TIME_LIMIT} s; recorded before the simulator speed-ups, kept fixed",
+           "trials": trials}
+    DATA.parent.mkdir(exist_ok=True)
+    DATA.write_text(json.dumps(doc, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    record()
+    sys.exit(0)
