@@ -132,11 +132,13 @@ class Ticker:
         self.late = 0
         self.skipped = 0
 
-    def wait(self) -> tuple[float, float]:
-        """Block until the next deadline; return (wake time, lateness) in seconds."""
+    def wait(self, sleep: bool = True) -> tuple[float, float]:
+        """Block until the next deadline (sleeping to ``spin`` before it, then spinning;
+        with ``sleep`` false, spinning only: for a caller that slept itself and did work
+        since); return (wake time, lateness) in seconds."""
         due = self.due
         remaining = due - time.monotonic()
-        if remaining > self.spin:
+        if sleep and remaining > self.spin:
             time.sleep(remaining - self.spin)
         now = time.monotonic()
         while now < due:

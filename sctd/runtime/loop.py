@@ -93,7 +93,7 @@ class TickLoop:
             self.before_tick(t)
             drained = time.monotonic() - t
             lead = next_lead(lead, drained)
-            now, lateness = ticker.wait()  # spins what the drain left of the window
+            now, lateness = ticker.wait(sleep=False)  # spins what the drain left: no second wake-up
             if end is not None and now >= end:
                 break
             wall = time.time()
