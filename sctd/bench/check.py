@@ -120,7 +120,8 @@ def _publish_demos(s: zenoh.Session, keys: Keys, task: str) -> list[str]:
     for d in read_demos(shipped_folder() / "demos" / task):
         name = Path(d.name).stem
         rows = [[float(t), *map(float, p)] for t, p in zip(d.t, d.poses, strict=True)]
-        s.put(keys.demos(task, name), codec.encode_demo(task, name, obj, rows))
+        s.put(keys.demos(task, name), codec.encode_demo(task, name, obj, rows),
+              congestion_control=zenoh.CongestionControl.BLOCK)  # as sctd record: none lost in a burst
         names.append(name)
     return names
 
