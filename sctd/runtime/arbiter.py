@@ -138,6 +138,12 @@ class InputArbiter:
         self._pressing: list[_Device] = []  # devices with presses not yet seen by a tick
         self._stopping: set[_Device] = set()  # devices whose newest message holds stop
 
+    def at_rest(self) -> bool:
+        """Whether every device's newest message is at rest (zero, not finite or
+        disabled), fresh or stale: a stick held while its messages stopped is not at
+        rest (it may come back deflected)."""
+        return all(d.rest for d in self.devices.values())
+
     # --- every message, as it arrives ----------------------------------------------------
 
     def offer(self, name: str, m: InputMsg, now: float) -> bool:

@@ -182,7 +182,7 @@ class Controller:
     config : RuntimeConfig
     """
 
-    def __init__(self, skill: Skill, config: RuntimeConfig):
+    def __init__(self, skill: Skill, config: RuntimeConfig, engine: SkillEngine | None = None):
         self.config = config
         self.counters = Counters()
         self._target: _Target | None = None
@@ -200,7 +200,7 @@ class Controller:
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
         self.stuck_detector = StuckDetector(config.stuck_after)
-        self._install(skill, now=0.0, keep_state=False)
+        self._install(skill, now=0.0, keep_state=False, engine=engine)
 
     @property
     def T_world_target(self) -> Array | None:
@@ -235,6 +235,18 @@ class Controller:
         built off the tick thread (KD-trees take time to build)."""
         self._install(skill, now, keep_state=True, engine=engine)
         self.counters.swaps += 1
+
+    def engage(self, skill: Skill, engine: SkillEngine, now: float) -> None:
+        """Run ``skill`` (a skill set's member, or its teleoperation) from its start state
+        from the next tick on, with ``engine``; the target stays where it is (in the
+        world: it is re-expressed in the new skill's object frame at the next tick)."""
+        self._install(skill, now, keep_state=False, engine=engine)
+        self.stuck_detector.release()
+
+    @property
+    def pose(self) -> list[float] | None:
+        """The newest target pose (world), None before the first."""
+        return self._pose
 
     def tick(self, now: float, wall: float, cmd: Command, state: Sample | None,
              obj: Sample | None) -> TickResult:

@@ -26,6 +26,7 @@ from ..skill import WORLD_OBJECT, Skill, SkillEngine
 from ..wire import codec
 from .arbiter import MAX_DEVICES, InputArbiter
 from .controller import Controller, Counters, RuntimeConfig, Sample, TickResult
+from .goals import GoalSet
 from .safety import StateWatch
 
 _WORLD_F = se3.flat_from_pose([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
@@ -40,11 +41,20 @@ class TickDriver:
     config : RuntimeConfig
     max_devices : int
         Input device names tracked at once (:mod:`.arbiter`).
+    goals : GoalSet, optional
+        A skill set (:mod:`.goals`): ``skill`` is then ignored; the set's teleoperation
+        runs until a member engages.
     """
 
-    def __init__(self, skill: Skill, config: RuntimeConfig, max_devices: int = MAX_DEVICES):
+    def __init__(self, skill: Skill | None, config: RuntimeConfig, max_devices: int = MAX_DEVICES,
+                 goals: GoalSet | None = None):
         self.config = config
-        self.controller = Controller(skill, config)
+        self.goals = goals
+        engine = None
+        if goals is not None:
+            skill, engine = goals.running
+        assert skill is not None, "a skill or a skill set"
+        self.controller = Controller(skill, config, engine)
         self.counters: Counters = self.controller.counters
         self.inputs = InputArbiter(config.input_timeout, config.deadband, config.stamp_check,
                                    self.counters, max_devices)
@@ -93,8 +103,9 @@ class TickDriver:
                             since=self.watch.since)
 
     def take_object(self, name: str, m: codec.ObjectMsg, now: float) -> None:
-        """An object's pose; kept when it is the active skill's task object."""
-        if name != self.controller.skill.object:
+        """An object's pose; kept when it is the active skill's task object (or a skill
+        set member's)."""
+        if name != self.controller.skill.object and (self.goals is None or name not in self.goals.objects):
             return
         prev = self.objects.get(name)
         # An unchanged pose keeps its flat transform (the same tuple): the controller's
@@ -118,10 +129,37 @@ class TickDriver:
         and ``wall`` (Unix time, for the sender-stamp checks). When the result has a
         ``pose``, it is target number :attr:`target_seq`."""
         cmd = self.inputs.select(now, wall)
-        res = self.controller.tick(now, wall, cmd, self.state, self.object_sample(now, wall))
+        if self.goals is None:
+            res = self.controller.tick(now, wall, cmd, self.state, self.object_sample(now, wall))
+        else:
+            res = self._tick_set(self.goals, now, wall, cmd)
         if res.pose is not None:
             self.target_seq += 1
         return res
+
+    def _tick_set(self, goals: GoalSet, now: float, wall: float, cmd) -> TickResult:
+        """A skill set's tick: the set sees the fresh objects and may change the running
+        skill (only at a tick whose input is at rest), then the controller steps, then
+        the set learns from the target's step."""
+        goals.see({n: s.F for n, s in self.objects.items()
+                   if s.F is not None and self._fresh(s, now, wall, self.config.object_timeout)})
+        state = self.state
+        fresh_state = state is not None and self._fresh(state, now, wall, self.config.state_timeout)
+        cmd, changed = goals.decide(cmd, state.F if fresh_state and state is not None else None,
+                                    self.inputs.at_rest())
+        ctl = self.controller
+        if changed:
+            skill, engine = goals.running
+            ctl.engage(skill, engine, now)
+        before = ctl.pose
+        res = ctl.tick(now, wall, cmd, state, self.object_sample(now, wall))
+        goals.observe(None if res.seed else before, res.pose)
+        return res
+
+    def _fresh(self, s: Sample, now: float, wall: float, timeout: float) -> bool:
+        """Whether a sample is fresh by the controller's rule (arrival and, with the
+        stamp check on, the sender's stamp)."""
+        return now - s.received <= timeout and (not self.config.stamp_check or abs(wall - s.stamp) <= timeout)
 
     def after_tick(self) -> None:
         """Between ticks, after the target is out: the neighbour answers the next
@@ -132,5 +170,22 @@ class TickDriver:
         """Replace the skill between two ticks (:meth:`.controller.Controller.swap`);
         object poses the new skill does not use are forgotten."""
         self.controller.swap(skill, now, engine)
-        for name in [n for n in self.objects if n != skill.object]:
+        for name in [n for n in self.objects if n != skill.object
+                     and (self.goals is None or n not in self.goals.objects)]:
             del self.objects[name]
+
+    def swap_member(self, name: str, skill: Skill, now: float, engine: SkillEngine | None = None) -> None:
+        """A skill set's swap (:meth:`.goals.GoalSet.replace`): ``skill`` takes member
+        ``name``'s place; when that member is engaged, the running skill is swapped as
+        :meth:`swap` does (the active state kept where the new skill has it), else the
+        set's next engagement of it runs the new one. Object poses no member and not the
+        running skill use are forgotten."""
+        goals = self.goals
+        if goals is None:
+            raise ValueError("not a skill set: a swap replaces the skill")
+        if goals.replace(name, skill, engine):
+            self.controller.swap(skill, now, goals.engines[goals.index(skill.name)])
+        else:
+            self.counters.swaps += 1
+        for n in [n for n in self.objects if n != self.controller.skill.object and n not in goals.objects]:
+            del self.objects[n]
