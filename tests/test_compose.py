@@ -79,3 +79,23 @@ def test_sctd_sim_takes_several_tasks():
     assert two.task.name == "drawer+cabinet" and [t.name for t in two.task.parts] == ["drawer", "cabinet"]
     with pytest.raises(ValueError, match=r"--task: .*'drawer' is also a name in an earlier task"):
         _settings_from_args(p.parse_args(["--task", "drawer", "--task", "drawer"]))
+
+
+def test_no_task_is_placed_behind_another_tasks_wall():
+    """The light switch's wall is a plane solid behind it: placed after the drawer and
+    the cabinet (which it would have cut through unturned), it is turned until both, and
+    the hand's start, are in front of it; placed first, the others go in front of it."""
+    from sctd.task.compose import walls
+
+    for names in (["drawer", "cabinet", "light_switch"], ["light_switch", "drawer", "cabinet"]):
+        room = compose([find_task(n) for n in names])
+        (p, n), = [w for part in room.parts for w in walls(part)]
+        for part in room.parts:
+            if part.name != "light_switch":
+                c, r = footprint(part)
+                assert float(n @ (c - p)) >= r - 1e-9, (names, part.name)
+        assert float(n @ (room.scene.start.T_world[:3, 3] - p)) >= 0.0
+    unturned = compose([find_task("drawer"), find_task("cabinet")])
+    (p, n), = walls(find_task("light_switch"))
+    c, r = footprint(unturned.parts[0])
+    assert float(n @ (c - p)) < r  # (where it stands in its own file, it would cut the drawer)

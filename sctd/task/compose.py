@@ -7,7 +7,10 @@ their bodies, joints, heads and zones. Each task keeps its objects' layout; a ta
 overlap those already placed is turned as a whole about the vertical through the arm's
 base (by 10 deg steps, alternately either way, up to 90 deg), which keeps every object
 at its distance from the arm, until its footprint (the ball around its bodies, joint
-paths and containers, plus :data:`CLEARANCE`) is clear of the others'.
+paths and containers, plus :data:`CLEARANCE`) is clear of the others', and every
+footprint and the hand's start are in front of every task's walls (a body's solid
+surface is a plane, solid behind it: a task behind another's wall could not be
+reached).
 
 The composed task's ``parts`` are the tasks as placed, each judged on the composed
 scene's readings (an element's readings carry its own name, so they do not mix).
@@ -67,12 +70,33 @@ def _turned(task: Task, T: Array) -> Task:
     return replace(task, scene=replace(sc, bodies=bodies, start=start))
 
 
+def walls(task: Task, T: Array | None = None) -> list[tuple[Array, Array]]:
+    """The planes of ``task``'s solid surfaces (a wall with a switch in it), moved by
+    ``T``: a point on each and its normal out of the solid (the body's x axis)."""
+    T = np.eye(4) if T is None else T
+    out = []
+    for b in task.scene.bodies.values():
+        if b.surface is not None:
+            W = T @ b.T_world
+            out.append((W[:3, 3].copy(), W[:3, 0].copy()))
+    return out
+
+
+def _in_front(centre: Array, radius: float, planes: list[tuple[Array, Array]]) -> bool:
+    """Whether the ball is wholly on the open side of every plane."""
+    return all(float(n @ (centre - p)) >= radius for p, n in planes)
+
+
 def _clear(centre: Array, radius: float, placed: list[tuple[Array, float]]) -> bool:
     return all(float(np.linalg.norm(centre - c)) >= radius + r + CLEARANCE for c, r in placed)
 
 
-def _place(task: Task, placed: list[tuple[Array, float]]) -> Task:
-    """``task`` turned about the base's vertical until clear of ``placed``."""
+def _place(task: Task, placed: list[tuple[Array, float]], placed_walls: list[tuple[Array, Array]],
+           start: Array) -> Task:
+    """``task`` turned about the base's vertical until clear of ``placed``, in front of
+    their walls (``placed_walls``), and with ``placed`` and the hand's ``start`` in
+    front of its own (a surface is a plane solid behind it: a task behind another's
+    wall could not be reached)."""
     turns = [0.0]
     k = 1
     while k * STEP <= MAX_TURN + 1e-9:
@@ -81,7 +105,9 @@ def _place(task: Task, placed: list[tuple[Array, float]]) -> Task:
     for a in turns:
         T = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, a]), np.zeros(3))
         centre, radius = footprint(task, T)
-        if _clear(centre, radius, placed):
+        own = walls(task, T)
+        if _clear(centre, radius, placed) and _in_front(centre, radius, placed_walls) \
+                and all(_in_front(c, r, own) for c, r in [*placed, (start, 0.0)]):
             return _turned(task, T) if a else task
     raise TaskError(task.file or task.name, "", f"no place for task {task.name!r} clear of the others "
                                                  f"within {math.degrees(MAX_TURN):.0f} deg either way")
@@ -100,10 +126,13 @@ def compose(tasks: list[Task]) -> Task:
     first = tasks[0]
     placed_tasks = [first]
     placed = [footprint(first)]
+    placed_walls = walls(first)
+    start = first.scene.start.T_world[:3, 3]
     for t in tasks[1:]:
-        t = _place(t, placed)
+        t = _place(t, placed, placed_walls, start)
         placed_tasks.append(t)
         placed.append(footprint(t))
+        placed_walls += walls(t)
     bodies: dict[str, Body] = {}
     joints: dict[str, Joint] = {}
     heads: dict[str, Head] = {}
