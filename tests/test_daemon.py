@@ -1,7 +1,7 @@
 """The daemon's parts, each on its own: the swap of a skill between two ticks
-(:class:`SkillSwap`), the tick statistics (:class:`TickStats`) and the status map
-(:class:`DaemonStatus`). The loop they serve is tested by tests/test_driver.py, the
-daemon they make up by the end-to-end tests."""
+(:class:`SkillSwap`; with a skill set, of a member), the tick statistics
+(:class:`TickStats`) and the status map (:class:`DaemonStatus`). The loop they serve is
+tested by tests/test_driver.py, the daemon they make up by the end-to-end tests."""
 
 from __future__ import annotations
 
@@ -12,15 +12,18 @@ from pathlib import Path
 
 import pytest
 
+from sctd.runtime import bundles
 from sctd.runtime import swap as swap_module
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.runtime.ingress import Ingress
+from sctd.runtime.sets import goal_set
 from sctd.runtime.status import RECENT, DaemonStatus, TickStats
 from sctd.runtime.swap import SkillSwap
-from sctd.skill import SkillError, load_skill
+from sctd.skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle
+from sctd.skill.skillset import load_skill_set
 from sctd.timing import Ticker
-from sctd.wire import Keys
+from sctd.wire import Keys, codec
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = Keys()
@@ -183,3 +186,131 @@ def test_the_status_says_how_often_each_constraint_acted_in_its_window(skills):
     assert window(0.75) == ("pour", 4, [0, 4])
     driver.controller.engine = type(eng)(pour)  # a swap: a new engine, counting from 0
     assert window(1.0) == ("carry", 0, [0, 0])
+
+
+# --- a skill set -----------------------------------------------------------------------------
+
+KITCHEN = ROOT / "skills" / "sets" / "kitchen.yaml"
+HAND = [0.35, 0.25, 0.90, 0.0, 0.0, 0.0, 1.0]
+
+
+@pytest.fixture(scope="module")
+def kitchen():
+    return load_skill_set(KITCHEN)
+
+
+def _running_set(spec):
+    """A driver on the set ``spec``, its ingress on a fake session, and the swap."""
+    session = _Session()
+    driver = TickDriver(None, RuntimeConfig(stamp_check=False), goals=goal_set(spec))
+    swap = SkillSwap(driver, set_name=spec.name)
+    swap.ingress = Ingress(session, KEYS, driver)  # type: ignore[arg-type]
+    return session, driver, swap
+
+
+def _swap_in(swap, skill, member=None):
+    """``swap.answer(skill, member)`` on a thread of its own, installed by this (tick)
+    thread; its answer."""
+    result: list = []
+    t = threading.Thread(target=lambda: result.append(swap.answer(skill, member)))
+    t.start()
+    now = 0.0
+    while t.is_alive():
+        if swap.pending is not None:
+            swap.install(now)
+        now += 1e-3
+        t.join(1e-3)
+    assert result, "the swap raised"
+    return result[0]
+
+
+def _variant(path: Path, description: str):
+    """The skill of ``path`` with another description: the same name, another id."""
+    b = bundle_from_file(path)
+    text = b.yaml_text.replace("\ndescription:", f"\ndescription: {description}", 1)
+    return skill_from_bundle(Bundle(b.name, text, b.files))
+
+
+def test_a_set_reads_every_members_object_and_its_status_and_summary_say_so(kitchen):
+    session, driver, swap = _running_set(kitchen)
+    assert set(swap.ingress.objects) == {"drawer_handle", "door_handle", "light_switch"}
+    assert all(session.live(KEYS.objects(n)) for n in swap.ingress.objects)
+    status = DaemonStatus(driver, TickStats(0.0, driver.engine.state, 0.1), swap).map(Ticker(1e-3), 0.0, 0.0)
+    goals = status["goals"]
+    assert goals["name"] == "kitchen" and goals["engaged"] == "teleop" and goals["teleop"] == "teleop"
+    assert goals["objects"] == {"drawer": "drawer_handle", "cabinet-vf": "door_handle",
+                                "light_switch-vf": "light_switch"}
+    assert status["skill"] == kitchen.teleop.id and status["skill_name"] == "teleop"
+    summary = swap.summary()
+    assert summary["id"] == kitchen.teleop.id and summary["state"] == "translate"
+    assert summary["set"]["name"] == "kitchen" and summary["set"]["engaged"] == "teleop"
+    assert [m["id"] for m in summary["set"]["members"]] == [m.skill.id for m in kitchen.members]
+    assert summary["set"]["teleop"] == {"id": kitchen.teleop.id, "name": "teleop", "object": "world"}
+    assert set(swap.in_use()) == {kitchen.teleop.id, *(m.skill.id for m in kitchen.members)}
+    single = TickDriver(kitchen.members[0].skill, RuntimeConfig())
+    assert "goals" not in DaemonStatus(single, TickStats(0.0, "reach", 0.1), SkillSwap(single)).map(
+        Ticker(1e-3), 0.0, 0.0)
+
+
+def test_a_swap_into_a_set_replaces_the_member_it_names_and_its_object_ring(kitchen):
+    session, driver, swap = _running_set(kitchen)
+    drawer_vf = load_skill(ROOT / "skills" / "drawer-vf.yaml")
+    got = _swap_in(swap, drawer_vf, "light_switch-vf")
+    assert got["member"] == "light_switch-vf" and got["state"] == drawer_vf.start
+    assert drawer_vf.id in got["in_use"] and kitchen.members[2].skill.id not in got["in_use"]
+    assert [m.name for m in driver.goals.members] == ["drawer", "cabinet-vf", "drawer-vf"]
+    assert driver.skill.name == "teleop"  # nothing engaged: the swap changes no running skill
+    assert set(swap.ingress.objects) == {"drawer_handle", "door_handle"}
+    assert not session.live(KEYS.objects("light_switch"))
+    # engage cabinet-vf by choose (the drawer's handle is not seen: it is skipped)
+    driver.take_state(codec.StateMsg(1, 0.0, HAND, None), 0.0)
+    driver.take_object("door_handle", codec.ObjectMsg(1, 0.0, [0.6, -0.2, 0.7, 0, 0, 0, 1]), 0.0)
+    driver.take_input("pad", codec.InputMsg(1, 0.0, (0.0, 0.0, 0.0), (0, 1, 0, 1), False), 0.0)
+    driver.tick(0.0, 0.0)
+    assert driver.skill.name == "cabinet-vf"
+    # the engaged member, replaced by a skill of its name (no member named): it runs now
+    cabinet2 = _variant(ROOT / "skills" / "cabinet-vf.yaml", "Relearned.")
+    got = _swap_in(swap, cabinet2)
+    assert got["member"] == "cabinet-vf" and driver.skill is cabinet2 and got["state"] == "default"
+    assert swap.summary()["id"] == cabinet2.id and swap.summary()["set"]["engaged"] == "cabinet-vf"
+    assert driver.counters.swaps == 2
+
+
+def test_a_swap_that_does_not_fit_the_set_is_refused_and_changes_nothing(kitchen, tmp_path):
+    _, driver, swap = _running_set(kitchen)
+    pour, drawer = load_skill(ROOT / "skills" / "pour.yaml"), kitchen.members[0].skill
+    text = (ROOT / "skills" / "teleop.yaml").read_text().replace("name: teleop", "name: chooser").replace(
+        "object: world", "object: mug")
+    chooser = skill_from_bundle(Bundle("chooser.yaml", text.replace("button: 0}", "button: 3}"), {}))
+    for skill, member, problem in [
+            (pour, None, "'pour' is no member of the running skill set (members: drawer, cabinet-vf, "
+                         "light_switch-vf): name the member it replaces (skill/swap?member=NAME)"),
+            (pour, "nope", "member 'nope': no such member"),
+            (drawer, "cabinet-vf", "'drawer' is the name of another skill of the running set"),
+            (kitchen.teleop, "drawer", "'teleop' is the name of another skill"),
+            (skill_from_bundle(Bundle("w.yaml", text.replace("object: mug", "object: world"), {})), "drawer",
+             "w.yaml: object: a member of a skill set is tied to its task object"),
+            (chooser, "drawer", "chooser.yaml: fsm.transitions[0].button: button 3 is the skill set's "
+                                "choose button")]:
+        with pytest.raises(SkillError) as e:
+            swap.swap(skill, member)
+        assert problem in str(e.value), str(e.value)
+    assert swap.pending is None
+    assert [m.skill for m in driver.goals.members] == [m.skill for m in kitchen.members]
+    _, _, single = _running(pour)
+    with pytest.raises(SkillError, match="runs one skill, not a skill set: swap without naming a member"):
+        single.swap(drawer, "drawer")
+
+
+def test_a_sets_bundles_stay_kept_across_swaps(tmp_path):
+    """The pinned ids (a running set's skills) are never dropped; the others keep the
+    newest :data:`bundles.KEEP`."""
+    pinned = [f"p{i}" for i in range(5)]
+    for sid in pinned:
+        bundles.keep(tmp_path, sid, b"x", pinned=pinned)
+    for k in range(6):
+        bundles.keep(tmp_path, f"s{k}", b"y", pinned=pinned)
+    kept = sorted(p.stem for p in tmp_path.glob("*.bundle"))
+    assert kept == sorted([*pinned, "s2", "s3", "s4", "s5"])
+    bundles.keep(tmp_path, "s6", b"y")  # a single skill's swap: nothing pinned
+    assert len(list(tmp_path.glob("*.bundle"))) == bundles.KEEP

@@ -109,6 +109,9 @@ def test_shipped_skills_resolve_by_name_from_an_empty_folder(installed, tmp_path
         assert json.loads(r.stdout)["id"] == rows["pour"]["id"]
     r = _run(installed, tmp_path, "inspect", "pour-vf", "--json")  # its model file came too
     assert r.returncode == 0 and json.loads(r.stdout)["fields"], r.stderr
+    # the shipped skill set and its skills load (the flags are checked after them)
+    r = _run(installed, tmp_path, "run", "--set", "kitchen", "--rate", "0")
+    assert r.returncode == 2 and r.stderr.strip().endswith("sctd run: --rate: must be > 0"), r.stderr
 
 
 def test_an_unknown_skill_exits_2_with_the_places_searched(installed, tmp_path):

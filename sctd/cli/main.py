@@ -106,7 +106,8 @@ CLUSTER: dict[str, Command] = {
 }
 
 COMMANDS: dict[str, Command] = {
-    "run": Command("run a skill: the fixed-rate daemon", "sctd.cli.run", "add_run_arguments", "main_run"),
+    "run": Command("run a skill (or a skill set): the fixed-rate daemon", "sctd.cli.run",
+                   "add_run_arguments", "main_run"),
     "inspect": Command("validate a skill and show its structure", "sctd.cli.run",
                        "add_inspect_arguments", "main_inspect"),
     "view": Command("the live view in a browser: the arm, the task, the active skill where the hand is",

@@ -18,8 +18,10 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import SKILL_HELP, add_arguments, add_robot_argument, check_ranges, from_namespace
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
+from ..runtime.sets import goal_set
 from ..skill import Bundle, Skill, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
-from ..skill.catalog import find_skill
+from ..skill.catalog import find_skill, find_skill_set
+from ..skill.skillset import load_skill_set, skill_set_of
 from ..wire import Keys, client
 from ..wire.ros_options import add_ros_arguments, check_ros_arguments
 from ..wire.session import (
@@ -35,7 +37,14 @@ ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (t
 
 
 def add_run_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", required=True, help=SKILL_HELP)
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--skill", action="append", metavar="SKILL",
+                      help=SKILL_HELP + "; given two or more times, a skill set of them (the shipped "
+                           "teleoperation runs until one engages; docs/skill-sets.md)")
+    what.add_argument("--set", dest="skill_set", metavar="FILE",
+                      help="a skill set file, or the name of a shipped set (kitchen): teleoperation runs "
+                           "until the person's motion (or button 3, choose) engages one of its skills "
+                           "(docs/skill-sets.md)")
     add_arguments(p, RuntimeConfig, exclude=("stamp_check",), show_default=True)
     add_arguments(p, RuntimeConfig, only=("stamp_check",))
     p.add_argument("--spin-us", type=float, default=100.0,
@@ -107,11 +116,30 @@ def _stop_on_signals() -> threading.Event:
     return stop
 
 
+def daemon_skills(args: argparse.Namespace) -> dict[str, Any]:
+    """What the daemon runs, as :class:`~sctd.runtime.daemon.Daemon`'s keyword arguments:
+    one skill (``--skill`` once), or a skill set (``--set``, or ``--skill`` two or more
+    times).
+
+    Raises
+    ------
+    SkillError
+        A skill or set file that does not validate, naming the file and the field.
+    """
+    refs = args.skill or []
+    if args.skill_set is None and len(refs) == 1:
+        bundle = bundle_from_file(find_skill(refs[0]))
+        return {"skill": skill_from_bundle(bundle), "bundle": bundle.pack()}
+    spec = load_skill_set(find_skill_set(args.skill_set)) if args.skill_set is not None \
+        else skill_set_of(refs)
+    return {"skill": None, "goals": goal_set(spec), "set_name": spec.name,
+            "set_bundles": {sid: b.pack() for sid, b in spec.bundles().items()}}
+
+
 def main_run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s", stream=sys.stderr)
     try:
-        bundle = bundle_from_file(find_skill(args.skill))
-        skill = skill_from_bundle(bundle)
+        what = daemon_skills(args)
         config = runtime_config(args)
         check_ros_arguments(args)
     except (SkillError, ValueError) as e:
@@ -141,12 +169,12 @@ def main_run(args: argparse.Namespace) -> int:
             return fail("run", f"--ros: {e}")
         if ros is not None:
             stack.enter_context(ros)
-        daemon = Daemon(skill, session, config, spin=args.spin_us * 1e-6,
+        daemon = Daemon(session=session, config=config, spin=args.spin_us * 1e-6,
                         rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
                         # wire contract v1: on the loopback defaults, bundles sent to the
                         # skill key still swap; with a config file only skill/swap does
                         swap_on_skill_key=args.zenoh_config is None, ros=ros,
-                        settings=SessionSettings.from_args(args), bundle=bundle.pack())
+                        settings=SessionSettings.from_args(args), **what)
         stats = daemon.run(args.duration)
     if args.stats_json:
         print(json.dumps(stats))
@@ -203,6 +231,9 @@ def _print_summary(skill: Skill, s: dict[str, Any]) -> None:
 
 def add_swap_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("skill", help="the skill to send to the running daemon; " + SKILL_HELP)
+    p.add_argument("--member", metavar="NAME", default=None,
+                   help="the member of the daemon's skill set the skill replaces (default: the member "
+                        "of the skill's own name; docs/skill-sets.md)")
     add_robot_argument(p)
     p.add_argument("--timeout", type=float, default=10.0, help="s to wait for the daemon's reply")
     add_zenoh_arguments(p)
@@ -217,8 +248,10 @@ def main_swap(args: argparse.Namespace) -> int:
     except SkillError as e:
         return fail("swap", str(e))
     keys = Keys(args.robot)
+    if args.member is not None and not client.member_name_ok(args.member):
+        return fail("swap", f"--member: {args.member!r}: {client.MEMBER_NAME_RULE}")
     with session_from_args(args) as session:
-        ok, body = client.swap(session, keys, bundle, args.timeout)
+        ok, body = client.swap(session, keys, bundle, args.timeout, member=args.member)
     if ok:
         print(body.get("id"))
         return EXIT_OK

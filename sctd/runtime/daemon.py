@@ -4,7 +4,8 @@
 stack:
 
 - :class:`~.loop.TickLoop`: the tick, on the main thread, which reads its inputs itself.
-  Input, state and the active skill's object poses arrive in Zenoh ring channels
+  Input, state and the active skill's object poses (with a skill set, every member's:
+  :mod:`.goals`) arrive in Zenoh ring channels
   (:class:`~.ingress.Ingress`; newest wins, filled by Zenoh's own threads without Python,
   so a flood of messages costs the tick nothing but the few it drains), drained and
   decoded in the spin window just ahead of each deadline; the control step runs at the
@@ -30,7 +31,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import ExitStack, contextmanager
 from typing import Any
 
@@ -43,6 +44,7 @@ from ..wire.session import MSGPACK, SessionSettings
 from . import bundles
 from .controller import RuntimeConfig
 from .driver import TickDriver
+from .goals import GoalSet
 from .ingress import Ingress
 from .loop import TickLoop
 from .publisher import Publisher, TargetOut
@@ -126,12 +128,13 @@ def _tick_thread_settings(rt_priority: int, cpu: int | None) -> Iterator[bool]:
 
 
 class Daemon:
-    """The runtime daemon: one skill, one robot, one Zenoh session (module doc).
+    """The runtime daemon: one skill (or one skill set), one robot, one Zenoh session
+    (module doc).
 
     Parameters
     ----------
-    skill : Skill
-        The skill to start with.
+    skill : Skill or None
+        The skill to start with (None with ``goals``).
     session : zenoh.Session
         An open session (the caller owns and closes it); open it with
         ``**ingress_limits(robot)`` to bound what the rings can hold and how fast they
@@ -148,23 +151,35 @@ class Daemon:
     bundle : bytes, optional
         The packed bundle ``skill`` was read from (:meth:`~sctd.skill.Bundle.pack`):
         kept on disk before the first tick for ``skill/bundle`` (:mod:`.bundles`).
+    goals : GoalSet, optional
+        A skill set to run instead of ``skill`` (:mod:`.goals`, :mod:`.sets`):
+        teleoperation until a member engages; every member's object is read.
+    set_name : str
+        The skill set's name (``status.goals.name``, the summary's ``set.name``).
+    set_bundles : mapping of str to bytes, optional
+        The packed bundles of the set's skills (members and teleoperation) by skill id,
+        all kept for ``skill/bundle``.
     """
 
-    def __init__(self, skill: Skill, session: zenoh.Session, config: RuntimeConfig,
+    def __init__(self, skill: Skill | None, session: zenoh.Session, config: RuntimeConfig,
                  spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
                  stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
                  ros: Any = None, settings: SessionSettings | None = None,
-                 bundle: bytes | None = None):
+                 bundle: bytes | None = None, goals: GoalSet | None = None, set_name: str = "",
+                 set_bundles: Mapping[str, bytes] | None = None):
         self.config = config
-        self.bundle = bundle  # the packed bundle ``skill`` was read from: kept for ``skill/bundle``
+        # the packed bundles the run starts with (by skill id): kept for ``skill/bundle``
+        self.bundles: dict[str, bytes] = dict(set_bundles or {})
+        if bundle is not None and skill is not None:
+            self.bundles[skill.id] = bundle
         self.session = session
         self.settings = settings if settings is not None else SessionSettings()
         self.swap_on_skill_key = swap_on_skill_key
         self.ros = ros  # sctd.wire.ros.RuntimeRos (--ros): target poses out, its status
         self.spin, self.rt_priority, self.cpu = spin, rt_priority, cpu
         self.stop_event = stop_event if stop_event is not None else threading.Event()
-        self.driver = TickDriver(skill, config)
-        self.swap = SkillSwap(self.driver, self.stop_event)
+        self.driver = TickDriver(skill, config, goals=goals)
+        self.swap = SkillSwap(self.driver, self.stop_event, set_name)
         self.realtime = False  # SCHED_FIFO granted to the tick thread
         self.status: DaemonStatus | None = None  # the running loop's (and the last run's)
 
@@ -178,9 +193,14 @@ class Daemon:
         with ExitStack() as stack:
             ingress, publisher, target = self._open(stack)
             ticker = self.swap.ticker = Ticker(self.config.period, spin=self.spin)
-            skill = self.driver.skill
-            log.info("running skill %s@%s for robot %s at %.0f Hz", skill.name, skill.id,
-                     self.config.robot, self.config.rate)
+            skill, goals = self.driver.skill, self.driver.goals
+            if goals is None:
+                log.info("running skill %s@%s for robot %s at %.0f Hz", skill.name, skill.id,
+                         self.config.robot, self.config.rate)
+            else:
+                log.info("running skill set %s (%s; teleoperation %s@%s) for robot %s at %.0f Hz",
+                         self.swap.set_name, ", ".join(f"{m.name}@{m.skill.id}" for m in goals.members),
+                         skill.name, skill.id, self.config.robot, self.config.rate)
             end = None if duration is None else time.monotonic() + duration
             stats = TickStats(time.monotonic(), self.driver.engine.state, 1.0 / self.config.status_rate,
                               self.driver.target_seq)
@@ -197,15 +217,15 @@ class Daemon:
         # it hands over waits for the loop (and the ingress) to start.
         folder = tempfile.mkdtemp(prefix="sctd-bundles-")  # mode 0700: the daemon's alone
         stack.callback(shutil.rmtree, folder, ignore_errors=True)
-        if self.bundle is not None:
-            bundles.keep(folder, self.driver.skill.id, self.bundle)
-            self.bundle = None  # on disk now: not held by the process that ticks
+        for skill_id, data in self.bundles.items():  # a set's: all of them (pinned)
+            bundles.keep(folder, skill_id, data, pinned=self.bundles)
+        self.bundles = {}  # on disk now: not held by the process that ticks
         stack.enter_context(self.swap.serve(
             ServerOptions(self.config.robot, self.settings, self.swap_on_skill_key, str(s.zid()), folder),
             self.rt_priority))
-        # Only the objects the active skill needs, by name: a wildcard would let any number
-        # of names cost memory, and a ring per wildcard would lose the task object's
-        # updates whenever another object publishes.
+        # Only the objects the active skill (or the set's members) need, by name: a
+        # wildcard would let any number of names cost memory, and a ring per wildcard
+        # would lose the task object's updates whenever another object publishes.
         ingress = self.swap.ingress = Ingress(s, keys, self.driver, self.config.device)
         stack.callback(ingress.close)
         pub_target = stack.enter_context(s.declare_publisher(

@@ -8,6 +8,8 @@ copying it, and hands it to :meth:`~sctd.runtime.driver.TickDriver.receive`. Not
 drops a message on arrival by rate: a rate limit keeps the first message of an interval
 and drops the rest, and the rest may be a release.
 
+The task objects read are the active skill's, by name (a skill set's: every member's).
+
 Input devices each get a ring of their own, so that a device flooding its key can never
 push another device's newest message out. Names are learned from a catch-all ring on
 ``input/*``: a message from a name without a ring is taken from there, and the device's
@@ -20,6 +22,7 @@ which names it tracks; a ring follows its table).
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from typing import Any
 
 import zenoh
@@ -83,8 +86,8 @@ class Ingress:
         self._wanted: list[str] = []  # names heard on the catch-all, to get a ring after the tick
         self._joining: dict[str, Inlet] = {}  # rings declared since the last drain
         self.objects: dict[str, Inlet] = {}
-        obj = driver.skill.object
-        if obj != WORLD_OBJECT:
+        names = {driver.skill.object} | (driver.goals.objects if driver.goals is not None else set())
+        for obj in sorted(names - {WORLD_OBJECT}):  # the skill's object, or every set member's
             self.objects[obj] = object_inlet(session, keys, obj)
         self.trash: list[Any] = []  # oversized samples: freed off the tick thread (take_trash)
 
@@ -190,13 +193,16 @@ class Ingress:
 
     # --- swaps ----------------------------------------------------------------------------
 
-    def object_inlets(self, obj: str) -> dict[str, Inlet]:
-        """The object rings a skill on ``obj`` needs, reusing the current one (called on
-        the query's thread; installed by :meth:`use_objects` between ticks)."""
-        if obj == WORLD_OBJECT:
-            return {}
-        inlet = self.objects.get(obj)
-        return {obj: inlet if inlet is not None else object_inlet(self.session, self.keys, obj)}
+    def object_inlets(self, names: Iterable[str]) -> dict[str, Inlet]:
+        """The rings of the objects ``names`` (a skill's object, or a skill set's
+        members'; ``world`` needs none), reusing the current ones (called on the query's
+        thread; installed by :meth:`use_objects` between ticks)."""
+        out: dict[str, Inlet] = {}
+        for obj in names:
+            if obj != WORLD_OBJECT and obj not in out:
+                inlet = self.objects.get(obj)
+                out[obj] = inlet if inlet is not None else object_inlet(self.session, self.keys, obj)
+        return out
 
     def use_objects(self, objects: dict[str, Inlet]) -> list[Inlet]:
         """Drain ``objects`` from now on (tick thread); returns the rings no longer

@@ -23,7 +23,10 @@ and ``sctd/<robot>/skill/swap``, on a Zenoh session of its own:
   landed at a tick boundary, with the FSM state it landed in, or why it did not;
 - asking the daemon for each summary (``skill_summary`` of the active skill plus its
   FSM state, worked out in the daemon as before), so that a summary is of the skill
-  that runs.
+  that runs;
+- with a skill set, passing on the member a swap names (the selector parameter
+  ``member``: ``skill/swap?member=drawer``), which the daemon checks, and serving a
+  member's kept bundle on ``skill/bundle?member=NAME``.
 
 Every query gets exactly one reply; refusals are error replies ``{error: ...}`` (``<file>:
 <field>: <problem>``, ``<bundle>: ...`` when no file is to blame), each reported to the
@@ -62,6 +65,7 @@ import zenoh
 from ..skill import Skill, SkillError
 from ..skill.loader import MAX_BUNDLE_BYTES
 from ..wire import Keys
+from ..wire.client import MEMBER
 from ..wire.session import MSGPACK, SessionSettings, close_session, outbound_config
 from . import bundles, frames
 from .worker import WHERE, BundleWorker
@@ -70,6 +74,7 @@ log = logging.getLogger("sctd.skillserver")
 
 READY_WAIT = 10.0  # s the skill server waits to be connected to the daemon before it says ready
 BUNDLE_PARAMETER = "bundle"  # ``get sctd/<robot>/skill?bundle``: the active bundle, not the summary
+MEMBER_PARAMETER = MEMBER  # ``skill/swap?member=NAME``: the skill set's member a swap replaces
 BUNDLE_VERSION = 1  # of that reply's map
 SUMMARY_WAIT = 10.0  # s the skill server waits for the daemon's summary
 SWAP_WAIT = 60.0  # s it waits for the daemon's answer to a swap (the daemon's own limit is 5 s)
@@ -119,8 +124,10 @@ class SkillServer:
     summary : callable
         ``summary() -> dict``: the active skill's summary with its FSM state.
     swap : callable
-        ``swap(skill) -> str``: install ``skill`` at a tick boundary and return the FSM
-        state it landed in; raise :class:`~sctd.skill.SkillError` to refuse it.
+        ``swap(skill, member) -> dict``: install ``skill`` at a tick boundary (in the
+        place of the skill set's ``member``, or None) and return ``{state, in_use,
+        [member]}`` (:meth:`.swap.SkillSwap.answer`); raise
+        :class:`~sctd.skill.SkillError` to refuse it.
     refused : callable
         ``refused(error)``: a query was refused with this error reply.
     stop : threading.Event, optional
@@ -138,7 +145,7 @@ class SkillServer:
     """
 
     def __init__(self, options: ServerOptions, summary: Callable[[], dict[str, Any]],
-                 swap: Callable[[Skill], str], refused: Callable[[str], None],
+                 swap: Callable[[Skill, str | None], dict[str, Any]], refused: Callable[[str], None],
                  stop: threading.Event | None = None,
                  between_ticks: Callable[[], None] | None = None, rt_priority: int = 0):
         self.options = options
@@ -255,17 +262,18 @@ class SkillServer:
                 log.info("skill queryables served by process %d (%s)", proc.pid, body)
                 self._ready.set()
 
-    def _answer_swap(self, sock: socket.socket, rid: int, skill: Skill) -> None:
+    def _answer_swap(self, sock: socket.socket, rid: int, body: tuple[Skill, str | None]) -> None:
         _realtime(self.priority)
+        skill, member = body
         try:
-            state = self._swap(skill)
+            landed = self._swap(skill, member)
         except SkillError as e:
             self._answer(sock, rid, False, str(e))
         except Exception as e:  # every swap gets its answer
             log.exception("swap failed")
             self._answer(sock, rid, False, f"{WHERE}: {type(e).__name__}: {e}")
         else:
-            self._answer(sock, rid, True, state)
+            self._answer(sock, rid, True, landed)
 
     def _answer(self, sock: socket.socket, rid: int, ok: bool, body: Any) -> None:
         with self._write_lock:
@@ -372,7 +380,7 @@ class _Queries:
                     return
                 ok, body = self.link.call("summary", None, SUMMARY_WAIT)
                 if ok:
-                    ok, body = self._bundle(body)
+                    ok, body = self._bundle(body, query.parameters.get(MEMBER_PARAMETER))
                 if ok:
                     query.reply(self.keys.skill_bundle, _reply(body), encoding=MSGPACK)
                 else:
@@ -408,7 +416,7 @@ class _Queries:
         if key == self.keys.skill and empty:
             ok, body = self.link.call("summary", None, SUMMARY_WAIT)
             if ok and query.parameters.get(BUNDLE_PARAMETER) is not None:
-                ok, body = self._bundle(body)
+                ok, body = self._bundle(body, query.parameters.get(MEMBER_PARAMETER))
             if ok:
                 query.reply(key, _reply(body), encoding=MSGPACK)
             else:
@@ -433,26 +441,51 @@ class _Queries:
             except SkillError as e:
                 self._refuse(query, str(e))
                 return
-            ok, state = self.link.call("swap", skill, SWAP_WAIT)
+            ok, landed = self.link.call("swap", (skill, query.parameters.get(MEMBER_PARAMETER)), SWAP_WAIT)
         if not ok:
-            self._refuse(query, state)
+            self._refuse(query, landed)
             return
         if self.bundles:
             try:
-                bundles.keep(self.bundles, skill.id, payload.to_bytes())
+                bundles.keep(self.bundles, skill.id, payload.to_bytes(), pinned=landed.get("in_use", ()))
             except OSError as e:  # the swap stands; only a view's fetch of it will fail
                 log.error("cannot keep the bundle of %s: %s", skill.id, e)
-        query.reply(key, _reply({"ok": True, "id": skill.id, "name": skill.name, "state": state}),
-                    encoding=MSGPACK)
+        reply = {"ok": True, "id": skill.id, "name": skill.name, "state": landed["state"]}
+        if "member" in landed:
+            reply["member"] = landed["member"]
+        query.reply(key, _reply(reply), encoding=MSGPACK)
 
-    def _bundle(self, summary: dict[str, Any]) -> tuple[bool, Any]:
+    def _bundle(self, summary: dict[str, Any], member: str | None = None) -> tuple[bool, Any]:
         """``skill/bundle`` (and ``skill?bundle``): the active skill's bundle as kept, with
-        its id, name and FSM state (``{v, id, name, state, bundle}``), or why not."""
+        its id, name and FSM state (``{v, id, name, state, bundle}``), or why not. With
+        ``member``, the running skill set's member (or teleoperation) of that name
+        (``state``: the active state while it runs, else null)."""
+        if member is not None:
+            found = _set_skill(summary, member)
+            if isinstance(found, str):
+                return False, found
+            running = found["id"] == summary.get("id")
+            summary = {**found, "state": summary.get("state") if running else None}
         data = bundles.kept(self.bundles, str(summary.get("id", "")))
         if data is None:
-            return False, f"{WHERE}: the bundle of the active skill {summary.get('id')} is not kept"
+            which = "the active skill" if member is None else f"{MEMBER_PARAMETER} {member}"
+            return False, f"{WHERE}: the bundle of {which} {summary.get('id')} is not kept"
         return True, {"v": BUNDLE_VERSION, "id": summary.get("id"), "name": summary.get("name"),
                       "state": summary.get("state"), "bundle": data}
+
+
+def _set_skill(summary: dict[str, Any], name: str) -> dict[str, Any] | str:
+    """The running skill set's member (or teleoperation) ``name`` as the summary has it
+    (``{id, name, object, ...}``), or why not."""
+    the_set = summary.get("set")
+    if not isinstance(the_set, dict):
+        return f"{WHERE}: {MEMBER_PARAMETER}={name}: the daemon runs one skill, not a skill set"
+    skills = [*the_set.get("members", []), the_set.get("teleop") or {}]
+    for s in skills:
+        if s.get("name") == name:
+            return s
+    names = ", ".join(str(s.get("name")) for s in skills)
+    return f"{WHERE}: {MEMBER_PARAMETER}={name}: no such skill in the running set (its skills: {names})"
 
 
 def _wait_connected(session: zenoh.Session, daemon_zid: str, link: _Link, timeout: float) -> bool:

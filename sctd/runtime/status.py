@@ -176,6 +176,8 @@ class DaemonStatus:
             "dropped": dict(c.drops),
             "counters": {**c.as_dict(), "swaps_refused": self.swap.refused},
         }
+        if drv.goals is not None:  # a skill set (docs/wire-contract.md, status.goals)
+            status["goals"] = {"name": self.swap.set_name, **drv.goals.status()}
         if self.ros is not None:
             status["ros"] = self.ros.stats()
         return status

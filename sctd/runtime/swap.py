@@ -11,6 +11,11 @@ one attribute read per tick) and the tick thread installs it between two ticks
 the query is answered once the swap landed. Each step that holds the GIL for a while
 begins just after a tick (:meth:`~SkillSwap.between_ticks`), with most of a period ahead
 of it.
+
+When the daemon runs a skill set (:mod:`.goals`), a swap replaces one member
+(:func:`.sets.check_swap`: the member the request names, else the member of the new
+skill's name), with the object rings of the set's objects after it, and the summary is
+the running skill's with the set's own (``set``).
 """
 
 from __future__ import annotations
@@ -24,7 +29,9 @@ from typing import Any
 from ..skill import Skill, SkillEngine, SkillError, skill_summary
 from ..timing import Ticker
 from .driver import TickDriver
+from .goals import TELEOP
 from .ingress import Ingress, Inlet
+from .sets import check_swap
 from .skillserver import ServerOptions, SkillServer
 from .worker import WHERE
 
@@ -47,6 +54,7 @@ class _Pending:
     state: str = ""
     retired: list[Inlet] = field(default_factory=list)  # object rings the new skill does not use
     replaced: tuple[Skill, SkillEngine] | None = None  # freed off the tick thread
+    member: str | None = None  # a skill set's member the skill replaces
 
 
 class SkillSwap:
@@ -56,10 +64,12 @@ class SkillSwap:
     Parameters
     ----------
     driver : TickDriver
-        The tick's driver, whose skill is swapped.
+        The tick's driver, whose skill (or skill set's member) is swapped.
     stop_event : threading.Event, optional
         Set when the daemon stops: a swap is refused from then on, one under way fails
         its wait, and a skill server that dies is not replaced.
+    set_name : str
+        The skill set's name, when the driver runs one (the summary's ``set.name``).
 
     Attributes
     ----------
@@ -74,8 +84,9 @@ class SkillSwap:
         Refusals of the skill queryables, whatever their cause.
     """
 
-    def __init__(self, driver: TickDriver, stop_event: threading.Event | None = None):
+    def __init__(self, driver: TickDriver, stop_event: threading.Event | None = None, set_name: str = ""):
         self.driver = driver
+        self.set_name = set_name
         self.stop_event = stop_event if stop_event is not None else threading.Event()
         self.pending: _Pending | None = None
         self.ingress: Ingress | None = None
@@ -88,7 +99,7 @@ class SkillSwap:
     def serve(self, options: ServerOptions, rt_priority: int = 0) -> SkillServer:
         """The skill server that answers with this swap; a context manager that starts it
         (:class:`~.skillserver.SkillServer`)."""
-        self.server = SkillServer(options, self.summary, self.swap, self.refuse, self.stop_event,
+        self.server = SkillServer(options, self.summary, self.answer, self.refuse, self.stop_event,
                                   self.between_ticks, rt_priority)
         return self.server
 
@@ -105,10 +116,34 @@ class SkillSwap:
     # --- the skill server's threads ------------------------------------------------------
 
     def summary(self) -> dict[str, Any]:
-        """The active skill's summary and FSM state (the ``skill`` queryable's answer)."""
+        """The active skill's summary and FSM state (the ``skill`` queryable's answer);
+        with a skill set, the running skill's (teleoperation's while no member is
+        engaged) and the set's (``set``)."""
         summary = skill_summary(self.driver.skill)
         summary["state"] = self.driver.engine.state
+        goals = self.driver.goals
+        if goals is not None:
+            def brief(s: Skill) -> dict[str, Any]:
+                return {"id": s.id, "name": s.name, "object": s.object}
+            engaged = goals.engaged
+            summary["set"] = {
+                "name": self.set_name,
+                "engaged": TELEOP if engaged is None else goals.members[engaged].name,
+                "teleop": brief(goals.teleop),
+                "members": [brief(m.skill) | {"point": list(m.point), "reach": m.reach,
+                                              "position_tolerance": m.position_tolerance,
+                                              "angle_tolerance": m.angle_tolerance}
+                            for m in goals.members]}
         return summary
+
+    def in_use(self) -> list[str]:
+        """The ids of the skills the daemon may run without a swap: the running one and,
+        with a set, its members' and teleoperation's (their bundles are all kept)."""
+        goals = self.driver.goals
+        ids = [self.driver.skill.id]
+        if goals is not None:
+            ids += [goals.teleop.id, *(m.skill.id for m in goals.members)]
+        return list(dict.fromkeys(ids))
 
     def refuse(self, error: str) -> None:
         """Every refusal of the skill queryables, whatever its cause, is counted."""
@@ -127,27 +162,53 @@ class SkillSwap:
         if wait > 0.0:
             time.sleep(min(wait, ticker.period + AFTER_TICK))
 
-    def swap(self, skill: Skill) -> str:
+    def answer(self, skill: Skill, member: str | None = None) -> dict[str, Any]:
+        """A swap asked for through the skill server (:meth:`swap`): the FSM state it
+        landed in and, with a skill set, the member it replaced and the ids of the set's
+        skills after it (:meth:`in_use`: their bundles stay kept)."""
+        state, replaced = self._swap(skill, member)
+        out: dict[str, Any] = {"state": state}
+        if replaced is not None:
+            out["member"], out["in_use"] = replaced, self.in_use()
+        return out
+
+    def swap(self, skill: Skill, member: str | None = None) -> str:
         """Install a validated skill at a tick boundary: its engine (KD-trees release the
         GIL) and object rings are made here, off the tick thread, and so is the replaced
-        skill freed, each step begun between two ticks. Returns the FSM state the swap
-        landed in.
+        skill freed, each step begun between two ticks. With a skill set it replaces
+        ``member`` (default: the member of its name; :func:`.sets.check_swap`). Returns
+        the FSM state the swap landed in (a member that is not engaged: the state the
+        new skill starts from when it engages).
 
         Raises
         ------
         SkillError
-            The daemon is not running, or did not reach a tick boundary in
-            :data:`BOUNDARY_WAIT` s.
+            The daemon is not running, did not reach a tick boundary in
+            :data:`BOUNDARY_WAIT` s, or the swap does not fit the set (or names a
+            member of a daemon that runs none).
         """
+        return self._swap(skill, member)[0]
+
+    def _swap(self, skill: Skill, member: str | None) -> tuple[str, str | None]:
+        """:meth:`swap`; also the member replaced (None: the skill)."""
         with self._swap_lock:
             ingress = self.ingress
             if ingress is None or self.stop_event.is_set():
                 raise SkillError(WHERE, "", "the daemon is not running")
+            goals = self.driver.goals
+            if goals is not None:
+                member = check_swap(goals, skill, member)
+                names = [skill.object, *(m.skill.object for m in goals.members if m.name != member)]
+            elif member is not None:
+                raise SkillError(WHERE, "", f"member {member!r}: the daemon runs one skill, not a skill "
+                                            "set: swap without naming a member")
+            else:
+                names = [skill.object]
             self.between_ticks()
             engine = SkillEngine(skill)
             self.between_ticks()
-            objects = ingress.object_inlets(skill.object)
-            pending = _Pending(skill, engine, objects, threading.Event())
+            objects = ingress.object_inlets(names)
+            pending = _Pending(skill, engine, objects, threading.Event(), member=member)
             with self._lock:
                 self.pending = pending
             if not self._landed(pending):
@@ -158,8 +219,9 @@ class SkillSwap:
             for inlet in pending.retired:  # the tick no longer drains these
                 inlet.close()
             pending.replaced = None
-        log.info("swapped to skill %s@%s (state %s)", skill.name, skill.id, pending.state)
-        return pending.state
+        log.info("swapped to skill %s@%s (state %s)%s", skill.name, skill.id, pending.state,
+                 "" if member is None else f" in the place of member {member}")
+        return pending.state, member
 
     def _landed(self, pending: _Pending) -> bool:
         """Wait until the tick installed ``pending``, the daemon stops, or
@@ -189,9 +251,17 @@ class SkillSwap:
             pending, self.pending = self.pending, None
         if pending is None:  # withdrawn meanwhile
             return
-        pending.replaced = (self.driver.skill, self.driver.engine)
-        self.driver.swap(pending.skill, now, pending.engine)
+        driver = self.driver
+        if pending.member is None:
+            pending.replaced = (driver.skill, driver.engine)
+            driver.swap(pending.skill, now, pending.engine)
+        else:
+            goals = driver.goals
+            assert goals is not None
+            i = goals.index(pending.member)
+            pending.replaced = (goals.members[i].skill, goals.engines[i])
+            driver.swap_member(pending.member, pending.skill, now, pending.engine)
         assert self.ingress is not None
         pending.retired = self.ingress.use_objects(pending.objects)
-        pending.state = self.driver.engine.state
+        pending.state = driver.engine.state if driver.skill is pending.skill else pending.skill.start
         pending.done.set()

@@ -14,7 +14,9 @@ resolved in this order:
    the package data ``sctd_skills``.
 
 An unknown name is a :class:`~sctd.skill.SkillError` that lists the places searched and
-the closest names.
+the closest names. A skill set file names its skills the same way, a path being
+relative to the set file's folder (``find_skill(name, folder=...)``); ``--set`` takes a
+set file's path or the name of a shipped set (``skills/sets/``, :func:`find_skill_set`).
 
 The store's layout (written by the learner service, ``sctd_services.learner``; read
 here so that every command finds what it trained): ``<store>/skills/<id>/`` holds the
@@ -131,8 +133,10 @@ def find_stored(ref: str, store: Path | None = None) -> StoredSkill | None:
     return hits[-1] if hits else None
 
 
-def find_skill(name: str | Path) -> Path:
-    """The skill file ``name`` refers to (see the module docstring for the order).
+def find_skill(name: str | Path, folder: str | Path | None = None) -> Path:
+    """The skill file ``name`` refers to (see the module docstring for the order); with
+    ``folder`` (a skill set file's), a relative path is a path in that folder, not in the
+    working directory.
 
     Raises
     ------
@@ -141,22 +145,57 @@ def find_skill(name: str | Path) -> Path:
         searched and the close matches among the known names.
     """
     path = Path(name)
+    if folder is not None and not path.is_absolute():
+        path = Path(folder) / path
     if path.is_file():
         return path
+    path = Path(name)
     text = str(name)
     if text and "/" not in text:
         stored = find_stored(text)
         if stored is not None:
             return stored.path
-    folder = shipped_folder()
+    shipped = shipped_folder()
     stem = path.name[:-5] if path.name.endswith(".yaml") else path.name
     if stem and path.name not in ("", ".", ".."):
-        shipped = folder / f"{stem}.yaml"
-        if shipped.is_file():
-            return shipped
+        found = shipped / f"{stem}.yaml"
+        if found.is_file():
+            return found
     known = [p.stem for p in shipped_skills()] + sorted({s.name for s in stored_skills()})
     close = difflib.get_close_matches(stem, known, n=3, cutoff=0.5)
     hint = f"did you mean {', '.join(close)}?" if close else f"known: {', '.join(known)}"
-    raise SkillError(text, "", f"no such skill: not a file ({path.absolute()}), nor in the "
+    where = (Path(folder) / path if folder is not None and not path.is_absolute() else path).absolute()
+    raise SkillError(text, "", f"no such skill: not a file ({where}), nor in the "
                                f"learner's store ({store_folder()}), nor a shipped skill in "
-                               f"{folder}; {hint}")
+                               f"{shipped}; {hint}")
+
+
+SETS = "sets"
+"""The folder of the shipped skill sets, in the shipped skills' folder."""
+
+
+def shipped_sets() -> list[Path]:
+    """The shipped skill set files (``sctd run --set NAME``), by name."""
+    return sorted((shipped_folder() / SETS).glob("*.yaml"))
+
+
+def find_skill_set(name: str | Path) -> Path:
+    """The skill set file ``name`` refers to: a path that exists, else a shipped set by
+    name with or without ``.yaml`` (``kitchen``).
+
+    Raises
+    ------
+    SkillError
+        Neither: the message names the shipped sets.
+    """
+    path = Path(name)
+    if path.is_file():
+        return path
+    stem = path.name[:-5] if path.name.endswith(".yaml") else path.name
+    if stem and path.name not in (".", ".."):
+        found = shipped_folder() / SETS / f"{stem}.yaml"
+        if found.is_file():
+            return found
+    known = ", ".join(p.stem for p in shipped_sets()) or "none"
+    raise SkillError(str(name), "", f"no such skill set: not a file ({path.absolute()}), nor a "
+                                    f"shipped set in {shipped_folder() / SETS} (shipped: {known})")

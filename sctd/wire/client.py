@@ -22,6 +22,12 @@ from . import Keys
 from .session import MSGPACK
 
 FIND = 5.0  # s to wait for a queryable to become known before giving up
+MEMBER = "member"
+"""The selector parameter that names a skill set's member: ``skill/swap?member=NAME``
+(the member a swap replaces), ``skill/bundle?member=NAME`` (its bundle)."""
+MEMBER_NAME_FORBIDDEN = ";=|&#?"
+MEMBER_NAME_RULE = (f"a member named in a selector is printable and has none of {MEMBER_NAME_FORBIDDEN}; "
+                    "swap a skill of the member's own name without naming it")
 
 
 def reply_body(data: bytes) -> dict[str, Any]:
@@ -82,11 +88,20 @@ def active_bundle(session: zenoh.Session, keys: Keys, timeout: float = 10.0,
     return bundle, {k: body.get(k) for k in ("v", "id", "name", "state")}
 
 
+def member_name_ok(name: str) -> bool:
+    """Whether a skill set's member can be named in a selector (``member=NAME``)."""
+    return bool(name) and name.isprintable() and not any(c in name for c in MEMBER_NAME_FORBIDDEN)
+
+
 def swap(session: zenoh.Session, keys: Keys, bundle: Bundle, timeout: float = 10.0,
-         find: float = FIND) -> tuple[bool, dict[str, Any]]:
-    """Send ``bundle`` to the daemon: (swapped, its reply ``{ok, id, name, state}`` or
-    ``{error}``; when no daemon answers, ``{error, unanswered: True}``)."""
-    got = query(session, keys.skill_swap, bundle.pack(), timeout, find)
+         find: float = FIND, member: str | None = None) -> tuple[bool, dict[str, Any]]:
+    """Send ``bundle`` to the daemon: (swapped, its reply ``{ok, id, name, state,
+    [member]}`` or ``{error}``; when no daemon answers, ``{error, unanswered: True}``).
+    ``member``: the daemon's skill set's member it replaces (:func:`member_name_ok`)."""
+    if member is not None and not member_name_ok(member):
+        return False, {"error": f"member {member!r}: {MEMBER_NAME_RULE}"}
+    parameters = None if member is None else f"{MEMBER}={member}"
+    got = query(session, keys.skill_swap, bundle.pack(), timeout, find, parameters)
     if got is None:
         return False, {"error": f"no daemon answered on {keys.skill_swap} (none found within "
                                 f"{find:g} s, or no reply within {timeout:g} s)", "unanswered": True}
