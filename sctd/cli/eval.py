@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from sctd.skill import SkillError, load_skill
-from sctd.skill.catalog import find_skill
+from sctd.skill.catalog import find_skill, find_skill_set
 from sctd.task import TaskError, find_task
 from sctd_services.eval.cluster import ClusterError, add_scheduler_arguments, executor_from_args
 from sctd_services.eval.evaluate import (
@@ -32,6 +32,7 @@ from sctd_services.eval.evaluate import (
     table,
     task_of,
 )
+from sctd_services.eval.goals import SetSpec, evaluate_set, format_set_report, goal_members, tasks_of
 from sctd_services.eval.report import write_report
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import PROFILES
@@ -45,7 +46,12 @@ CLIENT_ROLE = "sctd-operator"  # the key pair of a sctd certs folder that sctd e
 
 
 def add_eval_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--skill", action="append", required=True, metavar="SKILL",
+    p.add_argument("--set", metavar="NAME|FILE", dest="skill_set",
+                   help="evaluate a skill set's goal inference instead (docs/goals.md): in a room of "
+                        "its members' tasks the user goes for one at random per trial; the set, the "
+                        "right skill pre-selected and teleoperation, in lockstep (--user defaults to "
+                        "pausing)")
+    p.add_argument("--skill", action="append", metavar="SKILL",
                    help="a skill to evaluate (repeatable): a path, or the name of a shipped skill "
                         "(pour, pour.yaml; sctd skills lists them); teleop is the unassisted "
                         "baseline and runs with the first assisted skill's speed limits")
@@ -54,7 +60,8 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trials", type=int, default=20, help="trials per skill (default %(default)s)")
     p.add_argument("--seed", type=int, default=0,
                    help="first trial seed: trial k starts from the seeded random start seed + k")
-    p.add_argument("--user", default="steady", help="simulated user profile (steady, noisy)")
+    p.add_argument("--user", default=None,
+                   help="simulated user profile (steady, noisy, pausing; default steady, pausing with --set)")
     p.add_argument("--baseline", action="store_true",
                    help="also run the unassisted baseline (skills/teleop.yaml) once per distinct "
                         "set of the assisted skills' speed limits")
@@ -72,6 +79,10 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
 
 def _check(args: argparse.Namespace) -> str | None:
     """The first problem with the arguments, as ``--flag: problem``, or None."""
+    if (args.skill_set is None) == (args.skill is None):
+        return "--skill or --set: one of them (skills to evaluate, or a skill set)"
+    if args.user is None:
+        args.user = "pausing" if args.skill_set else "steady"
     if args.user not in PROFILES:
         return f"--user: unknown profile {args.user!r} (known: {', '.join(PROFILES)})"
     if args.trials < 1:
@@ -80,6 +91,10 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--jobs: must be >= 1"
     if args.scheduler is not None and not args.lockstep:
         return "--scheduler: only with --lockstep (real-time trials start local processes)"
+    if args.skill_set is not None and (args.task or args.baseline or args.demos or args.report
+                                       or args.scheduler or args.logs):
+        return "--set: a set's room is its members' tasks; --task, --baseline, --demos, --report, " \
+               "--logs and --scheduler are for --skill"
     if args.task is not None:
         try:
             find_task(args.task)  # its scene, outcome and intent: what a trial needs
@@ -127,6 +142,8 @@ def main_eval(args: argparse.Namespace) -> int:
     problem = _check(args)
     if problem:
         return fail("eval", problem)
+    if args.skill_set is not None:
+        return _evaluate_set(args)
     # the skills' copies with another's limits (a baseline's), removed at the end
     with tempfile.TemporaryDirectory(prefix="sctd-eval-") as work:
         return _evaluate(args, Path(work))
@@ -169,4 +186,23 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
         print(json.dumps({**header, "results": plain}))
     else:
         _print_table(plain, spec, args)
+    return 0
+
+
+def _evaluate_set(args: argparse.Namespace) -> int:
+    """``sctd eval --set FILE``: the set's goal inference against the right skill
+    pre-selected and teleoperation, in lockstep (:mod:`sctd_services.eval.goals`)."""
+    try:
+        spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, time_limit=args.time_limit)
+        tasks_of([m.skill for m in goal_members(spec.set_file)])
+    except (SkillError, TaskError, ValueError) as e:
+        return fail("eval", str(e))
+    bar = _progress_bar()
+    result = evaluate_set(spec, args.trials, args.seed, args.jobs or os.cpu_count() or 1,
+                          progress=lambda done, total: bar(done, total, "set, pre-selected, teleop"))
+    print(file=sys.stderr)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_set_report(result))
     return 0

@@ -17,10 +17,11 @@ from typing import Any
 from sctd import se3
 from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
+from sctd.runtime.goals import GoalSet
 from sctd.skill import Skill
-from sctd.task import find_task
+from sctd.task import Task, find_task
 from sctd.wire import codec
-from sctd_services.user import Observation, SimulatedUser
+from sctd_services.user import Observation, SetUser, SimulatedUser
 from sctd_sim.guard import TargetGuard, TargetLimits
 from sctd_sim.simulation import Simulation, trial_scene
 
@@ -33,21 +34,65 @@ USER_DEVICE = "user"  # the simulated user's device name (input/<name>)
 
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
-              keep_series: bool = False) -> TrialResult:
-    """One trial of ``skill`` on ``spec.task`` from the seeded start ``seed``."""
-    scene, q0 = trial_scene(spec.task, seed)
+              keep_series: bool = False, task: Task | None = None) -> TrialResult:
+    """One trial of ``skill`` on ``spec.task`` (or ``task``, a composed room whose first
+    part is the user's goal) from the seeded start ``seed``."""
+    task = task if task is not None else find_task(spec.task)
+    scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
     try:
-        return _run(sim, skill, spec, seed, demos)
+        return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos)
     finally:
         sim.close()
 
 
-def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list | None) -> TrialResult:
-    feed = Feed(TickDriver(skill, RuntimeConfig()))
+def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int) -> tuple[TrialResult, SetWatch]:
+    """One trial of a skill set (:mod:`sctd.runtime.goals`) in the composed room ``task``
+    (its first part is the user's goal) from the seeded start ``seed``: the user does
+    not know about the inference and escapes a skill it did not want
+    (:class:`~sctd_services.user.SetUser`). Returns the trial's result and what the set
+    did (:class:`SetWatch`)."""
+    scene, q0 = trial_scene(task, seed)
+    sim = Simulation(scene=scene, q0=q0)
+    watch = SetWatch(goals, task.object)
+    try:
+        return _run(sim, TickDriver(None, RuntimeConfig(), goals=goals), task, spec, seed, None, watch), watch
+    finally:
+        sim.close()
+
+
+class SetWatch:
+    """What a skill set did in a trial: every change of the running skill (time, from,
+    to) and what the user was shown (the engaged skill's task object)."""
+
+    def __init__(self, goals: GoalSet, goal_object: str):
+        self.goals = goals
+        self.goal_object = goal_object
+        self.changes: list[tuple[float, str, str]] = []
+        self._running = goals.running[0].name
+
+    def tick(self, t: float) -> None:
+        name = self.goals.running[0].name
+        if name != self._running:
+            self.changes.append((t, self._running, name))
+            self._running = name
+
+    def shown(self) -> tuple[str | None, str]:
+        """The engaged skill's task object (None in teleoperation) and the mode the
+        display shows: the skill and its state (states of different skills may share a
+        name, a person tells them apart by the skill)."""
+        skill, engine = self.goals.running
+        engaged = None if self.goals.engaged is None else skill.object
+        return engaged, f"{skill.name}:{engine.state}"
+
+
+def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: int, demos: list | None,
+         watch: SetWatch | None = None) -> TrialResult:
+    feed = Feed(driver)
     drv = feed.driver
-    task = find_task(spec.task)
-    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed)
+    user: SimulatedUser | SetUser = SimulatedUser(task, spec.axes, spec.profile, seed=seed)
+    if watch is not None:
+        user = SetUser(user, task.object)
     rec = TrialRecorder(task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
     every_user = max(1, round(1.0 / (USER_RATE * sim.dt)))
@@ -58,6 +103,9 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
     u: tuple[float, ...] = (0.0,) * spec.axes
     b: tuple[int, ...] = (0, 1, 0)
     mode = drv.engine.state
+    engaged: str | None = None
+    if watch is not None:
+        engaged, mode = watch.shown()
     k, seq = 0, 0
     while True:
         t = sim.t
@@ -76,11 +124,14 @@ def _run(sim: Simulation, skill: Skill, spec: TaskSpec, seed: int, demos: list |
             membership = None if eng.last_membership is None else eng.last_membership.tolist()
             if rec.add(obs, u, b, eng.last_scale, membership) is not None:
                 break
-            u, b = user.step(t, obs)
+            u, b = user.step(t, obs) if isinstance(user, SimulatedUser) else user.step(t, obs, engaged)
             seq += 1
             feed.input(USER_DEVICE, seq, t, u, b)
         res = feed.tick(t)
         mode = res.state
+        if watch is not None:
+            watch.tick(t)
+            engaged, mode = watch.shown()
         F = drv.state.F if drv.state is not None else None
         assert F is not None
         if res.pose is not None and guard.admit(res.pose, t, F, not sim.arm.controller.holding):

@@ -10,6 +10,7 @@ from .agent import SimulatedUser, twist_between
 from .device import DeviceModel
 from .human import DEFAULT_PROFILE, PROFILES, HumanProfile
 from .intent import Desire, Observation, TaskIntent
+from .setuser import SetUser
 
 __all__ = ["DEFAULT_PROFILE", "PROFILES", "Desire", "DeviceModel", "HumanProfile", "Observation",
-           "SimulatedUser", "TaskIntent", "twist_between"]
+           "SetUser", "SimulatedUser", "TaskIntent", "twist_between"]

@@ -24,6 +24,7 @@ dead zone, and a mode switch costs it time with the stick released.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -98,6 +99,8 @@ class SimulatedUser:
         self._best_error = np.inf  # the intent's error at its best since the last re-try
         self._improved = 0.0  # when it last got better
         self._phase = ""
+        self._pause_phase: str | None = None  # the step the last pause was for
+        self._pause_until = -math.inf
         self.reprobes = 0
         self.settled = 0  # sub-goals taken as reached when close enough
         self.switches = 0
@@ -200,7 +203,7 @@ class SimulatedUser:
             self.intent.settle()
             self.settled += 1
             desire = self.desire = self.intent.desire(obs)
-        if desire.done:
+        if desire.done or self._pausing(t, desire.phase):
             return zero, (0, 1, 0)
         model = self.models.setdefault(obs.mode, DeviceModel(self.n))
         if self._no_progress(t, desire) and model.known and obs.mode not in self._probes \
@@ -232,6 +235,15 @@ class SimulatedUser:
             # lets go and gets ready to switch.
             return zero, (0, 1, 0)
         return u, (0, 1, 0)
+
+    def _pausing(self, t: float, phase: str) -> bool:
+        """Whether the stick is let go after a step of the task was reached
+        (``profile.step_pause``)."""
+        if phase != self._pause_phase:
+            if self._pause_phase is not None:
+                self._pause_until = t + self.profile.step_pause
+            self._pause_phase = phase
+        return t < self._pause_until
 
     def _no_progress(self, t: float, desire: Desire) -> bool:
         """Whether the intent's error has not got better for ``REPROBE_AFTER`` seconds

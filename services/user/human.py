@@ -43,6 +43,9 @@ class HumanProfile:
     noise_gain: float = 0.05  # SD per unit deflection (signal-dependent noise)
     dead_zone: float = 0.05  # smallest deflection made on purpose
     switch_time: float = 1.0  # s one mode switch costs
+    # s the person lets go of the stick when a step of their task is reached, before
+    # going on with the next (re-planning between sub-movements); 0: straight on
+    step_pause: float = 0.0
 
     def describe(self) -> dict:
         return asdict(self)
@@ -52,5 +55,7 @@ PROFILES = {
     "steady": HumanProfile("steady"),
     "noisy": HumanProfile("noisy", reaction_delay=0.3, update_period=0.2, noise_constant=0.05,
                           noise_gain=0.15, dead_zone=0.1, switch_time=1.5),
+    # steady, letting go of the stick for half a second at each step of the task
+    "pausing": HumanProfile("pausing", step_pause=0.5),
 }
 DEFAULT_PROFILE = "steady"

@@ -1,0 +1,235 @@
+"""Goal inference in a room of several tasks (``sctd eval --set``): the skill set against
+the right skill pre-selected and against teleoperation, trial by trial.
+
+The room is the members' tasks composed into one scene (:func:`room_task`), laid out
+once in the set's order (the first member's task gives the hand's start), so that every
+trial's room is the same whatever the user goes for. Each trial draws the user's goal
+at random from its seed (:func:`goal_of`) and runs three lockstep trials from the same
+seeded start with the same simulated user (:class:`~sctd_services.user.SetUser` under
+the set; it does not know about the inference and escapes a skill for another object
+than its own):
+
+- **set**: the tick driver with the skill set (:mod:`sctd.runtime.goals`): teleoperation
+  until a member engages;
+- **preselected**: the goal task's member alone, as if a person had picked it from a
+  menu before starting;
+- **teleop**: the set's teleoperation alone (the baseline's modes).
+
+Per trial: the goal, every engagement and disengagement, whether the goal's skill was
+the first engaged and whether it was engaged at all, the time from the start to its
+engagement, the wrong engagements and how long each took to undo, and each condition's
+outcome and time (:func:`summarise_set` puts them together).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import ExitStack
+from dataclasses import dataclass, replace
+from multiprocessing import get_context
+from typing import Any
+
+import numpy as np
+
+from sctd.runtime.sets import belief_model, goal_set
+from sctd.skill import Skill
+from sctd.skill.skillset import load_skill_set
+from sctd.task import Task, find_task, task_for_object
+from sctd.task.compose import compose
+
+from .lockstep import run_set_trial, run_trial
+from .trial import TaskSpec
+
+CONDITIONS = ("set", "preselected", "teleop")
+
+
+@dataclass(frozen=True)
+class SetSpec:
+    """What every trial of a set's evaluation shares: the set file (docs/skill-sets.md;
+    the room's tasks are its members', in its order), the user's profile and the limits
+    of a trial (s)."""
+
+    set_file: str
+    profile: str = "pausing"
+    time_limit: float = 60.0
+    stuck_after: float = 10.0
+    conditions: tuple[str, ...] = CONDITIONS
+
+
+def tasks_of(skills: Sequence[Skill]) -> list[str]:
+    """The task of each member (the known task whose object its object is).
+
+    Raises
+    ------
+    ValueError
+        Naming a skill whose object no known task has, or two members of one task.
+    """
+    names = []
+    for s in skills:
+        t = task_for_object(s.object)
+        if t is None:
+            raise ValueError(f"skill {s.name!r}: no known task has the object {s.object!r} "
+                             "(sctd tasks lists them)")
+        names.append(t.name)
+    if len(set(names)) != len(names):
+        raise ValueError(f"two members are skills for one task ({', '.join(names)}): a room holds "
+                         "each task once")
+    return names
+
+
+def goal_members(set_file: str) -> tuple:
+    """The members of the set file (:class:`~sctd.skill.skillset.SetMember`), read and
+    checked."""
+    return load_skill_set(set_file).members
+
+
+def room_task(names: Sequence[str], goal: str) -> Task:
+    """The room of tasks ``names`` laid out in that order, as the task a user going for
+    ``goal`` does (its outcome and intent first), with the hand's start of the room's
+    first task whatever the goal."""
+    placed = compose([find_task(n) for n in names])
+    parts = list(placed.parts) if len(names) > 1 else [placed]
+    first = next(p for p in parts if p.name == goal)
+    task = compose([first, *(p for p in parts if p is not first)])
+    return replace(task, scene=replace(task.scene, start=placed.scene.start))
+
+
+def goal_of(seed: int, names: Sequence[str]) -> str:
+    """The task the user of trial ``seed`` goes for (uniform, from the seed alone)."""
+    return names[int(np.random.default_rng([seed, 31]).integers(len(names)))]
+
+
+def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
+    """Trial ``seed``: the user's goal, and each condition's run (module doc)."""
+    skill_set = load_skill_set(spec.set_file)
+    skills = [m.skill for m in skill_set.members]
+    names = tasks_of(skills)
+    goal = goal_of(seed, names)
+    task = room_task(names, goal)
+    tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=spec.stuck_after)
+    right = skills[names.index(goal)]
+    out: dict[str, Any] = {"seed": seed, "goal": goal, "skill": right.name}
+    if "set" in spec.conditions:
+        goals = goal_set(skill_set)
+        res, watch = run_set_trial(goals, task, tspec, seed)
+        out["set"] = res.as_dict(with_trajectory=False)
+        out.update(engagements(watch.changes, right.name, goals.teleop.name))
+        out["escapes"] = goals.counters.escapes
+    if "preselected" in spec.conditions:
+        out["preselected"] = run_trial(right, tspec, seed, task=task).as_dict(with_trajectory=False)
+    if "teleop" in spec.conditions:
+        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task).as_dict(with_trajectory=False)
+    return out
+
+
+def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str) -> dict[str, Any]:
+    """What the changes of the running skill (time, from, to) of a trial say: the first
+    member engaged, whether it was ``right`` (the goal's), whether ``right`` was ever
+    engaged and when first, the wrong engagements and the seconds each took to undo
+    (None: never undone)."""
+    engaged = [(t, to) for t, _, to in changes if to != teleop]
+    first = engaged[0][1] if engaged else None
+    t_right = next((t for t, to in engaged if to == right), None)
+    recovery: list[float | None] = []
+    for k, (t, _, to) in enumerate(changes):
+        if to in (teleop, right):
+            continue
+        out = next((t2 for t2, f2, _ in changes[k + 1:] if f2 == to), None)
+        recovery.append(None if out is None else round(out - t, 3))
+    return {"first_engaged": first, "right_first": first == right, "right_engaged": t_right is not None,
+            "t_engaged": None if t_right is None else round(t_right, 3), "wrong": len(recovery),
+            "recovery_s": recovery, "changes": [(round(t, 3), f, to) for t, f, to in changes]}
+
+
+def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
+                 progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """``trials`` trials (seeds ``seed ..``), in ``jobs`` spawned processes; their
+    summary (:func:`summarise_set`) with ``per_trial``."""
+    seeds = list(range(seed, seed + trials))
+    per_trial: list[dict[str, Any]] = []
+    with ExitStack() as stack:
+        n = max(1, min(jobs, trials))
+        if n > 1:
+            pool = stack.enter_context(ProcessPoolExecutor(n, mp_context=get_context("spawn")))
+            runs = (f.result() for f in [pool.submit(set_job, spec, s) for s in seeds])
+        else:
+            runs = (set_job(spec, s) for s in seeds)
+        for r in runs:
+            per_trial.append(r)
+            if progress:
+                progress(len(per_trial), trials)
+    skill_set = load_skill_set(spec.set_file)
+    out = summarise_set(per_trial, spec.conditions)
+    out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
+               room=tasks_of([m.skill for m in skill_set.members]), teleop=skill_set.teleop.name,
+               profile=spec.profile, seed=seed, belief=dataclasses.asdict(belief_model(skill_set)),
+               per_trial=per_trial)
+    return out
+
+
+def _median(xs: Sequence[float]) -> float | None:
+    return round(float(np.median(xs)), 3) if xs else None
+
+
+def summarise_set(per_trial: Sequence[dict[str, Any]], conditions: Sequence[str] = CONDITIONS
+                  ) -> dict[str, Any]:
+    """The evaluation's figures: the share of trials whose goal's skill was engaged
+    (first, and at all), the time to that engagement, the wrong engagements and their
+    recovery, each condition's successes and median time, and the set's time against
+    each other condition (the median of per-trial ratios over trials both finished;
+    ``duration_s``: from the start to the task done, inference included), overall and
+    per goal."""
+    out: dict[str, Any] = {"trials": len(per_trial), "overall": _figures(per_trial, conditions)}
+    goals = sorted({r["goal"] for r in per_trial})
+    out["by_goal"] = {g: _figures([r for r in per_trial if r["goal"] == g], conditions) for g in goals}
+    return out
+
+
+def _figures(rows: Sequence[dict[str, Any]], conditions: Sequence[str]) -> dict[str, Any]:
+    out: dict[str, Any] = {"trials": len(rows)}
+    for c in conditions:
+        ok = [r[c]["duration_s"] for r in rows if r[c]["outcome"] == "success"]
+        out[c] = {"successes": len(ok), "median_s": _median(ok)}
+    if "set" not in conditions or not rows:
+        return out
+    recov = [x for r in rows for x in r["recovery_s"] if x is not None]
+    out.update(
+        right_first=round(sum(r["right_first"] for r in rows) / len(rows), 4),
+        right_engaged=round(sum(r["right_engaged"] for r in rows) / len(rows), 4),
+        t_engaged_median=_median([r["t_engaged"] for r in rows if r["t_engaged"] is not None]),
+        wrong=sum(r["wrong"] for r in rows), wrong_undone=len(recov), recovery_median_s=_median(recov))
+    for c in conditions:
+        if c == "set":
+            continue
+        both = [r for r in rows if r["set"]["outcome"] == "success" and r[c]["outcome"] == "success"]
+        ratios = [r["set"]["duration_s"] / r[c]["duration_s"] for r in both if r[c]["duration_s"] > 0]
+        out[f"set_vs_{c}"] = _median(ratios)
+        out[f"set_vs_{c}_pairs"] = len(ratios)
+    return out
+
+
+def format_set_report(r: dict[str, Any]) -> str:
+    """Human-readable table of :func:`evaluate_set`'s result."""
+    lines = [f"skill set {r['set']}: {', '.join(r['members'])} (teleoperation {r['teleop']}) in a room "
+             f"of {', '.join(r['room'])}; user {r['profile']}, {r['trials']} lockstep trials from seed "
+             f"{r['seed']}",
+             "goal            trials  right first  right at all  t engaged [s]  wrong (undone, median s)  "
+             "success set/pre/teleop  median s set/pre/teleop  set/pre  set/teleop"]
+    rows = [*(("all", r["overall"]),), *r["by_goal"].items()]
+    for name, f in rows:
+        if "right_first" not in f:
+            continue
+        succ = "/".join(str(f[c]["successes"]) for c in CONDITIONS if c in f)
+        med = "/".join(_fmt(f[c]["median_s"]) for c in CONDITIONS if c in f)
+        lines.append(f"{name:<15} {f['trials']:>6}  {f['right_first']:>11.0%}  {f['right_engaged']:>12.0%}  "
+                     f"{_fmt(f['t_engaged_median']):>13}  {f['wrong']:>5} ({f['wrong_undone']}, "
+                     f"{_fmt(f['recovery_median_s'])}){'':<9}  {succ:>22}  {med:>23}  "
+                     f"{_fmt(f.get('set_vs_preselected')):>7}  {_fmt(f.get('set_vs_teleop')):>10}")
+    return "\n".join(lines)
+
+
+def _fmt(x: float | None) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2f}"

@@ -1,0 +1,126 @@
+"""Goal inference in a room of several tasks, evaluated (sctd_services.eval.goals): the
+room is the same whatever the user goes for, the goals are drawn from the seed, the
+engagements are read off the set's changes, and a lockstep trial of the set engages the
+user's task."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sctd.skill import load_skill
+from sctd_services.eval.goals import (
+    SetSpec,
+    engagements,
+    goal_of,
+    room_task,
+    set_job,
+    summarise_set,
+    tasks_of,
+)
+
+ROOM = ["cabinet", "drawer", "oven"]
+SKILLS = ("skills/cabinet-vf.yaml", "skills/drawer.yaml", "skills/oven-vf.yaml")
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def set_file(folder: Path) -> str:
+    members = "\n".join(f"  - {{skill: {ROOT / s}, reach: 0.35}}" for s in SKILLS)
+    path = folder / "room.yaml"
+    path.write_text(f"sctd_set: 1\nname: room\nmembers:\n{members}\n")
+    return str(path)
+
+
+def _objects(task):
+    return {n: b.T_world[:3, 3] for p in task.parts for n, b in p.scene.bodies.items()}
+
+
+def test_the_room_is_laid_out_once_whatever_the_goal():
+    rooms = {g: room_task(ROOM, g) for g in ROOM}
+    first = _objects(rooms["cabinet"])
+    for g, task in rooms.items():
+        assert task.parts[0].name == g and task.object == task.parts[0].object  # its outcome, its intent
+        got = _objects(task)
+        assert set(got) == set(first)
+        for n in first:
+            assert np.allclose(got[n], first[n]), (g, n)
+        assert np.allclose(task.scene.start.T_world, rooms["cabinet"].scene.start.T_world)
+
+
+def test_goals_come_from_the_seed_alone_and_each_task_is_drawn():
+    drawn = [goal_of(s, ROOM) for s in range(60)]
+    assert drawn == [goal_of(s, ROOM) for s in range(60)]
+    assert set(drawn) == set(ROOM)
+
+
+def test_each_member_names_its_task_and_a_task_is_in_the_room_once():
+    skills = [load_skill(p) for p in SKILLS]
+    assert tasks_of(skills) == ROOM
+    with pytest.raises(ValueError, match="two members are skills for one task"):
+        tasks_of([skills[1], load_skill("skills/drawer-vf.yaml")])
+
+
+def test_engagements_read_off_the_changes():
+    """teleop -> b (wrong) at 2 s, escaped at 2.5 s, -> a (right) at 4 s."""
+    changes = [(2.0, "teleop", "b"), (2.5, "b", "teleop"), (4.0, "teleop", "a")]
+    e = engagements(changes, "a", "teleop")
+    assert e["first_engaged"] == "b" and not e["right_first"] and e["right_engaged"]
+    assert e["t_engaged"] == 4.0 and e["wrong"] == 1 and e["recovery_s"] == [0.5]
+    never = engagements([(1.0, "teleop", "b")], "a", "teleop")
+    assert never["wrong"] == 1 and never["recovery_s"] == [None] and not never["right_engaged"]
+    assert engagements([], "a", "teleop")["first_engaged"] is None
+
+
+def test_the_summary_pairs_trials_that_both_finished():
+    def row(goal, s, p, t, right=True):
+        res = lambda d: {"outcome": "success" if d else "failure", "duration_s": d or 60.0}  # noqa: E731
+        return {"goal": goal, "set": res(s), "preselected": res(p), "teleop": res(t),
+                "right_first": right, "right_engaged": right, "t_engaged": 3.0 if right else None,
+                "wrong": 0 if right else 1, "recovery_s": [] if right else [0.4]}
+    rows = [row("a", 10.0, 8.0, 20.0), row("a", 12.0, 10.0, None), row("b", None, 9.0, 9.0, right=False)]
+    s = summarise_set(rows)
+    o = s["overall"]
+    assert o["right_first"] == pytest.approx(2 / 3, abs=1e-4) and o["wrong"] == 1
+    assert o["recovery_median_s"] == 0.4
+    assert o["set_vs_preselected"] == pytest.approx(np.median([10 / 8, 12 / 10]))
+    assert o["set_vs_teleop"] == 0.5 and o["set_vs_teleop_pairs"] == 1
+    assert s["by_goal"]["b"]["set"]["successes"] == 0
+
+
+@pytest.mark.slow
+def test_a_lockstep_trial_of_the_set_engages_the_users_task(tmp_path):
+    """Trial 0's user goes for the cabinet: the set engages the cabinet's skill first,
+    and the trial, the pre-selected skill's and teleoperation's all open it."""
+    r = set_job(SetSpec(set_file(tmp_path)), 0)
+    assert r["goal"] == goal_of(0, ROOM)
+    assert r["first_engaged"] == {"cabinet": "cabinet-vf", "drawer": "drawer", "oven": "oven-vf"}[r["goal"]]
+    assert r["wrong"] == 0 and r["t_engaged"] is not None
+    assert [r[c]["outcome"] for c in ("set", "preselected", "teleop")] == ["success"] * 3
+
+
+def test_the_user_escapes_a_skill_for_another_object_a_reaction_delay_later():
+    """The display shows the drawer's skill to a user going for the cabinet: it keeps
+    doing what it did for a reaction delay, then lets go of the stick and presses escape
+    (a rising edge, again while the display still shows it); its own task's skill it
+    uses."""
+    from sctd.task import find_task
+    from sctd_services.user import Observation, SetUser, SimulatedUser
+
+    class Fixed(SimulatedUser):
+        def step(self, t, obs):
+            return (0.5, 0.0, 0.0), (0, 1, 0)
+
+    task = find_task("cabinet")
+    user = SetUser(Fixed(task), task.object)
+    obs = Observation(0.0, np.eye(4), {}, {}, "drawer:reach")
+    delay, period = user.profile.reaction_delay, user.profile.update_period
+    seen = [(t, *user.step(t, obs, "drawer_handle")) for t in np.arange(0.0, 1.0, 0.01)]
+    before = [b for t, u, b in seen if t < delay - 1e-9]
+    assert before and all(b == (0, 1, 0) for b in before)
+    after = [(t, u, b) for t, u, b in seen if t >= delay - 1e-9]
+    assert all(u == (0.0, 0.0, 0.0) for _, u, _ in after)
+    presses = [t for (t, _, b), (_, _, b0) in zip(after[1:], after, strict=False) if b[2] and not b0[2]]
+    assert after[0][2] == (0, 1, 1) and presses and presses[0] == pytest.approx(delay + 4 * period, abs=0.011)
+    assert user.escapes == [(0.0, pytest.approx(delay))]
+    assert user.step(2.0, obs, task.object) == ((0.5, 0.0, 0.0), (0, 1, 0))  # its own: used
+    assert user.step(2.01, obs, None) == ((0.5, 0.0, 0.0), (0, 1, 0))  # teleoperation
