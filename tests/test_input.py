@@ -94,14 +94,19 @@ def test_unknown_keys_of_mixed_types_are_named():
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     for name in ("xbox", "spacemouse"):
         m = shipped_mapping(name)
-        assert m.buttons.keys() == {"mode", "enable", "escape", "stop"}
+        assert m.buttons.keys() == {"mode", "enable", "escape", "choose", "stop"}
+        assert m.buttons["choose"] is None  # (published only where a mapping maps it)
     assert shipped_mapping("xbox").buttons["enable"] is not None  # a pad has a deadman
     # the pad's Y (SDL button 3) is stop: the message's stop field, not a button position
     xbox = shipped_mapping("xbox")
     held = Reading((0.0,) * 6, (0, 0, 0, 1) + (0,) * 7)
     assert xbox.stop(held) and not xbox.stop(Reading((0.0,) * 6, (0,) * 11))
     assert xbox.apply(held, 3)[1] == [0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
+    # choose (a skill set's next task) is the fourth position, where a file maps it
     f = tmp_path / "m.yaml"
+    f.write_text("version: 1\naxes: [{source: 0}]\nbuttons: {enable: null, escape: 1, choose: 2}\n")
+    assert load_mapping(f).apply(Reading((0.0,), (0, 0, 1)), 3)[1] == [0, 1, 0, 1]
+    assert load_mapping(f).apply(Reading((0.0,), (0, 1, 0)), 3)[1] == [0, 1, 1, 0]
     f.write_text("version: 1\naxes: [{source: 2}]\n")
     assert load_mapping(f).apply(Reading((0.0, 0.0, -0.4)), 3)[0] == [-0.4, 0.0, 0.0]
     f.write_text("version: 1\naxes: [{source: 2}\n")

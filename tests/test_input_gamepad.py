@@ -75,7 +75,8 @@ def test_xbox_map_numbering_is_sdls():
         (sdl2.SDL_CONTROLLER_AXIS_TRIGGERRIGHT, sdl2.SDL_CONTROLLER_AXIS_TRIGGERLEFT, False)]
     assert m.buttons == {"mode": sdl2.SDL_CONTROLLER_BUTTON_A,
                          "enable": sdl2.SDL_CONTROLLER_BUTTON_RIGHTSHOULDER,
-                         "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
+                         "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "choose": None,
+                         "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """The mapping file: which device axis drives each output axis (scale, inversion, dead
-band) and which device buttons are ``mode``, ``enable``, ``escape`` and ``stop``
-(``docs/input.md``).
+band) and which device buttons are ``mode``, ``enable``, ``escape``, ``choose`` and
+``stop`` (``docs/input.md``).
 
 ::
 
@@ -9,14 +9,15 @@ band) and which device buttons are ``mode``, ``enable``, ``escape`` and ``stop``
       - {source: 0}                            # device axis 0 as it is
       - {source: 1, invert: true, deadband: 0.1}
       - {source: [5, 4], scale: 0.8}           # axis 5 minus axis 4 (two triggers)
-    buttons: {mode: 0, enable: null, escape: 1, stop: 3}
+    buttons: {mode: 0, enable: null, escape: 1, choose: 2, stop: 3}
 
 An output axis is ``clip(scale * s * d(x), -1, 1)`` with ``s`` = -1 when inverted and
 ``d`` the dead band rescaled so the output still starts from zero at its edge:
 ``d(x) = sign(x) (|x| - b) / (1 - b)`` for ``|x| > b``, else 0. A button names a device
 button by its number, or null: ``enable: null`` publishes enable held (the device has
-no deadman), ``mode``/``escape``/``stop`` null (or absent) never press them. The
-published ``buttons`` are by the wire contract's positions: ``[mode, enable, escape]``;
+no deadman), ``mode``/``escape``/``choose``/``stop`` null (or absent) never press them.
+The published ``buttons`` are by the wire contract's positions: ``[mode, enable,
+escape]``, and ``choose`` (a skill set's next member) fourth when it is mapped;
 ``stop`` is published as the message's ``stop`` field (it halts every device's motion).
 """
 
@@ -34,8 +35,9 @@ from .device import InputError, Reading
 
 VERSION = 1
 ROLES = ("mode", "enable", "escape")  # the wire contract's button positions 0, 1, 2
+CHOOSE = "choose"  # position 3, published only when mapped
 STOP = "stop"  # the wire contract's stop field
-KNOWN = (*ROLES, STOP)
+KNOWN = (*ROLES, CHOOSE, STOP)
 MAX_AXES = 6
 
 
@@ -75,10 +77,14 @@ class Mapping:
     origin: str = "identity"
 
     def apply(self, reading: Reading, n_axes: int) -> tuple[list[float], list[int]]:
-        """``u`` (``n_axes`` values in [-1, 1]) and ``[mode, enable, escape]``."""
+        """``u`` (``n_axes`` values in [-1, 1]) and ``[mode, enable, escape]`` (and
+        ``choose`` when it is mapped)."""
         u = [m(reading.axes) for m in self.axes[:n_axes]]
         u += [0.0] * (n_axes - len(u))
-        return u, [self._button(reading.buttons, r) for r in ROLES]
+        buttons = [self._button(reading.buttons, r) for r in ROLES]
+        if self.buttons.get(CHOOSE) is not None:
+            buttons.append(self._button(reading.buttons, CHOOSE))
+        return u, buttons
 
     def stop(self, reading: Reading) -> bool:
         """Whether the button mapped to ``stop`` is held (never, when none is)."""
@@ -114,7 +120,7 @@ def parse_mapping(doc: Any, origin: str) -> Mapping:
     axes = tuple(_axis(a, f"axes[{k}]", bad) for k, a in enumerate(raw_axes))
     raw_buttons = doc.get("buttons", {}) or {}
     if not isinstance(raw_buttons, dict):
-        raise bad("buttons", "expected a map of mode, enable, escape, stop to button numbers or null")
+        raise bad("buttons", "expected a map of mode, enable, escape, choose, stop to button numbers or null")
     for k in raw_buttons:
         if k not in KNOWN:
             raise bad(f"buttons.{k}", f"unknown role (known: {', '.join(KNOWN)})")
