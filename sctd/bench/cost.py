@@ -58,6 +58,8 @@ from ..wire.session import session
 from . import run_and_report
 from .latency import wait_for_targets
 
+SET = "set:"  # a --skills entry that names a skill set
+
 IMPORT_FOLDERS = {"sctd": "sctd", "sctd_sim": "sim", "sctd_services": "services",
                   "sctd_skills": "skills", "sctd_tasks": "tasks"}
 """Import name -> folder of a source tree (as the package installs them)."""
@@ -217,8 +219,9 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
     ep = f"tcp/127.0.0.1:{free_port()}"
     seconds, trips, stop = _Seconds(), RoundTrips(), threading.Event()
     trips.counting = False
+    what = ("--set", ph.skill[len(SET):]) if ph.skill.startswith(SET) else ("--skill", ph.skill)
     tick = (("sctd.bench.cost", "floor", "--connect", ep) if ph.floor else
-            ("sctd.cli.main", "run", "--skill", ph.skill, "--connect", ep, "--spin-us", f"{ph.spin_us:g}"))
+            ("sctd.cli.main", "run", *what, "--connect", ep, "--spin-us", f"{ph.spin_us:g}"))
     with Child("sctd.cli.main", "sim", "--task", ph.task, "--listen", ep, log=logdir / f"sim-{k}.log",
                env=tree.env, cwd=tree.cwd) as sim, \
          Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env, cwd=tree.cwd) as daemon, \
@@ -302,7 +305,8 @@ def run_cost_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
                 rows.append(run_phase(tree, ph, logdir, len(rows)))
                 print(_row(rows[-1]), file=sys.stderr, flush=True)
         steps = []
-        for k, skill in enumerate(args.skills if args.eval_trials else []):
+        stepped = [x for x in args.skills if not x.startswith(SET)] if args.eval_trials else []
+        for k, skill in enumerate(stepped):
             for tree in (trees if k % 2 == 0 else trees[::-1]):
                 steps.append(lockstep_step(tree, skill, args.eval_trials, logdir))
     return {"task": args.task, "window_s": args.window, "trees": {t.label: t.source for t in trees},
@@ -415,7 +419,8 @@ def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
                    help="another sctd source tree to measure beside this one: a folder, or a commit "
                         "of this checkout's repository")
     p.add_argument("--skills", type=_csv(str, "skills"), default=[defaults().skill, "pour-vf"],
-                   help="skills the daemon runs (default pour,pour-vf)")
+                   help="skills the daemon runs (default pour,pour-vf); set:NAME|FILE runs a skill set "
+                        "(sctd run --set; no lockstep step for it)")
     p.add_argument("--task", default=defaults().task, help="the simulator's task (default %(default)s)")
     p.add_argument("--inputs", type=_inputs, default=[False, True], help="zero,full (default both)")
     p.add_argument("--spins", type=_csv(float, "spins in us"), default=[0.0, 25.0, 50.0, 100.0],
