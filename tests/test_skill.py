@@ -78,6 +78,7 @@ def test_bundle_round_trip_keeps_id():
         ({"fsm__transitions__0__below": float("nan")}, "transitions[0].below", "finite"),
         ({"limits__max_linear_speed": 5.0}, "limits.max_linear_speed", "<= 1.0"),
         ({"states__carry__colour": "red"}, "states.carry.colour", "unknown field"),
+        ({"colour": "red"}, "t.yaml: colour: ", "unknown field"),
     ],
 )
 def test_validation_names_file_field_and_problem(overrides, where, what):

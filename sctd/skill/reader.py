@@ -65,7 +65,8 @@ class Reader:
     def known_keys(self, d: dict, path: str, allowed: set[str]) -> None:
         extra = sorted(set(map(str, d)) - allowed)
         if extra:
-            raise self.fail(f"{path}.{extra[0]}", f"unknown field (allowed: {', '.join(sorted(allowed))})")
+            where = f"{path}.{extra[0]}" if path else extra[0]  # (a top-level field: its name alone)
+            raise self.fail(where, f"unknown field (allowed: {', '.join(sorted(allowed))})")
 
     def string(self, v: Any, path: str) -> str:
         if not isinstance(v, str) or not v:

@@ -164,12 +164,6 @@ class _SetReader(Reader):
         members = self.members(doc.get("members"), teleop)
         return SkillSet(name, members, teleop, teleop_bundle, teleop_ref, belief, description, self.file)
 
-    def known_keys(self, d: dict, path: str, allowed: set[str]) -> None:
-        extra = sorted(set(map(str, d)) - allowed)
-        if extra:
-            where = f"{path}.{extra[0]}" if path else extra[0]
-            raise self.fail(where, f"unknown field (allowed: {', '.join(sorted(allowed))})")
-
     def text(self, v: Any, path: str, empty: bool = False) -> str:
         if empty and v == "":
             return v
