@@ -297,3 +297,24 @@ def test_sctd_view_reports_what_it_read(capsys):
     # --stats-json is the live view's: a log replay refuses it
     assert main(["view", "--log", "x.mcap", "--stats-json"]) == 2
     assert "--stats-json reports on the live view" in capsys.readouterr().err
+
+
+def test_the_persons_panel_says_which_task_is_engaged_and_the_belief(server):
+    """A skill set's status: the engaged member (or teleoperation), the belief most
+    likely first, a change waiting for the release; a status off the wire that is not
+    the contract's draws nothing of it, and names are escaped."""
+    from sctd_services.view.live import goal_lines
+
+    status = {"goals": {"engaged": "teleop", "belief": {"drawer": 0.15, "pour": 0.8, "door": 0.05},
+                        "pending": {"kind": "choose", "member": "pour"}}}
+    lines = goal_lines(status)
+    assert lines == ["engaged: <b>teleoperation</b>", "going for: pour 80 %, drawer 15 %, door 5 %",
+                     "choosing pour once the stick is let go"]
+    assert goal_lines({"goals": {"engaged": "<i>x</i>", "belief": {"a": float("nan"), "b": "1"},
+                                 "pending": {"kind": "escape"}}}) == \
+        ["engaged: <b>&lt;i&gt;x&lt;/i&gt;</b>", "leaving the skill once the stick is let go"]
+    assert goal_lines({}) == [] and goal_lines({"goals": [1, 2]}) == []
+    view = LiveView(server, None, find_task("pour"))
+    view.draw(Snapshot(t=1.0, pose=None, objects={}, target={"state": "translate"},
+                       status={"mode": "running", "state": "translate", **status}))
+    assert "going for: pour 80 %" in view.person.content

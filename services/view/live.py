@@ -15,8 +15,10 @@ at about 30 Hz):
   where it is (what each axis does *here*, the constraints at the hand's frames), a
   state picker that follows the daemon's state unless a state is picked;
 - for the person in the chair, a panel readable at arm's length: the mode, what each
-  axis does now, what holds the hand (a constraint it presses against) and why the
-  runtime holds (its ``status.mode`` and stuck report);
+  axis does now, what holds the hand (a constraint it presses against), why the
+  runtime holds (its ``status.mode`` and stuck report) and, with a skill set, which
+  task's skill is engaged and what the runtime believes the person is going for
+  (``status.goals``);
 - plots of the last :data:`WINDOW` s: the input of the device that owns the motion, the
   hand's speed and the state, and the constraints' activity (``status.constraints``:
   the share of the person's commands each constraint of the active state changed).
@@ -24,6 +26,7 @@ at about 30 Hz):
 
 from __future__ import annotations
 
+import html
 import math
 import time
 from collections import deque
@@ -33,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from sctd import se3
+from sctd.runtime.goals import TELEOP
 from sctd.skill import Skill
 from sctd.task import Task
 
@@ -302,7 +306,38 @@ class LiveView:
         if stuck:
             lines.append(f"<b>stuck in {stuck.get('state')} for {stuck.get('since', 0):.0f} s: the escape "
                          "button goes back</b>")
+        lines += goal_lines(status)
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
+
+
+MAX_GOALS = 16  # a set's members drawn at most (the set file's limit)
+
+
+def goal_lines(status: dict) -> list[str]:
+    """A skill set's lines of the person's panel (``status.goals``, docs/goals.md): which
+    task's skill is engaged (or teleoperation), what the runtime believes the person is
+    going for, most likely first, and a change waiting for the stick's release. Nothing
+    for a single skill, or a ``goals`` that is not the contract's (it came off the wire)."""
+    goals = status.get("goals")
+    if not isinstance(goals, dict):
+        return []
+    engaged = goals.get("engaged")
+    out = []
+    if isinstance(engaged, str):
+        out.append("engaged: <b>" + ("teleoperation" if engaged == TELEOP else html.escape(engaged)) + "</b>")
+    belief = goals.get("belief")
+    if isinstance(belief, dict):
+        ranked = sorted(((str(k), float(v)) for k, v in belief.items()
+                         if isinstance(v, int | float) and math.isfinite(v)), key=lambda kv: -kv[1])
+        if ranked:
+            out.append("going for: " + ", ".join(f"{html.escape(k)} {100 * v:.0f} %"
+                                                 for k, v in ranked[:MAX_GOALS]))
+    pending = goals.get("pending")
+    if isinstance(pending, dict) and isinstance(pending.get("kind"), str):
+        what = "leaving the skill" if pending["kind"] == "escape" else \
+            f"choosing {html.escape(str(pending.get('member')))}"
+        out.append(f"{what} once the stick is let go")
+    return out
 
 
 def acting(status: dict, skill: Skill | None) -> list[float] | None:
