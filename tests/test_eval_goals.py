@@ -124,3 +124,33 @@ def test_the_user_escapes_a_skill_for_another_object_a_reaction_delay_later():
     assert user.escapes == [(0.0, pytest.approx(delay))]
     assert user.step(2.0, obs, task.object) == ((0.5, 0.0, 0.0), (0, 1, 0))  # its own: used
     assert user.step(2.01, obs, None) == ((0.5, 0.0, 0.0), (0, 1, 0))  # teleoperation
+
+
+@pytest.mark.slow
+def test_a_practised_user_knows_the_modes_of_its_practice_runs(tmp_path):
+    """With practice, the user of every condition starts knowing the modes it used in
+    one run of the goal's task with the goal's skill and one with teleoperation (under
+    the set, by the display's skill:state names), each tried out on every axis."""
+    from sctd_services.eval.goals import _practised
+
+    path = set_file(tmp_path)
+    r = set_job(SetSpec(path, practice=True, conditions=("set",)), 0)
+    goal = goal_of(0, ROOM)
+    skill = {"cabinet": "cabinet-vf", "drawer": "drawer", "oven": "oven-vf"}[goal]
+    own, teleop = _practised(path, goal, ROOM.index(goal), "pausing"), _practised(path, goal, -1, "pausing")
+    assert own and teleop and all(m.known for m in [*own.values(), *teleop.values()])
+    assert r["practised_modes"] == sorted([f"{skill}:{m}" for m in own] + [f"teleop:{m}" for m in teleop])
+    assert r["set"]["outcome"] == "success" and r["right_first"]
+
+
+def test_eval_refuses_a_bad_belief_or_practice_without_a_set(capsys):
+    from sctd.cli.main import main
+
+    for argv, problem in [
+        (["--set", "doors", "--belief", "threshold"], "--belief: 'threshold' is not KEY=NUMBER"),
+        (["--set", "doors", "--belief", "gamma=2"], "belief.gamma: unknown field (allowed: beta, "),
+        (["--set", "doors", "--belief", "threshold=1.5"], "belief.threshold: expected a number in (0.5, 1)"),
+        (["--skill", "pour", "--practised"], "--practised and --belief: only with --set"),
+    ]:
+        assert main(["eval", *argv, "--trials", "1"]) == 2, argv
+        assert problem in capsys.readouterr().err, argv

@@ -5,6 +5,7 @@ skill or a set."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 from pathlib import Path
 
@@ -206,3 +207,37 @@ def test_run_takes_a_skill_or_a_set_not_both(capsys):
     assert "--set" in capsys.readouterr().err
     with pytest.raises(SkillError, match=r"^nope: no such skill set: .* \(shipped: .*\bkitchen\b.*\)"):
         daemon_skills(_run_args("--set", "nope"))
+
+
+def test_inspect_checks_a_set_as_run_does_and_shows_its_members(room, capsys):
+    from sctd.cli.main import main
+
+    assert main(["inspect", "--set", "doors", "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["name"] == "doors" and s["teleop"]["name"] == "teleop" and "engaged" not in s
+    assert [(m["name"], m["object"], m["reach"]) for m in s["members"]] == [
+        ("cabinet-vf", "door_handle", 0.35), ("drawer", "drawer_handle", 0.35),
+        ("oven-vf", "oven_handle", 0.35)]
+    assert s["members"][1]["start"] == "reach" and s["belief"] == dataclasses.asdict(BeliefModel())
+    assert main(["inspect", "--set", "kitchen"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("skill set kitchen (") and "member cabinet-vf (id " in out
+    bad = room(base(belief={"threshold": 0.3}))  # in range for the file's reader, not the runtime's
+    assert main(["inspect", "--set", str(bad)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"sctd inspect: {bad}: belief.threshold: expected a number in (0.5, 1), got 0.3")
+    assert main(["inspect", "drawer", "--set", "doors"]) == 2
+    assert main(["inspect"]) == 2
+    assert "SKILL or --set" in capsys.readouterr().err
+
+
+def test_skills_sets_lists_the_shipped_sets_read_and_checked(capsys):
+    from sctd.cli.main import main
+
+    assert main(["skills", "sets", "--json"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert {"doors", "kitchen", "kitchen-pour"} <= set(rows)
+    assert rows["kitchen-pour"]["members"] == ["pour", "drawer", "light_switch-vf"]
+    assert all("error" not in r and r["teleop"] == "teleop" for r in rows.values())
+    assert main(["skills"]) == 0
+    assert "skill sets (sctd skills sets): doors, " in capsys.readouterr().out

@@ -1,6 +1,7 @@
 """The simulated user's parts: the device model it learns, the task files' intents, and
 the whole user driving a toy device whose mapping it does not know."""
 
+import itertools
 import math
 
 import numpy as np
@@ -190,6 +191,65 @@ def test_user_learns_an_unknown_device_and_opens_the_toy_drawer(perm, signs):
         toy.step(u, dt)
         t += dt
     assert user.done and toy.opening >= 0.2, (t, toy.p, toy.opening)
+
+
+def _drive_toy(user, toy, limit=30.0):
+    """Run ``user`` on ``toy`` until done; every correction (t, u, phase) and the time."""
+    t, dt, log = 0.0, 0.01, []
+    while t < limit and not user.done:
+        u, _ = user.step(t, _drawer_obs(t, toy.p, toy.opening, toy.attached))
+        if not log or log[-1][1] != u:
+            log.append((t, u, user.desire.phase if user.desire else ""))
+        toy.step(u, dt)
+        t += dt
+    return log, t
+
+
+def _starts_by_trying_the_stick(log):
+    """Whether the first six deflections push each axis alone, both ways in turn (the
+    user's trial pushes)."""
+    pushes = [u for _, u, _ in log if any(u)][:6]
+    signs = [(int(np.argmax(np.abs(u))), bool(u[int(np.argmax(np.abs(u)))] > 0)) for u in pushes]
+    return signs == [(0, True), (0, False), (1, True), (1, False), (2, True), (2, False)]
+
+
+def test_a_practised_user_needs_no_trial_pushes_and_finishes_sooner():
+    """A user that learned the device before (the models of an earlier run) uses it at
+    once: no trial pushes, done sooner than a user trying it out; what it was given is
+    copied, not changed."""
+    B = np.zeros((6, 3))
+    B[1, 0], B[0, 2], B[2, 1] = 0.1, -0.1, 0.1
+    naive = SimulatedUser(DRAWER, 3, PROFILES["steady"], seed=4)
+    log, t_naive = _drive_toy(naive, ToyDrawer(B))
+    assert naive.done and _starts_by_trying_the_stick(log)
+    known = naive.models
+    before = {m: d.B.copy() for m, d in known.items()}
+    practised = SimulatedUser(DRAWER, 3, PROFILES["steady"], seed=4, known=known)
+    log, t_practised = _drive_toy(practised, ToyDrawer(B))
+    assert practised.done and not _starts_by_trying_the_stick(log)
+    assert t_practised < t_naive - 0.5, (t_practised, t_naive)
+    assert all(np.array_equal(known[m].B, before[m]) for m in known)
+    assert practised.models["m"] is not known["m"]
+
+
+def test_a_hesitant_user_lets_go_while_it_reaches():
+    """``regrip_every``: within one step of the task the user lets go of the stick after
+    that long of holding it, for ``regrip_time``; then goes on."""
+    from sctd_services.user import HumanProfile
+
+    B = np.zeros((6, 3))
+    B[:3, :3] = np.eye(3) * 0.04  # slow: the reach takes several seconds
+    profile = HumanProfile("test", regrip_every=1.0, regrip_time=0.4)
+    user = SimulatedUser(DRAWER, 3, profile, seed=2)
+    log, _ = _drive_toy(user, ToyDrawer(B), limit=40.0)
+    reach = [(t, u) for t, u, phase in log if phase == "reach"]
+    rests = [(t0, t1) for (t0, u0), (t1, _) in itertools.pairwise(reach) if not any(u0)]
+    long_rests = [(t0, t1) for t0, t1 in rests if t1 - t0 >= 0.4 - 0.01]
+    assert reach[-1][0] - reach[0][0] > 3.0 and len(long_rests) >= 2, (reach[-1][0] - reach[0][0], rests)
+    held_since = reach[0][0]
+    for t0, t1 in long_rests:  # never held much longer than regrip_every between let-goes
+        assert t0 - held_since <= 1.0 + profile.update_period + 0.02, (held_since, t0)
+        held_since = t1
 
 
 def test_user_at_rest_sends_exactly_zero():

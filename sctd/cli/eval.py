@@ -40,6 +40,7 @@ from sctd_services.user import PROFILES
 from ..app.errors import EXIT_FAILED, fail
 from ..app.logs import log_folder
 from ..app.options import TASK_HELP
+from ..runtime.sets import goal_set
 from .eval_realtime import realtime_job
 
 CLIENT_ROLE = "sctd-operator"  # the key pair of a sctd certs folder that sctd eval presents
@@ -61,7 +62,14 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="first trial seed: trial k starts from the seeded random start seed + k")
     p.add_argument("--user", default=None,
-                   help="simulated user profile (steady, noisy, pausing; default steady, pausing with --set)")
+                   help="simulated user profile (steady, noisy, pausing, hesitant; default steady, "
+                        "pausing with --set)")
+    p.add_argument("--belief", action="append", metavar="KEY=VALUE", default=[],
+                   help="with --set: a parameter of the set's belief over its file's (repeatable; beta, "
+                        "threshold, floor, escape_factor, rearm_travel; docs/goals.md)")
+    p.add_argument("--practised", action="store_true",
+                   help="with --set: the user did the goal's task once with its skill and once with "
+                        "teleoperation before the trials, and knows what the stick does in their modes")
     p.add_argument("--baseline", action="store_true",
                    help="also run the unassisted baseline (skills/teleop.yaml) once per distinct "
                         "set of the assisted skills' speed limits")
@@ -91,6 +99,16 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--jobs: must be >= 1"
     if args.scheduler is not None and not args.lockstep:
         return "--scheduler: only with --lockstep (real-time trials start local processes)"
+    if (args.practised or args.belief) and args.skill_set is None:
+        return "--practised and --belief: only with --set"
+    for kv in args.belief:
+        key, eq, value = kv.partition("=")
+        try:
+            float(value)
+        except ValueError:
+            eq = ""
+        if not eq or not key:
+            return f"--belief: {kv!r} is not KEY=NUMBER"
     if args.skill_set is not None and (args.task or args.baseline or args.demos or args.report
                                        or args.scheduler or args.logs):
         return "--set: a set's room is its members' tasks; --task, --baseline, --demos, --report, " \
@@ -193,8 +211,11 @@ def _evaluate_set(args: argparse.Namespace) -> int:
     """``sctd eval --set FILE``: the set's goal inference against the right skill
     pre-selected and teleoperation, in lockstep (:mod:`sctd_services.eval.goals`)."""
     try:
-        spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, time_limit=args.time_limit)
+        belief = tuple((k, float(v)) for k, _, v in (kv.partition("=") for kv in args.belief))
+        spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, time_limit=args.time_limit,
+                       practice=args.practised, belief=belief)
         tasks_of([m.skill for m in goal_members(spec.set_file)])
+        goal_set(spec.skill_set())  # (the belief's parameters checked before any trial)
     except (SkillError, TaskError, ValueError) as e:
         return fail("eval", str(e))
     bar = _progress_bar()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import logging
 import os
@@ -18,7 +19,7 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import SKILL_HELP, add_arguments, add_robot_argument, check_ranges, from_namespace
 from ..runtime.controller import RuntimeConfig
 from ..runtime.daemon import Daemon, check_no_rate_limit, ingress_limits
-from ..runtime.sets import goal_set
+from ..runtime.sets import goal_set, set_summary
 from ..skill import Bundle, Skill, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill, find_skill_set
 from ..skill.skillset import load_skill_set, skill_set_of
@@ -182,7 +183,10 @@ def main_run(args: argparse.Namespace) -> int:
 
 
 def add_inspect_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("skill", help=SKILL_HELP)
+    p.add_argument("skill", nargs="?", help=SKILL_HELP)
+    p.add_argument("--set", dest="skill_set", metavar="NAME|FILE",
+                   help="check a skill set file instead (a path, or a shipped set's name) and show "
+                        "its members, start regions and belief (docs/skill-sets.md)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     add_view_arguments(p)
 
@@ -191,6 +195,12 @@ def main_inspect(args: argparse.Namespace) -> int:
     problem = check_view_arguments(args)
     if problem is not None:
         return fail("inspect", problem)
+    if getattr(args, "skill_set", None) is not None:
+        if args.skill is not None or args.view:
+            return fail("inspect", "--set: a set alone (no SKILL, no --view)")
+        return _inspect_set(args)
+    if args.skill is None:
+        return fail("inspect", "SKILL or --set: which skill (or skill set) to check")
     try:
         skill = load_skill(find_skill(args.skill))
     except SkillError as e:
@@ -202,6 +212,35 @@ def main_inspect(args: argparse.Namespace) -> int:
         print(json.dumps(s, indent=2))
     else:
         _print_summary(skill, s)
+    return EXIT_OK
+
+
+def _inspect_set(args: argparse.Namespace) -> int:
+    """``sctd inspect --set``: the set file checked as ``sctd run --set`` checks it, and
+    what it holds."""
+    try:
+        spec = load_skill_set(find_skill_set(args.skill_set))
+        goals = goal_set(spec)
+    except SkillError as e:
+        return fail("inspect", str(e))
+    s = {"source": str(spec.source), "description": spec.description, **set_summary(spec.name, goals),
+         "belief": dataclasses.asdict(goals.model)}
+    del s["engaged"]  # (the running daemon's: not a file's)
+    s["members"] = [m | {"start": skill.start} for m, skill in
+                    zip(s["members"], (g.skill for g in goals.members), strict=True)]
+    if args.json:
+        print(json.dumps(s, indent=2))
+        return EXIT_OK
+    print(f"skill set {s['name']} ({s['source']}): {s['description']}")
+    b = s["belief"]
+    print(f"  belief: beta {b['beta']} /m, threshold {b['threshold']}, floor {b['floor']}, escape factor "
+          f"{b['escape_factor']}, rearm travel {b['rearm_travel']} m")
+    t = s["teleop"]
+    print(f"  teleoperation {t['name']} (id {t['id']})")
+    for m in s["members"]:
+        print(f"  member {m['name']} (id {m['id']}), object {m['object']}, starts in {m['start']}: within "
+              f"{m['reach']} m of {m['point']} (tolerances {m['position_tolerance']} m, "
+              f"{m['angle_tolerance']} rad)")
     return EXIT_OK
 
 

@@ -17,10 +17,12 @@ from ..skill.catalog import (
     StoredSkill,
     find_stored,
     shipped_folder,
+    shipped_sets,
     shipped_skills,
     store_folder,
     stored_skills,
 )
+from ..skill.skillset import load_skill_set
 from ..wire import Keys, client
 from ..wire.session import add_zenoh_arguments, session_from_args
 from .run import main_inspect
@@ -41,6 +43,10 @@ def add_skills_arguments(p: argparse.ArgumentParser) -> None:
     swap.add_argument("--timeout", type=float, default=40.0,
                       help="s to wait for the daemon's reply (default %(default)s)")
     add_zenoh_arguments(swap)
+    sets = sub.add_parser("sets", help="the shipped skill sets (--set NAME finds them)",
+                          description="the shipped skill sets (sctd run --set NAME finds them; "
+                                      "sctd inspect --set NAME checks one)")
+    sets.add_argument("--json", action="store_true", help="one JSON list on stdout")
     p.add_argument("--json", action="store_true", help="one JSON list on stdout")
 
 
@@ -69,6 +75,8 @@ def main_skills(args: argparse.Namespace) -> int:
         return main_inspect(args)
     if args.action == "swap":
         return main_skills_swap(args)
+    if args.action == "sets":
+        return main_skills_sets(args)
     rows = [_stored_row(s) for s in reversed(stored_skills())]  # newest first
     rows += [_row(p, "shipped") for p in shipped_skills()]
     if args.json:
@@ -85,6 +93,33 @@ def main_skills(args: argparse.Namespace) -> int:
             where = f"{made}, {r['demos']} demos, {checks}; {where}"
         print(f"{r['name']:22s} {r['id'] or '-':18s} {r['object'] or '-':15s} "
               f"{r['method'] or r.get('error', '-'):22s} {r['source']} ({where})")
+    sets = [p.stem for p in shipped_sets()]
+    if sets:
+        print(f"skill sets (sctd skills sets): {', '.join(sets)}")
+    return EXIT_OK
+
+
+def _set_row(path: Path) -> dict[str, Any]:
+    try:
+        s = load_skill_set(path)
+    except SkillError as e:
+        return {"name": path.stem, "members": [], "description": "", "path": str(path), "error": str(e)}
+    return {"name": s.name, "members": [m.name for m in s.members], "teleop": s.teleop.name,
+            "description": s.description, "path": str(path)}
+
+
+def main_skills_sets(args: argparse.Namespace) -> int:
+    """``sctd skills sets``: the shipped skill sets, each read and checked."""
+    rows = [_set_row(p) for p in shipped_sets()]
+    if args.json:
+        print(json.dumps(rows))
+        return EXIT_OK
+    if not rows:
+        return fail("skills", f"no skill sets in {shipped_folder()}", 1)
+    print(f"{'name':16s} {'members':40s} description")
+    for r in rows:
+        what = r.get("error") or f"{r['description']} ({r['path']})"
+        print(f"{r['name']:16s} {', '.join(r['members']) or '-':40s} {what}")
     return EXIT_OK
 
 

@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 from ..skill import WORLD_OBJECT, Button, Skill, SkillEngine, SkillError
 from ..skill.skillset import SkillSet
 from ..wire.codec import BUTTON_CHOOSE
-from .goals import BeliefModel, GoalSet, Member
+from .goals import TELEOP, BeliefModel, GoalSet, Member
 
 
 def reserved_button(skill: Skill) -> str | None:
@@ -103,3 +104,19 @@ def check_swap(goals: GoalSet, skill: Skill, member: str | None) -> str:
     if problem is not None:
         raise SkillError(where, "", problem)
     return member
+
+
+def set_summary(name: str, goals: GoalSet) -> dict[str, Any]:
+    """The set's part of the ``skill`` summary (docs/wire-contract.md): its name, the
+    engaged member (``teleop`` while none is), teleoperation's and each member's id, name
+    and object, with the member's start region settings."""
+    def brief(s: Skill) -> dict[str, Any]:
+        return {"id": s.id, "name": s.name, "object": s.object}
+    engaged = goals.engaged
+    return {"name": name,
+            "engaged": TELEOP if engaged is None else goals.members[engaged].name,
+            "teleop": brief(goals.teleop),
+            "members": [brief(m.skill) | {"point": list(m.point), "reach": m.reach,
+                                          "position_tolerance": m.position_tolerance,
+                                          "angle_tolerance": m.angle_tolerance}
+                        for m in goals.members]}

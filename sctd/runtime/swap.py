@@ -29,9 +29,8 @@ from typing import Any
 from ..skill import Skill, SkillEngine, SkillError, skill_summary
 from ..timing import Ticker
 from .driver import TickDriver
-from .goals import TELEOP
 from .ingress import Ingress, Inlet
-from .sets import check_swap
+from .sets import check_swap, set_summary
 from .skillserver import ServerOptions, SkillServer
 from .worker import WHERE
 
@@ -123,17 +122,7 @@ class SkillSwap:
         summary["state"] = self.driver.engine.state
         goals = self.driver.goals
         if goals is not None:
-            def brief(s: Skill) -> dict[str, Any]:
-                return {"id": s.id, "name": s.name, "object": s.object}
-            engaged = goals.engaged
-            summary["set"] = {
-                "name": self.set_name,
-                "engaged": TELEOP if engaged is None else goals.members[engaged].name,
-                "teleop": brief(goals.teleop),
-                "members": [brief(m.skill) | {"point": list(m.point), "reach": m.reach,
-                                              "position_tolerance": m.position_tolerance,
-                                              "angle_tolerance": m.angle_tolerance}
-                            for m in goals.members]}
+            summary["set"] = set_summary(self.set_name, goals)
         return summary
 
     def in_use(self) -> list[str]:

@@ -15,6 +15,12 @@ than its own):
   menu before starting;
 - **teleop**: the set's teleoperation alone (the baseline's modes).
 
+With ``practice``, the user is practised (:class:`~sctd_services.user.SimulatedUser`):
+before the trials it did the goal's task once with the goal's skill and once with
+teleoperation (from a start no measured trial has, :data:`PRACTICE_SEED`), and starts
+every condition knowing what the stick does in the modes it used there, as the
+participants of a user study trained on each condition before they are measured.
+
 Per trial: the goal, every engagement and disengagement, whether the goal's skill was
 the first engaged and whether it was engaged at all, the time from the start to its
 engagement, the wrong engagements and how long each took to undo, and each condition's
@@ -24,6 +30,7 @@ outcome and time (:func:`summarise_set` puts them together).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -36,14 +43,16 @@ import numpy as np
 
 from sctd.runtime.sets import belief_model, goal_set
 from sctd.skill import Skill
-from sctd.skill.skillset import load_skill_set
+from sctd.skill.skillset import SkillSet, load_skill_set
 from sctd.task import Task, find_task, task_for_object
 from sctd.task.compose import compose
+from sctd_services.user import DeviceModel
 
-from .lockstep import run_set_trial, run_trial
+from .lockstep import practise, run_set_trial, run_trial
 from .trial import TaskSpec
 
 CONDITIONS = ("set", "preselected", "teleop")
+PRACTICE_SEED = 999_983  # the practice runs' start (measured trials count up from their seed)
 
 
 @dataclass(frozen=True)
@@ -57,6 +66,14 @@ class SetSpec:
     time_limit: float = 60.0
     stuck_after: float = 10.0
     conditions: tuple[str, ...] = CONDITIONS
+    practice: bool = False
+    belief: tuple[tuple[str, float], ...] = ()  # the belief's parameters over the file's
+
+    def skill_set(self) -> SkillSet:
+        """The set file read, with ``belief`` over its belief's parameters (checked when
+        the set is made to run, :func:`~sctd.runtime.sets.goal_set`)."""
+        s = load_skill_set(self.set_file)
+        return replace(s, belief={**s.belief, **dict(self.belief)}) if self.belief else s
 
 
 def tasks_of(skills: Sequence[Skill]) -> list[str]:
@@ -104,7 +121,7 @@ def goal_of(seed: int, names: Sequence[str]) -> str:
 
 def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     """Trial ``seed``: the user's goal, and each condition's run (module doc)."""
-    skill_set = load_skill_set(spec.set_file)
+    skill_set = spec.skill_set()
     skills = [m.skill for m in skill_set.members]
     names = tasks_of(skills)
     goal = goal_of(seed, names)
@@ -112,17 +129,39 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=spec.stuck_after)
     right = skills[names.index(goal)]
     out: dict[str, Any] = {"seed": seed, "goal": goal, "skill": right.name}
+    known: dict[str, dict[str, DeviceModel]] = {"preselected": {}, "teleop": {}}
+    if spec.practice:
+        for c, index in (("preselected", names.index(goal)), ("teleop", -1)):
+            known[c] = _practised(spec.set_file, goal, index, spec.profile)
     if "set" in spec.conditions:
         goals = goal_set(skill_set)
-        res, watch = run_set_trial(goals, task, tspec, seed)
+        shown = {f"{right.name}:{m}": d for m, d in known["preselected"].items()}
+        shown.update({f"{skill_set.teleop.name}:{m}": d for m, d in known["teleop"].items()})
+        res, watch = run_set_trial(goals, task, tspec, seed, known=shown)
+        if spec.practice:
+            out["practised_modes"] = sorted(shown)
         out["set"] = res.as_dict(with_trajectory=False)
         out.update(engagements(watch.changes, right.name, goals.teleop.name))
         out["escapes"] = goals.counters.escapes
     if "preselected" in spec.conditions:
-        out["preselected"] = run_trial(right, tspec, seed, task=task).as_dict(with_trajectory=False)
+        out["preselected"] = run_trial(right, tspec, seed, task=task,
+                                       known=known["preselected"]).as_dict(with_trajectory=False)
     if "teleop" in spec.conditions:
-        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task).as_dict(with_trajectory=False)
+        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task,
+                                  known=known["teleop"]).as_dict(with_trajectory=False)
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str, DeviceModel]:
+    """What the user learned of the device doing ``goal``'s task once from
+    :data:`PRACTICE_SEED` with member ``member``'s skill (-1: teleoperation), by mode
+    (once per process: every trial of an evaluation starts from the same practice)."""
+    skill_set = load_skill_set(set_file)
+    names = tasks_of([m.skill for m in skill_set.members])
+    skill = skill_set.teleop if member < 0 else skill_set.members[member].skill
+    tspec = TaskSpec(goal, profile=profile)
+    return practise(skill, tspec, PRACTICE_SEED, task=room_task(names, goal))[1]
 
 
 def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str) -> dict[str, Any]:
@@ -161,11 +200,12 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
             per_trial.append(r)
             if progress:
                 progress(len(per_trial), trials)
-    skill_set = load_skill_set(spec.set_file)
+    skill_set = spec.skill_set()
     out = summarise_set(per_trial, spec.conditions)
     out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
                room=tasks_of([m.skill for m in skill_set.members]), teleop=skill_set.teleop.name,
-               profile=spec.profile, seed=seed, belief=dataclasses.asdict(belief_model(skill_set)),
+               profile=spec.profile, practice=spec.practice, seed=seed,
+               belief=dataclasses.asdict(belief_model(skill_set)),
                per_trial=per_trial)
     return out
 
@@ -213,9 +253,10 @@ def _figures(rows: Sequence[dict[str, Any]], conditions: Sequence[str]) -> dict[
 
 def format_set_report(r: dict[str, Any]) -> str:
     """Human-readable table of :func:`evaluate_set`'s result."""
+    practised = " (practised)" if r.get("practice") else ""
     lines = [f"skill set {r['set']}: {', '.join(r['members'])} (teleoperation {r['teleop']}) in a room "
-             f"of {', '.join(r['room'])}; user {r['profile']}, {r['trials']} lockstep trials from seed "
-             f"{r['seed']}",
+             f"of {', '.join(r['room'])}; user {r['profile']}{practised}, {r['trials']} lockstep trials "
+             f"from seed {r['seed']}",
              "goal            trials  right first  right at all  t engaged [s]  wrong (undone, median s)  "
              "success set/pre/teleop  median s set/pre/teleop  set/pre  set/teleop"]
     rows = [*(("all", r["overall"]),), *r["by_goal"].items()]

@@ -12,6 +12,7 @@ outcome 10 Hz), so that both ways of running give the user the same information.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from sctd import se3
@@ -21,7 +22,7 @@ from sctd.runtime.goals import GoalSet
 from sctd.skill import Skill
 from sctd.task import Task, find_task
 from sctd.wire import codec
-from sctd_services.user import Observation, SetUser, SimulatedUser
+from sctd_services.user import DeviceModel, Observation, SetUser, SimulatedUser
 from sctd_sim.guard import TargetGuard, TargetLimits
 from sctd_sim.simulation import Simulation, trial_scene
 
@@ -34,29 +35,43 @@ USER_DEVICE = "user"  # the simulated user's device name (input/<name>)
 
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
-              keep_series: bool = False, task: Task | None = None) -> TrialResult:
+              keep_series: bool = False, task: Task | None = None,
+              known: Mapping[str, DeviceModel] | None = None) -> TrialResult:
     """One trial of ``skill`` on ``spec.task`` (or ``task``, a composed room whose first
-    part is the user's goal) from the seeded start ``seed``."""
+    part is the user's goal) from the seeded start ``seed``; ``known``: what a practised
+    user knows of the device (:class:`~sctd_services.user.SimulatedUser`)."""
+    return practise(skill, spec, seed, demos, task, known)[0]
+
+
+def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None, task: Task | None = None,
+             known: Mapping[str, DeviceModel] | None = None) -> tuple[TrialResult, dict[str, DeviceModel]]:
+    """:func:`run_trial`, and what its user learned of the device by the end: a model per
+    mode (the skill's state names) it used."""
     task = task if task is not None else find_task(spec.task)
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
+    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known)
     try:
-        return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos)
+        return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos, user), user.models
     finally:
         sim.close()
 
 
-def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int) -> tuple[TrialResult, SetWatch]:
+def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int,
+                  known: Mapping[str, DeviceModel] | None = None) -> tuple[TrialResult, SetWatch]:
     """One trial of a skill set (:mod:`sctd.runtime.goals`) in the composed room ``task``
     (its first part is the user's goal) from the seeded start ``seed``: the user does
     not know about the inference and escapes a skill it did not want
-    (:class:`~sctd_services.user.SetUser`). Returns the trial's result and what the set
-    did (:class:`SetWatch`)."""
+    (:class:`~sctd_services.user.SetUser`); ``known``: what a practised user knows of the
+    device, by the modes the display shows (``skill:state``, :meth:`SetWatch.shown`).
+    Returns the trial's result and what the set did (:class:`SetWatch`)."""
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
     watch = SetWatch(goals, task.object)
+    user = SetUser(SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known), task.object)
     try:
-        return _run(sim, TickDriver(None, RuntimeConfig(), goals=goals), task, spec, seed, None, watch), watch
+        driver = TickDriver(None, RuntimeConfig(), goals=goals)
+        return _run(sim, driver, task, spec, seed, None, user, watch), watch
     finally:
         sim.close()
 
@@ -87,12 +102,9 @@ class SetWatch:
 
 
 def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: int, demos: list | None,
-         watch: SetWatch | None = None) -> TrialResult:
+         user: SimulatedUser | SetUser, watch: SetWatch | None = None) -> TrialResult:
     feed = Feed(driver)
     drv = feed.driver
-    user: SimulatedUser | SetUser = SimulatedUser(task, spec.axes, spec.profile, seed=seed)
-    if watch is not None:
-        user = SetUser(user, task.object)
     rec = TrialRecorder(task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
     every_user = max(1, round(1.0 / (USER_RATE * sim.dt)))

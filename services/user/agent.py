@@ -20,12 +20,19 @@ the stick: the user neither learns from it nor tries the stick out there.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
 stick only every update period, its deflections are noisy and never smaller than its
 dead zone, and a mode switch costs it time with the stick released.
+
+A *practised* user (``known``) starts with what it learned of the device in earlier
+runs, a model per mode it has used, as the participants of a user study who are
+trained on every condition before they are measured. It needs no trial pushes in a
+mode it knows, and keeps learning from the hand's motion as before.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,16 +79,19 @@ class SimulatedUser:
     profile : HumanProfile or str
     seed : int
         Noise seed.
+    known : mapping of str to DeviceModel, optional
+        What a practised user knows of the device (module doc): a model per displayed
+        mode, copied, and learned further in this run.
     """
 
     def __init__(self, task: Task, n_axes: int = 3, profile: HumanProfile | str = "steady",
-                 seed: int = 0):
+                 seed: int = 0, known: Mapping[str, DeviceModel] | None = None):
         self.task = task
         self.intent = TaskIntent(task)
         self.n = n_axes
         self.profile = PROFILES[profile] if isinstance(profile, str) else profile
         self.rng = np.random.default_rng(seed)
-        self.models: dict[str, DeviceModel] = {}
+        self.models: dict[str, DeviceModel] = {m: copy.deepcopy(d) for m, d in (known or {}).items()}
         self._seen: deque[Observation] = deque()
         self._history: deque[tuple[float, Array]] = deque()  # (time, output) as applied
         self._perceived: Observation | None = None
@@ -238,11 +248,14 @@ class SimulatedUser:
 
     def _pausing(self, t: float, phase: str) -> bool:
         """Whether the stick is let go after a step of the task was reached
-        (``profile.step_pause``)."""
+        (``profile.step_pause``), or after holding it for ``profile.regrip_every``
+        within a step (for ``profile.regrip_time``)."""
+        p = self.profile
         if phase != self._pause_phase:
-            if self._pause_phase is not None:
-                self._pause_until = t + self.profile.step_pause
+            self._pause_until = t + p.step_pause if self._pause_phase is not None else t
             self._pause_phase = phase
+        elif p.regrip_every > 0 and t - self._pause_until >= p.regrip_every:
+            self._pause_until = t + p.regrip_time
         return t < self._pause_until
 
     def _no_progress(self, t: float, desire: Desire) -> bool:

@@ -24,6 +24,15 @@ measurements of a particular person; ``sctd eval`` prints the profile it used.
   execution time on a Kinova JACO; they give no single duration per switch, so the
   1 s default is our estimate, and ``sctd eval`` prints the share of the task time
   switching took to compare with their figure.
+- Let-goes: a reaching movement is a sequence of sub-movements (Meyer, Abrams,
+  Kornblum, Wright & Smith 1988, "Optimality in human motor performance: ideal control
+  of rapid aimed movements", Psychol. Rev. 95(3)), and a person driving an arm through
+  a joystick lets go between some of them to look and re-plan. ``step_pause`` lets go
+  when a step of the task is reached; ``regrip_every`` also after that long of holding
+  the stick in one step, for ``regrip_time``. Both are our assumptions, not
+  measurements: they give a skill set's inference the moments at rest it needs to
+  change the mapping, and the hesitant user's let-goes mid-reach are where a wrong
+  engagement can happen.
 """
 
 from __future__ import annotations
@@ -46,6 +55,8 @@ class HumanProfile:
     # s the person lets go of the stick when a step of their task is reached, before
     # going on with the next (re-planning between sub-movements); 0: straight on
     step_pause: float = 0.0
+    regrip_every: float = 0.0  # s of holding the stick after which the person lets go (0: never)
+    regrip_time: float = 0.0  # s such a let-go lasts
 
     def describe(self) -> dict:
         return asdict(self)
@@ -57,5 +68,7 @@ PROFILES = {
                           noise_gain=0.15, dead_zone=0.1, switch_time=1.5),
     # steady, letting go of the stick for half a second at each step of the task
     "pausing": HumanProfile("pausing", step_pause=0.5),
+    # pausing, and letting go for 0.3 s after every 1.5 s of holding the stick
+    "hesitant": HumanProfile("hesitant", step_pause=0.5, regrip_every=1.5, regrip_time=0.3),
 }
 DEFAULT_PROFILE = "steady"
