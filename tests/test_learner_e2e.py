@@ -2,7 +2,8 @@
 published -> stored -> trained -> checked -> swapped into the running daemon; a
 malformed demonstration refused with its row; a skill that fails the check kept out;
 kill -9 of the learner while it checks leaves the daemon ticking, and a restarted one
-finds its store; a rollback puts an earlier skill back."""
+finds its store; a rollback puts an earlier skill back; into a running skill set, the
+learned skill replaces the member tied to its object."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import pytest
 import zenoh
 
 from sctd.learn.demos import read_demos
-from sctd.wire import Keys, codec
+from sctd.wire import Keys, client, codec
 from sctd.wire.session import open_session
 from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
 
@@ -190,3 +191,42 @@ def test_train_without_a_learner_says_so(tmp_path):
     assert p.p.wait(60) == 1
     p.stop()
     assert "no learner answered on sctd/edan/learner (none found within 1 s" in p.output()
+
+
+def test_into_a_running_skill_set_the_member_of_the_skills_object_is_replaced(tmp_path, monkeypatch):
+    """``sctd run --set kitchen``: drawer-vf-learned is no member's name, so the learner
+    names the member tied to its object, drawer_handle: ``drawer``. Unchecked (gate:
+    false; no simulator) to keep it short: the check is the one a single skill gets."""
+    port = free_port()
+    ep = f"tcp/127.0.0.1:{port}"
+    store = tmp_path / "store"
+    monkeypatch.setenv("SCTD_STORE", str(store))
+    procs = [sctd("run", "--set", "kitchen", "--listen", ep, log=tmp_path / "run.log"),
+             sctd("learner", "--store", str(store), "--allow-unchecked", "--connect", ep,
+                  log=tmp_path / "learner.log")]
+    session = open_session(connect=[ep])
+    watch = Watch(session)
+    try:
+        assert wait_for(lambda: watch.events("state"), 60), "\n".join(p.output() for p in procs)
+        names = _publish_demos(session)
+        assert wait_for(lambda: len(watch.events("stored")) == len(names), 120)
+        request = {"task": "drawer", "method": "vf", "gate": False}
+        got = client.query(session, KEYS.learner, codec.pack(request), timeout=300)
+        assert got is not None and got[0], got
+        reply = got[1]
+        assert reply["swapped"] and reply["member"] == "drawer", reply
+        assert reply["reason"].startswith("swapped, replacing the member 'drawer': not checked")
+        summary = client.active_skill(session, KEYS, timeout=10.0)
+        assert summary is not None and summary["set"]["engaged"] == "teleop"
+        assert [(m["name"], m["object"]) for m in summary["set"]["members"]] == [
+            ("drawer-vf-learned", "drawer_handle"), ("cabinet-vf", "door_handle"),
+            ("light_switch-vf", "light_switch")]
+        assert summary["set"]["members"][0]["id"] == reply["id"]
+        record = json.loads((store / "skills" / reply["id"] / "record.json").read_text())
+        assert record["member"] == "drawer"
+    finally:
+        watch.close()
+        session.close()
+        for p in reversed(procs):
+            p.stop()
+        assert port_is_free(port)

@@ -170,6 +170,10 @@ def test_a_request_reads_learns_flags_by_their_names():
     ({"task": "pour", "method": "vf", "demos": []}, "demos"),
     ({"task": "pour", "method": "vf", "gate": "yes"}, "gate"),
     ({"task": "pour", "method": "vf", "seed": -1}, "seed"),
+    ({"task": "pour", "method": "vf", "member": 3}, "member"),
+    ({"task": "pour", "method": "vf", "member": ""}, "member"),
+    ({"task": "pour", "method": "vf", "member": "a=b"}, "member"),
+    ({"task": "pour", "method": "vf", "member": "tab\there"}, "member"),
 ])
 def test_a_malformed_request_is_named_by_its_field(fields, where):
     with pytest.raises(RequestError, match=f"^{where}: "):
@@ -292,6 +296,7 @@ def test_a_request_writes_the_record_before_a_swap_and_once_at_the_end(store, mo
     learner = Learner(None, store, settings=CheckSettings(allow_unchecked=True))  # type: ignore[arg-type]
     monkeypatch.setattr(learner, "say", lambda *args, **fields: None)
     monkeypatch.setattr(learner, "_train", lambda req: (s, load_skill(s.path), {"method": "vf"}))
+    monkeypatch.setattr(learner, "daemon_summary", lambda: None)
     writes: list[dict] = []
     write_atomic = store_module._write_atomic
 
@@ -303,7 +308,7 @@ def test_a_request_writes_the_record_before_a_swap_and_once_at_the_end(store, mo
     monkeypatch.setattr(store_module, "_write_atomic", counted)
     asked: list[dict] = []
 
-    def daemon_swap(session, keys, bundle, timeout):
+    def daemon_swap(session, keys, bundle, timeout, member=None):
         asked.append(json.loads(record_path.read_text()))  # what a learner killed now leaves
         return True, {"ok": True, "id": s.id}
 

@@ -39,6 +39,9 @@ def add_skills_arguments(p: argparse.ArgumentParser) -> None:
                           description="put a stored skill into the running daemon")
     swap.add_argument("ref", metavar="REF", help="a stored skill: NAME@ID, ID (or a prefix of 4+ "
                                                  "characters), or NAME (the newest)")
+    swap.add_argument("--member", metavar="NAME", default=None,
+                      help="the member of the daemon's skill set it replaces (default: the member of "
+                           "the skill's own name; docs/skill-sets.md)")
     add_robot_argument(swap)
     swap.add_argument("--timeout", type=float, default=40.0,
                       help="s to wait for the daemon's reply (default %(default)s)")
@@ -135,8 +138,9 @@ def main_skills_swap(args: argparse.Namespace) -> int:
     except SkillError as e:
         return fail("skills swap", str(e))
     with session_from_args(args) as session:
-        ok, body = client.swap(session, Keys(args.robot), bundle, args.timeout)
+        ok, body = client.swap(session, Keys(args.robot), bundle, args.timeout, member=args.member)
     if not ok:
         return fail("skills swap", body.get("error", str(body)), EXIT_FAILED)
-    print(f"{stored.ref}: swapped into the daemon (state {body.get('state')})")
+    member = f", replacing its set's member {body['member']}" if body.get("member") else ""
+    print(f"{stored.ref}: swapped into the daemon (state {body.get('state')}{member})")
     return EXIT_OK

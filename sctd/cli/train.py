@@ -35,6 +35,10 @@ def add_train_arguments(p: argparse.ArgumentParser) -> None:
                    help="learn from these stored demonstrations only (repeatable; default all "
                         "of the task)")
     p.add_argument("--name", default=None, help="the skill's name (default <task>-<method>-learned)")
+    p.add_argument("--member", default=None, metavar="NAME",
+                   help="with a skill set running: the member the skill replaces (default: the member "
+                        "of the skill's name, else the one member tied to its object; a daemon running one "
+                        "skill refuses it)")
     p.add_argument("--seed", type=int, default=None, help="the check's first trial seed (default: "
                                                           "the learner's)")
     p.add_argument("--no-gate", dest="gate", action="store_false",
@@ -72,7 +76,8 @@ def request_of(args: argparse.Namespace) -> dict[str, Any]:
         params[name] = _value(value)
     req: dict[str, Any] = {"task": args.task, "method": args.method, "gate": args.gate, "swap": args.swap}
     for key, value in (("object", args.object), ("frames", args.frame), ("demos", args.demos),
-                       ("name", args.name), ("seed", args.seed), ("params", params or None)):
+                       ("name", args.name), ("seed", args.seed), ("member", args.member),
+                       ("params", params or None)):
         if value is not None:
             req[key] = value
     return req
@@ -88,7 +93,9 @@ def progress_line(msg: dict[str, Any]) -> str | None:
     if ev == "checking":
         return f"checking: trial {msg.get('trial')}/{msg.get('of')}"
     if ev == "swapping":
-        return f"swapping {msg.get('id')} into the daemon"
+        member = msg.get("member")
+        return f"swapping {msg.get('id')} into the daemon" + (
+            "" if member is None else f" in place of the member {member!r}")
     return None
 
 

@@ -11,9 +11,10 @@ from typing import Any
 from sctd.learn import METHODS, HyperparameterError, check_hyperparameters, hyperparameter_names
 from sctd.learn.pipeline import hyperparameter_fields
 from sctd.wire import codec
+from sctd.wire.client import MEMBER_NAME_RULE, member_name_ok
 
 FIELDS = ("task", "method", "object", "frames", "params", "demos", "gate", "name", "swap", "seed",
-          "v")
+          "member", "v")
 
 
 class RequestError(ValueError):
@@ -37,6 +38,7 @@ class Request:
     name: str | None = None  # default: <task>-<method>-learned
     swap: bool = True
     seed: int | None = None  # the check's first trial seed (default: the learner's)
+    member: str | None = None  # the skill set's member it replaces (default: services/learner/member.py)
 
     @property
     def skill_name(self) -> str:
@@ -138,6 +140,17 @@ def _frames(value: Any, method: str) -> dict[str, list[float]]:
     return dict(parse_frame(t) for t in value)
 
 
+def _member(value: Any) -> str | None:
+    """A skill set's member, as the daemon's ``skill/swap?member=NAME`` takes it."""
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise RequestError("member", f"expected a skill set member's name, got {value!r}")
+    if not member_name_ok(value):
+        raise RequestError("member", f"{value!r}: {MEMBER_NAME_RULE}")
+    return value
+
+
 def _flag(obj: dict, key: str, default: bool) -> bool:
     value = obj.get(key, default)
     if not isinstance(value, bool):
@@ -177,7 +190,8 @@ def parse_request(data: bytes) -> Request:
         frames=_frames(obj.get("frames"), method), params=_params(obj.get("params"), method),
         demos=None if demos is None else [_chunk(d, "demos") for d in demos],
         gate=_flag(obj, "gate", True), swap=_flag(obj, "swap", True),
-        name=None if obj.get("name") is None else _chunk(obj["name"], "name"), seed=seed)
+        name=None if obj.get("name") is None else _chunk(obj["name"], "name"), seed=seed,
+        member=_member(obj.get("member")))
 
 
 def request_map(req: Request) -> dict[str, Any]:

@@ -9,8 +9,9 @@ Zenoh (docs/wire-contract.md, docs/learner.md):
 - answers ``sctd/<robot>/learner`` (the request: :mod:`.request`): trains with
   :mod:`sctd.learn`, stores the skill by content id, checks it with lockstep trials
   (:mod:`.check`) and, when it passes, swaps it into the daemon through its ``skill``
-  queryable; one reply after all that, ``{id, name, ref, swapped, reason, summary,
-  report, evaluation, timings}``, or an error reply ``{error}``;
+  queryable (into a running skill set, in place of the member :mod:`.member` chooses);
+  one reply after all that, ``{id, name, ref, swapped, member, reason, summary, report,
+  evaluation, timings}``, or an error reply ``{error}``;
 - publishes on ``sctd/<robot>/learner/status`` what it stored or refused, each stage of
   a training as it ends, each trial of a check, and once a second its state.
 
@@ -43,6 +44,7 @@ from sctd.wire import DEFAULT_ROBOT, Keys, client, codec
 from sctd.wire.session import MSGPACK
 
 from .check import CheckSettings, can_evaluate, evaluation, verdict
+from .member import NoMember, member_to_replace, replaced_skill_id
 from .request import Request, RequestError, parse_request, request_map
 from .store import SkillRecord, Store, StoreFull
 from .training import Trainer, TrainingError
@@ -80,13 +82,19 @@ class _Outcome:
     timings: dict[str, float]
     daemon: dict[str, Any] | None
 
+    @property
+    def member(self) -> str | None:
+        """The member of the daemon's skill set the skill replaced (None: not swapped, or
+        no set)."""
+        return self.daemon.get("member") if self.swapped and self.daemon else None
+
     def reply(self) -> dict[str, Any]:
         """The reply map; the report without its per-sample labels (the record on disk
         keeps them)."""
         s = self.stored
         report = {k: v for k, v in self.report.items() if k not in PER_SAMPLE}
         return {"id": s.id, "name": s.name, "ref": s.ref, "passed": self.passed,
-                "checked": self.passed is not None, "swapped": self.swapped,
+                "checked": self.passed is not None, "swapped": self.swapped, "member": self.member,
                 "reason": self.reason, "summary": self.summary, "report": report,
                 "evaluation": self.evaluation, "timings": self.timings, "daemon": self.daemon,
                 "path": str(s.path)}
@@ -257,10 +265,10 @@ class Learner:
         record.update({"timings": timings})
         record.save()
         self.counters["swapped" if swapped else "kept"] += 1
-        self.say("swapped" if swapped else "kept", id=stored.id, name=stored.name, reason=reason,
-                 timings=timings)
-        return _Outcome(stored, passed, swapped, reason, skill_summary(skill), report, ev, timings,
-                        daemon)
+        out = _Outcome(stored, passed, swapped, reason, skill_summary(skill), report, ev, timings, daemon)
+        self.say("swapped" if swapped else "kept", id=stored.id, name=stored.name, member=out.member,
+                 reason=reason, timings=timings)
+        return out
 
     def _train(self, req: Request) -> tuple[StoredSkill, Any, dict[str, Any]]:
         demos = self.store.load_demos(req.task, req.demos)
@@ -306,7 +314,7 @@ class Learner:
         if not can_evaluate(req.task):
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
-        active = self._active_evaluation(req.task, exclude=stored.id)
+        active = self._active_evaluation(req, stored, record.data.get("object"))
         ev = evaluation(stored, req.task, self.settings, seed, self.pool,
                         lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n),
                         active=active)
@@ -315,15 +323,18 @@ class Learner:
                        "check": {"passed": passed, "reason": reason, "evaluation": ev}})
         return ev, passed, reason
 
-    def _active_evaluation(self, task: str, exclude: str) -> dict[str, Any] | None:
-        """The running skill's stored evaluation on ``task`` (None: no daemon, not from
-        the store, or never evaluated on it)."""
-        active = self.daemon_summary()
-        sid = active.get("id") if active else None
-        if not sid or sid == exclude:
+    def _active_evaluation(self, req: Request, stored: StoredSkill, obj: str | None
+                           ) -> dict[str, Any] | None:
+        """The stored evaluation on the request's task of the skill ``stored`` would
+        replace: the running skill's, or with a skill set the replaced member's
+        (:func:`.member.replaced_skill_id`; a set runs teleoperation until a member
+        engages). None: no daemon, no member chosen, not from the store, the same skill,
+        or never evaluated on the task."""
+        sid = replaced_skill_id(self.daemon_summary(), req.member, stored.name, obj)
+        if not sid or sid == stored.id:
             return None
-        s = self.store.skill(str(sid))
-        return None if s is None else s.record.get("evaluation", {}).get(task)
+        s = self.store.skill(sid)
+        return None if s is None else s.record.get("evaluation", {}).get(req.task)
 
     def daemon_summary(self) -> dict[str, Any] | None:
         """The daemon's active skill summary, or None when no daemon answers."""
@@ -332,20 +343,33 @@ class Learner:
     def _swap(self, stored: StoredSkill, req: Request, passed: bool | None, reason: str,
               record: SkillRecord) -> tuple[bool, str, dict[str, Any] | None]:
         """Swap the skill into the daemon when it passed (or was not checked) and the
-        request asks for it; a swap goes into ``record``. The record is written before
-        the daemon is asked: from then on the daemon may run the skill, and a learner
-        that dies before the reply must leave its check (the baseline of later checks,
-        what ``sctd skills`` shows) on disk."""
+        request asks for it; into a running skill set in place of the member
+        :func:`.member.member_to_replace` chooses, or not at all when it chooses none. A
+        swap goes into ``record``. The record is written before the daemon is asked: from
+        then on the daemon may run the skill, and a learner that dies before the reply
+        must leave its check (the baseline of later checks, what ``sctd skills`` shows)
+        on disk."""
         if passed is False:
             return False, f"kept the active skill: {reason}", None
         if not req.swap:
             return False, f"stored, not swapped (swap: false); check: {reason}", None
+        try:  # the summary of now, not the check's: the set may have changed meanwhile
+            member = member_to_replace(self.daemon_summary(), req.member, stored.name,
+                                       record.data.get("object"))
+        except NoMember as e:
+            return False, f"stored, not swapped: {e}; check: {reason}", None
         record.save()
-        self.say("swapping", id=stored.id)
-        ok, body = client.swap(self.session, self.keys, bundle_from_file(stored.path), SWAP_TIMEOUT)
+        self.say("swapping", id=stored.id, member=member)
+        # the member of the skill's own name, found by name, is the daemon's default: not
+        # named, so that a name a selector cannot carry (client.MEMBER_NAME_RULE) is replaced too
+        named = None if req.member is None and member == stored.name else member
+        ok, body = client.swap(self.session, self.keys, bundle_from_file(stored.path), SWAP_TIMEOUT,
+                               member=named)
         if ok:
-            record.update({"swaps": [*record.data.get("swaps", []), time.time()]})
-            return True, f"swapped: {reason}", body
+            replaced = body.get("member")
+            record.update({"swaps": [*record.data.get("swaps", []), time.time()], "member": replaced})
+            return True, (f"swapped: {reason}" if replaced is None else
+                          f"swapped, replacing the member {replaced!r}: {reason}"), body
         return False, f"not swapped: {body.get('error', body)}; check: {reason}", body
 
 
