@@ -71,6 +71,38 @@ def test_engagements_read_off_the_changes():
     assert engagements([], "a", "teleop")["first_engaged"] is None
 
 
+def test_with_a_change_of_mind_the_first_tasks_skill_is_right_until_the_change():
+    """The user goes for b first and changes its mind at 5 s: b engaged at 3 s was what it
+    wanted then; still engaged at the change, it is left 0.2 s after; c engaged at 6 s is
+    wrong (undone at 6.5 s), a at 8 s right."""
+    changes = [(3.0, "teleop", "b"), (5.2, "b", "teleop"), (6.0, "teleop", "c"), (6.5, "c", "teleop"),
+               (8.0, "teleop", "a")]
+    e = engagements(changes, "a", "teleop", detour="b", changed_at=5.0)
+    assert e["first_engaged"] == "b" and e["right_first"] and e["right_engaged"] and e["t_engaged"] == 8.0
+    assert e["wrong"] == 1 and e["recovery_s"] == [0.5] and e["after_change_s"] == 0.2
+    kept = engagements([(3.0, "teleop", "b")], "a", "teleop", detour="b", changed_at=5.0)
+    assert np.isnan(kept["after_change_s"]) and kept["wrong"] == 0 and not kept["right_engaged"]
+    late = engagements([(6.0, "teleop", "b")], "a", "teleop", detour="b", changed_at=5.0)
+    assert late["after_change_s"] is None and late["wrong"] == 1 and not late["right_first"]
+    assert engagements(changes, "a", "teleop")["after_change_s"] is None
+
+
+@pytest.mark.slow
+def test_a_user_who_changes_its_mind_escapes_the_first_tasks_skill(tmp_path):
+    """Trial 0 with a change of mind: the set engages the first task's skill, the user
+    changes its mind there, escapes it a reaction delay later, and the goal's skill
+    engages and finishes; teleoperation runs the same person; no pre-selected run."""
+    from sctd_services.eval.goals import detour_of
+
+    r = set_job(SetSpec(set_file(tmp_path), detour=True), 0)
+    skill = {"cabinet": "cabinet-vf", "drawer": "drawer", "oven": "oven-vf"}
+    assert r["detour"] == detour_of(0, ROOM) != r["goal"] and "preselected" not in r
+    assert r["first_engaged"] == skill[r["detour"]] and r["right_first"] and r["changed_at"] is not None
+    assert 0.0 < r["after_change_s"] < 1.0 and r["escapes"] >= 1
+    assert r["right_engaged"] and r["t_engaged"] > r["changed_at"]
+    assert r["set"]["outcome"] == "success" and r["teleop"]["outcome"] == "success"
+
+
 def test_the_summary_pairs_trials_that_both_finished():
     def row(goal, s, p, t, right=True):
         res = lambda d: {"outcome": "success" if d else "failure", "duration_s": d or 60.0}  # noqa: E731
@@ -126,6 +158,42 @@ def test_the_user_escapes_a_skill_for_another_object_a_reaction_delay_later():
     assert user.step(2.01, obs, None) == ((0.5, 0.0, 0.0), (0, 1, 0))  # teleoperation
 
 
+def test_a_user_changing_its_mind_uses_the_first_tasks_skill_until_then():
+    """Going for the drawer first, the user drives as the drawer's user and uses the
+    drawer's skill; a step pause after it reached the drawer's first step it changes its
+    mind: from then it drives as the cabinet's user and escapes the drawer's skill a
+    reaction delay later. One person: one knowledge of the device."""
+    from sctd.task import find_task
+    from sctd_services.user import Observation, SetUser, SimulatedUser
+
+    class Fixed(SimulatedUser):
+        def __init__(self, task, u):
+            super().__init__(task, profile="pausing")
+            self.u = u
+
+        def step(self, t, obs):
+            return self.u, (0, 1, 0)
+
+    cabinet, drawer = find_task("cabinet"), find_task("drawer")
+    goal, first = Fixed(cabinet, (0.5, 0.0, 0.0)), Fixed(drawer, (0.0, 0.3, 0.0))
+    user = SetUser(goal, cabinet.object, first, drawer.object)
+    assert first.models is goal.models and user.wanted == drawer.object
+    obs = Observation(0.0, np.eye(4), {}, {}, "drawer:reach")
+    assert user.step(0.0, obs, drawer.object) == ((0.0, 0.3, 0.0), (0, 1, 0))  # its skill: used
+    first.intent.index = 1  # the drawer's first step reached
+    pause = user.profile.step_pause
+    assert user.step(1.0, obs, drawer.object)[0] == (0.0, 0.3, 0.0)
+    assert user.step(1.0 + pause - 0.01, obs, drawer.object)[0] == (0.0, 0.3, 0.0)
+    assert user.step(1.0 + pause, obs, drawer.object)[0] == (0.0, 0.3, 0.0) and user.changed_at == 1.0 + pause
+    assert user.wanted == cabinet.object
+    t = 1.0 + pause + 0.01
+    assert user.step(t, obs, drawer.object) == ((0.5, 0.0, 0.0), (0, 1, 0))  # noticed a delay later
+    pressed = user.step(t + user.profile.reaction_delay, obs, drawer.object)
+    assert pressed == ((0.0, 0.0, 0.0), (0, 1, 1)) and len(user.escapes) == 1
+    with pytest.raises(ValueError, match="both"):
+        SetUser(goal, cabinet.object, first)
+
+
 @pytest.mark.slow
 def test_a_practised_user_knows_the_modes_of_its_practice_runs(tmp_path):
     """With practice, the user of every condition starts knowing the modes it used in
@@ -150,7 +218,7 @@ def test_eval_refuses_a_bad_belief_or_practice_without_a_set(capsys):
         (["--set", "doors", "--belief", "threshold"], "--belief: 'threshold' is not KEY=NUMBER"),
         (["--set", "doors", "--belief", "gamma=2"], "belief.gamma: unknown field (allowed: beta, "),
         (["--set", "doors", "--belief", "threshold=1.5"], "belief.threshold: expected a number in (0.5, 1)"),
-        (["--skill", "pour", "--practised"], "--practised and --belief: only with --set"),
+        (["--skill", "pour", "--practised"], "--practised, --belief and --change-of-mind: only with --set"),
     ]:
         assert main(["eval", *argv, "--trials", "1"]) == 2, argv
         assert problem in capsys.readouterr().err, argv

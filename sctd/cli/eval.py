@@ -67,6 +67,9 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--belief", action="append", metavar="KEY=VALUE", default=[],
                    help="with --set: a parameter of the set's belief over its file's (repeatable; beta, "
                         "threshold, floor, escape_factor, rearm_travel; docs/goals.md)")
+    p.add_argument("--change-of-mind", action="store_true",
+                   help="with --set: the user first goes for another task of the room and changes "
+                        "its mind once there (the set against teleoperation; docs/goals.md)")
     p.add_argument("--practised", action="store_true",
                    help="with --set: the user did the goal's task once with its skill and once with "
                         "teleoperation before the trials, and knows what the stick does in their modes")
@@ -99,8 +102,8 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--jobs: must be >= 1"
     if args.scheduler is not None and not args.lockstep:
         return "--scheduler: only with --lockstep (real-time trials start local processes)"
-    if (args.practised or args.belief) and args.skill_set is None:
-        return "--practised and --belief: only with --set"
+    if (args.practised or args.belief or args.change_of_mind) and args.skill_set is None:
+        return "--practised, --belief and --change-of-mind: only with --set"
     for kv in args.belief:
         key, eq, value = kv.partition("=")
         try:
@@ -213,14 +216,14 @@ def _evaluate_set(args: argparse.Namespace) -> int:
     try:
         belief = tuple((k, float(v)) for k, _, v in (kv.partition("=") for kv in args.belief))
         spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, time_limit=args.time_limit,
-                       practice=args.practised, belief=belief)
+                       practice=args.practised, belief=belief, detour=args.change_of_mind)
         tasks_of([m.skill for m in goal_members(spec.set_file)])
         goal_set(spec.skill_set())  # (the belief's parameters checked before any trial)
     except (SkillError, TaskError, ValueError) as e:
         return fail("eval", str(e))
     bar = _progress_bar()
     result = evaluate_set(spec, args.trials, args.seed, args.jobs or os.cpu_count() or 1,
-                          progress=lambda done, total: bar(done, total, "set, pre-selected, teleop"))
+                          progress=lambda done, total: bar(done, total, ", ".join(spec.runs)))
     print(file=sys.stderr)
     if args.json:
         print(json.dumps(result))

@@ -52,6 +52,9 @@ from .lockstep import practise, run_set_trial, run_trial
 from .trial import TaskSpec
 
 CONDITIONS = ("set", "preselected", "teleop")
+DETOUR_STUCK = 20.0
+"""s added to a trial's ``stuck_after`` when the user goes for another task first (its
+goal makes no progress meanwhile)."""
 PRACTICE_SEED = 999_983  # the practice runs' start (measured trials count up from their seed)
 
 
@@ -67,7 +70,14 @@ class SetSpec:
     stuck_after: float = 10.0
     conditions: tuple[str, ...] = CONDITIONS
     practice: bool = False
+    detour: bool = False  # the user first goes for another task, then changes their mind
     belief: tuple[tuple[str, float], ...] = ()  # the belief's parameters over the file's
+
+    @property
+    def runs(self) -> tuple[str, ...]:
+        """The conditions a trial runs: with a change of mind, no pre-selected skill (the
+        person would have picked the first task's from the menu)."""
+        return tuple(c for c in self.conditions if not (self.detour and c == "preselected"))
 
     def skill_set(self) -> SkillSet:
         """The set file read, with ``belief`` over its belief's parameters (checked when
@@ -119,6 +129,14 @@ def goal_of(seed: int, names: Sequence[str]) -> str:
     return names[int(np.random.default_rng([seed, 31]).integers(len(names)))]
 
 
+def detour_of(seed: int, names: Sequence[str]) -> str:
+    """The task the user of trial ``seed`` goes for first when it changes its mind: one
+    of the others than its goal (uniform, from the seed alone)."""
+    goal = goal_of(seed, names)
+    others = [n for n in names if n != goal]
+    return others[int(np.random.default_rng([seed, 32]).integers(len(others)))]
+
+
 def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     """Trial ``seed``: the user's goal, and each condition's run (module doc)."""
     skill_set = spec.skill_set()
@@ -126,29 +144,35 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     names = tasks_of(skills)
     goal = goal_of(seed, names)
     task = room_task(names, goal)
-    tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=spec.stuck_after)
+    stuck = spec.stuck_after + (DETOUR_STUCK if spec.detour else 0.0)
+    tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=stuck)
     right = skills[names.index(goal)]
     out: dict[str, Any] = {"seed": seed, "goal": goal, "skill": right.name}
     known: dict[str, dict[str, DeviceModel]] = {"preselected": {}, "teleop": {}}
     if spec.practice:
         for c, index in (("preselected", names.index(goal)), ("teleop", -1)):
             known[c] = _practised(spec.set_file, goal, index, spec.profile)
-    if "set" in spec.conditions:
+    detour = detour_skill = None
+    if spec.detour:
+        first = detour_of(seed, names)
+        detour, detour_skill = room_task(names, first), skills[names.index(first)].name
+        out.update(detour=first, detour_skill=detour_skill)
+    if "set" in spec.runs:
         goals = goal_set(skill_set)
         shown = {f"{right.name}:{m}": d for m, d in known["preselected"].items()}
         shown.update({f"{skill_set.teleop.name}:{m}": d for m, d in known["teleop"].items()})
-        res, watch = run_set_trial(goals, task, tspec, seed, known=shown)
+        res, watch = run_set_trial(goals, task, tspec, seed, known=shown, detour=detour)
         if spec.practice:
             out["practised_modes"] = sorted(shown)
         out["set"] = res.as_dict(with_trajectory=False)
-        out.update(engagements(watch.changes, right.name, goals.teleop.name))
-        out["escapes"] = goals.counters.escapes
-    if "preselected" in spec.conditions:
-        out["preselected"] = run_trial(right, tspec, seed, task=task,
-                                       known=known["preselected"]).as_dict(with_trajectory=False)
-    if "teleop" in spec.conditions:
-        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task,
-                                  known=known["teleop"]).as_dict(with_trajectory=False)
+        out.update(engagements(watch.changes, right.name, goals.teleop.name, detour_skill, watch.changed_at))
+        out.update(escapes=goals.counters.escapes, changed_at=watch.changed_at)
+    if "preselected" in spec.runs:
+        out["preselected"] = run_trial(right, tspec, seed, task=task, known=known["preselected"],
+                                       detour=detour).as_dict(with_trajectory=False)
+    if "teleop" in spec.runs:
+        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task, known=known["teleop"],
+                                  detour=detour).as_dict(with_trajectory=False)
     return out
 
 
@@ -164,23 +188,41 @@ def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str,
     return practise(skill, tspec, PRACTICE_SEED, task=room_task(names, goal))[1]
 
 
-def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str) -> dict[str, Any]:
+def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str,
+                detour: str | None = None, changed_at: float | None = None) -> dict[str, Any]:
     """What the changes of the running skill (time, from, to) of a trial say: the first
-    member engaged, whether it was ``right`` (the goal's), whether ``right`` was ever
-    engaged and when first, the wrong engagements and the seconds each took to undo
-    (None: never undone)."""
+    member engaged, whether it was the one the user wanted then, whether ``right`` (the
+    goal's) was ever engaged and when first, the wrong engagements (of a member the user
+    did not want then) and the seconds each took to undo (None: never undone).
+
+    With a change of mind (``detour``: the skill of the task the user went for first,
+    until ``changed_at``), that skill is the one wanted before the change; one still
+    engaged at the change is undone ``after_change_s`` after it (None: none was engaged;
+    NaN: never undone)."""
+    def wanted(t: float) -> str:
+        return detour if detour is not None and (changed_at is None or t < changed_at) else right
+
     engaged = [(t, to) for t, _, to in changes if to != teleop]
-    first = engaged[0][1] if engaged else None
+    first = engaged[0] if engaged else None
     t_right = next((t for t, to in engaged if to == right), None)
     recovery: list[float | None] = []
     for k, (t, _, to) in enumerate(changes):
-        if to in (teleop, right):
+        if to == teleop or to == wanted(t):
             continue
         out = next((t2 for t2, f2, _ in changes[k + 1:] if f2 == to), None)
         recovery.append(None if out is None else round(out - t, 3))
-    return {"first_engaged": first, "right_first": first == right, "right_engaged": t_right is not None,
+    after: float | None = None
+    if detour is not None and changed_at is not None:
+        running = next((to for t, _, to in reversed(changes) if t < changed_at), teleop)
+        if running == detour:
+            left = next((t for t, f, _ in changes if t >= changed_at and f == detour), None)
+            after = math.nan if left is None else round(left - changed_at, 3)
+    return {"first_engaged": None if first is None else first[1],
+            "right_first": first is not None and first[1] == wanted(first[0]),
+            "right_engaged": t_right is not None,
             "t_engaged": None if t_right is None else round(t_right, 3), "wrong": len(recovery),
-            "recovery_s": recovery, "changes": [(round(t, 3), f, to) for t, f, to in changes]}
+            "recovery_s": recovery, "after_change_s": after,
+            "changes": [(round(t, 3), f, to) for t, f, to in changes]}
 
 
 def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
@@ -201,10 +243,10 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
             if progress:
                 progress(len(per_trial), trials)
     skill_set = spec.skill_set()
-    out = summarise_set(per_trial, spec.conditions)
+    out = summarise_set(per_trial, spec.runs)
     out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
                room=tasks_of([m.skill for m in skill_set.members]), teleop=skill_set.teleop.name,
-               profile=spec.profile, practice=spec.practice, seed=seed,
+               profile=spec.profile, practice=spec.practice, detour=spec.detour, seed=seed,
                belief=dataclasses.asdict(belief_model(skill_set)),
                per_trial=per_trial)
     return out
@@ -241,6 +283,11 @@ def _figures(rows: Sequence[dict[str, Any]], conditions: Sequence[str]) -> dict[
         right_engaged=round(sum(r["right_engaged"] for r in rows) / len(rows), 4),
         t_engaged_median=_median([r["t_engaged"] for r in rows if r["t_engaged"] is not None]),
         wrong=sum(r["wrong"] for r in rows), wrong_undone=len(recov), recovery_median_s=_median(recov))
+    stale = [r["after_change_s"] for r in rows if r.get("after_change_s") is not None]
+    undone = [x for x in stale if not math.isnan(x)]
+    if any("detour" in r for r in rows):
+        out.update(engaged_at_change=len(stale), undone_after_change=len(undone),
+                   after_change_median_s=_median(undone))
     for c in conditions:
         if c == "set":
             continue
@@ -263,12 +310,18 @@ def format_set_report(r: dict[str, Any]) -> str:
     for name, f in rows:
         if "right_first" not in f:
             continue
-        succ = "/".join(str(f[c]["successes"]) for c in CONDITIONS if c in f)
-        med = "/".join(_fmt(f[c]["median_s"]) for c in CONDITIONS if c in f)
+        succ = "/".join(str(f[c]["successes"]) if c in f else "-" for c in CONDITIONS)
+        med = "/".join(_fmt(f[c]["median_s"]) if c in f else "-" for c in CONDITIONS)
         lines.append(f"{name:<15} {f['trials']:>6}  {f['right_first']:>11.0%}  {f['right_engaged']:>12.0%}  "
                      f"{_fmt(f['t_engaged_median']):>13}  {f['wrong']:>5} ({f['wrong_undone']}, "
                      f"{_fmt(f['recovery_median_s'])}){'':<9}  {succ:>22}  {med:>23}  "
                      f"{_fmt(f.get('set_vs_preselected')):>7}  {_fmt(f.get('set_vs_teleop')):>10}")
+    o = r["overall"]
+    if "engaged_at_change" in o:
+        lines.append(f"change of mind: the first task's skill was engaged when the user changed its "
+                     f"mind in {o['engaged_at_change']} of {o['trials']} trials, escaped in "
+                     f"{o['undone_after_change']}, median {_fmt(o['after_change_median_s'])} s after "
+                     "the change")
     return "\n".join(lines)
 
 

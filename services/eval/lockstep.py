@@ -36,11 +36,22 @@ USER_DEVICE = "user"  # the simulated user's device name (input/<name>)
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
               keep_series: bool = False, task: Task | None = None,
-              known: Mapping[str, DeviceModel] | None = None) -> TrialResult:
+              known: Mapping[str, DeviceModel] | None = None, detour: Task | None = None) -> TrialResult:
     """One trial of ``skill`` on ``spec.task`` (or ``task``, a composed room whose first
     part is the user's goal) from the seeded start ``seed``; ``known``: what a practised
-    user knows of the device (:class:`~sctd_services.user.SimulatedUser`)."""
-    return practise(skill, spec, seed, demos, task, known)[0]
+    user knows of the device (:class:`~sctd_services.user.SimulatedUser`); ``detour``:
+    the room as the task the user goes for first, before changing their mind
+    (:class:`~sctd_services.user.SetUser`)."""
+    if detour is None:
+        return practise(skill, spec, seed, demos, task, known)[0]
+    task = task if task is not None else find_task(spec.task)
+    scene, q0 = trial_scene(task, seed)
+    sim = Simulation(scene=scene, q0=q0)
+    try:
+        return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos,
+                    set_user(task, spec, seed, known, detour))
+    finally:
+        sim.close()
 
 
 def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None, task: Task | None = None,
@@ -57,33 +68,50 @@ def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
         sim.close()
 
 
+def set_user(task: Task, spec: TaskSpec, seed: int, known: Mapping[str, DeviceModel] | None = None,
+             detour: Task | None = None) -> SetUser:
+    """The person of a trial in a room of several tasks (:class:`~sctd_services.user.SetUser`):
+    going for ``task``'s goal, or first for ``detour``'s."""
+    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known)
+    if detour is None:
+        return SetUser(user, task.object)
+    first = SimulatedUser(detour, spec.axes, spec.profile, seed=seed + 1)
+    return SetUser(user, task.object, first, detour.object)
+
+
 def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int,
-                  known: Mapping[str, DeviceModel] | None = None) -> tuple[TrialResult, SetWatch]:
+                  known: Mapping[str, DeviceModel] | None = None,
+                  detour: Task | None = None) -> tuple[TrialResult, SetWatch]:
     """One trial of a skill set (:mod:`sctd.runtime.goals`) in the composed room ``task``
     (its first part is the user's goal) from the seeded start ``seed``: the user does
     not know about the inference and escapes a skill it did not want
     (:class:`~sctd_services.user.SetUser`); ``known``: what a practised user knows of the
-    device, by the modes the display shows (``skill:state``, :meth:`SetWatch.shown`).
-    Returns the trial's result and what the set did (:class:`SetWatch`)."""
+    device, by the modes the display shows (``skill:state``, :meth:`SetWatch.shown`);
+    ``detour``: the room as the task the user goes for first. Returns the trial's result
+    and what the set did (:class:`SetWatch`)."""
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
     watch = SetWatch(goals, task.object)
-    user = SetUser(SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known), task.object)
+    user = set_user(task, spec, seed, known, detour)
     try:
         driver = TickDriver(None, RuntimeConfig(), goals=goals)
-        return _run(sim, driver, task, spec, seed, None, user, watch), watch
+        res = _run(sim, driver, task, spec, seed, None, user, watch)
+        watch.changed_at = user.changed_at
+        return res, watch
     finally:
         sim.close()
 
 
 class SetWatch:
     """What a skill set did in a trial: every change of the running skill (time, from,
-    to) and what the user was shown (the engaged skill's task object)."""
+    to) and what the user was shown (the engaged skill's task object); when the user
+    changed their mind (``changed_at``, None: never)."""
 
     def __init__(self, goals: GoalSet, goal_object: str):
         self.goals = goals
         self.goal_object = goal_object
         self.changes: list[tuple[float, str, str]] = []
+        self.changed_at: float | None = None
         self._running = goals.running[0].name
 
     def tick(self, t: float) -> None:
