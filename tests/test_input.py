@@ -15,7 +15,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sctd.wire import codec
-from sctd_services.input.bridge import RELEASED, Bridge
+from sctd_services.input.bridge import Bridge
 from sctd_services.input.bridge import run as run_bridge
 from sctd_services.input.device import DeviceInfo, InputDevice, InputError, Reading, pick
 from sctd_services.input.mapping import (
@@ -92,16 +92,20 @@ def test_unknown_keys_of_mixed_types_are_named():
 
 
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
-    for name in ("xbox", "spacemouse"):
+    for name in ("xbox", "spacemouse", "keyboard"):
         m = shipped_mapping(name)
         assert m.buttons.keys() == {"mode", "enable", "escape", "choose", "stop"}
-        assert m.buttons["choose"] is None  # (published only where a mapping maps it)
+    # (choose is published only where a mapping maps it: the pad's X, the keyboard's c;
+    # the space mouse has two buttons)
+    assert shipped_mapping("spacemouse").buttons["choose"] is None
     assert shipped_mapping("xbox").buttons["enable"] is not None  # a pad has a deadman
     # the pad's Y (SDL button 3) is stop: the message's stop field, not a button position
     xbox = shipped_mapping("xbox")
     held = Reading((0.0,) * 6, (0, 0, 0, 1) + (0,) * 7)
     assert xbox.stop(held) and not xbox.stop(Reading((0.0,) * 6, (0,) * 11))
-    assert xbox.apply(held, 3)[1] == [0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
+    assert xbox.apply(held, 3)[1] == [0, 0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
+    x_button = Reading((0.0,) * 6, (0, 0, 1) + (0,) * 8)  # the pad's X: choose, fourth
+    assert xbox.apply(x_button, 3)[1] == [0, 0, 0, 1]
     # choose (a skill set's next task) is the fourth position, where a file maps it
     f = tmp_path / "m.yaml"
     f.write_text("version: 1\naxes: [{source: 0}]\nbuttons: {enable: null, escape: 1, choose: 2}\n")
@@ -161,7 +165,7 @@ def test_bridge_publishes_zero_released_while_the_device_is_gone_and_on_exit():
     assert [s.seq for s in sent] == list(range(1, 8))
     assert sent[0].u == (0.5, -0.5, 0.0) and sent[0].buttons == (0, 1, 0)
     for s in (sent[1], sent[2], *sent[4:]):  # gone, failed, and the zeros on exit
-        assert s.u == (0.0, 0.0, 0.0) and list(s.buttons) == RELEASED
+        assert s.u == (0.0, 0.0, 0.0) and list(s.buttons) == [0, 0, 0]
     assert sent[3].u == (0.0, 1.0, -1.0) and sent[3].buttons == (1, 1, 0)  # finite, clipped
     assert br.stats.errors == 1 and br.stats.disconnected == 2 and br.stats.connects == 2
     assert said[0] == "scripted: connected" and "disconnected" in said[1]

@@ -103,15 +103,16 @@ def test_hold_times_must_be_ordered():
 
 def test_reading_from_keys_signs_speed_buttons_and_opposites():
     r = reading_from_keys({"right", "up", "pageup"}, 1.0, 5.0)
-    assert r.axes == (1.0, 1.0, 1.0) and r.buttons == (0, 0, 0, 0) and r.stamp == 5.0
+    assert r.axes == (1.0, 1.0, 1.0) and r.buttons == (0, 0, 0, 0, 0) and r.stamp == 5.0
     assert reading_from_keys({"left", "down", "s"}, 0.5, 0.0).axes == (-0.5, -0.5, -0.5)
     assert reading_from_keys({"up", "down", "w", "pagedown"}, 1.0, 0.0).axes == (0.0, 0.0, 0.0)
     assert reading_from_keys({"w", "pageup"}, 1.0, 0.0).axes == (0.0, 0.0, 1.0)  # clipped
-    assert reading_from_keys({" "}, 1.0, 0.0).buttons == (1, 0, 0, 0)
-    assert reading_from_keys({"m", "e", "q"}, 1.0, 0.0).buttons == (1, 0, 1, 0)
+    assert reading_from_keys({" "}, 1.0, 0.0).buttons == (1, 0, 0, 0, 0)
+    assert reading_from_keys({"m", "e", "q"}, 1.0, 0.0).buttons == (1, 0, 1, 0, 0)
     keyboard = shipped_mapping("keyboard")
     u, b = keyboard.apply(reading_from_keys({"e", "left"}, 1.0, 0.0), 6)
-    assert u == [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0] and b == [0, 1, 1]  # enable held: no deadman
+    assert u == [-1.0, 0.0, 0.0, 0.0, 0.0, 0.0] and b == [0, 1, 1, 0]  # enable held: no deadman
+    assert keyboard.apply(reading_from_keys({"c"}, 1.0, 0.0), 3)[1] == [0, 1, 0, 1]  # c: choose
     assert keyboard.stop(reading_from_keys({"x"}, 1.0, 0.0))  # x: the message's stop field
     assert not keyboard.stop(reading_from_keys({"e"}, 1.0, 0.0))
 
@@ -194,7 +195,7 @@ def test_keyboard_on_a_pty_holds_while_repeating_then_zero_and_restores_the_term
         assert wait_for(lambda: u0()[-1] == 0.0 and u0().count(0.8) > 0, 10), u0()
         os.write(master, b" ")  # mode
         assert wait_for(lambda: any(m.buttons[0] for m in list(seen)), 10)
-        assert wait_for(lambda: seen[-1].buttons == (0, 1, 0), 10)
+        assert wait_for(lambda: seen[-1].buttons == (0, 1, 0, 0), 10)
         child.send_signal(signal.SIGTERM)
         rc = child.wait(10)
         time.sleep(0.3)
@@ -215,5 +216,5 @@ def test_keyboard_on_a_pty_holds_while_repeating_then_zero_and_restores_the_term
     runs = [x for k, x in enumerate(u0()) if k == 0 or u0()[k - 1] != x]
     assert runs == [0.0, 0.8, 0.0], runs
     assert all(m.u[1:] == (0.0, 0.0) for m in seen)
-    assert seen[-1].u == (0.0, 0.0, 0.0) and seen[-1].buttons == (0, 0, 0)  # zero on exit
+    assert seen[-1].u == (0.0, 0.0, 0.0) and seen[-1].buttons == (0, 0, 0, 0)  # zero on exit
     assert all(m.buttons[1] == 1 for m in seen[:-3])  # enable held while running

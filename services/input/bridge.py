@@ -26,7 +26,6 @@ from .device import InputDevice, Reading
 from .mapping import Mapping
 
 MIN_RATE, MAX_RATE = 20.0, 1000.0
-RELEASED = [0, 0, 0]  # mode, enable (released), escape
 ZERO_ON_EXIT = 3  # zero messages published when the bridge stops
 ZERO_SPACING = 0.005  # s between them (see Bridge.zero)
 
@@ -70,7 +69,7 @@ class Bridge:
         self.seq = 0
         self.stats = BridgeStats()
         self.connected: bool | None = None
-        self.last: tuple[list[float], list[int]] = ([0.0] * n_axes, list(RELEASED))
+        self.last: tuple[list[float], list[int]] = ([0.0] * n_axes, self.mapping.released())
         self.last_reading: Reading | None = None
 
     def step(self, stamp: float | None = None) -> tuple[list[float], list[int]]:
@@ -88,7 +87,7 @@ class Bridge:
         self._connection(reading is not None)
         stop = False
         if reading is None:
-            u, buttons = [0.0] * self.n_axes, list(RELEASED)
+            u, buttons = [0.0] * self.n_axes, self.mapping.released()
             self.stats.disconnected += 1
         else:
             u, buttons = self.mapping.apply(reading, self.n_axes)
@@ -106,7 +105,7 @@ class Bridge:
         for k in range(count):
             if k:
                 time.sleep(spacing)
-            self._send(time.time(), [0.0] * self.n_axes, list(RELEASED))
+            self._send(time.time(), [0.0] * self.n_axes, self.mapping.released())
 
     def _send(self, stamp: float, u: list[float], buttons: list[int], stop: bool = False) -> None:
         self.seq += 1

@@ -3,7 +3,7 @@
 
 Keys: the arrows move x (left/right) and y (up = forward, down = back); ``w``/``s``
 or PageUp/PageDown move z (up/down); space or ``m`` is mode (button 0), ``e`` is escape
-(button 2); Ctrl-C quits. There is no deadman: enable is always held.
+(button 2), ``x`` stop (3), ``c`` choose (4); Ctrl-C quits. There is no deadman: enable is always held.
 
 A terminal sends a key's bytes on its press and again at each auto-repeat, never on its
 release. So a key counts as held from its press until no repeat came for a while: for
@@ -33,8 +33,8 @@ AXIS_KEYS: dict[str, tuple[int, float]] = {
     "w": (2, 1.0), "pageup": (2, 1.0),
     "s": (2, -1.0), "pagedown": (2, -1.0),
 }
-BUTTON_KEYS: dict[str, int] = {" ": 0, "m": 0, "e": 2, "x": 3}  # 0 mode, 2 escape, 3 stop
-N_BUTTONS = 4
+BUTTON_KEYS: dict[str, int] = {" ": 0, "m": 0, "e": 2, "x": 3, "c": 4}  # 0 mode, 2 escape, 3 stop, 4 choose
+N_BUTTONS = 5
 ESCAPES = {b"[A": "up", b"[B": "down", b"[C": "right", b"[D": "left",
            b"OA": "up", b"OB": "down", b"OC": "right", b"OD": "left",  # application mode
            b"[5~": "pageup", b"[6~": "pagedown"}
@@ -127,7 +127,7 @@ class HoldTracker:
 
 def reading_from_keys(held: set[str], speed: float, stamp: float) -> Reading:
     """x, y, z (each ``speed`` times the sum of its held keys' signs, in [-1, 1]) and
-    the buttons ``[mode, 0, escape]``."""
+    the device's buttons (:data:`BUTTON_KEYS`)."""
     axes = [0.0, 0.0, 0.0]
     for k in held:
         if k in AXIS_KEYS:

@@ -86,6 +86,11 @@ class Mapping:
             buttons.append(self._button(reading.buttons, CHOOSE))
         return u, buttons
 
+    def released(self) -> list[int]:
+        """The buttons of a message with nothing pressed and the deadman released (the
+        device gone, the bridge exiting): as many as :meth:`apply` publishes."""
+        return [0] * (len(ROLES) + (self.buttons.get(CHOOSE) is not None))
+
     def stop(self, reading: Reading) -> bool:
         """Whether the button mapped to ``stop`` is held (never, when none is)."""
         return bool(self._button(reading.buttons, STOP))
