@@ -128,6 +128,12 @@ def test_a_lockstep_trial_of_the_set_engages_the_users_task(tmp_path):
     assert r["first_engaged"] == {"cabinet": "cabinet-vf", "drawer": "drawer", "oven": "oven-vf"}[r["goal"]]
     assert r["wrong"] == 0 and r["t_engaged"] is not None
     assert [r[c]["outcome"] for c in ("set", "preselected", "teleop")] == ["success"] * 3
+    trace = r["belief_trace"]  # 10 Hz, each member's column; the goal's passed the threshold
+    t = np.array(trace["t"])
+    assert set(trace) == {"t", "cabinet-vf", "drawer", "oven-vf"} and np.all(np.diff(t) >= 0.1 - 1e-9)
+    p = np.array([trace[m] for m in ("cabinet-vf", "drawer", "oven-vf")], dtype=float)
+    assert np.allclose(p.sum(axis=0), 1.0, atol=1e-3) and np.allclose(p[:, 0], 1 / 3, atol=1e-3)
+    assert p[ROOM.index(r["goal"]), t <= r["t_engaged"]].max() >= 0.8
 
 
 def test_the_user_escapes_a_skill_for_another_object_a_reaction_delay_later():

@@ -21,10 +21,17 @@ teleoperation (from a start no measured trial has, :data:`PRACTICE_SEED`), and s
 every condition knowing what the stick does in the modes it used there, as the
 participants of a user study trained on each condition before they are measured.
 
-Per trial: the goal, every engagement and disengagement, whether the goal's skill was
-the first engaged and whether it was engaged at all, the time from the start to its
-engagement, the wrong engagements and how long each took to undo, and each condition's
-outcome and time (:func:`summarise_set` puts them together).
+With ``detour``, the user changes its mind (:class:`~sctd_services.user.SetUser`): it
+first goes for another task of the room (:func:`detour_of`), and once there decides for
+its goal; such trials run the set and teleoperation with the same person (a pre-selected
+skill would have been the first task's).
+
+Per trial: the goal, every engagement and disengagement, the belief over time (10 Hz),
+whether the first skill engaged was the one the user wanted then and whether the goal's
+was engaged at all, the time from the start to the goal's engagement, the wrong
+engagements and how long each took to undo, with a change of mind how long a skill
+still engaged then took to leave, and each condition's outcome and time
+(:func:`summarise_set` puts them together).
 """
 
 from __future__ import annotations
@@ -166,7 +173,8 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
             out["practised_modes"] = sorted(shown)
         out["set"] = res.as_dict(with_trajectory=False)
         out.update(engagements(watch.changes, right.name, goals.teleop.name, detour_skill, watch.changed_at))
-        out.update(escapes=goals.counters.escapes, changed_at=watch.changed_at)
+        out.update(escapes=goals.counters.escapes, changed_at=watch.changed_at,
+                   belief_trace=watch.belief)
     if "preselected" in spec.runs:
         out["preselected"] = run_trial(right, tspec, seed, task=task, known=known["preselected"],
                                        detour=detour).as_dict(with_trajectory=False)

@@ -104,14 +104,20 @@ def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int,
 
 class SetWatch:
     """What a skill set did in a trial: every change of the running skill (time, from,
-    to) and what the user was shown (the engaged skill's task object); when the user
-    changed their mind (``changed_at``, None: never)."""
+    to), the belief over time (``belief``: ``t`` and each member's column, sampled every
+    ``BELIEF_EVERY`` s as ``status.goals.belief`` has it; a member that is no candidate
+    reads None), what the user was shown (the engaged skill's task object), and when the
+    user changed their mind (``changed_at``, None: never)."""
+
+    BELIEF_EVERY = 0.1
 
     def __init__(self, goals: GoalSet, goal_object: str):
         self.goals = goals
         self.goal_object = goal_object
         self.changes: list[tuple[float, str, str]] = []
         self.changed_at: float | None = None
+        self.belief: dict[str, list[float | None]] = {"t": [], **{m.name: [] for m in goals.members}}
+        self._next_sample = 0.0
         self._running = goals.running[0].name
 
     def tick(self, t: float) -> None:
@@ -119,6 +125,12 @@ class SetWatch:
         if name != self._running:
             self.changes.append((t, self._running, name))
             self._running = name
+        if t >= self._next_sample:
+            self._next_sample = t + self.BELIEF_EVERY
+            b = self.goals.status()["belief"]
+            self.belief["t"].append(round(t, 3))
+            for m in self.goals.members:
+                self.belief[m.name].append(b.get(m.name))
 
     def shown(self) -> tuple[str | None, str]:
         """The engaged skill's task object (None in teleoperation) and the mode the
