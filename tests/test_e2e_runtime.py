@@ -239,8 +239,11 @@ def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):
     rig.drive([0.0, 1.0, 0.0], 0.2)
     assert np.allclose(rig.last()["pose"], before, atol=1e-9)
     rig.drive([0.0, 0.0, 0.0], 0.02)
+    # (the tick has followed the zero: on a loaded machine it may not have ticked within
+    # the 20 ms, and a push after would supersede the zero unseen)
+    assert wait_for(lambda: _newest_status(rig)["in_seq"] == rig.seq, 10), _newest_status(rig)
     rig.drive([0.0, 1.0, 0.0], 0.3)
-    assert rig.last()["pose"][1] > before[1]
+    assert wait_for(lambda: rig.last()["pose"][1] > before[1], 10), (rig.last()["pose"], before)
 
 
 def test_hot_swap_refuses_bad_bundles_and_takes_good_ones(daemon, tmp_path):
