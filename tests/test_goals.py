@@ -60,14 +60,15 @@ class Room:
     """The tick driver with a robot that follows each target at once, the objects
     published every tick (those in ``present``), and one input device."""
 
-    def __init__(self, goals: GoalSet, start=START, tilt: float = 0.0):
+    def __init__(self, goals: GoalSet, start=START, tilt: float = 0.0, objects=None):
+        self.objects = OBJECTS if objects is None else objects
         self.driver = TickDriver(None, RuntimeConfig(stamp_check=False), goals=goals)
         self.goals = goals
         c, s = math.cos(tilt / 2), math.sin(tilt / 2)
         self.pose = [*start, s, 0.0, 0.0, c]  # (a tilt about x)
         self.k = 0
         self.seq = 0
-        self.present = set(OBJECTS)
+        self.present = set(self.objects)
         self.newest: tuple[tuple[float, ...], tuple[int, ...]] | None = None
         self.changes: list[tuple[str, str, tuple, tuple]] = []  # (from, to, newest u, buttons)
         self.poses: list[list[float]] = []
@@ -77,7 +78,7 @@ class Room:
         d = self.driver
         d.take_state(codec.StateMsg(self.k, t, list(self.pose), None), t)
         for name in self.present:
-            d.take_object(name, codec.ObjectMsg(self.k, t, [*OBJECTS[name], 0.0, 0.0, 0.0, 1.0]), t)
+            d.take_object(name, codec.ObjectMsg(self.k, t, [*self.objects[name], 0.0, 0.0, 0.0, 1.0]), t)
         if send:
             self.seq += 1
             d.take_input("pad", codec.InputMsg(self.seq, t, tuple(u), tuple(buttons), False), t)
@@ -120,6 +121,52 @@ def test_the_belief_follows_the_boltzmann_model_to_the_number():
     # no motion, no evidence
     b.update((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), [(1.0, 0.0, 0.0), (0.0, 1.0, 0.0)])
     assert b.probabilities([True, True]) == [pa, pb]
+
+
+def test_a_rest_near_one_goal_point_is_evidence_against_the_others_to_the_number():
+    """Known answer: the hand rests 5 cm from obj_a (its goal point the object's origin),
+    20 cm and more from the others: after 0.5 s of rest each other candidate has lost
+    beta * rest_speed * 0.5 = 2 nats against obj_a. Motion restarts the count; a rest
+    far from every goal point, or with rest_speed 0, is no evidence."""
+    model = BeliefModel(beta=40.0, rest_speed=0.1, rest_radius=0.1, threshold=0.99)
+    goals = goal_set(model)
+    goals.see({n: (1, 0, 0, 0, 1, 0, 0, 0, 1, *p) for n, p in OBJECTS.items()})
+    near = (1, 0, 0, 0, 1, 0, 0, 0, 1, 0.60, 0.25, 0.50)
+    rest = Command((0.0, 0.0, 0.0), True, 1, "pad", frozenset())
+    for k in range(501):  # 0 .. 0.5 s at 1 kHz
+        goals.decide(rest, near, True, 10.0 + k * 1e-3)
+    pa, pb, pc = goals.belief.probabilities(goals.candidates)
+    assert math.log(pa / pb) == pytest.approx(2.0, rel=1e-9)
+    assert math.log(pa / pc) == pytest.approx(2.0, rel=1e-9)
+    assert goals.engaged is None  # 0.787 < 0.99
+    push = rest._replace(u=(0.5, 0.0, 0.0))
+    goals.decide(push, near, False, 11.0)
+    goals.decide(rest, near, True, 20.0)  # (the 9 s since the last rest are not a rest)
+    assert goals.belief.probabilities(goals.candidates) == pytest.approx([pa, pb, pc], rel=1e-12)
+    far = (1, 0, 0, 0, 1, 0, 0, 0, 1, 0.30, 0.0, 0.50)
+    for t, F, m in ((21.0, far, model), (22.0, far, model), (0.0, near, BeliefModel(rest_speed=0.0)),
+                    (1.0, near, BeliefModel(rest_speed=0.0))):
+        goals.model = goals.belief.model = m
+        goals.decide(rest, F, True, t)
+        assert goals.belief.probabilities(goals.candidates) == pytest.approx([pa, pb, pc], rel=1e-12)
+
+
+def test_a_hand_that_stops_at_a_task_on_the_way_to_another_engages_it_after_a_rest():
+    """obj_b lies straight beyond obj_a: the way to obj_a is the way to obj_b, and the
+    belief stays split between them; resting at obj_a engages skill_a (about 0.35 s at
+    the defaults: odds of 4 to 1 at 4 nats/s), which it would not without the rest's
+    evidence."""
+    objects = {"obj_a": (0.50, 0.0, 0.50), "obj_b": (0.80, 0.0, 0.50), "obj_c": (0.30, 0.50, 0.50)}
+    for rest_speed, engaged in ((0.1, "skill_a"), (0.0, "teleop")):
+        room = Room(goal_set(BeliefModel(rest_speed=rest_speed)), objects=objects)
+        room.push_towards(objects["obj_a"], 1950)  # 0.195 m: 5 mm short of obj_a
+        b = room.goals.status()["belief"]
+        assert b["skill_a"] == pytest.approx(b["skill_b"], abs=1e-3) and b["skill_c"] < 0.01
+        room.rest(200)
+        assert room.driver.skill.name == "teleop"  # 0.2 s: not yet
+        room.rest(2800)
+        assert room.driver.skill.name == engaged
+        assert all(u == (0.0, 0.0, 0.0) for _, _, u, _ in room.changes)
 
 
 def test_no_belief_falls_below_the_floor_and_a_stale_object_leaves_the_candidates():
@@ -279,7 +326,7 @@ def test_the_choose_button_is_taken_out_of_the_command():
     goals = goal_set()
     cmd = Command((0.0, 0.0, 0.0), True, 1, "pad", frozenset({codec.BUTTON_CHOOSE, codec.BUTTON_MODE}))
     goals.see({n: (1, 0, 0, 0, 1, 0, 0, 0, 1, *p) for n, p in OBJECTS.items()})
-    out, changed = goals.decide(cmd, None, True)
+    out, changed = goals.decide(cmd, None, True, 0.0)
     assert changed and out.pressed == frozenset({codec.BUTTON_MODE})
 
 

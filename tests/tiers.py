@@ -176,7 +176,19 @@ class Tiers:
                         pytrace=False)
 
 
+def _warm_caches() -> None:
+    """What a library does once per machine by starting a process, done before any test's
+    guard is up: matplotlib lists the system's fonts with ``fc-list`` the first time it is
+    imported and keeps the list in its cache (on a fresh machine the first fast test to
+    import it would otherwise be refused)."""
+    try:
+        import matplotlib.font_manager  # noqa: F401
+    except ImportError:  # (the 'learn' extra is not installed: its tests are skipped)
+        pass
+
+
 def pytest_configure(config: pytest.Config) -> None:
+    _warm_caches()
     for name, text in MARKERS.items():
         config.addinivalue_line("markers", f"{name}: {text}")
     if not config.pluginmanager.has_plugin("sctd-tiers"):

@@ -66,7 +66,8 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
                         "pausing with --set)")
     p.add_argument("--belief", action="append", metavar="KEY=VALUE", default=[],
                    help="with --set: a parameter of the set's belief over its file's (repeatable; beta, "
-                        "threshold, floor, escape_factor, rearm_travel; docs/goals.md)")
+                        "threshold, floor, escape_factor, rearm_travel, rest_radius, rest_speed; "
+                        "docs/goals.md)")
     p.add_argument("--change-of-mind", action="store_true",
                    help="with --set: the user first goes for another task of the room and changes "
                         "its mind once there (the set against teleoperation; docs/goals.md)")

@@ -234,7 +234,8 @@ def _inspect_set(args: argparse.Namespace) -> int:
     print(f"skill set {s['name']} ({s['source']}): {s['description']}")
     b = s["belief"]
     print(f"  belief: beta {b['beta']} /m, threshold {b['threshold']}, floor {b['floor']}, escape factor "
-          f"{b['escape_factor']}, rearm travel {b['rearm_travel']} m")
+          f"{b['escape_factor']}, rearm travel {b['rearm_travel']} m, rest {b['rest_speed']} m/s "
+          f"within {b['rest_radius']} m")
     t = s["teleop"]
     print(f"  teleoperation {t['name']} (id {t['id']})")
     for m in s["members"]:

@@ -146,7 +146,7 @@ class TickDriver:
         state = self.state
         fresh_state = state is not None and self._fresh(state, now, wall, self.config.state_timeout)
         cmd, changed = goals.decide(cmd, state.F if fresh_state and state is not None else None,
-                                    self.inputs.at_rest())
+                                    self.inputs.at_rest(), now)
         ctl = self.controller
         if changed:
             skill, engine = goals.running

@@ -24,6 +24,15 @@ turns carry none either (the goal points are positions). The belief is normalise
 the candidates and no candidate's falls below ``floor``, so evidence can always bring a
 task back.
 
+**Rest** is evidence too. A person going for another task does not stop at this one:
+while the input is at rest, nothing is engaged and the hand is within ``rest_radius`` of
+one or more candidates' goal points, every other candidate pays ``beta * rest_speed``
+nats per second of rest (the tick driver's time). In the model's terms the cost is time
+as well as path: resting costs nothing at a goal already reached, and ``rest_speed * t``
+for a goal still ahead, the way a person going there at ``rest_speed`` would have come
+nearer. Without it a hand that stopped at a task whose approach was also the approach
+to a task beyond (a mug on the way to a switch) keeps a belief split between the two.
+
 **Engagement.** From teleoperation, the most likely candidate engages when its belief is
 at least ``threshold`` and the hand is inside its skill's start region
 (:meth:`GoalSet.in_start_region`: within ``reach`` of the goal point, and the start
@@ -79,6 +88,11 @@ class BeliefModel:
     person's next motion decides between the others."""
     rearm_travel: float = 0.02
     """m the target travels after an escape before a task engages by itself again."""
+    rest_radius: float = 0.10
+    """m: a hand at rest this near a candidate's goal point counts as stopped there."""
+    rest_speed: float = 0.10
+    """m/s: the rest's evidence, as motion at this speed straight away from the goals not
+    reached (``beta * rest_speed`` nats per second; 0 turns it off)."""
 
     def __post_init__(self) -> None:
         if not (self.beta > 0.0 and math.isfinite(self.beta)):
@@ -91,6 +105,10 @@ class BeliefModel:
             raise ValueError(f"escape_factor: expected a number in (0, 1), got {self.escape_factor}")
         if not (self.rearm_travel >= 0.0 and math.isfinite(self.rearm_travel)):
             raise ValueError(f"rearm_travel: expected a number >= 0, got {self.rearm_travel}")
+        for name in ("rest_radius", "rest_speed"):
+            v = getattr(self, name)
+            if not (v >= 0.0 and math.isfinite(v)):
+                raise ValueError(f"{name}: expected a number >= 0, got {v}")
 
 
 @dataclass(frozen=True)
@@ -144,6 +162,14 @@ class Belief:
             after = math.sqrt((qx - gx) ** 2 + (qy - gy) ** 2 + (qz - gz) ** 2)
             log[i] -= beta * (length - (before - after))
         self._normalise([g is not None for g in goals])
+
+    def charge(self, paying: Sequence[bool], nats: float, candidates: Sequence[bool]) -> None:
+        """Lower the log-belief of every task in ``paying`` by ``nats`` (a rest away from
+        their goals), renormalised."""
+        for i, pays in enumerate(paying):
+            if pays:
+                self.log[i] -= nats
+        self._normalise(candidates)
 
     def lower(self, i: int, factor: float, candidates: Sequence[bool]) -> None:
         """Multiply task ``i``'s belief by ``factor`` (an escape), renormalised."""
@@ -233,6 +259,7 @@ class GoalSet:
         self._p1: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._path = 0.0
         self._steps = 0
+        self._rest_at: float | None = None  # the time of the last tick at rest that was weighed
 
     # --- what the driver asks ------------------------------------------------------------
 
@@ -261,13 +288,15 @@ class GoalSet:
                                   F[3] * x + F[4] * y + F[5] * z + F[10],
                                   F[6] * x + F[7] * y + F[8] * z + F[11])
 
-    def decide(self, cmd: Command, F_hand: se3.Flat | None, at_rest: bool) -> tuple[Command, bool]:
+    def decide(self, cmd: Command, F_hand: se3.Flat | None, at_rest: bool,
+               now: float) -> tuple[Command, bool]:
         """Before the controller's step: the command it should follow (the set's own
         buttons taken out of it) and whether the running skill changed (:attr:`running`).
 
         ``F_hand`` is the measured hand pose (world), None while there is none;
         ``at_rest`` whether every input device's newest message is at rest
-        (:meth:`.arbiter.InputArbiter.at_rest`): only then may the running skill change."""
+        (:meth:`.arbiter.InputArbiter.at_rest`): only then may the running skill change;
+        ``now`` the tick's time (s, any origin): how long a rest has lasted."""
         pressed = cmd.pressed
         at_rest = at_rest and not any(cmd.u)
         if BUTTON_CHOOSE in pressed or (BUTTON_ESCAPE in pressed and self.engaged is not None):
@@ -276,13 +305,17 @@ class GoalSet:
             pressed = pressed - {BUTTON_CHOOSE, BUTTON_ESCAPE} if self.engaged is not None \
                 else pressed - {BUTTON_CHOOSE}
             cmd = cmd._replace(pressed=pressed)
+        if at_rest and self._pending is None and self.engaged is None and F_hand is not None \
+                and self._travel >= self.model.rearm_travel:
+            self._flush()
+            self._weigh_rest(F_hand, now)
+            return cmd, self._maybe_engage(F_hand)
+        self._rest_at = None
         if not at_rest:
             return cmd, False
         self._flush()
         if self._pending is not None:
             return cmd, self._apply_pending()
-        if self.engaged is None and F_hand is not None and self._travel >= self.model.rearm_travel:
-            return cmd, self._maybe_engage(F_hand)
         return cmd, False
 
     def observe(self, before: Sequence[float] | None, after: Sequence[float] | None) -> None:
@@ -354,6 +387,21 @@ class GoalSet:
         changed = i != self.engaged
         self.engaged = i
         return changed
+
+    def _weigh_rest(self, F_hand: se3.Flat, now: float) -> None:
+        """A tick at rest, unengaged and armed: the rest since the last such tick is
+        evidence against the candidates whose goal points are farther than
+        ``rest_radius`` while one is nearer (module doc)."""
+        last, self._rest_at = self._rest_at, now
+        nats_per_s = self.model.beta * self.model.rest_speed
+        if last is None or not now > last or not nats_per_s > 0.0:
+            return
+        h, r2 = F_hand[9:12], self.model.rest_radius ** 2
+        near = [g is not None and (h[0] - g[0]) ** 2 + (h[1] - g[1]) ** 2 + (h[2] - g[2]) ** 2 <= r2
+                for g in self._goals]
+        if any(near):
+            paying = [g is not None and not n for g, n in zip(self._goals, near, strict=True)]
+            self.belief.charge(paying, nats_per_s * (now - last), self.candidates)
 
     def _maybe_engage(self, F_hand: se3.Flat) -> bool:
         p = self.belief.probabilities(self.candidates)
