@@ -165,7 +165,11 @@ class Belief:
 
     def charge(self, paying: Sequence[bool], nats: float, candidates: Sequence[bool]) -> None:
         """Lower the log-belief of every task in ``paying`` by ``nats`` (a rest away from
-        their goals), renormalised."""
+        their goals), renormalised. Those already at the floor stay there and the others'
+        shares do not change: nothing to do (a long rest, every tick)."""
+        at_floor = math.log(self.model.floor) + 1e-12
+        if all(self.log[i] <= at_floor for i, pays in enumerate(paying) if pays):
+            return
         for i, pays in enumerate(paying):
             if pays:
                 self.log[i] -= nats
