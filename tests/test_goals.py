@@ -226,6 +226,27 @@ def test_escape_disengages_lowers_the_belief_and_waits_for_new_motion():
     assert room.goals.status()["counters"]["escapes"] == 1
 
 
+def test_choosing_teleoperation_is_not_taken_back_by_the_belief():
+    """The belief engaged skill_a; the person cycles choose to teleoperation, at rest in
+    skill_a's start region with the belief still sure of it: teleoperation stays until
+    the person has moved rearm_travel, as after an escape; then the belief engages
+    again."""
+    room = Room(goal_set())
+    room.push_towards(OBJECTS["obj_a"], 3000)
+    room.rest()
+    assert room.driver.skill.name == "skill_a"
+    for _ in range(3):  # skill_b, skill_c, teleoperation
+        room.press(codec.BUTTON_CHOOSE)
+    assert room.driver.skill.name == "teleop"
+    room.rest(1000)
+    assert room.driver.skill.name == "teleop"
+    assert room.goals.status()["belief"]["skill_a"] > 0.99
+    room.push_towards(OBJECTS["obj_a"], 300)  # 3 cm, held against it
+    room.rest()
+    assert room.driver.skill.name == "skill_a"
+    assert room.goals.status()["counters"]["engagements"] == 2
+
+
 def test_escape_under_a_held_stick_waits_for_the_release():
     room = Room(goal_set())
     room.push_towards(OBJECTS["obj_a"], 3000)

@@ -41,7 +41,9 @@ skill takes over without pulling the hand). Escape (button 2) disengages the eng
 skill and multiplies its task's belief by ``escape_factor``; automatic engagement then
 waits until the target has travelled ``rearm_travel`` (the person shows where they go
 next). Button 3 (choose) cycles teleoperation -> the first candidate -> the next ... ->
-teleoperation, in the set's order, for a person who prefers to choose. Every change of
+teleoperation, in the set's order, for a person who prefers to choose; after a choice,
+as after an escape, automatic engagement waits for ``rearm_travel`` (teleoperation
+chosen in a task's start region is not taken straight back). Every change of
 the running skill waits for a tick whose newest input is zero or disabled: a mapping
 changed under a held stick would change the direction of motion. An engaged skill stays
 engaged until escape or choose: the inference never switches between skills by itself.
@@ -87,7 +89,8 @@ class BeliefModel:
     again): from the most a task can hold (three tasks: 0.998) to a third, so that the
     person's next motion decides between the others."""
     rearm_travel: float = 0.02
-    """m the target travels after an escape before a task engages by itself again."""
+    """m the target travels after an escape or a choice before a task engages by itself
+    again."""
     rest_radius: float = 0.10
     """m: a hand at rest this near a candidate's goal point counts as stopped there."""
     rest_speed: float = 0.10
@@ -386,6 +389,7 @@ class GoalSet:
             self.engaged = None
             return True
         self.counters.choices += 1
+        self._travel = 0.0  # (teleoperation chosen: not taken back before the person moves)
         if i is not None and not self.candidates[i]:
             return False  # its object went stale meanwhile
         changed = i != self.engaged
