@@ -27,7 +27,8 @@ task back.
 **Rest** is evidence too. A person going for another task does not stop at this one:
 while the input is at rest, nothing is engaged and the hand is within ``rest_radius`` of
 one or more candidates' goal points, every other candidate pays ``beta * rest_speed``
-nats per second of rest (the tick driver's time). In the model's terms the cost is time
+nats per second of rest (the tick driver's time). A rest is a stop: it counts once the
+target has moved (a hand resting where the daemon found it has said nothing). In the model's terms the cost is time
 as well as path: resting costs nothing at a goal already reached, and ``rest_speed * t``
 for a goal still ahead, the way a person going there at ``rest_speed`` would have come
 nearer. Without it a hand that stopped at a task whose approach was also the approach
@@ -267,6 +268,7 @@ class GoalSet:
         self._path = 0.0
         self._steps = 0
         self._rest_at: float | None = None  # the time of the last tick at rest that was weighed
+        self._moved = False  # whether the target has moved at all (a rest is a stop after motion)
 
     # --- what the driver asks ------------------------------------------------------------
 
@@ -338,6 +340,7 @@ class GoalSet:
         step = math.sqrt(dx * dx + dy * dy + dz * dz)
         if not step > 0.0:
             return
+        self._moved, self._rest_at = True, None  # (a step ends a rest)
         if self._p0 is None:
             self._p0 = (before[0], before[1], before[2])
         self._p1 = (after[0], after[1], after[2])
@@ -399,10 +402,10 @@ class GoalSet:
     def _weigh_rest(self, F_hand: se3.Flat, now: float) -> None:
         """A tick at rest, unengaged and armed: the rest since the last such tick is
         evidence against the candidates whose goal points are farther than
-        ``rest_radius`` while one is nearer (module doc)."""
+        ``rest_radius`` while one is nearer, once the target has moved (module doc)."""
         last, self._rest_at = self._rest_at, now
         nats_per_s = self.model.beta * self.model.rest_speed
-        if last is None or not now > last or not nats_per_s > 0.0:
+        if last is None or not now > last or not nats_per_s > 0.0 or not self._moved:
             return
         h, r2 = F_hand[9:12], self.model.rest_radius ** 2
         near = [g is not None and (h[0] - g[0]) ** 2 + (h[1] - g[1]) ** 2 + (h[2] - g[2]) ** 2 <= r2
