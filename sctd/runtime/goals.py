@@ -28,11 +28,12 @@ task back.
 while the input is at rest, nothing is engaged and the hand is within ``rest_radius`` of
 one or more candidates' goal points, every other candidate pays ``beta * rest_speed``
 nats per second of rest (the tick driver's time). A rest is a stop: it counts once the
-target has moved (a hand resting where the daemon found it has said nothing). In the model's terms the cost is time
-as well as path: resting costs nothing at a goal already reached, and ``rest_speed * t``
-for a goal still ahead, the way a person going there at ``rest_speed`` would have come
-nearer. Without it a hand that stopped at a task whose approach was also the approach
-to a task beyond (a mug on the way to a switch) keeps a belief split between the two.
+target has moved (a hand resting where the daemon found it has said nothing). In the
+model's terms the cost is time as well as path: resting costs nothing at a goal already
+reached, and ``rest_speed * t`` for a goal still ahead, the way a person going there at
+``rest_speed`` would have come nearer. Without it a hand that stopped at a task whose
+approach was also the approach to a task beyond (a mug on the way to a switch) keeps a
+belief split between the two.
 
 **Engagement.** From teleoperation, the most likely candidate engages when its belief is
 at least ``threshold`` and the hand is inside its skill's start region
