@@ -103,6 +103,26 @@ def test_a_user_who_changes_its_mind_escapes_the_first_tasks_skill(tmp_path):
     assert r["set"]["outcome"] == "success" and r["teleop"]["outcome"] == "success"
 
 
+@pytest.mark.slow
+def test_a_rest_at_the_mug_after_a_change_of_mind_engages_the_pour():
+    """kitchen-pour, trial 0: the user goes for the drawer first, changes its mind for the
+    pour there and carries the bottle to the mug, which lies on the way from the drawer
+    to the light switch. Its stop at the mug engages the pour, which pours; without the
+    rest's evidence (rest_speed 0) the belief stays split between the mug and the
+    switch, nothing engages, and teleoperation cannot pour."""
+    from sctd.skill.catalog import find_skill_set
+
+    kitchen = str(find_skill_set("kitchen-pour"))
+    r = set_job(SetSpec(kitchen, detour=True), 0)
+    assert (r["goal"], r["detour"]) == ("pour", "drawer") and r["first_engaged"] == "drawer"
+    assert r["right_engaged"] and r["t_engaged"] > r["changed_at"]
+    assert [c[2] for c in r["changes"]] == ["drawer", "teleop", "pour"]
+    assert r["set"]["reason"] == "poured" and r["teleop"]["outcome"] != "success"
+    flat = set_job(SetSpec(kitchen, detour=True, belief=(("rest_speed", 0.0),)), 0)
+    assert [c[2] for c in flat["changes"]] == ["drawer", "teleop"] and not flat["right_engaged"]
+    assert flat["set"]["outcome"] != "success"
+
+
 def test_the_summary_pairs_trials_that_both_finished():
     def row(goal, s, p, t, right=True):
         res = lambda d: {"outcome": "success" if d else "failure", "duration_s": d or 60.0}  # noqa: E731
