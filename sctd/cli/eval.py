@@ -33,6 +33,7 @@ from sctd_services.eval.evaluate import (
     task_of,
 )
 from sctd_services.eval.goals import SetSpec, evaluate_set, format_set_report, goal_members, tasks_of
+from sctd_services.eval.numerics import numerics
 from sctd_services.eval.report import write_report
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import PROFILES
@@ -197,7 +198,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     print(file=sys.stderr)
     found = find_task(task)  # (checked above: it loads)
     header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
-              "user": args.user, "lockstep": args.lockstep}
+              "user": args.user, "lockstep": args.lockstep, "numerics": numerics()}
     if pool is not None:
         header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])
     if args.report:

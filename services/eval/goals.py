@@ -56,6 +56,7 @@ from sctd.task.compose import compose
 from sctd_services.user import DeviceModel
 
 from .lockstep import practise, run_set_trial, run_trial
+from .numerics import describe, numerics
 from .trial import TaskSpec
 
 CONDITIONS = ("set", "preselected", "teleop")
@@ -255,7 +256,7 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
     out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
                room=tasks_of([m.skill for m in skill_set.members]), teleop=skill_set.teleop.name,
                profile=spec.profile, practice=spec.practice, detour=spec.detour, seed=seed,
-               belief=dataclasses.asdict(belief_model(skill_set)),
+               belief=dataclasses.asdict(belief_model(skill_set)), numerics=numerics(),
                per_trial=per_trial)
     return out
 
@@ -330,6 +331,8 @@ def format_set_report(r: dict[str, Any]) -> str:
                      f"mind in {o['engaged_at_change']} of {o['trials']} trials, escaped in "
                      f"{o['undone_after_change']}, median {_fmt(o['after_change_median_s'])} s after "
                      "the change")
+    if "numerics" in r:
+        lines.append(describe(r["numerics"]))
     return "\n".join(lines)
 
 
