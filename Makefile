@@ -15,7 +15,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[learn,sim,dev,view,inputs,logs,ros,ros2,cluster]'
+	$(BIN)/python -m pip install --quiet -e '.[learn,sim,dev,view,inputs,logs,ros,ros2,cluster,franky]'
 	touch $(STAMP)
 
 demo: setup

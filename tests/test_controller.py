@@ -541,3 +541,23 @@ def test_constraint_activity_counts_the_commands_each_constraint_changed():
     eng.reset(6.5, "approach")
     assert eng.entries == entries + 1 and eng.commands == 0
     assert eng.acted == [0] * len(SKILL.states[SKILL.state_index("approach")].active_constraints)
+
+
+def test_a_faulted_arm_holds_the_target_and_re_seeds_only_from_zero_input():
+    """A state that carries the arm's ``fault`` publishes nothing (mode ``fault``) while
+    the person pushes; once the arm reports no fault, a held push still moves nothing: the
+    target re-seeds at the measured pose only with the input at zero."""
+    c = ctl(reseed_after=0.0)
+    run(c, [[0.5, 0, 0]] * 20)
+    assert c.T_world_target is not None
+    T = c.T_world_target.copy()
+    faulted = Sample(seq=0, stamp=1.0, received=1.0, F=se3.flat_from_transform(T), fault="reflex: collision")
+    r = c.tick(1.0, 1.0, inp([1, 0, 0], 1.0), faulted, obj(1.0))
+    assert r.mode == "fault" and r.pose is None and c.counters.robot_fault_ticks == 1
+    for k in range(1, 50):  # recovered, the push still held: nothing
+        t = 1.0 + 0.001 * k
+        r = c.tick(t, t, inp([1, 0, 0], t, seq=k + 1), state(T, t), obj(t))
+        assert r.mode == "fault" and r.pose is None
+    t += 0.001
+    r = c.tick(t, t, inp([0, 0, 0], t, seq=99), state(T, t), obj(t))
+    assert r.pose is not None and r.seed and np.allclose(r.T_world_target, T, atol=1e-15)

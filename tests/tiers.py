@@ -35,13 +35,15 @@ MARKERS = {
 EXTRAS = {
     "learn": ("sklearn", "maxflow", "matplotlib"),
     "sim": ("pinocchio", "can", "cantools"),
-    "dev": ("pytest", "hypothesis", "atheris", "gco", "importlinter", "setuptools", "playwright"),
+    "dev": ("pytest", "hypothesis", "atheris", "gco", "importlinter", "setuptools", "playwright",
+            "franky_sim", "mujoco"),
     "view": ("viser",),
     "inputs": ("sdl2", "hid", "brainflow"),
     "logs": ("mcap",),
     "ros": ("rosbags", "xxhash"),
     "ros2": ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_msgs", "visualization_msgs"),
     "cluster": ("dask", "distributed"),
+    "franky": ("franky",),
 }
 _EXTRA_OF = {module: extra for extra, modules in EXTRAS.items() for module in modules}
 

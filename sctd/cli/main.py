@@ -53,7 +53,8 @@ class Command:
 EXTRA_OF = {"sklearn": "learn", "maxflow": "learn", "matplotlib": "learn", "pinocchio": "sim",
             "can": "sim", "cantools": "sim", "viser": "view", "atheris": "dev", "sdl2": "inputs",
             "hid": "inputs", "brainflow": "inputs", "mcap": "logs", "rclpy": "ros2", "geometry_msgs": "ros2",
-            "sensor_msgs": "ros2", "diagnostic_msgs": "ros2", "dask": "cluster", "distributed": "cluster"}
+            "sensor_msgs": "ros2", "diagnostic_msgs": "ros2", "dask": "cluster", "distributed": "cluster",
+            "franky": "franky", "franky_sim": "dev", "mujoco": "dev"}
 
 BENCHES: dict[str, Command] = {
     "check": Command("the learner's sequential check: its operating points (exact, simulated), and "
@@ -133,6 +134,9 @@ COMMANDS: dict[str, Command] = {
     # as python -m sctd_sim.service / python -m sctd_services.record take
     "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd_sim.service",
                    "add_service_arguments", "run"),
+    "robot": Command("serve a robot driver on the wire (sim, kinematic, franky, or a registered one): "
+                     "state out, targets in, faults on sctd/<robot>/robot", "sctd_services.robots.service",
+                     "add_arguments", "run"),
     "record": Command("record a demonstration (ee in the task object's frame) as CSV",
                       "sctd_services.record", "add_arguments", "run"),
     "ros": Command("a ROS 2 node (rclpy): a ROS 2 arm, its perception and joystick as sctd's robot, "

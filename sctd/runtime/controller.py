@@ -77,7 +77,8 @@ class Sample:
     world; ``pose`` the object's pose as received (to tell an unchanged pose). A state
     also carries the :class:`~sctd.runtime.safety.StateWatch` verdict on its stream:
     ``epoch`` (discontinuities before it) and ``since`` (arrival of the first state of
-    its continuous run). (Input messages have their own slots: :mod:`.arbiter`.)
+    its continuous run), and the arm's ``fault`` when it reports one. (Input messages
+    have their own slots: :mod:`.arbiter`.)
     """
 
     seq: int
@@ -88,6 +89,7 @@ class Sample:
     pose: list[float] | None = None
     epoch: int = 0
     since: float = 0.0
+    fault: str | None = None
 
 
 class _Target:
@@ -153,6 +155,7 @@ class Counters:
     escapes: int = 0
     stuck: int = 0
     swaps: int = 0
+    robot_fault_ticks: int = 0  # ticks held because the arm reported a fault
     drops: dict[str, int] = field(default_factory=dict)
 
     def drop(self, reason: str) -> None:
@@ -318,6 +321,12 @@ class Controller:
         if state_ok and state is not None and state.epoch != self._epoch:
             self._epoch = state.epoch  # the state stream jumped or restarted
             self._fault = self._target is not None
+        if state_ok and state is not None and state.fault is not None:
+            # The arm says it is faulted (it follows no target): nothing is published,
+            # and once it has recovered the target re-seeds only with the input at zero.
+            self._fault = self._target is not None
+            self.counters.robot_fault_ticks += 1
+            return self._quiet("fault", cmd)
         if not state_ok:
             # Stale state: where the robot is is not known, so nothing is published (the
             # robot holds on its own stale-target rule) and the target will resume from

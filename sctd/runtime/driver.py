@@ -100,7 +100,7 @@ class TickDriver:
         if self.watch.observe(m.seq, F, now):
             self.counters.state_discontinuity += 1
         self.state = Sample(m.seq, m.stamp, now, F=F, wrench=m.wrench, epoch=self.watch.epoch,
-                            since=self.watch.since)
+                            since=self.watch.since, fault=m.fault)
 
     def take_object(self, name: str, m: codec.ObjectMsg, now: float) -> None:
         """An object's pose; kept when it is the active skill's task object (or a skill

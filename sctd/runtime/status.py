@@ -168,6 +168,7 @@ class DaemonStatus:
             "recent_ms": stats.recent,
             "input_age": age(last.received if last is not None else None),
             "state_age": age(drv.state.received if drv.state is not None else None),
+            "robot_fault": drv.state.fault if drv.state is not None else None,
             "object_age": age(obj.received if obj is not None else None),
             "in_seq": last.msg.seq if last is not None and last.msg is not None else -1,
             "input": drv.inputs.summary(),

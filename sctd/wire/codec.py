@@ -22,6 +22,7 @@ WIRE_VERSION = 1
 # about 60 bytes, a state with q, dq and wrench about 300.
 MAX_INPUT_BYTES = 4096
 MAX_STATE_BYTES = 65536
+MAX_FAULT_CHARS = 500  # a state's fault text is cut to this
 MAX_OBJECT_BYTES = 4096
 MAX_JOINTS = 64  # longest q / dq a state may carry
 MAX_POSITION = 1000.0  # m: a pose further from the world origin is not a pose of this robot
@@ -126,6 +127,7 @@ class StateMsg(NamedTuple):
     q: list[float] | None = None
     dq: list[float] | None = None
     wrench_nonfinite: bool = False  # a wrench was sent but not finite: dropped, the pose kept
+    fault: str | None = None  # the arm is faulted (it follows no target): what happened
 
 
 class ObjectMsg(NamedTuple):
@@ -175,8 +177,10 @@ def decode_input(data: bytes) -> InputMsg:
 
 def decode_state(data: bytes) -> StateMsg:
     """``sctd/<robot>/state``: seq, stamp, pose [7], optional q, dq (equal lengths, at
-    most MAX_JOINTS, finite) and wrench [6]. A non-finite wrench is dropped and flagged
-    (``wrench_nonfinite``) without costing the pose: force guards then see none."""
+    most MAX_JOINTS, finite), wrench [6] and ``fault`` (a non-empty string while the arm
+    is faulted and follows no target: what happened, at most MAX_FAULT_CHARS). A
+    non-finite wrench is dropped and flagged (``wrench_nonfinite``) without costing the
+    pose: force guards then see none."""
     _size(data, MAX_STATE_BYTES)
     obj = unpack_map(data)
     wrench = None
@@ -188,7 +192,16 @@ def decode_state(data: bytes) -> StateMsg:
     q, dq = _joints(obj, "q"), _joints(obj, "dq")
     if q is not None and dq is not None and len(q) != len(dq):
         raise DecodeError("bad_dq", f"{len(dq)} velocities for {len(q)} joints")
-    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench, q, dq, nonfinite)
+    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench, q, dq, nonfinite, _fault(obj))
+
+
+def _fault(obj: dict) -> str | None:
+    x = obj.get("fault")
+    if x is None or x == "":
+        return None
+    if not isinstance(x, str):
+        raise DecodeError("bad_fault", f"expected a string, got {type(x).__name__}")
+    return x[:MAX_FAULT_CHARS]
 
 
 def decode_object(data: bytes) -> ObjectMsg:
@@ -210,8 +223,12 @@ def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...],
 
 
 def encode_state(seq: int, stamp: float, pose: list[float], *, q: list[float] | None = None,
-                 dq: list[float] | None = None, wrench: list[float] | None = None) -> bytes:
+                 dq: list[float] | None = None, wrench: list[float] | None = None,
+                 fault: str | None = None) -> bytes:
+    """A state; ``fault`` is written only while the arm is faulted."""
     msg: dict[str, Any] = {"seq": seq, "stamp": stamp, "pose": [float(x) for x in pose]}
+    if fault:
+        msg["fault"] = fault[:MAX_FAULT_CHARS]
     if q is not None:
         msg["q"] = [float(x) for x in q]
     if dq is not None:

@@ -75,6 +75,18 @@ class Keys:
         return f"{self.prefix}/learner/status"
 
     @property
+    def robot_status(self) -> str:
+        """``sctd/<robot>/robot``: the robot service's status (driver, connection, the
+        arm's mode, its fault), from ``sctd robot`` (docs/robots.md)."""
+        return f"{self.prefix}/robot"
+
+    @property
+    def robot_recover(self) -> str:
+        """``sctd/<robot>/robot/recover``: the robot service's queryable that clears a
+        fault (``sctd robot NAME --recover``)."""
+        return f"{self.prefix}/robot/recover"
+
+    @property
     def sim_reset(self) -> str:
         """``sctd/<robot>/sim/reset``: the simulator's scene reset (a sim-only queryable)."""
         return f"{self.prefix}/sim/reset"

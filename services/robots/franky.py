@@ -1,0 +1,352 @@
+"""The ``franky`` driver: a Franka FR3 (or Panda) through franky and libfranka's protocol.
+
+franky (``pip install 'sctd[franky]'``) is libfranka for Python; the driver talks to the
+arm's control interface (FCI) as any libfranka program does, and so to franky-sim, a
+server that speaks the same protocol on 127.0.0.1 (what the tests run against).
+
+- **State**: libfranka's robot state, read at the arm's 1 kHz (the driver waits for
+  each new state): the hand pose ``O_T_EE`` (with the end-effector frame set from
+  ``--tool`` on the arm, ``set_ee``), ``q``, ``dq``, the estimated external wrench
+  ``O_F_ext_hat_K`` and the robot mode. The arm's clock (ms since it booted) is mapped to
+  this host's Unix time by the least-delayed offset seen (:class:`ClockMap`).
+- **Targets** go into franky's ``CartesianImpedanceTrackingMotion`` (a torque controller
+  in libfranka's 1 kHz loop, franky's own): ``set_reference`` with each admitted target.
+  It starts at the first target, seeded at the measured pose; the arm's own torque-rate
+  limit (``max_delta_tau``), joint-limit repulsion and libfranka's collision reflexes
+  stay in force. The stiffness is a flag: the hand sags off the reference by about
+  force / stiffness.
+- **Faults**: a control exception (a reflex: collision, joint or Cartesian limit, a
+  ``communication_constraints_violation``), a lost link (libfranka's UDP timeout, about
+  1 s after the arm went silent) and a protocol error raise
+  :class:`~sctd.robots.RobotFault`; the motion is over and nothing is commanded until
+  :meth:`FrankyDriver.recover` (the arm's automatic error recovery, or a new connection
+  after a lost link).
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from sctd import se3
+from sctd.robots import Reading, RobotDriver, RobotError, RobotFault
+
+Array = np.ndarray
+FF_TAU = 0.02  # s: the feed-forward twist's low-pass filter
+
+
+def _pose_flag(text: str) -> Array:
+    """``x,y,z,qx,qy,qz,qw`` -> 4x4 (ValueError naming what is wrong)."""
+    try:
+        v = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise ValueError(f"not numbers: {text!r}") from None
+    if len(v) != 7 or not np.all(np.isfinite(v)):
+        raise ValueError(f"expected 7 finite numbers x,y,z,qx,qy,qz,qw, got {text!r}")
+    if abs(np.linalg.norm(v[3:]) - 1.0) > 1e-3:
+        raise ValueError(f"the quaternion of {text!r} is not a unit quaternion")
+    return se3.transform_from_pose(v)
+
+
+class ClockMap:
+    """The arm's clock (s since it booted) to this host's Unix time.
+
+    The offset follows the smallest ``wall - arm`` seen (the state that arrived with the
+    least delay) at once, and a larger one by a fraction ``gain`` per state: the two
+    clocks' rates differ (a real arm's by parts per million; a simulator slower than real
+    time, as franky-sim on two cores at 0.8, by a lot), so the offset must be allowed to
+    grow. A stamp is then late by about the link's delay jitter, and one from a slow
+    simulator by ``(1 / speed - 1) * period / gain`` (about 5 ms at 0.8). It starts again
+    when the arm's clock goes back (the arm rebooted).
+    """
+
+    def __init__(self, gain: float = 0.05):
+        self.gain = gain
+        self.offset: float | None = None
+        self._t: float | None = None
+
+    def stamp(self, t_arm: float, wall: float) -> float:
+        """The Unix time of the arm's ``t_arm``, received at ``wall``."""
+        off = wall - t_arm
+        if self.offset is None or self._t is None or t_arm < self._t or off <= self.offset:
+            self.offset = off
+        else:
+            self.offset += self.gain * (off - self.offset)
+        self._t = t_arm
+        return t_arm + self.offset
+
+
+class FrankyDriver(RobotDriver):
+    """See the module doc. Flags: ``--host`` (the arm's FCI address), ``--tool``,
+    ``--base``, ``--stiffness``, ``--rotational-stiffness``, ``--realtime``,
+    ``--collision-torque``, ``--collision-force``."""
+
+    name = "franky"
+    description = "a Franka FR3 or Panda through franky and libfranka's protocol (franky-sim too)"
+
+    def __init__(self, host: str, *, tool: Array | None = None, base: Array | None = None,
+                 stiffness: float = 2000.0, rotational_stiffness: float = 150.0, realtime: str = "enforce",
+                 collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0):
+        self.host = host
+        self.connect_timeout = connect_timeout
+        self.T_ne_ee = np.eye(4) if tool is None else tool  # the task's ee in the arm's nominal EE
+        self.T_world_base = np.eye(4) if base is None else base
+        self.T_base_world = se3.invert_transform(self.T_world_base)
+        self.stiffness, self.rotational_stiffness = stiffness, rotational_stiffness
+        self.realtime = realtime
+        self.collision = (collision_torque, collision_force)
+        self.robot: Any = None
+        self.motion: Any = None
+        self.fault: RobotFault | None = None
+        self.clock = ClockMap()
+        self._t_last = -1.0
+        self._next_due = 0.0
+        self._last_ref: tuple[Array, float | None] | None = None  # the last target and its stamp
+        self._twist = np.zeros(6)  # the feed-forward twist (base frame), filtered
+        self._ne_t_ee0: Array | None = None  # the arm's own NE_T_EE when we first connected
+        self.counts = {"states": 0, "repeats": 0, "references": 0, "motions": 0, "connections": 0}
+
+    # -- flags -------------------------------------------------------------------------
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--host", help="the arm's FCI address (franky-sim prints its own); needed "
+                                           "to serve")
+        parser.add_argument("--tool", default=None, metavar="x,y,z,qx,qy,qz,qw",
+                            help="the task's hand frame in the arm's configured end effector (set on the "
+                                 "arm with set_ee; default: the arm's own end effector)")
+        parser.add_argument("--base", default=None, metavar="x,y,z,qx,qy,qz,qw",
+                            help="the arm's base in the task's world (default: the world is the base)")
+        parser.add_argument("--stiffness", type=float, default=2000.0,
+                            help="translational stiffness of the tracking controller, N/m "
+                                 "(default %(default)s)")
+        parser.add_argument("--rotational-stiffness", type=float, default=150.0,
+                            help="rotational stiffness, N m/rad (default %(default)s)")
+        parser.add_argument("--realtime", choices=("enforce", "ignore"), default="enforce",
+                            help="libfranka's real-time check: enforce (a real arm: a PREEMPT_RT kernel) or "
+                                 "ignore (franky-sim, a laptop) (default %(default)s)")
+        parser.add_argument("--connect-timeout", type=float, default=5.0,
+                            help="s to wait for the arm's answer when connecting (default %(default)s)")
+        parser.add_argument("--collision-torque", type=float, default=20.0,
+                            help="joint torque threshold of the arm's collision reflex, N m "
+                                 "(default %(default)s)")
+        parser.add_argument("--collision-force", type=float, default=30.0,
+                            help="Cartesian force threshold of the collision reflex, N (default %(default)s)")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace, task: Any) -> FrankyDriver:
+        if not args.host:
+            raise RobotError("--host: the arm's FCI address is needed (franky-sim prints its own)")
+        poses = {}
+        for flag in ("tool", "base"):
+            text = getattr(args, flag)
+            try:
+                poses[flag] = None if text is None else _pose_flag(text)
+            except ValueError as e:
+                raise RobotError(f"--{flag}: {e}") from None
+        for flag in ("stiffness", "rotational_stiffness", "collision_torque", "collision_force",
+                     "connect_timeout"):
+            v = getattr(args, flag)
+            if not (np.isfinite(v) and v > 0):
+                raise RobotError(f"--{flag.replace('_', '-')}: must be positive, got {v}")
+        return cls(args.host, tool=poses["tool"], base=poses["base"], stiffness=args.stiffness,
+                   rotational_stiffness=args.rotational_stiffness, realtime=args.realtime,
+                   collision_torque=args.collision_torque, collision_force=args.collision_force,
+                   connect_timeout=args.connect_timeout)
+
+    @property
+    def rate(self) -> float:
+        return 1000.0
+
+    # -- the link ----------------------------------------------------------------------
+    def connect(self) -> None:
+        import franky
+
+        cfg = franky.RealtimeConfig.Enforce if self.realtime == "enforce" else franky.RealtimeConfig.Ignore
+        robot = self._open(lambda: franky.Robot(self.host, realtime_config=cfg))
+        try:
+            robot.set_collision_behavior(self.collision[0], self.collision[1])
+            ne_t_ee = robot.state.NE_T_EE.matrix
+            if self._ne_t_ee0 is None:
+                self._ne_t_ee0 = np.array(ne_t_ee)
+            robot.set_ee((self._ne_t_ee0 @ self.T_ne_ee).flatten(order="F").tolist())
+        except (franky.NetworkException, franky.CommandException, franky.ProtocolException) as e:
+            raise RobotError(f"{self.host}: setting up the arm: {type(e).__name__}: {e}") from None
+        self.robot, self.motion, self.fault = robot, None, None
+        self._t_last = -1.0
+        self.counts["connections"] += 1
+
+    def _open(self, make: Any) -> Any:
+        """``make()`` (franky.Robot) in a thread of its own, given ``connect_timeout`` s:
+        libfranka waits for as long as a peer keeps the socket open without a valid
+        reply, and a hostile or confused server on the arm's port must be an error, not a
+        hang. (A thread left waiting on such a peer ends with the process.)"""
+        import franky
+
+        box: dict[str, Any] = {}
+
+        def attempt() -> None:
+            try:
+                box["robot"] = make()
+            except Exception as e:  # handed to the caller below
+                box["error"] = e
+
+        t = threading.Thread(target=attempt, name="franky-connect", daemon=True)
+        t.start()
+        t.join(self.connect_timeout)
+        if t.is_alive():
+            raise RobotError(f"{self.host}: no answer in libfranka's protocol within "
+                             f"{self.connect_timeout:g} s "
+                             "(a Franka arm's FCI answers at once: is this its address, is FCI active?)")
+        e = box.get("error")
+        if isinstance(e, franky.RealtimeException):
+            raise RobotError(f"{e} (--realtime ignore runs without a real-time kernel, as against "
+                             "franky-sim)")
+        if e is not None:
+            raise RobotError(f"{self.host}: {type(e).__name__}: {e}")
+        return box["robot"]
+
+    def close(self) -> None:
+        robot, self.robot = self.robot, None
+        if robot is None:
+            return
+        if self.motion is not None and self.fault is None:
+            import franky
+
+            try:  # ramp the torque down and let the arm come to rest (no preemption)
+                robot.move(franky.TorqueStopMotion(), asynchronous=True)
+                robot.join_motion(timeout=2.0)
+            except Exception:  # closing anyway: the arm stops when we go
+                pass
+        self.motion = None
+
+    # -- state -------------------------------------------------------------------------
+    def read(self, timeout: float) -> Reading | None:
+        if self.robot is None or (self.fault is not None and self.fault.kind == "connection"):
+            time.sleep(timeout)
+            return None
+        end = time.monotonic() + timeout
+        while True:
+            st = self._state()
+            t = st.time.to_sec()
+            if t != self._t_last:
+                break
+            self.counts["repeats"] += 1
+            now = time.monotonic()
+            if now > end:
+                return None
+            # In a motion the state is the newest one: the next is due a period after
+            # the last new one arrived (sooner when the arm's clock ran ahead).
+            time.sleep(min(max(self._next_due - now, 0.0002), end - now))
+        self._next_due = time.monotonic() + 0.00095
+        self._t_last = t
+        self.counts["states"] += 1
+        return self._reading(st, t)
+
+    def _state(self) -> Any:
+        """The newest state; the motion's exception (a reflex, a lost link) as a fault."""
+        import franky
+
+        try:
+            if self.motion is not None and self.fault is None:
+                self.robot.poll_motion()
+            return self.robot.state
+        except franky.ControlException as e:
+            raise self._fault("reflex" if "reflex" in str(e).lower() else "control", e) from None
+        except franky.NetworkException as e:
+            raise self._fault("connection", e) from None
+        except (franky.ProtocolException, franky.IncompatibleVersionException) as e:
+            raise self._fault("protocol", e) from None
+
+    def _fault(self, kind: str, e: Exception) -> RobotFault:
+        self.motion = None  # the motion is over: libfranka stopped it
+        self.fault = RobotFault(kind, f"{type(e).__name__}: {e}")
+        return self.fault
+
+    def _reading(self, st: Any, t: float) -> Reading:
+        T_world_ee = self.T_world_base @ np.asarray(st.O_T_EE.matrix)
+        w = np.asarray(st.O_F_ext_hat_K, dtype=float)
+        R = self.T_world_base[:3, :3]
+        wrench = np.concatenate([R @ w[:3], R @ w[3:]]).tolist()
+        return Reading(self.clock.stamp(t, time.time()), T_world_ee, np.asarray(st.q).tolist(),
+                       np.asarray(st.dq).tolist(), wrench, st.robot_mode.name.lower())
+
+    # -- targets -----------------------------------------------------------------------
+    def command(self, T_world_ee: Array | None, stamp: float | None = None) -> None:
+        import franky
+
+        if self.robot is None or self.fault is not None:
+            return
+        if T_world_ee is None:
+            if self.motion is None:
+                return  # not following: the arm holds on its own
+            T_base_ee = np.asarray(self.robot.current_pose.end_effector_pose.matrix)
+            twist = np.zeros(6)
+            self._last_ref = None
+        else:
+            T_base_ee = self.T_base_world @ T_world_ee
+            twist = self._feed_forward(T_base_ee, stamp)
+        ref = franky.CartesianReference(target=franky.Affine(T_base_ee),
+                                        target_twist=franky.Twist(twist[:3], twist[3:]))
+        try:
+            if self.motion is None:
+                self._start_motion(ref)
+            else:
+                self.motion.set_reference(ref)
+        except franky.ControlException as e:
+            raise self._fault("control", e) from None
+        except franky.NetworkException as e:
+            raise self._fault("connection", e) from None
+        self.counts["references"] += 1
+
+    def _feed_forward(self, T_base_ee: Array, stamp: float | None) -> Array:
+        """The reference's twist (base frame) from the last two targets' stamps, low-pass
+        filtered (time constant ``FF_TAU``): the tracking controller's damping then acts on
+        the twist error, and a hand that follows a moving target does not trail it by
+        damping * speed / stiffness. Zero for a first target or a hold."""
+        last, self._last_ref = self._last_ref, (T_base_ee, stamp)
+        if last is None or stamp is None or last[1] is None or not stamp > last[1]:
+            self._twist[:] = 0.0 if last is None else self._twist
+            return self._twist.copy()
+        T0, dt = last[0], stamp - last[1]
+        raw = np.concatenate([(T_base_ee[:3, 3] - T0[:3, 3]) / dt,
+                              se3.rotvec_from_matrix(T_base_ee[:3, :3] @ T0[:3, :3].T) / dt])
+        a = dt / (FF_TAU + dt)
+        self._twist += a * (raw - self._twist)
+        return self._twist.copy()
+
+    def _start_motion(self, ref: Any) -> None:
+        import franky
+
+        m = franky.CartesianImpedanceTrackingMotion(translational_stiffness=self.stiffness,
+                                                    rotational_stiffness=self.rotational_stiffness)
+        m.set_reference(ref)
+        self.robot.move(m, asynchronous=True)
+        self.motion = m
+        self.counts["motions"] += 1
+
+    # -- recovery ----------------------------------------------------------------------
+    def recover(self) -> None:
+        import franky
+
+        fault = self.fault
+        if fault is None:
+            return
+        if fault.kind == "connection" or self.robot is None:
+            self.robot = None
+            self.connect()
+            return
+        try:
+            ok = self.robot.recover_from_errors()
+        except (franky.NetworkException, franky.CommandException) as e:
+            raise RobotError(f"the arm's automatic error recovery: {type(e).__name__}: {e}") from None
+        if not ok:
+            raise RobotError("the arm's automatic error recovery did not succeed: check the arm (its "
+                             "user stop, Desk) and try again")
+        self.fault, self.motion, self._t_last, self._last_ref = None, None, -1.0, None
+
+    def health(self) -> dict[str, Any]:
+        return {**self.counts, "host": self.host, "clock_offset": self.clock.offset}

@@ -1,0 +1,102 @@
+"""The robot-driver contract's pure parts: the registry, the franky driver's clock map and
+flags, the scene observer, the state's ``fault`` on the wire. (The drivers against real
+arms: tests/test_robot_franky.py.)"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sctd import se3
+from sctd.robots import RobotDriver, RobotError, driver_names, get_driver
+from sctd.task import find_task
+from sctd.wire import codec
+from sctd_services.robots.franky import ClockMap, FrankyDriver
+from sctd_services.robots.observer import observer_for
+from sctd_services.robots.service import driver_parser
+
+
+def test_the_built_in_drivers_are_registered_and_an_unknown_one_is_named():
+    assert driver_names()[:3] == ["sim", "kinematic", "franky"]
+    for name in ("sim", "kinematic", "franky"):
+        cls = get_driver(name)
+        assert issubclass(cls, RobotDriver) and cls.name == name and cls.description
+    with pytest.raises(RobotError, match=r"unknown robot driver 'ur5'; known: sim, kinematic, franky"):
+        get_driver("ur5")
+
+
+def test_the_clock_map_takes_the_least_delayed_state_at_once():
+    clock = ClockMap()
+    # the arm's clock 1000 s behind; delays of 3, 1, 2 ms
+    stamps = [clock.stamp(t, t + 1000.0 + d) for t, d in [(0.0, 0.003), (0.001, 0.001), (0.002, 0.002)]]
+    assert stamps[0] == pytest.approx(1000.003)
+    assert stamps[1] == pytest.approx(1000.002)  # 1 ms delay: the new offset, at once
+    assert stamps[2] == pytest.approx(1000.002 + 0.05 * 0.001)  # a larger delay: a fraction of it
+
+
+def test_the_clock_map_follows_an_arm_that_runs_slower_than_real_time():
+    """franky-sim at 0.8 of real time: a state every 1.25 ms of wall time, its clock
+    advancing 1 ms. The stamps stay within (1/0.8 - 1) * 1 ms / 0.05 = 5 ms of the wall."""
+    clock = ClockMap()
+    lag = [w - clock.stamp(0.001 * k, w) for k in range(5000) for w in [1e9 + 0.00125 * k]]
+    assert max(lag[1000:]) < 0.0055 and min(lag) >= 0.0
+
+
+@given(st.floats(-1e3, 1e3), st.floats(0.0, 0.01))
+def test_the_clock_map_never_stamps_a_state_after_it_arrived(t0, delay):
+    clock = ClockMap()
+    for k in range(20):
+        wall = 5e8 + t0 + 0.001 * k + delay * (k % 3)
+        assert clock.stamp(t0 + 0.001 * k, wall) <= wall + 1e-9
+
+
+def _franky_args(*argv: str) -> argparse.Namespace:
+    return driver_parser(FrankyDriver).parse_args(["--host", "127.0.0.1", *argv])
+
+
+def test_the_franky_flags_are_checked_where_and_what():
+    d = FrankyDriver.from_args(_franky_args("--tool", "0,0,0.1,0,0,0,1", "--stiffness", "1500"), None)
+    assert d.host == "127.0.0.1" and d.stiffness == 1500.0 and d.T_ne_ee[2, 3] == pytest.approx(0.1)
+    for argv, message in [(("--tool", "0,0,0.1"), r"--tool: expected 7 finite numbers"),
+                          (("--base", "0,0,0,0,0,0,2"), r"--base: the quaternion .* is not a unit"),
+                          (("--stiffness", "-5"), r"--stiffness: must be positive"),
+                          (("--tool", "a,b"), r"--tool: not numbers")]:
+        with pytest.raises(RobotError, match=message):
+            FrankyDriver.from_args(_franky_args(*argv), None)
+    with pytest.raises(RobotError, match="--host"):
+        FrankyDriver.from_args(driver_parser(FrankyDriver).parse_args([]), None)
+
+
+def test_the_observer_judges_a_pour_from_the_hand_and_refuses_contact_tasks():
+    pour = find_task("pour")
+    obs = observer_for(pour)
+    T0 = obs.scene.start_pose()
+    assert set(obs.objects()) == {"mug", "bottle_tip"}
+    for k in range(100):
+        obs.step(10.0 + 0.001 * k, T0)  # still: nothing poured
+    out = obs.outcome()
+    assert out["done"] is False and out["progress"] == 0.0 and obs.t == pytest.approx(0.099)
+    # the hand carries the held frames
+    T1 = T0 @ se3.transform_from_pose([0.0, 0.1, 0.0, 0, 0, 0, 1])
+    obs.step(10.2, T1)
+    tip = obs.objects()["bottle_tip"]
+    assert np.allclose(tip[:3, 3], (T1 @ pour.scene.held.frames["bottle_tip"])[:3, 3])
+    for contact_task in ("drawer", "light_switch"):
+        with pytest.raises(RobotError, match="needs contact physics"):
+            observer_for(find_task(contact_task))
+
+
+def test_a_state_fault_round_trips_and_a_bad_one_is_refused():
+    data = codec.encode_state(3, 1.0, [0, 0, 0, 0, 0, 0, 1], fault="reflex: cartesian_reflex")
+    assert codec.decode_state(data).fault == "reflex: cartesian_reflex"
+    assert codec.decode_state(codec.encode_state(3, 1.0, [0, 0, 0, 0, 0, 0, 1])).fault is None
+    bad = codec.pack({"seq": 1, "stamp": 1.0, "pose": [0, 0, 0, 0, 0, 0, 1], "fault": 7})
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_state(bad)
+    assert e.value.reason == "bad_fault"
+    long = codec.encode_state(1, 1.0, [0, 0, 0, 0, 0, 0, 1], fault="x" * 5000)
+    assert len(codec.decode_state(long).fault or "") == codec.MAX_FAULT_CHARS
