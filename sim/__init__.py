@@ -27,6 +27,7 @@ _LAZY = {
     "CartesianImpedanceController": "controller",
     "ImpedanceGains": "controller",
     "ArmModel": "robot",
+    "ArmModelError": "robot",
     "load_arm_model": "robot",
     "inverse_kinematics": "robot",
     "FaultConfig": "canbus",

@@ -22,6 +22,7 @@ from sctd.task import Task
 from sctd.timing import Ticker
 
 from .kinematic import KinematicRobot, kinematic_scene
+from .options import add_arm_arguments, arm_from_args
 
 
 def _need_task(name: str, task: Task | None) -> Task:
@@ -114,30 +115,33 @@ class SimDriver(_Clocked):
     name = "sim"
     description = "sctd's Pinocchio arm with its CAN joint bus and the task's physics"
 
-    def __init__(self, task: Task, rate: float = 1000.0, trial_seed: int | None = None):
+    def __init__(self, task: Task, rate: float = 1000.0, trial_seed: int | None = None, arm: Any = None):
         super().__init__(rate)
-        self.task, self.trial_seed = task, trial_seed
+        self.task, self.trial_seed, self.arm = task, trial_seed, arm
         self.sim: Any = None
 
     @classmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
         super().add_arguments(parser)
-        parser.add_argument("--trial-seed", type=int, default=None, metavar="N",
-                            help="start from the seeded random start N of an evaluation trial")
+        add_arm_arguments(parser)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace, task: Any) -> SimDriver:
-        return cls(_need_task(cls.name, task), args.rate, args.trial_seed)
+        try:
+            arm = arm_from_args(args)
+        except ValueError as e:
+            raise RobotError(str(e)) from None
+        return cls(_need_task(cls.name, task), args.rate, args.trial_seed, arm)
 
     def connect(self) -> None:
         from .scenes import make_scene
         from .simulation import Simulation, trial_scene
 
         if self.trial_seed is not None:
-            scene, q0 = trial_scene(self.task, self.trial_seed)
+            scene, q0 = trial_scene(self.task, self.trial_seed, self.arm)
         else:
             scene, q0 = make_scene(self.task), None
-        self.sim = Simulation(scene=scene, q0=q0, rate=self._rate)
+        self.sim = Simulation(scene=scene, q0=q0, rate=self._rate, arm=self.arm)
         super().connect()
 
     def close(self) -> None:

@@ -3,12 +3,15 @@
 ``python -m sctd_sim.service`` and ``sctd sim`` take the same flags: this module defines
 them and both parse with it. It imports nothing heavy (no Pinocchio, python-can or
 Zenoh beyond what :mod:`sctd.runtime` already loads), so the ``sctd`` command line
-builds its parser without loading the simulator.
+builds its parser without loading the simulator. The arm's flags (``--urdf``,
+``--ee-frame``) are a group of their own, :func:`add_arm_arguments` and
+:func:`arm_from_args`, for any program that runs the simulated arm.
 """
 
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from sctd.app.defaults import defaults
 from sctd.app.options import add_robot_argument, add_task_argument
@@ -17,6 +20,9 @@ from sctd.wire.session import add_zenoh_arguments
 
 from .guard import add_limit_arguments
 
+if TYPE_CHECKING:
+    from .robot import ArmModel
+
 
 def add_service_arguments(p: argparse.ArgumentParser) -> None:
     """Add the simulator service's flags (see :func:`sctd_sim.service.run`) to ``p``."""
@@ -24,6 +30,7 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
                       help="the task whose scene to simulate: the path of a task file, or the name of "
                            "a shipped or registered one; sctd tasks lists them", several=True)
     add_robot_argument(p)
+    add_arm_arguments(p)
     p.add_argument("--trial-seed", type=int, default=None, metavar="N",
                    help="start from the seeded random start N of an evaluation trial (the hand and the "
                         "objects moved within what the task file's vary fields say)")
@@ -60,3 +67,37 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
     add_ros_arguments(p, "the measured end effector as geometry_msgs/msg/PoseStamped on "
                          "<namespace>/ee_pose")
     add_zenoh_arguments(p)
+
+
+def add_arm_arguments(p: argparse.ArgumentParser) -> None:
+    """Add ``--urdf`` and ``--ee-frame``, the simulated arm (read back by
+    :func:`arm_from_args`), to ``p``."""
+    p.add_argument("--urdf", metavar="FILE", default=None,
+                   help="the arm to simulate, as a URDF whose root is the world and whose chain to "
+                        "--ee-frame is 7 revolute joints with limits and masses (other joints, such "
+                        "as fingers, are locked); default: the shipped arm (docs/sim-urdf.md)")
+    p.add_argument("--ee-frame", metavar="NAME", default=None,
+                   help="the URDF's frame that targets move and state reports (the hand's tool "
+                        "centre point); default: the shipped arm's")
+
+
+def arm_from_args(args: argparse.Namespace) -> ArmModel:
+    """The arm of ``--urdf`` and ``--ee-frame`` (:func:`add_arm_arguments`; each
+    defaulting to the shipped arm's), checked by :func:`~sctd_sim.robot.load_arm_model`.
+
+    Raises
+    ------
+    ValueError
+        ``--urdf: FILE: problem``, or ``--ee-frame: FILE: problem`` when the URDF has no
+        such frame.
+    """
+    # (Pinocchio is imported once the flags are parsed, not to build the parser)
+    from .robot import EE_FRAME, URDF_PATH, ArmModelError, load_arm_model
+
+    try:
+        return load_arm_model(args.urdf or URDF_PATH, args.ee_frame or EE_FRAME)
+    except ArmModelError as e:
+        if e.part != "ee_frame":
+            raise ValueError(f"--urdf: {e}") from None
+        hint = "" if args.ee_frame else "; name the hand's frame with --ee-frame"
+        raise ValueError(f"--ee-frame: {e}{hint}") from None

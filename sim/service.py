@@ -44,9 +44,10 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import can
+import numpy as np
 import zenoh
 
 from sctd import se3
@@ -62,7 +63,11 @@ from sctd.wire.session import MSGPACK, session_from_args
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
 from .guard import TargetGuard, TargetLimits, limits_from_args
-from .options import add_service_arguments
+from .options import add_service_arguments, arm_from_args
+
+if TYPE_CHECKING:
+    from .robot import ArmModel
+    from .scenes import Scene
 
 _FAULT_NAMES = {
     "drop": "drop_rate", "drop_rate": "drop_rate",
@@ -443,6 +448,7 @@ class _Settings(NamedTuple):
     """What :func:`run` takes from the flags, checked."""
 
     task: Task
+    arm: ArmModel
     faults: FaultConfig | None
     limits: TargetLimits
     channel: str | None
@@ -463,6 +469,7 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
         task = compose([find_task(r) for r in refs])  # one task: itself
     except TaskError as e:
         raise ValueError(f"--task: {e}") from None
+    arm = arm_from_args(args)
     Keys(args.robot)
     check_ros_arguments(args)
     if args.rate <= 0 or args.state_rate <= 0 or args.object_rate <= 0 or args.scene_rate <= 0:
@@ -471,7 +478,36 @@ def _settings_from_args(args: argparse.Namespace) -> _Settings:
     if not 0 <= args.view_port <= 65535:
         raise ValueError(f"--view-port: not a TCP port: {args.view_port}")
     channel, bus_factory = can_bus_choice(args.can_interface, args.can_channel)
-    return _Settings(task, faults, limits, channel, bus_factory)
+    return _Settings(task, arm, faults, limits, channel, bus_factory)
+
+
+def _start(settings: _Settings, args: argparse.Namespace) -> tuple[Scene, np.ndarray]:
+    """The scene to run and the arm's start posture in it: the task's start, or with
+    ``--trial-seed`` that trial's seeded start. The task's start is checked first, so an
+    arm that cannot reach it is told at once, not after every draw of a trial's start.
+
+    Raises
+    ------
+    ValueError
+        The arm cannot reach the task's start (``--urdf: FILE: task NAME: ...``, or
+        ``--task: task NAME: ...`` with the shipped arm; the pose and the arm named), or
+        no draw of the trial's start (``--trial-seed:``).
+    """
+    from .scenes import make_scene
+    from .simulation import start_posture, trial_scene
+
+    scene = make_scene(settings.task)
+    try:
+        q0 = start_posture(settings.arm, scene.start_pose())
+    except RuntimeError as e:
+        where = f"--urdf: {args.urdf}" if args.urdf else "--task"
+        raise ValueError(f"{where}: task {settings.task.name}: {e}") from None
+    if args.trial_seed is None:
+        return scene, q0
+    try:
+        return trial_scene(settings.task, args.trial_seed, settings.arm)
+    except RuntimeError as e:
+        raise ValueError(f"--trial-seed: {e}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -479,6 +515,7 @@ def run(args: argparse.Namespace) -> int:
     returns the exit code (2: bad flags)."""
     try:
         settings = _settings_from_args(args)
+        scene, q0 = _start(settings, args)
     except ValueError as e:
         return fail("sim", str(e))
     stop = threading.Event()
@@ -495,7 +532,7 @@ def run(args: argparse.Namespace) -> int:
             except ViewerUnavailable as e:
                 return fail("sim", f"--view: {e}")
             print(f"sctd sim: view at {viewer.url}", file=sys.stderr, flush=True)
-        summary = _serve(stack, args, settings, viewer, stop)
+        summary = _serve(stack, args, settings, (scene, q0), viewer, stop)
     print(f"sctd sim: stopped after {summary['t']:.2f} s simulated (real-time factor "
           f"{summary['rtf_total']}, {summary['overruns']} overruns, {summary['skipped']} skipped "
           f"cycles, {summary['targets']} targets, {summary['target_rejected']} refused, dropped "
@@ -507,19 +544,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Settings,
-           viewer: Any, stop: threading.Event) -> dict[str, Any]:
-    """Build the scene, the simulation, the session and the service (entered on
-    ``stack``), run until ``stop`` or ``--duration``; the service's summary."""
-    from .scenes import make_scene
-    from .simulation import Simulation, trial_scene
+           start: tuple[Scene, np.ndarray], viewer: Any, stop: threading.Event) -> dict[str, Any]:
+    """Build the simulation of the arm in ``start`` (the scene and the start posture,
+    :func:`_start`), the session and the service (entered on ``stack``), run until
+    ``stop`` or ``--duration``; the service's summary."""
+    from .simulation import Simulation
 
-    if args.trial_seed is not None:
-        scene, q0 = trial_scene(settings.task, args.trial_seed)
-    else:
-        scene, q0 = make_scene(settings.task), None
+    scene, q0 = start
     sim = stack.enter_context(Simulation(
         scene=scene, q0=q0, rate=args.rate, faults=settings.faults, channel=settings.channel,
-        bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout))
+        bus_factory=settings.bus_factory, drive_timeout=args.drive_timeout, arm=settings.arm))
     session = stack.enter_context(session_from_args(args))
     ros = None
     if args.ros:
@@ -537,8 +571,10 @@ def _serve(stack: contextlib.ExitStack, args: argparse.Namespace, settings: _Set
     # scans it (with the view, ~40 ms and the cycles skipped otherwise).
     gc.collect()
     gc.freeze()
+    arm = settings.arm
     print(f"sctd sim: scene {scene.name} at {args.rate:.0f} Hz on sctd/{args.robot}/ "
-          f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key})",
+          f"(objects: {', '.join(sim.objects())}; bus mirror {service.can_key}; arm "
+          f"{arm.urdf_path.name}, frame {arm.ee_frame})",
           file=sys.stderr, flush=True)
     service.run(stop, args.duration)
     return service.summary()

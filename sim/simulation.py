@@ -26,8 +26,11 @@ from sctd.task import Task
 from .arm import SimArm
 from .canbus import FaultConfig
 from .controller import ImpedanceGains
-from .robot import FORWARD_POSTURE, UP_POSTURE, ArmModel, inverse_kinematics, load_arm_model
+from .robot import ArmModel, inverse_kinematics, load_arm_model
 from .scenes import Scene, make_scene
+
+RANDOM_SEEDS = 30
+"""Pseudo-random postures :func:`start_posture` tries after the arm's own seeds."""
 
 
 class Simulation:
@@ -53,6 +56,7 @@ class Simulation:
     drive_timeout : float, optional
         Drive command timeout, s.
     arm : ArmModel, optional
+        The arm (:func:`~sctd_sim.robot.load_arm_model`); default the shipped one.
     compensate_payload : bool, optional
         Tell the arm's controller the load the hand holds (the bottle as it empties), as
         a real arm is configured; False only to measure what that buys.
@@ -206,15 +210,23 @@ def trial_scene(task: Task | str, seed: int, arm: ArmModel | None = None, attemp
 
 
 def start_posture(arm: ArmModel, T_world_ee: np.ndarray, via: np.ndarray | None = None) -> np.ndarray:
-    """Joint positions reaching ``T_world_ee``: IK from the up, rest and forward
-    postures, then from fixed pseudo-random seeds; with ``via`` (a nearby pose, such as
+    """Joint positions reaching ``T_world_ee``: IK from the arm's seed postures, then
+    from fixed pseudo-random ones; with ``via`` (a nearby pose, such as
     a scene's default start), first by continuation from the posture of ``via`` along
     the straight path to ``T_world_ee``, so that nearby starts get nearby postures.
+
+    The postures tried are the arm's own seeds (:attr:`ArmModel.seeds
+    <sctd_sim.robot.ArmModel>`), then :data:`RANDOM_SEEDS` fixed pseudo-random ones in
+    the middle 80 % of each joint's range. With seeds tuned for the arm (the shipped
+    one), the first posture reached is the start; otherwise, of the postures reached
+    from all of them, the one furthest from its joint limits (the smallest distance of a
+    joint to a limit, as a fraction of that joint's range, largest).
 
     Raises
     ------
     RuntimeError
-        If the pose is out of reach from every seed.
+        If the pose is out of reach from every seed (the message gives the pose and the
+        arm's URDF and frame).
     """
     if via is not None and not np.allclose(via, T_world_ee):
         q = start_posture(arm, via)
@@ -229,11 +241,28 @@ def start_posture(arm: ArmModel, T_world_ee: np.ndarray, via: np.ndarray | None 
                 break
         if ok:
             return q
+    return _posture_from_seeds(arm, T_world_ee)
+
+
+def _posture_from_seeds(arm: ArmModel, T_world_ee: np.ndarray) -> np.ndarray:
+    """:func:`start_posture` without ``via``: IK from every seed (see there)."""
     rng = np.random.default_rng(0)  # fixed: the same start posture every run
-    seeds = [UP_POSTURE, arm.rest, FORWARD_POSTURE]
-    seeds += [rng.uniform(0.8 * arm.q_lower, 0.8 * arm.q_upper) for _ in range(30)]
+    # the pseudo-random seeds lie in the middle 80 % of each joint's range
+    middle = 0.5 * (arm.q_lower + arm.q_upper)
+    low, high = middle + 0.8 * (arm.q_lower - middle), middle + 0.8 * (arm.q_upper - middle)
+    seeds = [*arm.seeds, *(rng.uniform(low, high) for _ in range(RANDOM_SEEDS))]
+    span = arm.q_upper - arm.q_lower
+    best, best_margin = None, -np.inf
     for seed in seeds:
         q, ok = inverse_kinematics(arm, T_world_ee, q_init=seed, max_iter=300)
-        if ok:
+        if ok and arm.seeds_tuned:
             return q
-    raise RuntimeError(f"start pose out of reach: {se3.pose_from_transform(T_world_ee)}")
+        margin = float(np.min(np.minimum(q - arm.q_lower, arm.q_upper - q) / span)) if ok else -np.inf
+        if margin > best_margin:
+            best, best_margin = q, margin
+    if best is not None:
+        return best
+    pose = ", ".join(f"{x:.3f}" for x in se3.pose_from_transform(T_world_ee))
+    raise RuntimeError(f"the start pose [{pose}] (x, y, z, qx, qy, qz, qw in the world) is out of reach "
+                       f"of the arm of {arm.urdf_path.name} (frame {arm.ee_frame!r}): inverse "
+                       f"kinematics from {len(seeds)} postures did not reach it")

@@ -23,7 +23,7 @@ from .crc import FrameCrc, crc8, frame_crc
 from .drives import JointDrives
 from .endpoint import BusEndpoint
 from .faults import FaultConfig, FaultCounts, FaultInjectingBus
-from .layout import DBC_PATH, load_dbc
+from .layout import DBC_PATH, JointBusRanges, joint_bus_ranges, load_dbc
 from .link import LinkStats, classify
 from .master import BusMaster
 from .virtual import FastVirtualBus, drain, send_batch
@@ -48,12 +48,14 @@ __all__ = [
     "FrameCrc",
     "FrameGroup",
     "JointBusCodecs",
+    "JointBusRanges",
     "JointDrives",
     "LinkStats",
     "classify",
     "crc8",
     "drain",
     "frame_crc",
+    "joint_bus_ranges",
     "load_dbc",
     "send_batch",
 ]

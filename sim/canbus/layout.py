@@ -118,3 +118,53 @@ def group_name(message_name: str) -> tuple[str, int] | None:
 def load_dbc(path: str | Path = DBC_PATH) -> cantools.database.can.Database:
     """Load (once per path) the joint-bus DBC."""
     return cast(cantools.database.can.Database, cantools.database.load_file(str(path)))
+
+
+@dataclass(frozen=True)
+class JointBusRanges:
+    """What the joint bus carries for each joint, from the DBC's signal ranges.
+
+    Attributes
+    ----------
+    n_joints : int
+        Joints with both a ``JointCmd_j`` and a ``JointState_j`` frame.
+    position : tuple of float
+        ``(min, max)`` of a measured position (``JointState_j.Position``), rad.
+    velocity : tuple of float
+        ``(min, max)`` of a measured velocity (``JointState_j.Velocity``), rad/s.
+    torque : tuple of float
+        ``(min, max)`` of a torque both commanded and reported (the narrower of
+        ``JointCmd_j.Torque`` and ``JointState_j.Torque``), N m.
+    """
+
+    n_joints: int
+    position: tuple[float, float]
+    velocity: tuple[float, float]
+    torque: tuple[float, float]
+
+
+def joint_bus_ranges(path: str | Path = DBC_PATH) -> JointBusRanges:
+    """The joint count and the per-joint ranges the bus of DBC ``path`` carries (the
+    intersection over its joints; a value outside is saturated when encoded)."""
+    db = load_dbc(path)
+    by_group: dict[str, list[cantools.database.can.Message]] = {}
+    for message in db.messages:
+        group = group_name(message.name)
+        if group is not None:
+            by_group.setdefault(group[0], []).append(message)
+    cmd, state = by_group.get("JointCmd", []), by_group.get("JointState", [])
+
+    def span(messages: list[cantools.database.can.Message], signal: str) -> tuple[float, float]:
+        sigs = [m.get_signal_by_name(signal) for m in messages]
+        if any(s.minimum is None or s.maximum is None for s in sigs):
+            raise ValueError(f"{path}: {signal}: every joint's signal needs a [min|max] range")
+        return (max(float(cast(float, s.minimum)) for s in sigs),
+                min(float(cast(float, s.maximum)) for s in sigs))
+
+    torque_cmd, torque_state = span(cmd, "Torque"), span(state, "Torque")
+    return JointBusRanges(
+        n_joints=min(len(cmd), len(state)),
+        position=span(state, "Position"),
+        velocity=span(state, "Velocity"),
+        torque=(max(torque_cmd[0], torque_state[0]), min(torque_cmd[1], torque_state[1])),
+    )
