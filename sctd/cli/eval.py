@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import os
+import shlex
 import sys
 import tempfile
 import time
@@ -82,6 +84,12 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
+    p.add_argument("--driver", metavar="NAME", default=None,
+                   help="real time only: run the trials on the arm this robot driver serves (sctd robot "
+                        "--list; e.g. franky against franky-sim) instead of sctd's simulator, the task's "
+                        "scene judged as an observer, the hand moved to each trial's start first")
+    p.add_argument("--driver-args", metavar="FLAGS", default="",
+                   help="the driver's flags, one string: --driver-args '--host 127.0.0.1 --realtime ignore'")
     p.add_argument("--jobs", type=int, default=None, help="lockstep trials run in parallel (default: CPUs)")
     p.add_argument("--time-limit", type=float, default=60.0, help="s per trial (default %(default)s)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
@@ -102,6 +110,10 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--trials: must be >= 1"
     if args.jobs is not None and args.jobs < 1:
         return "--jobs: must be >= 1"
+    if args.driver is not None and (args.lockstep or args.skill_set is not None):
+        return "--driver: real-time trials of --skill only (lockstep trials step sctd's own arm)"
+    if args.driver_args and args.driver is None:
+        return "--driver-args: only with --driver"
     if args.scheduler is not None and not args.lockstep:
         return "--scheduler: only with --lockstep (real-time trials start local processes)"
     if (args.practised or args.belief or args.change_of_mind) and args.skill_set is None:
@@ -183,6 +195,8 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
+    if args.driver is not None:
+        job = functools.partial(realtime_job, driver=(args.driver, *shlex.split(args.driver_args)))
     jobs = (args.jobs or os.cpu_count() or 1) if args.lockstep else 1
     logdir = None if args.lockstep else log_folder(args.logs, "sctd-eval-logs-")  # lockstep: none
     try:
@@ -198,7 +212,8 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     print(file=sys.stderr)
     found = find_task(task)  # (checked above: it loads)
     header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
-              "user": args.user, "lockstep": args.lockstep, "numerics": numerics()}
+              "user": args.user, "lockstep": args.lockstep, "numerics": numerics(),
+              "robot": {"driver": args.driver or "sctd sim", "args": args.driver_args}}
     if pool is not None:
         header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])
     if args.report:

@@ -127,9 +127,21 @@ class _Watcher:
             sub.undeclare()
 
 
+def robot_command(spec: TaskSpec, seed: int, driver: tuple[str, ...] | None) -> list[str]:
+    """The arm of a trial as ``sctd`` arguments: ``sctd sim`` from the seeded start, or
+    with ``driver`` (a driver's name and its flags) ``sctd robot NAME`` with the task's
+    scene as an observer, moved to the trial's start first (docs/robots.md)."""
+    if driver is None:
+        return ["sim", "--task", spec.task, "--trial-seed", str(seed)]
+    name, *flags = driver
+    return ["robot", name, "--task", spec.task, "--trial-seed", str(seed), "--move-to-start", *flags]
+
+
 def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | None = None,
-              logdir: Path | None = None, startup: float = 90.0) -> TrialResult:
-    """One real-time trial of the skill file ``skill_path`` from the seeded start."""
+              logdir: Path | None = None, startup: float = 90.0,
+              driver: tuple[str, ...] | None = None) -> TrialResult:
+    """One real-time trial of the skill file ``skill_path`` from the seeded start, on the
+    Pinocchio arm or, with ``driver``, on the arm that robot driver serves."""
     logdir = log_folder(logdir, "sctd-eval-")
     hub = f"tcp/127.0.0.1:{free_port()}"
     profile = PROFILES[spec.profile]
@@ -144,7 +156,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
         w = _Watcher(s, spec.task)
         try:
-            with Child("sctd.cli.main", "sim", "--task", spec.task, "--trial-seed", str(seed),
+            with Child("sctd.cli.main", *robot_command(spec, seed, driver),
                        "--connect", hub, "--listen", ep(), log=logdir / f"sim-{seed}.log") as sim, \
                     Child("sctd.cli.main", "run", "--skill", str(skill_path), "--connect", hub,
                           "--listen", ep(), log=logdir / f"daemon-{seed}.log") as daemon:
@@ -178,7 +190,8 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
 
 
 def realtime_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
-                 logdir: Path | None) -> dict[str, Any]:
-    """One real-time trial as :func:`sctd_services.eval.evaluate.evaluate` runs it."""
+                 logdir: Path | None, driver: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """One real-time trial as :func:`sctd_services.eval.evaluate.evaluate` runs it (with
+    ``driver`` bound by ``sctd eval --driver``)."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
-    return run_trial(path, spec, seed, demos, logdir).as_dict(with_trajectory=keep)
+    return run_trial(path, spec, seed, demos, logdir, driver=driver).as_dict(with_trajectory=keep)

@@ -141,6 +141,12 @@ class RobotDriver(ABC):
         """Clear a fault (reconnect after a lost link); RobotError when the arm cannot
         be recovered from here (the message says what a person must do)."""
 
+    def move_to(self, T_world_ee: Array) -> None:
+        """Bring the hand to ``T_world_ee`` with the arm's own planner and limits, before
+        serving (``sctd robot NAME --task T --move-to-start``: an operator's explicit
+        step, never the person's input); RobotError when it cannot."""
+        raise RobotError(f"the {self.name} driver cannot move to a start pose on its own")
+
     def close(self) -> None:  # noqa: B027 - a driver with nothing to let go
         """Stop following targets and let the link go (idempotent)."""
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,16 @@ from sctd.robots import Reading, RobotDriver, RobotError, RobotFault
 
 Array = np.ndarray
 FF_TAU = 0.02  # s: the feed-forward twist's low-pass filter
+START_TIMEOUT = 60.0  # s --move-to-start may take
+
+
+def _franky_sim_urdf() -> Path | None:
+    """franky-sim's FR3 URDF, where franky-sim is installed (it is the arm there)."""
+    try:
+        import franky_sim
+    except ImportError:
+        return None
+    return Path(franky_sim.__file__).parent / "assets" / "fr3.urdf"
 
 
 def _pose_flag(text: str) -> Array:
@@ -90,10 +101,15 @@ class FrankyDriver(RobotDriver):
 
     def __init__(self, host: str, *, tool: Array | None = None, base: Array | None = None,
                  stiffness: float = 2000.0, rotational_stiffness: float = 150.0, realtime: str = "enforce",
-                 collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0):
+                 collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0,
+                 start_dynamics: float = 0.1, urdf: Path | None = None, ee_frame: str = "fr3_hand_tcp",
+                 posture_stiffness: float = 5.0):
         self.host = host
+        self.urdf, self.ee_frame, self.posture_stiffness = urdf, ee_frame, posture_stiffness
+        self.posture: Array | None = None  # the joint posture the nullspace holds (from --move-to-start)
+        self.start_dynamics = start_dynamics
         self.connect_timeout = connect_timeout
-        self.T_ne_ee = np.eye(4) if tool is None else tool  # the task's ee in the arm's nominal EE
+        self.T_ne_ee = np.eye(4) if tool is None else tool  # NE_T_EE: the task's ee in the nominal EE
         self.T_world_base = np.eye(4) if base is None else base
         self.T_base_world = se3.invert_transform(self.T_world_base)
         self.stiffness, self.rotational_stiffness = stiffness, rotational_stiffness
@@ -107,7 +123,6 @@ class FrankyDriver(RobotDriver):
         self._next_due = 0.0
         self._last_ref: tuple[Array, float | None] | None = None  # the last target and its stamp
         self._twist = np.zeros(6)  # the feed-forward twist (base frame), filtered
-        self._ne_t_ee0: Array | None = None  # the arm's own NE_T_EE when we first connected
         self.counts = {"states": 0, "repeats": 0, "references": 0, "motions": 0, "connections": 0}
 
     # -- flags -------------------------------------------------------------------------
@@ -116,8 +131,9 @@ class FrankyDriver(RobotDriver):
         parser.add_argument("--host", help="the arm's FCI address (franky-sim prints its own); needed "
                                            "to serve")
         parser.add_argument("--tool", default=None, metavar="x,y,z,qx,qy,qz,qw",
-                            help="the task's hand frame in the arm's configured end effector (set on the "
-                                 "arm with set_ee; default: the arm's own end effector)")
+                            help="the task's hand frame in the arm's nominal end effector (the flange and "
+                                 "the hand Desk is configured with), set on the arm at every connection "
+                                 "(set_ee, NE_T_EE; default: identity, the nominal end effector)")
         parser.add_argument("--base", default=None, metavar="x,y,z,qx,qy,qz,qw",
                             help="the arm's base in the task's world (default: the world is the base)")
         parser.add_argument("--stiffness", type=float, default=2000.0,
@@ -128,6 +144,17 @@ class FrankyDriver(RobotDriver):
         parser.add_argument("--realtime", choices=("enforce", "ignore"), default="enforce",
                             help="libfranka's real-time check: enforce (a real arm: a PREEMPT_RT kernel) or "
                                  "ignore (franky-sim, a laptop) (default %(default)s)")
+        parser.add_argument("--start-dynamics", type=float, default=0.1,
+                            help="with --move-to-start: the fraction of the arm's velocity, acceleration and "
+                                 "jerk limits the move takes (default %(default)s)")
+        parser.add_argument("--urdf", default=None, metavar="FILE",
+                            help="the arm's URDF, for --move-to-start's joint posture (default: franky-sim's "
+                                 "FR3 where franky-sim is installed)")
+        parser.add_argument("--ee-frame", default="fr3_hand_tcp", metavar="NAME",
+                            help="the URDF's frame of the arm's nominal end effector (default %(default)s)")
+        parser.add_argument("--posture-stiffness", type=float, default=5.0,
+                            help="N m/rad of the tracking controller's nullspace pull towards the start "
+                                 "posture (with --move-to-start; default %(default)s)")
         parser.add_argument("--connect-timeout", type=float, default=5.0,
                             help="s to wait for the arm's answer when connecting (default %(default)s)")
         parser.add_argument("--collision-torque", type=float, default=20.0,
@@ -148,14 +175,16 @@ class FrankyDriver(RobotDriver):
             except ValueError as e:
                 raise RobotError(f"--{flag}: {e}") from None
         for flag in ("stiffness", "rotational_stiffness", "collision_torque", "collision_force",
-                     "connect_timeout"):
+                     "connect_timeout", "start_dynamics", "posture_stiffness"):
             v = getattr(args, flag)
             if not (np.isfinite(v) and v > 0):
                 raise RobotError(f"--{flag.replace('_', '-')}: must be positive, got {v}")
         return cls(args.host, tool=poses["tool"], base=poses["base"], stiffness=args.stiffness,
                    rotational_stiffness=args.rotational_stiffness, realtime=args.realtime,
                    collision_torque=args.collision_torque, collision_force=args.collision_force,
-                   connect_timeout=args.connect_timeout)
+                   connect_timeout=args.connect_timeout, start_dynamics=min(1.0, args.start_dynamics),
+                   urdf=Path(args.urdf) if args.urdf else None, ee_frame=args.ee_frame,
+                   posture_stiffness=args.posture_stiffness)
 
     @property
     def rate(self) -> float:
@@ -169,10 +198,8 @@ class FrankyDriver(RobotDriver):
         robot = self._open(lambda: franky.Robot(self.host, realtime_config=cfg))
         try:
             robot.set_collision_behavior(self.collision[0], self.collision[1])
-            ne_t_ee = robot.state.NE_T_EE.matrix
-            if self._ne_t_ee0 is None:
-                self._ne_t_ee0 = np.array(ne_t_ee)
-            robot.set_ee((self._ne_t_ee0 @ self.T_ne_ee).flatten(order="F").tolist())
+            # absolute, so that it is the same whatever an earlier program left set
+            robot.set_ee(self.T_ne_ee.flatten(order="F").tolist())
         except (franky.NetworkException, franky.CommandException, franky.ProtocolException) as e:
             raise RobotError(f"{self.host}: setting up the arm: {type(e).__name__}: {e}") from None
         self.robot, self.motion, self.fault = robot, None, None
@@ -321,12 +348,68 @@ class FrankyDriver(RobotDriver):
     def _start_motion(self, ref: Any) -> None:
         import franky
 
+        posture = None if self.posture is None else franky.PostureTask(self.posture.tolist(),
+                                                                       self.posture_stiffness)
         m = franky.CartesianImpedanceTrackingMotion(translational_stiffness=self.stiffness,
-                                                    rotational_stiffness=self.rotational_stiffness)
+                                                    rotational_stiffness=self.rotational_stiffness,
+                                                    posture_task=posture)
         m.set_reference(ref)
         self.robot.move(m, asynchronous=True)
         self.motion = m
         self.counts["motions"] += 1
+
+    def move_to(self, T_world_ee: Array) -> None:
+        """The hand to the pose in joint space: the posture is the inverse kinematics of
+        the arm's model (``--urdf``, ``--ee-frame``) furthest from the joint limits, and
+        franky's ``JointMotion`` (Ruckig: the arm's velocity, acceleration and jerk limits,
+        scaled by ``--start-dynamics``) takes the arm there. (A Cartesian move would keep
+        whatever elbow and wrist the arm had, and can end at a joint limit.) The tracking
+        controller's nullspace then holds the arm near that posture."""
+        import franky
+
+        if self.robot is None or self.fault is not None:
+            raise RobotError("not connected, or faulted: recover first")
+        q = self._start_posture(T_world_ee)
+        try:
+            self.robot.move(franky.JointMotion(q.tolist(), relative_dynamics_factor=self.start_dynamics),
+                            asynchronous=True)
+            end = time.monotonic() + START_TIMEOUT
+            while not self.robot.join_motion(timeout=0.1):  # bounded: an arm that never
+                if time.monotonic() > end:  # arrives (a limit, a planner that stalls) is an error
+                    self.robot.stop()
+                    raise RobotError(f"the arm did not reach the start within {START_TIMEOUT:.0f} s; "
+                                     f"it stopped at {self._where()}")
+        except (franky.ControlException, franky.InvalidMotionTypeException, RuntimeError) as e:
+            # (franky's planner reports an invalid goal as a RuntimeError)
+            raise RobotError(f"moving to the start {se3.pose_from_transform(T_world_ee).round(4).tolist()}: "
+                             f"{type(e).__name__}: {e}") from None
+        except franky.NetworkException as e:
+            raise self._fault("connection", e) from None
+        self.posture = q
+        self._t_last = -1.0
+
+    def _start_posture(self, T_world_ee: Array) -> Array:
+        """The joint posture of the hand at ``T_world_ee`` furthest from the limits."""
+        from sctd_sim.robot import ArmModelError, load_arm_model
+        from sctd_sim.simulation import start_posture
+
+        urdf = self.urdf or _franky_sim_urdf()
+        if urdf is None:
+            raise RobotError("--move-to-start needs the arm's model: --urdf FILE (Franka's "
+                             "franka_description has the FR3's) and --ee-frame (its hand's TCP frame)")
+        try:
+            arm = load_arm_model(urdf, ee_frame=self.ee_frame)
+        except ArmModelError as e:
+            raise RobotError(f"--urdf: {e}") from None
+        T_base_tcp = self.T_base_world @ T_world_ee @ se3.invert_transform(self.T_ne_ee)
+        try:
+            return start_posture(arm, T_base_tcp)
+        except RuntimeError as e:
+            raise RobotError(f"the start is out of the arm's reach ({e}): check --base and --tool") from None
+
+    def _where(self) -> list[float]:
+        T = self.T_world_base @ np.asarray(self.robot.current_pose.end_effector_pose.matrix)
+        return [round(x, 4) for x in se3.pose_from_transform(T).tolist()]
 
     # -- recovery ----------------------------------------------------------------------
     def recover(self) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 from sctd import se3
 from sctd.robots import RobotError
 from sctd.task import Task
-from sctd_sim.scenes import TaskScene
+from sctd_sim.scenes import TaskScene, make_scene
 
 Array = np.ndarray
 
@@ -29,8 +29,10 @@ class SceneObserver:
         Time since the first reading, s (on the readings' stamps): the task's clock.
     """
 
-    def __init__(self, task: Task):
-        self.scene = TaskScene(task)
+    def __init__(self, task: Task, trial_seed: int | None = None):
+        scene = make_scene(task, trial_seed=trial_seed)
+        assert isinstance(scene, TaskScene)
+        self.scene = scene
         self.t = 0.0
         self._last: tuple[float, Array] | None = None  # (stamp, T_world_ee) of the last reading
 
@@ -63,13 +65,15 @@ class SceneObserver:
         self.scene.reset()
 
 
-def observer_for(task: Task) -> SceneObserver:
-    """The observer of ``task``'s scene; RobotError when the task needs contact physics."""
+def observer_for(task: Task, trial_seed: int | None = None) -> SceneObserver:
+    """The observer of ``task``'s scene (with ``trial_seed``, the seeded random start of
+    an evaluation trial, as ``sctd sim --trial-seed`` draws it); RobotError when the task
+    needs contact physics."""
     sc = task.scene
     pushing = [*(f"joint {n}" for n in sc.joints), *(f"head {n}" for n in sc.heads),
                *(f"surface {n}" for n, b in sc.bodies.items()
                  if b.surface is not None or b.button is not None)]
-    observer = SceneObserver(task)
+    observer = SceneObserver(task, trial_seed)
     if pushing or observer.scene.contacts:
         what = ", ".join(pushing) or "a contact"
         raise RobotError(f"task {task.name}: its outcome needs contact physics ({what}), which only "

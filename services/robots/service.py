@@ -288,6 +288,12 @@ def driver_parser(cls: type[RobotDriver]) -> argparse.ArgumentParser:
     add_task_argument(p, None, help="the task whose scene to serve: objects published and the outcome "
                                     "judged from the arm's readings (a simulator driver simulates it)")
     add_robot_argument(p)
+    p.add_argument("--trial-seed", type=int, default=None, metavar="N",
+                   help="with --task: the seeded random start N of an evaluation trial (objects and hand "
+                        "moved within what the task file's vary fields say)")
+    p.add_argument("--move-to-start", action="store_true",
+                   help="with --task: before serving, bring the hand to the task's (trial's) start with the "
+                        "arm's own planner (an operator's step: the arm moves without the person's input)")
     p.add_argument("--recover", action="store_true",
                    help="do not serve: ask the running robot service to recover from its fault "
                         "(reconnect after a lost link), print its reply")
@@ -356,7 +362,9 @@ def _setup(cls: type[RobotDriver], a: argparse.Namespace) -> tuple[RobotDriver, 
     Keys(a.robot)
     limits = limits_from_args(a)
     driver = cls.from_args(a, task)
-    observer = observer_for(task) if task is not None and not cls.owns_scene else None
+    observer = observer_for(task, a.trial_seed) if task is not None and not cls.owns_scene else None
+    if (a.move_to_start or a.trial_seed is not None) and task is None:
+        raise ValueError("--move-to-start and --trial-seed need --task")
     return driver, observer, limits
 
 
@@ -375,6 +383,11 @@ def _serve(cls: type[RobotDriver], a: argparse.Namespace) -> int:
             driver.connect()
         except RobotError as e:
             return fail(name, f"cannot connect: {e}", EXIT_FAILED)
+        if a.move_to_start and observer is not None:
+            try:
+                driver.move_to(observer.scene.start_pose())
+            except RobotError as e:
+                return fail(name, f"--move-to-start: {e}", EXIT_FAILED)
         session = stack.enter_context(session_from_args(a))
         service = stack.enter_context(RobotService(session, driver, Keys(a.robot), limits, observer,
                                                    not a.no_stamp_check))
