@@ -10,7 +10,6 @@ the daemon's targets and status, the robot service's status.
 from __future__ import annotations
 
 import os
-import random
 import signal
 import socket
 import threading
@@ -23,6 +22,7 @@ import numpy as np
 import pytest
 import zenoh
 
+from sctd.bench.robot import free_loopback
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, Proc, free_port, run_sctd, sctd, wait_for
@@ -34,25 +34,11 @@ TELEOP = str(ROOT / "skills" / "teleop.yaml")
 SPEED = 0.10  # m/s: the teleoperation skill's max_linear_speed at full input
 
 
-def _free_loopback() -> str:
-    """A 127.x.y.z address whose libfranka ports (1337, 1338) are free: franky-sim binds
-    fixed ports, so each server gets an address of its own."""
-    rng = random.Random(os.getpid() ^ time.monotonic_ns())
-    for _ in range(200):
-        host = f"127.{rng.randint(1, 254)}.{rng.randint(0, 255)}.{rng.randint(1, 254)}"
-        try:
-            for port in (1337, 1338):
-                with socket.socket() as s:
-                    s.bind((host, port))
-            return host
-        except OSError:
-            continue
-    raise RuntimeError("no free loopback address for franky-sim")
-
-
-def franky_sim(host: str, log: Path) -> Proc:
-    """franky-sim (MuJoCo, headless) on ``host``; returns once it listens."""
-    p = Proc("franky_sim.run_server", "--simulator", "mujoco", "--hostname", host, log=log)
+def franky_sim(host: str, log: Path, module: str = "franky_sim.run_server") -> Proc:
+    """franky-sim (MuJoCo, headless) on ``host``; returns once it listens. ``module``:
+    franky-sim's own server, or tests.franky_reflex_server (reflexes on SIGUSR1)."""
+    args = ("--simulator", "mujoco", "--hostname", host) if module == "franky_sim.run_server" else (host,)
+    p = Proc(module, *args, log=log)
 
     def listening() -> bool:
         with socket.socket() as s:
@@ -126,9 +112,19 @@ class Person:
 @pytest.fixture
 def rig(tmp_path):
     """franky-sim, the daemon on the teleoperation skill, the franky driver; the person."""
-    host = _free_loopback()
+    yield from _rig(tmp_path, "franky_sim.run_server")
+
+
+@pytest.fixture
+def reflex_rig(tmp_path):
+    """The same with franky-sim's reflexes on demand (tests/franky_reflex_server.py)."""
+    yield from _rig(tmp_path, "tests.franky_reflex_server")
+
+
+def _rig(tmp_path, module: str):
+    host = free_loopback()
     ep = f"tcp/127.0.0.1:{free_port()}"
-    sim = franky_sim(host, tmp_path / "franky-sim.log")
+    sim = franky_sim(host, tmp_path / "franky-sim.log", module)
     daemon = sctd("run", "--skill", TELEOP, "--listen", ep, log=tmp_path / "daemon.log")
     robot = sctd("robot", "franky", "--host", host, "--realtime", "ignore", "--connect", ep,
                  log=tmp_path / "robot.log")
@@ -251,6 +247,52 @@ def test_a_frozen_arm_holds_the_daemon_faults_and_after_a_restart_moves_only_fro
     assert moved > 0.05, f"moved only {moved * 1e3:.1f} mm after the input was at zero"
 
 
+def test_a_reflex_is_a_fault_the_daemon_holds_and_after_recovery_moves_only_from_zero(reflex_rig):
+    person, procs, _, _ = reflex_rig
+    stop = threading.Event()
+
+    def hold_the_push() -> None:
+        while not stop.is_set():
+            person.push((-1.0, 0.0, 0.0), 0.05)
+
+    pusher = threading.Thread(target=hold_the_push)
+    pusher.start()
+    try:
+        time.sleep(0.5)
+        os.kill(procs["sim"].p.pid, signal.SIGUSR1)  # the arm's safety stops the motion
+        assert wait_for(lambda: (person.get("robot").get("fault") or {}).get("kind") == "reflex",
+                        timeout=10), procs["robot"].output()
+        # the arm still reports: its states carry the fault, and the daemon holds
+        assert wait_for(lambda: person.get("status").get("robot_fault") is not None
+                        and person.get("status").get("mode") == "fault", timeout=5)
+        assert "reflex" in person.get("status")["robot_fault"]
+        time.sleep(0.3)
+        assert _targets_after(person, time.monotonic() - 0.25) == 0
+        n0 = person.count()
+        time.sleep(0.5)
+        held = [s for s in person.since(n0)]
+        assert held and all(s[3] is not None for s in held)  # every state says it is faulted
+        rc = run_sctd("robot", "franky", "--recover", "--connect", _endpoint(procs["daemon"]), timeout=60)
+        assert rc.returncode == 0, rc.stderr
+        assert wait_for(lambda: person.get("robot").get("fault") is None, timeout=10)
+        n0 = person.count()
+        time.sleep(1.0)  # the push still held: nothing moves
+        pushed = person.since(n0)
+        assert len(pushed) > 300 and all(s[3] is None for s in pushed)
+        moved = float(np.max(np.linalg.norm(np.array([s[2] for s in pushed]) - pushed[0][2], axis=1)))
+        assert moved < 0.0005, f"moved {moved * 1e3:.2f} mm before the input was at zero"
+        assert person.get("status")["mode"] == "fault"
+    finally:
+        stop.set()
+        pusher.join()
+    person.push((0.0, 0.0, 0.0), 0.8)
+    n0 = person.count()
+    person.push((-1.0, 0.0, 0.0), 1.0)
+    moved = float(np.linalg.norm(person.position() - person.since(n0)[0][2]))
+    assert moved > 0.05, f"moved only {moved * 1e3:.1f} mm after the input was at zero"
+    assert person.get("robot")["recoveries"] == 1
+
+
 def _endpoint(daemon: Proc) -> str:
     args = daemon.p.args
     return args[args.index("--listen") + 1]
@@ -258,7 +300,7 @@ def _endpoint(daemon: Proc) -> str:
 
 @pytest.mark.parametrize("reply", [b"\xde\xad\xbe\xef" * 64, b"HTTP/1.1 400 Bad Request\r\n\r\n", b""])
 def test_a_hostile_reply_on_the_robot_port_is_a_clear_error_not_a_hang(reply):
-    host = _free_loopback()
+    host = free_loopback()
     server = socket.socket()
     server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     server.bind((host, 1337))
@@ -286,3 +328,27 @@ def test_a_hostile_reply_on_the_robot_port_is_a_clear_error_not_a_hang(reply):
     assert rc.returncode == 1, rc.stderr
     assert f"sctd robot franky: cannot connect: {host}:" in rc.stderr, rc.stderr
     assert "libfranka" in rc.stderr or "no answer" in rc.stderr
+
+
+def test_sctd_eval_runs_a_real_time_trial_on_the_fr3_judged_by_the_observer(tmp_path):
+    """``sctd eval --driver franky``: the trial's arm is the FR3 in franky-sim, moved to
+    the trial's start, its scene judged as an observer; the JSON says so."""
+    host = free_loopback()
+    sim = franky_sim(host, tmp_path / "franky-sim.log")
+    try:
+        rc = run_sctd("eval", "--skill", "pour-vf", "--task", "pour", "--trials", "1", "--seed", "1",
+                      "--json",
+                      "--time-limit", "20", "--logs", str(tmp_path / "logs"), "--driver", "franky",
+                      "--driver-args", f"--host {host} --realtime ignore --base 0.15,0,0.2,0,0,0,1 "
+                                       "--tool 0,0,0,0.7071068,0,0,0.7071068", timeout=240)
+    finally:
+        sim.stop()
+    assert rc.returncode == 0, rc.stderr[-2000:]
+    out = __import__("json").loads(rc.stdout)
+    assert out["robot"]["driver"] == "franky"
+    trial = out["results"][0]["per_trial"][0]
+    robot_log = next((tmp_path / "logs").rglob("sim-1.log")).read_text()
+    assert "sctd robot: franky at 1000 Hz" in robot_log and "(task pour, observed)" in robot_log
+    assert " 0 faults" in robot_log and "0 refused" in robot_log
+    # the person drove the FR3: the bottle left the start and the trial was timed on the arm's clock
+    assert trial["duration_s"] > 5.0 and trial["effort"] > 1.0 and trial["sim_rtf"] is not None

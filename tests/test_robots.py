@@ -18,6 +18,7 @@ from sctd.wire import codec
 from sctd_services.robots.franky import ClockMap, FrankyDriver
 from sctd_services.robots.observer import observer_for
 from sctd_services.robots.service import driver_parser
+from tests.conftest import wait_for
 
 
 def test_the_built_in_drivers_are_registered_and_an_unknown_one_is_named():
@@ -85,6 +86,7 @@ def test_the_observer_judges_a_pour_from_the_hand_and_refuses_contact_tasks():
     obs.step(10.2, T1)
     tip = obs.objects()["bottle_tip"]
     assert np.allclose(tip[:3, 3], (T1 @ pour.scene.held.frames["bottle_tip"])[:3, 3])
+    assert observer_for(find_task("drink")).scene.heads  # watched, not felt
     for contact_task in ("drawer", "light_switch"):
         with pytest.raises(RobotError, match="needs contact physics"):
             observer_for(find_task(contact_task))
@@ -100,3 +102,71 @@ def test_a_state_fault_round_trips_and_a_bad_one_is_refused():
     assert e.value.reason == "bad_fault"
     long = codec.encode_state(1, 1.0, [0, 0, 0, 0, 0, 0, 1], fault="x" * 5000)
     assert len(codec.decode_state(long).fault or "") == codec.MAX_FAULT_CHARS
+
+
+class _Arm(RobotDriver):
+    """A scripted arm: still at the start pose; ``fail_at`` readings in, it faults."""
+
+    name, description = "scripted", "a test's arm"
+
+    def __init__(self, fail_at: int | None = None):
+        self.n, self.fail_at, self.faulted, self.commands, self.recoveries = 0, fail_at, False, [], 0
+
+    @classmethod
+    def from_args(cls, args, task):
+        return cls()
+
+    @property
+    def rate(self) -> float:
+        return 1000.0
+
+    def connect(self) -> None:
+        pass
+
+    def read(self, timeout: float):
+        from sctd.robots import Reading, RobotFault
+
+        self.n += 1
+        if self.n == self.fail_at:
+            self.faulted = True
+            raise RobotFault("reflex", "cartesian_reflex")
+        return Reading(float(self.n), se3.transform_from_pose([0.4, 0, 0.5, 0, 0, 0, 1]), mode="move")
+
+    def command(self, T_world_ee, stamp=None) -> None:
+        self.commands.append(T_world_ee)
+
+    def recover(self) -> None:
+        self.recoveries += 1
+        self.faulted = False
+
+
+def test_the_robot_service_marks_faulted_states_and_starts_seq_again_after_a_recovery():
+    from sctd.wire import Keys
+    from sctd.wire.session import close_session, open_session
+    from sctd_services.robots.service import RobotService, _Recovery
+    from sctd_sim.guard import TargetLimits
+
+    session = open_session()
+    states: list = []
+    sub = session.declare_subscriber(Keys("t").state,
+                                     lambda s: states.append(codec.decode_state(s.payload.to_bytes())))
+    arm = _Arm(fail_at=4)
+    try:
+        with RobotService(session, arm, Keys("t"), TargetLimits()) as svc:
+            for _ in range(6):
+                svc.cycle()
+            assert svc.fault is not None and svc.fault.kind == "reflex" and svc.status_message()["fault"]
+            svc._recovery = _Recovery()
+            svc._run_recovery()
+            assert arm.recoveries == 1 and svc.fault is None and svc.seq == 0
+            svc.cycle()
+            svc._recovery = rec = _Recovery()  # no fault now: nothing to recover
+            svc._run_recovery()
+            assert rec.error is not None and "no fault" in rec.error and arm.recoveries == 1
+            assert wait_for(lambda: len(states) >= 6, timeout=5)
+    finally:
+        sub.undeclare()
+        close_session(session)
+    assert [m.seq for m in states] == [0, 1, 2, 3, 4, 0]
+    assert [m.fault is not None for m in states] == [False, False, False, True, True, False]
+    assert "reflex: cartesian_reflex" in (states[3].fault or "")

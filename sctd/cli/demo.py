@@ -1,7 +1,7 @@
 """``sctd demo``: the main job on one machine, end to end, on a free loopback port.
 
-Starts ``sctd run`` with a skill, a robot (the Pinocchio simulator, or the kinematic
-stand-in with ``--robot-backend kinematic``) and the simulated
+Starts ``sctd run`` with a skill, a robot (the Pinocchio simulator, or any robot driver
+with ``--robot-backend NAME``: the kinematic stand-in, a Franka FR3 through franky) and the simulated
 user as separate processes, prints the FSM state changes as the targets report them,
 and finishes with the target rate, the input -> target latency and the daemon's tick
 statistics. Exits non-zero if any part failed.
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import threading
 import time
 from contextlib import ExitStack
@@ -23,6 +24,7 @@ from ..app.defaults import defaults
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.logs import log_folder
 from ..app.options import SKILL_HELP, TASK_HELP
+from ..robots import driver_names
 from ..skill import Skill, SkillError, load_skill
 from ..skill.catalog import find_skill
 from ..task import TaskError, add_to_path, find_task, task_for_object
@@ -30,7 +32,15 @@ from ..wire import Keys, codec
 from ..wire.session import session as zsession
 from .procs import Child, free_port
 
-ROBOTS = {"sim": "sctd_sim.service", "kinematic": "sctd_sim.kinematic"}
+
+def robot_command(name: str, task: str, extra: str) -> list[str]:
+    """The robot process of ``--robot-backend NAME``: ``sctd sim`` for the simulator (its
+    own service, with the bus mirror and the scene reset), else ``sctd robot NAME`` (any
+    registered driver, with ``--robot-args``; moved to the task's start first)."""
+    if name == "sim":
+        return ["sctd_sim.service", "--task", task, *shlex.split(extra)]
+    start = ["--move-to-start"] if name not in ("kinematic",) else []
+    return ["sctd_services.robots.service", name, "--task", task, *start, *shlex.split(extra)]
 
 
 def add_demo_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,9 +52,12 @@ def add_demo_arguments(p: argparse.ArgumentParser) -> None:
                    help="the longest the user drives; it stops when it has done the task "
                         "(default %(default)s)")
     p.add_argument("--rate", type=float, default=1000.0, help="daemon tick rate, Hz")
-    p.add_argument("--robot-backend", default="sim", choices=sorted(ROBOTS),
-                   help="what stands in for the arm: the Pinocchio simulator (sim, default) or "
-                        "the kinematic stand-in")
+    p.add_argument("--robot-backend", default="sim", choices=driver_names(), metavar="DRIVER",
+                   help="the arm: a robot driver (sctd robot --list): the Pinocchio simulator (sim, "
+                        "default), the kinematic stand-in, franky (a Franka FR3, or franky-sim, with "
+                        "--robot-args '--host ADDRESS ...'), or a registered one")
+    p.add_argument("--robot-args", default="", metavar="FLAGS",
+                   help="the robot's own flags, one string (sctd robot DRIVER --help lists them)")
     p.add_argument("--logs", help="keep the processes' logs in this folder")
 
 
@@ -110,7 +123,7 @@ def _drive(args: argparse.Namespace, task: str, ep: str, logdir: Path) -> tuple[
     user's report (None when it did not get one) and the last scene message."""
     with Child("sctd.cli.main", "run", "--skill", args.skill, "--listen", ep, "--rate", str(args.rate),
                "--stats-json", log=logdir / "daemon.log") as daemon, \
-            Child(ROBOTS[args.robot_backend], "--task", task, "--connect", ep,
+            Child(*robot_command(args.robot_backend, task, args.robot_args), "--connect", ep,
                   log=logdir / "robot.log") as robot, \
             zsession(connect=[ep]) as session, \
             _Watch(session, Keys("edan")) as watch:

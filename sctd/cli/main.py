@@ -94,6 +94,9 @@ BENCHES: dict[str, Command] = {
     "vf": Command("a vector-field skill's tick cost against its number of demonstration points "
                   "(300 to 20k), next to the hand-written pour; --daemon adds the daemon's",
                   "sctd.bench.vf", "add_bench_vf_arguments", "main_bench_vf"),
+    "robot": Command("sctd's path to a franky arm (target stamp -> reference handed to franky, tracking, "
+                     "the driver's CPU) against a bare franky client's loop, both on franky-sim",
+                     "sctd.bench.robot", "add_bench_robot_arguments", "main_bench_robot"),
     "cluster": Command("short lockstep trials on local processes and on a loopback Dask cluster with as "
                        "many workers: the cluster's overhead per trial", "sctd.bench.cluster",
                        "add_bench_cluster_arguments", "main_bench_cluster"),

@@ -2,8 +2,10 @@
 puts them (the held ones carried by the hand), and the outcome from the hand's readings.
 
 It applies no physics: the arm's own stack moves the hand. Tasks whose outcome needs the
-scene to push back (a handle, a surface, a button, a head) stay in sctd's simulator,
-which has the physics; :func:`observer_for` says so.
+scene to push back (a handle on a joint, a surface, a button) stay in sctd's simulator,
+which has the physics; :func:`observer_for` says so. A head (the drink's face) is judged
+from the hand's pose alone: its readings need no force, and the face's push back, which
+sctd's simulator applies, is not felt by the arm.
 """
 
 from __future__ import annotations
@@ -70,7 +72,9 @@ def observer_for(task: Task, trial_seed: int | None = None) -> SceneObserver:
     an evaluation trial, as ``sctd sim --trial-seed`` draws it); RobotError when the task
     needs contact physics."""
     sc = task.scene
-    pushing = [*(f"joint {n}" for n in sc.joints), *(f"head {n}" for n in sc.heads),
+    # (a head is watched, not felt: the cup's touch of the lips is a reading of the
+    # hand's pose; the arm's own stack feels no push back from the face)
+    pushing = [*(f"joint {n}" for n in sc.joints),
                *(f"surface {n}" for n, b in sc.bodies.items()
                  if b.surface is not None or b.button is not None)]
     observer = SceneObserver(task, trial_seed)

@@ -15,7 +15,9 @@ blocks until the next state) and speaks the wire contract (docs/wire-contract.md
   (10 Hz): the driver's own scene (the simulator), or the scene as an observer of the
   readings (:mod:`.observer`);
 - publishes its own status on ``sctd/<robot>/robot`` (10 Hz): driver, connected, the
-  arm's mode, the fault and its history, counters;
+  arm's mode, the fault and its history, counters, and two distributions: a target's
+  stamp to the driver having it (``target_latency_ms``) and the hand's distance to the
+  target it follows, at every reading (``tracking_mm``);
 - answers ``sctd/<robot>/robot/recover``: after a fault, the driver recovers (or
   reconnects) between two cycles; the reply says whether it worked.
 
@@ -28,6 +30,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import signal
 import sys
 import threading
@@ -42,6 +45,7 @@ from sctd.app.errors import EXIT_FAILED, EXIT_OK, EXIT_USAGE, fail
 from sctd.app.options import add_robot_argument, add_task_argument
 from sctd.robots import Reading, RobotDriver, RobotError, RobotFault, driver_names, get_driver
 from sctd.task import Task, TaskError, find_task
+from sctd.timing import Histogram
 from sctd.wire import Keys, codec
 from sctd.wire.client import query
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
@@ -95,6 +99,9 @@ class RobotService:
         self.mode = ""
         self.last: Reading | None = None
         self.started = time.monotonic()
+        self.latency = Histogram()  # s from a target's stamp to the driver having it
+        self.tracking = Histogram()  # m between the admitted target and the measured hand
+        self._target_p: Any = None  # the position of the target the driver follows
         self._recovery: _Recovery | None = None
         self._lock = threading.Lock()
         self._due = {"status": 0.0, "objects": 0.0, "scene": 0.0}
@@ -147,6 +154,10 @@ class RobotService:
         with self._lock:
             rec, self._recovery = self._recovery, None
         if rec is None:
+            return
+        if self.fault is None:
+            rec.error = f"{self.driver.name}: no fault to recover from (the arm follows targets)"
+            rec.done.set()
             return
         try:
             self.driver.recover()
@@ -221,6 +232,10 @@ class RobotService:
     def _follow(self, r: Reading) -> None:
         """The newest valid target to the driver when the guard admits it; refused, the
         arm holds where it is."""
+        if self.following and self._target_p is not None:
+            x, y, z = self._target_p
+            p = r.T_world_ee[:3, 3]
+            self.tracking.add(math.sqrt((p[0] - x) ** 2 + (p[1] - y) ** 2 + (p[2] - z) ** 2))
         newest = None
         while (s := self.sub_target.try_recv()) is not None:
             try:
@@ -234,7 +249,9 @@ class RobotService:
                 F = se3.flat_from_transform(r.T_world_ee)
                 if self.guard.admit(newest["pose"], newest["stamp"], F, self.following):
                     self.driver.command(se3.transform_from_pose(newest["pose"]), newest["stamp"])
+                    self.latency.add(max(0.0, time.time() - newest["stamp"]))
                     self.following = True
+                    self._target_p = newest["pose"][:3]
                 elif self.following:
                     self.driver.command(None)  # refused: hold where the arm is
                     self.following = False
@@ -269,6 +286,8 @@ class RobotService:
             "following": self.following, "target_rejected": self.guard.total_rejected,
             "target_rejected_reasons": dict(self.guard.rejected), "dropped": dict(self.dropped),
             "uptime": round(time.monotonic() - self.started, 3), "driver_health": self.driver.health(),
+            # (Histogram's summaries are of seconds x 1e3: of metres, they are millimetres)
+            "target_latency_ms": self.latency.summary_ms(), "tracking_mm": self.tracking.summary_ms(),
         }
 
 
