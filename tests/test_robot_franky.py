@@ -27,7 +27,11 @@ from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, Proc, free_port, run_sctd, sctd, wait_for
 
-pytestmark = pytest.mark.slow  # franky-sim, the daemon and the robot service as processes
+# franky-sim, the daemon and the robot service as processes; and the verdicts need the
+# machine to keep time: franky-sim runs at 0.7-0.8 of real time here when alone, and at
+# 0.35 beside another test, where the FR3 cannot follow its targets (a hand speed of
+# 0.065 m/s against the skill's 0.10, measured beside the parallel tier)
+pytestmark = [pytest.mark.slow, pytest.mark.realtime]
 
 KEYS = Keys("edan")
 TELEOP = str(ROOT / "skills" / "teleop.yaml")
@@ -190,7 +194,7 @@ def test_a_release_stops_the_fr3_within_the_tracking_settling(rig):
     # tail of about 0.2 s (measured: 6.7, 2.8, 0.9, 0.5, 0.3 mm to go at 0.13 s steps):
     # from 0.8 s on, it is still.
     settled = np.array([s[2] for s in after if s[1] - t0 >= 0.8])
-    assert len(settled) > 400
+    assert len(settled) > 300  # 0.7 s of the arm's states
     creep = float(np.max(np.linalg.norm(settled - settled[0], axis=1)))
     trace = [round(float(np.linalg.norm(s[2] - after[-1][2])) * 1e3, 2) for s in after[::100]]
     assert creep < 0.0003, f"still moving {creep * 1e3:.2f} mm after the settling: {trace}"
