@@ -39,6 +39,7 @@ from sctd.robots import Reading, RobotDriver, RobotError, RobotFault
 Array = np.ndarray
 FF_TAU = 0.02  # s: the feed-forward twist's low-pass filter
 START_TIMEOUT = 60.0  # s --move-to-start may take
+POLL_PERIOD = 0.005  # s between looks at the motion's exception
 
 
 def _franky_sim_urdf() -> Path | None:
@@ -112,6 +113,7 @@ class FrankyDriver(RobotDriver):
         self.T_ne_ee = np.eye(4) if tool is None else tool  # NE_T_EE: the task's ee in the nominal EE
         self.T_world_base = np.eye(4) if base is None else base
         self.T_base_world = se3.invert_transform(self.T_world_base)
+        self._base_identity = bool(np.array_equal(self.T_world_base, np.eye(4)))
         self.stiffness, self.rotational_stiffness = stiffness, rotational_stiffness
         self.realtime = realtime
         self.collision = (collision_torque, collision_force)
@@ -121,6 +123,7 @@ class FrankyDriver(RobotDriver):
         self.clock = ClockMap()
         self._t_last = -1.0
         self._next_due = 0.0
+        self._poll_due = 0.0  # when poll_motion is due next
         self._last_ref: tuple[Array, float | None] | None = None  # the last target and its stamp
         self._twist = np.zeros(6)  # the feed-forward twist (base frame), filtered
         self.counts = {"states": 0, "repeats": 0, "references": 0, "motions": 0, "connections": 0}
@@ -278,7 +281,11 @@ class FrankyDriver(RobotDriver):
         import franky
 
         try:
-            if self.motion is not None and self.fault is None:
+            now = time.monotonic()
+            if self.motion is not None and self.fault is None and now >= self._poll_due:
+                # (about 0.13 ms a call: at most every POLL_PERIOD, which bounds how late
+                # a fault is noticed; the arm itself stopped at once)
+                self._poll_due = now + POLL_PERIOD
                 self.robot.poll_motion()
             return self.robot.state
         except franky.ControlException as e:
@@ -294,12 +301,14 @@ class FrankyDriver(RobotDriver):
         return self.fault
 
     def _reading(self, st: Any, t: float) -> Reading:
-        T_world_ee = self.T_world_base @ np.asarray(st.O_T_EE.matrix)
-        w = np.asarray(st.O_F_ext_hat_K, dtype=float)
-        R = self.T_world_base[:3, :3]
-        wrench = np.concatenate([R @ w[:3], R @ w[3:]]).tolist()
-        return Reading(self.clock.stamp(t, time.time()), T_world_ee, np.asarray(st.q).tolist(),
-                       np.asarray(st.dq).tolist(), wrench, st.robot_mode.name.lower())
+        T_base_ee = st.O_T_EE.matrix
+        T_world_ee = T_base_ee if self._base_identity else self.T_world_base @ T_base_ee
+        w = st.O_F_ext_hat_K
+        if not self._base_identity:
+            R = self.T_world_base[:3, :3]
+            w = np.concatenate([R @ w[:3], R @ w[3:]])
+        return Reading(self.clock.stamp(t, time.time()), T_world_ee, st.q.tolist(), st.dq.tolist(),
+                       w.tolist(), st.robot_mode.name.lower())
 
     # -- targets -----------------------------------------------------------------------
     def command(self, T_world_ee: Array | None, stamp: float | None = None) -> None:
@@ -339,8 +348,9 @@ class FrankyDriver(RobotDriver):
             self._twist[:] = 0.0 if last is None else self._twist
             return self._twist.copy()
         T0, dt = last[0], stamp - last[1]
-        raw = np.concatenate([(T_base_ee[:3, 3] - T0[:3, 3]) / dt,
-                              se3.rotvec_from_matrix(T_base_ee[:3, :3] @ T0[:3, :3].T) / dt])
+        raw = np.empty(6)
+        raw[:3] = (T_base_ee[:3, 3] - T0[:3, 3]) / dt
+        raw[3:] = np.array(se3.rotvec_from_matrix3(T_base_ee[:3, :3] @ T0[:3, :3].T)) / dt
         a = dt / (FF_TAU + dt)
         self._twist += a * (raw - self._twist)
         return self._twist.copy()

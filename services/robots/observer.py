@@ -50,7 +50,7 @@ class SceneObserver:
             return  # the same state again (or a clock step back): nothing happened
         twist = np.zeros(6)
         twist[:3] = (T_world_ee[:3, 3] - T0[:3, 3]) / dt
-        twist[3:] = se3.rotvec_from_matrix(T_world_ee[:3, :3] @ T0[:3, :3].T) / dt
+        twist[3:] = np.array(se3.rotvec_from_matrix3(T_world_ee[:3, :3] @ T0[:3, :3].T)) / dt
         self.scene.step(T_world_ee, twist, dt)
         self.t += dt
         self._last = (stamp, T_world_ee)

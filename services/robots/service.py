@@ -211,7 +211,7 @@ class RobotService:
         self.last = r
         self.readings += 1
         self.mode = r.mode
-        pose = se3.pose_from_transform(r.T_world_ee).tolist()
+        pose = se3.pose_from_flat(se3.flat_from_transform(r.T_world_ee))  # (the fast path: 1 kHz)
         fault = str(self.fault) if self.fault is not None else None
         self.pub_state.put(codec.encode_state(self.seq, r.stamp, pose, q=r.q, dq=r.dq, wrench=r.wrench,
                                               fault=fault))
@@ -248,7 +248,8 @@ class RobotService:
             if newest is not None:
                 F = se3.flat_from_transform(r.T_world_ee)
                 if self.guard.admit(newest["pose"], newest["stamp"], F, self.following):
-                    self.driver.command(se3.transform_from_pose(newest["pose"]), newest["stamp"])
+                    self.driver.command(se3.transform_from_flat(se3.flat_from_pose(newest["pose"])),
+                                        newest["stamp"])
                     self.latency.add(max(0.0, time.time() - newest["stamp"]))
                     self.following = True
                     self._target_p = newest["pose"][:3]
