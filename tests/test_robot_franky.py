@@ -9,6 +9,7 @@ the daemon's targets and status, the robot service's status.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -207,16 +208,54 @@ def _targets_after(person: Person, t: float) -> int:
         return sum(1 for arrival, _ in person.targets if arrival > t)
 
 
-def test_a_frozen_arm_holds_the_daemon_faults_and_after_a_restart_moves_only_from_zero(rig):
-    person, procs, host, tmp_path = rig
+@contextlib.contextmanager
+def holding_the_push(person: Person):
+    """The person pushes along -x (full deflection, deadman held) until the block ends."""
     stop = threading.Event()
-    def hold_the_push() -> None:
+
+    def hold() -> None:
         while not stop.is_set():
             person.push((-1.0, 0.0, 0.0), 0.05)
 
-    pusher = threading.Thread(target=hold_the_push)
+    pusher = threading.Thread(target=hold)
     pusher.start()
     try:
+        yield
+    finally:
+        stop.set()
+        pusher.join()
+
+
+def nothing_moves_until_the_input_was_at_zero(person: Person) -> list:
+    """With the push still held after a recovery: the arm's states of 1 s (the hand moved
+    less than 0.5 mm, the daemon in mode fault). Call inside :func:`holding_the_push`."""
+    n0 = person.count()
+    time.sleep(1.0)
+    pushed = person.since(n0)
+    assert len(pushed) > 300
+    moved = float(np.max(np.linalg.norm(np.array([s[2] for s in pushed]) - pushed[0][2], axis=1)))
+    assert moved < 0.0005, f"moved {moved * 1e3:.2f} mm before the input was at zero"
+    assert person.get("status")["mode"] == "fault"
+    return pushed
+
+
+def moves_again_from_zero(person: Person) -> None:
+    """Zero, then a push: the daemon re-seeded and the hand follows again."""
+    person.push((0.0, 0.0, 0.0), 0.8)
+    n0 = person.count()
+    person.push((-1.0, 0.0, 0.0), 1.0)
+    moved = float(np.linalg.norm(person.position() - person.since(n0)[0][2]))
+    assert moved > 0.05, f"moved only {moved * 1e3:.1f} mm after the input was at zero"
+
+
+def recover(procs: dict) -> None:
+    rc = run_sctd("robot", "franky", "--recover", "--connect", _endpoint(procs["daemon"]), timeout=60)
+    assert rc.returncode == 0, rc.stderr
+
+
+def test_a_frozen_arm_holds_the_daemon_faults_and_after_a_restart_moves_only_from_zero(rig):
+    person, procs, host, tmp_path = rig
+    with holding_the_push(person):
         time.sleep(0.3)
         os.kill(procs["sim"].p.pid, signal.SIGSTOP)  # franky-sim frozen mid-motion
         frozen = time.monotonic()
@@ -230,38 +269,17 @@ def test_a_frozen_arm_holds_the_daemon_faults_and_after_a_restart_moves_only_fro
         os.kill(procs["sim"].p.pid, signal.SIGCONT)
         procs["sim"].stop()  # killed: a new franky-sim on the same address
         procs["sim"] = franky_sim(host, tmp_path / "franky-sim-2.log")
-        rc = run_sctd("robot", "franky", "--recover", "--connect", _endpoint(procs["daemon"]), timeout=60)
-        assert rc.returncode == 0, rc.stderr
+        recover(procs)
         assert wait_for(lambda: person.get("robot").get("recoveries") == 1
                         and person.get("robot").get("fault") is None, timeout=10)
-        n0 = person.count()
-        time.sleep(1.0)  # still pushing: the restarted arm's stream is new, nothing may move
-        pushed = person.since(n0)
-        assert len(pushed) > 300 and pushed[0][0] < 1000  # seq started again
-        moved = float(np.max(np.linalg.norm(np.array([s[2] for s in pushed]) - pushed[0][2], axis=1)))
-        assert moved < 0.0005, f"moved {moved * 1e3:.2f} mm before the input was at zero"
-        assert person.get("status")["mode"] == "fault"
-    finally:
-        stop.set()
-        pusher.join()
-    person.push((0.0, 0.0, 0.0), 0.8)  # zero: the daemon re-seeds
-    n0 = person.count()
-    person.push((-1.0, 0.0, 0.0), 1.0)
-    moved = float(np.linalg.norm(person.position() - person.since(n0)[0][2]))
-    assert moved > 0.05, f"moved only {moved * 1e3:.1f} mm after the input was at zero"
+        pushed = nothing_moves_until_the_input_was_at_zero(person)
+        assert pushed[0][0] < 1000  # the restarted arm's stream is new: seq started again
+    moves_again_from_zero(person)
 
 
 def test_a_reflex_is_a_fault_the_daemon_holds_and_after_recovery_moves_only_from_zero(reflex_rig):
     person, procs, _, _ = reflex_rig
-    stop = threading.Event()
-
-    def hold_the_push() -> None:
-        while not stop.is_set():
-            person.push((-1.0, 0.0, 0.0), 0.05)
-
-    pusher = threading.Thread(target=hold_the_push)
-    pusher.start()
-    try:
+    with holding_the_push(person):
         time.sleep(0.5)
         os.kill(procs["sim"].p.pid, signal.SIGUSR1)  # the arm's safety stops the motion
         assert wait_for(lambda: (person.get("robot").get("fault") or {}).get("kind") == "reflex",
@@ -274,26 +292,13 @@ def test_a_reflex_is_a_fault_the_daemon_holds_and_after_recovery_moves_only_from
         assert _targets_after(person, time.monotonic() - 0.25) == 0
         n0 = person.count()
         time.sleep(0.5)
-        held = [s for s in person.since(n0)]
+        held = person.since(n0)
         assert held and all(s[3] is not None for s in held)  # every state says it is faulted
-        rc = run_sctd("robot", "franky", "--recover", "--connect", _endpoint(procs["daemon"]), timeout=60)
-        assert rc.returncode == 0, rc.stderr
+        recover(procs)
         assert wait_for(lambda: person.get("robot").get("fault") is None, timeout=10)
-        n0 = person.count()
-        time.sleep(1.0)  # the push still held: nothing moves
-        pushed = person.since(n0)
-        assert len(pushed) > 300 and all(s[3] is None for s in pushed)
-        moved = float(np.max(np.linalg.norm(np.array([s[2] for s in pushed]) - pushed[0][2], axis=1)))
-        assert moved < 0.0005, f"moved {moved * 1e3:.2f} mm before the input was at zero"
-        assert person.get("status")["mode"] == "fault"
-    finally:
-        stop.set()
-        pusher.join()
-    person.push((0.0, 0.0, 0.0), 0.8)
-    n0 = person.count()
-    person.push((-1.0, 0.0, 0.0), 1.0)
-    moved = float(np.linalg.norm(person.position() - person.since(n0)[0][2]))
-    assert moved > 0.05, f"moved only {moved * 1e3:.1f} mm after the input was at zero"
+        pushed = nothing_moves_until_the_input_was_at_zero(person)
+        assert all(s[3] is None for s in pushed)
+    moves_again_from_zero(person)
     assert person.get("robot")["recoveries"] == 1
 
 
