@@ -233,6 +233,40 @@ def test_eval_cli_json_is_one_object(tmp_path):
 pytestmark = pytest.mark.timeout(900)
 
 
+def test_an_arm_lag_is_refused_where_it_cannot_apply(capsys):
+    from sctd.cli.main import main
+
+    for argv, message in [(["--arm-lag", "0.05"], "--arm-lag: only with --lockstep and --skill"),
+                          (["--lockstep", "--arm-lag", "-0.1"], "--arm-lag: must be from 0 to 1 s, got -0.1"),
+                          (["--lockstep", "--arm-lag", "nan"], "--arm-lag: must be from 0 to 1 s, got nan")]:
+        assert main(["eval", "--skill", "pour", "--trials", "1", *argv]) == 2
+        assert message in capsys.readouterr().err
+
+
+def test_an_arm_lag_hands_the_arm_each_target_that_much_later(monkeypatch):
+    """``--arm-lag 0.05`` in lockstep: every target the arm is set to is the one the
+    daemon published 50 ticks (50 ms) earlier, and the arm gets none in the first 50."""
+    published, taken = {}, {}
+    tick, set_target = lockstep.Feed.tick, lockstep.Simulation.set_target
+
+    def spy_tick(self, t):
+        res = tick(self, t)
+        published[round(t * 1000)] = None if res.pose is None else list(res.pose)
+        return res
+
+    def spy_set(self, pose, stamp=None):
+        taken[round(self.t * 1000)] = list(pose)
+        return set_target(self, pose, stamp)
+
+    monkeypatch.setattr(lockstep.Feed, "tick", spy_tick)
+    monkeypatch.setattr(lockstep.Simulation, "set_target", spy_set)
+    lockstep.run_trial(load_skill(POUR), TaskSpec("pour", time_limit=4.0, arm_lag=0.05), 0)
+    assert taken and min(taken) >= 50
+    moved = [k for k in taken if taken[k] != taken[min(taken)]]
+    assert moved, "the user never moved the arm: nothing was checked"
+    assert all(taken[k] == published[k - 50] for k in taken)
+
+
 def _held_bottle(t: float, tilt: float):
     from sctd import se3
     from sctd_services.user import Observation

@@ -47,6 +47,20 @@ def test_the_clock_map_follows_an_arm_that_runs_slower_than_real_time():
     assert max(lag[1000:]) < 0.0055 and min(lag) >= 0.0
 
 
+def test_the_clock_map_measures_the_arms_pace():
+    """An arm at 0.7 of real time (a state every 1/0.7 ms of wall time): the pace is
+    measured within 1 % after a few windows; an arm at real time keeps 1; a reboot (the
+    arm's clock back) starts again at 1."""
+    slow, real = ClockMap(), ClockMap()
+    for k in range(4000):
+        slow.stamp(0.001 * k, 1e9 + 0.001 * k / 0.7)
+        real.stamp(0.001 * k, 1e9 + 0.001 * k)
+    assert slow.pace == pytest.approx(0.7, rel=0.01)
+    assert real.pace == pytest.approx(1.0, rel=1e-6)
+    slow.stamp(0.0, 1e9 + 10.0)
+    assert slow.pace == 1.0
+
+
 @given(st.floats(-1e3, 1e3), st.floats(0.0, 0.01))
 def test_the_clock_map_never_stamps_a_state_after_it_arrived(t0, delay):
     clock = ClockMap()
@@ -65,11 +79,16 @@ def test_the_franky_flags_are_checked_where_and_what():
     for argv, message in [(("--tool", "0,0,0.1"), r"--tool: expected 7 finite numbers"),
                           (("--base", "0,0,0,0,0,0,2"), r"--base: the quaternion .* is not a unit"),
                           (("--stiffness", "-5"), r"--stiffness: must be positive"),
-                          (("--tool", "a,b"), r"--tool: not numbers")]:
+                          (("--tool", "a,b"), r"--tool: not numbers"),
+                          (("--friction", "1,1,1"), r"--friction: needs 7 values, one per joint, got 3"),
+                          (("--friction", "1,1,1,1,1,1,-1"), r"--friction: each value must be finite"),
+                          (("--friction-viscous", "0,0,0,0,0,0,0"), r"--friction-viscous: needs --friction")]:
         with pytest.raises(RobotError, match=message):
             FrankyDriver.from_args(_franky_args(*argv), None)
     with pytest.raises(RobotError, match="--host"):
         FrankyDriver.from_args(driver_parser(FrankyDriver).parse_args([]), None)
+    d = FrankyDriver.from_args(_franky_args("--friction", "1,1,1,1,0.5,0.5,0.25"), None)
+    assert d.friction.tolist() == [1, 1, 1, 1, 0.5, 0.5, 0.25] and d.friction_viscous is None
 
 
 def test_the_observer_judges_a_pour_from_the_hand_and_refuses_contact_tasks():
@@ -185,3 +204,15 @@ def test_the_feed_forward_twist_converges_to_the_targets_velocity():
     assert np.allclose(twist, [0.1, 0, 0, 0, 0, 0.5], rtol=0.01, atol=1e-6)
     d._last_ref = None
     assert np.allclose(d._feed_forward(T, 2000.0), 0.0)
+
+
+def test_the_feed_forward_twist_is_in_the_arms_time():
+    """An arm at half real time (a simulator on a loaded machine) moves its hand in its
+    own time: targets at 0.1 m/s of this host's time are 0.2 m/s of the arm's."""
+    d = FrankyDriver("127.0.0.1")
+    d.clock.pace = 0.5
+    twist = np.zeros(6)
+    for k in range(300):
+        t = 0.001 * k
+        twist = d._feed_forward(se3.transform_from_rt(np.eye(3), [0.4 + 0.1 * t, 0.0, 0.5]), 1000.0 + t)
+    assert twist[0] == pytest.approx(0.2, rel=0.01)

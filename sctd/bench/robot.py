@@ -14,8 +14,11 @@ Against franky-sim (started here on a loopback address of its own), twice:
    stamp to the reference handed to franky; ``tracking_mm``) and the CPU of the robot
    service's process (from ``/proc``).
 
-The arm's own clock decides what "1 kHz" is: franky-sim keeps real time only where it
-has a core to itself; the table prints its pace (states per second of wall time).
+Both compensate franky-sim's joint friction (its model's values, ``--friction``), as
+a lab would its arm's identified friction; the bare client runs once more without, to
+show what the compensation buys. The arm's own clock decides what "1 kHz" is:
+franky-sim keeps real time only where it has a core to itself; the table prints its pace
+(states per second of wall time).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from sctd.cli.procs import Child, free_port
 from sctd.timing import Histogram, Ticker
 from sctd.wire import Keys, codec
 from sctd.wire.session import session as zsession
+from sctd_services.robots.franky import FRANKY_SIM_FRICTION
 
 from .cost import tree_cpu
 
@@ -76,15 +80,20 @@ def wait_listening(host: str, port: int, child: Child, seconds: float) -> bool:
 
 # --- the floor: a bare franky client ----------------------------------------------------------
 
-def bare_client(host: str, seconds: float) -> dict[str, Any]:
+def bare_client(host: str, seconds: float, friction: bool = True) -> dict[str, Any]:
     """Stream a triangle-wave reference to franky's tracking motion at 1 kHz for
-    ``seconds``; the loop's figures."""
+    ``seconds`` (with franky-sim's joint friction compensated, or not); the loop's
+    figures."""
     import franky
 
     robot = franky.Robot(host, realtime_config=franky.RealtimeConfig.Ignore)
     T0 = np.asarray(robot.current_pose.end_effector_pose.matrix)
+    params = None
+    if friction:
+        params = franky.FrictionCompensationParams(coulomb=list(FRANKY_SIM_FRICTION), viscous=[0.0] * 7,
+                                                   max_torque=list(FRANKY_SIM_FRICTION))
     motion = franky.CartesianImpedanceTrackingMotion(translational_stiffness=2000.0,
-                                                     rotational_stiffness=150.0)
+                                                     rotational_stiffness=150.0, friction=params)
     motion.set_reference(franky.CartesianReference(target=franky.Affine(T0)))
     robot.move(motion, asynchronous=True)
     age, tracking = Histogram(), Histogram()
@@ -138,7 +147,8 @@ def sctd_path(host: str, seconds: float, logdir: str) -> dict[str, Any]:
         stack.enter_context(Child("sctd.cli.main", "run", "--skill", "teleop", "--listen", ep,
                                   log=Path(logdir) / "daemon.log"))
         robot = stack.enter_context(Child("sctd.cli.main", "robot", "franky", "--host", host,
-                                          "--realtime", "ignore", "--connect", ep,
+                                          "--realtime", "ignore", "--connect", ep, "--friction",
+                                          ",".join(f"{x:g}" for x in FRANKY_SIM_FRICTION),
                                           log=Path(logdir) / "robot.log"))
         s = stack.enter_context(zsession(connect=[ep]))
         sub = s.declare_subscriber(keys.robot_status,
@@ -170,10 +180,12 @@ def add_bench_robot_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
     p.add_argument("--logs", default=None, metavar="DIR", help="keep the processes' logs here")
     p.add_argument("--bare", metavar="HOST", help=argparse.SUPPRESS)  # the floor's own process
+    p.add_argument("--bare-without-friction", action="store_true", help=argparse.SUPPRESS)
 
 
-def _phase_floor(host: str, seconds: float, logdir: str) -> dict[str, Any]:
-    with Child("sctd.bench.robot", "--bare", host, "--seconds", str(seconds)) as c:
+def _phase_floor(host: str, seconds: float, logdir: str, friction: bool = True) -> dict[str, Any]:
+    extra = () if friction else ("--bare-without-friction",)
+    with Child("sctd.bench.robot", "--bare", host, "--seconds", str(seconds), *extra) as c:
         out = c.communicate(timeout=seconds + 60)
     lines = [ln for ln in out.splitlines() if ln.startswith("{")]
     if not lines:
@@ -183,7 +195,7 @@ def _phase_floor(host: str, seconds: float, logdir: str) -> dict[str, Any]:
 
 def main_bench_robot(args: argparse.Namespace) -> int:
     if args.bare:
-        print(json.dumps(bare_client(args.bare, args.seconds)), flush=True)
+        print(json.dumps(bare_client(args.bare, args.seconds, not args.bare_without_friction)), flush=True)
         return 0
     import tempfile
 
@@ -195,13 +207,18 @@ def main_bench_robot(args: argparse.Namespace) -> int:
             if not wait_listening(host, 1337, sim, 60):
                 return fail("bench robot", f"franky-sim did not start; see {logdir}", EXIT_FAILED)
             floor = _phase_floor(host, args.seconds, logdir)
+            unfrictioned = _phase_floor(host, args.seconds, logdir, friction=False)
             ours = sctd_path(host, args.seconds, logdir)
     except RuntimeError as e:
         return fail("bench robot", str(e), EXIT_FAILED)
     if args.json:
-        print(json.dumps({"floor": floor, "sctd": ours, "logs": logdir}))
+        print(json.dumps({"floor": floor, "floor_without_friction": unfrictioned, "sctd": ours,
+                          "logs": logdir}))
         return 0
     _print(floor, ours)
+    t = unfrictioned["tracking_mm"]
+    print(f"  the bare client without friction compensation: hand to reference p50 {t['p50']:.3f} "
+          f"p99 {t['p99']:.3f} mm")
     return 0
 
 

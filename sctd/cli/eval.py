@@ -9,6 +9,7 @@ import argparse
 import contextlib
 import functools
 import json
+import math
 import os
 import shlex
 import sys
@@ -84,6 +85,11 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
+    p.add_argument("--arm-lag", type=float, default=0.0, metavar="S",
+                   help="with --lockstep: the arm takes each target this many s after the daemon "
+                        "published it (a delay line), as an arm whose tracking lags (franky's impedance "
+                        "controller on franky-sim: about 0.05 s): how well a skill and the simulated "
+                        "user hold up on a slower arm (default 0)")
     p.add_argument("--driver", metavar="NAME", default=None,
                    help="real time only: run the trials on the arm this robot driver serves (sctd robot "
                         "--list; e.g. franky against franky-sim) instead of sctd's simulator, the task's "
@@ -112,6 +118,10 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--jobs: must be >= 1"
     if args.driver is not None and (args.lockstep or args.skill_set is not None):
         return "--driver: real-time trials of --skill only (lockstep trials step sctd's own arm)"
+    if args.arm_lag and (not args.lockstep or args.skill_set is not None):
+        return "--arm-lag: only with --lockstep and --skill (a real-time arm lags as it does)"
+    if not (math.isfinite(args.arm_lag) and 0.0 <= args.arm_lag <= 1.0):
+        return f"--arm-lag: must be from 0 to 1 s, got {args.arm_lag}"
     if args.driver_args and args.driver is None:
         return "--driver-args: only with --driver"
     if args.scheduler is not None and not args.lockstep:
@@ -151,6 +161,8 @@ def _progress_bar() -> Callable[[int, int, str], None]:
 
 def _print_table(plain: list[dict[str, Any]], spec: TaskSpec, args: argparse.Namespace) -> None:
     how = "lockstep (simulated time)" if args.lockstep else "real time, over Zenoh"
+    if args.arm_lag:
+        how += f", the arm {1000 * args.arm_lag:g} ms behind each target"
     print(f"sctd eval: task {spec.task}, {args.trials} trials per skill from seed {args.seed}, {how}")
     print(f"  {profile_line(spec)}")
     print("  speed limits:")
@@ -191,7 +203,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
         ents = entries(paths, args.baseline, work, find_task(task))
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))
-    spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit)
+    spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit, arm_lag=args.arm_lag)
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
@@ -212,7 +224,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     print(file=sys.stderr)
     found = find_task(task)  # (checked above: it loads)
     header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
-              "user": args.user, "lockstep": args.lockstep, "numerics": numerics(),
+              "user": args.user, "lockstep": args.lockstep, "arm_lag": args.arm_lag, "numerics": numerics(),
               "robot": {"driver": args.driver or "sctd sim", "args": args.driver_args}}
     if pool is not None:
         header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])

@@ -12,6 +12,7 @@ outcome 10 Hz), so that both ways of running give the user the same information.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -159,6 +160,9 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
     if watch is not None:
         engaged, mode = watch.shown()
     k, seq = 0, 0
+    # spec.arm_lag: the targets reach the arm through a delay line of that many ticks
+    late: deque[list[float] | None] | None = deque() if spec.arm_lag > 0 else None
+    lag_ticks = round(spec.arm_lag / sim.dt)
     while True:
         t = sim.t
         m = sim.state_message()
@@ -186,9 +190,13 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             engaged, mode = watch.shown()
         F = drv.state.F if drv.state is not None else None
         assert F is not None
-        if res.pose is not None and guard.admit(res.pose, t, F, not sim.arm.controller.holding):
-            sim.set_target(res.pose, t)
-        elif res.pose is not None and not sim.arm.controller.holding:
+        pose = res.pose
+        if late is not None:
+            late.append(pose)
+            pose = late.popleft() if len(late) > lag_ticks else None
+        if pose is not None and guard.admit(pose, t, F, not sim.arm.controller.holding):
+            sim.set_target(pose, t)
+        elif pose is not None and not sim.arm.controller.holding:
             sim.arm.controller.hold()
         sim.step()
         k += 1

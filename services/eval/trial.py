@@ -38,14 +38,17 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class TaskSpec:
     """What every trial of an evaluation shares: the task, the device's axes, the
-    simulated user's profile (a name of :data:`~sctd_services.user.PROFILES`) and the
-    limits on a trial (s)."""
+    simulated user's profile (a name of :data:`~sctd_services.user.PROFILES`), the
+    limits on a trial (s) and, in lockstep, ``arm_lag``: s by which the arm takes each
+    target later than the daemon published it (0: at once), an arm that lags as an
+    impedance-controlled one does."""
 
     task: str
     axes: int = 3
     profile: str = "steady"
     time_limit: float = 60.0
     stuck_after: float = 10.0
+    arm_lag: float = 0.0
 
 
 @dataclass

@@ -14,7 +14,11 @@ server that speaks the same protocol on 127.0.0.1 (what the tests run against).
   It starts at the first target, seeded at the measured pose; the arm's own torque-rate
   limit (``max_delta_tau``), joint-limit repulsion and libfranka's collision reflexes
   stay in force. The stiffness is a flag: the hand sags off the reference by about
-  force / stiffness.
+  force / stiffness. Each reference carries the targets' twist as feed-forward, in the
+  arm's own time (:attr:`ClockMap.pace`: a simulator below real time moves its hand
+  faster per simulated second). ``--friction`` has the controller compensate the
+  joints' Coulomb friction (franky's friction compensation), which otherwise holds the
+  hand a few millimetres off a reference that is still.
 - **Faults**: a control exception (a reflex: collision, joint or Cartesian limit, a
   ``communication_constraints_violation``), a lost link (libfranka's UDP timeout, about
   1 s after the arm went silent) and a protocol error raise
@@ -40,6 +44,11 @@ Array = np.ndarray
 FF_TAU = 0.02  # s: the feed-forward twist's low-pass filter
 START_TIMEOUT = 60.0  # s --move-to-start may take
 POLL_PERIOD = 0.005  # s between looks at the motion's exception
+PACE_WINDOW = 0.5  # s of this host's time over which the arm's pace is measured
+PACE_MIN = 0.2  # the slowest pace believed (a stalled arm is the link's fault, not its pace)
+# franky-sim's FR3 joint friction (its MuJoCo model's frictionloss, N m): --friction's
+# value for trials against franky-sim; a real arm's has to be identified
+FRANKY_SIM_FRICTION = (1.137, 1.137, 1.137, 1.137, 0.763, 0.44, 0.248)
 
 
 def _franky_sim_urdf() -> Path | None:
@@ -49,6 +58,20 @@ def _franky_sim_urdf() -> Path | None:
     except ImportError:
         return None
     return Path(franky_sim.__file__).parent / "assets" / "fr3.urdf"
+
+
+def _joint_flag(text: str) -> Array:
+    """Seven comma-separated non-negative numbers, one per joint (ValueError naming what
+    is wrong)."""
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise ValueError(f"not numbers: {text!r}") from None
+    if len(v) != 7:
+        raise ValueError(f"needs 7 values, one per joint, got {len(v)}: {text!r}")
+    if not (np.all(np.isfinite(v)) and np.all(v >= 0)):
+        raise ValueError(f"each value must be finite and at least 0: {text!r}")
+    return v
 
 
 def _pose_flag(text: str) -> Array:
@@ -80,22 +103,41 @@ class ClockMap:
         self.gain = gain
         self.offset: float | None = None
         self._t: float | None = None
+        self.pace = 1.0  # the arm's clock's seconds per second of this host's (see below)
+        self._anchor: tuple[float, float] | None = None  # (t_arm, wall) a pace window began
 
     def stamp(self, t_arm: float, wall: float) -> float:
         """The Unix time of the arm's ``t_arm``, received at ``wall``."""
         off = wall - t_arm
         if self.offset is None or self._t is None or t_arm < self._t or off <= self.offset:
+            if self._t is not None and t_arm < self._t:
+                self._anchor, self.pace = None, 1.0  # the arm restarted
             self.offset = off
         else:
             self.offset += self.gain * (off - self.offset)
         self._t = t_arm
+        self._measure_pace(t_arm, wall)
         return t_arm + self.offset
+
+    def _measure_pace(self, t_arm: float, wall: float) -> None:
+        """The arm's pace: its clock's advance over this host's, over windows of
+        ``PACE_WINDOW`` s, smoothed. 1 for a real arm (to parts per million); a simulator
+        below real time runs its physics, and so the arm's motion, at its pace."""
+        if self._anchor is None:
+            self._anchor = (t_arm, wall)
+            return
+        t0, w0 = self._anchor
+        if wall - w0 < PACE_WINDOW:
+            return
+        window = min(1.0, max(PACE_MIN, (t_arm - t0) / (wall - w0)))
+        self.pace += 0.5 * (window - self.pace)
+        self._anchor = (t_arm, wall)
 
 
 class FrankyDriver(RobotDriver):
     """See the module doc. Flags: ``--host`` (the arm's FCI address), ``--tool``,
-    ``--base``, ``--stiffness``, ``--rotational-stiffness``, ``--realtime``,
-    ``--collision-torque``, ``--collision-force``."""
+    ``--base``, ``--stiffness``, ``--rotational-stiffness``, ``--friction``,
+    ``--friction-viscous``, ``--realtime``, ``--collision-torque``, ``--collision-force``."""
 
     name = "franky"
     description = "a Franka FR3 or Panda through franky and libfranka's protocol (franky-sim too)"
@@ -104,8 +146,11 @@ class FrankyDriver(RobotDriver):
                  stiffness: float = 2000.0, rotational_stiffness: float = 150.0, realtime: str = "enforce",
                  collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0,
                  start_dynamics: float = 0.1, urdf: Path | None = None, ee_frame: str = "fr3_hand_tcp",
-                 posture_stiffness: float = 5.0):
+                 posture_stiffness: float = 5.0, friction: Array | None = None,
+                 friction_viscous: Array | None = None):
         self.host = host
+        # joint friction the tracking controller compensates (N m, N m s/rad; None: none)
+        self.friction, self.friction_viscous = friction, friction_viscous
         self.urdf, self.ee_frame, self.posture_stiffness = urdf, ee_frame, posture_stiffness
         self.posture: Array | None = None  # the joint posture the nullspace holds (from --move-to-start)
         self.start_dynamics = start_dynamics
@@ -158,6 +203,14 @@ class FrankyDriver(RobotDriver):
         parser.add_argument("--posture-stiffness", type=float, default=5.0,
                             help="N m/rad of the tracking controller's nullspace pull towards the start "
                                  "posture (with --move-to-start; default %(default)s)")
+        parser.add_argument("--friction", default=None, metavar="N_M,... (7)",
+                            help="each joint's Coulomb friction, N m, that the tracking controller "
+                                 "compensates (franky's friction compensation, capped at these values); "
+                                 "identify your arm's before using it (franky-sim's FR3: "
+                                 f"{','.join(f'{x:g}' for x in FRANKY_SIM_FRICTION)}; default: none)")
+        parser.add_argument("--friction-viscous", default=None, metavar="N_M_S,... (7)",
+                            help="each joint's viscous friction, N m s/rad, compensated with --friction "
+                                 "(default: none)")
         parser.add_argument("--connect-timeout", type=float, default=5.0,
                             help="s to wait for the arm's answer when connecting (default %(default)s)")
         parser.add_argument("--collision-torque", type=float, default=20.0,
@@ -170,13 +223,16 @@ class FrankyDriver(RobotDriver):
     def from_args(cls, args: argparse.Namespace, task: Any) -> FrankyDriver:
         if not args.host:
             raise RobotError("--host: the arm's FCI address is needed (franky-sim prints its own)")
-        poses = {}
-        for flag in ("tool", "base"):
+        poses = {}  # the flags of poses and of per-joint values, parsed
+        for flag, parse in (("tool", _pose_flag), ("base", _pose_flag), ("friction", _joint_flag),
+                            ("friction_viscous", _joint_flag)):
             text = getattr(args, flag)
             try:
-                poses[flag] = None if text is None else _pose_flag(text)
+                poses[flag] = None if text is None else parse(text)
             except ValueError as e:
-                raise RobotError(f"--{flag}: {e}") from None
+                raise RobotError(f"--{flag.replace('_', '-')}: {e}") from None
+        if poses["friction_viscous"] is not None and poses["friction"] is None:
+            raise RobotError("--friction-viscous: needs --friction (the Coulomb part)")
         for flag in ("stiffness", "rotational_stiffness", "collision_torque", "collision_force",
                      "connect_timeout", "start_dynamics", "posture_stiffness"):
             v = getattr(args, flag)
@@ -187,7 +243,8 @@ class FrankyDriver(RobotDriver):
                    collision_torque=args.collision_torque, collision_force=args.collision_force,
                    connect_timeout=args.connect_timeout, start_dynamics=min(1.0, args.start_dynamics),
                    urdf=Path(args.urdf) if args.urdf else None, ee_frame=args.ee_frame,
-                   posture_stiffness=args.posture_stiffness)
+                   posture_stiffness=args.posture_stiffness, friction=poses["friction"],
+                   friction_viscous=poses["friction_viscous"])
 
     @property
     def rate(self) -> float:
@@ -347,7 +404,9 @@ class FrankyDriver(RobotDriver):
         if last is None or stamp is None or last[1] is None or not stamp > last[1]:
             self._twist[:] = 0.0 if last is None else self._twist
             return self._twist.copy()
-        T0, dt = last[0], stamp - last[1]
+        # the targets' twist in the arm's own time, which is the controller's: a
+        # simulator below real time has to move its hand faster per simulated second
+        T0, dt = last[0], (stamp - last[1]) * self.clock.pace
         raw = np.empty(6)
         raw[:3] = (T_base_ee[:3, 3] - T0[:3, 3]) / dt
         raw[3:] = np.array(se3.rotvec_from_matrix3(T_base_ee[:3, :3] @ T0[:3, :3].T)) / dt
@@ -360,9 +419,15 @@ class FrankyDriver(RobotDriver):
 
         posture = None if self.posture is None else franky.PostureTask(self.posture.tolist(),
                                                                        self.posture_stiffness)
+        friction = None
+        if self.friction is not None:
+            viscous = np.zeros(7) if self.friction_viscous is None else self.friction_viscous
+            friction = franky.FrictionCompensationParams(coulomb=self.friction.tolist(),
+                                                         viscous=viscous.tolist(),
+                                                         max_torque=self.friction.tolist())
         m = franky.CartesianImpedanceTrackingMotion(translational_stiffness=self.stiffness,
                                                     rotational_stiffness=self.rotational_stiffness,
-                                                    posture_task=posture)
+                                                    posture_task=posture, friction=friction)
         m.set_reference(ref)
         self.robot.move(m, asynchronous=True)
         self.motion = m
@@ -442,4 +507,5 @@ class FrankyDriver(RobotDriver):
         self.fault, self.motion, self._t_last, self._last_ref = None, None, -1.0, None
 
     def health(self) -> dict[str, Any]:
-        return {**self.counts, "host": self.host, "clock_offset": self.clock.offset}
+        return {**self.counts, "host": self.host, "clock_offset": self.clock.offset,
+                "arm_pace": round(self.clock.pace, 3)}

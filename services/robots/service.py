@@ -294,6 +294,13 @@ class RobotService:
 
 # -- the command line ------------------------------------------------------------------------
 
+def _tracking_line(t: dict[str, Any]) -> str:
+    """The hand's distance to its targets while following, for the last line."""
+    if not t.get("n"):
+        return ""
+    return f"; hand to target p50 {t['p50']:.1f} mm, p99 {t['p99']:.1f} mm"
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """``sctd robot [--list] NAME [flags of the service and of the driver NAME]``."""
     p.add_argument("--list", action="store_true", help="list the robot drivers (built-in and registered)")
@@ -418,7 +425,8 @@ def _serve(cls: type[RobotDriver], a: argparse.Namespace) -> int:
         final = service.status_message()
     print(f"sctd robot: stopped after {final['readings']} readings, {final['targets']} targets "
           f"({final['target_rejected']} refused), {len(final['faults'])} faults, "
-          f"{final['recoveries']} recoveries", file=sys.stderr, flush=True)
+          f"{final['recoveries']} recoveries" + _tracking_line(final["tracking_mm"]),
+          file=sys.stderr, flush=True)
     if a.json:
         print(json.dumps(final), flush=True)
     return EXIT_OK
