@@ -45,6 +45,7 @@ import zenoh
 from sctd import se3
 from sctd.app.errors import fail
 from sctd.app.options import add_robot_argument
+from sctd.task.demos import DEMOS_FILE, DemosInfo, read_demos_info
 from sctd.timing import Ticker
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
@@ -247,7 +248,9 @@ class Take:
         _record_rows(self.rec, self._fh, self.rate, self.min_distance, stop, duration, self.rows)
 
     def start(self) -> Take:
-        """Sample rows in a background thread until :meth:`stop`."""
+        """Sample rows in a background thread until :meth:`stop` (ValueError, before
+        any row, when the folder holds another object's demonstrations)."""
+        check_demos_folder(self.out_dir, self.rec.object_name)
         def sample() -> None:
             try:
                 self.record(self._halt)
@@ -288,6 +291,8 @@ class Take:
         fh.close()
         self.path = publish_final(part, self.out_dir)
         self._part = None
+        assert self.rec.object_name is not None and self.rec.task is not None
+        note_demos_folder(self.out_dir, DemosInfo(self.rec.task, self.rec.object_name))
         self._publish(self.path.stem)
         return self.path
 
@@ -309,6 +314,32 @@ class Take:
         self.key = rec.keys.demos(task, name)
         rec.session.put(self.key, codec.encode_demo(task, name, rec.object_name, self.rows),
                         congestion_control=zenoh.CongestionControl.BLOCK, encoding=MSGPACK)
+
+
+def check_demos_folder(out_dir: Path, object_name: str | None) -> None:
+    """ValueError when ``out_dir``'s ``demos.yaml`` says its demonstrations are in
+    another object's frame than ``object_name``'s (a skill learned from the mix would be
+    in neither)."""
+    info = read_demos_info(out_dir)
+    if info is not None and object_name is not None and info.object != object_name:
+        raise ValueError(f"{out_dir / DEMOS_FILE}: the demonstrations here are of {info.object!r} "
+                         f"(task {info.task}), not {object_name!r}: record into another folder")
+
+
+def note_demos_folder(out_dir: Path, info: DemosInfo) -> None:
+    """Write ``out_dir``'s ``demos.yaml`` unless it is there (never overwritten; two
+    recorders racing write the same)."""
+    path = out_dir / DEMOS_FILE
+    if path.exists():
+        return
+    fd, name = _mkstemp(out_dir)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(info.to_yaml())
+        with contextlib.suppress(FileExistsError):
+            os.link(name, path)
+    finally:
+        Path(name).unlink(missing_ok=True)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -346,6 +377,10 @@ def run(args: argparse.Namespace) -> int:
     with session_from_args(args) as session, Recorder(session, args.robot, args.object, args.task) as rec:
         if not _wait_for_first_sample(rec, args.wait, stop):
             return 1
+        try:
+            check_demos_folder(out_dir, rec.object_name)
+        except ValueError as e:
+            return fail("record", str(e))
         print(f"sctd record: recording the ee in the frame of {rec.object_name!r} at "
               f"{args.rate:g} Hz{' until SIGINT' if args.duration is None else ''}",
               file=sys.stderr, flush=True)

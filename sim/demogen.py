@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import Task, find_task
+from sctd.task.demos import DEMOS_FILE, DemosInfo
 from sctd.task.model import Reach, Tilt
 
 Array = NDArray[np.float64]
@@ -414,7 +415,9 @@ def _unit_mean(v: Array) -> Array:
 
 
 def write_demo_set(demo_set: DemoSet, directory: str | Path, digits: int = 6) -> list[Path]:
-    """Write ``demo_XX.csv`` files and ``truth.json`` into ``directory`` (created)."""
+    """Write ``demo_XX.csv`` files, ``truth.json`` and, for a task's demonstrations,
+    ``demos.yaml`` (what they are of: :class:`~sctd.learn.demos.DemosInfo`) into
+    ``directory`` (created)."""
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -427,6 +430,9 @@ def write_demo_set(demo_set: DemoSet, directory: str | Path, digits: int = 6) ->
                 fh.write(fmt % (ti, *row))
         paths.append(p)
     (out / "truth.json").write_text(json.dumps(demo_set.truth, indent=1) + "\n")
+    task, obj = demo_set.truth.get("task"), demo_set.truth.get("object")
+    if task and obj:
+        (out / DEMOS_FILE).write_text(DemosInfo(task, obj).to_yaml())
     return paths
 
 

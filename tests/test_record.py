@@ -15,6 +15,7 @@ import pytest
 from sctd import se3
 from sctd.learn import demos
 from sctd.learn.demos import MIN_SAMPLES, read_demo_csv, read_demos
+from sctd.task.demos import DemosInfo, read_demos_info
 from sctd.wire import Keys, codec
 from sctd.wire.session import open_session
 from sctd_services import record
@@ -205,7 +206,8 @@ def test_a_take_is_kept_or_discarded(tmp_path):
             pub_s.undeclare()
             pub_o.undeclare()
             sub_d.undeclare()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo_000.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo_000.csv", "demos.yaml"]
+    assert read_demos_info(tmp_path) == DemosInfo("slide", "box")
     assert [k for k, _ in published] == [KEYS.demos("slide", "demo_000")]
     msg = published[0][1]
     assert (msg.task, msg.object) == ("slide", "box")

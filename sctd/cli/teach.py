@@ -24,7 +24,7 @@ import time
 import zenoh
 
 from sctd.task import Task, add_to_path
-from sctd_services.record import LINGER
+from sctd_services.record import LINGER, check_demos_folder
 from sctd_services.teach import (
     Attempt,
     CommanderConflict,
@@ -84,6 +84,10 @@ def main_teach(args: argparse.Namespace) -> int:
         return fail("teach", str(e))
     if args.swap and not args.then_learn:
         return fail("teach", "--swap: needs --then-learn METHOD")
+    try:
+        check_demos_folder(options.out_dir, options.the_task.object)
+    except ValueError as e:
+        return fail("teach", f"--out: {e}")
     add_to_path(options.task)  # the learner and the evaluation find a task file by its name
     reply = None
     with contextlib.ExitStack() as stack:

@@ -11,6 +11,9 @@ outliers (a Hampel filter; the thesis has none, Ch. 6), :func:`smooth_poses` ave
 out sensor noise over a few samples, :func:`subsample_by_distance` keeps samples a
 fixed tf-norm apart (Ch. 4.1.1), :func:`dtw` aligns two demonstrations with the
 tf-norm (Ch. 5.1).
+
+Beside the CSVs, a folder's ``demos.yaml`` says what they are demonstrations of
+(:mod:`sctd.task.demos`).
 """
 
 from __future__ import annotations

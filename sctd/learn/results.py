@@ -101,7 +101,9 @@ class SkillOptions:
         gets a ``speed_near`` constraint so written; empty for none.
     """
 
-    object: str = hyperparameter("object", "task object name (the skill frame)", valid=Text())
+    object: str = hyperparameter("object", "task object whose frame the demonstrations are in (the "
+                                 "skill's frame; sctd learn's default: the one the folder's demos.yaml "
+                                 "names)", valid=Text())
     max_linear_speed: float = hyperparameter(0.10, "m/s at full input (default %(default)s)",
                                              valid=Interval(0, 1, open="low"))
     max_angular_speed: float = hyperparameter(0.50, "rad/s at full input (default %(default)s)",

@@ -53,6 +53,12 @@ def task_of(skills: list[Skill], task: str | None) -> str:
     """The task: given, or the one known task whose task object every skill's object is
     (:func:`sctd.task.task_for_object`)."""
     if task is not None:
+        frames = set(find_task(task).scene.frames())
+        for s in skills:
+            if s.object != WORLD_OBJECT and s.object not in frames:
+                raise ValueError(f"skill {s.name}: its object {s.object!r} is not in task {task} "
+                                 f"(its frames: {', '.join(sorted(frames))}); the skill would never see "
+                                 "where it is")
         return task
     objects = {s.object for s in skills if s.object != WORLD_OBJECT}
     found = task_for_object(next(iter(objects))) if len(objects) == 1 else None

@@ -41,6 +41,7 @@ from ...learn import (
 )
 from ...learn.pipeline import hyperparameter_fields
 from ...skill import SkillError
+from ...task.demos import DEMOS_FILE, read_demos_info
 from .report import write_report, write_skill
 
 
@@ -57,6 +58,8 @@ def add_learn_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPar
     # --seed seeds either learner: one flag, the same field name in both.
     add_arguments(parser, LinearIMLearner, only=("random_state",))
     add_arguments(parser, SkillOptions, only=("object",))
+    # (unset: the folder's demos.yaml names it, :func:`resolve_object`)
+    parser.set_defaults(object=None)
     parser.add_argument("--quiet", action="store_true", help="no progress line")
     add_arguments(parser.add_argument_group("preprocessing"), Preprocessing)
     add_arguments(parser.add_argument_group("linear IMs (Ch. 4.1)"), LinearIMLearner,
@@ -113,6 +116,22 @@ def parse_frame(text: str) -> tuple[str, NDArray[np.float64]]:
     return name, np.asarray(vals)
 
 
+def resolve_object(args: argparse.Namespace) -> None:
+    """``args.object`` from the folder's ``demos.yaml`` where ``--object`` was not given;
+    ValueError where neither names it, or where they disagree (the poses are in the
+    folder's object's frame, whatever the flag says)."""
+    info = read_demos_info(args.demos)
+    if args.object is None:
+        if info is None:
+            raise ValueError(f"--object: name the task object whose frame the demonstrations are in: "
+                             f"{args.demos} has no {DEMOS_FILE} to say it (sctd teach and sctd record "
+                             "write one)")
+        args.object = info.object
+    elif info is not None and info.object != args.object:
+        raise ValueError(f"--object {args.object}: the demonstrations in {args.demos} are of "
+                         f"{info.object!r} ({args.demos / DEMOS_FILE})")
+
+
 def _learn(args: argparse.Namespace, demos: list[Demo],
            progress: ProgressLine) -> LinearResult | VectorFieldResult:
     """The learning run the arguments describe, on ``demos``."""
@@ -145,6 +164,7 @@ def run_learn(args: argparse.Namespace) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         demos = read_demos(args.demos)
+        resolve_object(args)
         result = _learn(args, demos, progress)
         skill = write_skill(result, args.out)
         result.timings["total_with_export"] = time.perf_counter() - t0
