@@ -30,7 +30,7 @@ from sctd_services.teach import (
     upright,
 )
 from sctd_sim.guard import TargetLimits
-from tests.conftest import free_port, port_is_free, sctd, wait_for
+from tests.conftest import ROOT, free_port, port_is_free, sctd, wait_for
 
 KEYS = Keys("edan")
 TIP = np.array([0.0, 0.0, 0.12])
@@ -368,6 +368,53 @@ def test_teach_stops_what_it_started_on_sigterm(tmp_path):
         assert proc.p.wait(60) == 143, proc.output()
     finally:
         proc.stop()
+    kept = sorted(p.name for p in (tmp_path / "taught").glob("demo_*.csv"))
+    assert len(kept) >= 1 and f"sctd teach: stopped; kept {len(kept)} demonstration(s) in " in proc.output()
     assert wait_for(lambda: not any(_alive(c) for c in started), 10), \
         [c for c in started if _alive(c)]
     assert port_is_free(port)
+
+
+STUCK = """
+import signal, sys, time
+from sctd.cli import teach
+from sctd.cli.procs import Child
+teach.STOP_GRACE = float(sys.argv[1])
+teach._Stop().install()
+child = Child("timeit", "-n", "1", "import time; time.sleep(300)")
+said = False
+while True:  # a main thread that swallows the stop and goes on, as a blocking call would
+    try:
+        if not said:  # (inside the try: a signal right after it is swallowed too)
+            said = True
+            print(child.p.pid, flush=True)
+        time.sleep(300)
+    except SystemExit:
+        print("swallowed", flush=True)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("second", [False, True])
+def test_a_stop_that_cannot_unwind_exits_anyway_and_kills_the_children(tmp_path, second):
+    """SIGTERM to a teach whose main thread does not get out: after STOP_GRACE s (or at
+    a second signal) it exits 143 on its own, saying so, and the child it started is gone."""
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", STUCK, "600" if second else "1"], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        child = int(proc.stdout.readline())
+        proc.send_signal(signal.SIGTERM)
+        if second:
+            assert proc.stdout.readline().strip() == "swallowed"  # the first was handled
+            proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, err
+    why = "a second SIGINT" if second else "still stopping 1 s after SIGTERM"
+    assert f"sctd teach: {why}: exiting now (1 child process(es) killed)" in err
+    assert wait_for(lambda: not _alive(child), 10)

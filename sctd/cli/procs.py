@@ -7,6 +7,7 @@ grace period) when its context exits, so nothing is left running.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import signal
@@ -96,6 +97,23 @@ def _default_signals() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+_live: set[Child] = set()  # the children started and not yet stopped
+
+
+def kill_children() -> int:
+    """SIGKILL the process group of every child not yet stopped (a process that must
+    exit now and cannot unwind: its children are in sessions of their own and would
+    outlive it); how many there were."""
+    n = 0
+    for c in list(_live):
+        if c.p.poll() is None:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(c.p.pid, signal.SIGKILL)
+            n += 1
+        _live.discard(c)
+    return n
+
+
 class Child:
     """``python -m MODULE ARGS`` as a child process; a context manager that reaps it.
 
@@ -122,6 +140,7 @@ class Child:
             stderr=subprocess.STDOUT if self._log is not None else None,
             cwd=cwd, env=env, start_new_session=True, preexec_fn=_default_signals,
         )
+        _live.add(self)
 
     def __enter__(self) -> Child:
         return self
@@ -151,6 +170,7 @@ class Child:
             except subprocess.TimeoutExpired:
                 os.killpg(self.p.pid, signal.SIGKILL)
                 self.p.wait()
+        _live.discard(self)
         if self.p.stdout is not None:
             self.p.stdout.close()
         if self._log is not None:

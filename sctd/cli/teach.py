@@ -18,8 +18,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import os
 import signal
+import sys
+import threading
 import time
+from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -41,7 +46,7 @@ from ..app.logs import log_folder
 from ..app.options import add_arguments, add_task_argument, from_namespace
 from ..wire import Keys
 from ..wire.session import add_zenoh_arguments, session
-from .procs import Child, free_port
+from .procs import Child, free_port, kill_children
 from .teach_loop import (
     LoopError,
     add_then_learn_arguments,
@@ -71,12 +76,57 @@ def add_teach_arguments(p: argparse.ArgumentParser) -> None:
                 "loopback port. " + (p.epilog or ""))
 
 
-def _stop_on_sigterm(*_: object) -> None:
-    raise SystemExit(143)  # unwinds the stack: the simulator, learner and daemon are stopped
+STOP_GRACE = 10.0  # s a stop may take to unwind before the process exits at once
+
+
+class _Stop:
+    """SIGTERM or SIGINT (Ctrl-C): unwind, stopping the simulator, the learner and the
+    daemon on the way out and discarding the attempt in progress. A second signal, or
+    ``STOP_GRACE`` s without getting out (the main thread blocked in a call that does
+    not return), exits at once, the children killed: a stop never hangs."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def install(self) -> None:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self)
+
+    def __call__(self, signum: int, _frame: object) -> None:
+        if self.signum is not None:
+            self._now(f"a second {signal.Signals(signum).name}")
+        self.signum = signum
+        threading.Thread(target=self._watch, name="stop-watch", daemon=True).start()
+        raise SystemExit(128 + signum)
+
+    def _watch(self) -> None:
+        time.sleep(STOP_GRACE)
+        assert self.signum is not None
+        self._now(f"still stopping {STOP_GRACE:g} s after {signal.Signals(self.signum).name}")
+
+    def _now(self, why: str) -> None:
+        killed = kill_children()
+        print(f"sctd teach: {why}: exiting now ({killed} child process(es) killed); the "
+              "demonstrations kept so far stay where they are", file=sys.stderr, flush=True)
+        os._exit(128 + (self.signum or signal.SIGTERM))
+
+
+def _kept_files(out: Path) -> set[Path]:
+    return set(out.glob("demo_*.csv")) if out.is_dir() else set()
 
 
 def main_teach(args: argparse.Namespace) -> int:
-    signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    stop = _Stop()
+    stop.install()
+    try:
+        return _main_teach(args)
+    except SystemExit:
+        if stop.signum is None:
+            raise
+        return 128 + stop.signum
+
+
+def _main_teach(args: argparse.Namespace) -> int:
     try:
         args.mistakes = tuple(args.mistakes)
         options = from_namespace(TeachOptions, args)
@@ -89,18 +139,19 @@ def main_teach(args: argparse.Namespace) -> int:
     except ValueError as e:
         return fail("teach", f"--out: {e}")
     add_to_path(options.task)  # the learner and the evaluation find a task file by its name
-    reply = None
-    with contextlib.ExitStack() as stack:
-        try:
-            s = open_simulator(stack, args, options)
-            watch = start_learner(stack, s, args, args.logdir) if args.then_learn else None
-            kept = teach_demos(s, options)
-            if watch is not None and len(kept) == options.demos:
-                reply = learn_and_swap(stack, s, args, options.name, kept, watch, args.logdir)
-        except (CommanderConflict, WrongScene) as e:
-            return fail("teach", str(e), EXIT_USAGE)
-        except (SimulatorLost, LoopError) as e:
-            return fail("teach", f"{e}{_log_hint(args)}", EXIT_FAILED)
+    before = _kept_files(options.out_dir)
+    try:
+        with contextlib.ExitStack() as stack:
+            done = _teach(args, options, stack)
+    except SystemExit:
+        new = sorted(_kept_files(options.out_dir) - before)
+        print(f"sctd teach: stopped; kept {len(new)} demonstration(s) in {options.out_dir}"
+              + (f" ({', '.join(p.name for p in new)})" if new else "")
+              + "; the attempt in progress was discarded", file=sys.stderr, flush=True)
+        raise
+    if isinstance(done, int):
+        return done
+    kept, reply = done
     if len(kept) < options.demos:
         return fail("teach", f"kept {len(kept)} of the {options.demos} demonstrations asked for in "
                              f"{options.attempts} attempts (--max-attempts)", EXIT_FAILED)
@@ -110,6 +161,25 @@ def main_teach(args: argparse.Namespace) -> int:
     if reply.get("passed") and args.eval_trials > 0:
         evaluate_taught(reply, options.name, args.then_learn, args.eval_trials)
     return EXIT_OK if reply.get("swapped") or (reply.get("passed") and not args.swap) else EXIT_FAILED
+
+
+def _teach(args: argparse.Namespace, options: TeachOptions, stack: contextlib.ExitStack
+           ) -> int | tuple[list[Attempt], dict[str, Any] | None]:
+    """The simulator (and the learner) on ``stack``, the demonstrations taught, then
+    learned and swapped when asked: (the kept attempts, the learner's reply), or an
+    exit code."""
+    reply = None
+    try:
+        s = open_simulator(stack, args, options)
+        watch = start_learner(stack, s, args, args.logdir) if args.then_learn else None
+        kept = teach_demos(s, options)
+        if watch is not None and len(kept) == options.demos:
+            reply = learn_and_swap(stack, s, args, options.name, kept, watch, args.logdir)
+    except (CommanderConflict, WrongScene) as e:
+        return fail("teach", str(e), EXIT_USAGE)
+    except (SimulatorLost, LoopError) as e:
+        return fail("teach", f"{e}{_log_hint(args)}", EXIT_FAILED)
+    return kept, reply
 
 
 def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
