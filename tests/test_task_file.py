@@ -41,6 +41,7 @@ from sctd.task.model import (
     Tilt,
     Upright,
 )
+from tests.conftest import ROOT
 
 POUR = shipped_folder() / "pour.yaml"
 
@@ -471,6 +472,25 @@ def test_sctd_tasks_lists_and_shows(capsys):
     assert "joint drawer: prismatic, handle drawer_handle, travel 0.3 m\n" in capsys.readouterr().out
     assert main(["tasks", "show", "juggle"]) == 2
     assert "sctd tasks show: juggle: no such file" in capsys.readouterr().err
+
+
+def test_sctd_tasks_show_checks_the_arm_reaches_the_start(tmp_path, capsys):
+    """A start out of the arm's reach is refused naming the pose and the arm; every
+    shipped task is reached at its start and the starts of trials 0-9."""
+    from sctd.cli.main import main
+
+    far = tmp_path / "far.yaml"
+    text = (ROOT / "tasks" / "drink.yaml").read_text().replace("name: drink", "name: far")
+    far.write_text(text.replace("position: [0.59, -0.27, 0.70]", "position: [1.59, -0.27, 0.70]"))
+    assert main(["tasks", "show", str(far)]) == 2
+    err = capsys.readouterr().err
+    assert "sctd tasks show: task far: the start pose [1.590, -0.270, 0.700" in err
+    assert "is out of reach of the arm of edan_arm.urdf (frame 'ee')" in err
+    assert main(["tasks", "show", str(far), "--no-reach"]) == 0
+    for name in ("pour", "drawer", "drink", "cabinet", "light_switch", "oven"):
+        assert main(["tasks", "show", name]) == 0, capsys.readouterr().err
+        assert "reach: edan_arm.urdf (frame 'ee') reaches the start and the starts of trials 0-9" in \
+            capsys.readouterr().out
 
 
 def test_scene_is_a_deprecated_alias_of_task(capsys):

@@ -418,3 +418,23 @@ def test_a_stop_that_cannot_unwind_exits_anyway_and_kills_the_children(tmp_path,
     why = "a second SIGINT" if second else "still stopping 1 s after SIGTERM"
     assert f"sctd teach: {why}: exiting now (1 child process(es) killed)" in err
     assert wait_for(lambda: not _alive(child), 10)
+
+
+@pytest.mark.slow
+def test_teach_reports_its_simulators_own_error_at_once(tmp_path):
+    """A task whose start the arm cannot reach: the simulator teach started exits 2
+    naming the pose, and teach says so as soon as it exits (exit 1), not after its
+    --wait of 300 s with "no simulator"."""
+    far = tmp_path / "far.yaml"
+    text = (ROOT / "tasks" / "drink.yaml").read_text().replace("name: drink", "name: far")
+    far.write_text(text.replace("position: [0.59, -0.27, 0.70]", "position: [1.59, -0.27, 0.70]"))
+    proc = sctd("teach", "--task", str(far), "--demos", "1", "--wait", "300", "--out", str(tmp_path / "out"),
+                "--logs", str(tmp_path / "logs"), log=tmp_path / "teach.log")
+    try:
+        assert proc.p.wait(120) == 1, proc.output()
+    finally:
+        proc.stop()
+    out = proc.output()
+    assert "sctd teach: the simulator exited (2): sctd sim: --task: task far: the start pose [1.590, " \
+           "-0.270" in out
+    assert "is out of reach of the arm" in out and "no simulator" not in out

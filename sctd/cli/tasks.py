@@ -23,7 +23,46 @@ def add_tasks_arguments(p: argparse.ArgumentParser) -> None:
                           description="one task: its scene, task object and outcome, validated")
     show.add_argument("task", metavar="NAME|FILE", help=TASK_HELP)
     show.add_argument("--json", action="store_true", help="machine-readable output")
+    show.add_argument("--urdf", metavar="FILE", default=None,
+                      help="check the task's reach with this arm (as sctd sim --urdf; default: the "
+                           "shipped arm)")
+    show.add_argument("--ee-frame", metavar="NAME", default=None, help="the arm's hand frame (as sctd sim)")
+    show.add_argument("--reach-trials", type=int, default=REACH_TRIALS, metavar="N",
+                      help="also the seeded starts of evaluation trials 0..N-1 (default %(default)s)")
+    show.add_argument("--no-reach", dest="reach", action="store_false",
+                      help="do not check that the arm reaches the task's start")
     p.add_argument("--json", action="store_true", help="one JSON list on stdout")
+
+
+REACH_TRIALS = 10  # the seeded trial starts sctd tasks show checks by default
+
+
+def reach(task: Task, args: argparse.Namespace) -> dict[str, Any]:
+    """Whether the arm (``--urdf``/``--ee-frame``, default the shipped one) reaches the
+    task's start and the seeded starts of trials 0..``--reach-trials``-1 (each drawn
+    again, as sctd sim does, while it cannot): ``{"arm", "checked", "start", "trials"}``
+    with ``start`` None when reached, else why; ValueError for a bad arm."""
+    try:
+        from sctd_sim.options import arm_from_args
+        from sctd_sim.scenes import make_scene
+        from sctd_sim.simulation import start_posture, trial_scene
+    except ImportError as e:  # no Pinocchio: the sim extra
+        return {"arm": None, "checked": False, "why": f"not checked ({e.name} is not installed: "
+                                                      "pip install 'sctd[sim]')"}
+    arm = arm_from_args(args)
+    out: dict[str, Any] = {"arm": f"{arm.urdf_path.name} (frame {arm.ee_frame!r})", "checked": True,
+                           "start": None, "trials": []}
+    try:
+        start_posture(arm, make_scene(task).start_pose())
+    except RuntimeError as e:
+        out["start"] = str(e)
+        return out
+    for seed in range(max(0, args.reach_trials)):
+        try:
+            trial_scene(task, seed, arm)
+        except RuntimeError as e:
+            out["trials"].append({"seed": seed, "why": str(e)})
+    return out
 
 
 def summary(task: Task) -> dict[str, Any]:
@@ -97,46 +136,20 @@ def _rows() -> list[dict[str, Any]]:
 def main_tasks(args: argparse.Namespace) -> int:
     if args.action == "show":
         try:
-            s = summary(find_task(args.task))
-        except TaskError as e:
+            task = find_task(args.task)
+            s = summary(task)
+            if args.reach:
+                s["reach"] = reach(task, args)
+        except (TaskError, ValueError) as e:
             return fail("tasks show", str(e))
+        r = s.get("reach") or {}
+        if r.get("start") or r.get("trials"):
+            bad = r["start"] or "; ".join(f"trial {t['seed']}: {t['why']}" for t in r["trials"])
+            return fail("tasks show", f"task {task.name}: {bad}")
         if args.json:
             print(json.dumps(s, indent=2))
-            return EXIT_OK
-        print(f"{s['name']}: {s['title']} ({s['file']})")
-        if s["description"]:
-            print(f"  {s['description']}")
-        if s["source"]:
-            print(f"  source: {s['source']}")
-        print(f"  task object: {s['object']}; frames: {', '.join(s['frames'])}")
-        if s["held"]:
-            h = s["held"]
-            contents = f", contents into {h['contents']['into']}" if h["contents"] else ""
-            print(f"  held: {h['name']} ({h['mass']} kg{contents})")
-        for n, j in s["joints"].items():
-            travel = f"{j['travel']:g} {j['unit']}"
-            if j["unit"] == "rad":
-                travel += f" ({math.degrees(j['travel']):g} deg)"
-            print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {travel}")
-        for n, f in s["surfaces"].items():
-            print(f"  surface {n}: {f['stiffness']:g} N/m, friction {f['friction']:g}, touched by "
-                  f"{', '.join(f['touch'])}")
-            if f["button"]:
-                b = f["button"]
-                print(f"  button {n}: radius {b['radius'] * 1000:g} mm, travel {b['travel'] * 1000:g} mm, "
-                      f"switches at {b['click'] * 1000:g} mm ({b['click_force']:g} N)")
-        for n, h in s["heads"].items():
-            print(f"  head {n}: a sphere of {h['radius']:g} m behind {h['behind']}, contact "
-                  f"{h['stiffness']:g} N/m, {h['damping']:g} N s/m")
-        for n, z in s["zones"].items():
-            turned = f", z within {math.degrees(z['tilt']):.0f} deg of {_vec(z['axis'])}" if z["tilt"] else ""
-            print(f"  zone {n}: {z['frame']} within {_vec(z['within'])} m of {_vec(z['position'])} in "
-                  f"{z['around']}{turned}")
-        targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
-        print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
-              f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
-        steps = ", ".join(f"{st['name']} ({st['kind']})" for st in s["intent"])
-        print(f"  intent: {steps}")
+        else:
+            _print_show(s, args)
         return EXIT_OK
     try:
         rows = _rows()
@@ -153,6 +166,50 @@ def main_tasks(args: argparse.Namespace) -> int:
         print(f"{r['name']:<{width}}  {r['title']:<24}  object {r['object']:<14}  {r['origin']:<8}  "
               f"{r['path']}")
     return EXIT_FAILED if any("error" in r for r in rows) else EXIT_OK
+
+
+def _print_show(s: dict[str, Any], args: argparse.Namespace) -> None:
+    """``sctd tasks show``'s text: the :func:`summary` ``s``, and its reach."""
+    print(f"{s['name']}: {s['title']} ({s['file']})")
+    if s["description"]:
+        print(f"  {s['description']}")
+    if s["source"]:
+        print(f"  source: {s['source']}")
+    print(f"  task object: {s['object']}; frames: {', '.join(s['frames'])}")
+    if s["held"]:
+        h = s["held"]
+        contents = f", contents into {h['contents']['into']}" if h["contents"] else ""
+        print(f"  held: {h['name']} ({h['mass']} kg{contents})")
+    for n, j in s["joints"].items():
+        travel = f"{j['travel']:g} {j['unit']}"
+        if j["unit"] == "rad":
+            travel += f" ({math.degrees(j['travel']):g} deg)"
+        print(f"  joint {n}: {j['type']}, handle {j['handle']}, travel {travel}")
+    for n, f in s["surfaces"].items():
+        print(f"  surface {n}: {f['stiffness']:g} N/m, friction {f['friction']:g}, touched by "
+              f"{', '.join(f['touch'])}")
+        if f["button"]:
+            b = f["button"]
+            print(f"  button {n}: radius {b['radius'] * 1000:g} mm, travel {b['travel'] * 1000:g} mm, "
+                  f"switches at {b['click'] * 1000:g} mm ({b['click_force']:g} N)")
+    for n, h in s["heads"].items():
+        print(f"  head {n}: a sphere of {h['radius']:g} m behind {h['behind']}, contact "
+              f"{h['stiffness']:g} N/m, {h['damping']:g} N s/m")
+    for n, z in s["zones"].items():
+        turned = f", z within {math.degrees(z['tilt']):.0f} deg of {_vec(z['axis'])}" if z["tilt"] else ""
+        print(f"  zone {n}: {z['frame']} within {_vec(z['within'])} m of {_vec(z['position'])} in "
+              f"{z['around']}{turned}")
+    targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
+    print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
+          f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
+    steps = ", ".join(f"{st['name']} ({st['kind']})" for st in s["intent"])
+    print(f"  intent: {steps}")
+    r = s.get("reach") or {}
+    if r.get("checked"):
+        print(f"  reach: {r['arm']} reaches the start and the starts of trials 0-{args.reach_trials - 1}"
+              if args.reach_trials > 0 else f"  reach: {r['arm']} reaches the start")
+    elif r:
+        print(f"  reach: {r['why']}")
 
 
 def _vec(v: list[float]) -> str:

@@ -23,6 +23,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -172,7 +173,7 @@ def _teach(args: argparse.Namespace, options: TeachOptions, stack: contextlib.Ex
     try:
         s = open_simulator(stack, args, options)
         watch = start_learner(stack, s, args, args.logdir) if args.then_learn else None
-        kept = teach_demos(s, options)
+        kept = teach_demos(s, options, _gone(getattr(args, "sim_child", None)))
         if watch is not None and len(kept) == options.demos:
             reply = learn_and_swap(stack, s, args, options.name, kept, watch, args.logdir)
     except (CommanderConflict, WrongScene) as e:
@@ -203,8 +204,8 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
         args.sim_log = logdir / "sim.log"
         ep = f"tcp/127.0.0.1:{free_port()}"
         args.child_zenoh = ["--connect", ep]  # how the learner and the daemon join it
-        stack.enter_context(Child("sctd_sim.service", "--task", options.task, "--robot",
-                                  options.robot, "--listen", ep, log=args.sim_log))
+        args.sim_child = stack.enter_context(Child("sctd_sim.service", "--task", options.task, "--robot",
+                                                   options.robot, "--listen", ep, log=args.sim_log))
         s = stack.enter_context(session(args.listen, [ep], rate_limits=ingress))
         print(f"sctd teach: {options.name} on a simulator started at {ep} (log {args.sim_log})",
               flush=True)
@@ -212,9 +213,27 @@ def open_simulator(stack: contextlib.ExitStack, args: argparse.Namespace,
     return s
 
 
-def teach_demos(s: zenoh.Session, options: TeachOptions) -> list[Attempt]:
+def _gone(child: Child | None) -> Callable[[], str | None] | None:
+    """Why the simulator ``child`` (started here) is no more: its exit code and the last
+    line it wrote (its own error: a start out of reach, a bad task file); None while it
+    runs."""
+    if child is None:
+        return None
+
+    def why() -> str | None:
+        if child.running():
+            return None
+        lines = [ln for ln in child.output().splitlines() if ln.strip()]
+        said = f": {lines[-1].strip()}" if lines else ""
+        return f"the simulator exited ({child.p.returncode}){said}"
+    return why
+
+
+def teach_demos(s: zenoh.Session, options: TeachOptions,
+                gone: Callable[[], str | None] | None = None) -> list[Attempt]:
     """Teach with ``options``, printing a line per attempt and the summary; the kept
-    attempts (``Attempt.path``: the CSV)."""
+    attempts (``Attempt.path``: the CSV). ``gone``: :func:`_gone` of a simulator started
+    here."""
     out = options.out_dir
     before = len(list(out.glob("demo_*.csv"))) if out.is_dir() else 0
     print(f"sctd teach: {options.demos} demonstrations (seed {options.seed}) into {out}"
@@ -225,7 +244,7 @@ def teach_demos(s: zenoh.Session, options: TeachOptions) -> list[Attempt]:
         seen.append(a)
         _print_attempt(a, options.the_task)
     t0 = time.monotonic()
-    kept = teach(s, options, on_attempt=report)
+    kept = teach(s, options, on_attempt=report, gone=gone)
     wall = time.monotonic() - t0
     recorded = sum(a.duration for a in kept) / len(kept) if kept else 0.0
     print(f"sctd teach: kept {len(kept)} of {options.demos} demonstrations in {out} "

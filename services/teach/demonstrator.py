@@ -170,10 +170,13 @@ class Attempt:
 
 def teach(session: zenoh.Session, options: TeachOptions,
           on_attempt: Callable[[Attempt], None] | None = None, speeds: Speeds | None = None,
-          limits: StreamLimits | None = None) -> list[Attempt]:
+          limits: StreamLimits | None = None, gone: Callable[[], str | None] | None = None
+          ) -> list[Attempt]:
     """Teach ``options.demos`` demonstrations of ``options.task`` on the simulator that
     ``session`` reaches; the kept attempts, in order (fewer when ``max_attempts`` ran
-    out). ``on_attempt`` hears of every attempt as it ends.
+    out). ``on_attempt`` hears of every attempt as it ends. ``gone``, where the caller
+    started the simulator: why it is no more (its exit and its own error), or None while
+    it runs; waiting for it ends at once when it is gone.
 
     The caller keeps the session open a moment after this returns, so that the last
     demonstration published leaves the process (``sctd_services.record.LINGER``).
@@ -195,7 +198,7 @@ def teach(session: zenoh.Session, options: TeachOptions,
     kept: list[Attempt] = []
     with Recorder(session, options.robot, task.object, task=task.name) as rec, \
             Teacher(session, rec, limits or StreamLimits()) as teacher:
-        _wait_for_simulator(teacher, rec, options)
+        _wait_for_simulator(teacher, rec, options, gone)
         out.mkdir(parents=True, exist_ok=True)
         for n in range(1, options.attempts + 1):
             if len(kept) >= options.demos:
@@ -209,14 +212,19 @@ def teach(session: zenoh.Session, options: TeachOptions,
     return kept
 
 
-def _wait_for_simulator(teacher: Teacher, rec: Recorder, options: TeachOptions) -> None:
+def _wait_for_simulator(teacher: Teacher, rec: Recorder, options: TeachOptions,
+                        gone: Callable[[], str | None] | None = None) -> None:
     """Wait for the simulator's state, task object and scene (refusing one that runs
-    another scene as soon as it says so), and listen COMMANDER_WINDOW s longer for
-    another commander (its status is 20 Hz by default)."""
+    another scene as soon as it says so, giving up as soon as ``gone`` says why it is
+    no more), and listen COMMANDER_WINDOW s longer for another commander (its status is
+    20 Hz by default)."""
     give_up = time.monotonic() + options.wait
     while rec.sample() is None or rec.scene is None:
         teacher.check_commander()
         _check_scene(rec, options)
+        why = gone() if gone is not None else None
+        if why is not None:
+            raise SimulatorLost(why)
         if time.monotonic() > give_up:
             what = "state" if rec.state is None else "scene" if rec.scene is None else \
                 f"object {rec.object_name}"
