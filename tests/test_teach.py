@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from sctd.wire import Keys, codec
 from sctd.wire.session import open_session
 from sctd_services.teach import (
     StreamLimits,
+    Teacher,
     TeachOptions,
     describe_outcome,
     facing,
@@ -148,6 +150,24 @@ def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
             T = _samples(M, 2000)
             v, w = _peak_speeds(T, M.duration / 1999)
             assert v < lim.max_speed and w < lim.max_turn, (type(M).__name__, v, w)
+
+
+def test_a_teacher_left_behind_by_a_stuck_arm_starts_again_from_the_arm():
+    """After an attempt in which the arm could not follow (4 cm and 11 deg behind its
+    last target), the next motion starts from the measured pose; an arm within the lag
+    keeps its target."""
+    from types import SimpleNamespace
+
+    pose = [0.5, 0.0, 0.6, 0.0, 0.0, 0.0, 1.0]
+    rec = SimpleNamespace(keys=Keys(), state=SimpleNamespace(stamp=0.0, pose=pose))
+    teacher = Teacher(None, rec, StreamLimits())  # (never entered: it publishes nothing here)
+    for offset, turn, dropped in [(0.01, 0.05, False), (0.04, 0.19, True)]:
+        rec.state.stamp = time.time()
+        T = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, turn, 0.0]), [0.5 + offset, 0.0, 0.6])
+        teacher._F_last, teacher.T_target = se3.flat_from_transform(T), T
+        assert teacher.reseed_if_behind() is dropped
+        assert np.allclose(teacher.target(), T if not dropped else se3.transform_from_pose(pose))
+    assert teacher.reseeds == 1
 
 
 def test_facing_the_mug():

@@ -271,6 +271,10 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
     finally:
         with contextlib.suppress(TeachingError):  # whatever happened: leave the task
             _leave(teacher, plan, geometry, options, speeds)
+        # An arm that could not follow is left where it is, not where its last target
+        # was: the next attempt's move starts from there (it failed at once, every
+        # attempt after the first that got stuck, chasing the stuck target)
+        teacher.reseed_if_behind()
     attempt.elapsed = time.monotonic() - t0
     return attempt
 

@@ -119,6 +119,7 @@ class Teacher:
         self.T_target: Array | None = None  # the last target published (world)
         self.seq = 0
         self._F_last: se3.Flat | None = None
+        self.reseeds = 0  # times the last target was dropped for the measured pose
         self._decls = contextlib.ExitStack()
 
     def __enter__(self) -> Teacher:
@@ -248,6 +249,22 @@ class Teacher:
                 return False
             if t >= motion.duration:
                 return True
+
+    def reseed_if_behind(self) -> bool:
+        """Forget the last target when the arm is more than ``lag`` behind it (it could
+        not follow: a joint limit, a collision), so that the next motion starts from
+        where the arm is rather than chasing a target it cannot reach; whether it did.
+        The next target is then the measured pose (the robot's guard may refuse that one
+        jump, and follows from the next)."""
+        if self._F_last is None:
+            return False
+        d, a = separation(se3.flat_from_transform(self.measured()), self._F_last)
+        if d <= self.limits.lag and a <= self.limits.lag_rotation:
+            return False
+        self._F_last = None
+        self.T_target = None
+        self.reseeds += 1
+        return True
 
     def settle(self, tolerance: float = 0.005, tolerance_rotation: float = 0.03,
                timeout: float = 3.0) -> bool:
