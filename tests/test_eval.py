@@ -233,6 +233,21 @@ def test_eval_cli_json_is_one_object(tmp_path):
 pytestmark = pytest.mark.timeout(900)
 
 
+def test_a_trial_ends_at_its_task_files_time_limit_unless_told_otherwise(capsys):
+    """The light switch's file gives 30 s: a trial spec, a recorder and sctd eval take
+    it; --time-limit overrides it and must be positive."""
+    from sctd.cli.main import main
+    from sctd_services.eval.trial import TrialRecorder
+
+    assert find_task("light_switch").outcome.time_limit == 30.0
+    assert TaskSpec("light_switch").time_limit == 30.0 and TaskSpec("pour").time_limit == 60.0
+    assert TaskSpec("light_switch", time_limit=12.0).time_limit == 12.0
+    assert TrialRecorder("light_switch", 0, switch_time=1.0).time_limit == 30.0
+    argv = ["eval", "--skill", "light_switch-vf", "--trials", "1", "--lockstep", "--time-limit", "0"]
+    assert main(argv) == 2
+    assert "--time-limit: must be a positive number of seconds, got 0.0" in capsys.readouterr().err
+
+
 def test_an_arm_lag_is_refused_where_it_cannot_apply(capsys):
     from sctd.cli.main import main
 

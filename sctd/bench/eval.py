@@ -28,7 +28,7 @@ RATE = 1000.0  # Hz: the lockstep simulation's cycle (Simulation's default)
 
 
 def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0,
-            time_limit: float = 60.0) -> dict[str, Any]:
+            time_limit: float | None = None) -> dict[str, Any]:
     """Time ``trials`` lockstep trials of ``skill`` (seeds ``seed ..``) on ``task`` (default:
     the task of the skill's object), each ending at ``time_limit`` s at the latest.
 
@@ -77,14 +77,15 @@ def add_bench_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trials", type=int, default=3, help="trials, run one after the other "
                                                          "(default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default %(default)s)")
-    p.add_argument("--time-limit", type=float, default=60.0, help="s per trial (default %(default)s)")
+    p.add_argument("--time-limit", type=float, default=None,
+                   help="s per trial (default: the task file's time_limit)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
 def main_bench_eval(args: argparse.Namespace) -> int:
     if args.trials < 1:
         return fail("bench eval", "--trials: must be >= 1")
-    if not args.time_limit > 0:
+    if args.time_limit is not None and not args.time_limit > 0:
         return fail("bench eval", "--time-limit: must be > 0")
     try:
         r = measure(args.skill, args.task, args.trials, args.seed, args.time_limit)

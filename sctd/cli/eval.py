@@ -97,7 +97,8 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--driver-args", metavar="FLAGS", default="",
                    help="the driver's flags, one string: --driver-args '--host 127.0.0.1 --realtime ignore'")
     p.add_argument("--jobs", type=int, default=None, help="lockstep trials run in parallel (default: CPUs)")
-    p.add_argument("--time-limit", type=float, default=60.0, help="s per trial (default %(default)s)")
+    p.add_argument("--time-limit", type=float, default=None,
+                   help="s per trial (default: the task file's time_limit; with --set, each goal's)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
     p.add_argument("--report", metavar="DIR", help="write evaluation.json and figures here")
     p.add_argument("--logs", metavar="DIR", help="keep the real-time trials' process logs here")
@@ -114,6 +115,8 @@ def _check(args: argparse.Namespace) -> str | None:
         return f"--user: unknown profile {args.user!r} (known: {', '.join(PROFILES)})"
     if args.trials < 1:
         return "--trials: must be >= 1"
+    if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        return f"--time-limit: must be a positive number of seconds, got {args.time_limit}"
     if args.jobs is not None and args.jobs < 1:
         return "--jobs: must be >= 1"
     if args.driver is not None and (args.lockstep or args.skill_set is not None):
@@ -224,7 +227,8 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     print(file=sys.stderr)
     found = find_task(task)  # (checked above: it loads)
     header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
-              "user": args.user, "lockstep": args.lockstep, "arm_lag": args.arm_lag, "numerics": numerics(),
+              "user": args.user, "lockstep": args.lockstep, "time_limit": spec.time_limit,
+              "arm_lag": args.arm_lag, "numerics": numerics(),
               "robot": {"driver": args.driver or "sctd sim", "args": args.driver_args}}
     if pool is not None:
         header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])

@@ -167,7 +167,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
                     time.sleep(0.05)
                 with Child("sctd_services.simulated_user", "--task", spec.task, "--seed", str(seed),
                            "--profile", spec.profile, "--axes", str(spec.axes),
-                           "--duration", str(spec.time_limit + 30), "--connect", hub, "--listen", ep(),
+                           "--duration", str(spec.limit + 30), "--connect", hub, "--listen", ep(),
                            log=logdir / f"user-{seed}.log"):
                     period = 1.0 / WATCH_RATE
                     while True:

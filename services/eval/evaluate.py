@@ -297,7 +297,7 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
                         f.cancel()  # the ones not started; a running one finishes unheard
                     done += trials - len(per_trial)
                     break
-            res = summarise(e, per_trial, spec.time_limit)
+            res = summarise(e, per_trial, spec.limit)
             if until is not None:
                 res.update(planned=trials, stopped_early=stopped)
             results.append(res)
@@ -312,7 +312,7 @@ def _stats(xs: list[float]) -> dict[str, float | None]:
             "median": round(float(np.median(a)), 3)}
 
 
-def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float = 60.0) -> dict[str, Any]:
+def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float) -> dict[str, Any]:
     """The figures of one skill over its trials (the JSON of ``sctd eval --json``).
     ``time_s_limited_median`` counts every trial that did not succeed at ``time_limit``
     (a censored median: defined even when few or no trials succeed)."""

@@ -74,7 +74,7 @@ class SetSpec:
 
     set_file: str
     profile: str = "pausing"
-    time_limit: float = 60.0
+    time_limit: float | None = None  # s per trial; None: the goal task file's own
     stuck_after: float = 10.0
     conditions: tuple[str, ...] = CONDITIONS
     practice: bool = False

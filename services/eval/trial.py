@@ -39,16 +39,27 @@ Array = NDArray[np.float64]
 class TaskSpec:
     """What every trial of an evaluation shares: the task, the device's axes, the
     simulated user's profile (a name of :data:`~sctd_services.user.PROFILES`), the
-    limits on a trial (s) and, in lockstep, ``arm_lag``: s by which the arm takes each
-    target later than the daemon published it (0: at once), an arm that lags as an
-    impedance-controlled one does."""
+    limits on a trial (s: ``time_limit`` None is the task file's own, resolved here)
+    and, in lockstep, ``arm_lag``: s by which the arm takes each target later than the
+    daemon published it (0: at once), an arm that lags as an impedance-controlled one
+    does."""
 
     task: str
     axes: int = 3
     profile: str = "steady"
-    time_limit: float = 60.0
+    time_limit: float | None = None
     stuck_after: float = 10.0
     arm_lag: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.time_limit is None:
+            object.__setattr__(self, "time_limit", find_task(self.task).outcome.time_limit)
+
+    @property
+    def limit(self) -> float:
+        """The trial's time limit, s (``time_limit``, resolved)."""
+        assert self.time_limit is not None  # (resolved in __post_init__)
+        return self.time_limit
 
 
 @dataclass
@@ -96,13 +107,13 @@ class TrialRecorder:
         s between recorded trajectory samples (50 Hz, as the demonstrations).
     """
 
-    def __init__(self, task: str | Task, seed: int, switch_time: float, time_limit: float = 60.0,
+    def __init__(self, task: str | Task, seed: int, switch_time: float, time_limit: float | None = None,
                  stuck_after: float = 10.0, record_every: float = 0.02):
         # what ends the trial, its clock, its progress and the intent its observer judges by
         self.spec = task if isinstance(task, Task) else find_task(task)
         self.seed = seed
         self.switch_time = switch_time
-        self.time_limit = time_limit
+        self.time_limit = self.spec.outcome.time_limit if time_limit is None else time_limit
         self.stuck_after = stuck_after
         self.record_every = record_every
         self.observer = TaskIntent(self.spec)  # judges progress; never steers
