@@ -176,3 +176,66 @@ def test_any_bytes_decode_as_a_demo_or_raise_decode_error(data):
         codec.decode_demo(data)
     except codec.DecodeError:
         pass
+
+
+# --- the gripper --------------------------------------------------------------------------
+
+gripper_cmds = st.builds(
+    codec.GripperCmd, seq=st.integers(0, 2**31), stamp=st.floats(0, 2e9), cmd=st.integers(0, 2**31),
+    action=st.just("close"), width=st.none() | st.floats(0, codec.MAX_GRIPPER_WIDTH),
+    force=st.floats(0.1, codec.MAX_GRIPPER_FORCE),
+    speed=st.none() | st.floats(0.001, codec.MAX_GRIPPER_SPEED),
+    skill=st.text("abc-@0", max_size=20), in_seq=st.integers(-1, 2**31), in_device=st.text("xyz", max_size=8))
+
+
+@given(gripper_cmds, st.sampled_from(codec.GRIPPER_ACTIONS))
+def test_a_gripper_command_round_trips(c, action):
+    c = c._replace(action=action, width=c.width if action != "width" or c.width is not None else 0.04)
+    assert codec.decode_gripper(codec.encode_gripper(c)) == c
+
+
+@pytest.mark.parametrize("fields, reason", [
+    ({"action": "squeeze", "force": 10.0}, "bad_action"),
+    ({"action": "close"}, "bad_force"),  # a grasp has a force bound, always
+    ({"action": "close", "force": 0.0}, "bad_force"),
+    ({"action": "close", "force": float("nan")}, "bad_force"),
+    ({"action": "close", "force": 5000.0}, "bad_force"),
+    ({"action": "width"}, "bad_width"),
+    ({"action": "width", "width": -0.01}, "bad_width"),
+    ({"action": "open", "width": 2.0}, "bad_width"),
+    ({"action": "open", "speed": True}, "bad_speed"),
+    ({"action": "open", "cmd": "1"}, "bad_cmd"),
+    ({"action": "open", "in_seq": 1.5}, "bad_in_seq"),
+    ({"action": "open", "skill": 3}, "bad_source"),
+])
+def test_a_bad_gripper_command_is_refused_naming_the_field(fields, reason):
+    msg = {"seq": 1, "stamp": 1.0, "cmd": 1, **fields}
+    with pytest.raises(codec.DecodeError) as e:
+        codec.decode_gripper(msgpack.packb(msg, use_bin_type=True))
+    assert e.value.reason == reason
+
+
+def test_a_states_gripper_reading_round_trips_and_a_bad_one_costs_only_itself():
+    r = codec.GripperReading(0.021, True, False, 7)
+    s = codec.decode_state(codec.encode_state(3, 1.0, POSE, gripper=r))
+    assert s.gripper == r and not s.gripper_invalid
+    assert codec.decode_state(codec.encode_state(3, 1.0, POSE)).gripper is None
+    for bad in ({"width": -1.0}, {"grasped": True}, {"width": 0.02, "grasped": 1}, [0.02],
+                {"width": 0.02, "cmd": 1.0}):
+        s = codec.decode_state(packed(pose=POSE, gripper=bad))
+        assert s.gripper is None and s.gripper_invalid and s.pose == POSE
+
+
+@given(st.dictionaries(st.sampled_from(["v", "seq", "stamp", "cmd", "action", "width", "force", "speed",
+                                        "skill", "in_seq", "in_device"]), json_values))
+@settings(max_examples=300, deadline=None)
+def test_any_map_is_a_valid_gripper_command_or_a_decode_error(fields):
+    try:
+        c = codec.decode_gripper(msgpack.packb(fields, use_bin_type=True))
+    except codec.DecodeError:
+        return
+    assert c.action in codec.GRIPPER_ACTIONS and math.isfinite(c.stamp)
+    for value, top in ((c.width, codec.MAX_GRIPPER_WIDTH), (c.force, codec.MAX_GRIPPER_FORCE),
+                       (c.speed, codec.MAX_GRIPPER_SPEED)):
+        assert value is None or 0.0 <= value <= top
+    assert c.action != "close" or c.force is not None

@@ -128,6 +128,8 @@ class StateMsg(NamedTuple):
     dq: list[float] | None = None
     wrench_nonfinite: bool = False  # a wrench was sent but not finite: dropped, the pose kept
     fault: str | None = None  # the arm is faulted (it follows no target): what happened
+    gripper: GripperReading | None = None  # the hand's fingers, where the robot has a gripper
+    gripper_invalid: bool = False  # a gripper reading was sent but malformed: dropped, the pose kept
 
 
 class ObjectMsg(NamedTuple):
@@ -192,7 +194,12 @@ def decode_state(data: bytes) -> StateMsg:
     q, dq = _joints(obj, "q"), _joints(obj, "dq")
     if q is not None and dq is not None and len(q) != len(dq):
         raise DecodeError("bad_dq", f"{len(dq)} velocities for {len(q)} joints")
-    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench, q, dq, nonfinite, _fault(obj))
+    try:
+        gripper, gripper_invalid = _gripper_reading(obj), False
+    except DecodeError:
+        gripper, gripper_invalid = None, True
+    return StateMsg(_int(obj, "seq"), _stamp(obj), _pose(obj), wrench, q, dq, nonfinite, _fault(obj),
+                    gripper, gripper_invalid)
 
 
 def _fault(obj: dict) -> str | None:
@@ -224,9 +231,12 @@ def encode_input(seq: int, stamp: float, u: list[float] | tuple[float, ...],
 
 def encode_state(seq: int, stamp: float, pose: list[float], *, q: list[float] | None = None,
                  dq: list[float] | None = None, wrench: list[float] | None = None,
-                 fault: str | None = None) -> bytes:
-    """A state; ``fault`` is written only while the arm is faulted."""
+                 fault: str | None = None, gripper: GripperReading | None = None) -> bytes:
+    """A state; ``fault`` is written only while the arm is faulted, ``gripper`` where
+    the robot has one."""
     msg: dict[str, Any] = {"seq": seq, "stamp": stamp, "pose": [float(x) for x in pose]}
+    if gripper is not None:
+        msg["gripper"] = gripper_field(gripper)
     if fault:
         msg["fault"] = fault[:MAX_FAULT_CHARS]
     if q is not None:
@@ -261,6 +271,122 @@ def decode_target(data: bytes) -> dict[str, Any]:
     _stamp(obj)
     _pose(obj)
     return obj
+
+
+# --- the gripper (sctd/<robot>/gripper, and the state's ``gripper``) ---------------------
+
+GRIPPER_ACTIONS = ("open", "close", "width")
+MAX_GRIPPER_BYTES = 1024
+MAX_GRIPPER_WIDTH = 0.5  # m: wider than any hand an assistive arm carries opens
+MAX_GRIPPER_FORCE = 1000.0  # N
+MAX_GRIPPER_SPEED = 1.0  # m/s
+
+
+class GripperCmd(NamedTuple):
+    """``sctd/<robot>/gripper``: what the gripper is to do.
+
+    ``cmd`` numbers the commands: a robot carries each number out once, and a message
+    that repeats it (the sender repeats its newest command, so that a lost message
+    costs nothing) changes nothing. ``action``: ``open`` (to ``width``, else all the
+    way), ``close`` (until the fingers meet something, squeezing at most ``force`` N,
+    or down to ``width``), ``width`` (to ``width``, not a grasp). ``in_seq`` and
+    ``in_device`` name the input message that asked for it (-1 and "" for none: a
+    skill's own, at a state's entry)."""
+
+    seq: int
+    stamp: float
+    cmd: int
+    action: str
+    width: float | None = None
+    force: float | None = None
+    speed: float | None = None
+    skill: str = ""
+    in_seq: int = -1
+    in_device: str = ""
+
+
+class GripperReading(NamedTuple):
+    """The state's optional ``gripper``: the fingers' ``width`` (m), whether they hold
+    something (``grasped``), whether they move, and ``cmd``, the newest command number
+    carried out or under way (-1 for none)."""
+
+    width: float
+    grasped: bool
+    moving: bool = False
+    cmd: int = -1
+
+
+def encode_gripper(c: GripperCmd) -> bytes:
+    msg: dict[str, Any] = {"seq": c.seq, "stamp": c.stamp, "cmd": c.cmd, "action": c.action,
+                           "skill": c.skill, "in_seq": c.in_seq, "in_device": c.in_device}
+    for key in ("width", "force", "speed"):
+        value = getattr(c, key)
+        if value is not None:
+            msg[key] = float(value)
+    return pack(msg)
+
+
+def _bounded(obj: dict, key: str, top: float, *, positive: bool = False) -> float | None:
+    """An optional number in [0, top] (or (0, top] with ``positive``), else DecodeError."""
+    x = obj.get(key)
+    if x is None:
+        return None
+    if type(x) not in _NUMBERS or not math.isfinite(x) or not (0.0 < x if positive else 0.0 <= x) \
+            or x > top:
+        raise DecodeError(f"bad_{key}", f"expected a number in {'(0' if positive else '[0'}, {top:g}], "
+                                        f"got {repr(x)[:40]}")
+    return float(x)
+
+
+def decode_gripper(data: bytes) -> GripperCmd:
+    """``sctd/<robot>/gripper`` (:class:`GripperCmd`): every field checked, nothing
+    guessed: an unknown action, a width, force or speed out of its range or a
+    ``close`` without a force bound is refused."""
+    _size(data, MAX_GRIPPER_BYTES)
+    obj = unpack_map(data)
+    action = obj.get("action")
+    if action not in GRIPPER_ACTIONS:
+        raise DecodeError("bad_action",
+                          f"expected one of {', '.join(GRIPPER_ACTIONS)}, got {repr(action)[:40]}")
+    width = _bounded(obj, "width", MAX_GRIPPER_WIDTH)
+    force = _bounded(obj, "force", MAX_GRIPPER_FORCE, positive=True)
+    speed = _bounded(obj, "speed", MAX_GRIPPER_SPEED, positive=True)
+    if action == "width" and width is None:
+        raise DecodeError("bad_width", "action width needs a width")
+    if action == "close" and force is None:
+        raise DecodeError("bad_force", "action close needs a force bound (N)")
+    skill, device = obj.get("skill", ""), obj.get("in_device", "")
+    if not isinstance(skill, str) or not isinstance(device, str):
+        raise DecodeError("bad_source", "skill and in_device must be strings")
+    in_seq = obj.get("in_seq", -1)
+    if isinstance(in_seq, bool) or not isinstance(in_seq, int):
+        raise DecodeError("bad_in_seq", repr(in_seq)[:40])
+    return GripperCmd(_int(obj, "seq"), _stamp(obj), _int(obj, "cmd"), action, width, force, speed,
+                      skill[:MAX_NAME], in_seq, device[:MAX_NAME])
+
+
+def gripper_field(r: GripperReading) -> dict[str, Any]:
+    """The state's ``gripper`` map for ``r`` (:func:`encode_state`'s ``gripper``)."""
+    return {"width": float(r.width), "grasped": bool(r.grasped), "moving": bool(r.moving), "cmd": int(r.cmd)}
+
+
+def _gripper_reading(obj: dict) -> GripperReading | None:
+    """The state's ``gripper`` map, or None (absent); DecodeError when malformed."""
+    g = obj.get("gripper")
+    if g is None:
+        return None
+    if not isinstance(g, dict):
+        raise DecodeError("bad_gripper", f"expected a map, got {type(g).__name__}")
+    width = _bounded(g, "width", MAX_GRIPPER_WIDTH)
+    if width is None:
+        raise DecodeError("bad_gripper", "no width")
+    flags = [g.get(k, False) for k in ("grasped", "moving")]
+    if not all(isinstance(f, bool) for f in flags):
+        raise DecodeError("bad_gripper", "grasped and moving must be true or false")
+    cmd = g.get("cmd", -1)
+    if isinstance(cmd, bool) or not isinstance(cmd, int):
+        raise DecodeError("bad_gripper", f"cmd: expected an integer, got {repr(cmd)[:40]}")
+    return GripperReading(width, flags[0], flags[1], cmd)
 
 
 # --- demonstrations (sctd/<robot>/demos/<task>/<name>) ----------------------------------

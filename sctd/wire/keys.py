@@ -37,6 +37,10 @@ class Keys:
         return f"{self.prefix}/target"
 
     @property
+    def gripper(self) -> str:
+        return f"{self.prefix}/gripper"
+
+    @property
     def status(self) -> str:
         return f"{self.prefix}/status"
 
