@@ -361,3 +361,62 @@ def test_sctd_eval_runs_a_real_time_trial_on_the_fr3_judged_by_the_observer(tmp_
     assert " 0 faults" in robot_log and "0 refused" in robot_log
     # the person drove the FR3: the bottle left the start and the trial was timed on the arm's clock
     assert trial["duration_s"] > 5.0 and trial["effort"] > 1.0 and trial["sim_rtf"] is not None
+
+
+def test_the_franka_hand_follows_numbered_gripper_commands_once_and_never_a_stale_one(tmp_path):
+    """sctd robot franky --gripper against franky-sim's gripper server: every state
+    carries the fingers; open, a width and a close (on nothing: not a grasp) are carried
+    out, each command number once however often it is repeated; a stale command and a
+    malformed one are not, and the fingers stay where they are."""
+    host = free_loopback()
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    sim = franky_sim(host, tmp_path / "franky-sim.log")
+    robot = sctd("robot", "franky", "--host", host, "--realtime", "ignore", "--gripper", "--listen", ep,
+                 log=tmp_path / "robot.log")
+    session = open_session(None, [ep])
+    readings: list[codec.GripperReading | None] = []
+    status: dict = {}
+    subs = [session.declare_subscriber(KEYS.state, lambda s: readings.append(
+                codec.decode_state(s.payload.to_bytes()).gripper)),
+            session.declare_subscriber(KEYS.robot_status, lambda s: status.update(
+                codec.unpack_map(s.payload.to_bytes())))]
+    pub = session.declare_publisher(KEYS.gripper)
+
+    def send(cmd: int, action: str, width=None, force=None, *, age: float = 0.0, until=None,
+             seconds: float = 20.0) -> codec.GripperReading:
+        """Repeat command ``cmd`` at 10 Hz until ``until(reading)``, at most ``seconds``."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            c = codec.GripperCmd(cmd, time.time() - age, cmd, action, width, force, 0.1)
+            pub.put(codec.encode_gripper(c))
+            time.sleep(0.1)
+            r = readings[-1]
+            if until is not None and r is not None and until(r):
+                return r
+        return readings[-1]
+
+    try:
+        assert wait_for(lambda: len(readings) > 100, 60), robot.output()
+        assert all(r is not None for r in readings[-50:])  # the fingers in every state
+        r = send(1, "open", until=lambda r: r.cmd == 1 and not r.moving and r.width > 0.075)
+        assert r.cmd == 1 and r.width > 0.075 and not r.grasped
+        r = send(2, "width", 0.02,
+                 until=lambda r: r.cmd == 2 and not r.moving and abs(r.width - 0.02) < 0.002)
+        assert r.cmd == 2 and abs(r.width - 0.02) < 0.002
+        r = send(3, "close", force=20.0, until=lambda r: r.cmd == 3 and not r.moving and r.width < 0.003)
+        assert r.cmd == 3 and r.width < 0.003 and not r.grasped  # closed on nothing
+        send(4, "open", age=5.0, seconds=2.0)  # a command 5 s old, repeated: never carried out
+        pub.put(b"\x81\xa6action\xa6launch")  # {"action": "launch"}: refused
+        assert wait_for(lambda: status.get("gripper", {}).get("stale", 0) >= 10
+                        and status.get("dropped", {}).get("gripper_bad_action") == 1, 5), status
+        r = readings[-1]
+        assert r.cmd == 3 and r.width < 0.003
+        g = status["gripper"]
+        assert g["carried_out"] == 3 and g["cmd"] == 3, g  # each number once, repeated 10 times a second
+    finally:
+        pub.undeclare()
+        for s in subs:
+            s.undeclare()
+        close_session(session)
+        robot.stop()
+        sim.stop()

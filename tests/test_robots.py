@@ -216,3 +216,66 @@ def test_the_feed_forward_twist_is_in_the_arms_time():
         t = 0.001 * k
         twist = d._feed_forward(se3.transform_from_rt(np.eye(3), [0.4 + 0.1 * t, 0.0, 0.5]), 1000.0 + t)
     assert twist[0] == pytest.approx(0.2, rel=0.01)
+
+
+class _HandArm(_Arm):
+    """The scripted arm with a gripper that records the commands it was given."""
+
+    def __init__(self, fail_at: int | None = None):
+        super().__init__(fail_at)
+        self.grips: list = []
+
+    @property
+    def has_gripper(self) -> bool:
+        return True
+
+    def grip(self, cmd) -> None:
+        self.grips.append((cmd.cmd, cmd.action))
+
+
+def test_the_robot_service_carries_out_each_gripper_command_once_and_none_late():
+    """Repeats of a command number are carried out once; a command that arrives while
+    the arm is faulted is passed over, and not carried out after the recovery, though
+    its sender still repeats it; a stale one waits for a fresh repeat."""
+    import time
+
+    from sctd.wire import Keys
+    from sctd.wire.session import close_session, open_session
+    from sctd_services.robots.service import RobotService, _Recovery
+    from sctd_sim.guard import TargetLimits
+
+    session = open_session()
+    pub = session.declare_publisher(Keys("t").gripper)
+    arm = _HandArm()
+
+    def repeat(cmd: int, action: str, until, age: float = 0.0) -> None:
+        """The sender repeating ``cmd``, a cycle of the service each time, until ``until()``."""
+        force = 10.0 if action == "close" else None
+
+        def once() -> bool:
+            pub.put(codec.encode_gripper(codec.GripperCmd(0, time.time() - age, cmd, action, None, force)))
+            svc.cycle()
+            return until()
+        assert wait_for(once, 5), (cmd, action, arm.grips, dict(svc.gripper))
+
+    try:
+        with RobotService(session, arm, Keys("t"), TargetLimits()) as svc:
+            repeat(1, "open", lambda: arm.grips == [(1, "open")])
+            repeat(1, "open", lambda: svc._grip_cmd == 1 and len(arm.grips) == 1 and arm.n > 20)
+            repeat(2, "close", lambda: svc.gripper["stale"] >= 3, age=5.0)  # stale: not carried out
+            assert arm.grips == [(1, "open")]
+            repeat(2, "close", lambda: arm.grips[-1] == (2, "close"))
+            arm.fail_at = arm.n + 1  # the next reading faults: this open comes while faulted
+            repeat(3, "open", lambda: svc.gripper["faulted"] == 1)
+            assert svc.fault is not None
+            svc._recovery = _Recovery()
+            svc._run_recovery()
+            n = arm.n
+            repeat(3, "open", lambda: arm.n > n + 20)  # its sender goes on repeating it: passed over
+            assert arm.grips == [(1, "open"), (2, "close")]
+            repeat(4, "open", lambda: arm.grips[-1] == (4, "open"))
+            assert svc.status_message()["gripper"] == {"carried_out": 3, "stale": svc.gripper["stale"],
+                                                       "faulted": 1, "cmd": 4}
+    finally:
+        pub.undeclare()
+        close_session(session)

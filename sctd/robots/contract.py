@@ -10,7 +10,9 @@ A driver owns the link to one arm. The service that runs it (``sctd robot NAME``
    due), or None when none came within the timeout;
 3. :meth:`RobotDriver.command` with the newest admitted target (a pose of the hand in
    the world, 4x4), or None to hold where the arm is;
-4. :meth:`RobotDriver.recover` when a person asks for it after a fault, then
+4. :meth:`RobotDriver.grip` with each new gripper command (``sctd/<robot>/gripper``)
+   where the driver has a gripper (:attr:`RobotDriver.has_gripper`);
+5. :meth:`RobotDriver.recover` when a person asks for it after a fault, then
    :meth:`RobotDriver.close` once.
 
 A fault of the arm (a reflex, a control exception, a lost connection) surfaces as
@@ -32,6 +34,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
+
+from ..wire.codec import GripperCmd, GripperReading
 
 Array = NDArray[np.float64]
 
@@ -76,6 +80,8 @@ class Reading:
         (N, N m).
     mode : str
         The arm's own word for what it is doing (``idle``, ``move``, ``reflex`` ...).
+    gripper : GripperReading, optional
+        The hand's fingers, where the driver has a gripper.
     """
 
     stamp: float
@@ -84,6 +90,7 @@ class Reading:
     dq: list[float] | None = None
     wrench: list[float] | None = None
     mode: str = ""
+    gripper: GripperReading | None = None
 
 
 class RobotDriver(ABC):
@@ -140,6 +147,18 @@ class RobotDriver(ABC):
     def recover(self) -> None:
         """Clear a fault (reconnect after a lost link); RobotError when the arm cannot
         be recovered from here (the message says what a person must do)."""
+
+    @property
+    def has_gripper(self) -> bool:
+        """Whether the driver drives a gripper (:meth:`grip`; its readings carry
+        ``gripper``)."""
+        return False
+
+    def grip(self, cmd: GripperCmd) -> None:
+        """Start carrying out a gripper command (``sctd/<robot>/gripper``; it returns at
+        once, the fingers move on their own). The service calls it once per command
+        number, never while the arm is faulted. RobotError where there is no gripper."""
+        raise RobotError(f"the {self.name} driver has no gripper")
 
     def move_to(self, T_world_ee: Array) -> None:
         """Bring the hand to ``T_world_ee`` with the arm's own planner and limits, before

@@ -147,8 +147,10 @@ class FrankyDriver(RobotDriver):
                  collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0,
                  start_dynamics: float = 0.1, urdf: Path | None = None, ee_frame: str = "fr3_hand_tcp",
                  posture_stiffness: float = 5.0, friction: Array | None = None,
-                 friction_viscous: Array | None = None):
+                 friction_viscous: Array | None = None, gripper: bool = False):
         self.host = host
+        self.use_gripper = gripper
+        self.hand: Any = None  # the FrankyHand, with --gripper, once connected
         # joint friction the tracking controller compensates (N m, N m s/rad; None: none)
         self.friction, self.friction_viscous = friction, friction_viscous
         self.urdf, self.ee_frame, self.posture_stiffness = urdf, ee_frame, posture_stiffness
@@ -211,6 +213,9 @@ class FrankyDriver(RobotDriver):
         parser.add_argument("--friction-viscous", default=None, metavar="N_M_S,... (7)",
                             help="each joint's viscous friction, N m s/rad, compensated with --friction "
                                  "(default: none)")
+        parser.add_argument("--gripper", action="store_true",
+                            help="drive the arm's Franka Hand too (franky's Gripper): commands from "
+                                 "sctd/<robot>/gripper, its width and grasp in every state")
         parser.add_argument("--connect-timeout", type=float, default=5.0,
                             help="s to wait for the arm's answer when connecting (default %(default)s)")
         parser.add_argument("--collision-torque", type=float, default=20.0,
@@ -244,7 +249,7 @@ class FrankyDriver(RobotDriver):
                    connect_timeout=args.connect_timeout, start_dynamics=min(1.0, args.start_dynamics),
                    urdf=Path(args.urdf) if args.urdf else None, ee_frame=args.ee_frame,
                    posture_stiffness=args.posture_stiffness, friction=poses["friction"],
-                   friction_viscous=poses["friction_viscous"])
+                   friction_viscous=poses["friction_viscous"], gripper=args.gripper)
 
     @property
     def rate(self) -> float:
@@ -265,6 +270,10 @@ class FrankyDriver(RobotDriver):
         self.robot, self.motion, self.fault = robot, None, None
         self._t_last = -1.0
         self.counts["connections"] += 1
+        if self.use_gripper and self.hand is None:
+            from .franky_gripper import FrankyHand
+
+            self.hand = FrankyHand(self._open(lambda: franky.Gripper(self.host)))
 
     def _open(self, make: Any) -> Any:
         """``make()`` (franky.Robot) in a thread of its own, given ``connect_timeout`` s:
@@ -296,7 +305,19 @@ class FrankyDriver(RobotDriver):
             raise RobotError(f"{self.host}: {type(e).__name__}: {e}")
         return box["robot"]
 
+    @property
+    def has_gripper(self) -> bool:
+        return self.use_gripper
+
+    def grip(self, cmd: Any) -> None:
+        if self.hand is None:
+            raise RobotError(f"{self.host}: the gripper is not connected")
+        self.hand.submit(cmd)
+
     def close(self) -> None:
+        hand, self.hand = self.hand, None
+        if hand is not None:
+            hand.close()  # the fingers stay as they are: whatever is held stays held
         robot, self.robot = self.robot, None
         if robot is None:
             return
@@ -365,7 +386,7 @@ class FrankyDriver(RobotDriver):
             R = self.T_world_base[:3, :3]
             w = np.concatenate([R @ w[:3], R @ w[3:]])
         return Reading(self.clock.stamp(t, time.time()), T_world_ee, st.q.tolist(), st.dq.tolist(),
-                       w.tolist(), st.robot_mode.name.lower())
+                       w.tolist(), st.robot_mode.name.lower(), self.hand.reading if self.hand else None)
 
     # -- targets -----------------------------------------------------------------------
     def command(self, T_world_ee: Array | None, stamp: float | None = None) -> None:
@@ -508,4 +529,4 @@ class FrankyDriver(RobotDriver):
 
     def health(self) -> dict[str, Any]:
         return {**self.counts, "host": self.host, "clock_offset": self.clock.offset,
-                "arm_pace": round(self.clock.pace, 3)}
+                "arm_pace": round(self.clock.pace, 3), **(self.hand.health() if self.hand else {})}

@@ -56,6 +56,7 @@ from .observer import SceneObserver, observer_for
 RECOVER_WAIT = 30.0  # s a recover request waits for the loop to run the recovery
 STATUS_RATE = 10.0
 OBJECT_RATE = 50.0
+GRIPPER_STALE = 0.5  # s: a gripper command older than this is not carried out (its repeat is)
 
 
 class _Recovery:
@@ -98,6 +99,11 @@ class RobotService:
         self.recoveries = 0
         self.mode = ""
         self.last: Reading | None = None
+        # the gripper: the newest command number seen (carried out, or passed over while
+        # faulted: never carried out late), and what became of the commands
+        self._grip_cmd: int | None = None
+        self.sub_gripper: Any = None
+        self.gripper = Counter[str]()  # carried_out, faulted (passed over), stale
         self.started = time.monotonic()
         self.latency = Histogram()  # s from a target's stamp to the driver having it
         self.tracking = Histogram()  # m between the admitted target and the measured hand
@@ -118,6 +124,9 @@ class RobotService:
 
             self.sub_target = stack.enter_context(
                 s.declare_subscriber(k.target, zenoh.handlers.RingChannel(16)))
+            if self.driver.has_gripper:
+                self.sub_gripper = stack.enter_context(
+                    s.declare_subscriber(k.gripper, zenoh.handlers.RingChannel(4)))
             self.pub_state = publisher(k.state, express=True)
             self.pub_scene = publisher(k.scene)
             self.pub_status = publisher(k.robot_status)
@@ -193,6 +202,8 @@ class RobotService:
             self._publish_reading(reading)
             if self.fault is None:
                 self._follow(reading)
+        if self.sub_gripper is not None:
+            self._grip()
         now = time.monotonic()
         if now >= self._due["status"]:
             self._due["status"] = now + 1.0 / STATUS_RATE
@@ -214,7 +225,7 @@ class RobotService:
         pose = se3.pose_from_flat(se3.flat_from_transform(r.T_world_ee))  # (the fast path: 1 kHz)
         fault = str(self.fault) if self.fault is not None else None
         self.pub_state.put(codec.encode_state(self.seq, r.stamp, pose, q=r.q, dq=r.dq, wrench=r.wrench,
-                                              fault=fault))
+                                              fault=fault, gripper=r.gripper))
         self.seq += 1
         if self.observer is not None:
             self.observer.step(r.stamp, r.T_world_ee)
@@ -228,6 +239,34 @@ class RobotService:
         if now >= self._due["scene"] and (self.observer is not None or self.driver.owns_scene):
             self._due["scene"] = now + 0.1
             self.pub_scene.put(codec.pack(self.scene_message()))
+
+    def _grip(self) -> None:
+        """The newest gripper command, carried out once per command number: not while the
+        arm is faulted (it is passed over, never carried out late), not when it is older
+        than ``GRIPPER_STALE`` s (the sender's next repeat is taken). The service never
+        makes a command of its own: without one the fingers stay as they are."""
+        newest = None
+        while (s := self.sub_gripper.try_recv()) is not None:
+            try:
+                newest = codec.decode_gripper(s.payload.to_bytes())
+            except codec.DecodeError as e:
+                self.dropped[f"gripper_{e.reason}"] += 1
+        if newest is None or newest.cmd == self._grip_cmd:
+            return
+        if self.fault is not None:
+            self._grip_cmd = newest.cmd
+            self.gripper["faulted"] += 1
+            return
+        if self.guard.stamp_check and abs(time.time() - newest.stamp) > GRIPPER_STALE:
+            self.gripper["stale"] += 1
+            return
+        self._grip_cmd = newest.cmd
+        try:
+            self.driver.grip(newest)
+        except RobotFault as f:
+            self._faulted(f)
+            return
+        self.gripper["carried_out"] += 1
 
     def _follow(self, r: Reading) -> None:
         """The newest valid target to the driver when the guard admits it; refused, the
@@ -289,6 +328,7 @@ class RobotService:
             "uptime": round(time.monotonic() - self.started, 3), "driver_health": self.driver.health(),
             # (Histogram's summaries are of seconds x 1e3: of metres, they are millimetres)
             "target_latency_ms": self.latency.summary_ms(), "tracking_mm": self.tracking.summary_ms(),
+            "gripper": None if self.sub_gripper is None else {**self.gripper, "cmd": self._grip_cmd},
         }
 
 
