@@ -10,6 +10,7 @@ the daemon's targets and status, the robot service's status.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import socket
@@ -419,4 +420,31 @@ def test_the_franka_hand_follows_numbered_gripper_commands_once_and_never_a_stal
             s.undeclare()
         close_session(session)
         robot.stop()
+        sim.stop()
+
+
+def test_the_held_objects_load_is_set_on_the_arm_and_none_clears_it(tmp_path):
+    """--load task sets the pour's bottle (0.2 kg and 0.3 kg inside) as the arm's
+    payload, as libfranka's own state then reports it; the next connection without it
+    sets none, whatever the earlier one left (franky-sim, like an arm, keeps it)."""
+    host = free_loopback()
+    sim = franky_sim(host, tmp_path / "franky-sim.log")
+
+    def serve(*flags: str) -> dict:
+        proc = sctd("robot", "franky", "--host", host, "--realtime", "ignore", "--task", "pour", *flags,
+                    "--duration", "1.5", "--json", log=tmp_path / f"robot{len(flags)}.log")
+        try:
+            assert proc.p.wait(60) == 0, proc.output()
+        finally:
+            proc.stop()
+        last = [ln for ln in proc.output().splitlines() if ln.startswith("{")][-1]
+        return json.loads(last)["driver_health"]
+
+    try:
+        h = serve("--load", "task")
+        assert h["load"]["mass"] == pytest.approx(0.5) and h["arm_load_kg"] == pytest.approx(0.5)
+        assert np.linalg.norm(h["load"]["com_flange"]) > 0.05  # the bottle's centre, past the flange
+        h = serve()
+        assert h["load"] == {"mass": 0.0, "com_flange": [0.0, 0.0, 0.0]} and h["arm_load_kg"] == 0.0
+    finally:
         sim.stop()

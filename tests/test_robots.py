@@ -87,6 +87,13 @@ def test_the_franky_flags_are_checked_where_and_what():
             FrankyDriver.from_args(_franky_args(*argv), None)
     with pytest.raises(RobotError, match="--host"):
         FrankyDriver.from_args(driver_parser(FrankyDriver).parse_args([]), None)
+    with pytest.raises(RobotError, match=r"--load task: needs --task$"):
+        FrankyDriver.from_args(_franky_args("--load", "task"), None)
+    with pytest.raises(RobotError, match="--load task: needs --task with a held object"):
+        FrankyDriver.from_args(_franky_args("--load", "task"), find_task("drawer"))
+    mass, com = FrankyDriver.from_args(_franky_args("--load", "task"), find_task("pour")).load
+    assert mass == pytest.approx(0.5) and com.tolist() == [0.0, 0.0, 0.05]  # bottle 0.2 kg + 0.3 kg inside
+    assert FrankyDriver.from_args(_franky_args(), find_task("pour")).load is None
     d = FrankyDriver.from_args(_franky_args("--friction", "1,1,1,1,0.5,0.5,0.25"), None)
     assert d.friction.tolist() == [1, 1, 1, 1, 0.5, 0.5, 0.25] and d.friction_viscous is None
 

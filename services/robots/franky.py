@@ -44,6 +44,7 @@ Array = np.ndarray
 FF_TAU = 0.02  # s: the feed-forward twist's low-pass filter
 START_TIMEOUT = 60.0  # s --move-to-start may take
 POLL_PERIOD = 0.005  # s between looks at the motion's exception
+LOAD_RADIUS = 0.04  # m: the held object's inertia is taken as a solid sphere's of this radius
 PACE_WINDOW = 0.5  # s of this host's time over which the arm's pace is measured
 PACE_MIN = 0.2  # the slowest pace believed (a stalled arm is the link's fault, not its pace)
 # franky-sim's FR3 joint friction (its MuJoCo model's frictionloss, N m): --friction's
@@ -58,6 +59,17 @@ def _franky_sim_urdf() -> Path | None:
     except ImportError:
         return None
     return Path(franky_sim.__file__).parent / "assets" / "fr3.urdf"
+
+
+def _task_load(task: Any) -> tuple[float, Array]:
+    """``--load task``: the held object's mass with its contents (kg) and its centre of
+    mass in the hand's frame; RobotError without a task or a held object."""
+    held = None if task is None else task.scene.held
+    if held is None:
+        raise RobotError("--load task: needs --task with a held object (the task's scene holds none)"
+                         if task is not None else "--load task: needs --task")
+    contents = held.contents.mass if held.contents is not None else 0.0
+    return held.mass + contents, np.asarray(held.com, dtype=float)
 
 
 def _joint_flag(text: str) -> Array:
@@ -147,8 +159,11 @@ class FrankyDriver(RobotDriver):
                  collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0,
                  start_dynamics: float = 0.1, urdf: Path | None = None, ee_frame: str = "fr3_hand_tcp",
                  posture_stiffness: float = 5.0, friction: Array | None = None,
-                 friction_viscous: Array | None = None, gripper: bool = False):
+                 friction_viscous: Array | None = None, gripper: bool = False,
+                 load: tuple[float, Array] | None = None):
         self.host = host
+        self.load = load  # (kg, centre of mass in the task's hand frame) set with set_load
+        self.load_set: dict[str, Any] | None = None  # what the arm reported after set_load
         self.use_gripper = gripper
         self.hand: Any = None  # the FrankyHand, with --gripper, once connected
         # joint friction the tracking controller compensates (N m, N m s/rad; None: none)
@@ -213,6 +228,13 @@ class FrankyDriver(RobotDriver):
         parser.add_argument("--friction-viscous", default=None, metavar="N_M_S,... (7)",
                             help="each joint's viscous friction, N m s/rad, compensated with --friction "
                                  "(default: none)")
+        parser.add_argument("--load", choices=("none", "task"), default="none",
+                            help="the payload set on the arm (libfranka's set_load) at each connection: "
+                                 "task: --task's held object, its mass with its contents and its centre "
+                                 "of mass (a real arm holding it needs it for its gravity and collision "
+                                 "models); none (default: no payload, set so whatever an earlier "
+                                 "program set; franky-sim holds no object, and a load set there would "
+                                 "lift the hand)")
         parser.add_argument("--gripper", action="store_true",
                             help="drive the arm's Franka Hand too (franky's Gripper): commands from "
                                  "sctd/<robot>/gripper, its width and grasp in every state")
@@ -249,7 +271,8 @@ class FrankyDriver(RobotDriver):
                    connect_timeout=args.connect_timeout, start_dynamics=min(1.0, args.start_dynamics),
                    urdf=Path(args.urdf) if args.urdf else None, ee_frame=args.ee_frame,
                    posture_stiffness=args.posture_stiffness, friction=poses["friction"],
-                   friction_viscous=poses["friction_viscous"], gripper=args.gripper)
+                   friction_viscous=poses["friction_viscous"], gripper=args.gripper,
+                   load=_task_load(task) if args.load == "task" else None)
 
     @property
     def rate(self) -> float:
@@ -265,6 +288,7 @@ class FrankyDriver(RobotDriver):
             robot.set_collision_behavior(self.collision[0], self.collision[1])
             # absolute, so that it is the same whatever an earlier program left set
             robot.set_ee(self.T_ne_ee.flatten(order="F").tolist())
+            self._set_load(robot)  # absolute too: the arm keeps what an earlier program set
         except (franky.NetworkException, franky.CommandException, franky.ProtocolException) as e:
             raise RobotError(f"{self.host}: setting up the arm: {type(e).__name__}: {e}") from None
         self.robot, self.motion, self.fault = robot, None, None
@@ -274,6 +298,18 @@ class FrankyDriver(RobotDriver):
             from .franky_gripper import FrankyHand
 
             self.hand = FrankyHand(self._open(lambda: franky.Gripper(self.host)))
+
+    def _set_load(self, robot: Any) -> None:
+        """The held object as the arm's payload (``--load task``), else none: its centre
+        of mass from the task's hand frame to the flange (``F_T_NE`` from Desk's end
+        effector, then ``--tool``), its inertia that of a solid sphere of
+        ``LOAD_RADIUS``."""
+        mass, com_ee = self.load if self.load is not None else (0.0, np.zeros(3))
+        F_T_ee = np.asarray(robot.state.F_T_NE.matrix) @ self.T_ne_ee
+        com_F = (F_T_ee @ np.r_[com_ee, 1.0])[:3] if mass > 0 else np.zeros(3)
+        inertia = np.eye(3) * 0.4 * mass * LOAD_RADIUS**2
+        robot.set_load(mass, com_F.tolist(), inertia.flatten(order="F").tolist())
+        self.load_set = {"mass": mass, "com_flange": [round(float(x), 6) for x in com_F]}
 
     def _open(self, make: Any) -> Any:
         """``make()`` (franky.Robot) in a thread of its own, given ``connect_timeout`` s:
@@ -529,4 +565,7 @@ class FrankyDriver(RobotDriver):
 
     def health(self) -> dict[str, Any]:
         return {**self.counts, "host": self.host, "clock_offset": self.clock.offset,
-                "arm_pace": round(self.clock.pace, 3), **(self.hand.health() if self.hand else {})}
+                "arm_pace": round(self.clock.pace, 3), "load": self.load_set,
+                # the payload the arm's own state reports (libfranka's m_load), set or not
+                "arm_load_kg": None if self.robot is None else float(self.robot.state.m_load),
+                **(self.hand.health() if self.hand else {})}
