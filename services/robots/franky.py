@@ -163,7 +163,8 @@ class FrankyDriver(RobotDriver):
                  load: tuple[float, Array] | None = None):
         self.host = host
         self.load = load  # (kg, centre of mass in the task's hand frame) set with set_load
-        self.load_set: dict[str, Any] | None = None  # what the arm reported after set_load
+        self.load_set: dict[str, Any] | None = None  # the payload set (set_load), for health
+        self._arm_load: float | None = None  # the payload the arm's state reported, kg
         self.use_gripper = gripper
         self.hand: Any = None  # the FrankyHand, with --gripper, once connected
         # joint friction the tracking controller compensates (N m, N m s/rad; None: none)
@@ -292,7 +293,7 @@ class FrankyDriver(RobotDriver):
         except (franky.NetworkException, franky.CommandException, franky.ProtocolException) as e:
             raise RobotError(f"{self.host}: setting up the arm: {type(e).__name__}: {e}") from None
         self.robot, self.motion, self.fault = robot, None, None
-        self._t_last = -1.0
+        self._t_last, self._arm_load = -1.0, None
         self.counts["connections"] += 1
         if self.use_gripper and self.hand is None:
             from .franky_gripper import FrankyHand
@@ -415,6 +416,7 @@ class FrankyDriver(RobotDriver):
         return self.fault
 
     def _reading(self, st: Any, t: float) -> Reading:
+        self._arm_load = st.m_load  # (a float attribute: health reads it without the link)
         T_base_ee = st.O_T_EE.matrix
         T_world_ee = T_base_ee if self._base_identity else self.T_world_base @ T_base_ee
         w = st.O_F_ext_hat_K
@@ -566,6 +568,7 @@ class FrankyDriver(RobotDriver):
     def health(self) -> dict[str, Any]:
         return {**self.counts, "host": self.host, "clock_offset": self.clock.offset,
                 "arm_pace": round(self.clock.pace, 3), "load": self.load_set,
-                # the payload the arm's own state reports (libfranka's m_load), set or not
-                "arm_load_kg": None if self.robot is None else float(self.robot.state.m_load),
+                # the payload the arm's own state reported last (libfranka's m_load), set or
+                # not (from the newest reading: health never waits on the link)
+                "arm_load_kg": self._arm_load,
                 **(self.hand.health() if self.hand else {})}
