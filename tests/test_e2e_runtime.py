@@ -384,7 +384,8 @@ def test_held_input_in_a_trap_is_stuck_in_status_and_escape_returns(tmp_path):
         return None
 
     try:
-        assert wait_for(lambda: len(rig.targets) > 50, 20), proc.output()
+        # (the status is 20 Hz: the first may come after the first 50 targets)
+        assert wait_for(lambda: len(rig.targets) > 50 and status() is not None, 20), proc.output()
         s = status()
         assert s["state"] == "free" and s["stuck"] is None and s["counters"]["stuck"] == 0
         assert push_until([1, 0, 0], enable, lambda s: s["state"] == "slide"), status()
