@@ -24,6 +24,7 @@ from .engine import SkillEngine
 from .errors import SkillError
 from .fields import FIELDS, CylinderField, Field, SphereField, TranslationField, sigmoid
 from .frames import WORLD_OBJECT, Frame
+from .gripper import GRIPPER_ACTIONS, GripperAction
 from .loader import Bundle, bundle_from_file, load_skill, skill_from_bundle
 from .mappings import AXIS_NAMES, MAPPINGS, InputMapping, LinearMapping, VectorFieldMapping
 from .model import Limits, Skill, State
@@ -31,7 +32,7 @@ from .modelfile import VectorFieldModel, vector_field_model_from_bytes, vector_f
 from .registry import Registry
 from .stuck import StuckDetector
 from .summary import field_summary, skill_summary
-from .transitions import TRANSITIONS, Button, Distance, Force, Hyperplane, Timeout, Transition
+from .transitions import TRANSITIONS, Button, Distance, Force, Gripper, Hyperplane, Timeout, Transition
 from .workspace import Workspace
 from .writer import bundle_from_skill, dump_skill, skill_to_yaml
 
@@ -39,6 +40,7 @@ __all__ = [
     "AXIS_NAMES",
     "CONSTRAINTS",
     "FIELDS",
+    "GRIPPER_ACTIONS",
     "MAPPINGS",
     "TRANSITIONS",
     "WORLD_OBJECT",
@@ -52,6 +54,8 @@ __all__ = [
     "Field",
     "Force",
     "Frame",
+    "Gripper",
+    "GripperAction",
     "Hyperplane",
     "InputMapping",
     "Limits",

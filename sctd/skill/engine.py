@@ -11,6 +11,13 @@ The engine also keeps the path that led to the active state, so that an escape p
 returns along it (thesis Ch. 6.2: the way out of a state that traps the user), and
 measures the progress towards the active state's transitions for the runtime's
 :class:`~sctd.skill.stuck.StuckDetector`.
+
+A state entered by a transition may ask the gripper for something
+(:class:`~sctd.skill.gripper.GripperAction`, the state's ``gripper``): the engine holds
+it until the runtime takes it (:meth:`SkillEngine.take_entry_action`), once per entry.
+Starting a state (the skill's start, a swap, a restart: :meth:`SkillEngine.reset`) and
+an escape back to a state enter nothing by a transition and ask the gripper for
+nothing: what the hand holds stays held.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .constraints import ActiveConstraint, StepLimit
+from .gripper import GripperAction
 from .model import Skill
 from .transitions import Transition
 from .workspace import Workspace
@@ -80,6 +88,8 @@ class SkillEngine:
         self.entries = 0  # states entered (a new count of activity begins at each)
         self.commands = 0
         self.acted: list[int] = [0] * len(skill.states[self.index].active_constraints)
+        # The gripper action of the state a transition entered, until the runtime takes it.
+        self.entry_action: GripperAction | None = None
 
     # --- FSM ---------------------------------------------------------------------------
 
@@ -126,7 +136,8 @@ class SkillEngine:
         self.entered = now
 
     def update(self, F_obj_ee: Flat, now: float, force_obj: Array | None = None,
-               pressed: Set[int] = frozenset(), escape: int | None = None) -> bool:
+               pressed: Set[int] = frozenset(), escape: int | None = None,
+               grasped: bool | None = None) -> bool:
         """Evaluate the active state's transitions on the measured pose; follow the first
         that fires. Returns True when the state changed (``escaped`` says whether by
         escape).
@@ -146,8 +157,13 @@ class SkillEngine:
             takes it, it returns to the state the active one was entered from (thesis
             Ch. 6.2: the way out of a state that traps the user); nothing at the start
             of the path.
+        grasped : bool, optional
+            Whether the gripper holds something, by the newest state's reading; None
+            when the robot reports no gripper or its state is stale (``gripper``
+            transitions then never fire).
         """
         self.escaped = False
+        self.workspace.grasped = grasped
         # A button press is an event, not a condition: it acts however long the state has
         # been active (the dwell only keeps geometric guards from chattering).
         if pressed:
@@ -174,13 +190,17 @@ class SkillEngine:
         hand is still where it crossed them, and escape would otherwise be undone at the
         next tick."""
         left = self.state
-        self._enter(self.skill.states[self.history[-1]].name, now)
+        self._enter(self.skill.states[self.history[-1]].name, now, act=False)
         self.escaped = True
         self._disarmed = {i for i, t in enumerate(self._out_of[self.index]) if t.target == left}
         return True
 
-    def _enter(self, state: str, now: float) -> bool:
+    def _enter(self, state: str, now: float, act: bool = True) -> bool:
+        """Enter ``state`` by a transition (``act``: its gripper action is to be taken)
+        or by an escape."""
         index = self.skill.state_index(state)
+        if act:
+            self.entry_action = self.skill.states[index].gripper
         if self.history and self.history[-1] == index:
             self.history.pop()  # back the way it came: the path gets shorter
         else:
@@ -190,6 +210,12 @@ class SkillEngine:
         self.entered = now
         self._disarmed = set()
         return True
+
+    def take_entry_action(self) -> GripperAction | None:
+        """The gripper action of the state the last transition entered, once: None
+        after it was taken, and when that state has none (module doc)."""
+        action, self.entry_action = self.entry_action, None
+        return action
 
     def _count_from(self, index: int) -> None:
         """A new count of constraint activity, for state ``index`` entered."""

@@ -22,6 +22,7 @@ from ..files import FileError, inside, parse_yaml, read_bytes, read_text
 from .constraints import CONSTRAINTS
 from .errors import SkillError
 from .frames import BUILTIN_FRAMES, Frame, builtin_frames
+from .gripper import GripperAction
 from .mappings import MAPPINGS
 from .model import Limits, Skill, State
 from .reader import Reader, check_relative, kind_of
@@ -265,7 +266,7 @@ class _Parser(Reader):
     def state(self, name: str, sd: Any) -> State:
         path = f"states.{name}"
         sd = self.mapping(sd if sd is not None else {}, path)
-        self.known_keys(sd, path, {"input_mapping", "active_constraints"})
+        self.known_keys(sd, path, {"input_mapping", "active_constraints", "gripper"})
         ims = sd.get("input_mapping") or []
         acs = sd.get("active_constraints") or []
         if not isinstance(ims, list):
@@ -278,6 +279,8 @@ class _Parser(Reader):
                                  for i, m in enumerate(ims)),
             active_constraints=tuple(self.element(CONSTRAINTS, c, f"{path}.active_constraints[{i}]")
                                      for i, c in enumerate(acs)),
+            gripper=None if sd.get("gripper") is None
+            else GripperAction.from_yaml(self, sd["gripper"], f"{path}.gripper"),
         )
 
     def element(self, registry: Registry, d: Any, path: str) -> Any:

@@ -7,9 +7,9 @@ of one task object. The kinds of elements are classes of their own, one per kind
 in the module of its element kind: :mod:`sctd.skill.mappings`,
 :mod:`sctd.skill.constraints`, :mod:`sctd.skill.transitions` and
 :mod:`sctd.skill.fields`; frames are in :mod:`sctd.skill.frames`, vector-field models
-in :mod:`sctd.skill.modelfile`. The model sits above all of them (they never import
-it). :mod:`sctd.skill.loader` builds a skill from YAML;
-:mod:`sctd.skill.engine` runs it.
+in :mod:`sctd.skill.modelfile`, a state's gripper action in :mod:`sctd.skill.gripper`.
+The model sits above all of them (they never import it). :mod:`sctd.skill.loader`
+builds a skill from YAML; :mod:`sctd.skill.engine` runs it.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 from .constraints import ActiveConstraint
 from .frames import Frame
+from .gripper import GripperAction
 from .mappings import InputMapping
 from .modelfile import VectorFieldModel
 from .transitions import Transition
@@ -25,9 +26,13 @@ from .transitions import Transition
 
 @dataclass(frozen=True)
 class State:
+    """One FSM state: its input mappings, its active constraints and, optionally, what
+    the gripper does when a transition enters it (:mod:`sctd.skill.gripper`)."""
+
     name: str
     input_mappings: tuple[InputMapping, ...]
     active_constraints: tuple[ActiveConstraint, ...]
+    gripper: GripperAction | None = None
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,11 @@ class Reader:
             raise self.fail(path, f"must be <= {hi}, got {x}")
         return x
 
+    def boolean(self, v: Any, path: str) -> bool:
+        if not isinstance(v, bool):
+            raise self.fail(path, f"expected true or false, got {kind_of(v)}")
+        return v
+
     def integer(self, v: Any, path: str, lo: int = 0) -> int:
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.fail(path, f"expected an integer, got {kind_of(v)}")

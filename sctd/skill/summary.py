@@ -10,7 +10,7 @@ from typing import Any
 
 from .. import se3
 from .fields import Field
-from .model import Skill
+from .model import Skill, State
 from .registry import plain
 
 
@@ -45,12 +45,18 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
         "frames": {n: {"parent": f.parent,
                        "pose": plain(se3.pose_from_transform(f.T_parent_frame))}
                    for n, f in skill.frames.items() if n not in ("ee", "object")},
-        "states": [{"name": s.name,
-                    "input_mappings": [m.summary() for m in s.input_mappings],
-                    "active_constraints": [c.summary() for c in s.active_constraints]}
-                   for s in skill.states],
+        "states": [_state(s) for s in skill.states],
         "transitions": [t.summary() for t in skill.transitions],
         "min_dwell": skill.min_dwell,
         "fields": fields,
         "candidate_frames": list(skill.candidate_frames),
     }
+
+
+def _state(s: State) -> dict[str, Any]:
+    """A state's mappings and constraints, and its gripper action where it has one."""
+    out: dict[str, Any] = {"name": s.name, "input_mappings": [m.summary() for m in s.input_mappings],
+                           "active_constraints": [c.summary() for c in s.active_constraints]}
+    if s.gripper is not None:
+        out["gripper"] = s.gripper.to_yaml()
+    return out

@@ -1,8 +1,9 @@
 """FSM transitions (guarded edges between states), one class per kind.
 
 Each kind reads its parameters from a skill file (``from_yaml``), writes them back
-(``to_yaml``), summarises itself and says in the tick whether it fires (``fires``; a button, an event, through
-``pressed``); :data:`TRANSITIONS` finds a kind by its ``type`` name. Guards carry a
+(``to_yaml``), summarises itself and says in the tick whether it fires (``fires``; a
+button, an event, through ``pressed``; the gripper's reading, through the workspace's
+``grasped``); :data:`TRANSITIONS` finds a kind by its ``type`` name. Guards carry a
 hysteresis ``margin`` in their own unit.
 """
 
@@ -303,3 +304,28 @@ class Button(Transition):
 
     def pressed(self, buttons: Set[int]) -> bool:
         return self.button in buttons
+
+
+@TRANSITIONS.register
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Gripper(Transition):
+    """Fires when the newest robot state's gripper reading says the fingers hold
+    something (``grasped: true``) or hold nothing (``grasped: false``). Never fires when
+    the robot reports no gripper or its state is stale (the workspace's ``grasped`` is
+    None then): an unknown hand neither holds nor lets go."""
+
+    type: ClassVar[str] = "gripper"
+    grasped: bool = True
+
+    @classmethod
+    def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Gripper:
+        r.known_keys(td, path, COMMON_KEYS | {"grasped"})
+        if "grasped" not in td:
+            raise r.fail(f"{path}.grasped", "a gripper transition needs grasped: true or false")
+        return cls(source=source, target=target, grasped=r.boolean(td["grasped"], f"{path}.grasped"))
+
+    def _parameters(self) -> dict[str, Any]:
+        return {"grasped": self.grasped}
+
+    def fires(self, F: Flat, elapsed: float, force: Array | None, ws: Workspace) -> bool:
+        return ws.grasped is self.grasped

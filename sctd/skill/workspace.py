@@ -79,6 +79,10 @@ class Workspace:
     membership : ndarray, shape (K,), or None
         ``P(F | p)`` (or ``P(F | p, u)``) of the fields of the last vector-field command
         (None before one; for evaluation and plots).
+    grasped : bool or None
+        Whether the gripper holds something, by the newest robot state's reading, for
+        the ``gripper`` transitions; None when the robot reports no gripper or its state
+        is stale (set by :meth:`~sctd.skill.engine.SkillEngine.update`).
     """
 
     def __init__(self, speeds: Sequence[float], frames: Mapping[str, Frame],
@@ -96,6 +100,7 @@ class Workspace:
         self.turn_budget = math.inf
         self.scale = 1.0
         self.membership: Array | None = None
+        self.grasped: bool | None = None
 
     def refresh(self) -> int:
         """:meth:`Neighbours.refresh` of every model file's neighbours (between ticks);

@@ -28,7 +28,7 @@ def skill_to_yaml(skill: Skill) -> dict[str, Any]:
 
     Every setting is written, defaults too; what the format lets a file leave out when
     empty is left out: the description, frames beyond the built-in ``ee`` and
-    ``object``, a state's mappings or constraints, the candidate frames.
+    ``object``, a state's mappings, constraints or gripper action, the candidate frames.
     """
     doc: dict[str, Any] = {"sctd_skill": FORMAT_VERSION, "name": skill.name}
     if skill.description:
@@ -53,6 +53,8 @@ def _state(s: State) -> dict[str, Any]:
         out["input_mapping"] = [m.to_yaml() for m in s.input_mappings]
     if s.active_constraints:
         out["active_constraints"] = [c.to_yaml() for c in s.active_constraints]
+    if s.gripper is not None:
+        out["gripper"] = s.gripper.to_yaml()
     return out
 
 
