@@ -68,6 +68,10 @@ def test_the_defaults_file_is_no_task_and_no_skill():
      "expected a name, got 7"),
     ({"bench_learn": {"pull": "drawer", "fields": ["pour"]}}, "bench_learn.tilt", "missing"),
     ({"bench_learn": []}, "bench_learn", "expected a mapping"),
+    ({"gripper": {"force": 20}}, "gripper.open_hold", "missing"),
+    ({"gripper": {"force": -1, "open_hold": 0.5}}, "gripper.force", "expected a number in (0, 1000], got -1"),
+    ({"gripper": {"force": 20, "open_hold": "long"}}, "gripper.open_hold", "got 'long'"),
+    ({"gripper": {"force": 20, "open_hold": 0.5, "speed": 1}}, "gripper", "unknown field 'speed'"),
 ])
 def test_a_malformed_document_names_the_field(shipped_doc, change, where, problem):
     doc = {**shipped_doc, **change}
@@ -122,3 +126,27 @@ def test_the_flags_take_their_defaults_from_the_file():
         add(p)
         assert getattr(p.parse_args([]), dest) == value
         assert f"(default {value})" in " ".join(p.format_help().split())
+
+
+def test_sctd_run_takes_the_grasp_buttons_settings_from_the_file(tmp_path, monkeypatch, shipped_doc):
+    """``--grasp-force`` and ``--grasp-open-hold`` default to the file's ``gripper``, and
+    the runtime's own defaults (a config built in code) are the shipped file's numbers."""
+    from sctd.cli.run import add_run_arguments
+    from sctd.runtime.controller import RuntimeConfig
+
+    shipped = defaults().gripper
+    config = RuntimeConfig()
+    assert (config.grasp_force, config.grasp_open_hold) == (shipped.force, shipped.open_hold)
+    path = tmp_path / "defaults.yaml"
+    path.write_text(yaml.safe_dump({**shipped_doc, "gripper": {"force": 35, "open_hold": 0.8}}))
+    monkeypatch.setattr(defaults_module, "DEFAULTS_FILE", path)
+    defaults.cache_clear()
+    try:
+        p = argparse.ArgumentParser()
+        add_run_arguments(p)
+        args = p.parse_args(["--skill", "pour"])
+        assert (args.grasp_force, args.grasp_open_hold) == (35.0, 0.8)
+        assert "(default 35.0)" in " ".join(p.format_help().split())
+        assert p.parse_args(["--skill", "pour", "--grasp-force", "12"]).grasp_force == 12.0
+    finally:
+        defaults.cache_clear()

@@ -156,8 +156,12 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
         "stamp", "skill", "skill_name", "state", "finished", "stuck", "mode", "rate", "realtime",
         "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
-        "state_age", "robot_fault", "object_age", "in_seq", "input", "vf_scale", "constraints", "dropped",
-            "counters"}
+        "state_age", "robot_fault", "object_age", "in_seq", "input", "gripper", "vf_scale", "constraints",
+        "dropped", "counters"}
+    assert set(first["gripper"]) == {"commands", "messages", "cmd", "action", "source", "in_device",
+                                     "reading", "reading_age", "holding", "presses", "ignored_presses",
+                                     "cancelled"}
+    assert first["gripper"]["commands"] == 0 and first["gripper"]["cmd"] is None
     assert (first["targets"], first["target_rate"], first["realtime"]) == (50, 100.0, True)
     assert first["publish_ms"] is None and first["mode"] == "waiting"
     assert stats.next_status == 0.75 and stats.window_targets == 50

@@ -10,6 +10,7 @@ a benchmark's workload). Those choices are data, in one file a user can read::
     skill: pour             # a hand-written skill of it: sctd demo --skill, ...
     learned_skill: pour-vf  # a learned one: sctd bench eval --skill, sctd bench vf --skill
     bench_learn: {tilt: pour, pull: drawer, fields: [pour, drawer, crank, wipe]}
+    gripper: {force: 20, open_hold: 0.5}  # sctd run --grasp-force, --grasp-open-hold
 
 It lives here, not among the shipped tasks or skills: ``sctd_tasks`` and
 ``sctd_skills`` are catalogs that take every ``*.yaml`` in their folder for a task or
@@ -32,8 +33,8 @@ from typing import Any
 
 from ..files import FileError, load_yaml
 
-__all__ = ["DEFAULTS_FILE", "BenchLearn", "Defaults", "DefaultsError", "defaults", "defaults_from_document",
-           "load_defaults"]
+__all__ = ["DEFAULTS_FILE", "BenchLearn", "Defaults", "DefaultsError", "GripperDefaults", "defaults",
+           "defaults_from_document", "load_defaults"]
 
 VERSION = 1
 MAX_BYTES = 64 * 1024
@@ -67,6 +68,23 @@ class BenchLearn:
 
 
 @dataclass(frozen=True)
+class GripperDefaults:
+    """What the runtime's grasp button does (``sctd run --grasp-force``,
+    ``--grasp-open-hold``; docs/wire-contract.md, "The gripper").
+
+    Attributes
+    ----------
+    force : float
+        N: the force bound of a close the grasp button asks for.
+    open_hold : float
+        s the grasp button must be held to open a hand that holds something.
+    """
+
+    force: float
+    open_hold: float
+
+
+@dataclass(frozen=True)
 class Defaults:
     """What ``defaults.yaml`` says (its comments say who takes what).
 
@@ -79,12 +97,14 @@ class Defaults:
     learned_skill : str
         A learned skill of that task.
     bench_learn : BenchLearn
+    gripper : GripperDefaults
     """
 
     task: str
     skill: str
     learned_skill: str
     bench_learn: BenchLearn
+    gripper: GripperDefaults
 
 
 def _name(doc: dict[str, Any], key: str, file: str, where: str = "") -> str:
@@ -109,7 +129,8 @@ def _mapping(doc: Any, file: str, where: str, keys: tuple[str, ...]) -> dict[str
 def defaults_from_document(doc: Any, file: str) -> Defaults:
     """Validate a parsed defaults document (``file``: its name in errors), field by
     field in the file's order."""
-    top = _mapping(doc, file, "", ("sctd_defaults", "task", "skill", "learned_skill", "bench_learn"))
+    top = _mapping(doc, file, "", ("sctd_defaults", "task", "skill", "learned_skill", "bench_learn",
+                                   "gripper"))
     if top.get("sctd_defaults") != VERSION:
         raise DefaultsError(file, "sctd_defaults", f"expected {VERSION}, got {top.get('sctd_defaults')!r}")
     task, skill, learned = (_name(top, key, file) for key in ("task", "skill", "learned_skill"))
@@ -123,7 +144,22 @@ def defaults_from_document(doc: Any, file: str) -> Defaults:
     for k, name in enumerate(fields):
         if not isinstance(name, str) or not name.strip():
             raise DefaultsError(file, f"bench_learn.fields[{k}]", f"expected a name, got {name!r}")
-    return Defaults(task, skill, learned, BenchLearn(tilt, pull, tuple(fields)))
+    return Defaults(task, skill, learned, BenchLearn(tilt, pull, tuple(fields)), _gripper(top, file))
+
+
+def _gripper(top: dict[str, Any], file: str) -> GripperDefaults:
+    if "gripper" not in top:
+        raise DefaultsError(file, "gripper", "missing")
+    g = _mapping(top["gripper"], file, "gripper", ("force", "open_hold"))
+    values = []
+    for key, hi in (("force", 1000.0), ("open_hold", 10.0)):  # (force: the wire contract's bound)
+        if key not in g:
+            raise DefaultsError(file, f"gripper.{key}", "missing")
+        x = g[key]
+        if isinstance(x, bool) or not isinstance(x, int | float) or not 0.0 < x <= hi:
+            raise DefaultsError(file, f"gripper.{key}", f"expected a number in (0, {hi:g}], got {x!r}")
+        values.append(float(x))
+    return GripperDefaults(*values)
 
 
 def load_defaults(path: str | Path) -> Defaults:

@@ -15,6 +15,7 @@ from typing import Any
 
 import zenoh
 
+from ..app.defaults import defaults
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import SKILL_HELP, add_arguments, add_robot_argument, check_ranges, from_namespace
 from ..runtime.controller import RuntimeConfig
@@ -48,6 +49,8 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
                            "(docs/skill-sets.md)")
     add_arguments(p, RuntimeConfig, exclude=("stamp_check",), show_default=True)
     add_arguments(p, RuntimeConfig, only=("stamp_check",))
+    grip = defaults().gripper  # the grasp button's, from sctd/app/defaults.yaml
+    p.set_defaults(grasp_force=grip.force, grasp_open_hold=grip.open_hold)
     p.add_argument("--spin-us", type=float, default=100.0,
                    help="us before each deadline the tick thread wakes: it drains its inputs, then "
                         "spins to the deadline; 0: it wakes at the deadline, cheapest, with the "

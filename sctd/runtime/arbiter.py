@@ -23,7 +23,11 @@ Every arriving input message is offered here, in arrival order per device
   command and then pushes again;
 - button presses (rising edges) are counted per device on every message; a tick acts on
   a device's presses when its newest message is fresh and enabled and the device owns
-  the motion or nobody does (others are counted as ``ignored_presses``).
+  the motion or nobody does (others are counted as ``ignored_presses``);
+- presses of grasp (button 4) are also handed on with the device and the ``seq`` of the
+  message that pressed it (:class:`GraspPress`, for the gripper: :mod:`.gripper`), and
+  :meth:`InputArbiter.holding` says whether a device still holds grasp under the same
+  rule (fresh, enabled, owning the motion or nobody does, no stop holding).
 
 Ownership changes only at a tick, and what a message does depends on its own device's
 messages and the owner the last tick left: messages of different devices that arrive
@@ -40,7 +44,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from ..wire.codec import BUTTON_ENABLE, InputMsg
+from ..wire.codec import BUTTON_ENABLE, BUTTON_GRASP, InputMsg
 from .safety import sanitize_input
 
 MAX_DEVICES = 64  # device names one daemon tracks at once
@@ -70,17 +74,30 @@ class ButtonWatch:
         return self.presses
 
 
+class GraspPress(NamedTuple):
+    """Presses of grasp (button 4) that act: the device, the ``seq`` of its newest
+    message with a rising edge of grasp and that message's arrival (the receiver's
+    clock), and how many presses since the last tick (one but for a flood)."""
+
+    device: str
+    seq: int
+    received: float
+    presses: int = 1
+
+
 class Command(NamedTuple):
     """What a tick follows: the command ``u`` (clipped, dead band applied; zeros when no
     device drives the motion), whether the input behind it is fresh, enabled and finite
-    (``ok``), the ``seq`` and device of that input (-1 and "" for none), and the buttons
-    pressed since the last tick that act on it."""
+    (``ok``), the ``seq`` and device of that input (-1 and "" for none), the buttons
+    pressed since the last tick that act on it, and the grasp presses among them with
+    the message that pressed (``grasps``)."""
 
     u: tuple[float, ...]
     ok: bool
     in_seq: int
     device: str
     pressed: frozenset[int]
+    grasps: tuple[GraspPress, ...] = ()
 
 
 NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
@@ -89,8 +106,8 @@ NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
 class _Device:
     """One device's newest message and its standing under the rule."""
 
-    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "msg", "name", "received",
-                 "rest", "run_start", "stale_seq", "stop", "u")
+    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "grasp_received", "grasp_seq", "msg",
+                 "name", "received", "rest", "run_start", "stale_seq", "stop", "u")
 
     def __init__(self, name: str):
         self.name = name
@@ -106,6 +123,8 @@ class _Device:
         self.buttons = ButtonWatch()
         self.acted: tuple[int, ...] = ()  # press counts already acted on (or dropped)
         self.stale_seq = -1  # the newest message already counted as stale
+        self.grasp_seq = -1  # the newest message with a rising edge of grasp, and its arrival
+        self.grasp_received = 0.0
 
 
 class InputArbiter:
@@ -137,6 +156,7 @@ class InputArbiter:
         self._pending: list[_Device] = []  # armed devices that pushed while nobody owned
         self._pressing: list[_Device] = []  # devices with presses not yet seen by a tick
         self._stopping: set[_Device] = set()  # devices whose newest message holds stop
+        self.ignored_grasps = 0  # grasp presses of a device while another owned the motion
 
     def at_rest(self) -> bool:
         """Whether every device's newest message is at rest (zero, not finite or
@@ -174,8 +194,13 @@ class InputArbiter:
         d.u, d.finite, d.enabled = u, finite, enabled
         d.rest = not (finite and enabled and any(u))
         if b:
-            if d.buttons.observe(b) != d.acted and d not in self._pressing:
+            before = d.buttons.presses
+            counts = d.buttons.observe(b)
+            if counts != d.acted and d not in self._pressing:
                 self._pressing.append(d)
+            if len(counts) > BUTTON_GRASP and (len(before) <= BUTTON_GRASP
+                                               or counts[BUTTON_GRASP] != before[BUTTON_GRASP]):
+                d.grasp_seq, d.grasp_received = m.seq, now
         if m.stop and not d.stop:
             self.counters.stops += 1
             self._stop_requested = True
@@ -248,11 +273,11 @@ class InputArbiter:
             self._stopping.clear()  # stops that went stale no longer hold (the disarm stays)
         if owner is None and self._pending:
             owner = self._elect(now, wall)
-        pressed = self._presses(now, wall) if self._pressing else frozenset()
+        pressed, grasps = self._presses(now, wall) if self._pressing else (frozenset(), ())
         if owner is not None:
             m = owner.msg
             assert m is not None
-            return Command(owner.u, True, m.seq, owner.name, pressed)
+            return Command(owner.u, True, m.seq, owner.name, pressed, grasps)
         last = self.last
         if last is None:
             return NO_INPUT
@@ -261,7 +286,7 @@ class InputArbiter:
         ok = last.finite and last.enabled and self.fresh(last, now, wall)
         if not ok:
             self._count_stale(last, now, wall)
-        return Command((0.0,) * len(last.u), ok, m.seq, last.name, pressed)
+        return Command((0.0,) * len(last.u), ok, m.seq, last.name, pressed, grasps)
 
     def _elect(self, now: float, wall: float) -> _Device | None:
         """The pending device whose push began first (then by name: messages between two
@@ -280,9 +305,11 @@ class InputArbiter:
         self.owner = first
         return first
 
-    def _presses(self, now: float, wall: float) -> frozenset[int]:
-        """Presses since the last tick that act (module doc); the others are dropped."""
+    def _presses(self, now: float, wall: float) -> tuple[frozenset[int], tuple[GraspPress, ...]]:
+        """Presses since the last tick that act (module doc), and the grasp presses among
+        them by device; the others are dropped."""
         pressed: set[int] = set()
+        grasps: list[GraspPress] = []
         owner = self.owner
         for d in self._pressing:
             counts, last = d.buttons.presses, d.acted
@@ -291,13 +318,36 @@ class InputArbiter:
                    if i != BUTTON_ENABLE and n > (last[i] if i < len(last) else 0)]
             if not new or not (d.enabled and d.finite and self.fresh(d, now, wall)):
                 continue
+            n_grasp = counts[BUTTON_GRASP] - (last[BUTTON_GRASP] if len(last) > BUTTON_GRASP else 0) \
+                if BUTTON_GRASP in new else 0
             if owner is not None and d is not owner:
                 self.counters.ignored_presses += len(new)
+                self.ignored_grasps += n_grasp
                 continue
             pressed.update(new)
+            if n_grasp:
+                grasps.append(GraspPress(d.name, d.grasp_seq, d.grasp_received, n_grasp))
         self._pressing.clear()
         self.counters.presses += len(pressed)
-        return frozenset(pressed)
+        return frozenset(pressed), tuple(grasps)
+
+    def holding(self, name: str, button: int, now: float, wall: float) -> bool:
+        """Whether device ``name`` still holds ``button`` in a way that acts: its newest
+        message is fresh, enabled, finite and holds the button, the device owns the
+        motion or nobody does, and no device's stop holds."""
+        d = self.devices.get(name)
+        if d is None or d.msg is None:
+            return False
+        b = d.msg.buttons
+        owner = self.owner
+        return (len(b) > button and b[button] == 1 and d.enabled and d.finite and not self._stopping
+                and not self._stop_requested and (owner is None or owner is d) and self.fresh(d, now, wall))
+
+    @property
+    def stopping(self) -> bool:
+        """Whether a stop holds (a device's fresh newest message holds ``stop``) or was
+        asked for since the last tick."""
+        return bool(self._stopping) or self._stop_requested
 
     def _count_stale(self, d: _Device, now: float | None = None, wall: float | None = None) -> None:
         """Count ``d``'s newest message once as stale (when it is)."""

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from ..skill import Skill, SkillEngine, StuckDetector
-from ..wire.codec import BUTTON_ESCAPE
+from ..wire.codec import BUTTON_ESCAPE, GripperCmd, GripperReading
 from .arbiter import Command
 from .safety import grows_offset, limit_step
 
@@ -63,6 +63,11 @@ class RuntimeConfig:
     stuck_after: float = _setting(5.0, "s of held input without progress towards any of the "
                                        "active state's transitions that count as stuck "
                                        "(status.stuck, counters.stuck; 0: never)")
+    # The gripper (sctd.runtime.gripper). sctd run takes their defaults from sctd/app/defaults.yaml
+    # (gripper: force, open_hold); these are the same numbers, for what builds a config in code.
+    grasp_force: float = _setting(20.0, "N: the force bound of a close the grasp button asks for")
+    grasp_open_hold: float = _setting(0.5, "s the grasp button must be held to open a hand that holds "
+                                           "something (a tremor cannot drop a cup)")
 
     @property
     def period(self) -> float:
@@ -77,8 +82,8 @@ class Sample:
     world; ``pose`` the object's pose as received (to tell an unchanged pose). A state
     also carries the :class:`~sctd.runtime.safety.StateWatch` verdict on its stream:
     ``epoch`` (discontinuities before it) and ``since`` (arrival of the first state of
-    its continuous run), and the arm's ``fault`` when it reports one. (Input messages
-    have their own slots: :mod:`.arbiter`.)
+    its continuous run), the arm's ``fault`` when it reports one and the gripper's
+    reading where it has one. (Input messages have their own slots: :mod:`.arbiter`.)
     """
 
     seq: int
@@ -90,6 +95,7 @@ class Sample:
     epoch: int = 0
     since: float = 0.0
     fault: str | None = None
+    gripper: GripperReading | None = None
 
 
 class _Target:
@@ -112,7 +118,8 @@ class _Target:
 class TickResult:
     """What one tick decided: the mode, the target to publish (``pose`` as
     [x, y, z, qx, qy, qz, qw] and ``T_world_target``; None when nothing is published),
-    the FSM state, and the input sequence number it followed.
+    the FSM state, the input sequence number it followed, and the gripper message to put
+    (``gripper``: a new command or a repeat, None for none; :mod:`.gripper`).
 
     Modes: ``waiting`` (no state or object pose yet) and ``fault`` (the state stream
     jumped or restarted; waiting to re-seed) publish nothing; ``hold`` publishes nothing
@@ -120,7 +127,7 @@ class TickResult:
     ``stopped`` (no valid input: the target stays) and ``running`` publish.
     """
 
-    __slots__ = ("_target", "device", "in_seq", "input_ok", "mode", "pose", "seed", "state",
+    __slots__ = ("_target", "device", "gripper", "in_seq", "input_ok", "mode", "pose", "seed", "state",
                  "state_changed")
 
     def __init__(self, mode: str, target: _Target | None, state: str, cmd: Command,
@@ -130,6 +137,7 @@ class TickResult:
         self.in_seq, self.device = cmd.in_seq, cmd.device
         self.state_changed, self.input_ok, self.pose = state_changed, input_ok, pose
         self.seed = seed  # the target is the measured pose: a (re-)seed, not a step
+        self.gripper: GripperCmd | None = None  # the gripper message to put this tick (the driver's)
 
     @property
     def T_world_target(self) -> Array | None:
@@ -288,7 +296,9 @@ class Controller:
             self._seed(F_meas, now)
         force = None if state.wrench is None else self._force_in_object(state.wrench)
         engine = self.engine
-        changed = engine.update(F_meas, now, force, pressed, BUTTON_ESCAPE)
+        grip = state.gripper
+        changed = engine.update(F_meas, now, force, pressed, BUTTON_ESCAPE,
+                                None if grip is None else grip.grasped)
         if changed:
             self.counters.transitions += 1
             self.counters.escapes += engine.escaped

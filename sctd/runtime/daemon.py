@@ -9,7 +9,9 @@ stack:
   (:class:`~.ingress.Ingress`; newest wins, filled by Zenoh's own threads without Python,
   so a flood of messages costs the tick nothing but the few it drains), drained and
   decoded in the spin window just ahead of each deadline; the control step runs at the
-  deadline and its target is put at once (:class:`~.publisher.TargetOut`);
+  deadline and its target is put at once (:class:`~.publisher.TargetOut`), as is a
+  gripper message when the tick has one (:class:`~.publisher.GripperOut`: a new command
+  or the newest one's repeat at 10 Hz, :mod:`.gripper`);
 - :class:`~.swap.SkillSwap`: the skill queryables, served by a child process, the skill
   server (:mod:`sctd.runtime.skillserver`), so that no bundle's bytes are ever in this
   process; each swapped-in skill is compiled on a thread of its own, handed over through
@@ -47,7 +49,7 @@ from .driver import TickDriver
 from .goals import GoalSet
 from .ingress import Ingress
 from .loop import TickLoop
-from .publisher import Publisher, TargetOut
+from .publisher import GripperOut, Publisher, TargetOut
 from .skillserver import ServerOptions
 from .status import DaemonStatus, TickStats
 from .swap import SkillSwap
@@ -178,7 +180,9 @@ class Daemon:
         self.ros = ros  # sctd.wire.ros.RuntimeRos (--ros): target poses out, its status
         self.spin, self.rt_priority, self.cpu = spin, rt_priority, cpu
         self.stop_event = stop_event if stop_event is not None else threading.Event()
-        self.driver = TickDriver(skill, config, goals=goals)
+        # the run's first gripper command number: its start in ms, so that a restarted
+        # daemon's commands are never taken for repeats of the last run's (sctd.runtime.gripper)
+        self.driver = TickDriver(skill, config, goals=goals, gripper_start=time.time_ns() // 1_000_000)
         self.swap = SkillSwap(self.driver, self.stop_event, set_name)
         self.realtime = False  # SCHED_FIFO granted to the tick thread
         self.status: DaemonStatus | None = None  # the running loop's (and the last run's)
@@ -191,7 +195,7 @@ class Daemon:
         so a failure at any point releases what was opened before it.
         """
         with ExitStack() as stack:
-            ingress, publisher, target = self._open(stack)
+            ingress, publisher, target, gripper = self._open(stack)
             ticker = self.swap.ticker = Ticker(self.config.period, spin=self.spin)
             skill, goals = self.driver.skill, self.driver.goals
             if goals is None:
@@ -206,11 +210,11 @@ class Daemon:
                               self.driver.target_seq)
             status = self.status = DaemonStatus(self.driver, stats, self.swap, target, self.ros,
                                                 self.realtime)
-            TickLoop(self.driver, ingress, self.swap, publisher.queue.put, target).run(
+            TickLoop(self.driver, ingress, self.swap, publisher.queue.put, target, gripper).run(
                 ticker, status, self.stop_event, end)
         return status.map(ticker, time.monotonic(), 0.0)
 
-    def _open(self, stack: ExitStack) -> tuple[Ingress, Publisher, TargetOut]:
+    def _open(self, stack: ExitStack) -> tuple[Ingress, Publisher, TargetOut, GripperOut]:
         """Declare and start what a run needs; each is closed by ``stack`` (in reverse)."""
         keys, s = Keys(self.config.robot), self.session
         # Started before the tick thread's own settings (its threads set theirs); a swap
@@ -231,6 +235,9 @@ class Daemon:
         pub_target = stack.enter_context(s.declare_publisher(
             keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP,
             encoding=MSGPACK))
+        pub_gripper = stack.enter_context(s.declare_publisher(
+            keys.gripper, express=True, congestion_control=zenoh.CongestionControl.DROP,
+            encoding=MSGPACK))
         pub_status = stack.enter_context(s.declare_publisher(
             keys.status, congestion_control=zenoh.CongestionControl.DROP, encoding=MSGPACK))
         publisher = stack.enter_context(Publisher(pub_status, self.rt_priority, self.ros))
@@ -239,7 +246,7 @@ class Daemon:
         # no new swaps once the loop ends; one under way fails its wait and is refused
         stack.callback(self.stop_event.set)
         self.swap.wait_served()
-        return ingress, publisher, target
+        return ingress, publisher, target, GripperOut(pub_gripper)
 
     def stop(self) -> None:
         self.stop_event.set()

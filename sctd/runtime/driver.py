@@ -14,7 +14,8 @@ does, in this order:
    (:class:`~.safety.StateWatch`); the task object's pose is kept (an unchanged pose
    keeps its flat transform, so that the controller's object caches stay valid);
 2. at the deadline, :meth:`TickDriver.tick` (the arbiter's command, the newest state
-   and object pose, the controller's step); publish what it returns;
+   and object pose, the controller's step, the gripper's command: :mod:`.gripper`);
+   publish what it returns (the target, and the gripper message when it has one);
 3. after the target is out, :meth:`TickDriver.after_tick` (the work a vector-field tick
    would otherwise do itself, done between ticks).
 """
@@ -24,9 +25,11 @@ from __future__ import annotations
 from .. import se3
 from ..skill import WORLD_OBJECT, Skill, SkillEngine
 from ..wire import codec
+from ..wire.codec import BUTTON_GRASP
 from .arbiter import MAX_DEVICES, InputArbiter
 from .controller import Controller, Counters, RuntimeConfig, Sample, TickResult
 from .goals import GoalSet
+from .gripper import GripperControl
 from .safety import StateWatch
 
 _WORLD_F = se3.flat_from_pose([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
@@ -44,10 +47,13 @@ class TickDriver:
     goals : GoalSet, optional
         A skill set (:mod:`.goals`): ``skill`` is then ignored; the set's teleoperation
         runs until a member engages.
+    gripper_start : int
+        The run's first gripper command number (:mod:`.gripper`; the daemon's is its
+        start time in ms, so that a restarted daemon's commands are new to the robot).
     """
 
     def __init__(self, skill: Skill | None, config: RuntimeConfig, max_devices: int = MAX_DEVICES,
-                 goals: GoalSet | None = None):
+                 goals: GoalSet | None = None, gripper_start: int = 0):
         self.config = config
         self.goals = goals
         engine = None
@@ -63,6 +69,7 @@ class TickDriver:
         self.objects: dict[str, Sample] = {}
         self._world = Sample(0, 0.0, 0.0, F=_WORLD_F)
         self.target_seq = 0  # targets published so far
+        self.gripper = GripperControl(config.grasp_force, config.grasp_open_hold, gripper_start)
 
     @property
     def skill(self) -> Skill:
@@ -99,8 +106,11 @@ class TickDriver:
         F = se3.flat_from_pose(m.pose)
         if self.watch.observe(m.seq, F, now):
             self.counters.state_discontinuity += 1
+        if m.gripper_invalid:
+            self.counters.drop("state_bad_gripper")
         self.state = Sample(m.seq, m.stamp, now, F=F, wrench=m.wrench, epoch=self.watch.epoch,
-                            since=self.watch.since, fault=m.fault)
+                            since=self.watch.since, fault=m.fault, gripper=m.gripper)
+        self.gripper.observe(m.gripper, now)
 
     def take_object(self, name: str, m: codec.ObjectMsg, now: float) -> None:
         """An object's pose; kept when it is the active skill's task object (or a skill
@@ -135,7 +145,22 @@ class TickDriver:
             res = self._tick_set(self.goals, now, wall, cmd)
         if res.pose is not None:
             self.target_seq += 1
+        res.gripper = self._grip(now, wall, cmd, res.mode)
         return res
+
+    def _grip(self, now: float, wall: float, cmd, mode: str) -> codec.GripperCmd | None:
+        """The gripper's step (:mod:`.gripper`): this tick's grasp presses, the action of a
+        state a transition entered, the newest state's reading when it is fresh."""
+        state = self.state
+        grasped = None
+        if state is not None and state.gripper is not None \
+                and self._fresh(state, now, wall, self.config.state_timeout):
+            grasped = state.gripper.grasped
+        inputs = self.inputs
+        return self.gripper.step(
+            now, wall, cmd.grasps, self.controller.engine.take_entry_action(), self.controller.skill.id,
+            grasped, lambda device: inputs.holding(device, BUTTON_GRASP, now, wall), self.counters.stops,
+            mode == "fault")
 
     def _tick_set(self, goals: GoalSet, now: float, wall: float, cmd) -> TickResult:
         """A skill set's tick: the set sees the fresh objects and may change the running

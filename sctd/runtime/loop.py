@@ -5,10 +5,10 @@ skill (:class:`~.swap.SkillSwap`) and drains each ring (:class:`~.ingress.Ingres
 checks each message's size before copying it, decodes and validates it, counts every
 malformed one, and keeps the newest valid sample; then it spins to the deadline. At the
 deadline the control step runs on them (:class:`~.driver.TickDriver`), and its target
-is encoded and put at once, on this thread; the tick's timing is kept
-(:class:`~.status.TickStats`) and, when due, a status map handed to the publisher thread
-(:class:`~.publisher.Publisher`), which encodes and puts it. After it, the work the next
-tick would otherwise do itself.
+(and a gripper message, when the tick has one) is encoded and put at once, on this
+thread; the tick's timing is kept (:class:`~.status.TickStats`) and, when due, a status
+map handed to the publisher thread (:class:`~.publisher.Publisher`), which encodes and
+puts it. After it, the work the next tick would otherwise do itself.
 
 How far ahead it wakes: ``spin`` (the daemon's ``--spin-us``) plus the drain's usual
 time (its :data:`LEAD_QUANTILE` quantile, tracked a step of :data:`LEAD_STEP` a tick, so
@@ -69,12 +69,17 @@ class TickLoop:
         ``target(item)``: publishes a target tuple ``(seq, stamp, pose, state, skill id,
         in_seq, in_device, seed)`` on this thread (:class:`~.publisher.TargetOut`);
         default ``send``.
+    gripper : callable, optional
+        ``gripper(cmd)``: publishes a gripper message (:class:`~sctd.wire.codec.GripperCmd`)
+        on this thread (:class:`~.publisher.GripperOut`); default ``send``.
     """
 
     def __init__(self, driver: TickDriver, ingress: Ingress, swap: SkillSwap,
-                 send: Callable[[Any], None], target: Callable[[tuple], None] | None = None):
+                 send: Callable[[Any], None], target: Callable[[tuple], None] | None = None,
+                 gripper: Callable[[Any], None] | None = None):
         self.driver, self.ingress, self.swap, self.send = driver, ingress, swap, send
         self.target = target if target is not None else send
+        self.gripper = gripper if gripper is not None else send
         self.controller = driver.controller
 
     def run(self, ticker: Ticker, status: DaemonStatus, stop: threading.Event,
@@ -101,6 +106,8 @@ class TickLoop:
             done = time.monotonic()
             if res.pose is not None:
                 publish(res, wall)
+            if res.gripper is not None:
+                self.gripper(res.gripper)
             stats.account(lateness, done - now, res.state)
             if done >= stats.next_status:
                 send(status.close_window(ticker, time.monotonic()))
@@ -119,6 +126,8 @@ class TickLoop:
         res = self.driver.tick(now, wall)
         if res.pose is not None:
             self.publish(res, wall)
+        if res.gripper is not None:
+            self.gripper(res.gripper)
         return res.state
 
     def publish(self, res: TickResult, wall: float) -> None:

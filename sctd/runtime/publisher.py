@@ -1,5 +1,6 @@
-"""The daemon's outputs: each target put on the tick thread (:class:`TargetOut`), the
-status encoded and put by a thread of its own (:class:`Publisher`)."""
+"""The daemon's outputs: each target and gripper message put on the tick thread
+(:class:`TargetOut`, :class:`GripperOut`), the status encoded and put by a thread of its
+own (:class:`Publisher`)."""
 
 from __future__ import annotations
 
@@ -32,6 +33,17 @@ class TargetOut:
         self.put_time.add(time.monotonic() - t0)
         if self.publisher is not None:
             self.publisher.queue.put((item[1], item[2]))
+
+
+class GripperOut:
+    """Puts each gripper message (a new command or a repeat, about 10 a second) on the
+    tick thread, as :class:`TargetOut` does the targets."""
+
+    def __init__(self, gripper: Any):
+        self.put = gripper.put
+
+    def __call__(self, c: codec.GripperCmd) -> None:
+        self.put(codec.encode_gripper(c))
 
 
 class Publisher(threading.Thread):

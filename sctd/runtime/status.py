@@ -172,6 +172,7 @@ class DaemonStatus:
             "object_age": age(obj.received if obj is not None else None),
             "in_seq": last.msg.seq if last is not None and last.msg is not None else -1,
             "input": drv.inputs.summary(),
+            "gripper": drv.gripper.status(now, drv.inputs.ignored_grasps),
             "vf_scale": ctl.engine.last_scale,
             "constraints": self.activity(),
             "dropped": dict(c.drops),

@@ -27,8 +27,9 @@ MAX_OBJECT_BYTES = 4096
 MAX_JOINTS = 64  # longest q / dq a state may carry
 MAX_POSITION = 1000.0  # m: a pose further from the world origin is not a pose of this robot
 MAX_BUTTONS = 32
-# Button positions in an input message's ``buttons`` (wire contract v1).
-BUTTON_MODE, BUTTON_ENABLE, BUTTON_ESCAPE, BUTTON_CHOOSE = 0, 1, 2, 3
+# Button positions in an input message's ``buttons`` (wire contract v1): 4 is grasp,
+# the gripper's (the runtime turns its presses into gripper commands).
+BUTTON_MODE, BUTTON_ENABLE, BUTTON_ESCAPE, BUTTON_CHOOSE, BUTTON_GRASP = 0, 1, 2, 3, 4
 
 
 class DecodeError(ValueError):
@@ -159,7 +160,7 @@ def _joints(obj: dict, key: str) -> list[float] | None:
 def decode_input(data: bytes) -> InputMsg:
     """``sctd/<robot>/input/<device>``: seq, stamp, u (3 or 6 numbers), optional buttons
     (at most MAX_BUTTONS values 0 or 1 by position: 0 mode switch, 1 enable, 2 escape,
-    3 choose: a skill set's next member)
+    3 choose: a skill set's next member, 4 grasp: the gripper)
     and optional ``stop`` (0/1 or a bool; absent: 0)."""
     _size(data, MAX_INPUT_BYTES)
     obj = unpack_map(data)
