@@ -11,7 +11,7 @@ import textwrap
 import threading
 
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sctd.wire import codec
@@ -20,6 +20,7 @@ from sctd_services.input.bridge import run as run_bridge
 from sctd_services.input.device import DeviceInfo, InputDevice, InputError, Reading, pick
 from sctd_services.input.mapping import (
     AxisMap,
+    Mapping,
     identity,
     load_mapping,
     parse_mapping,
@@ -94,7 +95,7 @@ def test_unknown_keys_of_mixed_types_are_named():
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     for name in ("xbox", "spacemouse", "keyboard"):
         m = shipped_mapping(name)
-        assert m.buttons.keys() == {"mode", "enable", "escape", "choose", "stop"}
+        assert m.buttons.keys() == {"mode", "enable", "escape", "choose", "grasp", "stop"}
     # (choose is published only where a mapping maps it: the pad's X, the keyboard's c;
     # the space mouse has two buttons)
     assert shipped_mapping("spacemouse").buttons["choose"] is None
@@ -103,9 +104,11 @@ def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
     xbox = shipped_mapping("xbox")
     held = Reading((0.0,) * 6, (0, 0, 0, 1) + (0,) * 7)
     assert xbox.stop(held) and not xbox.stop(Reading((0.0,) * 6, (0,) * 11))
-    assert xbox.apply(held, 3)[1] == [0, 0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
+    assert xbox.apply(held, 3)[1] == [0, 0, 0, 0, 0] and not shipped_mapping("spacemouse").stop(held)
     x_button = Reading((0.0,) * 6, (0, 0, 1) + (0,) * 8)  # the pad's X: choose, fourth
-    assert xbox.apply(x_button, 3)[1] == [0, 0, 0, 1]
+    assert xbox.apply(x_button, 3)[1] == [0, 0, 0, 1, 0]
+    shoulder = Reading((0.0,) * 6, (0,) * 9 + (1, 0))  # the pad's left shoulder: grasp, fifth
+    assert xbox.apply(shoulder, 3)[1] == [0, 0, 0, 0, 1]
     # choose (a skill set's next task) is the fourth position, where a file maps it
     f = tmp_path / "m.yaml"
     f.write_text("version: 1\naxes: [{source: 0}]\nbuttons: {enable: null, escape: 1, choose: 2}\n")
@@ -251,3 +254,49 @@ def test_cli_refuses_bad_flags_and_files_with_exit_2(tmp_path):
     assert r.returncode == 0, r.stderr
     names = [ln.split()[0] for ln in r.stdout.splitlines() if ln and not ln[0].isspace()]
     assert names[:4] == ["gamepad", "spacemouse", "emg", "keyboard"], r.stdout
+
+
+@pytest.mark.parametrize(("buttons", "published"), [
+    ("{enable: null, escape: 1}", ("mode", "enable", "escape")),
+    ("{enable: null, choose: 2}", ("mode", "enable", "escape", "choose")),
+    ("{enable: null, grasp: 3}", ("mode", "enable", "escape", "choose", "grasp")),
+    ("{enable: 0, choose: 2, grasp: 3}", ("mode", "enable", "escape", "choose", "grasp")),
+])
+def test_grasp_is_the_fifth_position_after_a_choose_of_zero(tmp_path, buttons, published):
+    """The wire contract's positions: grasp is buttons[4] where a file maps it, with
+    choose (buttons[3]) 0 when choose is not mapped; the released message is as long."""
+    f = tmp_path / "m.yaml"
+    f.write_text(f"version: 1\naxes: [{{source: 0}}]\nbuttons: {buttons}\n")
+    m = load_mapping(f)
+    assert m.published == published and len(m.released()) == len(published)
+    assert set(m.released()) == {0}
+    out = m.apply(Reading((0.0,), (0, 0, 1, 1)), 3)[1]
+    assert len(out) == len(published)
+    assert out[:2] == [0, 1 if m.buttons["enable"] is None else 0]
+    if "grasp" in published:
+        assert out[4] == 1 and out[3] == (1 if m.buttons["choose"] == 2 else 0)
+
+
+@settings(max_examples=100)
+@given(pressed=st.lists(st.integers(0, 1), min_size=0, max_size=8), choose=st.none() | st.integers(0, 7),
+       grasp=st.none() | st.integers(0, 7))
+def test_every_role_lands_at_its_wire_position(pressed, choose, grasp):
+    """For any device buttons and any choose/grasp numbers, each published position is
+    its role's device button (enable held without one), and the positions are the wire
+    contract's (codec.BUTTON_*)."""
+    from sctd.wire.codec import BUTTON_CHOOSE, BUTTON_ENABLE, BUTTON_ESCAPE, BUTTON_GRASP, BUTTON_MODE
+
+    roles = {"mode": 0, "enable": None, "escape": 1, "choose": choose, "grasp": grasp, "stop": None}
+    m = Mapping((AxisMap(0),), roles)
+    out = m.apply(Reading((0.0,), tuple(pressed)), 3)[1]
+
+    def device(i):
+        return 1 if i is not None and i < len(pressed) and pressed[i] else 0
+
+    assert out[BUTTON_MODE] == device(0) and out[BUTTON_ENABLE] == 1 and out[BUTTON_ESCAPE] == device(1)
+    assert len(out) == 3 + (choose is not None or grasp is not None) + (grasp is not None)
+    if len(out) > BUTTON_CHOOSE:
+        assert out[BUTTON_CHOOSE] == device(choose)
+    if grasp is not None:
+        assert out[BUTTON_GRASP] == device(grasp)
+    assert len(m.released()) == len(out)

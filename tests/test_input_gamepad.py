@@ -76,6 +76,7 @@ def test_xbox_map_numbering_is_sdls():
     assert m.buttons == {"mode": sdl2.SDL_CONTROLLER_BUTTON_A,
                          "enable": sdl2.SDL_CONTROLLER_BUTTON_RIGHTSHOULDER,
                          "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "choose": sdl2.SDL_CONTROLLER_BUTTON_X,
+                         "grasp": sdl2.SDL_CONTROLLER_BUTTON_LEFTSHOULDER,
                          "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
 
 
@@ -89,8 +90,8 @@ def test_bridge_with_the_xbox_map_publishes_the_stick_and_deadman(pad):
         pad.set_button(10, True)
         bridge.step()
     released, held = (codec.decode_input(m) for m in sent)
-    assert list(released.u) == pytest.approx([0.0, 1.0, 0.0]) and released.buttons == (0, 0, 0, 0)
-    assert list(held.u) == pytest.approx([0.0, 1.0, 0.0]) and held.buttons == (0, 1, 0, 0)
+    assert list(released.u) == pytest.approx([0.0, 1.0, 0.0]) and released.buttons == (0, 0, 0, 0, 0)
+    assert list(held.u) == pytest.approx([0.0, 1.0, 0.0]) and held.buttons == (0, 1, 0, 0, 0)
 
 
 @pytest.mark.slow
@@ -335,12 +336,12 @@ class Rig:
 
 def pushed(axis: int):
     """Enabled messages with ``u[axis]`` near +1 and the other axes zero."""
-    return lambda m: (m.buttons == (0, 1, 0, 0) and m.u[axis] > 0.9
+    return lambda m: (m.buttons == (0, 1, 0, 0, 0) and m.u[axis] > 0.9
                       and all(abs(x) < 1e-9 for k, x in enumerate(m.u) if k != axis))
 
 
 def released(m: codec.InputMsg) -> bool:
-    return m.buttons == (0, 0, 0, 0) and all(x == 0.0 for x in m.u)
+    return m.buttons == (0, 0, 0, 0, 0) and all(x == 0.0 for x in m.u)
 
 
 def moved(targets: list[dict]) -> np.ndarray:

@@ -134,7 +134,7 @@ def test_objects_and_joy_become_sctd_messages_and_nothing_else():
     rig.bridge.on_joy(joy_msg(NOW - 0.03, [0.5, -0.8, 0, 0, 0, 0], buttons))
     msg = codec.decode_input(rig.on(KEYS.input("ros"))[0])
     assert msg.stamp == pytest.approx(NOW - 0.03, abs=1e-6)
-    assert msg.u[0] > 0 and msg.u[1] > 0 and msg.buttons == (0, 1, 0, 0)  # stick y down is + on ROS
+    assert msg.u[0] > 0 and msg.u[1] > 0 and msg.buttons == (0, 1, 0, 0, 0)  # stick y down is + on ROS
     rig.bridge.on_joy(joy_msg(NOW - 1.0, [1, 0, 0, 0, 0, 0], buttons))  # an old push
     rig.bridge.on_joy(joy_msg(NOW, [math.inf], buttons))
     assert len(rig.on(KEYS.input("ros"))) == 1

@@ -1,6 +1,6 @@
 """The mapping file: which device axis drives each output axis (scale, inversion, dead
-band) and which device buttons are ``mode``, ``enable``, ``escape``, ``choose`` and
-``stop`` (``docs/input.md``).
+band) and which device buttons are ``mode``, ``enable``, ``escape``, ``choose``,
+``grasp`` and ``stop`` (``docs/input.md``).
 
 ::
 
@@ -9,16 +9,18 @@ band) and which device buttons are ``mode``, ``enable``, ``escape``, ``choose`` 
       - {source: 0}                            # device axis 0 as it is
       - {source: 1, invert: true, deadband: 0.1}
       - {source: [5, 4], scale: 0.8}           # axis 5 minus axis 4 (two triggers)
-    buttons: {mode: 0, enable: null, escape: 1, choose: 2, stop: 3}
+    buttons: {mode: 0, enable: null, escape: 1, choose: 2, grasp: 4, stop: 3}
 
 An output axis is ``clip(scale * s * d(x), -1, 1)`` with ``s`` = -1 when inverted and
 ``d`` the dead band rescaled so the output still starts from zero at its edge:
 ``d(x) = sign(x) (|x| - b) / (1 - b)`` for ``|x| > b``, else 0. A button names a device
 button by its number, or null: ``enable: null`` publishes enable held (the device has
-no deadman), ``mode``/``escape``/``choose``/``stop`` null (or absent) never press them.
-The published ``buttons`` are by the wire contract's positions: ``[mode, enable,
-escape]``, and ``choose`` (a skill set's next member) fourth when it is mapped;
-``stop`` is published as the message's ``stop`` field (it halts every device's motion).
+no deadman), ``mode``/``escape``/``choose``/``grasp``/``stop`` null (or absent) never
+press them. The published ``buttons`` are by the wire contract's positions: ``[mode,
+enable, escape]``, ``choose`` (a skill set's next member) fourth when it is mapped, and
+``grasp`` (the gripper: close, or open when held) fifth when it is mapped, after a
+``choose`` of 0 when choose is not; ``stop`` is published as the message's ``stop``
+field (it halts every device's motion).
 """
 
 from __future__ import annotations
@@ -35,9 +37,10 @@ from .device import InputError, Reading
 
 VERSION = 1
 ROLES = ("mode", "enable", "escape")  # the wire contract's button positions 0, 1, 2
-CHOOSE = "choose"  # position 3, published only when mapped
+CHOOSE = "choose"  # position 3, published when it or grasp is mapped
+GRASP = "grasp"  # position 4, published only when mapped
 STOP = "stop"  # the wire contract's stop field
-KNOWN = (*ROLES, CHOOSE, STOP)
+KNOWN = (*ROLES, CHOOSE, GRASP, STOP)
 MAX_AXES = 6
 
 
@@ -76,20 +79,26 @@ class Mapping:
     buttons: dict[str, int | None]
     origin: str = "identity"
 
+    @property
+    def published(self) -> tuple[str, ...]:
+        """The roles of the published ``buttons``, by position: ``mode, enable, escape``,
+        then ``choose`` when choose or grasp is mapped, then ``grasp`` when it is."""
+        grasp = self.buttons.get(GRASP) is not None
+        if grasp:
+            return (*ROLES, CHOOSE, GRASP)
+        return (*ROLES, CHOOSE) if self.buttons.get(CHOOSE) is not None else ROLES
+
     def apply(self, reading: Reading, n_axes: int) -> tuple[list[float], list[int]]:
-        """``u`` (``n_axes`` values in [-1, 1]) and ``[mode, enable, escape]`` (and
-        ``choose`` when it is mapped)."""
+        """``u`` (``n_axes`` values in [-1, 1]) and the buttons by :attr:`published`
+        (``[mode, enable, escape]``, ``choose`` and ``grasp`` where mapped)."""
         u = [m(reading.axes) for m in self.axes[:n_axes]]
         u += [0.0] * (n_axes - len(u))
-        buttons = [self._button(reading.buttons, r) for r in ROLES]
-        if self.buttons.get(CHOOSE) is not None:
-            buttons.append(self._button(reading.buttons, CHOOSE))
-        return u, buttons
+        return u, [self._button(reading.buttons, r) for r in self.published]
 
     def released(self) -> list[int]:
         """The buttons of a message with nothing pressed and the deadman released (the
         device gone, the bridge exiting): as many as :meth:`apply` publishes."""
-        return [0] * (len(ROLES) + (self.buttons.get(CHOOSE) is not None))
+        return [0] * len(self.published)
 
     def stop(self, reading: Reading) -> bool:
         """Whether the button mapped to ``stop`` is held (never, when none is)."""
@@ -125,7 +134,8 @@ def parse_mapping(doc: Any, origin: str) -> Mapping:
     axes = tuple(_axis(a, f"axes[{k}]", bad) for k, a in enumerate(raw_axes))
     raw_buttons = doc.get("buttons", {}) or {}
     if not isinstance(raw_buttons, dict):
-        raise bad("buttons", "expected a map of mode, enable, escape, choose, stop to button numbers or null")
+        raise bad("buttons", "expected a map of mode, enable, escape, choose, grasp, stop to button numbers "
+                             "or null")
     for k in raw_buttons:
         if k not in KNOWN:
             raise bad(f"buttons.{k}", f"unknown role (known: {', '.join(KNOWN)})")
@@ -183,10 +193,11 @@ def shipped_mapping(name: str) -> Mapping:
 
 
 def joy_function(path: str | Path | None = None):
-    """``(axes, buttons) -> (u [6], [mode, enable, escape], stop)`` through the mapping
-    file ``path`` (default: the shipped xbox map, which numbers a ROS Joy from the joy
-    package's ``game_controller_node`` as SDL does): how a ROS ``Joy`` becomes sctd
-    input (``sctd run --ros``, ``sctd ros``). MappingError when the file is bad."""
+    """``(axes, buttons) -> (u [6], [mode, enable, escape, ...], stop)`` through the
+    mapping file ``path`` (the buttons by :attr:`Mapping.published`; default: the
+    shipped xbox map, which numbers a ROS Joy from the joy package's
+    ``game_controller_node`` as SDL does): how a ROS ``Joy`` becomes sctd input
+    (``sctd run --ros``, ``sctd ros``). MappingError when the file is bad."""
     from .device import Reading
 
     mapping = load_mapping(path) if path else shipped_mapping("xbox")
