@@ -1,0 +1,463 @@
+"""A :class:`~.model.Task` to its task file: the YAML document and its text (pure).
+
+The inverse of :mod:`.reader`: ``task_from_document(task_to_yaml(t), t.file)`` is ``t``
+again, field by field (``tests/test_task_writer.py``), and writing what was read back
+gives the same text. Numbers are written as Python floats, which YAML keeps to the last
+bit; an angle is written in degrees (``"180 deg"``) where a short number of degrees reads
+back as exactly the same radians, else in radians. A pose is written as ``position`` and
+``rpy``: angles whose rotation (:func:`~.reader.rpy_matrix`) is the pose's own to the
+bit where the reader made it of angles in (-pi, pi], pitch in (-pi/2, pi/2)
+(:func:`rpy_from_matrix`), else within 1e-12; the position is exact.
+
+What equals the reader's default is left out only where the reader fills that same
+value back (a container's ``rim_margin``, a joint's ``friction_speed``, a step's
+``orientation: free``); what it fills in from the rest of the scene (a surface's
+``touch``) is always written. A composed task (:func:`~.compose.compose`) has no file:
+writing one is a ValueError.
+
+Elements of kinds registered outside this module (``sctd.task.kinds``) write themselves
+with their ``to_yaml()``: an intent step's action that has one, and a scene's or a
+body's field this module does not know (:func:`_extra_sections`, :func:`_extra_facets`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .model import (
+    VERSION,
+    Action,
+    AllOf,
+    AnyOf,
+    Body,
+    Compare,
+    Held,
+    Joint,
+    MoveJoint,
+    Near,
+    Not,
+    Outcome,
+    Predicate,
+    Press,
+    Reach,
+    Scene,
+    Step,
+    Surface,
+    Task,
+    Teach,
+    TeachStep,
+    Tilt,
+    Upright,
+    Vary,
+    Zone,
+)
+from .reader import KINDS, TEACH_SPEEDS, _angular, rpy_matrix
+
+Doc = dict[str, Any]
+
+FRICTION_SPEED = 0.01
+"""m/s (rad/s): a joint's and a surface's ``friction_speed`` when the file leaves it out."""
+ULPS = 3
+"""How many ulps either way of the closed-form angles :func:`rpy_from_matrix` tries."""
+
+
+def task_to_yaml(task: Task) -> Doc:
+    """The task file's document (dicts, lists, str, float, int and bool only) that
+    :func:`~.reader.task_from_document` reads back as ``task``.
+
+    Raises
+    ------
+    ValueError
+        ``task`` is composed of parts (it has no file of its own), or holds an element
+        this module cannot write.
+    """
+    if task.parts:
+        parts = ", ".join(p.name for p in task.parts)
+        raise ValueError(f"task {task.name!r} is composed of parts ({parts}): a composed task has no "
+                         "file to write; write each part's")
+    doc: Doc = {"sctd_task": VERSION, "name": task.name}
+    if task.title and task.title != task.name:  # (the name: the reader's title when there is none)
+        doc["title"] = task.title
+    for key in ("description", "source"):
+        if getattr(task, key):
+            doc[key] = getattr(task, key)
+    doc["object"] = task.object
+    doc["scene"] = _scene(task.scene)
+    doc["outcome"] = _outcome(task.outcome, task.scene)
+    doc["intent"] = [_step(s, task.scene) for s in task.intent]
+    if task.teach != Teach():
+        doc["teach"] = _teach(task.teach, task.intent, task.scene)
+    return doc
+
+
+def dump_task(task: Task) -> str:
+    """The task file's text: :func:`task_to_yaml` in the file's order (block style, lists
+    of scalars in flow style, folded near 100 characters)."""
+    return yaml.safe_dump(task_to_yaml(task), sort_keys=False, default_flow_style=None, width=100,
+                          allow_unicode=True)
+
+
+# -- numbers, angles and poses ------------------------------------------------------------
+def _floats(v: Iterable[Any]) -> list[float]:
+    return [float(x) for x in v]
+
+
+def _angle(a: float) -> float | str:
+    """``a`` (rad) as an angle field: ``"<n> deg"`` where ``n``, at most 6 significant
+    digits, reads back as exactly ``a``; else the radians."""
+    if a != 0.0:
+        text = f"{round(math.degrees(a), 6):g}"
+        if math.radians(float(text)) == a:
+            return f"{text} deg"
+    return float(a) + 0.0  # (-0.0 as 0.0: the same angle)
+
+
+def _angles(v: Iterable[float]) -> list[float | str]:
+    return [_angle(float(a)) for a in v]
+
+
+def _per_axis(v: np.ndarray) -> float | list[float]:
+    """A vector the reader also takes as one number for every axis (``vary.position``,
+    a zone's ``within``): that number when all three are equal."""
+    return float(v[0]) if bool(np.all(v == v[0])) else _floats(v)
+
+
+def _near_ulps(a: float) -> list[float]:
+    """``a``, the whole number of millidegrees nearest it when within 1e-12, and the
+    floats up to :data:`ULPS` ulps either way: where :func:`rpy_from_matrix` looks."""
+    out = [math.radians(round(math.degrees(a), 3))]
+    out = [x for x in out if abs(x - a) < 1e-12] + [a]
+    up = down = a
+    for _ in range(ULPS):
+        up, down = math.nextafter(up, math.inf), math.nextafter(down, -math.inf)
+        out += [up, down]
+    return list(dict.fromkeys(out))
+
+
+def rpy_from_matrix(R: np.ndarray) -> list[float]:
+    """Roll, pitch and yaw (rad, about the fixed x, y, z axes) whose
+    :func:`~.reader.rpy_matrix` is ``R`` (3, 3).
+
+    The closed form (pitch in [-pi/2, pi/2]; in gimbal lock roll 0), then the nearest
+    angles around it that give ``R`` to the bit (:func:`_near_ulps`, a whole number of
+    millidegrees first), as the tests find for every ``R`` the reader makes of angles in
+    (-pi, pi], pitch in (-pi/2, pi/2). For another ``R`` (angles out of those ranges,
+    gimbal lock), angles whose matrix is within 1e-12 of ``R`` and gives them back: what
+    is read back is written the same."""
+    closed = _rpy_closed_form(R)
+    exact = _rpy_exact(R, closed)
+    if exact is None:
+        R_near = rpy_matrix(np.array(closed))
+        exact = _rpy_exact(R_near, _rpy_closed_form(R_near))
+    return closed if exact is None else exact
+
+
+def _rpy_closed_form(R: np.ndarray) -> list[float]:
+    cos_pitch = math.hypot(R[0, 0], R[1, 0])
+    pitch = math.atan2(-R[2, 0], cos_pitch)
+    if cos_pitch > 1e-12:
+        return [math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])]
+    return [0.0, pitch, math.atan2(-R[0, 1], R[1, 1])]  # pitch +-pi/2: only yaw -+ roll counts
+
+
+def _rpy_exact(R: np.ndarray, near: list[float]) -> list[float] | None:
+    """The first angles around ``near`` whose matrix is ``R`` to the bit, or None."""
+    for rpy in itertools.product(*(_near_ulps(a) for a in near)):
+        if np.array_equal(rpy_matrix(np.array(rpy)), R):
+            return list(rpy)
+    return None
+
+
+def _pose(T: np.ndarray) -> Doc:
+    """``position`` and, unless it is the identity (the reader's default), ``rpy``."""
+    out: Doc = {"position": _floats(T[:3, 3])}
+    if not np.array_equal(T[:3, :3], np.eye(3)):
+        out["rpy"] = _angles(rpy_from_matrix(T[:3, :3]))
+    return out
+
+
+def _vary(v: Vary) -> Doc:
+    out: Doc = {}
+    if np.any(v.position != 0.0):
+        out["position"] = _per_axis(v.position)
+    if v.yaw != 0.0:
+        out["yaw"] = _angle(v.yaw)
+    return out
+
+
+def _put(d: Doc, key: str, value: float, default: float, write: Callable[[float], Any] = float) -> None:
+    """``d[key]``, unless ``value`` is the ``default`` the reader fills back."""
+    if value != default:
+        d[key] = write(value)
+
+
+# -- the scene ----------------------------------------------------------------------------
+def _scene(sc: Scene) -> Doc:
+    start = _pose(sc.start.T_world)
+    if _vary(sc.start.vary):
+        start["vary"] = _vary(sc.start.vary)
+    out: Doc = {"start": start, "bodies": {n: _body(b) for n, b in sc.bodies.items()}}
+    if sc.held is not None:
+        out["held"] = _held(sc.held)
+    if sc.joints:
+        out["joints"] = {n: _joint(j) for n, j in sc.joints.items()}
+    if sc.heads:
+        out["heads"] = {n: {"behind": h.behind, "radius": float(h.radius),
+                            "contact": {"stiffness": float(h.stiffness), "damping": float(h.damping)}}
+                        for n, h in sc.heads.items()}
+    if sc.zones:
+        out["zones"] = {n: _zone(z) for n, z in sc.zones.items()}
+    out.update(_extra_sections(sc))
+    return out
+
+
+def _body(b: Body) -> Doc:
+    out = _pose(b.T_world)
+    if _vary(b.vary):
+        out["vary"] = _vary(b.vary)
+    if b.container is not None:
+        c = b.container
+        out["container"] = {"radius": float(c.radius), "depth": float(c.depth)}
+        _put(out["container"], "rim_margin", c.rim_margin, 0.005)
+        _put(out["container"], "max_drop", c.max_drop, 0.15)
+    if b.surface is not None:
+        out["surface"] = _surface(b.surface)
+    if b.button is not None:
+        k = b.button
+        out["button"] = {"radius": float(k.radius), "travel": float(k.travel), "click": float(k.click)}
+        _put(out["button"], "spring", k.spring, 0.0)
+        _put(out["button"], "preload", k.preload, 0.0)
+    out.update(_extra_facets(b))
+    return out
+
+
+def _surface(s: Surface) -> Doc:
+    out: Doc = {"stiffness": float(s.stiffness)}
+    _put(out, "damping", s.damping, 0.0)
+    _put(out, "friction", s.friction, 0.0)
+    _put(out, "friction_speed", s.friction_speed, FRICTION_SPEED)
+    out["touch"] = list(s.touch)  # (its default depends on the held object: written)
+    return out
+
+
+def _held(h: Held) -> Doc:
+    out: Doc = {"name": h.name, "mass": float(h.mass), "com": _floats(h.com)}
+    if h.frames:
+        out["frames"] = {n: _pose(T) for n, T in h.frames.items()}
+    if h.contents is not None:
+        c = h.contents
+        out["contents"] = {"mass": float(c.mass), "outlet": c.outlet, "into": c.into,
+                           "flow_angle": _angle(c.flow_angle), "flow_rate": float(c.flow_rate)}
+    return out
+
+
+def _joint(j: Joint) -> Doc:
+    out: Doc = {"type": j.kind, "handle": j.handle}
+    if j.hinge is not None:
+        out["hinge"] = {"point": _floats(j.hinge.point), "axis": _floats(j.hinge.axis)}
+    out["travel"] = _angle(j.travel) if j.kind == "revolute" else float(j.travel)
+    out["mass"] = float(j.mass)
+    for key in ("spring", "damping", "friction"):
+        _put(out, key, getattr(j, key), 0.0)
+    _put(out, "friction_speed", j.friction_speed, FRICTION_SPEED)
+    g = j.grasp
+    out["grasp"] = {"radius": float(g.radius), "release": float(g.release), "stiffness": float(g.stiffness),
+                    "damping": float(g.damping)}
+    return out
+
+
+def _zone(z: Zone) -> Doc:
+    out: Doc = {"frame": z.frame, "around": z.around, "position": _floats(z.position),
+                "within": _per_axis(z.within)}
+    if z.tilt is not None:  # (without a tilt the reader's axis is z, and unused)
+        out["axis"] = _floats(z.axis)
+        out["tilt"] = _angle(z.tilt)
+    return out
+
+
+def _elements(value: Any, where: str) -> list[tuple[str | None, Any]]:
+    """(key, element) of a field's value that is an element with ``to_yaml()`` (key None),
+    or a mapping of them (by its keys); nothing for an empty value; ValueError else."""
+    if value is None or (isinstance(value, dict | tuple | list) and not value):
+        return []
+    if hasattr(value, "to_yaml"):
+        return [(None, value)]
+    if isinstance(value, dict) and all(hasattr(e, "to_yaml") for e in value.values()):
+        return list(value.items())
+    raise ValueError(f"{where}: the task writer does not know this field, and it holds no element "
+                     "with to_yaml()")
+
+
+def _extra_sections(scene: Scene) -> Doc:
+    """The scene's sections of kinds registered in ``sctd.task.kinds``: each field of
+    :class:`~.model.Scene` this module does not write itself, as ``{field: {name:
+    element.to_yaml()}}`` (or ``{field: element.to_yaml()}`` for one element). Scene has
+    no such field today: nothing."""
+    known = {"start", "bodies", "held", "joints", "heads", "zones"}
+    out: Doc = {}
+    for f in dataclasses.fields(scene):
+        if f.name not in known:
+            items = _elements(getattr(scene, f.name), f"scene.{f.name}")
+            if items:
+                out[f.name] = {k: e.to_yaml() for k, e in items} if items[0][0] else items[0][1].to_yaml()
+    return out
+
+
+def _extra_facets(body: Body) -> Doc:
+    """A body's facets of kinds registered in ``sctd.task.kinds``: each field of
+    :class:`~.model.Body` this module does not write itself holds elements with
+    ``to_yaml()``, written under their kind's ``key`` (or the mapping's keys) in the
+    body's mapping. Body has no such field today: nothing."""
+    known = {"name", "T_world", "vary", "container", "surface", "button"}
+    out: Doc = {}
+    for f in dataclasses.fields(body):
+        if f.name not in known:
+            for k, e in _elements(getattr(body, f.name), f"body {body.name!r}: {f.name}"):
+                out[k or type(e).key] = e.to_yaml()
+    return out
+
+
+# -- the outcome --------------------------------------------------------------------------
+def _predicate(p: Predicate, sc: Scene) -> Any:
+    if isinstance(p, bool):
+        return p
+    if isinstance(p, Compare):
+        out: Doc = {"reading": str(p.reading)}
+        number: Callable[[float], Any] = _angle if _angular(p.reading, sc) else float
+        for key in ("at_least", "at_most", "above", "below"):
+            if getattr(p, key) is not None:
+                out[key] = number(getattr(p, key))
+        if p.is_ is not None:
+            out["is"] = p.is_
+        return out
+    if isinstance(p, Near):
+        return {"near": {"frame": p.frame, "to": p.to, "within": float(p.within)}}
+    if isinstance(p, AllOf | AnyOf):
+        return {"all" if isinstance(p, AllOf) else "any": [_predicate(t, sc) for t in p.terms]}
+    if isinstance(p, Not):
+        return {"not": _predicate(p.term, sc)}
+    raise ValueError(f"not a predicate the task writer knows: {p!r}")
+
+
+def _outcome(o: Outcome, sc: Scene) -> Doc:
+    out: Doc = {"done": _predicate(o.done, sc)}
+    if o.success is not True:
+        out["success"] = _predicate(o.success, sc)
+    if o.done_reason != "done":
+        out["done_reason"] = o.done_reason
+    if o.fail:
+        out["fail"] = [{"when": _predicate(f.when, sc), "reason": f.reason} for f in o.fail]
+    out |= {"progress": str(o.progress), "clock": _predicate(o.clock, sc), "time_limit": float(o.time_limit)}
+    return out
+
+
+# -- the intent ---------------------------------------------------------------------------
+def _step(s: Step, sc: Scene) -> Doc:
+    a: Any = s.action
+    if hasattr(a, "to_yaml"):  # a step kind registered in sctd.task.kinds
+        return {"name": s.name, type(a).key: a.to_yaml()}
+    key = next((k for k, cls in KINDS.items() if type(a) is cls), None)
+    if key is None:
+        raise ValueError(f"intent step {s.name!r}: not a step the task writer knows: {a!r}")
+    return {"name": s.name, key: _action(a, sc)}
+
+
+def _action(a: Action, sc: Scene) -> Doc:
+    if isinstance(a, Reach):
+        return _reach(a, sc)
+    if isinstance(a, Tilt):
+        out: Doc = {"to": _angle(a.to), "until": _predicate(a.until, sc)}
+        _put(out, "weight", a.weight, 1.0)
+        if a.off_by is not None:
+            out["off_by"] = float(a.off_by)
+        return out
+    if isinstance(a, Upright):
+        return {"below": _angle(a.below)}
+    if isinstance(a, Press):
+        return {"frame": a.frame, "button": a.button, "until": _predicate(a.until, sc),
+                "force": float(a.force)}
+    assert isinstance(a, MoveJoint)
+    out = {"joint": a.joint}
+    _put(out, "overshoot", a.overshoot, 0.0, _angle if sc.joints[a.joint].kind == "revolute" else float)
+    if a.back is not None:
+        out["back"] = _predicate(a.back, sc)
+    return out
+
+
+def _end(start: float, span: float) -> float:
+    """The ``b`` of ``between: [a, b]`` that the reader turns into exactly ``span``
+    (``b - a``): ``a + span``, or a float an ulp or two from it."""
+    for b in _near_ulps(start + span):
+        if b - start == span:
+            return b
+    return start + span
+
+
+def _reach(a: Reach, sc: Scene) -> Doc:
+    out: Doc = {"frame": a.frame}
+    if a.to is not None:
+        out["to"] = _floats(a.to)
+    if a.handle is not None:
+        out["handle"] = a.handle
+    if a.lift is not None:
+        out["lift"] = {"height": float(a.lift.height),
+                       "between": [float(a.lift.start), _end(a.lift.start, a.lift.span)]}
+    if a.reached is not None:
+        out["reached"] = {k: float(v) for k in ("radial", "height")
+                          if (v := getattr(a.reached, k)) is not None}
+    if a.accept is not None:
+        out["accept"] = {"radial": float(a.accept.radial)}
+        if a.accept.height is not None:
+            out["accept"]["height"] = _floats(a.accept.height)
+        if a.accept.tilt is not None:
+            out["accept"]["tilt"] = _angle(a.accept.tilt)
+    if a.until is not None:
+        out["until"] = _predicate(a.until, sc)
+    if a.upright is not None:  # (None: orientation free, the reader's default)
+        out["orientation"] = {"upright": _angle(a.upright)}
+    return out
+
+
+# -- how demonstrations vary --------------------------------------------------------------
+def _teach(t: Teach, intent: tuple[Step, ...], sc: Scene) -> Doc:
+    default = Teach()
+    out: Doc = {}
+    _put(out, "start", t.start, default.start)
+    if t.start_height is not None:
+        out["start_height"] = _floats(t.start_height)
+    _put(out, "via", t.via, default.via)
+    if t.via_at != default.via_at:
+        out["via_at"] = _floats(t.via_at)
+    _put(out, "speed", t.speed, default.speed)
+    speeds: Doc = {}
+    for key, name in TEACH_SPEEDS.items():
+        _put(speeds, key, getattr(t, name), getattr(default, name))
+    if speeds:
+        out["speeds"] = speeds
+    if t.steps:
+        actions = {s.name: s.action for s in intent}
+        out["steps"] = {n: _teach_step(ts, actions.get(n), sc) for n, ts in t.steps.items()}
+    return out
+
+
+def _teach_step(ts: TeachStep, action: object, sc: Scene) -> Doc:
+    """What of a step varies (``{}`` when all is as by default: the step is still named)."""
+    default = TeachStep()
+    out: Doc = {}
+    _put(out, "yaw", ts.yaw, default.yaw, _angle)
+    if ts.height is not None:
+        out["height"] = _floats(ts.height)
+    if ts.to is not None:
+        revolute = isinstance(action, MoveJoint) and sc.joints[action.joint].kind == "revolute"
+        out["to"] = _angles(ts.to) if isinstance(action, Tilt) or revolute else _floats(ts.to)
+    if ts.margin is not None:
+        out["margin"] = _floats(ts.margin)
+    _put(out, "miss", ts.miss, default.miss)
+    return out
