@@ -1,6 +1,7 @@
 """``sctd tasks``: the tasks ``--task NAME`` finds (the shipped task files, then those
 other packages register), and ``sctd tasks show NAME|FILE``: one task's scene and how it
-is judged, checked as every command that takes ``--task`` checks it."""
+is judged, checked as every command that takes ``--task`` checks it (``--yaml``: its file
+as :func:`sctd.task.writer.dump_task` writes it)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from typing import Any
 
 from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import TASK_HELP
-from ..task import Task, TaskError, find_task, known_tasks, load_task
+from ..task import Task, TaskError, dump_task, find_task, known_tasks, load_task
 from ..task.judge import thresholds
 from ..task.model import AllOf, Body, Compare, Predicate
 from ..task.reader import KINDS
@@ -22,7 +23,11 @@ def add_tasks_arguments(p: argparse.ArgumentParser) -> None:
     show = sub.add_parser("show", help="one task: its scene, task object and outcome, validated",
                           description="one task: its scene, task object and outcome, validated")
     show.add_argument("task", metavar="NAME|FILE", help=TASK_HELP)
-    show.add_argument("--json", action="store_true", help="machine-readable output")
+    fmt = show.add_mutually_exclusive_group()
+    fmt.add_argument("--json", action="store_true", help="machine-readable output")
+    fmt.add_argument("--yaml", action="store_true",
+                     help="print the task's file as sctd writes it (sctd.task.writer.dump_task: "
+                          "every value read back exactly, defaults left out); no reach check")
     show.add_argument("--urdf", metavar="FILE", default=None,
                       help="check the task's reach with this arm (as sctd sim --urdf; default: the "
                            "shipped arm)")
@@ -137,6 +142,9 @@ def main_tasks(args: argparse.Namespace) -> int:
     if args.action == "show":
         try:
             task = find_task(args.task)
+            if args.yaml:
+                print(dump_task(task), end="")
+                return EXIT_OK
             s = summary(task)
             if args.reach:
                 s["reach"] = reach(task, args)
