@@ -20,6 +20,7 @@ from sctd import se3
 from sctd.robots import Reading, RobotDriver, RobotError
 from sctd.task import Task
 from sctd.timing import Ticker
+from sctd.wire.codec import GripperCmd
 
 from .kinematic import KinematicRobot, kinematic_scene
 from .options import add_arm_arguments, arm_from_args
@@ -156,7 +157,15 @@ class SimDriver(_Clocked):
         sim.step()
         m = sim.state_message()
         return Reading(time.time(), se3.transform_from_pose(m["pose"]), m["q"], m["dq"], m["wrench"],
-                       "hold" if sim.arm.controller.holding else "move")
+                       "hold" if sim.arm.controller.holding else "move", gripper=m["gripper"])
+
+    @property
+    def has_gripper(self) -> bool:
+        """The simulated hand has two fingers (:mod:`sctd_sim.fingers`)."""
+        return True
+
+    def grip(self, cmd: GripperCmd) -> None:
+        self.sim.scene.grip(cmd)
 
     def command(self, T_world_ee: np.ndarray | None, stamp: float | None = None) -> None:
         if T_world_ee is None:

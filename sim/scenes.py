@@ -48,8 +48,12 @@ import numpy as np
 from sctd import se3
 from sctd.task import Task, find_task, handle_pose
 from sctd.task.judge import holds, thresholds
+from sctd.task.kinds import FacetPhysics, World
 from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint, Zone
 from sctd.task.reader import HAND
+from sctd.wire.codec import GripperCmd, GripperReading
+
+from .fingers import Fingers
 
 GRAVITY = 9.81
 
@@ -78,6 +82,12 @@ class Scene(Protocol):
     def payload(self) -> tuple[float, np.ndarray] | None:
         """The load the arm carries as its controller is configured with it (a real arm's
         load data): mass (kg) and centre of mass in the ee frame (m); None for none."""
+
+    def grip(self, cmd: GripperCmd) -> bool:
+        """Take a gripper command (once per number); whether it was new."""
+
+    def gripper(self) -> GripperReading:
+        """The fingers now (the state's ``gripper``)."""
 
 
 # -- contents that flow --------------------------------------------------------------
@@ -637,7 +647,16 @@ class TaskScene:
         self.zones = [ZoneWatch(z, frames.get(z.frame, np.eye(4))) for z in sc.zones.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
-        self._held_com = tuple(sc.held.com.tolist()) if sc.held is not None else (0.0, 0.0, 0.0)
+        self.fingers = Fingers()
+        self.live = {n: T.copy() for n, T in self.poses.items()}  # the bodies now (an item moves)
+        self.world = World(self._T_world_ee, np.zeros(6), self.live, self.fingers, {})
+        for name, body in sc.bodies.items():
+            for key, facet in body.facets.items():
+                phys = facet.physics(name, sc)
+                if phys is not None:
+                    self.world.physics.setdefault(name, {})[key] = phys
+        self._physics: list[FacetPhysics] = [p for facets in self.world.physics.values()
+                                             for p in facets.values()]  # (in the file's order)
         self.reset()
 
     def reset(self) -> None:
@@ -653,6 +672,19 @@ class TaskScene:
             head.reset()
         for z in self.zones:
             z.reset()
+        self.live.clear()
+        self.live.update({n: T.copy() for n, T in self.poses.items()})
+        self.fingers.reset()
+        for p in self._physics:
+            p.reset(self.world)
+
+    def grip(self, cmd: GripperCmd) -> bool:
+        """Take a gripper command (once per number); whether it was new."""
+        return self.fingers.command(cmd)
+
+    def gripper(self) -> GripperReading:
+        """The fingers now."""
+        return self.fingers.reading()
 
     def start_pose(self) -> np.ndarray:
         """The hand's start: the file's orientation turned by ``start_yaw`` about the
@@ -664,24 +696,29 @@ class TaskScene:
         """Advance by ``dt``; return the wrench of the held load, the grasped handles, the
         surfaces the hand touches and the heads pressed into."""
         self._T_world_ee = T_world_ee = T_world_ee.copy()  # (kept: never changed in place)
+        live = self.live
         if self.flow is not None:
-            self.flow.step(T_world_ee, self.poses[self.flow.contents.into], dt)
+            self.flow.step(T_world_ee, live[self.flow.contents.into], dt)
         wrench = np.zeros(6)
         for h in self.handles:
-            wrench[:3] += h.step(T_world_ee, twist, self.poses[h.joint.handle], dt)
+            wrench[:3] += h.step(T_world_ee, twist, live[h.joint.handle], dt)
         for c in self.contacts:
-            wrench += c.step(T_world_ee, twist, self.poses[c.name], dt)
+            wrench += c.step(T_world_ee, twist, live[c.name], dt)
         for head in self.heads:
-            wrench += head.step(T_world_ee, twist, self.poses[head.head.behind])
+            wrench += head.step(T_world_ee, twist, live[head.head.behind])
         for z in self.zones:
-            z.step(T_world_ee, self.poses[z.zone.around], dt)
+            z.step(T_world_ee, live[z.zone.around], dt)
+        self.fingers.advance(dt)
+        self.world.T_world_ee, self.world.twist = T_world_ee, twist
+        for p in self._physics:  # (the registered kinds' elements: an item, in the hand or not)
+            wrench += p.step(self.world, dt)
         load = self.payload()
         if load is not None:
-            mass, _ = load
+            mass, com = load
             fz = -mass * GRAVITY
             # r = R com, and [force, r x force] with force = (0, 0, fz), on floats
             (a0, a1, a2, _), (b0, b1, b2, _), _, _ = T_world_ee.tolist()
-            c0, c1, c2 = self._held_com
+            c0, c1, c2 = com.tolist()
             r0, r1 = a0 * c0 + a1 * c1 + a2 * c2, b0 * c0 + b1 * c1 + b2 * c2
             wrench[2] += fz
             wrench[3] += r1 * fz
@@ -692,17 +729,27 @@ class TaskScene:
         """The held object with what is left in it (the arm's load data follows it as it
         empties, as a real arm's load estimate from its force-torque sensing would);
         None when the hand holds nothing (a grasped handle is not a load it carries)."""
-        if self.held is None:
+        loads = [p.load() for p in self._physics]
+        carried = [x for x in loads if x is not None]
+        if self.held is not None:
+            left = self.held.contents.mass * self.flow.remaining if self.flow is not None and \
+                self.held.contents is not None else 0.0
+            if not carried:
+                return self.held.mass + left, self.held.com
+            carried.append((self.held.mass + left, self.held.com))
+        if not carried:
             return None
-        left = self.held.contents.mass * self.flow.remaining if self.flow is not None and \
-            self.held.contents is not None else 0.0
-        return self.held.mass + left, self.held.com
+        mass = sum(m for m, _ in carried)
+        return mass, sum((m * c for m, c in carried), np.zeros(3)) / mass
 
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:
-        """The bodies' frames, then the held object's frames."""
-        out = {n: T.copy() for n, T in self.poses.items()}
+        """The bodies' frames (where they are now), then the held object's frames, then the
+        frames of the bodies' facets (an item's)."""
+        out = {n: T.copy() for n, T in self.live.items()}
         if self.held is not None:
             out.update({n: T_world_ee @ T for n, T in self.held.frames.items()})
+        for p in self._physics:
+            out.update(p.frames(self.world))
         return out
 
     def readings(self) -> dict[str, float | bool]:
@@ -718,13 +765,17 @@ class TaskScene:
             out.update(head.readings())
         for z in self.zones:
             out.update(z.readings())
+        for p in self._physics:
+            out.update(p.readings(self.world))
         return out
 
     def positions(self) -> dict[str, np.ndarray]:
         """World positions of the hand (as last stepped), the bodies and the held frames."""
-        out = {n: T[:3, 3] for n, T in self.poses.items()}
+        out = {n: T[:3, 3] for n, T in self.live.items()}
         if self.held is not None:  # (where the hand holds them: turned with it)
             out.update({n: (self._T_world_ee @ T)[:3, 3] for n, T in self.held.frames.items()})
+        for p in self._physics:
+            out.update({n: T[:3, 3] for n, T in p.frames(self.world).items()})
         out["hand"] = self._T_world_ee[:3, 3]
         return out
 
@@ -739,6 +790,9 @@ class TaskScene:
         out: dict[str, Any] = {"scene": self.name, "readings": r, "done": done,
                                "success": done and holds(o.success, r, pos),
                                "progress": float(r[str(o.progress)]), "thresholds": dict(self.thresholds)}
+        g = self.fingers.reading()  # (the fingers as a person sees them)
+        out["gripper"] = {"width": g.width, "grasped": g.grasped, "moving": g.moving,
+                          "closing": self.fingers.closing}
         if self.task.parts:  # several tasks in one room: each judged on the same readings
             out["tasks"] = {t.name: _judged(t, r, pos) for t in self.task.parts}
         if self.flow is not None:
@@ -762,15 +816,28 @@ class EmptyScene:
     name = "empty"
     task_object = ""
 
+    def __init__(self) -> None:
+        self.fingers = Fingers()
+
     def reset(self) -> None:
-        """Nothing to reset."""
+        """The fingers open, as at the start."""
+        self.fingers.reset()
+
+    def grip(self, cmd: GripperCmd) -> bool:
+        """Take a gripper command (once per number); whether it was new."""
+        return self.fingers.command(cmd)
+
+    def gripper(self) -> GripperReading:
+        """The fingers now."""
+        return self.fingers.reading()
 
     def start_pose(self) -> np.ndarray:
         """Hand in front, pointing down (the arm's rest posture's neighbourhood)."""
         return se3.transform_from_rt(np.diag([-1.0, 1.0, -1.0]), [0.55, 0.0, 0.20])
 
     def step(self, T_world_ee: np.ndarray, twist: np.ndarray, dt: float) -> np.ndarray:
-        """No wrench."""
+        """The fingers move; no wrench."""
+        self.fingers.advance(dt)
         return np.zeros(6)
 
     def objects(self, T_world_ee: np.ndarray) -> dict[str, np.ndarray]:

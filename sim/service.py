@@ -182,6 +182,7 @@ class SimService:
         self.viewer = viewer
         self.dropped: Counter[str] = Counter()
         self.targets = 0
+        self.gripper_commands = 0
         self.injected = 0
         self.seq = 0
         self.cycles = 0
@@ -221,6 +222,8 @@ class SimService:
 
         self.sub_target = stack.enter_context(
             session.declare_subscriber(k.target, zenoh.handlers.RingChannel(16)))
+        self.sub_gripper = stack.enter_context(
+            session.declare_subscriber(k.gripper, zenoh.handlers.RingChannel(16)))
         self.pub_state = publisher(k.state, express=True)
         self.pub_objects = {n: publisher(k.objects(n)) for n in self.sim.objects()}
         self.pub_scene = publisher(k.scene)
@@ -321,6 +324,18 @@ class SimService:
                 ctl.hold()  # refused: stay where the arm is (once: holding again and again
                 # would re-take the pose the load has pushed it to, and let it sink)
 
+    def _take_gripper(self) -> None:
+        """The newest gripper command, carried out once per number (a malformed one is
+        dropped and counted; the fingers stay as they are)."""
+        newest = None
+        while (s := self.sub_gripper.try_recv()) is not None:
+            try:
+                newest = codec.decode_gripper(s.payload.to_bytes())
+            except codec.DecodeError as e:
+                self.dropped[f"gripper_{e.reason}"] += 1
+        if newest is not None and self.sim.scene.grip(newest):
+            self.gripper_commands += 1
+
     def _take_can(self) -> None:
         bus = self._inject_bus
         if bus is not None:
@@ -343,6 +358,7 @@ class SimService:
         if self._reset is not None:
             self._apply_reset()
         self._take_targets()
+        self._take_gripper()
         self._take_can()
         sim.step()
         n = self.cycles
@@ -351,8 +367,8 @@ class SimService:
             m = sim.state_message()
             self._F_measured = se3.flat_from_pose(m["pose"])
             now = time.time()
-            self.pub_state.put(codec.encode_state(self.seq, now, m["pose"], q=m["q"],
-                                                  dq=m["dq"], wrench=m["wrench"]))
+            self.pub_state.put(codec.encode_state(self.seq, now, m["pose"], q=m["q"], dq=m["dq"],
+                                                  wrench=m["wrench"], gripper=m["gripper"]))
             self.seq += 1
             if self.ros is not None:
                 self.ros.ee(now, m["pose"])
@@ -379,7 +395,8 @@ class SimService:
         ``out_of_order``, ``before_start``),
         ``dropped`` (reason -> count), ``can_injected`` (frames put on the bus from
         Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults),
-        ``resets`` (scene resets done through ``sim/reset``).
+        ``resets`` (scene resets done through ``sim/reset``), ``gripper_commands`` (gripper
+        commands carried out: each number once).
         """
         sim = self.sim
         now = time.monotonic()
@@ -399,7 +416,7 @@ class SimService:
             target_rejected=self.guard.total_rejected,
             target_rejected_reasons=dict(self.guard.rejected),
             dropped=dict(self.dropped), can_injected=self.injected, link=sim.link_stats(),
-            resets=self.resets,
+            resets=self.resets, gripper_commands=self.gripper_commands,
         )
         return msg
 

@@ -149,8 +149,9 @@ class Simulation:
             return
         self.arm.set_target(se3.transform_from_flat(se3.flat_from_pose(p)), stamp)
 
-    def state_message(self) -> dict[str, list[float]]:
-        """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] (wire contract ``state``).
+    def state_message(self) -> dict[str, Any]:
+        """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] and ``gripper`` (the fingers'
+        :class:`~sctd.wire.codec.GripperReading`) (wire contract ``state``).
 
         ``q`` and ``dq`` are what the controller decoded from the joint bus (as a real
         arm reports its encoders), ``pose`` their forward kinematics; ``wrench`` is the
@@ -164,6 +165,7 @@ class Simulation:
             "q": m.q.tolist(),
             "dq": m.dq.tolist(),
             "wrench": self._wrench.tolist(),
+            "gripper": self.scene.gripper(),
         }
 
     def objects(self) -> dict[str, list[float]]:

@@ -253,8 +253,10 @@ def test_simulation_messages_are_plain_data():
     with Simulation("pour") as sim:
         sim.run(0.02)
         msg = sim.state_message()
-        assert set(msg) == {"pose", "q", "dq", "wrench"}
+        assert set(msg) == {"pose", "q", "dq", "wrench", "gripper"}
         assert [len(msg[k]) for k in ("pose", "q", "dq", "wrench")] == [7, 7, 7, 6]
+        g = msg["gripper"]  # (the fingers, open: no command taken)
+        assert g.width == 0.08 and g.grasped is False and g.moving is False and g.cmd == -1
         assert all(isinstance(x, float) for x in msg["pose"])
         # bus-decoded measurement agrees with the physics to the frame resolution
         np.testing.assert_allclose(msg["pose"][:3], sim.arm.ee_pose[:3], atol=1e-4)

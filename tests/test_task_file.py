@@ -126,7 +126,7 @@ DRAWER = shipped_folder() / "drawer.yaml"
     (POUR, "intent.1.name", "bring", "intent[1].name", "'bring' is the name of an earlier step"),
     (POUR, "intent.0.colour", "red", "intent[0].colour", "unknown field"),
     (POUR, "intent.2.tilt", {"to": 1.0, "until": True}, "intent[2]",
-     "expected one of reach, tilt, upright, move_joint, press; got tilt, upright"),
+     "expected one of reach, tilt, upright, move_joint, press, grasp, place; got tilt, upright"),
     (POUR, "intent.0", {"name": "tip", "upright": {"below": 0.3}}, "intent[0].upright",
      "the first step must be a reach"),
     (POUR, "intent.0.reach.frame", "mug", "intent[0].reach.frame",
@@ -357,8 +357,8 @@ def test_a_file_is_found_by_path_and_named_by_its_name_field(tmp_path):
     f = tmp_path / "anything.yaml"
     f.write_text(yaml.safe_dump(doc))
     assert find_task(str(f)).name == "pour_tea"
-    with pytest.raises(TaskError, match=r"no task of that name \(known: cabinet, drawer, (\w+, )*pour.*did "
-                                        r"you mean 'pour'"):
+    with pytest.raises(TaskError, match=r"no task of that name \(known: cabinet, cup_to_table, drawer, "
+                                        r"(\w+, )*pour.*did you mean 'pour'"):
         find_task("pout")
 
 

@@ -26,10 +26,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:  # (the kinds' classes type their scene with this module's)
+    from .kinds import Facet, StepKind
 
 Array = NDArray[np.float64]
 
@@ -95,6 +98,9 @@ class Body:
         its x axis.
     button : Button or None
         A push button in that surface, its face centred on the origin.
+    facets : dict of str to Facet
+        Its elements of the registered kinds (:mod:`sctd.task.kinds`), by key: a
+        ``support`` things rest on, an ``item`` the hand picks up.
     """
 
     name: str
@@ -103,6 +109,7 @@ class Body:
     container: Container | None = None
     surface: Surface | None = None
     button: Button | None = None
+    facets: dict[str, Facet] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -424,8 +431,14 @@ class Scene:
     zones: dict[str, Zone] = field(default_factory=dict)
 
     def frames(self) -> list[str]:
-        """The names of every published frame: the bodies', then the held object's."""
-        return [*self.bodies, *(self.held.frames if self.held else ())]
+        """The names of every published frame: the bodies', then the held object's, then
+        the frames of the bodies' facets (an item's named frames)."""
+        extra = [n for b in self.bodies.values() for f in b.facets.values() for n in f.frame_names()]
+        return [*self.bodies, *(self.held.frames if self.held else ()), *extra]
+
+    def with_facet(self, key: str) -> dict[str, Any]:
+        """The bodies' facets of kind ``key``, by body name."""
+        return {n: b.facets[key] for n, b in self.bodies.items() if key in b.facets}
 
 
 # -- predicates -----------------------------------------------------------------------
@@ -661,6 +674,8 @@ class Press:
 
 
 Action = Reach | Tilt | Upright | MoveJoint | Press
+"""The built-in kinds of step; a step of a registered kind holds a
+:class:`~sctd.task.kinds.StepKind` instead."""
 
 DONE = "done"
 """The phase after the intent's last step (no step may be called so)."""
@@ -672,7 +687,7 @@ class Step:
     what it does."""
 
     name: str
-    action: Action
+    action: Action | StepKind
 
 
 # -- how demonstrations vary ---------------------------------------------------------------

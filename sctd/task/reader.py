@@ -18,6 +18,7 @@ import numpy as np
 from sctd import se3
 from sctd.skill.reader import Reader, kind_of
 
+from . import kinds
 from .judge import thresholds
 from .model import (
     DONE,
@@ -225,13 +226,18 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     if twice:
         raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints, heads, "
                            f"zones and {HAND!r} share one namespace)")
+    for name, b in bodies.items():
+        for key, facet in b.facets.items():
+            facet.check(r, name, scene, f"{path}.bodies.{name}.{key}")
+    _quantities_once(r, scene, path)
     _in_front(r, scene, path)
     _outside_heads(r, scene, path)
     return scene
 
 
 def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
-    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", "surface", "button"})
+    facet_kinds = kinds.facets()
+    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", "surface", "button", *facet_kinds})
     container = None
     if "container" in d:
         c = r.fields(d["container"], f"{path}.container", {"radius", "depth"}, {"rim_margin", "max_drop"})
@@ -242,8 +248,9 @@ def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
         container = Container(radius, r.positive(c["depth"], f"{path}.container.depth"), margin,
                               r.positive(c.get("max_drop", 0.15), f"{path}.container.max_drop"))
     surface, button = _contact(r, d, path)
+    facets = {k: cls.read(r, d[k], f"{path}.{k}") for k, cls in facet_kinds.items() if k in d}
     return Body(name, r.transform(d, path), r.vary(d["vary"], f"{path}.vary") if "vary" in d else Vary(),
-                container, surface, button)
+                container, surface, button, facets)
 
 
 def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
@@ -498,20 +505,66 @@ def _elements(scene: Scene) -> dict[str, str]:
                 if b.surface is not None})
     out |= {h: "head" for h in scene.heads}
     out |= {z: "zone" for z in scene.zones}
+    for n, b in scene.bodies.items():  # (a body's facets of registered kinds: the first with readings)
+        first = next((k for k, f in b.facets.items() if f.quantities), None)
+        if first is not None:
+            out[n] = first
     return out
+
+
+def quantities(kind: str) -> tuple[str, ...]:
+    """What an element of ``kind`` reports (:data:`READINGS`, or a registered facet's)."""
+    if kind in READINGS:
+        return READINGS[kind]
+    return kinds.facets()[kind].quantities
+
+
+def _flag(reading: Reading, scene: Scene) -> bool:
+    """Whether ``reading`` is true or false rather than a number."""
+    body = scene.bodies.get(reading.element)
+    for f in body.facets.values() if body is not None else ():
+        if reading.quantity in f.quantities:
+            return reading.quantity in f.flags
+    return reading.quantity in FLAGS
+
+
+def _quantities_once(r: _Reader, scene: Scene, path: str) -> None:
+    """A body reports each quantity once: its facets with readings do not share one, nor
+    with its surface."""
+    for n, b in scene.bodies.items():
+        seen = list(READINGS["button" if b.button else "surface"]) if b.surface is not None else []
+        for k, f in b.facets.items():
+            twice = sorted(set(seen) & set(f.quantities))
+            if twice:
+                raise r.fail(f"{path}.bodies.{n}.{k}", f"reports {twice[0]!r}, as another element of "
+                                                        f"{n!r} does: one reading, one element")
+            seen += f.quantities
 
 
 def _reading(r: _Reader, v: Any, path: str, scene: Scene) -> Reading:
     s = r.string(v, path)
     element, _, quantity = s.partition(".")
-    kinds = _elements(scene)
-    if element not in kinds:
+    elements = _elements(scene)
+    if element not in elements:
         raise r.fail(path, f"unknown element {element!r} in {s!r} (elements with readings: "
-                           f"{', '.join(kinds) or 'none'})")
-    if quantity not in READINGS[kinds[element]]:
-        raise r.fail(path, f"a {kinds[element]} reports {', '.join(READINGS[kinds[element]])}; "
+                           f"{', '.join(elements) or 'none'})")
+    known = _all_quantities(scene, element, elements[element])
+    if quantity not in known:
+        kind = elements[element]
+        raise r.fail(path, f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} reports {', '.join(known)}; "
                            f"got {quantity!r}")
     return Reading(element, quantity)
+
+
+def _all_quantities(scene: Scene, element: str, kind: str) -> tuple[str, ...]:
+    """Every quantity ``element`` reports: its kind's, and a body's other facets'."""
+    out = list(quantities(kind))
+    body = scene.bodies.get(element)
+    if body is not None and body.surface is not None:
+        out += [q for q in READINGS["button" if body.button else "surface"] if q not in out]
+    for f in body.facets.values() if body is not None else ():
+        out += [q for q in f.quantities if q not in out]
+    return tuple(out)
 
 
 COMPARISONS = ("at_least", "at_most", "above", "below", "is")
@@ -537,7 +590,7 @@ def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:
         bounds = {k: d[k] for k in COMPARISONS if k in d}
         if not bounds:
             raise r.fail(path, f"expected a comparison: one or two of {', '.join(COMPARISONS)}")
-        flag = reading.quantity in FLAGS
+        flag = _flag(reading, scene)
         if flag != ("is" in bounds) or (flag and len(bounds) > 1):
             how = ("a flag: compare it with is: true|false" if flag
                    else "a number: compare it with at_least, at_most, above or below")
@@ -608,20 +661,25 @@ def _intent(r: _Reader, v: Any, path: str, scene: Scene, outcome: Outcome) -> tu
         raise r.fail(path, f"expected a non-empty list of steps, got {kind_of(v)}")
     steps: list[Step] = []
     anchor: Reach | None = None
+    registered = kinds.step_kinds()
+    every = [*KINDS, *(k for k in registered if k not in KINDS)]
     for i, item in enumerate(v):
         where = f"{path}[{i}]"
         d = r.mapping(item, where)
-        r.known_keys(d, where, {"name", *KINDS})
+        r.known_keys(d, where, {"name", *every})
         if "name" not in d:
             raise r.fail(f"{where}.name", "missing")
         name = r.name(d["name"], f"{where}.name")
         if name == DONE or name in (s.name for s in steps):
             why = "the phase after the last step" if name == DONE else "the name of an earlier step"
             raise r.fail(f"{where}.name", f"{name!r} is {why}")
-        kinds = [k for k in KINDS if k in d]
-        if len(kinds) != 1:
-            raise r.fail(where, f"expected one of {', '.join(KINDS)}; got {', '.join(kinds) or 'none'}")
-        kind = kinds[0]
+        given = [k for k in every if k in d]
+        if len(given) != 1:
+            raise r.fail(where, f"expected one of {', '.join(every)}; got {', '.join(given) or 'none'}")
+        kind = given[0]
+        if kind not in KINDS:  # (a registered kind names the frames it moves)
+            steps.append(Step(name, registered[kind].read(r, d[kind], f"{where}.{kind}", scene, outcome)))
+            continue
         if anchor is None and kind not in ("reach", "press"):  # (a press names its frame)
             raise r.fail(f"{where}.{kind}", f"a {kind} step moves the frame of a reach before it: "
                                             + ("the first step must be a reach" if not steps
@@ -773,7 +831,7 @@ def _teach(r: _Reader, v: Any, path: str, intent: tuple[Step, ...], scene: Scene
             if k in sp:
                 out[f] = r.positive(sp[k], f"{path}.speeds.{k}")
     if "steps" in d:
-        by_name = {s.name: s.action for s in intent}
+        by_name = {s.name: s.action for s in intent if not isinstance(s.action, kinds.StepKind)}
         steps = r.fields(d["steps"], f"{path}.steps", set(), set(by_name))
         out["steps"] = {str(n): _teach_step(r, x, f"{path}.steps.{n}", by_name[str(n)], scene)
                         for n, x in steps.items()}

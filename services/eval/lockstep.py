@@ -184,6 +184,8 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             seq += 1
             feed.input(USER_DEVICE, seq, t, u, b)
         res = feed.tick(t)
+        if res.gripper is not None:  # (to the fingers at once: messages take no time here)
+            sim.scene.grip(res.gripper)
         mode = res.state
         if watch is not None:
             watch.tick(t)
@@ -234,7 +236,7 @@ class Feed:
 def state_msg(seq: int, t: float, m: dict[str, Any]) -> codec.StateMsg:
     """The simulator's state (:meth:`Simulation.state_message`) as the runtime decodes it
     off the wire (``q`` and ``dq`` are not read by the tick)."""
-    return codec.StateMsg(seq, t, m["pose"], m["wrench"])
+    return codec.StateMsg(seq, t, m["pose"], m["wrench"], gripper=m.get("gripper"))
 
 
 def input_msg(seq: int, t: float, u: tuple[float, ...], buttons: tuple[int, ...],

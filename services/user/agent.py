@@ -40,8 +40,10 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import Task
+from sctd.task.kinds import StepKind
 
 from .device import DeviceModel
+from .grasping import GraspButton
 from .human import PROFILES, HumanProfile
 from .intent import Desire, Observation, TaskIntent
 
@@ -116,12 +118,28 @@ class SimulatedUser:
         self.switches = 0
         self.switch_time = 0.0
         self.desire: Desire | None = None
+        # a task whose steps take things in the hand: the grasp button (the wire's fifth)
+        self.grasp = GraspButton() if any(isinstance(s.action, StepKind) and s.action.grips
+                                          for s in task.intent) else None
 
     # -- the loop ----------------------------------------------------------------------
 
-    def step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, int, int]]:
-        """The stick's deflection (``n_axes``) and the buttons (mode, enable, escape) at
-        time ``t`` (s, any clock the observations share), given the newest observation."""
+    def step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, ...]]:
+        """The stick's deflection (``n_axes``) and the buttons (mode, enable, escape; and
+        choose, grasp for a task that takes things in the hand) at time ``t`` (s, any
+        clock the observations share), given the newest observation."""
+        u, buttons = self._step(t, obs)
+        if self.grasp is None:
+            return u, buttons
+        perceived = self._perceived
+        want = self.desire.grip if self.desire is not None and not self.desire.done else None
+        down = perceived is not None and self.grasp.down(t, want, perceived.scene)
+        if down:  # (the stick let go while the button is down)
+            self._out = np.zeros(self.n)
+            u = tuple(self._out.tolist())
+        return u, (*buttons, 0, int(down))
+
+    def _step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, int, int]]:
         self._seen.append(obs)
         perceived = self._perceive(t)
         if perceived is None or t < self._next:

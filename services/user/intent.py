@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task, handle_jacobian, handle_pose
 from sctd.task.judge import holds, thresholds
+from sctd.task.kinds import Sight, StepKind, StepMind
 from sctd.task.model import (
     DONE,
     Action,
@@ -71,7 +72,8 @@ class Desire:
     turns; m/s and rad/s compare), ``error`` a distance to the current sub-goal (progress), ``phase`` the
     intent's own step, ``done`` the task is achieved as far as the user can tell,
     ``close_enough`` the hand is short of the sub-goal but within what the task
-    tolerates (a user who cannot get any closer moves on: :meth:`TaskIntent.settle`)."""
+    tolerates (a user who cannot get any closer moves on: :meth:`TaskIntent.settle`),
+    ``grip`` what the fingers should do (``close``, ``open``; None: as they are)."""
 
     twist: Array
     W: Array
@@ -79,6 +81,7 @@ class Desire:
     phase: str
     done: bool = False
     close_enough: bool = False  # the sub-goal is not reached, but within what the task tolerates
+    grip: str | None = None  # what the fingers should do: close, open, or None (as they are)
 
 
 NO_TWIST = np.zeros(6)  # what an observer's desire() holds instead of a twist and weights
@@ -245,6 +248,9 @@ class TaskIntent:
                         or (isinstance(s.action, Reach) and (s.action.to is not None or s.action.lift
                                                              or s.action.reached or s.action.accept))}
         self._surfaces = [n for n, b in self.task.scene.bodies.items() if b.surface is not None]
+        # a step of a registered kind behaves as its kind says
+        self._minds: dict[int, StepMind] = {i: s.action.mind(self.task.scene, steps, self)
+                                            for i, s in enumerate(steps) if isinstance(s.action, StepKind)}
 
     @property
     def phase(self) -> str:
@@ -256,7 +262,8 @@ class TaskIntent:
         """What the hand should do now; with ``steer`` False (an observer judging
         progress, which never steers) the twist and the weights are left zero."""
         readings: Mapping[str, Any] = obs.scene.get("readings", {})
-        positions = self._positions(obs) if self._near else {}
+        positions = self._positions(obs) if self._near or self._minds else {}
+        sight = Sight(obs.T_world_ee, obs.objects, readings, positions) if self._minds else None
         looks: dict[int, _Look] = {}
 
         def look(i: int) -> _Look:
@@ -270,10 +277,17 @@ class TaskIntent:
                 looks[k] = self._look(self._reach(k), k in self._placed, obs, readings)
             return looks[k]
 
-        for i, s in enumerate(self.task.intent):  # forwards, as far as it goes; back once
+        for i in range(len(self.task.intent)):  # forwards, as far as it goes; back once
             if self.index == i:
-                self.index = i + self._move(i, s.action, look(i), readings, positions)
+                if i in self._minds:
+                    assert sight is not None
+                    self.index = i + self._minds[i].move(sight)
+                else:
+                    self.index = i + self._move(i, self._action(i), look(i), readings, positions)
         i = self.index
+        if self._last(i) in self._minds:
+            assert sight is not None
+            return self._kind_desire(i, sight, obs, steer)
         seen = look(i)
         err = self._error(i, seen, obs, readings)
         done = i == len(self.task.intent)
@@ -282,6 +296,18 @@ class TaskIntent:
             return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done, close)
         W = self._weights(i, seen) @ _at_point(seen.p - obs.T_world_ee[:3, 3])
         return Desire(self._twist(i, seen, obs, readings), W, err, self.phase, done, close)
+
+    def _kind_desire(self, i: int, sight: Sight, obs: Observation, steer: bool) -> Desire:
+        """What a step of a registered kind wants (once done, the last step's error, no motion)."""
+        mind = self._minds[self._last(i)]
+        err = mind.error(sight)
+        done = i == len(self.task.intent)
+        if not steer:
+            return Desire(NO_TWIST, NO_WEIGHTS, err, self.phase, done)
+        if done:
+            return Desire(np.zeros(6), np.eye(6), err, self.phase, True)
+        want = mind.want(sight)
+        return Desire(want.twist, want.W, err, self.phase, False, False, want.grip)
 
     def touching(self, obs: Observation) -> bool:
         """Whether the scene reports the hand pressed against a surface (a wall, a
@@ -311,7 +337,9 @@ class TaskIntent:
         return min(i, len(self.task.intent) - 1)
 
     def _action(self, i: int) -> Action:
-        return self.task.intent[self._last(i)].action
+        a = self.task.intent[self._last(i)].action
+        assert not isinstance(a, StepKind)  # (a registered kind's step is its mind's: _kind_desire)
+        return a
 
     @staticmethod
     def _positions(obs: Observation) -> dict[str, Array]:

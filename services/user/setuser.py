@@ -81,7 +81,7 @@ class SetUser:
         return self.goal_object
 
     def step(self, t: float, obs: Observation, engaged: str | None
-             ) -> tuple[tuple[float, ...], tuple[int, int, int]]:
+             ) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The stick and buttons at ``t``; ``engaged`` is the task object of the skill the
         display shows engaged (None: teleoperation)."""
         u, buttons = self._own_step(t, obs)  # (the person keeps seeing, and planning)
@@ -102,7 +102,7 @@ class SetUser:
         pressing = ((t - self._pressed_at) % (4 * period)) < period
         return zero, ESCAPE_BUTTONS if pressing else ZERO_BUTTONS
 
-    def _own_step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, int, int]]:
+    def _own_step(self, t: float, obs: Observation) -> tuple[tuple[float, ...], tuple[int, ...]]:
         """The person's stick and buttons for the task they are going for now; the change
         of mind once the detour's first step was reached and let go of."""
         d = self.detour

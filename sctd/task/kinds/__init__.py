@@ -1,0 +1,85 @@
+"""Kinds of task element as a registry: what a task file may say, one class a kind.
+
+A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
+support things rest on, an item the hand can pick up. A **step kind** is a kind of
+intent step (``intent[i].<key>``): grasp an item, place it. Each kind is one class that
+holds everything sctd knows of it:
+
+- its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
+- its writer (``to_yaml``: a task file's fields, read back to the same element);
+- its readings (``<body>.<quantity>``, :attr:`Facet.quantities`);
+- its physics in the simulator (:meth:`Facet.physics`: pure numpy on a :class:`World`);
+- the simulated user's behaviour for a step (:meth:`StepKind.mind`);
+- the demonstrator's plan for a step (:meth:`StepKind.waypoints`);
+- its drawing in the view (:meth:`Facet.shapes`: boxes and cylinders, as data).
+
+The kinds shipped with sctd are listed in :data:`BUILTIN`; a package adds its own under
+the entry-point group ``sctd.task_kinds`` (a name for the kind's key, the class as its
+value)::
+
+    [project.entry-points."sctd.task_kinds"]
+    hook = "mypackage.hook:Hook"
+
+A built-in key wins over an entry point of the same key. Nothing here does I/O: a kind's
+physics and its user's behaviour are pure functions of what they are given.
+"""
+
+from __future__ import annotations
+
+import importlib
+from functools import cache
+from importlib.metadata import entry_points
+
+from .base import Facet, FacetPhysics, Fingers, Person, Shape, Sight, StepKind, StepMind, Want, World
+
+GROUP = "sctd.task_kinds"
+BUILTIN = {
+    "support": "sctd.task.kinds.pickable:Support",
+    "item": "sctd.task.kinds.pickable:Item",
+    "grasp": "sctd.task.kinds.handling:GraspStep",
+    "place": "sctd.task.kinds.handling:PlaceStep",
+}
+"""The shipped kinds, by their key in a task file."""
+
+
+class KindError(ValueError):
+    """A registered kind that does not load or is not a kind."""
+
+
+def _load(key: str, target: str) -> type[Facet] | type[StepKind]:
+    module, _, attr = target.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as e:
+        raise KindError(f"task element kind {key!r} ({target}) does not load: {e}") from e
+    if not (isinstance(cls, type) and issubclass(cls, Facet | StepKind)):
+        raise KindError(f"task element kind {key!r} ({target}): not a Facet or StepKind subclass")
+    if cls.key != key:
+        raise KindError(f"task element kind {key!r} ({target}): its class says key {cls.key!r}")
+    return cls
+
+
+@cache
+def registry() -> dict[str, type[Facet] | type[StepKind]]:
+    """Every kind by its key: the built-in ones, then the registered ones (loaded once)."""
+    out = {key: _load(key, target) for key, target in BUILTIN.items()}
+    for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
+        if ep.name not in out:
+            out[ep.name] = _load(ep.name, ep.value)
+    return out
+
+
+def facets() -> dict[str, type[Facet]]:
+    """The facet kinds, by key (in registration order: a facet that another one refers to
+    comes first: supports before items)."""
+    kinds = [c for c in registry().values() if issubclass(c, Facet)]
+    return {c.key: c for c in sorted(kinds, key=lambda c: c.order)}
+
+
+def step_kinds() -> dict[str, type[StepKind]]:
+    """The step kinds, by key."""
+    return {k: c for k, c in registry().items() if issubclass(c, StepKind)}
+
+
+__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Person", "Shape", "Sight",
+           "StepKind", "StepMind", "Want", "World", "facets", "registry", "step_kinds"]

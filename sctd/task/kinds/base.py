@@ -1,0 +1,227 @@
+"""What a kind of task element is: the classes a kind subclasses, and what its parts are
+given (pure: no I/O)."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:  # (typing only: the reader imports the registry)
+    from ..model import Outcome, Scene, Step
+
+Array = NDArray[np.float64]
+
+
+# -- the simulator's side ---------------------------------------------------------------
+class Fingers(Protocol):
+    """The hand's two fingers as a facet's physics sees them (the simulator's hand).
+
+    ``width`` is the opening between the fingertips (m), ``closing`` whether the newest
+    command closes them (a grasp: until they meet something, squeezing at most
+    ``force`` N), ``max_width`` their widest opening. The fingers close along the hand's y
+    axis, their tips' middle at the hand's origin."""
+
+    width: float
+    max_width: float
+    closing: bool
+    force: float
+
+    def block(self, width: float) -> None:
+        """Something between the fingers stops them at ``width`` this step (they hold it)."""
+
+
+@dataclass
+class World:
+    """What a facet's physics sees at one step.
+
+    Attributes
+    ----------
+    T_world_ee : ndarray (4, 4)
+        The hand.
+    twist : ndarray (6,)
+        Its twist [v, w] (world axes, at its origin).
+    poses : dict of str to ndarray (4, 4)
+        Every body's pose now: a physics that moves its body (an item carried) writes its
+        own entry.
+    fingers : Fingers or None
+        The hand's fingers; None for a hand without.
+    physics : dict of str to dict of str to FacetPhysics
+        Every facet's physics, by body and key: what one facet asks of another (an item
+        asks the supports where it can rest).
+    """
+
+    T_world_ee: Array
+    twist: Array
+    poses: dict[str, Array]
+    fingers: Fingers | None = None
+    physics: dict[str, dict[str, FacetPhysics]] = field(default_factory=dict)
+
+
+class FacetPhysics(ABC):
+    """A facet's physics in the simulator, one per body that has it."""
+
+    @abstractmethod
+    def reset(self, world: World) -> None:
+        """Back to the trial's start (the bodies where ``world.poses`` puts them)."""
+
+    @abstractmethod
+    def step(self, world: World, dt: float) -> Array:
+        """Advance by ``dt``; the wrench (6,) it exerts on the hand (world axes, at its
+        origin; N and N m)."""
+
+    @abstractmethod
+    def readings(self, world: World) -> dict[str, float | bool]:
+        """Its readings, ``<body>.<quantity>``."""
+
+    def load(self) -> tuple[float, Array] | None:
+        """What the hand carries of it: mass (kg) and centre of mass in the hand's frame;
+        None for nothing."""
+        return None
+
+    def frames(self, world: World) -> dict[str, Array]:
+        """Frames it publishes besides its body's (world, 4x4)."""
+        return {}
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A solid to draw, in its body's frame: a ``box`` of full ``size`` (x, y, z) or a
+    ``cylinder`` of ``size`` (radius, radius, height) about its z, centred at
+    ``T_body_shape``'s origin; ``colour`` RGB in [0, 1]."""
+
+    kind: str
+    size: tuple[float, float, float]
+    T_body_shape: Array
+    colour: tuple[float, float, float] = (0.6, 0.6, 0.6)
+    opacity: float = 1.0
+
+
+# -- kinds -------------------------------------------------------------------------------
+class Facet(ABC):
+    """A kind of scene element a body has: ``bodies.<name>.<key>`` in a task file.
+
+    Class attributes
+    ----------------
+    key : str
+        Its field in a body's mapping.
+    order : int
+        Facets are read and stepped in this order (one that refers to another comes after it).
+    quantities : tuple of str
+        Its readings, ``<body>.<quantity>``; empty for none.
+    flags : tuple of str
+        Those of them that are true or false.
+    """
+
+    key: ClassVar[str]
+    order: ClassVar[int] = 0
+    quantities: ClassVar[tuple[str, ...]] = ()
+    flags: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    @abstractmethod
+    def read(cls, r: Any, v: Any, path: str) -> Facet:
+        """The facet a task file's field ``v`` at ``path`` says (``r``: the task reader,
+        whose ``fail(path, problem)`` is the error to raise)."""
+
+    def check(self, r: Any, body: str, scene: Scene, path: str) -> None:  # noqa: B027 - most check nothing
+        """Cross-checks once the whole scene is read (what it names exists)."""
+
+    @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """Its task-file field: :meth:`read` gives the same facet back."""
+
+    def frame_names(self) -> list[str]:
+        """The frames it publishes besides its body's (its physics' :meth:`FacetPhysics.frames`)."""
+        return []
+
+    def physics(self, body: str, scene: Scene) -> FacetPhysics | None:
+        """Its physics in the simulator; None for a facet the simulator has nothing to do for."""
+        return None
+
+    def shapes(self) -> list[Shape]:
+        """What the view draws of it, in its body's frame."""
+        return []
+
+
+@dataclass
+class Sight:
+    """What the simulated person sees at a step: the hand and the published frames
+    (world, 4x4), the scene's readings, and the frames' positions (``hand`` among them)."""
+
+    T_world_ee: Array
+    objects: Mapping[str, Array]
+    readings: Mapping[str, Any]
+    positions: Mapping[str, Array]
+
+
+@dataclass
+class Want:
+    """What the person wants of the hand at a step: ``twist`` [v, w] (world, at the hand's
+    origin), ``W`` (6, 6) the weights of its errors (a map from the hand's twist), and what
+    the fingers should do: ``close``, ``open`` or None (as they are)."""
+
+    twist: Array
+    W: Array
+    grip: str | None = None
+
+
+class Person(Protocol):
+    """How a simulated person moves (:class:`sctd_services.user.intent.TaskIntent` is one)."""
+
+    gain: float
+    v_max: float
+    w_max: float
+    free_weight: float
+
+
+class StepMind(ABC):
+    """A simulated person's behaviour for one intent step, for one run."""
+
+    @abstractmethod
+    def move(self, sight: Sight) -> int:
+        """+1: the step is complete; -1: back to the step before; 0: stay."""
+
+    @abstractmethod
+    def error(self, sight: Sight) -> float:
+        """How far from complete it is, m (and m-equivalents)."""
+
+    @abstractmethod
+    def want(self, sight: Sight) -> Want:
+        """How the hand should move now, and the fingers."""
+
+
+class StepKind(ABC):
+    """A kind of intent step: ``intent[i].<key>`` in a task file.
+
+    Class attributes
+    ----------------
+    key : str
+        Its field in a step's mapping.
+    grips : bool
+        Whether the step works the fingers (a person doing it uses the grasp button).
+    """
+
+    key: ClassVar[str]
+    grips: ClassVar[bool] = False
+
+    @classmethod
+    @abstractmethod
+    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome) -> StepKind:
+        """The step a task file's field ``v`` at ``path`` says."""
+
+    @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """Its task-file field: :meth:`read` gives the same step back."""
+
+    @abstractmethod
+    def frame(self) -> str:
+        """The frame the step moves (``hand``, or a frame of what the hand holds)."""
+
+    @abstractmethod
+    def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
+        """The simulated person's behaviour for it."""

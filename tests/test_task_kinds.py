@@ -1,0 +1,463 @@
+"""Task element kinds as a registry: the shipped kinds have every part, a kind from
+another package is found through its entry point, and the pick-and-place kinds behave
+(supports, items, the two fingers, the grasp and place steps)."""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from sctd import se3
+from sctd.task import TaskError, find_task, task_from_document
+from sctd.task.kinds import (
+    BUILTIN,
+    Facet,
+    FacetPhysics,
+    Shape,
+    StepKind,
+    StepMind,
+    facets,
+    registry,
+    step_kinds,
+)
+from sctd.wire.codec import GripperCmd
+from sctd_services.user.grasping import GraspButton
+from sctd_services.user.intent import Observation, TaskIntent
+from sctd_sim.fingers import MAX_WIDTH, Fingers
+from sctd_sim.scenes import TaskScene, make_scene
+
+CUP = "cup_to_table"
+
+
+def cup_doc() -> dict:
+    return yaml.safe_load(Path(find_task(CUP).file).read_text())
+
+
+def read(doc: dict):
+    return task_from_document(doc, "test.yaml")
+
+
+# -- the registry -------------------------------------------------------------------------
+def test_the_shipped_kinds_are_registered_with_every_part():
+    reg = registry()
+    assert set(BUILTIN) <= set(reg)
+    assert list(facets()) == ["support", "item"]  # (a support before the items resting on it)
+    assert set(step_kinds()) >= {"grasp", "place"}
+    task = find_task(CUP)
+    for body, b in task.scene.bodies.items():
+        for key, facet in b.facets.items():
+            assert isinstance(facet, Facet) and type(facet) is reg[key]
+            # its writer: read back to the same facet
+            r = _reader()
+            assert type(facet).read(r, copy.deepcopy(facet.to_yaml()), "x") == facet
+            assert all(isinstance(s, Shape) for s in facet.shapes()) and facet.shapes()
+            assert isinstance(facet.physics(body, task.scene), FacetPhysics)
+            assert set(facet.flags) <= set(facet.quantities)
+    for step in task.intent:
+        assert isinstance(step.action, StepKind)
+        back = type(step.action).read(_reader(), copy.deepcopy(step.action.to_yaml()), "x", task.scene,
+                                      task.outcome)
+        assert back == step.action
+        assert isinstance(step.action.mind(task.scene, task.intent, TaskIntent(task)), StepMind)
+
+
+def _reader():
+    from sctd.task.reader import _Reader
+
+    return _Reader("test.yaml")
+
+
+TEST_KIND = '''
+"""A test kind from outside sctd: a beacon on a body that lights while the hand is near."""
+from dataclasses import dataclass
+import numpy as np
+from sctd.task.kinds import Facet, FacetPhysics, Shape
+
+
+@dataclass(frozen=True)
+class Beacon(Facet):
+    key = "beacon"
+    quantities = ("lit", "lit_for")
+    flags = ("lit",)
+    within: float
+
+    @classmethod
+    def read(cls, r, v, path):
+        d = r.fields(v, path, {"within"})
+        return cls(r.positive(d["within"], f"{path}.within"))
+
+    def to_yaml(self):
+        return {"within": float(self.within)}
+
+    def physics(self, body, scene):
+        return _Lamp(body, self.within)
+
+    def shapes(self):
+        return [Shape("cylinder", (0.01, 0.01, 0.02), np.eye(4))]
+
+
+class _Lamp(FacetPhysics):
+    def __init__(self, body, within):
+        self.body, self.within, self.t = body, within, 0.0
+
+    def reset(self, world):
+        self.t = 0.0
+
+    def step(self, world, dt):
+        if self._lit(world):
+            self.t += dt
+        return np.zeros(6)
+
+    def _lit(self, world):
+        d = world.T_world_ee[:3, 3] - world.poses[self.body][:3, 3]
+        return float(np.linalg.norm(d)) < self.within
+
+    def readings(self, world):
+        return {f"{self.body}.lit": self._lit(world), f"{self.body}.lit_for": self.t}
+'''
+
+PROBE = '''
+import numpy as np
+from sctd import se3
+from sctd.task import find_task
+from sctd.task.kinds import registry
+from sctd.task.writer import task_to_yaml
+from sctd_sim.scenes import make_scene
+assert "beacon" in registry(), sorted(registry())
+t = find_task(__import__("sys").argv[1])
+assert t.scene.bodies["lamp"].facets["beacon"].within == 0.1
+assert t.outcome.done.reading.element == "lamp"
+sc = make_scene(t)
+T = t.scene.bodies["lamp"].T_world.copy()
+for _ in range(100):
+    sc.step(T, np.zeros(6), 0.01)
+o = sc.outcome()
+print(o["readings"]["lamp.lit"], round(o["readings"]["lamp.lit_for"], 6), o["done"])
+from sctd.task import task_from_document
+again = task_from_document(task_to_yaml(t), "again")
+assert again.scene.bodies["lamp"].facets == t.scene.bodies["lamp"].facets
+'''
+
+
+@pytest.mark.slow
+def test_a_kind_from_another_package_is_found_through_its_entry_point(tmp_path):
+    """Adding a kind is one module: the package's class, registered under the entry
+    point group; a task file then uses it, the simulator runs it and the writer writes it."""
+    site = tmp_path / "site"
+    (site / "sctd_beacon").mkdir(parents=True)
+    (site / "sctd_beacon" / "__init__.py").write_text(textwrap.dedent(TEST_KIND))
+    dist = site / "sctd_beacon-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: sctd-beacon\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[sctd.task_kinds]\nbeacon = sctd_beacon:Beacon\n")
+    doc = {"sctd_task": 1, "name": "beacon_test", "object": "lamp",
+           "scene": {"start": {"position": [0.45, 0.0, 0.6]},
+                     "bodies": {"lamp": {"position": [0.6, 0.0, 0.6], "beacon": {"within": 0.1}}}},
+           "outcome": {"done": {"reading": "lamp.lit_for", "at_least": 0.5}, "progress": "lamp.lit_for",
+                       "clock": True, "time_limit": 10},
+           "intent": [{"name": "go", "reach": {"frame": "hand", "to": [0, 0, 0],
+                                               "reached": {"radial": 0.01, "height": 0.01}}}]}
+    f = tmp_path / "beacon_test.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", PROBE, str(f)], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "1.0", "True"]
+    # without the package, the same file is refused naming the field
+    only_read = "import sys; from sctd.task import find_task; find_task(sys.argv[1])"
+    bare = subprocess.run([sys.executable, "-c", only_read, str(f)], capture_output=True, text=True,
+                          timeout=120)
+    assert bare.returncode != 0 and "scene.bodies.lamp.beacon: unknown field" in bare.stderr
+
+
+@pytest.mark.slow
+def test_a_registered_kind_that_is_not_a_kind_is_refused_by_name(tmp_path):
+    site = tmp_path / "site"
+    (site / "notakind").mkdir(parents=True)
+    (site / "notakind" / "__init__.py").write_text("class Thing:\n    key = 'thing'\n")
+    dist = site / "notakind-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: notakind\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[sctd.task_kinds]\nthing = notakind:Thing\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", "from sctd.task.kinds import registry; registry()"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0
+    assert "task element kind 'thing' (notakind:Thing): not a Facet or StepKind subclass" in out.stderr
+
+
+# -- reading them ----------------------------------------------------------------------------
+@pytest.mark.parametrize("edit, where, what", [
+    (lambda d: d["scene"]["bodies"]["cup"]["item"].update(rests_on="cup"), "scene.bodies.cup.item.rests_on",
+     "'cup' is no support (supports: shelf, tabletop)"),
+    (lambda d: d["scene"]["bodies"]["cup"].update(position=[0.68, 0.18, 0.80]),
+     "scene.bodies.cup.item.rests_on",
+     "'cup' does not stand on 'shelf'"),
+    (lambda d: d["scene"]["bodies"]["cup"]["item"].update(grip=0.2), "scene.bodies.cup.item.grip",
+     "expected a height on its side, 0.010-0.090 m above its base, got 0.2"),
+    (lambda d: d["scene"]["bodies"]["shelf"]["support"].update(size=[0.2, -0.1]),
+     "scene.bodies.shelf.support.size",
+     "expected two lengths > 0"),
+    (lambda d: d["intent"][0]["grasp"].update(item="shelf"), "intent[0].grasp.item",
+     "'shelf' is no item (items: cup)"),
+    (lambda d: d["intent"][1]["place"].update(onto="cup"), "intent[1].place.onto", "'cup' is no support"),
+    (lambda d: d["intent"][1]["place"].update(at=[0.2, 0.0]), "intent[1].place.at",
+     "is not on the top of 'tabletop'"),
+    (lambda d: d["outcome"].update(progress="cup.colour"), "outcome.progress",
+     "an item reports held, grasps"),
+    (lambda d: d["outcome"]["fail"][0]["when"].update({"is": 1}), "outcome.fail[0].when.is",
+     "expected true or false"),
+])
+def test_bad_pick_and_place_fields_are_refused_naming_them(edit, where, what):
+    doc = cup_doc()
+    edit(doc)
+    with pytest.raises(TaskError) as e:
+        read(doc)
+    assert e.value.path == where and what in e.value.problem, str(e.value)
+
+
+def test_an_item_and_its_readings_are_published_frames():
+    task = find_task(CUP)
+    assert task.scene.frames() == ["shelf", "tabletop", "cup", "cup_rim"]
+    assert task.scene.with_facet("support").keys() == {"shelf", "tabletop"}
+
+
+# -- the fingers -----------------------------------------------------------------------------
+def cmd(n: int, action: str, **kw) -> GripperCmd:
+    return GripperCmd(n, 0.0, n, action, **kw)
+
+
+def test_the_fingers_take_each_command_once_and_never_open_on_their_own():
+    f = Fingers()
+    assert f.width == MAX_WIDTH and f.reading().cmd == -1
+    assert f.command(cmd(1, "close", force=20.0))
+    for _ in range(200):
+        f.advance(0.01)
+    assert f.width == 0.0 and not f.reading().grasped and not f.reading().moving  # (closed on nothing)
+    assert not f.command(cmd(1, "open"))  # a repeat of number 1: nothing changes
+    for _ in range(100):
+        f.advance(0.01)
+    assert f.width == 0.0 and f.closing
+    assert f.command(cmd(2, "width", width=0.03))
+    for _ in range(100):
+        f.advance(0.01)
+    assert f.width == pytest.approx(0.03) and not f.closing and f.reading().cmd == 2
+    assert f.command(cmd(3, "close", force=500.0)) and f.force == 70.0  # (cut to the hand's most)
+
+
+# -- items on supports ------------------------------------------------------------------------
+def scene_at_cup(seed: int | None = None) -> tuple[TaskScene, np.ndarray]:
+    sc = make_scene(find_task(CUP), seed)
+    assert isinstance(sc, TaskScene)
+    T_cup = sc.live["cup"]
+    T = se3.transform_from_rt(np.eye(3), T_cup[:3, 3] + np.array([0.0, 0.0, 0.05]))
+    return sc, T
+
+
+def run(sc: TaskScene, T: np.ndarray, seconds: float, twist: np.ndarray | None = None) -> np.ndarray:
+    w = np.zeros(6)
+    for _ in range(round(seconds / 0.01)):
+        w = sc.step(T, np.zeros(6) if twist is None else twist, 0.01)
+    return w
+
+
+def readings(sc: TaskScene) -> dict:
+    return sc.outcome()["readings"]
+
+
+def test_fingers_closed_about_the_axis_take_the_item_and_it_moves_with_the_hand():
+    sc, T = scene_at_cup()
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 0.5)
+    r = readings(sc)
+    assert r["cup.held"] and r["cup.grasps"] == 1 and not r["cup.resting"] and r["shelf.items"] == 0
+    g = sc.gripper()
+    assert g.grasped and g.width == pytest.approx(0.07)
+    assert sc.payload()[0] == pytest.approx(0.25)
+    up = T.copy()
+    up[2, 3] += 0.06
+    run(sc, up, 0.1)
+    assert readings(sc)["cup.lifted"] == pytest.approx(0.06)
+    assert np.allclose(sc.objects(up)["cup_rim"][:3, 3], sc.live["cup"][:3, 3] + [0, 0, 0.10])
+
+
+@pytest.mark.parametrize("dx, dy, taken", [(0.0, 0.0, True), (0.012, 0.0, True), (0.02, 0.0, False),
+                                            (0.0, 0.006, True), (0.0, -0.006, True), (0.0, 0.012, False)])
+def test_the_fingers_take_it_only_with_its_axis_between_them(dx, dy, taken):
+    sc, T = scene_at_cup()
+    T[:3, 3] += [dx, dy, 0.0]
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 2.0)
+    assert readings(sc)["cup.held"] is taken
+    assert sc.gripper().grasped is taken and (sc.gripper().width == 0.0) is (not taken)
+    if taken:  # (slid to the fingers' middle)
+        assert abs((se3.invert_transform(T) @ sc.live["cup"])[1, 3]) < 1e-12
+
+
+def test_fingers_along_the_axis_do_not_take_it():
+    sc, T = scene_at_cup()
+    T[:3, :3] = se3.matrix_from_rotvec([math.pi / 2, 0.0, 0.0])  # the fingers' line vertical
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 0.5)
+    assert not readings(sc)["cup.held"]
+
+
+def test_an_item_wider_than_the_open_fingers_is_never_taken():
+    doc = cup_doc()
+    doc["scene"]["bodies"]["cup"]["item"]["radius"] = 0.045
+    sc = make_scene(read(doc))
+    T = se3.transform_from_rt(np.eye(3), sc.live["cup"][:3, 3] + [0.0, 0.0, 0.05])
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 2.0)
+    assert not readings(sc)["cup.held"] and sc.gripper().width == 0.0
+
+
+def test_a_weak_squeeze_lets_it_slip_and_fall_once_it_is_off_its_support():
+    sc, T = scene_at_cup()
+    sc.grip(cmd(1, "close", force=1.0))  # 2 * 0.8 * 1 N < 0.25 kg * g
+    run(sc, T, 0.5)
+    assert readings(sc)["cup.held"]  # (the shelf bears it)
+    up = T.copy()
+    up[2, 3] += 0.06
+    run(sc, up, 0.5)
+    r = readings(sc)
+    assert r["cup.grasps"] == 1 and r["cup.slips"] == 1 and not r["cup.held"] and r["cup.dropped"]
+    assert not sc.gripper().grasped  # (and it is not taken again where it fell)
+
+
+def test_let_go_over_a_support_it_lands_standing_in_the_air_it_is_dropped():
+    sc, T = scene_at_cup()
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 0.5)
+    table = sc.live["tabletop"]
+    over = se3.transform_from_rt(np.eye(3), table[:3, 3] + [0.0, 0.0, 0.05 + 0.02])  # base 2 cm over it
+    run(sc, over, 0.1)
+    sc.grip(cmd(2, "open"))
+    run(sc, over, 0.5)
+    r = readings(sc)
+    assert not r["cup.held"] and r["cup.resting"] and not r["cup.dropped"] and r["tabletop.items"] == 1
+    assert sc.live["cup"][2, 3] == pytest.approx(table[2, 3])
+    # the same from 20 cm up, or tilted past its topple angle: dropped
+    for pose in (se3.transform_from_rt(np.eye(3), table[:3, 3] + [0.0, 0.0, 0.25]),
+                 se3.transform_from_rt(se3.matrix_from_rotvec([0.6, 0.0, 0.0]), table[:3, 3] + [0, 0, 0.06])):
+        sc, T = scene_at_cup()
+        sc.grip(cmd(1, "close", force=20.0))
+        run(sc, T, 0.5)
+        run(sc, pose, 0.1)
+        sc.grip(cmd(2, "open"))
+        run(sc, pose, 0.5)
+        r = readings(sc)
+        assert r["cup.dropped"] and not r["cup.resting"] and r["tabletop.items"] == 0
+
+
+def test_a_support_pushes_back_on_an_item_carried_into_it():
+    sc, T = scene_at_cup()
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 0.5)
+    into = T.copy()
+    into[2, 3] -= 0.01  # the base 1 cm into the shelf's top
+    w = run(sc, into, 0.05)
+    assert w[2] == pytest.approx(3000.0 * 0.01 - 0.25 * 9.81, rel=1e-6)
+    assert readings(sc)["cup.force"] == pytest.approx(30.0)
+
+
+def test_a_rim_keeps_what_is_carried_over_it_up():
+    doc = cup_doc()
+    doc["scene"]["bodies"]["tabletop"]["support"]["rim"] = 0.04
+    sc = make_scene(read(doc))
+    T = se3.transform_from_rt(np.eye(3), sc.live["cup"][:3, 3] + [0.0, 0.0, 0.05])
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 0.5)
+    table = sc.live["tabletop"]
+    edge = table[:3, 3] + [0.15, 0.0, 0.02 + 0.05]  # the base 2 cm up, across the rim's line
+    w = run(sc, se3.transform_from_rt(np.eye(3), edge), 0.05)
+    assert readings(sc)["cup.force"] == pytest.approx(3000.0 * 0.02)
+    inside = table[:3, 3] + [0.0, 0.0, 0.02 + 0.05]  # inside it, the same height: free
+    w = run(sc, se3.transform_from_rt(np.eye(3), inside), 0.05)
+    assert readings(sc)["cup.force"] == 0.0 and w[2] == pytest.approx(-0.25 * 9.81)
+
+
+def test_the_item_moves_with_its_support_where_a_trial_puts_it():
+    for seed in range(5):
+        sc = make_scene(find_task(CUP), seed)
+        shelf, cup = sc.live["shelf"], sc.live["cup"]
+        p = se3.invert_transform(shelf) @ cup[:, 3]
+        assert abs(p[2]) < 1e-12 and abs(p[0]) <= 0.02 + 1e-12 and abs(p[1]) <= 0.02 + 1e-12
+        assert readings(sc)["shelf.items"] == 1 and readings(sc)["cup.resting"]
+
+
+# -- the steps: a person who moves the hand as they wish ---------------------------------------
+def ideal_run(task, seed: int, limit: float = 60.0) -> tuple[dict, list[str]]:
+    """The hand moved exactly as the intent wishes, the fingers as it asks: the steps
+    alone, without a device, a skill or an arm."""
+    sc = make_scene(task, seed)
+    it = TaskIntent(task)
+    T = sc.start_pose()
+    n, last, phases = 0, None, []
+    for k in range(round(limit / 0.01)):
+        d = it.desire(Observation(k * 0.01, T, sc.objects(T), sc.outcome()))
+        if not phases or phases[-1] != d.phase:
+            phases.append(d.phase)
+        if d.grip is not None and d.grip != last:
+            n += 1
+            sc.grip(cmd(n, d.grip, force=20.0 if d.grip == "close" else None))
+            last = d.grip
+        v, w = d.twist[:3], d.twist[3:]
+        T2 = T.copy()
+        T2[:3, 3] += v * 0.01
+        T2[:3, :3] = se3.matrix_from_rotvec(w * 0.01) @ T[:3, :3]
+        sc.step(T2, d.twist, 0.01)
+        T = T2
+        o = sc.outcome()
+        if o["done"] or o["readings"]["cup.dropped"]:
+            return o, phases
+    return sc.outcome(), phases
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_grasp_and_place_steps_take_the_cup_to_the_table(seed):
+    o, phases = ideal_run(find_task(CUP), seed)
+    assert o["done"] and o["success"], o["readings"]
+    assert phases == ["take", "put"]
+    r = o["readings"]
+    assert r["cup.grasps"] == 1 and r["cup.slips"] == 0 and r["tabletop.items"] == 1 and r["shelf.items"] == 0
+
+
+def test_a_place_that_loses_the_item_goes_back_to_the_grasp():
+    task = find_task(CUP)
+    sc, T = scene_at_cup()
+    it = TaskIntent(task)
+    sc.grip(cmd(1, "close", force=20.0))
+    T2 = T.copy()
+    T2[2, 3] += 0.08
+    run(sc, T, 0.3)
+    run(sc, T2, 0.3)
+    assert it.desire(Observation(0.0, T2, sc.objects(T2), sc.outcome())).phase == "put"
+    sc.grip(cmd(2, "open"))  # let go in the air: dropped
+    run(sc, T2, 0.5)
+    assert it.desire(Observation(1.0, T2, sc.objects(T2), sc.outcome())).phase == "take"
+
+
+# -- the grasp button --------------------------------------------------------------------------
+def test_the_grasp_button_taps_to_close_holds_to_open_and_waits_between():
+    b = GraspButton()
+    open_ = {"gripper": {"closing": False, "grasped": False, "moving": False}}
+    holding = {"gripper": {"closing": True, "grasped": True, "moving": False}}
+    empty = {"gripper": {"closing": True, "grasped": False, "moving": False}}
+    assert not b.down(0.0, None, open_)
+    assert b.down(0.0, "close", open_) and b.down(0.1, "close", open_) and not b.down(0.2, "close", open_)
+    assert not b.down(0.5, "close", open_)  # (waiting to see what it did)
+    assert not b.down(1.5, "close", holding)  # holds it: nothing to do
+    assert b.down(2.0, "open", holding) and b.down(2.7, "open", holding) and not b.down(2.85, "open", holding)
+    assert b.down(5.0, None, empty) and b.presses == 3  # closed on nothing: opened again
+    assert not b.down(10.0, "close", {})  # fingers it cannot see: no press
