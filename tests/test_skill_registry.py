@@ -35,7 +35,7 @@ def test_registries_hold_the_format_kinds_in_their_documented_order():
     """The order is the one the loader's "expected one of ..." messages list."""
     assert MAPPINGS.names() == ("linear", "vector_field")
     assert CONSTRAINTS.names() == ("tilt_cone", "band", "box", "neighbour_orientation", "speed_near")
-    assert TRANSITIONS.names() == ("hyperplane", "distance", "timeout", "force", "button")
+    assert TRANSITIONS.names() == ("hyperplane", "distance", "timeout", "force", "button", "gripper")
     assert FIELDS.names() == ("translation", "cylinder", "sphere", "point", "general")
     for registry in (MAPPINGS, CONSTRAINTS, TRANSITIONS, FIELDS):
         assert all(registry[name].type == name for name in registry.names())
