@@ -30,7 +30,7 @@ N = 20
 ROBOT = "edan"
 # every published key of the wire contract, and the role that owns it
 OWNER = {"input/pad": "sctd-input", "state": "sctd-robot", "objects/cup": "sctd-robot",
-         "target": "sctd-runtime", "status": "sctd-runtime", "scene": "sctd-robot",
+         "target": "sctd-runtime", "gripper": "sctd-runtime", "status": "sctd-runtime", "scene": "sctd-robot",
          "can": "sctd-robot", "demos/pour/d1": "sctd-recorder",
          "learner/status": "sctd-learner"}
 # queryables and the role that answers each
@@ -38,18 +38,19 @@ ANSWERS = {"skill": "sctd-runtime", "skill/swap": "sctd-runtime", "skill/bundle"
            "learner": "sctd-learner", "sim/reset": "sctd-robot"}
 EVERY = set(OWNER)
 # the roles table: what each role may publish, subscribe, answer and query
-PUB = {"sctd-runtime": {"target", "status"},
+PUB = {"sctd-runtime": {"target", "gripper", "status"},
        "sctd-robot": {"state", "objects/cup", "scene", "can"},
        "sctd-input": {"input/pad"}, "sctd-recorder": {"demos/pour/d1"},
        "sctd-learner": {"learner/status"}, "sctd-operator": set(), "sctd-observer": set()}
 SUB = {"sctd-runtime": {"input/pad", "state", "objects/cup"},
-       "sctd-robot": {"target", "can"},
+       "sctd-robot": {"target", "gripper", "can"},
        "sctd-input": {"target", "state", "scene", "status", "objects/cup"},
        "sctd-recorder": {"state", "objects/cup", "scene"},
        "sctd-learner": {"demos/pour/d1", "status"},
        "sctd-operator": EVERY,
        # the view (sctd view) draws the input and the objects too
-       "sctd-observer": {"target", "state", "status", "scene", "learner/status", "input/pad", "objects/cup"}}
+       "sctd-observer": {"target", "gripper", "state", "status", "scene", "learner/status", "input/pad",
+                         "objects/cup"}}
 ANSWER = {"sctd-runtime": {"skill", "skill/swap", "skill/bundle"}, "sctd-robot": {"sim/reset"},
           "sctd-learner": {"learner"}}
 QUERY = {"sctd-input": {"skill"}, "sctd-learner": {"skill", "skill/swap"},
