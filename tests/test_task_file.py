@@ -357,8 +357,8 @@ def test_a_file_is_found_by_path_and_named_by_its_name_field(tmp_path):
     f = tmp_path / "anything.yaml"
     f.write_text(yaml.safe_dump(doc))
     assert find_task(str(f)).name == "pour_tea"
-    with pytest.raises(TaskError, match=r"no task of that name \(known: cabinet, cup_to_table, drawer, "
-                                        r"(\w+, )*pour.*did you mean 'pour'"):
+    with pytest.raises(TaskError, match=r"no task of that name \(known: bottle_to_fridge, cabinet, "
+                                        r"cup_to_table, drawer, (\w+, )*pour.*did you mean 'pour'"):
         find_task("pout")
 
 

@@ -14,6 +14,7 @@ from ..app.errors import EXIT_FAILED, EXIT_OK, fail
 from ..app.options import TASK_HELP
 from ..task import Task, TaskError, dump_task, find_task, known_tasks, load_task
 from ..task.judge import thresholds
+from ..task.kinds import StepKind
 from ..task.model import AllOf, Body, Compare, Predicate
 from ..task.reader import KINDS
 
@@ -98,9 +99,17 @@ def summary(task: Task) -> dict[str, Any]:
         "fails": [f.reason for f in task.outcome.fail],
         "progress": str(task.outcome.progress),
         "time_limit": task.outcome.time_limit,
-        "intent": [{"name": s.name, "kind": next(k for k, c in KINDS.items() if isinstance(s.action, c))}
-                   for s in task.intent],
+        "facets": {n: {k: f.to_yaml() for k, f in b.facets.items()}
+                   for n, b in sc.bodies.items() if b.facets},
+        "intent": [{"name": s.name, "kind": _step_kind(s.action)} for s in task.intent],
     }
+
+
+def _step_kind(action: Any) -> str:
+    """An intent step's kind, as its file's key names it."""
+    if isinstance(action, StepKind):
+        return action.key
+    return next(k for k, c in KINDS.items() if isinstance(action, c))
 
 
 def _flag_terms(p: Predicate) -> list[str]:
