@@ -264,7 +264,7 @@ def _print_summary(skill: Skill, s: dict[str, Any]) -> None:
             extra = {k: v for k, v in c.items() if k not in ("type", "frame")}
             print(f"    AC {c['type']} on {c['frame']}: {extra}")
         if st.get("gripper") is not None:
-            print(f"    gripper at entry: {st['gripper']}")
+            print(f"    gripper when a transition enters it: {st['gripper']}")
     for t in s["transitions"]:
         extra = {k: v for k, v in t.items() if k not in ("from", "to", "type")}
         print(f"  {t['from']} -> {t['to']} ({t['type']}): {extra}")
