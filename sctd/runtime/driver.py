@@ -26,7 +26,7 @@ from .. import se3
 from ..skill import WORLD_OBJECT, Skill, SkillEngine
 from ..wire import codec
 from ..wire.codec import BUTTON_GRASP
-from .arbiter import MAX_DEVICES, InputArbiter
+from .arbiter import MAX_DEVICES, Command, InputArbiter
 from .controller import Controller, Counters, RuntimeConfig, Sample, TickResult
 from .goals import GoalSet
 from .gripper import GripperControl
@@ -148,7 +148,7 @@ class TickDriver:
         res.gripper = self._grip(now, wall, cmd, res.mode)
         return res
 
-    def _grip(self, now: float, wall: float, cmd, mode: str) -> codec.GripperCmd | None:
+    def _grip(self, now: float, wall: float, cmd: Command, mode: str) -> codec.GripperCmd | None:
         """The gripper's step (:mod:`.gripper`): this tick's grasp presses, the action of a
         state a transition entered, the newest state's reading when it is fresh."""
         state = self.state
