@@ -92,7 +92,7 @@ class Scene(Protocol):
 
 # -- contents that flow --------------------------------------------------------------
 @dataclass(frozen=True)
-class PourGeometry:
+class OutletGeometry:
     """Where the outlet is relative to the container's opening.
 
     Attributes
@@ -116,8 +116,8 @@ class PourGeometry:
     over_opening: bool
 
 
-def pour_geometry(T_world_outlet: np.ndarray, container: Container, T_container_world: np.ndarray
-                  ) -> PourGeometry:
+def outlet_geometry(T_world_outlet: np.ndarray, container: Container, T_container_world: np.ndarray
+                    ) -> OutletGeometry:
     """The outlet relative to the container's opening (``T_container_world``: the
     inverse of the container body's pose), and the outlet's tilt."""
     p = (T_container_world @ T_world_outlet)[:3, 3]
@@ -125,11 +125,12 @@ def pour_geometry(T_world_outlet: np.ndarray, container: Container, T_container_
     radial = math.hypot(x, y)
     tilt = math.acos(min(1.0, max(-1.0, float(T_world_outlet[2, 2]))))
     over = radial <= container.radius - container.rim_margin and 0.0 <= above <= container.max_drop
-    return PourGeometry(p.copy(), above, radial, tilt, over)
+    return OutletGeometry(p.copy(), above, radial, tilt, over)
 
 
-def pour_flow(tilt: float, contents: Contents) -> float:
-    """Flow out of the outlet at ``tilt`` (fraction of the full contents per second)."""
+def outlet_stream(tilt: float, contents: Contents) -> float:
+    """The stream out of the outlet at ``tilt`` (fraction of the full contents per
+    second): none up to the contents' flow angle, then growing with the tilt past it."""
     past = tilt - contents.flow_angle
     if past <= 0.0:
         return 0.0
@@ -163,7 +164,7 @@ class Flow:
         self.spilled = 0.0
         self._tilt: float | None = None
         self._at: tuple[np.ndarray, np.ndarray] | None = None  # (T_world_ee, T_container_world)
-        self._geometry: PourGeometry | None = None
+        self._geometry: OutletGeometry | None = None
 
     def step(self, T_world_ee: np.ndarray, T_world_container: np.ndarray, dt: float) -> None:
         """Pour for ``dt`` s from the hand at ``T_world_ee`` (which must not change
@@ -175,7 +176,7 @@ class Flow:
         self._tilt = tilt = math.acos(min(1.0, max(-1.0, r20 * a0 + r21 * a1 + r22 * a2)))
         self._at = (T_world_ee, self._inverse(T_world_container))
         self._geometry = None
-        out = min(self.remaining, pour_flow(tilt, self.contents) * dt)
+        out = min(self.remaining, outlet_stream(tilt, self.contents) * dt)
         if out > 0.0:
             self.remaining -= out
             g = self.geometry
@@ -185,12 +186,12 @@ class Flow:
                 self.spilled += out
 
     @property
-    def geometry(self) -> PourGeometry | None:
+    def geometry(self) -> OutletGeometry | None:
         """Where the outlet was at the last :meth:`step` (None before one)."""
         if self._geometry is None and self._at is not None:
             T_world_ee, T_container_world = self._at
-            self._geometry = pour_geometry(T_world_ee @ self.T_ee_outlet, self.container,
-                                           T_container_world)
+            self._geometry = outlet_geometry(T_world_ee @ self.T_ee_outlet, self.container,
+                                             T_container_world)
         return self._geometry
 
     def _inverse(self, T: np.ndarray) -> np.ndarray:
@@ -203,7 +204,7 @@ class Flow:
     @property
     def flowing(self) -> bool:
         tilt = self._tilt
-        return tilt is not None and pour_flow(tilt, self.contents) > 0.0 and self.remaining > 0.0
+        return tilt is not None and outlet_stream(tilt, self.contents) > 0.0 and self.remaining > 0.0
 
     def readings(self) -> dict[str, float | bool]:
         n = self.name

@@ -14,7 +14,7 @@ from sctd import se3
 from sctd.task import TaskError, handle_jacobian, handle_pose
 from sctd.task.judge import holds
 from sctd.task.model import Near
-from sctd_sim.scenes import TaskScene, joint_force, make_scene, pour_flow, pour_geometry
+from sctd_sim.scenes import TaskScene, joint_force, make_scene, outlet_geometry, outlet_stream
 from sctd_sim.simulation import Simulation
 from tests.oracles import HandleState, reference_handle_step
 
@@ -57,7 +57,7 @@ def test_start_pose_holds_the_bottle_upright():
     scene = pour_scene()
     T_tip = scene.objects(scene.start_pose())[TIP]
     mug = scene.task.scene.bodies["mug"].container
-    g = pour_geometry(T_tip, mug, se3.invert_transform(scene.poses["mug"]))
+    g = outlet_geometry(T_tip, mug, se3.invert_transform(scene.poses["mug"]))
     assert g.tilt == pytest.approx(0.0, abs=1e-9)
     assert T_tip[2, 3] > scene.start_pose()[2, 3]  # the opening is above the hand
 
@@ -66,23 +66,23 @@ def test_geometry_over_the_opening_and_beside_it():
     scene = pour_scene()
     C, inv = scene.task.scene.bodies["mug"].container, se3.invert_transform(scene.poses["mug"])
     upright = se3.transform_from_rt(np.eye(3), mug_opening(scene))
-    g = pour_geometry(upright, C, inv)
+    g = outlet_geometry(upright, C, inv)
     assert g.over_opening and g.radial == pytest.approx(0.0) and g.tilt == pytest.approx(0.0)
     assert g.above_rim == pytest.approx(0.03)
     beside = se3.transform_from_rt(np.eye(3), mug_opening(scene, radial=(0.05, 0.0)))
-    assert not pour_geometry(beside, C, inv).over_opening
+    assert not outlet_geometry(beside, C, inv).over_opening
     too_high = se3.transform_from_rt(np.eye(3), mug_opening(scene, above=0.5))
-    assert not pour_geometry(too_high, C, inv).over_opening
+    assert not outlet_geometry(too_high, C, inv).over_opening
     below_rim = se3.transform_from_rt(np.eye(3), mug_opening(scene, above=-0.02))
-    assert not pour_geometry(below_rim, C, inv).over_opening
+    assert not outlet_geometry(below_rim, C, inv).over_opening
 
 
 def test_flow_only_past_the_pouring_angle():
     c = pour_scene().task.scene.held.contents
     assert c.flow_angle == pytest.approx(math.radians(75.0))
-    assert pour_flow(c.flow_angle - 0.01, c) == 0.0
-    assert pour_flow(c.flow_angle + 0.3, c) > pour_flow(c.flow_angle + 0.1, c) > 0.0
-    assert pour_flow(math.pi, c) <= c.flow_rate
+    assert outlet_stream(c.flow_angle - 0.01, c) == 0.0
+    assert outlet_stream(c.flow_angle + 0.3, c) > outlet_stream(c.flow_angle + 0.1, c) > 0.0
+    assert outlet_stream(math.pi, c) <= c.flow_rate
 
 
 def test_pouring_over_the_mug_fills_it_without_spilling():
