@@ -9,6 +9,7 @@ from .options import (
     SKILL_HELP,
     TASK_HELP,
     add_arguments,
+    add_deprecated_alias,
     add_robot_argument,
     add_task_argument,
     add_zenoh_arguments,
@@ -18,5 +19,5 @@ from .options import (
 )
 
 __all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_FORCED", "EXIT_OK", "EXIT_USAGE", "SKILL_HELP", "TASK_HELP",
-           "Parser", "add_arguments", "add_robot_argument", "add_task_argument", "add_zenoh_arguments",
-           "check_ranges", "fail", "flag_name", "from_namespace"]
+           "Parser", "add_arguments", "add_deprecated_alias", "add_robot_argument", "add_task_argument",
+           "add_zenoh_arguments", "check_ranges", "fail", "flag_name", "from_namespace"]

@@ -35,8 +35,8 @@ from typing import Any, TypeVar
 from ..wire import DEFAULT_ROBOT
 from ..wire.session import add_zenoh_arguments
 
-__all__ = ["SKILL_HELP", "TASK_HELP", "add_arguments", "add_robot_argument", "add_task_argument",
-           "add_zenoh_arguments", "check_ranges", "flag_name", "from_namespace"]
+__all__ = ["SKILL_HELP", "TASK_HELP", "add_arguments", "add_deprecated_alias", "add_robot_argument",
+           "add_task_argument", "add_zenoh_arguments", "check_ranges", "flag_name", "from_namespace"]
 
 T = TypeVar("T")
 
@@ -165,6 +165,15 @@ class _DeprecatedAlias(argparse.Action):
         print(f"{parser.prog}: {option_string} is deprecated (it goes in the next release): use "
               f"{self.instead}", file=sys.stderr, flush=True)
         setattr(namespace, self.dest, values)
+
+
+def add_deprecated_alias(parser: argparse.ArgumentParser | argparse._ArgumentGroup, option: str, dest: str,
+                         instead: str, **kwargs: Any) -> None:
+    """``option``, a flag of the previous release, kept as a deprecated alias: it sets
+    ``dest`` as the flag ``instead`` does (``kwargs``: its ``type``, ...), is left out of
+    ``--help`` and says on stderr that it is deprecated."""
+    parser.add_argument(option, dest=dest, action=_DeprecatedAlias, instead=instead,
+                        help=argparse.SUPPRESS, **kwargs)
 
 
 class _Several(argparse.Action):
