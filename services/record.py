@@ -5,7 +5,10 @@ Samples, at a fixed rate, the newest ``sctd/<robot>/state`` and
 frame, ``T_obj_ee = T_world_obj^-1 T_world_ee``, as the learner's CSV
 (``t,x,y,z,qx,qy,qz,qw``, see :mod:`sctd.learn.demos`), ``t`` from 0 on the state's
 own clock (its ``stamp``), strictly increasing (a sample whose state has not advanced
-is skipped), quaternions unit and in the ``qw >= 0`` hemisphere.
+is skipped), quaternions unit and in the ``qw >= 0`` hemisphere. Where the first sampled
+state carries a gripper reading, every row also has the fingers' ``gripper`` width (m)
+and ``grasped`` (0/1) (``t,x,y,z,qx,qy,qz,qw,gripper,grasped``; a later state without a
+reading repeats the last one); otherwise the file is exactly the pose's columns.
 
 Files: the rows go to a hidden ``.demo-*.part`` file in the output folder, flushed as
 they are written; on exit (``--duration`` elapsed, SIGINT or SIGTERM) it is synced and
@@ -51,6 +54,7 @@ from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
 COLUMNS = ",".join(codec.DEMO_COLUMNS)  # the CSV header: the learner's columns (sctd.learn.demos)
+GRIPPER_COLUMNS = ",".join(codec.DEMO_COLUMNS + codec.DEMO_GRIPPER_COLUMNS)  # ... with the fingers
 MIN_ROWS = codec.MIN_DEMO_ROWS  # sctd.learn.demos.MIN_SAMPLES: the learner refuses shorter ones
 # s the session stays open after the demonstration is put, so that it leaves this
 # process before the session closes (Zenoh may drop what is still queued then)
@@ -67,8 +71,15 @@ def row_from_poses(t: float, pose_world_ee: list[float], pose_world_obj: list[fl
 
 
 def format_row(row: list[float]) -> str:
-    """One CSV line (time to the microsecond, poses to 1e-9)."""
-    return f"{row[0]:.6f}," + ",".join(f"{x:.9f}" for x in row[1:]) + "\n"
+    """One CSV line (time to the microsecond, poses to 1e-9; a row of 10 has the fingers'
+    width to the micrometre and grasped as 0 or 1)."""
+    grip = f",{row[8]:.6f},{int(row[9])}" if len(row) > 8 else ""
+    return f"{row[0]:.6f}," + ",".join(f"{x:.9f}" for x in row[1:8]) + grip + "\n"
+
+
+def gripper_values(reading: codec.GripperReading) -> list[float]:
+    """A row's ``gripper`` and ``grasped`` from a state's gripper reading."""
+    return [float(reading.width), 1.0 if reading.grasped else 0.0]
 
 
 def publish_final(tmp: Path, out_dir: Path, prefix: str = "demo_") -> Path:
@@ -162,11 +173,16 @@ class Recorder:
 
     def sample(self) -> tuple[float, list[float], list[float]] | None:
         """(state stamp, ee pose, object pose), or None until both have arrived."""
+        s = self.sample_gripper()
+        return None if s is None else s[:3]
+
+    def sample_gripper(self) -> tuple[float, list[float], list[float], codec.GripperReading | None] | None:
+        """:meth:`sample` and the same state's gripper reading (None: it has none)."""
         st = self.state
         obj = self.objects.get(self.object_name) if self.object_name else None
         if st is None or obj is None:
             return None
-        return st.stamp, st.pose, obj
+        return st.stamp, st.pose, obj, st.gripper
 
 
 class Take:
@@ -200,8 +216,8 @@ class Take:
     Attributes
     ----------
     rows : list of list of float
-        The rows as written (``t, x, y, z, qx, qy, qz, qw``), so the file and the
-        message agree.
+        The rows as written (``t, x, y, z, qx, qy, qz, qw`` and, where the state has a
+        gripper, ``gripper, grasped``), so the file and the message agree.
     path : Path or None
         The kept file.
     key : str or None
@@ -224,12 +240,12 @@ class Take:
         self._error: BaseException | None = None
 
     def __enter__(self) -> Take:
-        """Create the part file with the CSV header."""
+        """Create the part file (its CSV header comes with the first row: its columns
+        depend on whether the state has a gripper)."""
         fd, name = _mkstemp(self.out_dir)
         self._part = Path(name)
         try:
             self._fh = os.fdopen(fd, "w", newline="")
-            self._fh.write(COLUMNS + "\n")
         except BaseException:
             self._part.unlink(missing_ok=True)
             raise
@@ -428,19 +444,21 @@ def _record_rows(rec: Recorder, fh: TextIO, rate: float, min_distance: float, st
     """One row per tick at ``rate`` Hz until ``stop`` or ``duration`` s, skipping samples
     whose state has not advanced or that lie closer than ``min_distance`` to the last
     row; each row written is appended to ``out`` (as written: the file and the message
-    agree)."""
+    agree). The first row fixes the columns and writes the header: the gripper's too
+    when its state has a gripper reading (then a state without one repeats the last)."""
     ticker = Ticker(1.0 / rate, spin=0.0)
     end = None if duration is None else time.monotonic() + duration
     t0 = last_t = None
     last_p = None
+    grip: list[float] | None = None  # the newest gripper values, once the columns have them
     while not stop.is_set():
         now, _ = ticker.wait()
         if end is not None and now >= end:
             break
-        s = rec.sample()
+        s = rec.sample_gripper()
         if s is None:
             continue
-        stamp, pose_ee, pose_obj = s
+        stamp, pose_ee, pose_obj, reading = s
         if t0 is None:
             t0 = stamp
         t = stamp - t0
@@ -449,6 +467,12 @@ def _record_rows(rec: Recorder, fh: TextIO, rate: float, min_distance: float, st
         row = row_from_poses(t, pose_ee, pose_obj)
         if last_p is not None and min_distance > 0 and math.dist(row[1:4], last_p) < min_distance:
             continue
+        if not out:  # the first row: the header, with the gripper's columns if it has a reading
+            grip = None if reading is None else gripper_values(reading)
+            fh.write((COLUMNS if grip is None else GRIPPER_COLUMNS) + "\n")
+        if grip is not None:
+            grip = gripper_values(reading) if reading is not None else grip
+            row += grip
         line = format_row(row)
         fh.write(line)
         fh.flush()

@@ -42,6 +42,7 @@ from .demos import (
     tf_distance,
 )
 from .graphcut import alpha_beta_swap, alpha_expansion, energy
+from .gripper import GripperError, GripperOptions, GripperPlan, plan_gripper, with_gripper
 from .linear import (
     SELECTIONS,
     IMLabel,
@@ -77,6 +78,9 @@ __all__ = [
     "STAGES",
     "Demo",
     "DemoError",
+    "GripperError",
+    "GripperOptions",
+    "GripperPlan",
     "HyperparameterError",
     "IMLabel",
     "LinearIMLearner",
@@ -107,6 +111,7 @@ __all__ = [
     "learn_vector_fields",
     "least_squares_command",
     "neighbour_graph",
+    "plan_gripper",
     "ransac_iterations",
     "read_demo_csv",
     "read_demos",
@@ -119,4 +124,5 @@ __all__ = [
     "subsample_by_distance",
     "tf_distance",
     "unit_vectors",
+    "with_gripper",
 ]

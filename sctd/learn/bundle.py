@@ -35,6 +35,7 @@ from ..skill import (
 from ..skill.frames import builtin_frames
 from ..skill.reader import Reader
 from ..skill.summary import field_summary
+from .gripper import gripper_lines, with_gripper
 from .linear import AXIS_NAMES
 from .results import LinearResult, VectorFieldResult, speed_near_from_text
 
@@ -97,12 +98,27 @@ def linear_skill(result: LinearResult, name: str) -> Skill:
         # The way back on the same plane: the margins leave a dead band between them.
         transitions.append(Hyperplane(source=b, target=a, frame=h.frame, normal=-n, offset=-o,
                                       margin=h.margin))
-    return Skill(
+    return _gripped(result, Skill(
         name=name, object=result.options.object, frames=frames, states=_capped(states, result),
         transitions=tuple(transitions), start=state_name(0), end=state_name(len(L.states_) - 1),
         limits=_limits(result), min_dwell=0.1,
         description=(f"Learned by sctd learn --method linear from {len(result.prepared)} "
-                     "demonstrations (linear IMs, alpha-beta swap, linear-SVM transitions)."))
+                     "demonstrations (linear IMs, alpha-beta swap, linear-SVM transitions).")))
+
+
+def _gripped(result: LinearResult | VectorFieldResult, skill: Skill) -> Skill:
+    """``skill`` split at the demonstrations' gripper events, each a state that commands
+    the gripper (:mod:`sctd.learn.gripper`); unchanged without events."""
+    if result.gripper is None:
+        return skill
+    return with_gripper(skill, result.labels, result.gripper, result.gripper_options)
+
+
+def _gripper_header(result: LinearResult | VectorFieldResult, skill: Skill) -> str:
+    if result.gripper is None:
+        return ""
+    return "\n".join(["", "Gripper (the demonstrations' events, states renamed in order):",
+                      *(f"  {line}" for line in gripper_lines(result.gripper, skill))])
 
 
 def _linear_header(result: LinearResult) -> str:
@@ -214,11 +230,11 @@ def vf_skill(result: VectorFieldResult, name: str) -> Skill:
                      direction="below", margin=0.0)
             for h in plan.transitions)
         min_dwell = 0.1
-    return Skill(name=name, object=result.options.object, frames=builtin_frames(),
-                 states=_capped(states, result),
-                 transitions=transitions, start=names[0], end=names[-1], limits=_limits(result),
-                 min_dwell=min_dwell, description=description,
-                 candidate_frames=tuple(L.candidate_frames_))
+    return _gripped(result, Skill(name=name, object=result.options.object, frames=builtin_frames(),
+                                  states=_capped(states, result),
+                                  transitions=transitions, start=names[0], end=names[-1],
+                                  limits=_limits(result), min_dwell=min_dwell, description=description,
+                                  candidate_frames=tuple(L.candidate_frames_)))
 
 
 def state_model_files(result: VectorFieldResult, model: str) -> list[str]:
@@ -258,5 +274,7 @@ def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
         A vector-field result without any field.
     """
     if isinstance(result, LinearResult):
-        return bundle_from_skill(linear_skill(result, name), _linear_header(result))
-    return bundle_from_skill(vf_skill(result, name), _vf_header(result))
+        skill = linear_skill(result, name)
+        return bundle_from_skill(skill, _linear_header(result) + _gripper_header(result, skill))
+    skill = vf_skill(result, name)
+    return bundle_from_skill(skill, _vf_header(result) + _gripper_header(result, skill))

@@ -2,9 +2,11 @@
 
 A demonstration is a CSV file with the header ``t,x,y,z,qx,qy,qz,qw`` (other columns
 are ignored): the end-effector pose over time in the task object's frame
-(``T_obj_ee``). :func:`read_demos` reads a folder of them and either returns every
-demonstration or raises :class:`DemoError` naming the file, the row and the reason;
-nothing is half-loaded.
+(``T_obj_ee``). Optionally, both or neither, ``gripper`` (the fingers' width, m) and
+``grasped`` (0/1: they hold something), the hand's fingers (:data:`GRIPPER_COLUMNS`).
+:func:`read_demos` reads a folder of them and either returns every demonstration or
+raises :class:`DemoError` naming the file, the row (and column) and the reason; nothing
+is half-loaded.
 
 Preprocessing (pure functions on arrays): :func:`spike_mask` drops isolated gross
 outliers (a Hampel filter; the thesis has none, Ch. 6), :func:`smooth_poses` averages
@@ -36,6 +38,8 @@ from ..files import FileError, open_regular
 Array = NDArray[np.float64]
 
 COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
+GRIPPER_COLUMNS = ("gripper", "grasped")  # optional, both or neither
+MAX_GRIPPER_WIDTH = 0.5  # m: the wire contract's (sctd.wire.codec.MAX_GRIPPER_WIDTH)
 QUAT_TOLERANCE = 1e-3
 MIN_SAMPLES = 10
 
@@ -56,7 +60,9 @@ class DemoError(ValueError):
 
 @dataclass(frozen=True)
 class Demo:
-    """One demonstration: times (n,) and end-effector poses (n, 7) in the object frame.
+    """One demonstration: times (n,) and end-effector poses (n, 7) in the object frame,
+    and, where it has the gripper's columns, the fingers' ``width`` (n,) in m and
+    ``grasped`` (n,) of bool (None without them).
 
     Quaternions are normalised to the canonical hemisphere (qw >= 0).
     """
@@ -64,6 +70,8 @@ class Demo:
     name: str
     t: Array
     poses: Array
+    width: Array | None = None
+    grasped: NDArray[np.bool_] | None = None
 
     @property
     def T(self) -> Array:
@@ -79,6 +87,8 @@ MAX_DEMO_ROWS = 100_000  # over 16 minutes at 100 Hz (as the wire contract's dem
 
 
 def _rows(name: str, reader: Any, quat_tolerance: float) -> list[list[float]]:
+    """The rows' values of ``COLUMNS`` (and of ``GRIPPER_COLUMNS`` where the header has
+    them), validated."""
     cols, width = _columns(name, next(reader, None))
     rows: list[list[float]] = []
     for k, rec in enumerate(reader, start=1):
@@ -125,12 +135,15 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
         raise DemoError(name, len(rows) or None,
                         f"too few samples: {len(rows)} rows, need at least {min_samples}")
     a = np.array(rows)
-    return Demo(name=path.name, t=a[:, 0], poses=np.concatenate(
-        [a[:, 1:4], se3.quaternion_normalize(a[:, 4:8])], axis=1))
+    poses = np.concatenate([a[:, 1:4], se3.quaternion_normalize(a[:, 4:8])], axis=1)
+    if a.shape[1] == len(COLUMNS):
+        return Demo(name=path.name, t=a[:, 0], poses=poses)
+    return Demo(name=path.name, t=a[:, 0], poses=poses, width=a[:, 8], grasped=a[:, 9] == 1.0)
 
 
 def _columns(name: str, header: list[str] | None) -> tuple[list[int], int]:
-    """Index of each of ``COLUMNS`` in the header, and the header's width."""
+    """Index of each of ``COLUMNS`` in the header (and of ``GRIPPER_COLUMNS`` after them,
+    where it has both), and the header's width."""
     if header is None:
         raise DemoError(name, None, f"empty file (expected the header {','.join(COLUMNS)})")
     header = [h.strip() for h in header]
@@ -138,16 +151,23 @@ def _columns(name: str, header: list[str] | None) -> tuple[list[int], int]:
     if missing:
         raise DemoError(name, None, f"missing column(s) {', '.join(missing)} "
                         f"(header must contain {','.join(COLUMNS)})")
-    return [header.index(c) for c in COLUMNS], len(header)
+    grip = [c for c in GRIPPER_COLUMNS if c in header]
+    if grip and len(grip) < len(GRIPPER_COLUMNS):
+        lacking = next(c for c in GRIPPER_COLUMNS if c not in grip)
+        raise DemoError(name, None, f"column {grip[0]} without column {lacking} (the gripper's "
+                        f"columns {','.join(GRIPPER_COLUMNS)} come both or neither)")
+    return [header.index(c) for c in COLUMNS + tuple(grip)], len(header)
 
 
 def _row(name: str, k: int, rec: list[str], cols: list[int], width: int,
          quat_tolerance: float) -> list[float]:
-    """The values of ``COLUMNS`` in data row ``k``: finite numbers, a unit quaternion."""
+    """The values of ``COLUMNS`` (and the gripper's, where ``cols`` has them) in data row
+    ``k``: finite numbers, a unit quaternion, a width in [0, MAX_GRIPPER_WIDTH] m,
+    grasped 0 or 1."""
     if len(rec) < width:
         raise DemoError(name, k, f"expected {width} values, got {len(rec)}")
     vals = []
-    for c, j in zip(COLUMNS, cols, strict=True):
+    for c, j in zip(COLUMNS + GRIPPER_COLUMNS, cols, strict=False):
         s = rec[j].strip()
         try:
             v = float(s)
@@ -156,10 +176,16 @@ def _row(name: str, k: int, rec: list[str], cols: list[int], width: int,
         if not math.isfinite(v):
             raise DemoError(name, k, f"column {c}: not finite ({s})")
         vals.append(v)
-    qn = math.sqrt(sum(x * x for x in vals[4:]))
+    qn = math.sqrt(sum(x * x for x in vals[4:8]))
     if abs(qn - 1.0) > quat_tolerance:
         raise DemoError(name, k, f"quaternion (qx, qy, qz, qw) has norm {qn:.6f}, "
                         f"not unit (tolerance {quat_tolerance})")
+    if len(vals) > len(COLUMNS):
+        if not 0.0 <= vals[8] <= MAX_GRIPPER_WIDTH:
+            raise DemoError(name, k, f"column gripper: width {vals[8]:g} m not in "
+                            f"[0, {MAX_GRIPPER_WIDTH:g}]")
+        if vals[9] not in (0.0, 1.0):
+            raise DemoError(name, k, f"column grasped: {rec[cols[9]].strip()!r} is not 0 or 1")
     return vals
 
 

@@ -21,6 +21,7 @@ from ..skill import Skill, skill_from_bundle
 from .bundle import skill_bundle
 from .demos import Demo
 from .frames import automatic_frames, frames_to_use
+from .gripper import GripperOptions, plan_gripper
 from .linear import LinearIMLearner, Progress
 from .params import HyperparameterError, check_params, param_problem
 from .preprocess import Preprocessing, preprocess, raw_labels
@@ -37,15 +38,15 @@ STAGES: dict[str, tuple[str, ...]] = {
 """The stage names a ``progress`` callback is called with, per method, in order."""
 
 _PARTS: dict[str, tuple[type, ...]] = {
-    "linear": (Preprocessing, LinearIMLearner, SkillOptions),
-    "vf": (Preprocessing, VectorFieldLearner, SkillOptions, VectorFieldOptions),
+    "linear": (Preprocessing, LinearIMLearner, SkillOptions, GripperOptions),
+    "vf": (Preprocessing, VectorFieldLearner, SkillOptions, VectorFieldOptions, GripperOptions),
 }
 
 
 def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = None, *,
                  learner: LinearIMLearner | None = None,
                  preprocessing: Preprocessing | None = None, options: SkillOptions | None = None,
-                 progress: Progress | None = None) -> LinearResult:
+                 progress: Progress | None = None, gripper: GripperOptions | None = None) -> LinearResult:
     """Linear IMs (Ch. 4.1, Algorithm 1) from demonstrations.
 
     Parameters
@@ -61,9 +62,15 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     options : SkillOptions, optional
     progress : callable(str), optional
         Called with each stage of ``STAGES["linear"]`` as it ends.
+    gripper : GripperOptions, optional
+        How the demonstrations' gripper events (if they have any) become states
+        (:mod:`sctd.learn.gripper`).
 
     Raises
     ------
+    sctd.learn.gripper.GripperError
+        Demonstrations whose gripper events differ, or some with the gripper's columns and
+        some without.
     sctd.learn.traps.TrapError
         A learned state traps the user (Ch. 6.2) and has no free input axis; one with a
         free axis gets the missing DoF (``result.traps`` says which).
@@ -71,8 +78,10 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     learner = LinearIMLearner() if learner is None else learner
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
     options = SkillOptions() if options is None else options
-    for part in (preprocessing, learner, options):
+    gripper = GripperOptions() if gripper is None else gripper
+    for part in (preprocessing, learner, options, gripper):
         check_params(part)  # before any work: a value out of range is named, not trained
+    events = plan_gripper(demos, gripper)  # before any work too: mixed columns are refused
     t0 = time.perf_counter()
     found = []
     if not frames and learner.auto_frames:
@@ -90,14 +99,15 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings, traps,
-                        found_frames=found)
+                        found_frames=found, gripper=events, gripper_options=gripper)
 
 
 def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None = None,
                         preprocessing: Preprocessing | None = None,
                         options: SkillOptions | None = None,
                         field_options: VectorFieldOptions | None = None,
-                        progress: Progress | None = None) -> VectorFieldResult:
+                        progress: Progress | None = None,
+                        gripper: GripperOptions | None = None) -> VectorFieldResult:
     """Vector fields (Ch. 4.2, Algorithm 4) from demonstrations (ee positions).
 
     Parameters as :func:`learn_linear`; ``field_options`` are the vector-field skill's
@@ -107,8 +117,10 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     preprocessing = Preprocessing() if preprocessing is None else preprocessing
     options = SkillOptions() if options is None else options
     field_options = VectorFieldOptions() if field_options is None else field_options
-    for part in (preprocessing, learner, options, field_options):
+    gripper = GripperOptions() if gripper is None else gripper
+    for part in (preprocessing, learner, options, field_options, gripper):
         check_params(part)  # before any work: a value out of range is named, not trained
+    events = plan_gripper(demos, gripper)
     t0 = time.perf_counter()
     prepared = preprocess(demos, preprocessing, preprocessing.vf_spacing, 0.0,
                           translation_only=True)
@@ -130,7 +142,8 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
         labels[p.name] = _states_of(field_labels[p.name], state_of)
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     return VectorFieldResult(preprocessing, SkillOptions() if options is None else options,
-                             field_options, prepared, learner, labels, field_labels, timings, plan)
+                             field_options, prepared, learner, labels, field_labels, timings, plan,
+                             gripper=events, gripper_options=gripper)
 
 
 def _states_of(fields: list[int], state_of: dict[int, int]) -> list[int]:
@@ -220,14 +233,14 @@ def learn(demos: list[Demo], method: str = "linear", *,
     """
     parts = _parts(_check_method(method), hyperparameters)
     if method == "linear":
-        prep, lin, options = parts
+        prep, lin, options, gripper = parts
         return learn_linear(demos, frames, learner=lin, preprocessing=prep, options=options,
-                            progress=progress)
+                            progress=progress, gripper=gripper)
     if frames:
         raise TypeError("frames are candidate frames of linear IMs; vector fields find their own")
-    prep, vf, options, field_options = parts
+    prep, vf, options, field_options, gripper = parts
     return learn_vector_fields(demos, learner=vf, preprocessing=prep, options=options,
-                               field_options=field_options, progress=progress)
+                               field_options=field_options, progress=progress, gripper=gripper)
 
 
 def learn_skill(demos: list[Demo], method: str = "linear", *, name: str = "skill",

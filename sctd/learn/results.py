@@ -17,6 +17,7 @@ from ..skill import SkillError, SpeedNear
 from ..skill.frames import builtin_frames
 from ..skill.reader import Reader
 from .frames import FoundFrame
+from .gripper import GripperOptions, GripperPlan
 from .linear import LinearIMLearner
 from .params import Interval, OneOf, Text, Valid, get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
@@ -185,11 +186,14 @@ class LinearResult:
     timings: dict[str, float] = field(default_factory=dict)
     traps: list[TrapFinding] = field(default_factory=list)  # per transition (sctd.learn.traps)
     found_frames: list[FoundFrame] = field(default_factory=list)  # found, not given (frames.py)
+    gripper: GripperPlan | None = None  # the demonstrations' gripper events (gripper.py), if any
+    gripper_options: GripperOptions = field(default_factory=GripperOptions)
 
     def hyperparameters(self) -> dict[str, Any]:
-        """Every hyperparameter of the run, by name."""
+        """Every hyperparameter of the run, by name (the gripper's where the
+        demonstrations have gripper events)."""
         return {**get_params(self.preprocessing), **get_params(self.learner),
-                **get_params(self.options)}
+                **get_params(self.options), **_gripper_params(self)}
 
 
 @dataclass
@@ -205,8 +209,17 @@ class VectorFieldResult:
     field_labels: dict[str, list[int]]  # demo -> field index (-1 outlier) per raw displacement
     timings: dict[str, float] = field(default_factory=dict)
     plan: StatePlan = field(default_factory=StatePlan)  # the fields as states, or why not
+    gripper: GripperPlan | None = None  # the demonstrations' gripper events (gripper.py), if any
+    gripper_options: GripperOptions = field(default_factory=GripperOptions)
 
     def hyperparameters(self) -> dict[str, Any]:
-        """Every hyperparameter of the run, by name."""
+        """Every hyperparameter of the run, by name (the gripper's where the
+        demonstrations have gripper events)."""
         return {**get_params(self.preprocessing), **get_params(self.learner),
-                **get_params(self.options), **get_params(self.field_options)}
+                **get_params(self.options), **get_params(self.field_options), **_gripper_params(self)}
+
+
+def _gripper_params(result: LinearResult | VectorFieldResult) -> dict[str, Any]:
+    """The gripper's hyperparameters where they were used (else none: a run on
+    demonstrations without gripper events reports what it always did)."""
+    return {} if result.gripper is None else get_params(result.gripper_options)

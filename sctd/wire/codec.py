@@ -393,6 +393,9 @@ def _gripper_reading(obj: dict) -> GripperReading | None:
 # --- demonstrations (sctd/<robot>/demos/<task>/<name>) ----------------------------------
 
 DEMO_COLUMNS = ("t", "x", "y", "z", "qx", "qy", "qz", "qw")
+# Optional, after the pose, both or neither: the fingers' width (m, the state's
+# ``gripper.width``) and whether they hold something (0/1, its ``grasped``).
+DEMO_GRIPPER_COLUMNS = ("gripper", "grasped")
 MAX_DEMO_BYTES = 16 * 1024 * 1024  # a message's bytes
 MAX_DEMO_ROWS = 100_000  # rows of one demonstration: over 16 minutes at 100 Hz
 MIN_DEMO_ROWS = 10  # what the learner needs (sctd.learn.demos.MIN_SAMPLES)
@@ -404,6 +407,14 @@ class DemoMsg(NamedTuple):
     name: str
     object: str
     rows: list[list[float]]  # t, x, y, z, qx, qy, qz, qw: the ee in the object's frame
+    columns: tuple[str, ...] = DEMO_COLUMNS  # or DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS
+
+
+def demo_columns(rows: list[list[float]]) -> tuple[str, ...]:
+    """The columns of demonstration rows: the pose's, and the gripper's when the rows
+    carry them (10 numbers each)."""
+    with_gripper = bool(rows) and len(rows[0]) == len(DEMO_COLUMNS) + len(DEMO_GRIPPER_COLUMNS)
+    return DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS if with_gripper else DEMO_COLUMNS
 
 
 MAX_NAME = 64  # characters of a task, demonstration, object or skill name
@@ -438,17 +449,21 @@ def _chunk(obj: dict, key: str) -> str:
 
 def encode_demo(task: str, name: str, object_name: str, rows: list[list[float]]) -> bytes:
     """A finished demonstration: rows ``t, x, y, z, qx, qy, qz, qw`` (the end-effector in
-    the task object's frame, ``t`` from 0, strictly increasing)."""
-    return pack({"task": task, "name": name, "object": object_name, "columns": list(DEMO_COLUMNS),
+    the task object's frame, ``t`` from 0, strictly increasing), each followed by
+    ``gripper, grasped`` where the rows carry the fingers (:func:`demo_columns`)."""
+    return pack({"task": task, "name": name, "object": object_name,
+                 "columns": list(demo_columns(rows)),
                  "rows": [[float(x) for x in r] for r in rows]})
 
 
 def decode_demo(data: bytes) -> DemoMsg:
     """``sctd/<robot>/demos/<task>/<name>``: task, name, object, columns (exactly
-    :data:`DEMO_COLUMNS`) and :data:`MIN_DEMO_ROWS` to :data:`MAX_DEMO_ROWS` rows (bounded
-    while unpacking) of 8 finite numbers,
-    ``t`` strictly increasing, quaternions unit. A bad row is named by its index
-    (``bad_rows: row 12: ...``)."""
+    :data:`DEMO_COLUMNS`, or those and :data:`DEMO_GRIPPER_COLUMNS`) and
+    :data:`MIN_DEMO_ROWS` to :data:`MAX_DEMO_ROWS` rows (bounded while unpacking) of 8
+    (or 10) finite numbers,
+    ``t`` strictly increasing, quaternions unit, ``gripper`` in [0, MAX_GRIPPER_WIDTH] m
+    and ``grasped`` 0 or 1. A bad row is named by its index and a bad value by its column
+    (``bad_rows: row 12: column grasped: ...``)."""
     _size(data, MAX_DEMO_BYTES)
     try:
         obj = unpack_map(data, max_array_len=MAX_DEMO_ROWS)
@@ -457,33 +472,49 @@ def decode_demo(data: bytes) -> DemoMsg:
             raise DecodeError("bad_rows", f"more than {MAX_DEMO_ROWS} rows ({e})") from None
         raise
     task, name, object_name = _chunk(obj, "task"), _chunk(obj, "name"), _chunk(obj, "object")
-    if obj.get("columns") != list(DEMO_COLUMNS):
-        raise DecodeError("bad_columns", f"expected {list(DEMO_COLUMNS)}")
+    columns = obj.get("columns")
+    if columns not in (list(DEMO_COLUMNS), list(DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS)):
+        raise DecodeError("bad_columns", f"expected {list(DEMO_COLUMNS)}, optionally followed by "
+                                         f"{list(DEMO_GRIPPER_COLUMNS)}")
+    assert isinstance(columns, list)
     rows = obj.get("rows")
     if not isinstance(rows, list) or len(rows) < MIN_DEMO_ROWS:
         raise DecodeError("bad_rows", f"expected a list of at least {MIN_DEMO_ROWS} rows")
     out = []
     last_t = -math.inf
     for k, row in enumerate(rows):
-        problem = _demo_row_problem(row, last_t)
+        problem = _demo_row_problem(row, last_t, len(columns))
         if problem:
             raise DecodeError("bad_rows", f"row {k}: {problem}")
         out.append(list(map(float, row)))
         last_t = row[0]
-    return DemoMsg(task, name, object_name, out)
+    return DemoMsg(task, name, object_name, out, tuple(columns))
 
 
-def _demo_row_problem(row: Any, last_t: float) -> str:
-    """What is wrong with one demonstration row ("" when nothing is)."""
-    if not isinstance(row, list | tuple) or len(row) != len(DEMO_COLUMNS):
-        return f"expected {len(DEMO_COLUMNS)} numbers"
+def _demo_row_problem(row: Any, last_t: float, width: int = len(DEMO_COLUMNS)) -> str:
+    """What is wrong with one demonstration row of ``width`` numbers ("" when nothing
+    is)."""
+    if not isinstance(row, list | tuple) or len(row) != width:
+        return f"expected {width} numbers"
     if not _NUMBERS.issuperset(map(type, row)) or not _finite(list(row)):
         return "not all finite numbers"
     if row[0] <= last_t:
         return f"t {row[0]!r} not after the previous row's {last_t!r}"
-    qn = math.sqrt(sum(q * q for q in row[4:]))
+    qn = math.sqrt(sum(q * q for q in row[4:8]))
     if abs(qn - 1.0) > DEMO_QUAT_TOLERANCE:
         return f"quaternion norm {qn:.6f} is not unit (tolerance {DEMO_QUAT_TOLERANCE})"
     if max(abs(row[1]), abs(row[2]), abs(row[3])) > MAX_POSITION:
         return f"position beyond {MAX_POSITION:g} m"
+    if width > len(DEMO_COLUMNS):
+        return demo_gripper_problem(row[8], row[9])
+    return ""
+
+
+def demo_gripper_problem(width: float, grasped: float) -> str:
+    """What is wrong with a demonstration row's ``gripper`` and ``grasped`` ("" when
+    nothing is): the width in [0, :data:`MAX_GRIPPER_WIDTH`] m, grasped 0 or 1."""
+    if not 0.0 <= width <= MAX_GRIPPER_WIDTH:
+        return f"column gripper: width {width!r} m not in [0, {MAX_GRIPPER_WIDTH:g}]"
+    if grasped not in (0, 1):
+        return f"column grasped: {grasped!r} is not 0 or 1"
     return ""

@@ -63,9 +63,11 @@ def _write_atomic(path: Path, data: bytes) -> None:
 
 
 def csv_text(rows: list[list[float]]) -> str:
-    """A demonstration's CSV (the recorder's format: time to the microsecond)."""
-    lines = [COLUMNS]
-    lines += [f"{r[0]:.6f}," + ",".join(f"{x:.9f}" for x in r[1:]) for r in rows]
+    """A demonstration's CSV (the recorder's format: time to the microsecond, poses to
+    1e-9, the fingers' width to the micrometre and grasped 0/1 where the rows have them)."""
+    lines = [",".join(codec.demo_columns(rows))]
+    lines += [f"{r[0]:.6f}," + ",".join(f"{x:.9f}" for x in r[1:8])
+              + (f",{r[8]:.6f},{int(r[9])}" if len(r) > 8 else "") for r in rows]
     return "\n".join(lines) + "\n"
 
 
