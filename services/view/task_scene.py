@@ -37,10 +37,10 @@ Array = NDArray[np.float64]
 
 WALL = 0.6  # m: the side of a surface's slab as drawn
 WALL_DEPTH = 0.02  # m: its thickness behind the plane
-DRAWER_FRONT = (0.40, 0.16)  # m: a drawer front's width and height
-DRAWER_DEPTH = 0.30  # m: the drawer's box behind its front
+BOX_FRONT = (0.40, 0.16)  # m: a prismatic joint's box (a drawer): its front's width and height
+BOX_DEPTH = 0.30  # m: the box's depth behind its front
 HANDLE_OUT = 0.03  # m: how far a handle stands out of its drawer front or door
-DOOR_THICKNESS = 0.02  # m
+PANEL_THICKNESS = 0.02  # m: a revolute joint's panel (a door)
 HELD_RADIUS = 0.03  # m: the held object's cylinder
 RGB = {"container": (110, 110, 130), "surface": (170, 170, 160), "button": (200, 60, 60),
        "head": (225, 185, 150), "joint": (150, 110, 70), "held": (70, 150, 70)}
@@ -139,9 +139,9 @@ def _turn_z_to_x() -> Array:
 def _joint_mesh(j) -> trimesh.Trimesh:
     """The part that moves with a joint's handle, in the handle's frame (x out of it)."""
     if j.hinge is None:  # a drawer: its front behind the handle and the box behind it
-        w, h = DRAWER_FRONT
-        box = trimesh.creation.box(extents=(DRAWER_DEPTH, w, h))
-        box.apply_translation((-HANDLE_OUT - DRAWER_DEPTH / 2, 0.0, 0.0))
+        w, h = BOX_FRONT
+        box = trimesh.creation.box(extents=(BOX_DEPTH, w, h))
+        box.apply_translation((-HANDLE_OUT - BOX_DEPTH / 2, 0.0, 0.0))
         return box
     # a door: the panel from the hinge line past the handle, in the plane of the hinge's
     # axis and the handle's arm, behind the handle
@@ -155,5 +155,5 @@ def _joint_mesh(j) -> trimesh.Trimesh:
     foot = p + float(-p @ a) * a  # the hinge line's point level with the handle
     back = -(np.sign(float(n[0])) or 1.0) * n  # the panel's thickness goes away from the handle (-x)
     corners = [foot + s * u + t * a + d * back for s in (0.0, lever + 0.05)
-               for t in (-height / 2, height / 2) for d in (0.0, DOOR_THICKNESS)]
+               for t in (-height / 2, height / 2) for d in (0.0, PANEL_THICKNESS)]
     return trimesh.convex.convex_hull(np.array(corners))
