@@ -13,7 +13,7 @@ outcome 10 Hz), so that both ways of running give the user the same information.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from sctd import se3
@@ -144,7 +144,7 @@ class SetWatch:
 
 def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: int, demos: list | None,
          user: SimulatedUser | SetUser, watch: SetWatch | None = None) -> TrialResult:
-    feed = Feed(driver)
+    feed = Feed(driver, sim.scene.grip)
     drv = feed.driver
     rec = TrialRecorder(task, seed, user.profile.switch_time, spec.time_limit, spec.stuck_after)
     guard = TargetGuard(TargetLimits(), sim.dt, started=0.0)
@@ -184,8 +184,6 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             seq += 1
             feed.input(USER_DEVICE, seq, t, u, b)
         res = feed.tick(t)
-        if res.gripper is not None:  # (to the fingers at once: messages take no time here)
-            sim.scene.grip(res.gripper)
         mode = res.state
         if watch is not None:
             watch.tick(t)
@@ -210,8 +208,9 @@ class Feed:
     message with its arrival time, then the tick and its between-ticks work. Messages
     take no time here: they arrive at the simulated time they are sent."""
 
-    def __init__(self, driver: TickDriver):
+    def __init__(self, driver: TickDriver, grip: Callable[[codec.GripperCmd], object] | None = None):
         self.driver = driver
+        self.grip = grip  # the fingers: a tick's gripper message reaches them at once
 
     def state(self, seq: int, t: float, m: dict[str, Any]) -> None:
         """The simulator's state (:meth:`Simulation.state_message`)."""
@@ -230,6 +229,8 @@ class Feed:
     def tick(self, t: float) -> TickResult:
         res = self.driver.tick(t, t)
         self.driver.after_tick()
+        if res.gripper is not None and self.grip is not None:
+            self.grip(res.gripper)
         return res
 
 
