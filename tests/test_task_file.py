@@ -126,7 +126,7 @@ DRAWER = shipped_folder() / "drawer.yaml"
     (POUR, "intent.1.name", "bring", "intent[1].name", "'bring' is the name of an earlier step"),
     (POUR, "intent.0.colour", "red", "intent[0].colour", "unknown field"),
     (POUR, "intent.2.tilt", {"to": 1.0, "until": True}, "intent[2]",
-     "expected one of reach, tilt, upright, move_joint, press, grasp, place; got tilt, upright"),
+     "expected one of reach, tilt, upright, move_joint, press, grasp, place, turn; got tilt, upright"),
     (POUR, "intent.0", {"name": "tip", "upright": {"below": 0.3}}, "intent[0].upright",
      "the first step must be a reach"),
     (POUR, "intent.0.reach.frame", "mug", "intent[0].reach.frame",

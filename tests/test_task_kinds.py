@@ -47,12 +47,13 @@ def read(doc: dict):
 
 
 # -- the registry -------------------------------------------------------------------------
-def test_the_shipped_kinds_are_registered_with_every_part():
+@pytest.mark.parametrize("name", [CUP, "bottle_to_fridge", "tap"])
+def test_the_shipped_kinds_are_registered_with_every_part(name):
     reg = registry()
     assert set(BUILTIN) <= set(reg)
-    assert list(facets()) == ["support", "item"]  # (a support before the items resting on it)
-    assert set(step_kinds()) >= {"grasp", "place"}
-    task = find_task(CUP)
+    assert list(facets()) == ["support", "item", "knob"]  # (a support before the items resting on it)
+    assert set(step_kinds()) >= {"grasp", "place", "turn"}
+    task = find_task(name)
     for body, b in task.scene.bodies.items():
         for key, facet in b.facets.items():
             assert isinstance(facet, Facet) and type(facet) is reg[key]
@@ -419,7 +420,7 @@ def ideal_run(task, seed: int, limit: float = 60.0) -> tuple[dict, list[str]]:
         sc.step(T2, d.twist, 0.01)
         T = T2
         o = sc.outcome()
-        if o["done"] or o["readings"]["cup.dropped"]:
+        if o["done"] or o["readings"].get("cup.dropped"):
             return o, phases
     return sc.outcome(), phases
 
@@ -461,3 +462,81 @@ def test_the_grasp_button_taps_to_close_holds_to_open_and_waits_between():
     assert b.down(2.0, "open", holding) and b.down(2.7, "open", holding) and not b.down(2.85, "open", holding)
     assert b.down(5.0, None, empty) and b.presses == 3  # closed on nothing: opened again
     assert not b.down(10.0, "close", {})  # fingers it cannot see: no press
+
+
+# -- a knob turned in the hand ------------------------------------------------------------------
+def tap_scene() -> tuple[TaskScene, np.ndarray]:
+    sc = make_scene(find_task("tap"))
+    assert isinstance(sc, TaskScene)
+    T = se3.transform_from_rt(np.eye(3), sc.live["tap"][:3, 3] + [0.0, 0.0, 0.03])
+    return sc, T
+
+
+def turned(T: np.ndarray, angle: float) -> np.ndarray:
+    out = T.copy()
+    out[:3, :3] = se3.matrix_from_rotvec([0.0, 0.0, angle]) @ T[:3, :3]
+    return out
+
+
+def test_a_knob_turns_with_the_hand_that_holds_it_up_to_its_end_stop():
+    sc, T = tap_scene()
+    run(sc, turned(T, 0.5), 0.1)  # (turning the hand without holding it turns nothing)
+    assert readings(sc)["tap.position"] == 0.0
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 1.0)
+    r = readings(sc)
+    assert r["tap.held"] and r["tap.grasps"] == 1 and sc.gripper().width == pytest.approx(0.036)
+    run(sc, turned(T, 0.8), 0.1)
+    assert readings(sc)["tap.position"] == pytest.approx(0.8, abs=1e-9)
+    w = run(sc, turned(T, math.radians(110.0)), 0.1)  # 10 deg past its 100 deg stop
+    r = readings(sc)
+    assert r["tap.position"] == pytest.approx(math.radians(100.0))
+    assert r["tap.torque"] == pytest.approx(-20.0 * math.radians(10.0))
+    assert w[5] == pytest.approx(r["tap.torque"])
+    run(sc, turned(T, 1.2), 0.1)
+    sc.grip(cmd(2, "open"))
+    run(sc, turned(T, 1.2), 0.5)
+    run(sc, turned(T, 0.2), 0.1)  # let go: it stays where it was turned
+    r = readings(sc)
+    assert not r["tap.held"] and r["tap.position"] == pytest.approx(1.2) and \
+        r["tap.max_position"] == pytest.approx(math.radians(100.0))
+
+
+def test_a_knob_pulled_away_from_slips_out_of_the_fingers():
+    sc, T = tap_scene()
+    sc.grip(cmd(1, "close", force=20.0))
+    run(sc, T, 1.0)
+    near = T.copy()
+    near[0, 3] += 0.02
+    w = run(sc, near, 0.05)
+    assert readings(sc)["tap.held"] and w[0] == pytest.approx(-2000.0 * 0.02)  # (the grasp's spring)
+    far = T.copy()
+    far[0, 3] += 0.04
+    run(sc, far, 0.05)
+    assert not readings(sc)["tap.held"]
+
+
+@pytest.mark.parametrize("edit, where, what", [
+    (lambda d: d["intent"][0]["turn"].update(knob="sink"), "intent[0].turn.knob",
+     "'sink' is no knob (knobs: tap)"),
+    (lambda d: d["outcome"].update(done={"reading": "tap.held", "is": False}), "intent[0].turn.knob",
+     "outcome.done sets no at_least on tap.position"),
+    (lambda d: d["intent"][0]["turn"].update(overshoot="45 deg"), "intent[0].turn.overshoot",
+     "turns it to 105.0 deg, past its travel of 100.0 deg"),
+    (lambda d: d["scene"]["bodies"]["tap"]["knob"].update(grip=0.001), "scene.bodies.tap.knob.grip",
+     "expected a height on its side"),
+])
+def test_bad_knob_fields_are_refused_naming_them(edit, where, what):
+    doc = yaml.safe_load(Path(find_task("tap").file).read_text())
+    edit(doc)
+    with pytest.raises(TaskError) as e:
+        read(doc)
+    assert e.value.path == where and what in e.value.problem, str(e.value)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_turn_step_turns_the_tap_on(seed):
+    o, phases = ideal_run(find_task("tap"), seed)
+    assert o["done"] and o["success"] and phases == ["turn"]
+    assert math.radians(60.0) <= o["readings"]["tap.position"] <= math.radians(67.0)
+    assert o["readings"]["tap.grasps"] == 1

@@ -574,6 +574,9 @@ def _angular(reading: Reading, scene: Scene) -> bool:
     """Whether ``reading`` is an angle (a revolute joint's position): its bounds may be
     written in degrees."""
     joint = scene.joints.get(reading.element)
+    body = scene.bodies.get(reading.element)
+    if body is not None and any(reading.quantity in f.angular for f in body.facets.values()):
+        return True
     return joint is not None and joint.kind == "revolute" and reading.quantity in ("position",
                                                                                    "max_position")
 

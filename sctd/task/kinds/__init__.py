@@ -1,9 +1,9 @@
 """Kinds of task element as a registry: what a task file may say, one class a kind.
 
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
-support things rest on, an item the hand can pick up. A **step kind** is a kind of
-intent step (``intent[i].<key>``): grasp an item, place it. Each kind is one class that
-holds everything sctd knows of it:
+support things rest on, an item the hand can pick up, a knob it turns. A **step kind** is
+a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a knob in the
+hand. Each kind is one class that holds everything sctd knows of it:
 
 - its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
 - its writer (``to_yaml``: a task file's fields, read back to the same element);
@@ -38,6 +38,8 @@ BUILTIN = {
     "item": "sctd.task.kinds.pickable:Item",
     "grasp": "sctd.task.kinds.handling:GraspStep",
     "place": "sctd.task.kinds.handling:PlaceStep",
+    "knob": "sctd.task.kinds.knob:Knob",
+    "turn": "sctd.task.kinds.knob:TurnStep",
 }
 """The shipped kinds, by their key in a task file."""
 

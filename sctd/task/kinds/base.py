@@ -115,12 +115,15 @@ class Facet(ABC):
         Its readings, ``<body>.<quantity>``; empty for none.
     flags : tuple of str
         Those of them that are true or false.
+    angular : tuple of str
+        Those that are angles (a task file may write their bounds in degrees).
     """
 
     key: ClassVar[str]
     order: ClassVar[int] = 0
     quantities: ClassVar[tuple[str, ...]] = ()
     flags: ClassVar[tuple[str, ...]] = ()
+    angular: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     @abstractmethod
@@ -177,6 +180,7 @@ class Person(Protocol):
     v_max: float
     w_max: float
     free_weight: float
+    per_rad: float
 
 
 class StepMind(ABC):

@@ -2,7 +2,7 @@
 
 ``grasp`` (an item, the squeeze ``force``, how high it is ``lift``-ed clear): the hand
 comes to a point ``approach`` back from where a person takes the item (its axis at its
-``grip`` height), along the line from where the hand was when the step began, then in
+``grip`` height), along the hand's own x as it was when the step began, then in
 onto it with the fingers across its axis, closes them, and lifts it until its base is
 ``lift`` above where it rested. Done once it is held and lifted; it begins again while
 the item is not held.
@@ -63,6 +63,17 @@ def _square(T_world_ee: Array, axis: Array, gain: float) -> tuple[Array, float]:
     y = T_world_ee[:3, 1]
     c = float(y @ axis)
     return -gain * c * np.cross(y, axis), abs(c)
+
+
+def _ahead(T_world_ee: Array, to_grip: Array) -> Array:
+    """The horizontal direction a hand comes in along: its own x (the fingers open across
+    the way in), or the way to the grip where its x points up or down."""
+    for d in (T_world_ee[:3, 0].copy(), to_grip.copy()):
+        d[2] = 0.0
+        n = float(np.linalg.norm(d))
+        if n > 0.3:
+            return d / n
+    return np.array([1.0, 0.0, 0.0])
 
 
 def _weights(person: Person, turning: bool) -> Array:
@@ -139,10 +150,7 @@ class GraspMind(StepMind):
             lifted = float(sight.readings.get(f"{self.step.item}.lifted", 0.0))
             return p + UP * max(0.0, self.step.lift + 0.01 - lifted), False
         if self._from is None:
-            d = grip - p
-            d[2] = 0.0
-            n = float(np.linalg.norm(d))
-            self._from = d / n if n > 1e-6 else sight.T_world_ee[:3, 0].copy()
+            self._from = _ahead(sight.T_world_ee, grip - p)
         before = grip - self.step.approach * self._from
         off = grip - p
         lateral = off - float(off @ self._from) * self._from

@@ -60,6 +60,24 @@ def facet_of(scene: Scene, body: str, kind: type[F]) -> F:
     return f
 
 
+def across_fingers(T_world_ee: Array, T_world_cyl: Array, f: Any, radius: float, span: tuple[float, float],
+                   aim: float) -> bool:
+    """Whether a cylinder (axis its frame's z from its origin, ``radius``) runs between
+    the open fingers ``f`` where they can take it: the fingers' middle at a height along
+    the axis within ``span``, their line (the hand's y) within 25 deg of square to the
+    axis, the axis within ``aim`` of their middle along the hand's x and within what the
+    open fingers leave along their line; and the cylinder no wider than they open."""
+    R_ee, o_ee = T_world_ee[:3, :3], T_world_ee[:3, 3]
+    axis, base = T_world_cyl[:3, 2], T_world_cyl[:3, 3]
+    h = float((o_ee - base) @ axis)
+    if not span[0] <= h <= span[1]:
+        return False
+    d = R_ee.T @ (base + h * axis - o_ee)  # the axis from the fingertips' middle (hand frame)
+    across = abs(float(R_ee[:, 1] @ axis))  # the fingers' line against the axis
+    return 2 * radius <= f.max_width and across < math.sin(math.radians(25.0)) and \
+        abs(float(d[0])) <= aim and abs(float(d[1])) <= f.max_width / 2 - radius + FREE
+
+
 @dataclass(frozen=True)
 class Support(Facet):
     """A flat top things rest on (see the module doc).
@@ -308,17 +326,9 @@ class _ItemPhysics(FacetPhysics):
 
     def _between(self, world: World, f: Any) -> bool:
         """Whether the item's axis runs between the open fingers, where they take it."""
-        T = world.poses[self.body]
-        R_ee, o_ee = world.T_world_ee[:3, :3], world.T_world_ee[:3, 3]
-        axis, base = T[:3, 2], T[:3, 3]
-        h = float((o_ee - base) @ axis)
-        if not LOW * self.item.height <= h <= self.item.height - TOP_GAP:
-            return False
-        d = R_ee.T @ (base + h * axis - o_ee)  # the axis from the fingertips' middle (hand frame)
-        across = abs(float(R_ee[:, 1] @ axis))  # the fingers' line against the axis
-        return 2 * self.item.radius <= f.max_width and across < math.sin(math.radians(25.0)) and \
-            abs(float(d[0])) <= self.item.aim and \
-            abs(float(d[1])) <= f.max_width / 2 - self.item.radius + FREE
+        it = self.item
+        return across_fingers(world.T_world_ee, world.poses[self.body], f, it.radius,
+                              (LOW * it.height, it.height - TOP_GAP), it.aim)
 
     def _slipping(self, world: World, f: Any, dt: float) -> bool:
         """Whether the squeeze no longer holds it: friction ``2 mu F`` against its weight
