@@ -418,9 +418,10 @@ def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baseline", metavar="DIR|COMMIT",
                    help="another sctd source tree to measure beside this one: a folder, or a commit "
                         "of this checkout's repository")
-    p.add_argument("--skills", type=_csv(str, "skills"), default=[defaults().skill, "pour-vf"],
-                   help="skills the daemon runs (default pour,pour-vf); set:NAME|FILE runs a skill set "
-                        "(sctd run --set; no lockstep step for it)")
+    skills = [defaults().skill, defaults().learned_skill]
+    p.add_argument("--skills", type=_csv(str, "skills"), default=skills,
+                   help=f"skills the daemon runs (default {','.join(skills)}); set:NAME|FILE runs a skill "
+                        "set (sctd run --set; no lockstep step for it)")
     p.add_argument("--task", default=defaults().task, help="the simulator's task (default %(default)s)")
     p.add_argument("--inputs", type=_inputs, default=[False, True], help="zero,full (default both)")
     p.add_argument("--spins", type=_csv(float, "spins in us"), default=[0.0, 25.0, 50.0, 100.0],
