@@ -508,17 +508,23 @@ def _start(settings: _Settings, args: argparse.Namespace) -> tuple[Scene, np.nda
     ValueError
         The arm cannot reach the task's start (``--urdf: FILE: task NAME: ...``, or
         ``--task: task NAME: ...`` with the shipped arm; the pose and the arm named), or
-        no draw of the trial's start (``--trial-seed:``).
+        what the task has the hand take cannot be taken (too wide for the fingers, out
+        of reach: :func:`~sctd_sim.handreach.hand_problems`), or no draw of the trial's
+        start (``--trial-seed:``).
     """
+    from .handreach import hand_problems
     from .scenes import make_scene
     from .simulation import start_posture, trial_scene
 
     scene = make_scene(settings.task)
+    where = f"--urdf: {args.urdf}" if args.urdf else "--task"
     try:
         q0 = start_posture(settings.arm, scene.start_pose())
     except RuntimeError as e:
-        where = f"--urdf: {args.urdf}" if args.urdf else "--task"
         raise ValueError(f"{where}: task {settings.task.name}: {e}") from None
+    problems = hand_problems(settings.task, settings.arm)
+    if problems:
+        raise ValueError(f"{where}: task {settings.task.name}: {'; '.join(problems)}")
     if args.trial_seed is None:
         return scene, q0
     try:

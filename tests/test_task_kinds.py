@@ -540,3 +540,39 @@ def test_the_turn_step_turns_the_tap_on(seed):
     assert o["done"] and o["success"] and phases == ["turn"]
     assert math.radians(60.0) <= o["readings"]["tap.position"] <= math.radians(67.0)
     assert o["readings"]["tap.grasps"] == 1
+
+
+# -- what the hand cannot take, said before anything moves ----------------------------------------
+def test_the_shipped_tasks_hand_can_take_what_they_ask_it_to():
+    from sctd_sim.handreach import hand_problems
+    from sctd_sim.robot import load_arm_model
+
+    arm = load_arm_model()
+    for name in (CUP, "bottle_to_fridge", "tap"):
+        assert hand_problems(find_task(name), arm) == [], name
+
+
+def test_too_wide_or_out_of_reach_is_named_by_tasks_show_and_the_simulator(tmp_path, capsys):
+    from sctd.cli.main import main
+    from sctd_sim.handreach import hand_problems
+    from sctd_sim.robot import load_arm_model
+
+    doc = cup_doc()
+    doc["name"] = "wide_cup"
+    doc["scene"]["bodies"]["cup"]["item"]["radius"] = 0.045
+    wide = tmp_path / "wide_cup.yaml"
+    wide.write_text(yaml.safe_dump(doc))
+    assert main(["tasks", "show", str(wide)]) == 2
+    err = capsys.readouterr().err
+    assert "task wide_cup: cup is 9.0 cm across; the fingers open 8.0 cm: the hand cannot take it" in err
+    doc = cup_doc()
+    doc["scene"]["bodies"]["tabletop"]["position"] = [1.40, -0.18, 0.58]
+    far = read(doc)
+    problems = hand_problems(far, load_arm_model())
+    assert len(problems) == 1
+    assert problems[0].startswith("cup put down on tabletop at [1.400, -0.180, 0.630] is out of the arm's "
+                                  "reach (edan_arm.urdf, frame 'ee')")
+    from sctd_sim.service import main as sim_main
+
+    assert sim_main(["--task", str(wide), "--duration", "0.1"]) == 2
+    assert "--task: task wide_cup: cup is 9.0 cm across" in capsys.readouterr().err

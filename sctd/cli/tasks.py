@@ -46,9 +46,12 @@ REACH_TRIALS = 10  # the seeded trial starts sctd tasks show checks by default
 def reach(task: Task, args: argparse.Namespace) -> dict[str, Any]:
     """Whether the arm (``--urdf``/``--ee-frame``, default the shipped one) reaches the
     task's start and the seeded starts of trials 0..``--reach-trials``-1 (each drawn
-    again, as sctd sim does, while it cannot): ``{"arm", "checked", "start", "trials"}``
-    with ``start`` None when reached, else why; ValueError for a bad arm."""
+    again, as sctd sim does, while it cannot), and whether the hand can take what the
+    task has it take (:func:`sctd_sim.handreach.hand_problems`): ``{"arm", "checked",
+    "start", "hand", "trials"}`` with ``start`` None when reached, else why, ``hand`` the
+    problems; ValueError for a bad arm."""
     try:
+        from sctd_sim.handreach import hand_problems
         from sctd_sim.options import arm_from_args
         from sctd_sim.scenes import make_scene
         from sctd_sim.simulation import start_posture, trial_scene
@@ -63,6 +66,7 @@ def reach(task: Task, args: argparse.Namespace) -> dict[str, Any]:
     except RuntimeError as e:
         out["start"] = str(e)
         return out
+    out["hand"] = hand_problems(task, arm)
     for seed in range(max(0, args.reach_trials)):
         try:
             trial_scene(task, seed, arm)
@@ -160,8 +164,9 @@ def main_tasks(args: argparse.Namespace) -> int:
         except (TaskError, ValueError) as e:
             return fail("tasks show", str(e))
         r = s.get("reach") or {}
-        if r.get("start") or r.get("trials"):
-            bad = r["start"] or "; ".join(f"trial {t['seed']}: {t['why']}" for t in r["trials"])
+        if r.get("start") or r.get("trials") or r.get("hand"):
+            bad = r["start"] or "; ".join([*r.get("hand", []),
+                                           *(f"trial {t['seed']}: {t['why']}" for t in r["trials"])])
             return fail("tasks show", f"task {task.name}: {bad}")
         if args.json:
             print(json.dumps(s, indent=2))
