@@ -30,6 +30,7 @@ pytestmark = pytest.mark.slow  # the daemon and the simulator as processes
 
 KEYS = Keys("edan")
 POUR = str(ROOT / "skills" / "pour.yaml")
+POUR_VF = ROOT / "skills" / "pour-vf.yaml"
 BOUND = 0.1 * 0.001 * (1 + 1e-9) + 1e-12  # the pour skill's 0.1 m/s, per 1 kHz tick
 
 
@@ -317,7 +318,7 @@ def test_every_bad_bundle_gets_an_error_reply_and_the_old_skill_runs_on(tmp_path
         assert wait_for(lambda: len(lis.targets) > 200, 30), proc.output()
         old = lis.newest()["skill"]
         errors = {}
-        for name, payload in malformed_bundles(ROOT / "skills"):
+        for name, payload in malformed_bundles(ROOT / "skills" / "pour.yaml", POUR_VF):
             replies = list(session.get(KEYS.skill, payload=payload, timeout=30.0))
             assert len(replies) == 1 and replies[0].err is not None, (name, replies)
             errors[name] = msgpack.unpackb(replies[0].err.payload.to_bytes(), raw=False)["error"]

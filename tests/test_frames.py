@@ -16,6 +16,8 @@ from sctd.runtime import frames
 from sctd.skill import Bundle, skill_from_bundle, skill_summary
 from tests.conftest import ROOT
 
+POUR_VF = ROOT / "skills" / "pour-vf.yaml"
+
 
 def _through_link(obj):
     a, b = frames.pair()
@@ -37,7 +39,7 @@ def _mapped(a: np.ndarray) -> bool:
 def test_a_large_skill_arrives_equal_with_its_model_arrays_on_memory_maps():
     from sctd.bench.bundles import big_bundle
 
-    skill = skill_from_bundle(Bundle.unpack(big_bundle(ROOT / "skills", seed=3, size=2 << 20).pack()))
+    skill = skill_from_bundle(Bundle.unpack(big_bundle(POUR_VF, seed=3, size=2 << 20).pack()))
     got = _through_link(("swap", 7, skill))
     assert got[:2] == ("swap", 7)
     back = got[2]

@@ -23,6 +23,8 @@ from sctd.wire import Keys, client, codec
 from sctd.wire.session import close_session, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 
+POUR_VF = ROOT / "skills" / "pour-vf.yaml"
+
 KEYS = Keys("edan")
 pytestmark = pytest.mark.slow
 
@@ -89,7 +91,7 @@ def _json(x):
 
 
 def test_an_8_mib_bundle_swaps_and_is_answered_one_swap_at_a_time(rig):
-    bundles = [big_bundle(ROOT / "skills", seed) for seed in (1, 2)]
+    bundles = [big_bundle(POUR_VF, seed) for seed in (1, 2)]
     assert all(MAX_BUNDLE_BYTES - 8192 < len(b.pack()) <= MAX_BUNDLE_BYTES for b in bundles)
     got: dict[int, list] = {}
 
@@ -133,7 +135,7 @@ def test_a_validator_killed_mid_swap_is_an_error_reply(rig):
     assert error == "<bundle>: the validating process died (exit code -9)", error
     assert wait_for(lambda: rig.last().get("counters", {}).get("swaps_refused") == 1, 5)
     # another validator takes the next bundle
-    ok, body = client.swap(rig.session, KEYS, big_bundle(ROOT / "skills", 4), timeout=60.0)
+    ok, body = client.swap(rig.session, KEYS, big_bundle(POUR_VF, 4), timeout=60.0)
     assert ok, body
     assert _children(server) not in ([], validator)
 
@@ -145,7 +147,7 @@ def test_a_skill_server_killed_mid_swap_ends_the_query_and_comes_back(rig):
     done = threading.Event()
 
     def ask() -> None:
-        replies.extend(rig.session.get(KEYS.skill_swap, payload=big_bundle(ROOT / "skills", 5).pack(),
+        replies.extend(rig.session.get(KEYS.skill_swap, payload=big_bundle(POUR_VF, 5).pack(),
                                        timeout=20.0))
         done.set()
 
@@ -163,7 +165,7 @@ def test_a_skill_server_killed_mid_swap_ends_the_query_and_comes_back(rig):
     assert wait_for(lambda: rig.last().get("ticks", 0) > ticks0 + 1000, 10)
     assert wait_for(lambda: _children(rig.proc.p.pid) not in ([], [server]), 30)
     assert rig.summary() is not None
-    ok, body = client.swap(rig.session, KEYS, big_bundle(ROOT / "skills", 6), timeout=60.0)
+    ok, body = client.swap(rig.session, KEYS, big_bundle(POUR_VF, 6), timeout=60.0)
     assert ok, body
 
 

@@ -2,8 +2,9 @@
 bundles and a jumping state, with the quiet run as the baseline of the same bench.
 
 Processes, all on one free loopback port held by this (the bench's) session:
-``sctd sim --scene pour`` (the Pinocchio arm at 1 kHz; the task of
-``sctd/app/defaults.yaml``), ``sctd run`` (the pour skill, ``pour.yaml`` of ``--skills``),
+``sctd sim --task`` (the Pinocchio arm at 1 kHz; the task of ``sctd/app/defaults.yaml``),
+``sctd run`` (``--skill``, the hand-written skill of that file; ``--learned-skill`` the
+vector-field skill swapped in and grown into the big bundles),
 and per phase a flooder (``python -m sctd.bench.robustness flood ...``). Every
 figure comes from what the daemon publishes: its targets (by ``seq``, with their
 ``stamp``), its status (tick counters, the per-second ``recent_ms`` windows, the drop
@@ -35,18 +36,19 @@ from typing import Any
 import msgpack
 import zenoh
 
+from sctd.app import add_deprecated_alias
 from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.bench.bundles import big_bundle, malformed_bundles
 from sctd.cli.procs import Child, free_port
 from sctd.skill import bundle_from_file
-from sctd.skill.catalog import shipped_folder
+from sctd.skill.catalog import find_skill
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session, session_from_args
 
 KEYS = Keys()
 SWAPS = 10
-PUSH = [0.0, 1.0, 0.0]  # the devices' push: the pour skill's u1, sideways to the mug
+PUSH = [0.0, 1.0, 0.0]  # the devices' push: the skill's u1 (the default's: sideways to its object)
 
 
 def flood_main(argv: list[str]) -> int:
@@ -312,10 +314,10 @@ def _phase(w: _Watch, daemon_pid: int, run, settle: float = 1.2) -> dict:
 class _Phases:
     """What each phase does next to the running daemon, through the bench's session."""
 
-    def __init__(self, s: zenoh.Session, watch: _Watch, hub: str, skills: Path, seconds: float,
-                 logdir: Path):
+    def __init__(self, s: zenoh.Session, watch: _Watch, hub: str, skill: Path, learned: Path,
+                 seconds: float, logdir: Path):
         self.s, self.watch, self.hub = s, watch, hub
-        self.skills, self.seconds, self.logdir = skills, seconds, logdir
+        self.skill, self.learned, self.seconds, self.logdir = skill, learned, seconds, logdir
 
     def quiet(self) -> dict:
         time.sleep(self.seconds)
@@ -340,14 +342,14 @@ class _Phases:
 
     def bad_bundles(self) -> dict:
         replies = errors = 0
-        for _name, payload in malformed_bundles(self.skills):
+        for _name, payload in malformed_bundles(self.skill, self.learned):
             got = list(self.s.get(KEYS.skill, payload=payload, timeout=60.0))
             replies += len(got)
             errors += sum(1 for r in got if r.err is not None)
         return {"bundles": 20, "replies": replies, "error_replies": errors}
 
     def swaps(self) -> dict:
-        paths = (self.skills / "pour-vf.yaml", self.skills / "pour.yaml")
+        paths = (self.learned, self.skill)
         ok = 0
         windows = []  # (query sent, reply + 5 ms), wall clock as the targets' stamps
         for k in range(SWAPS):
@@ -379,8 +381,8 @@ class _Phases:
     def big_swaps(self) -> dict:
         """An 8 MiB bundle swapped in once a second (two that differ, in turn) for the
         length of a flood (as many one-second windows as the quiet phase has, so the two
-        compare), each on the second's mark; then the pour skill back."""
-        bundles = [big_bundle(self.skills, seed).pack() for seed in (1, 2)]
+        compare), each on the second's mark; then the daemon's skill back."""
+        bundles = [big_bundle(self.learned, seed).pack() for seed in (1, 2)]
         ok, windows, took = 0, [], []
         n = max(3, round(self.seconds))
         due = time.monotonic()
@@ -392,20 +394,21 @@ class _Phases:
             took.append(time.time() - t0)
             windows.append((t0, t0 + took[-1] + 0.005))
             ok += sum(1 for r in got if r.ok is not None)
-        back = bundle_from_file(self.skills / "pour.yaml").pack()
+        back = bundle_from_file(self.skill).pack()
         list(self.s.get(KEYS.skill_swap, payload=back, timeout=30.0))
         took.sort()
         return {"swaps": n, "ok_replies": ok, "bundle_bytes": len(bundles[0]), "windows": windows,
                 "reply_s_median": round(took[len(took) // 2], 3), "reply_s_max": round(took[-1], 3)}
 
 
-def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
+def run_robustness_bench(skill: Path, learned: Path, seconds: float, logdir: Path) -> dict:
+    """The phases next to ``sctd run --skill skill``, ``learned`` swapped in and grown."""
     hub = f"tcp/127.0.0.1:{free_port()}"
     out: dict[str, Any] = {"seconds_per_phase": seconds}
     with session(listen=[hub]) as s, \
             Child("sctd.cli.main", "sim", "--task", defaults().task, "--connect", hub, "--listen",
                   f"tcp/127.0.0.1:{free_port()}", log=logdir / "sim.log"), \
-            Child("sctd.cli.main", "run", "--skill", str(skills / "pour.yaml"), "--connect", hub,
+            Child("sctd.cli.main", "run", "--skill", str(skill), "--connect", hub,
                   "--listen", f"tcp/127.0.0.1:{free_port()}", "--stats-json",
                   log=logdir / "daemon.log") as daemon, \
             _Watch(s) as w:
@@ -415,7 +418,7 @@ def run_robustness_bench(skills: Path, seconds: float, logdir: Path) -> dict:
                 raise RuntimeError(f"the daemon published no targets; see {logdir}")
             time.sleep(0.1)
         pid = daemon.p.pid
-        ph = _Phases(s, w, hub, skills, seconds, logdir)
+        ph = _Phases(s, w, hub, skill, learned, seconds, logdir)
         for name, run in (("quiet", ph.quiet), ("valid_flood", lambda: ph.flood("valid")),
                           ("garbage_flood", lambda: ph.flood("garbage")),
                           ("object_names", lambda: ph.flood("objects", "--names", "50000")),
@@ -593,16 +596,34 @@ def print_report(r: dict) -> None:
 
 def add_robustness_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seconds", type=float, default=5.0, help="length of each flood, s")
-    p.add_argument("--skills", help="folder holding pour.yaml and pour-vf.yaml, which the daemon "
-                   "runs and the bundles are made from (default: the shipped skills)")
+    p.add_argument("--skill", default=defaults().skill, metavar="NAME|FILE",
+                   help="the skill the daemon runs and the malformed bundles are made from, with a tilt "
+                        "cone, a frame's pose and a speed limit (default %(default)s)")
+    p.add_argument("--learned-skill", default=defaults().learned_skill, metavar="NAME|FILE",
+                   help="a vector-field skill swapped in and grown to the big bundles (default %(default)s)")
+    add_deprecated_alias(p, "--skills", dest="skills_folder", instead="--skill and --learned-skill")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
 
+def _skills(args: argparse.Namespace) -> tuple[Path, Path]:
+    """The two skill files: ``--skill`` and ``--learned-skill``; with the deprecated
+    ``--skills DIR``, the files of those names in DIR."""
+    names = (args.skill, args.learned_skill)
+    if args.skills_folder is None:
+        return find_skill(names[0]), find_skill(names[1])
+    folder = Path(args.skills_folder)
+
+    def in_folder(name: str) -> Path:
+        return folder / (name if name.endswith(".yaml") else f"{name}.yaml")
+
+    return in_folder(names[0]), in_folder(names[1])
+
+
 def main_robustness(args: argparse.Namespace) -> int:
+    skill, learned = _skills(args)
     return run_and_report("robustness", args, lambda logdir: summarise(
-        run_robustness_bench(Path(args.skills) if args.skills else shipped_folder(), args.seconds,
-                             logdir)), print_report)
+        run_robustness_bench(skill, learned, args.seconds, logdir)), print_report)
 
 
 if __name__ == "__main__":
