@@ -576,3 +576,19 @@ def test_too_wide_or_out_of_reach_is_named_by_tasks_show_and_the_simulator(tmp_p
 
     assert sim_main(["--task", str(wide), "--duration", "0.1"]) == 2
     assert "--task: task wide_cup: cup is 9.0 cm across" in capsys.readouterr().err
+
+
+def test_the_view_draws_each_facets_shapes_with_its_body():
+    from sctd_services.view.task_scene import part_pose, task_parts
+
+    task = find_task("bottle_to_fridge")
+    parts = {p.name: p for p in task_parts(task)}
+    assert {"worktop/support0", "bottle/item0"} <= set(parts)
+    assert sum(n.startswith("door_shelf/support") for n in parts) == 5  # (the board, the rim's four walls)
+    bottle = parts["bottle/item0"]
+    assert bottle.rgb == (76, 140, 217) and bottle.anchor == ("body", "bottle")
+    # a 7 cm wide, 20 cm tall cylinder standing on the body's origin
+    lo, hi = bottle.vertices.min(axis=0), bottle.vertices.max(axis=0)
+    assert np.allclose(lo, [-0.035, -0.035, 0.0], atol=1e-9) and np.allclose(hi, [0.035, 0.035, 0.2], atol=1e-9)
+    carried = se3.transform_from_rt(np.eye(3), [0.5, 0.2, 0.9])
+    assert part_pose(bottle, task, {"bottle": carried}, None) is carried

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import Task
+from sctd.task.kinds import Facet
 from sctd.task.kinematics import handle_pose
 
 Array = NDArray[np.float64]
@@ -63,10 +64,11 @@ class Part:
     vertices: Array
     faces: NDArray[np.int64]
     opacity: float = 1.0
+    colour: tuple[int, int, int] | None = None  # (a registered kind's shape says its own)
 
     @property
     def rgb(self) -> tuple[int, int, int]:
-        return RGB[self.kind]
+        return self.colour if self.colour is not None else RGB[self.kind]
 
 
 def task_parts(task: Task) -> list[Part]:
@@ -88,6 +90,7 @@ def task_parts(task: Task) -> list[Part]:
             m = trimesh.creation.cylinder(radius=b.button.radius, height=0.01)
             m.apply_transform(_turn_z_to_x())
             parts.append(_part(f"{name}/button", f"{name}", "button", ("body", name), m))
+        parts += _facet_parts(name, b.facets)
     for name, h in sc.heads.items():
         m = trimesh.creation.icosphere(subdivisions=2, radius=h.radius)
         m.apply_translation((-h.radius, 0.0, 0.0))
@@ -129,6 +132,24 @@ def default_poses(task: Task) -> dict[str, Array]:
 def _part(name: str, label: str, kind: str, anchor, m: trimesh.Trimesh, opacity: float = 1.0) -> Part:
     return Part(name, label, kind, anchor, np.asarray(m.vertices, dtype=float),
                 np.asarray(m.faces, dtype=np.int64), opacity)
+
+
+def _facet_parts(body: str, facets: dict[str, Facet]) -> list[Part]:
+    """The shapes a body's facets of registered kinds draw (:meth:`Facet.shapes`), moving
+    with the body (an item carried moves with it)."""
+    out = []
+    for key, facet in facets.items():
+        for k, shape in enumerate(facet.shapes()):
+            if shape.kind == "box":
+                m = trimesh.creation.box(extents=shape.size)
+            else:
+                m = trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[2])
+            m.apply_transform(shape.T_body_shape)
+            rgb = tuple(round(255 * c) for c in shape.colour)
+            out.append(Part(f"{body}/{key}{k}", f"{body} ({key})", "facet", ("body", body),
+                            np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64),
+                            shape.opacity, (rgb[0], rgb[1], rgb[2])))
+    return out
 
 
 def _turn_z_to_x() -> Array:
