@@ -589,6 +589,7 @@ def test_the_view_draws_each_facets_shapes_with_its_body():
     assert bottle.rgb == (76, 140, 217) and bottle.anchor == ("body", "bottle")
     # a 7 cm wide, 20 cm tall cylinder standing on the body's origin
     lo, hi = bottle.vertices.min(axis=0), bottle.vertices.max(axis=0)
-    assert np.allclose(lo, [-0.035, -0.035, 0.0], atol=1e-9) and np.allclose(hi, [0.035, 0.035, 0.2], atol=1e-9)
+    assert np.allclose(lo, [-0.035, -0.035, 0.0], atol=1e-9)
+    assert np.allclose(hi, [0.035, 0.035, 0.2], atol=1e-9)
     carried = se3.transform_from_rt(np.eye(3), [0.5, 0.2, 0.9])
     assert part_pose(bottle, task, {"bottle": carried}, None) is carried
