@@ -58,3 +58,12 @@ def thresholds(p: Predicate) -> dict[str, float]:
             out.update(thresholds(t))
         return out
     return {}
+
+
+def readings_of(p: Predicate) -> list[str]:
+    """The readings ``p`` compares, each once, in the order it names them (``near`` names
+    frames, not readings)."""
+    if isinstance(p, Compare):
+        return [str(p.reading)]
+    terms = p.terms if isinstance(p, (AllOf, AnyOf)) else (p.term,) if isinstance(p, Not) else ()
+    return list(dict.fromkeys(r for t in terms for r in readings_of(t)))
