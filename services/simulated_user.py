@@ -29,7 +29,7 @@ import zenoh
 from sctd import se3
 from sctd.app.errors import EXIT_USAGE
 from sctd.app.options import TASK_HELP, add_robot_argument
-from sctd.task import TaskError, find_task
+from sctd.task import Task, TaskError, find_task
 from sctd.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
@@ -37,10 +37,10 @@ from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 from .user import PROFILES, Observation, SimulatedUser
 
 
-def task_frames(task: str) -> tuple[str, ...]:
+def task_frames(task: Task) -> tuple[str, ...]:
     """The frames the task's scene publishes (its bodies', then the held object's): what
     a person in the chair sees."""
-    return tuple(find_task(task).scene.frames())
+    return tuple(task.scene.frames())
 
 
 class UserClient:

@@ -96,19 +96,16 @@ SYNTHETIC = {"crank": Kind("crank", "crank", "crank", ("reach", "turn")),
 """The kinds of no task file: their objects and geometry are the generator's own."""
 
 
-def kind_of(task: str | Path | Task) -> Kind:
-    """The kind :func:`generate` makes for ``task``: ``crank`` or ``wipe``, or a task (a
-    :class:`~sctd.task.Task`, or its name or file) whose held object has contents (a
-    tilt) or that has a prismatic joint (a pull).
+def kind_of(t: Task) -> Kind:
+    """The kind :func:`generate` makes for task ``t``: a tilt when its held object has
+    contents, a pull when it has a prismatic joint (``crank`` and ``wipe``, of no task
+    file, are :data:`SYNTHETIC`).
 
     Raises
     ------
     ValueError
-        An unknown task (:class:`~sctd.task.TaskError`), or one of neither shape.
+        A task of neither shape.
     """
-    if isinstance(task, str) and task in SYNTHETIC:
-        return SYNTHETIC[task]
-    t = task if isinstance(task, Task) else find_task(task)
     held = t.scene.held
     if held is not None and held.contents is not None:
         return _tilt_kind(t)
@@ -326,15 +323,15 @@ def _wipe_demo(rng: np.random.Generator, rate: float, length: float) -> tuple:
     return t, poses, phase, info
 
 
-def generate(task: str | Path | Task, n_demos: int = 10, noise: float = 0.001,
+def generate(task: Task | Kind, n_demos: int = 10, noise: float = 0.001,
              rot_noise: float | None = None, outliers: float = 0.0, rate: float = 50.0,
              seed: int = 0, pour_jitter: float = 0.0) -> DemoSet:
-    """Generate ``n_demos`` demonstrations of ``task`` (a task's name or file, or
-    ``crank`` or ``wipe``: :func:`kind_of`).
+    """Generate ``n_demos`` demonstrations of ``task`` (a task, :func:`kind_of`, or a
+    kind of :data:`SYNTHETIC`).
 
     Parameters
     ----------
-    task : str, Path or Task
+    task : Task or Kind
     n_demos : int
     noise : float
         Standard deviation of the Gaussian position noise (m).
@@ -350,7 +347,7 @@ def generate(task: str | Path | Task, n_demos: int = 10, noise: float = 0.001,
     pour_jitter : float
         Standard deviation (m) of the pour point between demonstrations (tilt only).
     """
-    kind = kind_of(task)
+    kind = task if isinstance(task, Kind) else kind_of(task)
     if n_demos < 1 or rate <= 0 or noise < 0 or not 0 <= outliers < 0.5:
         raise ValueError("need n_demos >= 1, rate > 0, noise >= 0, 0 <= outliers < 0.5")
     rng = np.random.default_rng(seed)
@@ -450,10 +447,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pour-jitter", type=float, default=0.0)
     args = ap.parse_args(argv)
     try:
-        kind_of(args.task)
-    except ValueError as e:
+        kind = SYNTHETIC.get(args.task) or kind_of(find_task(args.task))
+    except ValueError as e:  # (a TaskError is a ValueError)
         ap.error(f"task: {e}")
-    ds = generate(args.task, n_demos=args.n_demos, noise=args.noise, rot_noise=args.rot_noise,
+    ds = generate(kind, n_demos=args.n_demos, noise=args.noise, rot_noise=args.rot_noise,
                   outliers=args.outliers, rate=args.rate, seed=args.seed,
                   pour_jitter=args.pour_jitter)
     paths = write_demo_set(ds, args.out)

@@ -17,7 +17,6 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import zenoh
@@ -47,18 +46,10 @@ class KinematicScene:
     joint: Joint | None = None
 
 
-def kinematic_scene(task: str | Path | Task) -> KinematicScene:
-    """The scene of ``task`` (a :class:`~sctd.task.Task`, or a task's name or file, see
-    :func:`sctd.task.find_task`) as the stand-in robot plays it: the bodies where the
+def kinematic_scene(t: Task) -> KinematicScene:
+    """The scene of task ``t`` as the stand-in robot plays it: the bodies where the
     task file puts them, the hand at the task's start, the held object's frames carried
-    by the hand, and the task's first prismatic joint, if any.
-
-    Raises
-    ------
-    sctd.task.TaskError
-        An unknown task, or a task file that does not validate (a ``ValueError``).
-    """
-    t = task if isinstance(task, Task) else find_task(task)
+    by the hand, and the task's first prismatic joint, if any."""
     sc = t.scene
     held = sc.held.frames if sc.held is not None else {}
     joint = next((j for j in sc.joints.values() if j.kind == "prismatic"), None)
@@ -145,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     keys = Keys(args.robot)
     try:
-        robot = KinematicRobot(kinematic_scene(args.task), tau=args.tau)
+        robot = KinematicRobot(kinematic_scene(find_task(args.task)), tau=args.tau)
     except TaskError as e:
         return fail("kinematic", f"--task: {e}")
     stop = threading.Event()

@@ -40,13 +40,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from sctd import se3
-from sctd.task import Task, find_task, handle_pose
+from sctd.task import Task, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
 from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint, Zone
@@ -854,20 +853,12 @@ class EmptyScene:
         return {"scene": self.name}
 
 
-def make_scene(task: Task | str | Path, trial_seed: int | None = None, attempt: int = 0) -> Scene:
-    """The scene of ``task`` (a :class:`~sctd.task.Task`, or a task's name or file, see
-    :func:`sctd.task.find_task`; ``empty`` for no objects); with ``trial_seed``, a
-    seeded random start (:func:`randomize`; ``attempt`` draws another one for the same
-    seed, for a start the arm cannot reach).
-
-    Raises
-    ------
-    sctd.task.TaskError
-        An unknown task, or a task file that does not validate.
-    """
-    if isinstance(task, str) and task == EmptyScene.name:
-        return EmptyScene()
-    scene = TaskScene(task if isinstance(task, Task) else find_task(task))
+def make_scene(task: Task, trial_seed: int | None = None, attempt: int = 0) -> Scene:
+    """The scene of ``task`` (resolved from its name or file where the program starts,
+    :func:`sctd.task.find_task`; :class:`EmptyScene` is the scene of no objects); with
+    ``trial_seed``, a seeded random start (:func:`randomize`; ``attempt`` draws another
+    one for the same seed, for a start the arm cannot reach)."""
+    scene = TaskScene(task)
     if trial_seed is not None:
         randomize(scene, trial_seed, attempt)
     return scene

@@ -2,7 +2,7 @@
 
 A service (``sctd sim``) drives it at its rate::
 
-    with Simulation(scene="pour", rate=1000) as sim:
+    with Simulation(scene=task, rate=1000) as sim:   # task: a sctd.task.Task
         while running:
             sim.set_target(pose7_world, stamp)      # when a target arrives
             sim.step()
@@ -38,10 +38,9 @@ class Simulation:
 
     Parameters
     ----------
-    scene : str, Task or Scene
-        A task (its name or file, :func:`sctd.task.find_task`, or a :class:`~sctd.task.Task`;
-        :func:`~sctd_sim.scenes.make_scene` builds its scene), ``"empty"``, or a scene
-        object.
+    scene : Task or Scene
+        A task (:func:`~sctd_sim.scenes.make_scene` builds its scene) or a scene object
+        (:class:`~sctd_sim.scenes.EmptyScene` for no objects).
     rate : float, optional
         Cycle rate, Hz.
     q0 : array_like, shape (7,), optional
@@ -69,7 +68,7 @@ class Simulation:
 
     def __init__(
         self,
-        scene: str | Task | Scene,
+        scene: Task | Scene,
         rate: float = 1000.0,
         *,
         q0: np.ndarray | None = None,
@@ -82,7 +81,7 @@ class Simulation:
         compensate_payload: bool = True,
     ) -> None:
         self.compensate_payload = compensate_payload
-        self.scene: Scene = make_scene(scene) if isinstance(scene, (str, Task)) else scene
+        self.scene: Scene = make_scene(scene) if isinstance(scene, Task) else scene
         model = arm or load_arm_model()
         if q0 is None:
             q0 = start_posture(model, self.scene.start_pose(), getattr(self.scene, "default_start_pose",
@@ -196,7 +195,7 @@ class Simulation:
         self.close()
 
 
-def trial_scene(task: Task | str, seed: int, arm: ArmModel | None = None, attempts: int = 50
+def trial_scene(task: Task, seed: int, arm: ArmModel | None = None, attempts: int = 50
                 ) -> tuple[Scene, np.ndarray]:
     """The scene of evaluation trial ``seed`` and the arm's start posture: the seeded
     random start (:func:`~sctd_sim.scenes.randomize`), drawn again (deterministically)

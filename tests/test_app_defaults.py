@@ -11,9 +11,9 @@ import yaml
 
 from sctd.app import defaults as defaults_module
 from sctd.app.defaults import DEFAULTS_FILE, DefaultsError, defaults, defaults_from_document, load_defaults
+from sctd.bench.demos import demo_kind
 from sctd.skill.catalog import find_skill
 from sctd.task import find_task
-from sctd_sim import demogen
 
 
 @pytest.fixture
@@ -41,9 +41,9 @@ def test_the_shipped_defaults_name_tasks_and_skills_that_exist():
     for skill in (d.skill, d.learned_skill):
         assert find_skill(skill).is_file()
     assert find_task(d.bench_learn.tilt).scene.held is not None
-    assert demogen.kind_of(d.bench_learn.tilt).shape == "tilt"
-    assert demogen.kind_of(d.bench_learn.pull).shape == "pull"
-    assert [demogen.kind_of(k).name for k in d.bench_learn.fields] == list(d.bench_learn.fields)
+    assert demo_kind(d.bench_learn.tilt).shape == "tilt"
+    assert demo_kind(d.bench_learn.pull).shape == "pull"
+    assert [demo_kind(k).name for k in d.bench_learn.fields] == list(d.bench_learn.fields)
     assert task.object == "mug"
 
 

@@ -19,6 +19,7 @@ from typing import Any
 import pytest
 
 from sctd.cli.main import main
+from sctd.task import find_task
 from sctd_services.eval.cluster import (
     SERVER_ROLE,
     ClusterError,
@@ -35,7 +36,7 @@ from sctd_services.eval.trial import TaskSpec
 from tests.conftest import ROOT, sctd, wait_for
 
 SKILL = str(ROOT / "skills" / "pour.yaml")
-SHORT = TaskSpec("pour", time_limit=1.0)  # simulated s: a trial of a few tenths of a second
+SHORT = TaskSpec.of(find_task("pour"), time_limit=1.0)  # simulated s: a trial of a few tenths of a second
 
 
 # --- fast: no process ---------------------------------------------------------------
@@ -99,7 +100,7 @@ def test_sctd_eval_refuses_plain_tcp_to_another_host(capsys):
 def test_a_shipped_trial_is_the_trial_read_from_files():
     """What a worker on another host runs (the skill's bundle, the task file's text) gives
     what the trial read from this machine's files gives, seed for seed."""
-    shipped = Shipped.of(SKILL, "pour", None)
+    shipped = Shipped.of(SKILL, SHORT, None)
     for seed in (0, 1):
         assert shipped_job(shipped, SHORT, seed, False) == lockstep_job(SKILL, SHORT, seed, None, False, None)
 
@@ -208,13 +209,14 @@ def test_scheduler_workers_and_their_http_servers_listen_on_loopback_only(loopba
 
 
 def _local(trials: int, seed: int, tmp_path: Path) -> list[dict[str, Any]]:
-    [res] = evaluate(entries([SKILL], False, tmp_path), TaskSpec("pour", time_limit=4.0), trials, seed)
+    spec = TaskSpec.of(find_task("pour"), time_limit=4.0)
+    [res] = evaluate(entries([SKILL], False, tmp_path), spec, trials, seed)
     return res["per_trial"]
 
 
 @pytest.mark.slow
 def test_trials_on_the_cluster_give_the_local_results(loopback, tmp_path):
-    spec = TaskSpec("pour", time_limit=4.0)
+    spec = TaskSpec.of(find_task("pour"), time_limit=4.0)
     with connect(loopback[0]) as pool:
         [res] = evaluate(entries([SKILL], False, tmp_path), spec, 3, 10, pool=pool)
         assert pool.reruns == []
@@ -238,8 +240,8 @@ def test_a_killed_worker_has_its_trials_rerun_and_reported(loopback, tmp_path):
 
         killer = threading.Thread(target=kill_when_busy, daemon=True)
         killer.start()
-        [res] = evaluate(entries([SKILL], False, tmp_path), TaskSpec("pour", time_limit=4.0), 6, 20,
-                         pool=pool)
+        spec = TaskSpec.of(find_task("pour"), time_limit=4.0)
+        [res] = evaluate(entries([SKILL], False, tmp_path), spec, 6, 20, pool=pool)
         killer.join(5)
     assert killed.is_set()
     assert [r.worker for r in heard] == [victim], heard
@@ -318,7 +320,7 @@ def test_the_learners_check_runs_on_the_cluster(loopback):
     stored = StoredSkill("0" * 16, "pour", 0.0, Path(SKILL))
     settings = CheckSettings(trials=2, jobs=1)
     with connect(loopback[0]) as pool:
-        remote = evaluation(stored, "pour", settings, 3, pool, stop_early=False)
-    local = evaluation(stored, "pour", settings, 3, None, stop_early=False)
+        remote = evaluation(stored, find_task("pour"), settings, 3, pool, stop_early=False)
+    local = evaluation(stored, find_task("pour"), settings, 3, None, stop_early=False)
     assert remote["per_trial"] == local["per_trial"]
     assert remote["success_rate"] == local["success_rate"]

@@ -9,20 +9,21 @@ import pytest
 
 from sctd import se3
 from sctd.learn import read_demos
+from sctd.task import find_task
 from sctd_sim import demogen
 
 
 def test_seeded_and_reproducible():
-    a = demogen.generate("pour", 3, seed=4, outliers=0.05)
-    b = demogen.generate("pour", 3, seed=4, outliers=0.05)
-    c = demogen.generate("pour", 3, seed=5, outliers=0.05)
+    a = demogen.generate(find_task("pour"), 3, seed=4, outliers=0.05)
+    b = demogen.generate(find_task("pour"), 3, seed=4, outliers=0.05)
+    c = demogen.generate(find_task("pour"), 3, seed=5, outliers=0.05)
     for x, y in zip(a.demos, b.demos, strict=True):
         np.testing.assert_array_equal(x.poses, y.poses)
     assert not np.allclose(a.demos[0].poses[:5], c.demos[0].poses[:5])
 
 
 def test_pour_ground_truth_geometry():
-    ds = demogen.generate("pour", 4, noise=0.0, seed=1)
+    ds = demogen.generate(find_task("pour"), 4, noise=0.0, seed=1)
     centre = np.asarray(ds.truth["sphere_centre"])
     tip = np.asarray(ds.truth["tip_offset"])
     for d in ds.demos:
@@ -51,7 +52,7 @@ def test_pour_ground_truth_geometry():
 
 
 def test_drawer_ground_truth():
-    ds = demogen.generate("drawer", 3, noise=0.0, seed=2)
+    ds = demogen.generate(find_task("drawer"), 3, noise=0.0, seed=2)
     assert ds.truth["directions"]["pull"] == [1.0, 0.0, 0.0]
     for d in ds.demos:
         pull = np.flatnonzero(d.phase == 1) + 1
@@ -63,7 +64,7 @@ def test_drawer_ground_truth():
 
 
 def test_noise_and_outliers_where_reported():
-    ds = demogen.generate("pour", 2, noise=0.001, outliers=0.05, seed=3)
+    ds = demogen.generate(find_task("pour"), 2, noise=0.001, outliers=0.05, seed=3)
     for d in ds.demos:
         err = np.linalg.norm(d.poses[:, :3] - d.clean[:, :3], axis=1)
         rows = d.outlier_rows
@@ -75,7 +76,7 @@ def test_noise_and_outliers_where_reported():
 
 
 def test_write_demo_set_round_trip(tmp_path):
-    ds = demogen.generate("drawer", 3, seed=0, rate=40.0)
+    ds = demogen.generate(find_task("drawer"), 3, seed=0, rate=40.0)
     demogen.write_demo_set(ds, tmp_path)
     truth = json.loads((tmp_path / "truth.json").read_text())
     demos = read_demos(tmp_path)
@@ -88,21 +89,21 @@ def test_write_demo_set_round_trip(tmp_path):
 
 def test_rejects_bad_arguments():
     with pytest.raises(ValueError):
-        demogen.generate("juggle")
+        demogen.generate(find_task("juggle"))
     with pytest.raises(ValueError):
-        demogen.generate("pour", outliers=0.7)
+        demogen.generate(find_task("pour"), outliers=0.7)
 
 
 def test_the_kinds_come_from_the_task_files():
     """A task's shape, object, tilt phase and geometry are its file's: the pour is a tilt
     about the bottle's tip 0.12 m up the hand to 5 cm over the mug, the drawer a pull."""
-    pour, drawer = demogen.kind_of("pour"), demogen.kind_of("drawer")
+    pour, drawer = demogen.kind_of(find_task("pour")), demogen.kind_of(find_task("drawer"))
     assert (pour.shape, pour.object, pour.phases, pour.fields) == ("tilt", "mug", ("carry", "pour"),
                                                                    ("translation", "sphere"))
     np.testing.assert_array_equal(pour.tip_offset, [0.0, 0.0, 0.12])
     np.testing.assert_array_equal(pour.pour_point, [0.0, 0.0, 0.05])
     assert (drawer.shape, drawer.object, drawer.phases) == ("pull", "drawer_handle", ("reach", "pull"))
-    assert demogen.kind_of("crank").object == "crank" and demogen.kind_of("wipe").object == "table"
+    assert demogen.SYNTHETIC["crank"].object == "crank" and demogen.SYNTHETIC["wipe"].object == "table"
 
 
 def test_a_task_file_sets_what_is_generated(tmp_path):
@@ -119,7 +120,7 @@ def test_a_task_file_sets_what_is_generated(tmp_path):
         text = text.replace(old, new)
     path = tmp_path / "tap.yaml"
     path.write_text(text)
-    ds = demogen.generate(path, 2, noise=0.0, seed=1)
+    ds = demogen.generate(find_task(path), 2, noise=0.0, seed=1)
     assert (ds.task, ds.shape, ds.truth["object"]) == ("tap", "tilt", "glass")
     assert ds.truth["tip_offset"] == [0.0, 0.0, 0.15]
     np.testing.assert_allclose(ds.truth["sphere_centre"], [0.0, 0.0, 0.07], atol=1e-12)
@@ -132,4 +133,4 @@ def test_a_task_of_neither_shape_is_refused(tmp_path):
     path = tmp_path / "hold.yaml"
     path.write_text(text.replace("name: pour", "name: hold"))
     with pytest.raises(ValueError, match="neither"):
-        demogen.kind_of(path)
+        demogen.kind_of(find_task(path))

@@ -12,6 +12,7 @@ import pytest
 from sctd.cli.learn import add_learn_arguments, main_learn
 from sctd.cli.main import main
 from sctd.skill import load_skill
+from sctd.task import find_task
 from sctd.task.demos import DEMOS_FILE, DemosInfo, DemosInfoError, read_demos_info
 from sctd_services.record import check_demos_folder, note_demos_folder
 from sctd_sim import demogen
@@ -54,7 +55,7 @@ def test_the_recorder_notes_the_folder_once_and_refuses_another_object(tmp_path)
 
 
 def test_generated_demonstrations_say_what_they_are_of(tmp_path):
-    demogen.write_demo_set(demogen.generate("drawer", 2, seed=0), tmp_path)
+    demogen.write_demo_set(demogen.generate(find_task("drawer"), 2, seed=0), tmp_path)
     assert read_demos_info(tmp_path) == DemosInfo("drawer", "drawer_handle")
 
 

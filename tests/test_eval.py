@@ -60,8 +60,9 @@ def test_the_user_succeeds_with_renamed_states_and_permuted_axes(tmp_path):
     # reads the permuted mapping, so its inputs, and with them single trials' times,
     # differ: measured over seeds 0-4, medians 16.1 s and 16.0 s, single trials up to
     # 10 % apart)
-    a = [lockstep.run_trial(load_skill(POUR), TaskSpec("pour"), s) for s in range(5)]
-    b = [lockstep.run_trial(skill, TaskSpec("pour"), s) for s in range(5)]
+    pour = find_task("pour")
+    a = [lockstep.run_trial(load_skill(POUR), TaskSpec.of(pour), s, task=pour) for s in range(5)]
+    b = [lockstep.run_trial(skill, TaskSpec.of(pour), s, task=pour) for s in range(5)]
     assert all(r.outcome == "success" and r.time_s is not None for r in a + b), (a, b)
     ta = float(np.median([r.time_s for r in a]))
     tb = float(np.median([r.time_s for r in b]))
@@ -101,9 +102,10 @@ def test_lockstep_and_real_time_agree(tmp_path):
     the simulator of a pour then ran at 0.47 of real time and took 23 s of simulated time
     against 15 s), ``sctd eval`` reports the trial as not comparable, and only the
     outcomes are compared."""
-    spec = TaskSpec("drawer")
+    drawer = find_task("drawer")
+    spec = TaskSpec.of(drawer)
     seeds = (0, 2, 3)
-    lock = [lockstep.run_trial(load_skill(DRAWER_VF), spec, s) for s in seeds]
+    lock = [lockstep.run_trial(load_skill(DRAWER_VF), spec, s, task=drawer) for s in seeds]
     real = [_real_time_trial(DRAWER_VF, spec, s, tmp_path) for s in seeds]
     assert all(r.sim_rtf is None for r in lock) and all(r.sim_rtf and r.sim_rtf > 0 for r in real)
     same = sum(a.outcome == b.outcome for a, b in zip(lock, real, strict=True))
@@ -128,7 +130,7 @@ def test_baseline_runs_with_the_assisted_skills_limits(tmp_path):
                    baseline=True, workdir=tmp_path / "b")
     base = [e for e in ents if e.baseline_of]
     assert [e.skill.limits for e in base] == [pour.limits, load_skill(vf).limits]
-    assert task_of([e.skill for e in ents], None) == "pour"
+    assert task_of([e.skill for e in ents], None).name == "pour"
     p = with_limits(ROOT / "skills" / "pour-vf.yaml", pour.limits, tmp_path / "vf")
     assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf.npz").exists()
 
@@ -240,9 +242,12 @@ def test_a_trial_ends_at_its_task_files_time_limit_unless_told_otherwise(capsys)
     from sctd_services.eval.trial import TrialRecorder
 
     assert find_task("light_switch").outcome.time_limit == 30.0
-    assert TaskSpec("light_switch").time_limit == 30.0 and TaskSpec("pour").time_limit == 60.0
-    assert TaskSpec("light_switch", time_limit=12.0).time_limit == 12.0
-    assert TrialRecorder("light_switch", 0, switch_time=1.0).time_limit == 30.0
+    light, pour = find_task("light_switch"), find_task("pour")
+    assert TaskSpec.of(light).time_limit == 30.0 and TaskSpec.of(pour).time_limit == 60.0
+    assert TaskSpec.of(light, time_limit=12.0).time_limit == 12.0
+    assert TaskSpec.of(light).task == "light_switch"
+    assert TaskSpec.of(light, "./light.yaml").task == "./light.yaml"
+    assert TrialRecorder(light, 0, switch_time=1.0).time_limit == 30.0
     argv = ["eval", "--skill", "light_switch-vf", "--trials", "1", "--lockstep", "--time-limit", "0"]
     assert main(argv) == 2
     assert "--time-limit: must be a positive number of seconds, got 0.0" in capsys.readouterr().err
@@ -275,7 +280,8 @@ def test_an_arm_lag_hands_the_arm_each_target_that_much_later(monkeypatch):
 
     monkeypatch.setattr(lockstep.Feed, "tick", spy_tick)
     monkeypatch.setattr(lockstep.Simulation, "set_target", spy_set)
-    lockstep.run_trial(load_skill(POUR), TaskSpec("pour", time_limit=4.0, arm_lag=0.05), 0)
+    pour = find_task("pour")
+    lockstep.run_trial(load_skill(POUR), TaskSpec.of(pour, time_limit=4.0, arm_lag=0.05), 0, task=pour)
     assert taken and min(taken) >= 50
     moved = [k for k in taken if taken[k] != taken[min(taken)]]
     assert moved, "the user never moved the arm: nothing was checked"
@@ -303,7 +309,7 @@ def test_a_user_who_pours_from_close_enough_is_not_stuck(tilting):
     pouring); holding it still for 10 s more is not."""
     from sctd_services.eval.trial import TrialRecorder
 
-    rec = TrialRecorder("pour", 0, switch_time=1.0)
+    rec = TrialRecorder(find_task("pour"), 0, switch_time=1.0)
     outcome = None
     for k in range(1400):  # 14 s at 100 Hz: 3 s still, then (or not) tilting at 0.1 rad/s
         t = 0.01 * k
@@ -336,13 +342,14 @@ def test_evaluate_stops_when_until_says_and_cancels_the_rest(tmp_path, pooled):
 
     pool = ThreadPoolExecutor(1) if pooled else None
     try:
-        [res] = evaluate(ents, TaskSpec("pour"), 10, 0, job=_fake_trial, pool=pool, until=two_failures,
-                         logdir=tmp_path)
+        [res] = evaluate(ents, TaskSpec.of(find_task("pour")), 10, 0, job=_fake_trial, pool=pool,
+                         until=two_failures, logdir=tmp_path)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     assert [t["seed"] for t in res["per_trial"]] == [0, 1, 2, 3]  # seed 3 is the second failure
     assert res["trials"] == 4 and res["planned"] == 10 and res["stopped_early"] is True
     assert seen == [1, 2, 3, 4]
-    [full] = evaluate(ents, TaskSpec("pour"), 4, 0, job=_fake_trial, until=lambda p: False, logdir=tmp_path)
+    [full] = evaluate(ents, TaskSpec.of(find_task("pour")), 4, 0, job=_fake_trial, until=lambda p: False,
+                      logdir=tmp_path)
     assert full["trials"] == 4 and full["stopped_early"] is False

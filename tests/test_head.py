@@ -105,7 +105,7 @@ def test_a_scene_without_heads_reads_as_before():
 
 # -- the contact ------------------------------------------------------------------------
 def drink_scene() -> TaskScene:
-    scene = make_scene("drink")
+    scene = make_scene(find_task("drink"))
     assert isinstance(scene, TaskScene)
     return scene
 

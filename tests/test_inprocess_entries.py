@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from sctd import se3
+from sctd.task import find_task
 from sctd.wire import codec
 from sctd_services.input.device import InputError
 from sctd_services.input.emg import guided
@@ -24,7 +25,7 @@ from sctd_sim.kinematic import KinematicRobot, _take_target, kinematic_scene
 
 
 def test_the_kinematic_robot_relaxes_towards_its_target_and_carries_the_bottle_tip():
-    robot = KinematicRobot(kinematic_scene("pour"), tau=0.02)
+    robot = KinematicRobot(kinematic_scene(find_task("pour")), tau=0.02)
     start = robot.T_world_ee.copy()
     goal = start @ se3.transform_from_pose([0.03, 0.0, 0.0, 0, 0, 0, 1])
     robot.T_world_target = goal
@@ -38,16 +39,15 @@ def test_the_kinematic_robot_relaxes_towards_its_target_and_carries_the_bottle_t
     np.testing.assert_allclose(tip, robot.T_world_ee @ robot.scene.attached["bottle_tip"])
     assert "mug" in robot.objects()
     with pytest.raises(ValueError, match="kitchen: no such file, and no task of that name"):
-        kinematic_scene("kitchen")
+        kinematic_scene(find_task("kitchen"))
 
 
 def test_the_kinematic_scene_is_the_task_files():
     """The stand-in puts the bodies where the task file does, starts the hand at its
     start and carries the held object's frames: the numbers come from the file."""
-    from sctd.task import find_task
-
     for name in ("pour", "drawer"):
-        task, scene = find_task(name), kinematic_scene(name)
+        task = find_task(name)
+        scene = kinematic_scene(task)
         assert set(scene.objects) == set(task.scene.bodies)
         for body in task.scene.bodies.values():
             np.testing.assert_array_equal(scene.objects[body.name], body.T_world)
@@ -56,11 +56,12 @@ def test_the_kinematic_scene_is_the_task_files():
         assert set(scene.attached) == set(held)
         for frame, T in held.items():
             np.testing.assert_array_equal(scene.attached[frame], T)
-    np.testing.assert_array_equal(kinematic_scene("pour").attached["bottle_tip"][:3, 3], [0.0, 0.0, 0.12])
+    tip = kinematic_scene(find_task("pour")).attached["bottle_tip"]
+    np.testing.assert_array_equal(tip[:3, 3], [0.0, 0.0, 0.12])
 
 
 def test_the_kinematic_drawer_opens_once_grasped_and_only_up_to_its_stop():
-    scene = kinematic_scene("drawer")
+    scene = kinematic_scene(find_task("drawer"))
     robot = KinematicRobot(scene, tau=0.001)
     handle = scene.objects["drawer_handle"]
     robot.T_world_target = handle.copy()
@@ -75,7 +76,7 @@ def test_the_kinematic_drawer_opens_once_grasped_and_only_up_to_its_stop():
 
 
 def test_the_kinematic_robot_follows_what_its_guard_admits_and_ignores_garbage():
-    robot = KinematicRobot(kinematic_scene("pour"))
+    robot = KinematicRobot(kinematic_scene(find_task("pour")))
     guard = TargetGuard(TargetLimits(), 0.001, 0.0)
     pose = se3.pose_from_transform(robot.T_world_ee).tolist()
     _take_target(robot, guard, b"\xc1 not a target")

@@ -23,6 +23,7 @@ from sctd.learn import (
     skill_bundle,
 )
 from sctd.skill import Skill, skill_from_bundle
+from sctd.task import find_task
 from sctd_sim import demogen
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,7 +35,7 @@ TIP = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]
 
 @pytest.fixture(scope="module")
 def pour():
-    ds = demogen.generate("pour", 6, noise=0.001, outliers=0.05, seed=3)
+    ds = demogen.generate(find_task("pour"), 6, noise=0.001, outliers=0.05, seed=3)
     return [Demo(d.name, d.t, d.poses) for d in ds.demos]
 
 

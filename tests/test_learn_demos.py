@@ -14,6 +14,7 @@ from sctd.learn import (
     subsample_by_distance,
     tf_distance,
 )
+from sctd.task import find_task
 from sctd_sim import demogen
 
 HEADER = "t,x,y,z,qx,qy,qz,qw\n"
@@ -93,7 +94,7 @@ def test_write_then_read(tmp_path):
 
 def test_spike_mask_finds_planted_outliers():
     for seed in range(5):
-        ds = demogen.generate("pour", 1, outliers=0.05, seed=seed)
+        ds = demogen.generate(find_task("pour"), 1, outliers=0.05, seed=seed)
         d = ds.demos[0]
         bad = np.flatnonzero(~spike_mask(d.poses))
         assert set(d.outlier_rows) <= set(bad)
@@ -101,7 +102,7 @@ def test_spike_mask_finds_planted_outliers():
 
 
 def test_subsample_by_distance_spacing():
-    d = demogen.generate("pour", 1, noise=0.0, seed=0).demos[0]
+    d = demogen.generate(find_task("pour"), 1, noise=0.0, seed=0).demos[0]
     keep = subsample_by_distance(d.poses, 0.02, alpha=0.4)
     gaps = tf_distance(d.poses[keep[1:]], d.poses[keep[:-1]], 0.4)
     assert keep[0] == 0 and np.all(np.diff(keep) > 0)
@@ -112,7 +113,7 @@ def test_subsample_by_distance_spacing():
 
 
 def test_dtw_identity_shift_and_path():
-    d = demogen.generate("drawer", 1, noise=0.0, seed=0).demos[0].poses[::5]
+    d = demogen.generate(find_task("drawer"), 1, noise=0.0, seed=0).demos[0].poses[::5]
     cost, path = dtw(d, d)
     assert cost == pytest.approx(0.0, abs=1e-9)
     np.testing.assert_array_equal(path, np.stack([np.arange(len(d))] * 2, axis=1))

@@ -11,13 +11,14 @@ import pytest
 from sctd import se3
 from sctd.cli.learn import add_dtw_arguments, add_learn_arguments, main_dtw, main_learn, parse_frame
 from sctd.skill import SkillEngine, load_skill
+from sctd.task import find_task
 from sctd_sim import demogen
 
 
 @pytest.fixture(scope="module")
 def pour_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("pour")
-    demogen.write_demo_set(demogen.generate("pour", 6, outliers=0.05, seed=3), d)
+    demogen.write_demo_set(demogen.generate(find_task("pour"), 6, outliers=0.05, seed=3), d)
     return d
 
 
@@ -27,7 +28,7 @@ def pour10_dir(tmp_path_factory):
     apart, the likelihood explains the carry by two translations before the pour's
     sphere (each sharper than the sphere's plane)."""
     d = tmp_path_factory.mktemp("pour10")
-    demogen.write_demo_set(demogen.generate("pour", 10, outliers=0.05, seed=1), d)
+    demogen.write_demo_set(demogen.generate(find_task("pour"), 10, outliers=0.05, seed=1), d)
     return d
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sctd.bench.demos import demo_kind
 from sctd.learn import Demo, LinearIMLearner, learn_linear, read_demos
 from sctd.learn.frames import automatic_frames
 from sctd_sim import demogen
@@ -14,7 +15,7 @@ from .conftest import ROOT
 
 
 def _demos(task, seed):
-    ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
+    ds = demogen.generate(demo_kind(task), 10, noise=0.001, outliers=0.05, seed=seed)
     return ds, [Demo(d.name, d.t, d.poses) for d in ds.demos]
 
 

@@ -16,6 +16,7 @@ from sctd.bench import gco as gco_bench
 from sctd.bench.gco import chain_instance, gco_swap, segmentation_instance
 from sctd.learn import Demo, LinearIMLearner, alpha_beta_swap, alpha_expansion, energy, learn_linear
 from sctd.learn.graphcut import _expansion_candidates, _label_pairs, _Potts, _swap_candidates
+from sctd.task import find_task
 from sctd_sim import demogen
 from tests.oracles import reference_swap
 
@@ -175,7 +176,7 @@ def test_swap_matches_independent_reference_on_the_learners_pour_energy():
     """The energy the linear learner segments a generated pour with (given the tip
     frame): the swap ends no higher than the independent one, which finds no move that
     lowers it."""
-    ds = demogen.generate("pour", 4, noise=0.001, outliers=0.05, seed=0)
+    ds = demogen.generate(find_task("pour"), 4, noise=0.001, outliers=0.05, seed=0)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     lr = learn_linear(demos, {"tip": [0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0]},
                       learner=LinearIMLearner(random_state=0)).learner

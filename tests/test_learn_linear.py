@@ -23,6 +23,7 @@ from sctd.learn import (
     selection_matrices,
 )
 from sctd.learn.linear import dtw_edges, frame_displacements
+from sctd.task import find_task
 from sctd_sim import demogen
 
 from .strategies import poses, unit_quaternions
@@ -99,7 +100,7 @@ def test_neighbour_graph():
 
 @pytest.fixture(scope="module")
 def pour_result():
-    ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=11)
+    ds = demogen.generate(find_task("pour"), 8, noise=0.001, outliers=0.05, seed=11)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     return ds, learn_linear(demos, {"tip": TIP}, learner=LinearIMLearner(random_state=0))
 
@@ -150,7 +151,7 @@ def test_dtw_edges_pair_the_same_stage_of_identical_demos():
 
 
 def test_dtw_align_option_learns_the_same_skill_shape():
-    ds = demogen.generate("pour", 6, noise=0.001, outliers=0.05, seed=3)
+    ds = demogen.generate(find_task("pour"), 6, noise=0.001, outliers=0.05, seed=3)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     r = learn_linear(demos, {"tip": np.array([0, 0, 0.12, 0, 0, 0, 1.0])},
                      learner=LinearIMLearner(dtw_align=True, random_state=3))

@@ -13,6 +13,7 @@ from sctd.cli.learn import add_learn_arguments, main_learn
 from sctd.learn import HyperparameterError, SkillOptions, check_hyperparameters
 from sctd.learn.results import speed_near_from_text
 from sctd.skill import SpeedNear, load_skill
+from sctd.task import find_task
 from sctd_sim import demogen
 
 TIP = "tip=0,0,0.12,0,0,0,1"
@@ -21,7 +22,7 @@ TIP = "tip=0,0,0.12,0,0,0,1"
 @pytest.fixture(scope="module")
 def pour_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("pour")
-    demogen.write_demo_set(demogen.generate("pour", 6, outliers=0.05, seed=3), d)
+    demogen.write_demo_set(demogen.generate(find_task("pour"), 6, outliers=0.05, seed=3), d)
     return d
 
 

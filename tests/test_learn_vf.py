@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sctd.bench.demos import demo_kind
 from sctd.learn import Demo, VectorFieldLearner, field_kinds_by_phase, learn_vector_fields, ransac_iterations
 from sctd.learn.vf import DEFAULT_FIELDS, cylinder_field, sphere_field
+from sctd.task import find_task
 from sctd_sim import demogen
 
 
@@ -85,7 +87,7 @@ def test_ransac_iterations_eq_4_23():
 
 
 def test_pour_sphere_centre_is_stable_and_gives_the_tip():
-    ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=5)
+    ds = demogen.generate(find_task("pour"), 8, noise=0.001, outliers=0.05, seed=5)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     truth = np.asarray(ds.truth["sphere_centre"])
     centres = []
@@ -105,7 +107,7 @@ def test_pour_sphere_centre_is_stable_and_gives_the_tip():
 
 
 def test_drawer_two_translation_fields():
-    ds = demogen.generate("drawer", 8, noise=0.001, outliers=0.05, seed=6)
+    ds = demogen.generate(find_task("drawer"), 8, noise=0.001, outliers=0.05, seed=6)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0))
     dirs = [f.direction for f in res.learner.fields_ if f.type == "translation"]
@@ -121,7 +123,7 @@ def test_drawer_two_translation_fields():
 def _phase_kinds(task: str, seed: int, **kw):
     """The learner's fields and, per phase of the generated task, the kind of field
     most of its displacements were assigned to."""
-    ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
+    ds = demogen.generate(demo_kind(task), 10, noise=0.001, outliers=0.05, seed=seed)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=seed, **kw))
     kinds = field_kinds_by_phase(res.field_labels, [f.type for f in res.learner.fields_],
@@ -212,7 +214,7 @@ def test_the_pour_pivot_is_the_bottle_tip():
     tip, to a millimetre along the hand's x and z (every tilt turns about the
     hand's y, which leaves the point free along it: there it is the sphere centre's mean
     offset, to 2 mm)."""
-    ds = demogen.generate("pour", 8, noise=0.001, outliers=0.05, seed=5)
+    ds = demogen.generate(find_task("pour"), 8, noise=0.001, outliers=0.05, seed=5)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     res = learn_vector_fields(demos, learner=VectorFieldLearner(random_state=0))
     sph = next(f for f in res.learner.fields_ if f.type == "sphere")

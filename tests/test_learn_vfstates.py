@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sctd import se3
+from sctd.bench.demos import demo_kind
 from sctd.learn import Demo, VectorFieldLearner, VectorFieldOptions, learn_vector_fields, skill_bundle
 from sctd.learn.vfstates import plan_states
 from sctd.skill import SkillEngine, skill_from_bundle
@@ -15,7 +16,7 @@ from sctd_sim import demogen
 
 
 def _result(task, seed, states="auto"):
-    ds = demogen.generate(task, 10, noise=0.001, outliers=0.05, seed=seed)
+    ds = demogen.generate(demo_kind(task), 10, noise=0.001, outliers=0.05, seed=seed)
     demos = [Demo(d.name, d.t, d.poses) for d in ds.demos]
     return ds, learn_vector_fields(demos, learner=VectorFieldLearner(random_state=seed),
                                    field_options=VectorFieldOptions(vf_states=states))

@@ -47,8 +47,9 @@ def outcome(skill: str, seed: int) -> dict[str, Any]:
     from sctd_services.eval.trial import TaskSpec
 
     loaded = load_skill(find_skill(skill))
-    spec = TaskSpec(task_of([loaded], None), time_limit=TIME_LIMIT)
-    r = run_trial(loaded, spec, seed).as_dict()
+    task = task_of([loaded], None)
+    spec = TaskSpec.of(task, time_limit=TIME_LIMIT)
+    r = run_trial(loaded, spec, seed, task=task).as_dict()
     got = {k: r[k] for k in FIELDS}
     for k in ("time_s", "duration_s"):
         got[k] = None if got[k] is None else round(got[k], 3)

@@ -13,10 +13,12 @@ import time
 
 import pytest
 
+from sctd.app.defaults import defaults
 from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import Cluster
 from sctd.deploy.netns import Hosts, NamespaceError, namespaces
 from sctd.runtime.controller import RuntimeConfig
+from sctd.task import find_task
 from tests.conftest import require_namespaces, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # network namespaces, a process per host
@@ -34,7 +36,7 @@ HAND_BOUND_M = 1e-3  # m the hand at rest may move across the outage (derived in
 def cluster(tmp_path_factory):
     require_namespaces()
     logdir = tmp_path_factory.mktemp("multihost")
-    c = Cluster(logdir)
+    c = Cluster(logdir, task=find_task(defaults().task))
     try:
         c.__enter__()
     except NamespaceError as e:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from sctd.bench.sim import format_report, measure_breakdown, measure_rtf, parts_line, tracking
+from sctd.task import find_task
 
 
 def test_measure_rtf_reports_its_figures():
@@ -23,7 +24,7 @@ def test_measure_breakdown_accounts_for_the_whole_cycle():
 
 
 def test_the_breakdown_in_a_scene_adds_the_target_and_the_scene():
-    b = measure_breakdown(seconds=0.03, scene="pour")
+    b = measure_breakdown(seconds=0.03, scene=find_task("pour"))
     parts = ("controller", "bus_controller_end", "bus_drives_end", "physics", "target", "scene", "other")
     assert set(b) == {*parts, "cycle"}
     assert all(b[p] > 0 for p in parts if p != "other")
@@ -65,8 +66,8 @@ def test_the_pour_scene_step_settles_because_the_bottle_is_compensated():
     step settled to 1.6 mm; told its load, the controller settles below 1 mm in < 1 s."""
     from sctd.bench.sim import scene_step
 
-    ok = scene_step("pour", 0.05)
-    bare = scene_step("pour", 0.05, compensate=False)
+    ok = scene_step(find_task("pour"), 0.05)
+    bare = scene_step(find_task("pour"), 0.05, compensate=False)
     assert ok["payload_kg"] == 0.5 and ok["settling_time_s"] < 1.0 and ok["final_error_m"] < 1e-3
     assert bare["settling_time_s"] == float("inf") and 1e-3 < bare["final_error_m"] < 3e-3
 

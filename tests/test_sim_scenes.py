@@ -11,10 +11,10 @@ import pytest
 from can.interfaces import virtual as can_virtual
 
 from sctd import se3
-from sctd.task import TaskError, handle_jacobian, handle_pose
+from sctd.task import TaskError, find_task, handle_jacobian, handle_pose
 from sctd.task.judge import holds
 from sctd.task.model import Near
-from sctd_sim.scenes import TaskScene, joint_force, make_scene, outlet_geometry, outlet_stream
+from sctd_sim.scenes import EmptyScene, TaskScene, joint_force, make_scene, outlet_geometry, outlet_stream
 from sctd_sim.simulation import Simulation
 from tests.oracles import HandleState, reference_handle_step
 
@@ -48,7 +48,7 @@ def mug_opening(scene, above=0.03, radial=(0.0, 0.0)):
 
 
 def pour_scene() -> TaskScene:
-    scene = make_scene("pour")
+    scene = make_scene(find_task("pour"))
     assert isinstance(scene, TaskScene)
     return scene
 
@@ -162,7 +162,7 @@ def ee_at(p):
 
 
 def drawer_scene(**joint) -> TaskScene:
-    scene = make_scene("drawer")
+    scene = make_scene(find_task("drawer"))
     if joint:  # the same task with other joint parameters
         task = scene.task
         j = dataclasses.replace(task.scene.joints["drawer"], **joint)
@@ -229,18 +229,18 @@ def test_released_drawer_closes_by_its_soft_close_spring():
 
 
 def test_make_scene():
-    assert make_scene("pour").task_object == "mug"
-    assert make_scene("drawer").task_object == "drawer_handle"
-    assert make_scene("empty").objects(np.eye(4)) == {}
+    assert make_scene(find_task("pour")).task_object == "mug"
+    assert make_scene(find_task("drawer")).task_object == "drawer_handle"
+    assert EmptyScene().objects(np.eye(4)) == {}
     with pytest.raises(TaskError, match="juggle: no such file, and no task of that name"):
-        make_scene("juggle")
+        make_scene(find_task("juggle"))
 
 
 def test_a_seeded_start_moves_what_the_file_says_and_nothing_else():
     """``vary``: the hand within 10 cm per axis and 15 deg of yaw, the mug within 5 cm
     on the table (never up or down); the same seed, the same start."""
     for seed in range(20):
-        a, b = make_scene("pour", trial_seed=seed), make_scene("pour", trial_seed=seed)
+        a, b = make_scene(find_task("pour"), trial_seed=seed), make_scene(find_task("pour"), trial_seed=seed)
         np.testing.assert_array_equal(a.start_pose(), b.start_pose())
         d = a.start_pose()[:3, 3] - a.default_start_pose[:3, 3]
         assert np.all(np.abs(d) <= 0.10) and abs(a.start_yaw) <= math.radians(15.0)
@@ -250,7 +250,7 @@ def test_a_seeded_start_moves_what_the_file_says_and_nothing_else():
 
 # -- the Simulation facade ------------------------------------------------------------
 def test_simulation_messages_are_plain_data():
-    with Simulation("pour") as sim:
+    with Simulation(find_task("pour")) as sim:
         sim.run(0.02)
         msg = sim.state_message()
         assert set(msg) == {"pose", "q", "dq", "wrench", "gripper"}
@@ -275,7 +275,7 @@ def test_simulation_messages_are_plain_data():
 def test_state_message_pose_is_the_forward_kinematics_of_the_decoded_joints():
     """The reported pose is the controller's kinematics of what crossed the bus (shared
     with its next update): Pinocchio's forward kinematics of the decoded q, bit for bit."""
-    with Simulation("pour") as sim:
+    with Simulation(find_task("pour")) as sim:
         model = sim.arm.arm
         data = model.model.createData()
         for _ in range(3):
@@ -287,7 +287,7 @@ def test_state_message_pose_is_the_forward_kinematics_of_the_decoded_joints():
 
 
 def test_simulation_ignores_invalid_targets():
-    with Simulation("empty") as sim:
+    with Simulation(EmptyScene()) as sim:
         sim.step()
         sim.set_target([float("nan")] * 7)
         sim.set_target([0.0] * 7)
@@ -296,7 +296,7 @@ def test_simulation_ignores_invalid_targets():
 
 
 def test_simulation_follows_targets_and_opens_the_drawer():
-    with Simulation("drawer") as sim:
+    with Simulation(find_task("drawer")) as sim:
         p0 = np.array(sim.state_message()["pose"])
         handle = np.array(sim.objects()["drawer_handle"])
         T_handle_ee = (se3.invert_transform(se3.transform_from_pose(handle))
@@ -325,7 +325,7 @@ def test_simulation_follows_targets_and_opens_the_drawer():
 
 # -- cabinet: a door on a revolute joint ------------------------------------------------
 def cabinet_scene(**joint) -> TaskScene:
-    scene = make_scene("cabinet")
+    scene = make_scene(find_task("cabinet"))
     if joint:  # the same task with other joint parameters
         task = scene.task
         joints = {"door": dataclasses.replace(task.scene.joints["door"], **joint)}
@@ -412,7 +412,7 @@ def test_friction_holds_the_door_below_its_breakaway_force():
     """Friction 0.3 N m at a 0.321 m lever: 0.93 N at the handle. Half of it turns the
     door by less than 2 deg in 2 s (the tanh friction's creep); three times it swings
     the door open."""
-    joint = make_scene("cabinet").task.scene.joints["door"]
+    joint = make_scene(find_task("cabinet")).task.scene.joints["door"]
     breakaway = joint.friction / joint.hinge.lever
     assert push(cabinet_scene(), 0.5 * breakaway, 2.0) < math.radians(2.0)
     assert push(cabinet_scene(spring=0.0), 0.5 * breakaway, 2.0) < math.radians(2.0)
@@ -433,7 +433,7 @@ def test_a_handle_steps_as_its_equations_say(task):
     """The scene's float arithmetic against the equations on 3-vectors (tests/oracles.py),
     along a hand path that grasps, pulls, wobbles and lets go: a prismatic joint's numbers
     to the bit (as before the revolute joint came), a revolute joint's to rounding."""
-    scene = make_scene(task)
+    scene = make_scene(find_task(task))
     joint = next(iter(scene.task.scene.joints.values()))
     T0 = scene.poses[joint.handle]
     element, ref = scene.handles[0], HandleState()

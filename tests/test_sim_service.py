@@ -17,6 +17,7 @@ import pytest
 import zenoh
 
 from sctd import se3
+from sctd.task import find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import open_session
 from sctd_sim.service import parse_faults
@@ -282,7 +283,7 @@ def test_the_bus_mirror_runs_only_while_a_remote_listener_is_there():
     from sctd_sim.simulation import Simulation
 
     ep = f"tcp/127.0.0.1:{free_port()}"
-    with open_session(listen=[ep]) as s, Simulation("pour") as sim, SimService(s, sim) as service:
+    with open_session(listen=[ep]) as s, Simulation(find_task("pour")) as sim, SimService(s, sim) as service:
         assert not service._can_watched
         with open_session(connect=[ep]) as other:
             sub = other.declare_subscriber(service.can_key, lambda sample: None)

@@ -27,6 +27,7 @@ from websockets.sync.client import connect
 from websockets.typing import Subprotocol
 
 from sctd import se3
+from sctd.task import find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import open_session
 from sctd_sim import service
@@ -107,7 +108,7 @@ def no_leaked_threads():
 
 # -- in process --------------------------------------------------------------------------
 def test_view_follows_the_sim_and_serves_on_loopback_only():
-    with Simulation(scene="pour") as sim:
+    with Simulation(scene=find_task("pour")) as sim:
         view = open_viewer(0)  # 0: the OS picks a free port
         port = view.port
         with view:

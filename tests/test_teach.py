@@ -53,7 +53,7 @@ def test_plans_are_seeded_and_within_the_variation(task):
     """The same seed gives the same plan attempt by attempt; another seed another one;
     every variation lies within the task file's teach ranges; a mistake changes only
     where the reach ends, by the step's miss."""
-    g = scene_geometry(task)
+    g = scene_geometry(find_task(task))
     V = g.teach
     for seed in range(5):
         for n in range(1, 9):
@@ -114,7 +114,7 @@ def test_motions_have_the_demonstrations_shape_and_bounded_speeds(task):
     the bottle's opening, tilting its top towards the mug; the pull goes along +x; the
     pour's last step brings the bottle upright about its opening; every motion's peak
     speed is under the teacher's step bound, itself under the guard."""
-    g = scene_geometry(task)
+    g = scene_geometry(find_task(task))
     lim, guard = StreamLimits(), TargetLimits()
     assert lim.max_speed < guard.max_target_speed and lim.max_turn < guard.max_target_angular_speed
     for n in (1, 3, 5):  # demonstrations of one seed, each drawn anew
@@ -173,7 +173,7 @@ def test_a_teacher_left_behind_by_a_stuck_arm_starts_again_from_the_arm():
 def test_facing_the_mug():
     """At the scene's start the hand faces the mug as the scene's start pose does; from
     elsewhere its x axis points at the mug's vertical axis."""
-    g = scene_geometry("pour")
+    g = scene_geometry(find_task("pour"))
     np.testing.assert_allclose(facing(g.T_obj_start[:3, 3], g), g.T_obj_start[:3, :3], atol=1e-12)
     for p in ([0.3, 0.1, 0.0], [0.2, -0.1, 0.1]):
         R = facing(np.array(p), g)

@@ -7,12 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sctd.task import find_task
 from sctd_services.teach import StreamLimits, plan_demonstration, scene_geometry, task_motions
 from sctd_services.teach.motion import PressMotion
 from sctd_services.teach.plan import PRESS_STANDOFF
 from tests.test_teach import _peak_speeds, _same, _samples
 
-G = scene_geometry("light_switch")
+G = scene_geometry(find_task("light_switch"))
 V = G.teach
 BUTTON = G.task.scene.bodies["light_switch"].button
 

@@ -40,7 +40,7 @@ from ..cli.procs import Child, free_port
 from ..cli.teach_loop import candidate_frames
 from ..learn.demos import read_demos
 from ..skill.catalog import shipped_folder
-from ..task import find_task
+from ..task import Task, find_task
 from ..wire import Keys, client, codec
 from ..wire.session import session
 from . import run_and_report
@@ -114,8 +114,8 @@ def _until(pred: Any, timeout: float, why: str) -> None:
         time.sleep(0.05)
 
 
-def _publish_demos(s: zenoh.Session, keys: Keys, task: str) -> list[str]:
-    obj = find_task(task).object
+def _publish_demos(s: zenoh.Session, keys: Keys, found: Task) -> list[str]:
+    task, obj = found.name, found.object
     names = []
     for d in read_demos(shipped_folder() / "demos" / task):
         name = Path(d.name).stem
@@ -133,10 +133,11 @@ SHIPPED_RECIPE: dict[str, dict[str, Any]] = {
 request without ``--param``."""
 
 
-def request_to_swap(tree: Tree, task: str, skill: str, method: str, params: dict[str, Any], quiet: float,
+def request_to_swap(tree: Tree, found: Task, skill: str, method: str, params: dict[str, Any], quiet: float,
                     logdir: Path, k: int) -> dict[str, Any]:
     """One end-to-end run of ``tree`` (module doc): its figures."""
     keys, hub = Keys(), f"tcp/127.0.0.1:{free_port()}"
+    task = found.name  # the child processes and the learner's request name it
     watch = _Watch()
     store = logdir / f"store-{k}"
     with ExitStack() as stack:
@@ -150,7 +151,7 @@ def request_to_swap(tree: Tree, task: str, skill: str, method: str, params: dict
                                       env=tree.env, cwd=tree.cwd))
         _until(lambda: watch.skill is not None and watch.count("state") > 0, 90,
                f"the daemon or the learner did not come up; see {logdir}/*-{k}.log")
-        names = _publish_demos(s, keys, task)
+        names = _publish_demos(s, keys, found)
         _until(lambda: watch.count("stored") + watch.count("duplicate") >= len(names), 60,
                f"the learner did not store the demonstrations; see {logdir}/learner-{k}.log")
         first = watch.skill
@@ -158,7 +159,7 @@ def request_to_swap(tree: Tree, task: str, skill: str, method: str, params: dict
         time.sleep(quiet)
         t0 = time.monotonic()
         req: dict[str, Any] = {"task": task, "method": method, "demos": names, "swap": True, "params": params}
-        if method == "linear" and (frames := candidate_frames(find_task(task))):
+        if method == "linear" and (frames := candidate_frames(found)):
             req["frames"] = frames
         got = client.query(s, keys.learner, codec.pack(req), timeout=900, find=10)
         if got is None or not got[0]:
@@ -180,6 +181,7 @@ def run_check_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
                            "runs": [], "task": args.task, "method": args.method}
     if not args.end_to_end:
         return out
+    task = find_task(args.task)  # the bench's --task, resolved once
     with ExitStack() as stack:
         trees = [Tree("this", cwd=logdir)]
         if args.baseline:
@@ -188,7 +190,7 @@ def run_check_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
         k = 0
         for r in range(args.rounds):
             for tree in (trees if r % 2 == 0 else trees[::-1]):
-                run = request_to_swap(tree, args.task, args.skill, args.method, _params(args), args.quiet,
+                run = request_to_swap(tree, task, args.skill, args.method, _params(args), args.quiet,
                                       logdir, k)
                 k += 1
                 out["runs"].append(run)

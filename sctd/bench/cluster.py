@@ -55,7 +55,7 @@ def measure(skill: str | None = None, trials: int = 8, workers: int = 2, time_li
     with tempfile.TemporaryDirectory(prefix="sctd-bench-cluster-") as work:
         path = str(find_skill(skill or defaults().learned_skill))
         ents = entries([path], False, Path(work))
-        spec = TaskSpec(task_of([ents[0].skill], None), time_limit=time_limit)
+        spec = TaskSpec.of(task_of([ents[0].skill], None), time_limit=time_limit)
         local_s: list[float] = []
         cluster_s: list[float] = []
         seen: list[list] = []

@@ -20,6 +20,7 @@ from sctd.app.errors import fail
 from sctd.app.options import SKILL_HELP, TASK_HELP
 from sctd.skill import load_skill
 from sctd.skill.catalog import find_skill
+from sctd.task import Task, find_task
 from sctd_services.eval.evaluate import task_of
 from sctd_services.eval.lockstep import run_trial
 from sctd_services.eval.trial import TaskSpec
@@ -27,7 +28,7 @@ from sctd_services.eval.trial import TaskSpec
 RATE = 1000.0  # Hz: the lockstep simulation's cycle (Simulation's default)
 
 
-def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0,
+def measure(skill: str, task: Task | None = None, trials: int = 3, seed: int = 0,
             time_limit: float | None = None) -> dict[str, Any]:
     """Time ``trials`` lockstep trials of ``skill`` (seeds ``seed ..``) on ``task`` (default:
     the task of the skill's object), each ending at ``time_limit`` s at the latest.
@@ -41,11 +42,12 @@ def measure(skill: str, task: str | None = None, trials: int = 3, seed: int = 0,
     """
     path = find_skill(skill)
     loaded = load_skill(path)
-    spec = TaskSpec(task_of([loaded], task), time_limit=time_limit)
+    found = task_of([loaded], task)
+    spec = TaskSpec.of(found, time_limit=time_limit)
     sim_s, outcomes = 0.0, Counter[str]()
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for k in range(trials):
-        r = run_trial(loaded, spec, seed + k)
+        r = run_trial(loaded, spec, seed + k, task=found)
         sim_s += r.duration_s
         outcomes[r.outcome] += 1
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
@@ -88,8 +90,9 @@ def main_bench_eval(args: argparse.Namespace) -> int:
     if args.time_limit is not None and not args.time_limit > 0:
         return fail("bench eval", "--time-limit: must be > 0")
     try:
-        r = measure(args.skill, args.task, args.trials, args.seed, args.time_limit)
-    except ValueError as e:  # a skill that does not load (SkillError), no task for it
+        task = find_task(args.task) if args.task is not None else None
+        r = measure(args.skill, task, args.trials, args.seed, args.time_limit)
+    except ValueError as e:  # a skill that does not load (SkillError), a task that does not (TaskError)
         return fail("bench eval", str(e))
     print(json.dumps(r) if args.json else format_report(r))
     return 0

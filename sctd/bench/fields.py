@@ -29,7 +29,7 @@ from ..learn import (
 )
 from ..learn.results import VectorFieldResult
 from ..skill.fields import CylinderField, SphereField
-from .demos import demos_of
+from .demos import demo_kind, demos_of
 
 SELECTIONS = ("likelihood", "inliers")
 
@@ -71,12 +71,13 @@ def run_field_bench(seeds: int = 10, n_demos: int = 10, noise: float = 0.001,
     tasks = defaults().bench_learn.fields if tasks is None else tasks
     out: dict[str, Any] = {"seeds": seeds, "n_demos": n_demos, "tasks": {}}
     for task in tasks:
-        truth = demogen.kind_of(task).fields
+        kind = demo_kind(task)
+        truth = kind.fields
         row: dict[str, Any] = {"truth": list(truth)}
         for sel in SELECTIONS:
             right, geo, times, wrong = 0, [], [], []
             for seed in range(seeds):
-                ds = demogen.generate(task, n_demos, noise=noise, outliers=outliers, seed=seed)
+                ds = demogen.generate(kind, n_demos, noise=noise, outliers=outliers, seed=seed)
                 t = time.perf_counter()
                 res = learn_vector_fields(demos_of(ds), learner=VectorFieldLearner(
                     random_state=seed, selection=sel))
@@ -107,8 +108,9 @@ def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float, tilt:
     tilt task (segmentation accuracy against the generator's phases), and the crank axis
     offset found, over seeds; learning times."""
     acc_auto, acc_given, tip_err, t_auto, crank_err = [], [], [], [], []
+    tilted = demo_kind(tilt)
     for seed in range(seeds):
-        pour = demogen.generate(tilt, n_demos, noise=noise, outliers=outliers, seed=seed)
+        pour = demogen.generate(tilted, n_demos, noise=noise, outliers=outliers, seed=seed)
         tip = tip_frame(pour)
         t = time.perf_counter()
         auto = learn_linear(demos_of(pour), learner=LinearIMLearner(random_state=seed))
@@ -118,7 +120,8 @@ def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float, tilt:
         acc_given.append(segmentation_accuracy(given.labels, pour.truth["labels"])[0])
         spheres = [f for f in auto.found_frames if f.kind == "sphere"]
         tip_err.append(min((float(np.linalg.norm(f.pose[:3] - tip[:3])) for f in spheres), default=np.inf))
-        crank = demogen.generate("crank", n_demos, noise=noise, outliers=outliers, seed=seed)
+        crank = demogen.generate(demogen.SYNTHETIC["crank"], n_demos, noise=noise, outliers=outliers,
+                                 seed=seed)
         c = learn_linear(demos_of(crank), learner=LinearIMLearner(random_state=seed))
         axis = [f for f in c.found_frames if f.kind == "cylinder"]
         crank_err.append(min((float(np.linalg.norm(f.pose[:3] - crank.truth["axis_ee_offset"]))

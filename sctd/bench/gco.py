@@ -48,7 +48,7 @@ from ..learn import (
     neighbour_graph,
 )
 from ..learn.preprocess import preprocess
-from .demos import demos_of
+from .demos import demo_kind, demos_of
 
 Problem = tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], float]
 GCO_INSTALL = "pip install gco-wrapper; it is in the dev extra"
@@ -62,7 +62,7 @@ def segmentation_instance(seed: int, task: str, n_demos: int = 10,
     the linear-IM learner's segmentation solves on generated demonstrations of ``task``
     (``ee`` the only frame)."""
     lr = LinearIMLearner() if learner is None else learner
-    ds = demogen.generate(task, n_demos, noise=noise, outliers=outliers, seed=seed)
+    ds = demogen.generate(demo_kind(task), n_demos, noise=noise, outliers=outliers, seed=seed)
     prep = Preprocessing()
     prepared = preprocess(demos_of(ds), prep, prep.spacing,
                           lr.alpha, translation_only=False)

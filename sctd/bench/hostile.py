@@ -35,7 +35,7 @@ from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
 from sctd.skill.catalog import shipped_folder
-from sctd.task import find_task
+from sctd.task import Task, find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, session
 
@@ -248,7 +248,8 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
     to the tools (:func:`files_phase`), then the learner attacked; the daemon's lateness
     over each."""
     keys = Keys()
-    task, skill = defaults().task, defaults().skill
+    found, skill = find_task(defaults().task), defaults().skill  # the bench's task, resolved once
+    task = found.name
     hub = f"tcp/127.0.0.1:{free_port()}"
     store = d / "store"
     status: list[dict] = []
@@ -282,7 +283,7 @@ def attack_phase(d: Path, seconds: float, logdir: Path) -> dict[str, Any]:
         tools = _windows(status, lock, k0)
         k0 = len(status)
         replies = _bad_requests(s, keys, task)
-        _bad_demos(s, keys, events, task)
+        _bad_demos(s, keys, events, found)
         attacked = _windows(status, lock, k0)
     stored = sum(1 for e in events if e.get("event") == "stored")
     rejected = [e for e in events if e.get("event") == "rejected"]
@@ -308,11 +309,11 @@ def _bad_requests(s: zenoh.Session, keys: Keys, task: str) -> list[dict[str, Any
     return replies
 
 
-def _bad_demos(s: zenoh.Session, keys: Keys, events: list[dict], task: str) -> None:
+def _bad_demos(s: zenoh.Session, keys: Keys, events: list[dict], found: Task) -> None:
     """Demonstrations of ``task`` the learner must refuse (too long, names that are
     paths) and more than a task's quota (of a task ``quota``); returns once the
     learner's status ``events`` account for each of them, or after 120 s."""
-    obj = find_task(task).object
+    task, obj = found.name, found.object
     for name, rows in (("long", 100_001), ("..", 12), (".h", 12), ("a\x00b", 12)):
         s.put(keys.demos(task, name.replace("\x00", "_")), _demo(task, name, obj, rows), encoding=MSGPACK)
     for k in range(1200):  # distinct names, small: past the task's quota of 1,000

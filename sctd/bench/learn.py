@@ -38,7 +38,7 @@ from ..learn import (
     segmentation_accuracy,
 )
 from ..skill.fields import SphereField, TranslationField
-from .demos import demos_of
+from .demos import demo_kind, demos_of
 from .fields import format_field_bench, run_field_bench, tip_frame
 from .gco import format_gco_bench, run_gco_bench
 
@@ -58,10 +58,10 @@ def run_bench(seed: int = 0, n_demos: int = 10, outliers: float = 0.05, noise: f
     import sklearn.svm  # noqa: F401  (the cold import is not learning time)
 
     out["sklearn_import_s"] = time.perf_counter() - t
-    pour = demogen.generate(workload.tilt, n_demos, noise=noise, outliers=outliers, seed=seed)
+    pour = demogen.generate(demo_kind(workload.tilt), n_demos, noise=noise, outliers=outliers, seed=seed)
     _bench_linear(pour, seed, out)
     _bench_vf_pour(pour, seed, n_seeds, out)
-    drawer = demogen.generate(workload.pull, n_demos, noise=noise, outliers=outliers, seed=seed)
+    drawer = demogen.generate(demo_kind(workload.pull), n_demos, noise=noise, outliers=outliers, seed=seed)
     _bench_vf_drawer(drawer, seed, out)
     out["swap_vs_gco"] = run_gco_bench(gco_instances, seed, (workload.tilt, workload.pull))
     if field_seeds > 0:

@@ -15,10 +15,12 @@ import argparse
 import time
 from pathlib import Path
 
+from sctd.app.defaults import defaults
 from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.bench import run_and_report
 from sctd.deploy.cluster import HOSTS, Cluster
 from sctd.deploy.netns import Process, last_json
+from sctd.task import find_task
 
 
 def _wait(pred, seconds: float, what: str, *procs: Process):
@@ -37,7 +39,7 @@ def _wait(pred, seconds: float, what: str, *procs: Process):
 def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restarts: int = 3) -> dict:
     """Latency across the hosts vs an echo; reconnection after router restarts; what
     the intruders got through (with the secured configs)."""
-    with Cluster(logdir) as c:
+    with Cluster(logdir, task=find_task(defaults().task)) as c:  # the default task, resolved once
         h = c.hosts
         c.start_router()
         robot, runtime = c.start_robot(), c.start_runtime()

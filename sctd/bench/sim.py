@@ -18,7 +18,7 @@ import numpy as np
 
 from sctd import se3
 from sctd.app.errors import fail
-from sctd.task import TaskError, find_task
+from sctd.task import Task, TaskError, find_task
 from sctd_sim.arm import SimArm
 from sctd_sim.robot import ArmModel, load_arm_model
 from sctd_sim.simulation import Simulation, start_posture
@@ -71,7 +71,7 @@ _PARTS = {
 """The parts of a cycle: the ``SimArm`` component methods each is made of."""
 
 
-def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0, scene: str | None = None
+def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0, scene: Task | None = None
                       ) -> dict[str, float]:
     """Per-cycle cost of the cycle's parts, us (mean over cycles, like the real-time
     factor, so it includes the controller's damping update every few cycles).
@@ -83,7 +83,7 @@ def measure_breakdown(seconds: float = 1.0, rate: float = 1000.0, scene: str | N
     (and in the timers), ``cycle`` the whole timed cycle: a few microseconds more than
     an untimed one.
 
-    With ``scene`` (a task's name or file) the cycle is the simulation's in that
+    With ``scene`` (a task) the cycle is the simulation's in that
     scene, as the ``sctd sim`` service and lockstep evaluation run it: a target (the
     start pose) given every cycle, then :meth:`Simulation.step
     <sctd_sim.simulation.Simulation.step>`; two more parts are timed, ``target``
@@ -233,7 +233,7 @@ def tracking(speed: float = 0.25, distance: float = 0.25, axis: int = 1, rate: f
     }
 
 
-def scene_step(scene: str, size: float = 0.05, rate: float = 1000.0, duration: float = 2.5,
+def scene_step(scene: Task, size: float = 0.05, rate: float = 1000.0, duration: float = 2.5,
                tolerance: float = 1e-3, hold: float = 1.0, compensate: bool = True) -> dict[str, Any]:
     """A step of the target along world x from the scene's start pose, with the scene in
     the loop (the full bottle in the pour scene, held by a controller that knows its
@@ -262,7 +262,7 @@ def scene_step(scene: str, size: float = 0.05, rate: float = 1000.0, duration: f
     above = np.nonzero(err > tolerance)[0]
     settle = 0.0 if above.size == 0 else (above[-1] + 1) / rate
     return {
-        "scene": scene,
+        "scene": scene.name,
         "compensated": compensate,
         "payload_kg": None if payload is None else float(payload[0]),
         "hold_error_m": sag,
@@ -273,7 +273,7 @@ def scene_step(scene: str, size: float = 0.05, rate: float = 1000.0, duration: f
     }
 
 
-def scene_tracking(scene: str, speed: float = 0.1, distance: float = 0.15, rate: float = 1000.0,
+def scene_tracking(scene: Task, speed: float = 0.1, distance: float = 0.15, rate: float = 1000.0,
                    ramp: float = 0.1) -> dict[str, Any]:
     """Error of the hand following a target moving along world y from the scene's start
     at ``speed`` (trapezoidal, as :func:`tracking`), with the scene in the loop."""
@@ -291,11 +291,11 @@ def scene_tracking(scene: str, speed: float = 0.1, distance: float = 0.15, rate:
             sim.step()
             errs.append(float(np.linalg.norm(sim.arm.dynamics.ee_transform()[:3, 3] - T[:3, 3])))
     e = np.array(errs)
-    return {"scene": scene, "speed_m_s": speed, "axis": "y", "max_error_m": float(e.max()),
+    return {"scene": scene.name, "speed_m_s": speed, "axis": "y", "max_error_m": float(e.max()),
             "rms_error_m": float(np.sqrt(np.mean(e**2)))}
 
 
-def run_scene_bench(scene: str, rate: float = 1000.0) -> dict[str, Any]:
+def run_scene_bench(scene: Task, rate: float = 1000.0) -> dict[str, Any]:
     """The step (5 cm along world x) and tracking figures in ``scene``, the targets
     (settles below 1 mm in under 1 s, as in the empty workspace) and the cost of a cycle
     in the scene (``breakdown``, :func:`measure_breakdown`)."""
@@ -303,7 +303,7 @@ def run_scene_bench(scene: str, rate: float = 1000.0) -> dict[str, Any]:
     track = scene_tracking(scene, 0.1, 0.15, rate)
     bare = scene_step(scene, 0.05, rate, compensate=False) if step["payload_kg"] is not None else None
     breakdown = measure_breakdown(1.0, rate, scene)
-    return {"scene": scene, "step": step, "tracking": track, "uncompensated_step": bare,
+    return {"scene": scene.name, "step": step, "tracking": track, "uncompensated_step": bare,
             "breakdown": breakdown,
             "pass": {"settle<1s": step["settling_time_s"] < 1.0,
                      "final<1mm": step["final_error_m"] < 1e-3,
@@ -424,10 +424,10 @@ def main_bench_sim(args: argparse.Namespace) -> int:
         return fail("bench sim", "--seconds, --rate: must be > 0")
     if args.scene is not None:
         try:
-            find_task(args.scene)
+            task = find_task(args.scene)
         except TaskError as e:
             return fail("bench sim", f"--scene: {e}")
-        result = run_scene_bench(args.scene, args.rate)
+        result = run_scene_bench(task, args.rate)
         print(json.dumps(result, default=float) if args.json else format_scene_report(result))
         return 0
     result = run_bench(args.seconds, args.rate)

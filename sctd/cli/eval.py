@@ -202,11 +202,13 @@ def main_eval(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace, work: Path) -> int:
     try:
         paths = [str(find_skill(k)) for k in args.skill]
-        task = task_of([load_skill(p) for p in paths], args.task)
-        ents = entries(paths, args.baseline, work, find_task(task))
+        given = find_task(args.task) if args.task is not None else None  # (checked: it loads)
+        task = task_of([load_skill(p) for p in paths], given, args.task)
+        ents = entries(paths, args.baseline, work, task)
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))
-    spec = TaskSpec(task, profile=args.user, time_limit=args.time_limit, arm_lag=args.arm_lag)
+    # the trials' workers find the task as it was named (spec.task: TaskSpec)
+    spec = TaskSpec.of(task, args.task, profile=args.user, time_limit=args.time_limit, arm_lag=args.arm_lag)
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
@@ -225,8 +227,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
         except ClusterError as e:  # the scheduler gave up on a trial: every worker it ran on died
             return fail("eval", str(e), EXIT_FAILED)
     print(file=sys.stderr)
-    found = find_task(task)  # (checked above: it loads)
-    header = {"task": found.name, "task_file": found.file, "trials": args.trials, "seed": args.seed,
+    header = {"task": task.name, "task_file": task.file, "trials": args.trials, "seed": args.seed,
               "user": args.user, "lockstep": args.lockstep, "time_limit": spec.time_limit,
               "arm_lag": args.arm_lag, "numerics": numerics(),
               "robot": {"driver": args.driver or "sctd sim", "args": args.driver_args}}

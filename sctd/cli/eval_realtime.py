@@ -28,6 +28,7 @@ import zenoh
 
 from sctd import se3
 from sctd.app.logs import log_folder
+from sctd.task import Task, find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import session
 from sctd_services.eval.evaluate import read_demo_poses
@@ -47,7 +48,7 @@ SCENE_PERIOD = 0.1  # s between the simulator's scene messages (``sctd sim``'s d
 
 
 class _Watcher:
-    def __init__(self, s: zenoh.Session, task: str):
+    def __init__(self, s: zenoh.Session, task: Task):
         k = Keys()
         self.lock = threading.Lock()
         self.T_world_ee: Any = None
@@ -116,7 +117,7 @@ class _Watcher:
         except codec.DecodeError:
             pass
 
-    def observation(self, task: str) -> Observation | None:
+    def observation(self) -> Observation | None:
         if (self.T_world_ee is None or self.mode is None or "t" not in self.scene
                 or any(n not in self.objects for n in self.frames)):
             return None
@@ -141,11 +142,15 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
               logdir: Path | None = None, startup: float = 90.0,
               driver: tuple[str, ...] | None = None) -> TrialResult:
     """One real-time trial of the skill file ``skill_path`` from the seeded start, on the
-    Pinocchio arm or, with ``driver``, on the arm that robot driver serves."""
+    Pinocchio arm or, with ``driver``, on the arm that robot driver serves. ``spec.task``
+    arrived as a name or file (a trial job's, :func:`realtime_job`) and is resolved here,
+    once; the processes the trial starts get it as that name or file, on their command
+    lines."""
+    task = find_task(spec.task)
     logdir = log_folder(logdir, "sctd-eval-")
     hub = f"tcp/127.0.0.1:{free_port()}"
     profile = PROFILES[spec.profile]
-    rec = TrialRecorder(spec.task, seed, profile.switch_time, spec.time_limit, spec.stuck_after)
+    rec = TrialRecorder(task, seed, profile.switch_time, spec.time_limit, spec.stuck_after)
 
     def ep() -> str:
         return f"tcp/127.0.0.1:{free_port()}"
@@ -154,25 +159,25 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start
     last: tuple[float, float] | None = None  # (wall, simulated) at its end
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
-        w = _Watcher(s, spec.task)
+        w = _Watcher(s, task)
         try:
             with Child("sctd.cli.main", *robot_command(spec, seed, driver),
                        "--connect", hub, "--listen", ep(), log=logdir / f"sim-{seed}.log") as sim, \
                     Child("sctd.cli.main", "run", "--skill", str(skill_path), "--connect", hub,
                           "--listen", ep(), log=logdir / f"daemon-{seed}.log") as daemon:
                 end = time.monotonic() + startup
-                while w.observation(spec.task) is None:  # the daemon publishes targets
+                while w.observation() is None:  # the daemon publishes targets
                     if time.monotonic() > end or not (sim.running() and daemon.running()):
                         raise RuntimeError(f"trial {seed}: no targets within {startup:.0f} s; see {logdir}")
                     time.sleep(0.05)
                 with Child("sctd_services.simulated_user", "--task", spec.task, "--seed", str(seed),
                            "--profile", spec.profile, "--axes", str(spec.axes),
-                           "--duration", str(spec.limit + 30), "--connect", hub, "--listen", ep(),
+                           "--duration", str(rec.time_limit + 30), "--connect", hub, "--listen", ep(),
                            log=logdir / f"user-{seed}.log"):
                     period = 1.0 / WATCH_RATE
                     while True:
                         time.sleep(period)
-                        obs = w.observation(spec.task)
+                        obs = w.observation()
                         if obs is None or w.inputs == 0:  # the trial starts with the user
                             continue
                         last = (time.monotonic(), obs.t)

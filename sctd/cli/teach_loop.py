@@ -233,7 +233,8 @@ def evaluate_taught(reply: dict[str, Any], scene: str, method: str, trials: int)
     with tempfile.TemporaryDirectory(prefix="sctd-teach-eval-") as work:
         ents = [replace(e, label=label) for e, label in
                 zip(entries(paths, baseline=False, workdir=Path(work)), labels, strict=False)]
-        results = evaluate(ents, TaskSpec(scene), trials, 0, jobs=2, logdir=Path(work) / "logs")
+        spec = TaskSpec.of(find_task(scene), scene)
+        results = evaluate(ents, spec, trials, 0, jobs=2, logdir=Path(work) / "logs")
     for row in table(results):
         print(f"  {row}")
     print(f"sctd teach: evaluated in {time.monotonic() - t0:.0f} s", flush=True)

@@ -4,7 +4,7 @@
 In the namespaces of :class:`~sctd.deploy.netns.Hosts`,
 - ``router``: ``sctd router``, on ``tcp/<router>:7447`` or, with ``sctd certs``'s
   configs (mutual TLS and the roles' access control), ``tls/<router>:7448``;
-- ``robot``: ``sctd sim --scene pour`` (the cluster's task: by default the one of
+- ``robot``: ``sctd sim --task pour`` (the cluster's task: by default the one of
   ``sctd/app/defaults.yaml``);
 - ``runtime``: ``sctd run --skill pour`` (its skill, by default that file's);
 - ``input``: the simulated user (on the cluster's task), or a steady input source;
@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from sctd.app.defaults import defaults
-from sctd.task import Task, find_task
+from sctd.task import Task
 from sctd.wire import Keys
 
 from .configs import (
@@ -79,14 +79,17 @@ class Cluster:
         Key prefix ``sctd/<robot>``.
     secure : bool, optional
         Mutual TLS and the roles' access control (default: when ``sctd certs`` is there).
-    task, skill : str, optional
-        The robot host's scene and the simulated user's task, and the runtime's skill
-        (default: the task and skill of ``sctd/app/defaults.yaml``).
+    task : Task
+        The robot host's scene and the simulated user's task (its name goes on their
+        command lines; whoever starts the cluster resolves it, by default the task of
+        ``sctd/app/defaults.yaml``).
+    skill : str, optional
+        The runtime's skill (default: the skill of ``sctd/app/defaults.yaml``).
     """
 
-    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None,
-                 task: str | None = None, skill: str | None = None):
-        self.task = find_task(defaults().task if task is None else task)
+    def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None, *,
+                 task: Task, skill: str | None = None):
+        self.task = task
         self.skill = defaults().skill if skill is None else skill
         self.logdir = Path(logdir)
         self.keys = Keys(robot)

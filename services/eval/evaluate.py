@@ -28,7 +28,7 @@ from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Bundle, Limits, Skill, bundle_from_file, load_skill, skill_from_bundle
 from sctd.skill.catalog import shipped_folder
 from sctd.skill.constraints import SpeedNear
-from sctd.task import Task, find_task, task_for_object
+from sctd.task import Task, find_task, load_task, task_for_object
 from sctd.task.model import Reach, Tilt, Upright
 from sctd_services.user import PROFILES
 
@@ -49,14 +49,16 @@ class Entry:
     baseline_of: str | None = None
 
 
-def task_of(skills: list[Skill], task: str | None) -> str:
-    """The task: given, or the one known task whose task object every skill's object is
+def task_of(skills: list[Skill], task: Task | None, ref: str | None = None) -> Task:
+    """The task: given (as ``ref``, its name or file on the command line; default its
+    name), or the one known task whose task object every skill's object is
     (:func:`sctd.task.task_for_object`)."""
     if task is not None:
-        frames = set(find_task(task).scene.frames())
+        frames = set(task.scene.frames())
         for s in skills:
             if s.object != WORLD_OBJECT and s.object not in frames:
-                raise ValueError(f"skill {s.name}: its object {s.object!r} is not in task {task} "
+                raise ValueError(f"skill {s.name}: its object {s.object!r} is not in task "
+                                 f"{task.name if ref is None else ref} "
                                  f"(its frames: {', '.join(sorted(frames))}); the skill would never see "
                                  "where it is")
         return task
@@ -66,7 +68,7 @@ def task_of(skills: list[Skill], task: str | None) -> str:
         named = ", ".join(sorted(objects)) or "none"
         raise ValueError(f"cannot tell the task from the skills' objects ({named}); pass --task NAME|FILE "
                          "(sctd tasks lists them)")
-    return found.name
+    return found
 
 
 def with_limits(path: Path, limits: Limits, directory: Path,
@@ -187,9 +189,12 @@ processes, is the application layer's (:func:`sctd.cli.eval_realtime.realtime_jo
 
 def lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, keep: bool,
                  logdir: Path | None) -> dict[str, Any]:
-    """One lockstep trial (in this process, simulated time; ``logdir`` is unused)."""
+    """One lockstep trial (in this process, simulated time; ``logdir`` is unused). A
+    worker's entry point: ``spec.task`` arrived as a name or file and is resolved here,
+    once (:class:`~.trial.TaskSpec`)."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
-    return run_trial(load_skill(path), spec, seed, demos).as_dict(with_trajectory=keep)
+    task = find_task(spec.task)
+    return run_trial(load_skill(path), spec, seed, demos, task=task).as_dict(with_trajectory=keep)
 
 
 @dataclass(frozen=True)
@@ -204,21 +209,26 @@ class Shipped:
     demos: list[np.ndarray] | None = None
 
     @classmethod
-    def of(cls, path: str | Path, task: str, demos_dir: str | None) -> Shipped:
-        found = find_task(task)
-        return cls(bundle_from_file(path).pack(), found.name, Path(found.file).read_text(),
+    def of(cls, path: str | Path, spec: TaskSpec, demos_dir: str | None) -> Shipped:
+        """What trials of the skill file ``path`` on ``spec``'s task (its file,
+        ``spec.task_file``: :meth:`TaskSpec.of <.trial.TaskSpec.of>`) read."""
+        if not spec.task_file:
+            raise ValueError(f"task {spec.task}: no task file to ship (make the spec with TaskSpec.of)")
+        file = Path(spec.task_file)
+        return cls(bundle_from_file(path).pack(), file.stem, file.read_text(),
                    read_demo_poses(demos_dir) if demos_dir else None)
 
 
 def shipped_job(shipped: Shipped, spec: TaskSpec, seed: int, keep: bool) -> dict[str, Any]:
     """:func:`lockstep_job` from what ``shipped`` carries: the skill from its bundle,
-    the task from its text (written to a folder of its own for the trial and removed)."""
+    the task from its text (written to a folder of its own for the trial, read there
+    once, removed after)."""
     skill = skill_from_bundle(Bundle.unpack(shipped.bundle))
     with tempfile.TemporaryDirectory(prefix="sctd-trial-") as tmp:
-        task = Path(tmp) / f"{shipped.task_name}.yaml"
-        task.write_text(shipped.task_text)
-        return run_trial(skill, replace(spec, task=str(task)), seed,
-                         shipped.demos).as_dict(with_trajectory=keep)
+        file = Path(tmp) / f"{shipped.task_name}.yaml"
+        file.write_text(shipped.task_text)
+        return run_trial(skill, replace(spec, task=str(file), task_file=str(file)), seed, shipped.demos,
+                         task=load_task(file)).as_dict(with_trajectory=keep)
 
 
 @dataclass(frozen=True)
@@ -247,7 +257,7 @@ def _trials(e: Entry, spec: TaskSpec, seeds: list[int], job: TrialJob, demos: st
                 for s in seeds]
     if job is not lockstep_job:
         raise ValueError("only lockstep trials run on a cluster (real-time ones start local processes)")
-    shipped = Shipped.of(e.path, spec.task, demos)
+    shipped = Shipped.of(e.path, spec, demos)
     return [Trial(f"{e.skill.name} seed {s}", shipped_job, (shipped, spec, s, keep)) for s in seeds]
 
 

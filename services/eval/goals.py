@@ -51,7 +51,7 @@ import numpy as np
 from sctd.runtime.sets import belief_model, goal_set
 from sctd.skill import Skill
 from sctd.skill.skillset import SkillSet, load_skill_set
-from sctd.task import Task, find_task, task_for_object
+from sctd.task import Task, task_for_object
 from sctd.task.compose import compose
 from sctd_services.user import DeviceModel
 
@@ -94,7 +94,7 @@ class SetSpec:
         return replace(s, belief={**s.belief, **dict(self.belief)}) if self.belief else s
 
 
-def tasks_of(skills: Sequence[Skill]) -> list[str]:
+def tasks_of(skills: Sequence[Skill]) -> list[Task]:
     """The task of each member (the known task whose object its object is).
 
     Raises
@@ -102,17 +102,18 @@ def tasks_of(skills: Sequence[Skill]) -> list[str]:
     ValueError
         Naming a skill whose object no known task has, or two members of one task.
     """
-    names = []
+    tasks = []
     for s in skills:
         t = task_for_object(s.object)
         if t is None:
             raise ValueError(f"skill {s.name!r}: no known task has the object {s.object!r} "
                              "(sctd tasks lists them)")
-        names.append(t.name)
+        tasks.append(t)
+    names = [t.name for t in tasks]
     if len(set(names)) != len(names):
         raise ValueError(f"two members are skills for one task ({', '.join(names)}): a room holds "
                          "each task once")
-    return names
+    return tasks
 
 
 def goal_members(set_file: str) -> tuple:
@@ -121,12 +122,12 @@ def goal_members(set_file: str) -> tuple:
     return load_skill_set(set_file).members
 
 
-def room_task(names: Sequence[str], goal: str) -> Task:
-    """The room of tasks ``names`` laid out in that order, as the task a user going for
-    ``goal`` does (its outcome and intent first), with the hand's start of the room's
-    first task whatever the goal."""
-    placed = compose([find_task(n) for n in names])
-    parts = list(placed.parts) if len(names) > 1 else [placed]
+def room_task(tasks: Sequence[Task], goal: str) -> Task:
+    """The room of ``tasks`` laid out in that order, as the task a user going for the
+    one named ``goal`` does (its outcome and intent first), with the hand's start of the
+    room's first task whatever the goal."""
+    placed = compose(list(tasks))
+    parts = list(placed.parts) if len(tasks) > 1 else [placed]
     first = next(p for p in parts if p.name == goal)
     task = compose([first, *(p for p in parts if p is not first)])
     return replace(task, scene=replace(task.scene, start=placed.scene.start))
@@ -149,9 +150,10 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     """Trial ``seed``: the user's goal, and each condition's run (module doc)."""
     skill_set = spec.skill_set()
     skills = [m.skill for m in skill_set.members]
-    names = tasks_of(skills)
+    tasks = tasks_of(skills)
+    names = [t.name for t in tasks]
     goal = goal_of(seed, names)
-    task = room_task(names, goal)
+    task = room_task(tasks, goal)
     stuck = spec.stuck_after + (DETOUR_STUCK if spec.detour else 0.0)
     tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=stuck)
     right = skills[names.index(goal)]
@@ -163,7 +165,7 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     detour = detour_skill = None
     if spec.detour:
         first = detour_of(seed, names)
-        detour, detour_skill = room_task(names, first), skills[names.index(first)].name
+        detour, detour_skill = room_task(tasks, first), skills[names.index(first)].name
         out.update(detour=first, detour_skill=detour_skill)
     if "set" in spec.runs:
         goals = goal_set(skill_set)
@@ -191,10 +193,10 @@ def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str,
     :data:`PRACTICE_SEED` with member ``member``'s skill (-1: teleoperation), by mode
     (once per process: every trial of an evaluation starts from the same practice)."""
     skill_set = load_skill_set(set_file)
-    names = tasks_of([m.skill for m in skill_set.members])
+    tasks = tasks_of([m.skill for m in skill_set.members])
     skill = skill_set.teleop if member < 0 else skill_set.members[member].skill
     tspec = TaskSpec(goal, profile=profile)
-    return practise(skill, tspec, PRACTICE_SEED, task=room_task(names, goal))[1]
+    return practise(skill, tspec, PRACTICE_SEED, task=room_task(tasks, goal))[1]
 
 
 def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str,
@@ -254,7 +256,8 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
     skill_set = spec.skill_set()
     out = summarise_set(per_trial, spec.runs)
     out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
-               room=tasks_of([m.skill for m in skill_set.members]), teleop=skill_set.teleop.name,
+               room=[t.name for t in tasks_of([m.skill for m in skill_set.members])],
+               teleop=skill_set.teleop.name,
                profile=spec.profile, practice=spec.practice, detour=spec.detour, seed=seed,
                belief=dataclasses.asdict(belief_model(skill_set)), numerics=numerics(),
                per_trial=per_trial)

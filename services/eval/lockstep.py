@@ -21,7 +21,7 @@ from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
 from sctd.runtime.goals import GoalSet
 from sctd.skill import Skill
-from sctd.task import Task, find_task
+from sctd.task import Task
 from sctd.wire import codec
 from sctd_services.user import DeviceModel, Observation, SetUser, SimulatedUser
 from sctd_sim.guard import TargetGuard, TargetLimits
@@ -36,16 +36,15 @@ USER_DEVICE = "user"  # the simulated user's device name (input/<name>)
 
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
-              keep_series: bool = False, task: Task | None = None,
+              keep_series: bool = False, *, task: Task,
               known: Mapping[str, DeviceModel] | None = None, detour: Task | None = None) -> TrialResult:
-    """One trial of ``skill`` on ``spec.task`` (or ``task``, a composed room whose first
-    part is the user's goal) from the seeded start ``seed``; ``known``: what a practised
+    """One trial of ``skill`` on ``task`` (``spec.task`` resolved, or a composed room whose
+    first part is the user's goal) from the seeded start ``seed``; ``known``: what a practised
     user knows of the device (:class:`~sctd_services.user.SimulatedUser`); ``detour``:
     the room as the task the user goes for first, before changing their mind
     (:class:`~sctd_services.user.SetUser`)."""
     if detour is None:
-        return practise(skill, spec, seed, demos, task, known)[0]
-    task = task if task is not None else find_task(spec.task)
+        return practise(skill, spec, seed, demos, task=task, known=known)[0]
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
     try:
@@ -55,11 +54,10 @@ def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None
         sim.close()
 
 
-def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None, task: Task | None = None,
+def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None, *, task: Task,
              known: Mapping[str, DeviceModel] | None = None) -> tuple[TrialResult, dict[str, DeviceModel]]:
     """:func:`run_trial`, and what its user learned of the device by the end: a model per
     mode (the skill's state names) it used."""
-    task = task if task is not None else find_task(spec.task)
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
     user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known)

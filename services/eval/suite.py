@@ -136,7 +136,7 @@ def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, 
         ents = entries(paths, baseline=bool(skills), workdir=workdir / task.name, task=task)
         if not skills:  # the baseline alone (with the task's control frame: entries)
             ents = [Entry("teleop", e.path, e.skill, "-") for e in ents]
-        spec = TaskSpec(ref, time_limit=task.outcome.time_limit)
+        spec = TaskSpec.of(task, ref)
         results = evaluate(ents, spec, trials, seed, lockstep_job, jobs, progress=progress)
         runs.append(TaskRun(task, skills, strip_trajectories(results)))
     return runs

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.task import Task, find_task
+from sctd.task import Task
 from sctd.task.judge import holds
 from sctd_services.user.agent import REPROBE_AFTER
 from sctd_services.user.intent import Observation, TaskIntent
@@ -39,10 +39,17 @@ Array = NDArray[np.float64]
 class TaskSpec:
     """What every trial of an evaluation shares: the task, the device's axes, the
     simulated user's profile (a name of :data:`~sctd_services.user.PROFILES`), the
-    limits on a trial (s: ``time_limit`` None is the task file's own, resolved here)
-    and, in lockstep, ``arm_lag``: s by which the arm takes each target later than the
-    daemon published it (0: at once), an arm that lags as an impedance-controlled one
-    does."""
+    limits on a trial (s: ``time_limit`` None is the task file's own, which
+    :meth:`of` fills in) and, in lockstep, ``arm_lag``: s by which the arm takes each
+    target later than the daemon published it (0: at once), an arm that lags as an
+    impedance-controlled one does.
+
+    ``task`` is the task's name or file, not a :class:`~sctd.task.Task`: the spec goes
+    to trial workers in other processes (spawned, or a cluster's) and on the command
+    lines of the processes a real-time trial starts, where a name travels and a task
+    object does not; each worker resolves it once, on arrival
+    (:func:`~sctd_services.eval.evaluate.lockstep_job`). ``task_file`` is the file it
+    was read from, which a pool on other hosts ships (:class:`~.evaluate.Shipped`)."""
 
     task: str
     axes: int = 3
@@ -50,15 +57,21 @@ class TaskSpec:
     time_limit: float | None = None
     stuck_after: float = 10.0
     arm_lag: float = 0.0
+    task_file: str = ""
 
-    def __post_init__(self) -> None:
-        if self.time_limit is None:
-            object.__setattr__(self, "time_limit", find_task(self.task).outcome.time_limit)
+    @classmethod
+    def of(cls, task: Task, ref: str | None = None, **kwargs: Any) -> TaskSpec:
+        """The spec of trials of ``task``, which workers find as ``ref`` (the name or file
+        it was found by; default its name); ``time_limit`` None: the task file's own."""
+        if kwargs.get("time_limit") is None:
+            kwargs["time_limit"] = task.outcome.time_limit
+        return cls(task.name if ref is None else ref, task_file=task.file, **kwargs)
 
     @property
     def limit(self) -> float:
-        """The trial's time limit, s (``time_limit``, resolved)."""
-        assert self.time_limit is not None  # (resolved in __post_init__)
+        """The trial's time limit, s (``time_limit``, as :meth:`of` resolves it)."""
+        if self.time_limit is None:
+            raise ValueError(f"task {self.task}: no time limit (make the spec with TaskSpec.of)")
         return self.time_limit
 
 
@@ -96,8 +109,7 @@ class TrialRecorder:
 
     Parameters
     ----------
-    task : str or Task
-        A task, or its name or file (:func:`sctd.task.find_task`).
+    task : Task
     seed : int
     switch_time : float
         Seconds one mode switch costs the user (charged per press of button 0).
@@ -107,10 +119,10 @@ class TrialRecorder:
         s between recorded trajectory samples (50 Hz, as the demonstrations).
     """
 
-    def __init__(self, task: str | Task, seed: int, switch_time: float, time_limit: float | None = None,
+    def __init__(self, task: Task, seed: int, switch_time: float, time_limit: float | None = None,
                  stuck_after: float = 10.0, record_every: float = 0.02):
         # what ends the trial, its clock, its progress and the intent its observer judges by
-        self.spec = task if isinstance(task, Task) else find_task(task)
+        self.spec = task
         self.seed = seed
         self.switch_time = switch_time
         self.time_limit = self.spec.outcome.time_limit if time_limit is None else time_limit

@@ -17,19 +17,20 @@ from multiprocessing import get_context
 from typing import Any
 
 from sctd.skill.catalog import StoredSkill
-from sctd.task import TaskError, find_task
+from sctd.task import Task, TaskError, find_task
 from sctd_services.eval.evaluate import entries, evaluate, table
 from sctd_services.eval.trial import TaskSpec
 
 
-def can_evaluate(task: str) -> bool:
-    """Whether a lockstep evaluation can run ``task``: whether it is a task sctd finds
-    whose file validates (its file gives the simulated scene and the user's intent)."""
+def evaluable(task: str) -> Task | None:
+    """The task a lockstep evaluation runs for a request naming ``task``, or None when
+    sctd finds no such task or its file does not validate (the file gives the simulated
+    scene and the user's intent). A learner request names its task over the wire
+    (``sctd/<robot>/learner``): the name is resolved here, once, on arrival."""
     try:
-        find_task(task)
+        return find_task(task)
     except TaskError:
-        return False
-    return True
+        return None
 
 
 ALPHA = 0.38
@@ -179,7 +180,7 @@ def trial_pool(jobs: int) -> Executor:
                                initargs=(os.getpid(),))
 
 
-def evaluation(stored: StoredSkill, task: str, settings: CheckSettings, seed: int,
+def evaluation(stored: StoredSkill, task: Task, settings: CheckSettings, seed: int,
                pool: Executor | None,
                progress: Callable[[int, int, str], None] | None = None,
                active: dict[str, Any] | None = None, stop_early: bool = True) -> dict[str, Any]:
@@ -193,11 +194,11 @@ def evaluation(stored: StoredSkill, task: str, settings: CheckSettings, seed: in
     # one skill and no baseline: entries() writes no copy into the work folder
     ents = [replace(e, label=stored.ref)
             for e in entries([str(stored.path)], baseline=False, workdir=stored.path.parent)]
-    [res] = evaluate(ents, TaskSpec(task), settings.trials, seed, jobs=settings.jobs,
+    [res] = evaluate(ents, TaskSpec.of(task), settings.trials, seed, jobs=settings.jobs,
                      progress=progress, pool=pool, until=until)
     res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "spill")}
                         for t in res["per_trial"]]
-    res.update(task=task, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
+    res.update(task=task.name, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
                table=table([res]))
     return res
 

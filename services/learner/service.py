@@ -43,7 +43,7 @@ from sctd.skill.catalog import StoredSkill, store_folder
 from sctd.wire import DEFAULT_ROBOT, Keys, client, codec
 from sctd.wire.session import MSGPACK
 
-from .check import CheckSettings, can_evaluate, evaluation, verdict
+from .check import CheckSettings, evaluable, evaluation, verdict
 from .member import NoMember, member_to_replace, replaced_skill_id
 from .request import Request, RequestError, parse_request, request_map
 from .store import SkillRecord, Store, StoreFull
@@ -311,11 +311,12 @@ class Learner:
             reason = "not checked (gate: false, allowed by the learner's operator)"
             record.update({"check": {"passed": None, "checked": False, "reason": reason}})
             return None, None, reason
-        if not can_evaluate(req.task):
+        task = evaluable(req.task)
+        if task is None:
             return None, *verdict(None, req.task, self.settings, None)
         seed = self.settings.seed if req.seed is None else req.seed
         active = self._active_evaluation(req, stored, record.data.get("object"))
-        ev = evaluation(stored, req.task, self.settings, seed, self.pool,
+        ev = evaluation(stored, task, self.settings, seed, self.pool,
                         lambda k, n, _label: self.say("checking", id=stored.id, trial=k, of=n),
                         active=active)
         passed, reason = verdict(ev, req.task, self.settings, active)

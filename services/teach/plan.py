@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
-from sctd.task import Task, find_task
+from sctd.task import Task
 from sctd.task.judge import thresholds
 from sctd.task.model import PRESS_MARGIN, MoveJoint, Press, Reach, Teach, TeachStep, Tilt, Upright
 
@@ -122,16 +122,8 @@ class SceneGeometry:
         return max(i + 1 for i, s in enumerate(steps) if not isinstance(s.action, Upright))
 
 
-def scene_geometry(task: Task | str) -> SceneGeometry:
-    """The geometry of ``task`` (a task, or a name or file :func:`sctd.task.find_task`
-    finds).
-
-    Raises
-    ------
-    sctd.task.TaskError
-        Unknown task, or a task file that does not validate.
-    """
-    t = task if isinstance(task, Task) else find_task(task)
+def scene_geometry(t: Task) -> SceneGeometry:
+    """The geometry of task ``t``."""
     T_world_obj = t.scene.bodies[t.object].T_world
     return SceneGeometry(t, se3.invert_transform(T_world_obj) @ t.scene.start.T_world)
 
