@@ -12,11 +12,11 @@ object, names and geometry; or ``crank`` or ``wipe``:
 centre of the mug's opening, z up). The end-effector's z axis is the held object's
 axis and its outlet sits where the task file's held frame puts it (the bottle's tip,
 ``[0, 0, 0.12]`` in the ee frame: the truth ``tip_offset``). *carry*: the bottle,
-upright, is translated along a straight line until its tip reaches the pour point,
+upright, is translated along a straight line until its tip reaches the tilt point,
 the goal of the intent's reach that comes before its tilt (5 cm above the opening);
 then the tilt (the phase is named as the intent's tilt step): the bottle rotates about
 its tip, about the ee's y axis, tilting its top towards the mug. In the tip frame the
-tilt is a rotation only; the ee moves on a sphere about the pour point (the truth
+tilt is a rotation only; the ee moves on a sphere about the tilt point (the truth
 ``sphere_centre``).
 
 ``crank`` (no task file; object ``crank``: origin on the crank's vertical axis at the
@@ -57,6 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
+from sctd.app import add_deprecated_alias
 from sctd.task import Task, find_task
 from sctd.task.demos import DEMOS_FILE, DemosInfo
 from sctd.task.model import Reach, Tilt
@@ -74,7 +75,7 @@ class Kind:
     """What :func:`generate` makes for one name: the shape of the motion, and the names
     and geometry its truth reports.
 
-    ``tip_offset`` (the outlet in the ee frame) and ``pour_point`` (where the outlet
+    ``tip_offset`` (the outlet in the ee frame) and ``tilt_point`` (where the outlet
     tilts, in the object's frame), m: the tilt's alone.
     """
 
@@ -83,7 +84,7 @@ class Kind:
     object: str
     phases: tuple[str, str]
     tip_offset: Array | None = None
-    pour_point: Array | None = None
+    tilt_point: Array | None = None
 
     @property
     def fields(self) -> tuple[str, str]:
@@ -118,7 +119,7 @@ def kind_of(t: Task) -> Kind:
 
 
 def _tilt_kind(t: Task) -> Kind:
-    """A tilt: the outlet as the held frame puts it, the pour point as the goal of the
+    """A tilt: the outlet as the held frame puts it, the tilt point as the goal of the
     intent's reach with that frame before its tilt, the tilt's phase named as its step."""
     held = t.scene.held
     assert held is not None and held.contents is not None
@@ -130,7 +131,7 @@ def _tilt_kind(t: Task) -> Kind:
                          f"outlet {outlet!r} at the goal of a reach with that frame before a tilt step")
     return Kind(t.name, "tilt", t.object, ("carry", t.intent[k].name),
                 tip_offset=np.array(held.frames[outlet][:3, 3], dtype=float),
-                pour_point=np.array(reach.to, dtype=float))
+                tilt_point=np.array(reach.to, dtype=float))
 
 
 @dataclass
@@ -206,12 +207,12 @@ def _corrupt(rng: np.random.Generator, clean: Array, noise: float, rot_noise: fl
     return np.concatenate([pos, q], axis=1), rows.astype(np.int64)
 
 
-def _tilt_demo(rng: np.random.Generator, rate: float, pour_jitter: float, tip_offset: Array,
-               pour_point: Array) -> tuple:
+def _tilt_demo(rng: np.random.Generator, rate: float, tilt_jitter: float, tip_offset: Array,
+               tilt_point: Array) -> tuple:
     phi = rng.uniform(-np.pi / 4, np.pi / 4)  # approach azimuth, from the +x side
     dist = rng.uniform(0.25, 0.35)
     height = rng.uniform(0.0, 0.15)
-    P = pour_point + rng.normal(0.0, pour_jitter, 3) if pour_jitter > 0 else pour_point.copy()
+    P = tilt_point + rng.normal(0.0, tilt_jitter, 3) if tilt_jitter > 0 else tilt_point.copy()
     start_tip = P + np.array([dist * np.cos(phi), dist * np.sin(phi), height])
     # Upright bottle (ee z up), ee x horizontal towards the mug (+- 10 deg of yaw).
     yaw = phi + np.pi + rng.uniform(-np.radians(10), np.radians(10))
@@ -235,8 +236,8 @@ def _tilt_demo(rng: np.random.Generator, rate: float, pour_jitter: float, tip_of
         p_ee = tip - R @ tip_offset
         poses[i, :3] = p_ee
         poses[i, 3:] = se3.quaternion_from_matrix(R)
-    info = {"pour_point": P.tolist(), "pour_axis": (R0 @ np.array([0.0, 1.0, 0.0])).tolist(),
-            "pour_angle": float(theta_max),
+    info = {"tilt_point": P.tolist(), "tilt_axis": (R0 @ np.array([0.0, 1.0, 0.0])).tolist(),
+            "tilt_angle": float(theta_max),
             "carry_direction": ((P - start_tip) / np.linalg.norm(P - start_tip)).tolist()}
     return t, poses, phase, info
 
@@ -325,7 +326,7 @@ def _wipe_demo(rng: np.random.Generator, rate: float, length: float) -> tuple:
 
 def generate(task: Task | Kind, n_demos: int = 10, noise: float = 0.001,
              rot_noise: float | None = None, outliers: float = 0.0, rate: float = 50.0,
-             seed: int = 0, pour_jitter: float = 0.0) -> DemoSet:
+             seed: int = 0, tilt_jitter: float = 0.0) -> DemoSet:
     """Generate ``n_demos`` demonstrations of ``task`` (a task, :func:`kind_of`, or a
     kind of :data:`SYNTHETIC`).
 
@@ -344,8 +345,8 @@ def generate(task: Task | Kind, n_demos: int = 10, noise: float = 0.001,
         Samples per second.
     seed : int
         Seed of the numpy ``Generator``; the same arguments give the same data.
-    pour_jitter : float
-        Standard deviation (m) of the pour point between demonstrations (tilt only).
+    tilt_jitter : float
+        Standard deviation (m) of the tilt point between demonstrations (tilt only).
     """
     kind = task if isinstance(task, Kind) else kind_of(task)
     if n_demos < 1 or rate <= 0 or noise < 0 or not 0 <= outliers < 0.5:
@@ -356,7 +357,7 @@ def generate(task: Task | Kind, n_demos: int = 10, noise: float = 0.001,
     length = float(rng.uniform(0.25, 0.30)) if kind.shape == "wipe" else 0.0
     demos = []
     for k in range(n_demos):
-        t, clean, phase, info = _clean_demo(kind, rng, rate, pour_jitter, radius, length)
+        t, clean, phase, info = _clean_demo(kind, rng, rate, tilt_jitter, radius, length)
         poses, rows = _corrupt(rng, clean, noise, rn, outliers)
         demos.append(GeneratedDemo(f"demo_{k:02d}.csv", t, poses, clean, phase, rows, info))
     truth = _task_truth(kind, demos, radius, length)
@@ -366,17 +367,17 @@ def generate(task: Task | Kind, n_demos: int = 10, noise: float = 0.001,
         "labels": {d.name: d.phase.tolist() for d in demos},
         "outlier_rows": {d.name: d.outlier_rows.tolist() for d in demos},
         "params": {"n_demos": n_demos, "noise": noise, "rot_noise": rn, "outliers": outliers,
-                   "rate": rate, "seed": seed, "pour_jitter": pour_jitter},
+                   "rate": rate, "seed": seed, "tilt_jitter": tilt_jitter},
     })
     return DemoSet(kind.name, demos, truth, kind.shape)
 
 
-def _clean_demo(kind: Kind, rng: np.random.Generator, rate: float, pour_jitter: float,
+def _clean_demo(kind: Kind, rng: np.random.Generator, rate: float, tilt_jitter: float,
                 radius: float, length: float) -> tuple:
     """One noise-free demonstration of ``kind``: ``(t, poses, phase, info)``."""
     if kind.shape == "tilt":
-        assert kind.tip_offset is not None and kind.pour_point is not None
-        return _tilt_demo(rng, rate, pour_jitter, kind.tip_offset, kind.pour_point)
+        assert kind.tip_offset is not None and kind.tilt_point is not None
+        return _tilt_demo(rng, rate, tilt_jitter, kind.tip_offset, kind.tilt_point)
     if kind.shape == "pull":
         return _pull_demo(rng, rate)
     if kind.shape == "crank":
@@ -386,14 +387,14 @@ def _clean_demo(kind: Kind, rng: np.random.Generator, rate: float, pour_jitter: 
 
 def _task_truth(kind: Kind, demos: list[GeneratedDemo], radius: float, length: float) -> dict:
     """What the demonstrations of ``kind`` were generated from, the part that depends on
-    its shape: its directions and its geometry (pour point, crank axis, wipe length)."""
+    its shape: its directions and its geometry (tilt point, crank axis, wipe length)."""
     if kind.shape == "tilt":
         assert kind.tip_offset is not None
         dirs = np.array([d.info["carry_direction"] for d in demos])
-        centre = np.mean([d.info["pour_point"] for d in demos], axis=0)
+        centre = np.mean([d.info["tilt_point"] for d in demos], axis=0)
         return {"sphere_centre": centre.tolist(), "tip_offset": kind.tip_offset.tolist(),
                 "directions": {"carry": _unit_mean(dirs).tolist()},
-                "pour_axes": {d.name: d.info["pour_axis"] for d in demos}}
+                "tilt_axes": {d.name: d.info["tilt_axis"] for d in demos}}
     dirs = np.array([d.info["reach_direction"] for d in demos])
     truth: dict = {"directions": {"reach": _unit_mean(dirs).tolist()}}
     if kind.shape == "pull":
@@ -444,7 +445,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--outliers", type=float, default=0.0, help="fraction of outlier rows")
     ap.add_argument("--rate", type=float, default=50.0, help="samples per second")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--pour-jitter", type=float, default=0.0)
+    ap.add_argument("--tilt-jitter", type=float, default=0.0,
+                    help="standard deviation (m) of the tilt point between demonstrations (tilt only; "
+                         "default %(default)s)")
+    add_deprecated_alias(ap, "--pour-jitter", dest="tilt_jitter", instead="--tilt-jitter", type=float)
     args = ap.parse_args(argv)
     try:
         kind = SYNTHETIC.get(args.task) or kind_of(find_task(args.task))
@@ -452,7 +456,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"task: {e}")
     ds = generate(kind, n_demos=args.n_demos, noise=args.noise, rot_noise=args.rot_noise,
                   outliers=args.outliers, rate=args.rate, seed=args.seed,
-                  pour_jitter=args.pour_jitter)
+                  tilt_jitter=args.tilt_jitter)
     paths = write_demo_set(ds, args.out)
     print(f"wrote {len(paths)} demonstrations and truth.json to {args.out}")
     return 0

@@ -101,13 +101,13 @@ def test_the_kinds_come_from_the_task_files():
     assert (pour.shape, pour.object, pour.phases, pour.fields) == ("tilt", "mug", ("carry", "pour"),
                                                                    ("translation", "sphere"))
     np.testing.assert_array_equal(pour.tip_offset, [0.0, 0.0, 0.12])
-    np.testing.assert_array_equal(pour.pour_point, [0.0, 0.0, 0.05])
+    np.testing.assert_array_equal(pour.tilt_point, [0.0, 0.0, 0.05])
     assert (drawer.shape, drawer.object, drawer.phases) == ("pull", "drawer_handle", ("reach", "pull"))
     assert demogen.SYNTHETIC["crank"].object == "crank" and demogen.SYNTHETIC["wipe"].object == "table"
 
 
 def test_a_task_file_sets_what_is_generated(tmp_path):
-    """Another task file of the same shape: its name, object, outlet and pour point go into
+    """Another task file of the same shape: its name, object, outlet and tilt point go into
     the demonstrations and their truth."""
     from sctd.task import shipped_folder
 
@@ -134,3 +134,14 @@ def test_a_task_of_neither_shape_is_refused(tmp_path):
     path.write_text(text.replace("name: pour", "name: hold"))
     with pytest.raises(ValueError, match="neither"):
         demogen.kind_of(find_task(path))
+
+
+def test_the_tilt_jitter_flag_and_its_deprecated_alias_give_the_same_demonstrations(tmp_path, capsys):
+    args = ["pour", "--n-demos", "2", "--seed", "3"]
+    assert demogen.main([*args[:1], str(tmp_path / "new"), *args[1:], "--tilt-jitter", "0.01"]) == 0
+    assert "deprecated" not in capsys.readouterr().err
+    assert demogen.main([*args[:1], str(tmp_path / "old"), *args[1:], "--pour-jitter", "0.01"]) == 0
+    assert "--pour-jitter is deprecated" in capsys.readouterr().err
+    for name in ("demo_00.csv", "demo_01.csv", "truth.json"):
+        assert (tmp_path / "new" / name).read_text() == (tmp_path / "old" / name).read_text()
+    assert json.loads((tmp_path / "new" / "truth.json").read_text())["params"]["tilt_jitter"] == 0.01
