@@ -106,7 +106,7 @@ class KinematicDriver(_Clocked):
 
     def outcome(self) -> dict[str, Any]:
         return {"scene": self.task.name, "task_object": self.task.object,
-                "drawer_open": self.arm.drawer_open}
+                "joint_position": self.arm.joint_position}
 
 
 class SimDriver(_Clocked):

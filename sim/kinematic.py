@@ -75,7 +75,7 @@ class KinematicRobot:
     ``grasp_radius`` (default: the joint's grasp radius); from then on the joint slides
     along the handle's x axis with the ee, from 0 to its travel. The handle's published
     frame is its pose with the joint at 0 (it does not move, as in the Pinocchio scene
-    and the demonstrations); ``drawer_open`` tells how far the joint is.
+    and the demonstrations); ``joint_position`` tells how far the joint is.
     """
 
     def __init__(self, scene: KinematicScene, tau: float = 0.02, grasp_radius: float | None = None):
@@ -89,7 +89,7 @@ class KinematicRobot:
         self.T_world_ee = scene.T_world_ee0.copy()
         self.T_world_target: np.ndarray | None = None
         self.grasped = False
-        self.drawer_open = 0.0
+        self.joint_position = 0.0
         self._handle0 = scene.objects[joint.handle] if joint is not None else None
 
     def step(self, dt: float) -> None:
@@ -103,7 +103,7 @@ class KinematicRobot:
             if self.grasped:
                 axis = self._handle0[:3, 0]
                 ee_along = float(np.dot(self.T_world_ee[:3, 3] - self._handle0[:3, 3], axis))
-                self.drawer_open = min(self.travel, max(0.0, ee_along))
+                self.joint_position = min(self.travel, max(0.0, ee_along))
 
     def objects(self) -> dict[str, np.ndarray]:
         out = dict(self.scene.objects)

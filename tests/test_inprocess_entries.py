@@ -67,12 +67,12 @@ def test_the_kinematic_drawer_opens_once_grasped_and_only_up_to_its_stop():
     robot.T_world_target = handle.copy()
     for _ in range(50):
         robot.step(0.001)
-    assert robot.grasped and robot.drawer_open == pytest.approx(0.0, abs=1e-6)
+    assert robot.grasped and robot.joint_position == pytest.approx(0.0, abs=1e-6)
     robot.T_world_target = handle @ se3.transform_from_pose([0.6, 0, 0, 0, 0, 0, 1])  # along +x
     for _ in range(50):
         robot.step(0.001)
     assert scene.joint is not None and robot.travel == scene.joint.travel == 0.30
-    assert robot.drawer_open == 0.30, "the drawer stops at the end of its travel"
+    assert robot.joint_position == 0.30, "the drawer stops at the end of its travel"
 
 
 def test_the_kinematic_robot_follows_what_its_guard_admits_and_ignores_garbage():
