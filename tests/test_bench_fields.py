@@ -30,12 +30,12 @@ def test_the_learn_report_says_when_no_seed_found_the_sphere():
     (few demonstrations, one seed) marks it missing instead of failing on the blanks."""
     from sctd.bench.learn import format_bench
 
-    r = {"seed": 0, "n_demos": 4, "outliers": 0.05, "noise": 0.001, "segmentation_accuracy": 0.97,
-         "segmentation_accuracy_min_demo": 0.9, "pour_state_tip_rotation_only": False,
-         "states": ["s0", "s1"], "pour_sphere_centre_error_m": None, "pour_sphere_found": "0/1",
-         "pour_sphere_centre_spread_m": None, "pour_tip_offset_from_sphere": None,
-         "drawer_direction_error_deg": {"pull": 1.5, "reach": None}, "linear_time_s": 0.4,
-         "vf_pour_time_s": 1.0, "vf_drawer_time_s": 1.0, "sklearn_import_s": 0.3,
+    r = {"seed": 0, "n_demos": 4, "outliers": 0.05, "noise": 0.001, "tilt": "pour", "pull": "drawer",
+         "segmentation_accuracy": 0.97, "segmentation_accuracy_min_demo": 0.9,
+         "tilt_state_tip_rotation_only": False, "states": ["s0", "s1"], "tilt_sphere_centre_error_m": None,
+         "tilt_sphere_found": "0/1", "tilt_sphere_centre_spread_m": None, "tilt_tip_offset_from_sphere": None,
+         "pull_direction_error_deg": {"pull": 1.5, "reach": None}, "linear_time_s": 0.4,
+         "vf_tilt_time_s": 1.0, "vf_pull_time_s": 1.0, "sklearn_import_s": 0.3,
          "swap_vs_gco": {"available": False, "reason": "not installed", "install": "pip install gco-wrapper"}}
     text = format_bench(r)
     assert "[MISS] pour sphere centre error - (max over seeds, found 0/1), spread -" in text

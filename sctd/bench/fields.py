@@ -110,14 +110,14 @@ def _frames_bench(seeds: int, n_demos: int, noise: float, outliers: float, tilt:
     acc_auto, acc_given, tip_err, t_auto, crank_err = [], [], [], [], []
     tilted = demo_kind(tilt)
     for seed in range(seeds):
-        pour = demogen.generate(tilted, n_demos, noise=noise, outliers=outliers, seed=seed)
-        tip = tip_frame(pour)
+        demos = demogen.generate(tilted, n_demos, noise=noise, outliers=outliers, seed=seed)
+        tip = tip_frame(demos)
         t = time.perf_counter()
-        auto = learn_linear(demos_of(pour), learner=LinearIMLearner(random_state=seed))
+        auto = learn_linear(demos_of(demos), learner=LinearIMLearner(random_state=seed))
         t_auto.append(time.perf_counter() - t)
-        given = learn_linear(demos_of(pour), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
-        acc_auto.append(segmentation_accuracy(auto.labels, pour.truth["labels"])[0])
-        acc_given.append(segmentation_accuracy(given.labels, pour.truth["labels"])[0])
+        given = learn_linear(demos_of(demos), {"tip": tip}, learner=LinearIMLearner(random_state=seed))
+        acc_auto.append(segmentation_accuracy(auto.labels, demos.truth["labels"])[0])
+        acc_given.append(segmentation_accuracy(given.labels, demos.truth["labels"])[0])
         spheres = [f for f in auto.found_frames if f.kind == "sphere"]
         tip_err.append(min((float(np.linalg.norm(f.pose[:3] - tip[:3])) for f in spheres), default=np.inf))
         crank = demogen.generate(demogen.SYNTHETIC["crank"], n_demos, noise=noise, outliers=outliers,
