@@ -156,8 +156,8 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
         "stamp", "skill", "skill_name", "state", "finished", "stuck", "mode", "rate", "realtime",
         "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
-        "state_age", "robot_fault", "object_age", "in_seq", "input", "gripper", "vf_scale", "constraints",
-        "dropped", "counters"}
+        "state_age", "robot_fault", "object", "object_age", "objects", "in_seq", "input", "gripper",
+        "vf_scale", "constraints", "dropped", "counters"}
     assert set(first["gripper"]) == {"commands", "messages", "cmd", "action", "source", "in_device",
                                      "reading", "reading_age", "holding", "presses", "ignored_presses",
                                      "cancelled"}

@@ -319,7 +319,8 @@ def skill_docs(draw) -> tuple[dict[str, Any], dict[str, bytes]]:
     for n in names:
         states[n] = draw(with_optional({}, input_mapping=st.lists(element_of(MAPPINGS), max_size=2),
                                        active_constraints=st.lists(element_of(CONSTRAINTS), max_size=2),
-                                       gripper=gripper_action()))
+                                       gripper=gripper_action(),
+                                       object=st.sampled_from(("mug", "tabletop", "world"))))
     chain = [draw(element_of(TRANSITIONS)) | {"from": a, "to": b} for a, b in itertools.pairwise(names)]
     doc = draw(with_optional(
         {"sctd_skill": 1, "name": "s", "object": draw(st.sampled_from(("mug", "world"))),

@@ -223,6 +223,7 @@ class Controller:
         old = getattr(self, "engine", None)
         self.engine = engine if engine is not None else SkillEngine(skill)
         self.skill = skill
+        self.objects = frozenset(skill.objects())  # the bodies whose poses the skill needs
         names = [s.name for s in skill.states]
         if keep_state and old is not None and old.state in names:
             self.engine.reset(now, old.state)
@@ -273,7 +274,9 @@ class Controller:
             The input this tick follows (:meth:`.arbiter.InputArbiter.select`): already
             zero when stale, disabled, not finite or from no device owning the motion.
         state, obj : Sample or None
-            Newest robot state (ee pose in world) and task-object pose (in world).
+            Newest robot state (ee pose in world) and the pose (in world) of the active
+            state's object (``engine.object``: the state's own, else the skill's task
+            object).
         """
         cfg = self.config
         u, input_ok, pressed = cmd.u, cmd.ok, cmd.pressed
@@ -297,13 +300,18 @@ class Controller:
         force = None if state.wrench is None else self._force_in_object(state.wrench)
         engine = self.engine
         grip = state.gripper
+        body = engine.object
         changed = engine.update(F_meas, now, force, pressed, BUTTON_ESCAPE,
                                 None if grip is None else grip.grasped)
         if changed:
             self.counters.transitions += 1
             self.counters.escapes += engine.escaped
-        # a (re-)seed tick moves nothing: no push, and the stuck watch restarts
-        self._watch(now, not seeding and self._move(u, F_meas), F_meas, force)
+        # A (re-)seed tick moves nothing: no push, and the stuck watch restarts. Nor does
+        # the tick that entered a state in another body's frame: the poses here are in
+        # the old one's; the next tick gets the new body's pose and re-expresses the
+        # target (a pose in the world, unchanged) in it, or holds while it is stale.
+        moves = not seeding and engine.object == body
+        self._watch(now, moves and self._move(u, F_meas), F_meas, force)
         self.mode = "running" if input_ok else "stopped"
         return TickResult(self.mode, self._target, self.engine.state, cmd, changed,
                           input_ok, self._pose, seeding)

@@ -11,8 +11,9 @@ does, in this order:
    :meth:`take_state`, :meth:`take_object` for decoded messages): inputs go to their
    device's slot, with button edges and the ownership rule judged on every message
    (:mod:`.arbiter`); every state goes through the continuity watch
-   (:class:`~.safety.StateWatch`); the task object's pose is kept (an unchanged pose
-   keeps its flat transform, so that the controller's object caches stay valid);
+   (:class:`~.safety.StateWatch`); the pose of every object the skill names is kept
+   (an unchanged pose keeps its flat transform, so that the controller's object caches
+   stay valid), and each tick hands the controller the active state's;
 2. at the deadline, :meth:`TickDriver.tick` (the arbiter's command, the newest state
    and object pose, the controller's step, the gripper's command: :mod:`.gripper`);
    publish what it returns (the target, and the gripper message when it has one);
@@ -113,9 +114,9 @@ class TickDriver:
         self.gripper.observe(m.gripper, now)
 
     def take_object(self, name: str, m: codec.ObjectMsg, now: float) -> None:
-        """An object's pose; kept when it is the active skill's task object (or a skill
-        set member's)."""
-        if name != self.controller.skill.object and (self.goals is None or name not in self.goals.objects):
+        """An object's pose; kept when the active skill names it (its task object or a
+        state's own ``object``; a skill set: any member's)."""
+        if name not in self.controller.objects and (self.goals is None or name not in self.goals.objects):
             return
         prev = self.objects.get(name)
         # An unchanged pose keeps its flat transform (the same tuple): the controller's
@@ -126,9 +127,9 @@ class TickDriver:
     # --- the tick -------------------------------------------------------------------------
 
     def object_sample(self, now: float, wall: float) -> Sample | None:
-        """The active skill's task object as the tick sees it (the world is always there
-        and always fresh)."""
-        obj = self.controller.skill.object
+        """The active state's object as the tick sees it (its own ``object``, else the
+        skill's; the world is always there and always fresh)."""
+        obj = self.controller.engine.object
         if obj == WORLD_OBJECT:
             self._world.received, self._world.stamp = now, wall
             return self._world
@@ -195,7 +196,8 @@ class TickDriver:
         """Replace the skill between two ticks (:meth:`.controller.Controller.swap`);
         object poses the new skill does not use are forgotten."""
         self.controller.swap(skill, now, engine)
-        for name in [n for n in self.objects if n != skill.object
+        names = skill.objects()
+        for name in [n for n in self.objects if n not in names
                      and (self.goals is None or n not in self.goals.objects)]:
             del self.objects[name]
 
@@ -212,5 +214,6 @@ class TickDriver:
             self.controller.swap(skill, now, goals.engines[goals.index(skill.name)])
         else:
             self.counters.swaps += 1
-        for n in [n for n in self.objects if n != self.controller.skill.object and n not in goals.objects]:
+        names = self.controller.skill.objects()
+        for n in [n for n in self.objects if n not in names and n not in goals.objects]:
             del self.objects[n]

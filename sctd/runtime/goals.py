@@ -256,7 +256,8 @@ class GoalSet:
         self.teleop_engine = SkillEngine(teleop)
         self.belief = Belief(len(members), self.model)
         self.engaged: int | None = None
-        self.objects = frozenset(m.skill.object for m in members)  # (the driver keeps their poses)
+        # every body a member names (the driver keeps their poses)
+        self.objects = frozenset(o for m in members for o in m.skill.objects())
         self.counters = GoalCounters()
         self.candidates = [False] * len(members)
         self._goals: list[tuple[float, float, float] | None] = [None] * len(members)
@@ -481,7 +482,7 @@ class GoalSet:
         old = self.members[i]
         self.members = (*self.members[:i], replace(old, skill=skill), *self.members[i + 1:])
         self.engines[i] = engine if engine is not None else SkillEngine(skill)
-        self.objects = frozenset(m.skill.object for m in self.members)
+        self.objects = frozenset(o for m in self.members for o in m.skill.objects())
         return self.engaged == i
 
     # --- what the status says ------------------------------------------------------------

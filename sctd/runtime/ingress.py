@@ -8,7 +8,8 @@ copying it, and hands it to :meth:`~sctd.runtime.driver.TickDriver.receive`. Not
 drops a message on arrival by rate: a rate limit keeps the first message of an interval
 and drops the rest, and the rest may be a release.
 
-The task objects read are the active skill's, by name (a skill set's: every member's).
+The objects read are those the active skill names, by name: its task object and its
+states' own (a skill set's: every member's).
 
 Input devices each get a ring of their own, so that a device flooding its key can never
 push another device's newest message out. Names are learned from a catch-all ring on
@@ -86,8 +87,8 @@ class Ingress:
         self._wanted: list[str] = []  # names heard on the catch-all, to get a ring after the tick
         self._joining: dict[str, Inlet] = {}  # rings declared since the last drain
         self.objects: dict[str, Inlet] = {}
-        names = {driver.skill.object} | (driver.goals.objects if driver.goals is not None else set())
-        for obj in sorted(names - {WORLD_OBJECT}):  # the skill's object, or every set member's
+        names = set(driver.skill.objects()) | (driver.goals.objects if driver.goals is not None else set())
+        for obj in sorted(names - {WORLD_OBJECT}):  # the skill's objects, or every set member's
             self.objects[obj] = object_inlet(session, keys, obj)
         self.trash: list[Any] = []  # oversized samples: freed off the tick thread (take_trash)
 

@@ -13,6 +13,7 @@ import logging
 import time
 from typing import Any
 
+from ..skill import WORLD_OBJECT
 from ..timing import Histogram, Ticker
 from .driver import TickDriver
 from .publisher import TargetOut
@@ -139,7 +140,7 @@ class DaemonStatus:
         drv, stats = self.driver, self.stats
         ctl = drv.controller
         c = ctl.counters
-        obj = drv.objects.get(ctl.skill.object)
+        obj = drv.objects.get(ctl.engine.object)
         last = drv.inputs.last
         targets = drv.target_seq - stats.window_targets
 
@@ -169,7 +170,10 @@ class DaemonStatus:
             "input_age": age(last.received if last is not None else None),
             "state_age": age(drv.state.received if drv.state is not None else None),
             "robot_fault": drv.state.fault if drv.state is not None else None,
+            "object": ctl.engine.object,
             "object_age": age(obj.received if obj is not None else None),
+            "objects": {n: age(o.received) if (o := drv.objects.get(n)) is not None else None
+                        for n in ctl.skill.objects() if n != WORLD_OBJECT},
             "in_seq": last.msg.seq if last is not None and last.msg is not None else -1,
             "input": drv.inputs.summary(),
             "gripper": drv.gripper.status(now, drv.inputs.ignored_grasps),

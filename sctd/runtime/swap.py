@@ -187,12 +187,13 @@ class SkillSwap:
             goals = self.driver.goals
             if goals is not None:
                 member = check_swap(goals, skill, member)
-                names = [skill.object, *(m.skill.object for m in goals.members if m.name != member)]
+                names = [*skill.objects(), *(o for m in goals.members if m.name != member
+                                             for o in m.skill.objects())]
             elif member is not None:
                 raise SkillError(WHERE, "", f"member {member!r}: the daemon runs one skill, not a skill "
                                             "set: swap without naming a member")
             else:
-                names = [skill.object]
+                names = list(skill.objects())
             self.between_ticks()
             engine = SkillEngine(skill)
             self.between_ticks()

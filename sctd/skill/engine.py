@@ -77,6 +77,8 @@ class SkillEngine:
             for m in s.input_mappings:
                 axes |= m.input_axes()
             self._axes.append(tuple(sorted(axes)))
+        # per state: the body whose frame it is in (its own object, else the skill's)
+        self._objects = tuple(skill.state_object(i) for i in range(len(skill.states)))
         self.index = skill.state_index(skill.start)
         self.entered = 0.0
         # The path that led to the active state (state indices, the newest last).
@@ -96,6 +98,15 @@ class SkillEngine:
     @property
     def state(self) -> str:
         return self.skill.states[self.index].name
+
+    @property
+    def object(self) -> str:
+        """The body whose frame the active state is in (the poses :meth:`update`,
+        :meth:`progress` and :meth:`command` take are in its frame): the state's own
+        ``object``, else the skill's. It changes with the state: a caller that holds
+        poses in the old state's frame re-expresses them (the runtime's controller does,
+        from the target's world pose)."""
+        return self._objects[self.index]
 
     @property
     def input_axes(self) -> tuple[int, ...]:

@@ -36,6 +36,8 @@ BUNDLE_FORMAT = "sctd-skill-bundle"
 # grow with it; a vector-field model of 20k demonstration points is 1.4 MB compressed.
 MAX_BUNDLE_BYTES = 8 * 1024 * 1024
 MAX_TEXT = 10_000  # characters of a skill's name or description
+MAX_NAME = 64  # characters of a state's object: a body's name (the wire's names)
+_NOT_IN_NAMES = frozenset("/\\*$?#@ ")
 
 
 @dataclass(frozen=True)
@@ -266,7 +268,7 @@ class _Parser(Reader):
     def state(self, name: str, sd: Any) -> State:
         path = f"states.{name}"
         sd = self.mapping(sd if sd is not None else {}, path)
-        self.known_keys(sd, path, {"input_mapping", "active_constraints", "gripper"})
+        self.known_keys(sd, path, {"input_mapping", "active_constraints", "gripper", "object"})
         ims = sd.get("input_mapping") or []
         acs = sd.get("active_constraints") or []
         if not isinstance(ims, list):
@@ -281,7 +283,23 @@ class _Parser(Reader):
                                      for i, c in enumerate(acs)),
             gripper=None if sd.get("gripper") is None
             else GripperAction.from_yaml(self, sd["gripper"], f"{path}.gripper"),
+            object=None if "object" not in sd else self.object_name(sd["object"], f"{path}.object"),
         )
+
+    def object_name(self, v: Any, path: str) -> str:
+        """A body's name as the wire's object key takes it (``objects/<name>``; the rule
+        of ``sctd.wire.codec.name_problem``, a layer above, which tests hold equal): 1 to
+        64 printable characters, none of ``/ \\ * $ ? # @`` or spaces, no leading dot."""
+        name = self.string(v, path)
+        bad = next((c for c in name if c in _NOT_IN_NAMES or not c.isprintable()), None)
+        if len(name) > MAX_NAME:
+            raise self.fail(path, f"expected a body's name: {len(name)} characters, at most {MAX_NAME}")
+        if name.startswith("."):
+            raise self.fail(path, f"expected a body's name: {name!r} starts with a dot")
+        if bad is not None:
+            raise self.fail(path, f"expected a body's name: {name!r} has {bad!r} (not in names: "
+                                  "/ \\ * $ ? # @, spaces, control characters)")
+        return name
 
     def element(self, registry: Registry, d: Any, path: str) -> Any:
         """An input mapping or active constraint, read by the class its ``type`` names."""

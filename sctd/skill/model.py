@@ -27,12 +27,19 @@ from .transitions import Transition
 @dataclass(frozen=True)
 class State:
     """One FSM state: its input mappings, its active constraints and, optionally, what
-    the gripper does when a transition enters it (:mod:`sctd.skill.gripper`)."""
+    the gripper does when a transition enters it (:mod:`sctd.skill.gripper`) and the
+    body whose frame the state is expressed in (``object``; None: the skill's object).
+
+    Two frames for one task: a pick-and-place reaches and grasps relative to the item
+    and carries and puts down relative to where it goes (the thesis' Shared Control
+    Templates give each state its own feature frame).
+    """
 
     name: str
     input_mappings: tuple[InputMapping, ...]
     active_constraints: tuple[ActiveConstraint, ...]
     gripper: GripperAction | None = None
+    object: str | None = None
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,22 @@ class Skill:
                     if out.setdefault(rel, model) is not model:
                         raise ValueError(f"two models for the model file {rel!r}")
         return out
+
+    def state_object(self, index: int) -> str:
+        """The body whose frame state number ``index`` is expressed in: its own
+        ``object``, else the skill's."""
+        own = self.states[index].object
+        return self.object if own is None else own
+
+    def objects(self) -> tuple[str, ...]:
+        """Every body the skill names, the skill's ``object`` first, then the states'
+        own in state order, each once (``world`` among them where named: it needs no
+        pose)."""
+        out = [self.object]
+        for s in self.states:
+            if s.object is not None and s.object not in out:
+                out.append(s.object)
+        return tuple(out)
 
     def state_index(self, name: str) -> int:
         for i, s in enumerate(self.states):

@@ -38,6 +38,7 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
         "description": skill.description,
         "source": skill.source,
         "object": skill.object,
+        "objects": list(skill.objects()),
         "start": skill.start,
         "end": skill.end,
         "limits": {"max_linear_speed": skill.limits.max_linear_speed,
@@ -54,9 +55,12 @@ def skill_summary(skill: Skill) -> dict[str, Any]:
 
 
 def _state(s: State) -> dict[str, Any]:
-    """A state's mappings and constraints, and its gripper action where it has one."""
+    """A state's mappings and constraints, and its own object and gripper action where
+    it has them."""
     out: dict[str, Any] = {"name": s.name, "input_mappings": [m.summary() for m in s.input_mappings],
                            "active_constraints": [c.summary() for c in s.active_constraints]}
+    if s.object is not None:
+        out["object"] = s.object
     if s.gripper is not None:
         out["gripper"] = s.gripper.to_yaml()
     return out

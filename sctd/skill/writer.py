@@ -28,7 +28,8 @@ def skill_to_yaml(skill: Skill) -> dict[str, Any]:
 
     Every setting is written, defaults too; what the format lets a file leave out when
     empty is left out: the description, frames beyond the built-in ``ee`` and
-    ``object``, a state's mappings, constraints or gripper action, the candidate frames.
+    ``object``, a state's own object, mappings, constraints or gripper action, the
+    candidate frames.
     """
     doc: dict[str, Any] = {"sctd_skill": FORMAT_VERSION, "name": skill.name}
     if skill.description:
@@ -49,6 +50,8 @@ def skill_to_yaml(skill: Skill) -> dict[str, Any]:
 
 def _state(s: State) -> dict[str, Any]:
     out: dict[str, Any] = {}
+    if s.object is not None:
+        out["object"] = s.object
     if s.input_mappings:
         out["input_mapping"] = [m.to_yaml() for m in s.input_mappings]
     if s.active_constraints:
