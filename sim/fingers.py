@@ -44,14 +44,15 @@ class Fingers:
     def __init__(self, max_width: float = MAX_WIDTH, speed: float = SPEED, width: float | None = None):
         self.max_width, self.speed = max_width, speed
         self._start = max_width if width is None else width
+        self.cmd = -1
         self.reset()
 
     def reset(self) -> None:
-        """Open, as at the start, no command taken."""
+        """Open, as at the start (a scene's reset). The newest command's number is kept: a
+        sender's repeats of it after the reset change nothing."""
         self.width = self.target = self._start
         self.closing = False
         self.force = 0.0
-        self.cmd = -1
         self._speed = self.speed
         self._blocked: float | None = None  # the width something stopped them at this step
 

@@ -45,7 +45,7 @@ from sctd.task.model import AllOf, AnyOf, Compare, MoveJoint, Not, Predicate, Pr
 from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
-from .motion import Motion, PressMotion, move, task_motions, upright
+from .motion import LegsMotion, Motion, PressMotion, move, task_motions, upright
 from .plan import (
     PRESS_STANDOFF,
     DemoPlan,
@@ -253,6 +253,10 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
     t0 = time.monotonic()
     attempt = Attempt(plan.attempt, plan)
     try:
+        if _moves_things(geometry.task):  # (the task object where it starts, not where it was left)
+            teacher.reset_scene(options.name)
+            teacher.scene_after(time.time())
+            teacher.scene_after(time.time())  # (an object message after the reset's has come)
         T_world_obj = teacher.object_pose()
         _move_to(teacher, plan.T_obj_start, T_world_obj, speeds)
         teacher.reset_scene(options.name)
@@ -285,7 +289,7 @@ def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: T
     the module doc); else a tilted frame brought upright about its point if it is still
     tilted (an attempt that ended early)."""
     task = geometry.task
-    if task.scene.joints:
+    if task.scene.joints or _moves_things(task):
         teacher.reset_scene(options.name)
         return
     presses = [s for s in plan.steps if s.kind == "press"]
@@ -301,6 +305,13 @@ def _leave(teacher: Teacher, plan: DemoPlan, geometry: SceneGeometry, options: T
     if back.angle > 0.05:
         teacher.phase = "upright"
         teacher.follow(back, T_world_obj)
+
+
+def _moves_things(task: Task) -> bool:
+    """Whether the task's hand takes things (an item, a knob): an attempt leaves them
+    moved or held, so the scene is reset after it and before the next."""
+    return any(f.physics(n, task.scene) is not None for n, b in task.scene.bodies.items()
+               for f in b.facets.values())
 
 
 def _pull_back(teacher: Teacher, geometry: SceneGeometry, press: StepPlan, speeds: Speeds) -> None:
@@ -351,6 +362,8 @@ def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_
     teacher.phase = step.name
     failed = _failing(teacher, task)
     action = next(s.action for s in task.intent if s.name == step.name)
+    if isinstance(motion, LegsMotion):
+        return _legs(teacher, step, motion, T_world_obj, failed)
     if isinstance(action, Press):
         assert isinstance(motion, PressMotion)  # (a press's motion)
         return _press(teacher, step, motion, action, T_world_obj, failed)
@@ -386,6 +399,30 @@ def _press(teacher: Teacher, step: StepPlan, motion: PressMotion, action: Press,
         raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
                             f"{PRESS_TIMEOUT:g} s of holding the button pushed in")
     return not failed() and teacher.follow(motion.outward, T_world_obj, stop_when=failed)
+
+
+def _legs(teacher: Teacher, step: StepPlan, motion: LegsMotion, T_world_obj: Array,
+          failed: Callable[[], bool]) -> bool:
+    """Show a step of a registered kind leg by leg: the hand along the leg, then the
+    fingers as it says, then held still until its reading is what it waits for
+    (TeachingError when it is not in GRASP_WAIT s: a grasp beside the item never holds
+    it); stopped when a failure rule holds (False then)."""
+    for line, leg in motion.legs:
+        if not teacher.follow(line, T_world_obj, stop_when=failed):
+            return False
+        if leg.grip is not None:
+            teacher.grip(leg.grip, leg.force)
+        if leg.until is not None:
+            reading, value = leg.until
+
+            def there(r: str = reading, v: bool = value) -> bool:
+                return failed() or _readings(teacher).get(r) is v
+            if not teacher.hold(there, GRASP_WAIT):
+                raise TeachingError(f"{step.name}: {reading} was not {str(value).lower()} within "
+                                    f"{GRASP_WAIT:g} s of the fingers' {leg.grip}")
+            if failed():
+                return False
+    return True
 
 
 def _readings(teacher: Teacher) -> dict:

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import handle_jacobian, handle_pose
+from sctd.task.kinds import Leg, StepKind
 from sctd.task.model import Joint
 
 from .plan import PRESS_STANDOFF, DemoPlan, SceneGeometry, Speeds, StepPlan
@@ -192,11 +193,49 @@ def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan
         elif s.kind == "press":
             m = press_motion(here, s, geometry, k * V.reach_speed, k * V.press_speed, k * V.turn_rate,
                              profile)
-        else:
+        elif s.kind == "move_joint":
             m = _joint_motion(here, s, geometry, k * V.joint_speed, k * V.turn_rate, profile)
+        else:
+            m = legs_motion(here, s, geometry, k * V.reach_speed, k * V.turn_rate, plan.mistake)
         out.append((s, m))
         here = s.T_obj_goal if s.T_obj_goal is not None else m.pose(m.duration)
     return out
+
+
+@dataclass(frozen=True)
+class LegsMotion:
+    """A step of a registered kind as its legs (:class:`~sctd.task.kinds.Leg`): each a
+    rest-to-rest :class:`Line` (object frame), then what the fingers do and the wait its
+    leg says (the demonstrator runs them leg by leg)."""
+
+    legs: tuple[tuple[Line, Leg], ...]
+
+    @property
+    def duration(self) -> float:
+        return sum(line.duration for line, _ in self.legs)
+
+    def pose(self, t: float) -> Array:
+        for line, _ in self.legs:
+            if t <= line.duration:
+                return line.pose(t)
+            t -= line.duration
+        return self.legs[-1][0].pose(self.legs[-1][0].duration)
+
+
+def legs_motion(here: Array, s: StepPlan, geometry: SceneGeometry, speed: float, turn_rate: float,
+                mistake: bool) -> LegsMotion:
+    """The legs of step ``s`` (of a registered kind) from ``here``, planned in the task
+    object's frame with the bodies at their defaults in it, drawn from ``s.draw``."""
+    action = next(x.action for x in geometry.task.intent if x.name == s.name)
+    assert isinstance(action, StepKind)  # (the plan gives its kind's key only to these)
+    poses = {n: geometry.body(n) for n in geometry.task.scene.bodies}
+    legs = action.legs(geometry.task.scene, poses, here, np.random.default_rng(s.draw), mistake)
+    out = []
+    for leg in legs:
+        out.append((line(here, leg.T_world_ee, leg.speed * speed, leg.speed * turn_rate, "rest_to_rest"),
+                    leg))
+        here = leg.T_world_ee
+    return LegsMotion(tuple(out))
 
 
 def _profile(i: int, recorded: int) -> str:

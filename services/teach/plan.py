@@ -19,7 +19,10 @@ one motion of the hand, planned in the task object's frame (``T_obj_ee``):
 - a **press** brings the step's frame, the hand keeping its orientation, through a via
   point onto the button's axis :data:`PRESS_STANDOFF` in front of its face, pushes it
   in to the planned depth (past the click), holds until the step's predicate holds and
-  pulls back out to where it came onto the axis.
+  pulls back out to where it came onto the axis;
+- a step of a **registered kind** (a grasp, a place, a turn: :mod:`sctd.task.kinds`)
+  runs the legs its kind plans (:meth:`~sctd.task.kinds.StepKind.legs`), drawn from a
+  seed the plan draws for it.
 
 Between demonstrations (the task file's ``teach`` section, :class:`~sctd.task.model.Teach`)
 the hand starts elsewhere, each reach bends through a different via point, the hand
@@ -43,6 +46,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task
 from sctd.task.judge import thresholds
+from sctd.task.kinds import StepKind
 from sctd.task.model import PRESS_MARGIN, MoveJoint, Press, Reach, Teach, TeachStep, Tilt, Upright
 
 Array = NDArray[np.float64]
@@ -156,6 +160,9 @@ class StepPlan:
         A reach to a handle, a joint's move: the joint.
     button : str
         A press: the button's body.
+    draw : int
+        A step of a registered kind (:mod:`sctd.task.kinds`): the seed its legs' variations
+        are drawn from (:meth:`~sctd.task.kinds.StepKind.legs`).
     """
 
     name: str
@@ -168,6 +175,7 @@ class StepPlan:
     value: float = math.nan
     joint: str = ""
     button: str = ""
+    draw: int = 0
 
     def describe(self) -> str:
         if self.kind == "reach":
@@ -266,6 +274,8 @@ def plan_demonstration(geometry: SceneGeometry, seed: int, attempt: int, mistake
             T_goal, depth = _press_goal(geometry, a, var, mistake, here, rng)
             steps.append(StepPlan(s.name, "press", a.frame, T_goal, value=depth, button=a.button))
             here = T_goal
+        elif isinstance(a, StepKind):  # (its legs are drawn where it runs, from this seed)
+            steps.append(StepPlan(s.name, a.key, a.frame(), draw=int(rng.integers(2**31))))
         else:
             steps.append(StepPlan(s.name, "upright", frame))
     a_point = T_start[:3, 3]

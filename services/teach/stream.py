@@ -45,6 +45,7 @@ from .motion import Motion
 
 Array = NDArray[np.float64]
 SKILL = "sctd-teach"  # the target messages' ``skill`` field: who commands
+GRIP_REPEAT = 0.1  # s between repeats of the fingers' newest command (the wire contract: >= 10 Hz)
 
 
 class CommanderConflict(RuntimeError):
@@ -121,12 +122,20 @@ class Teacher:
         self._F_last: se3.Flat | None = None
         self.reseeds = 0  # times the last target was dropped for the measured pose
         self._decls = contextlib.ExitStack()
+        # the fingers' newest command, repeated with the targets (numbers new to the robot:
+        # from this teacher's start time, in ms, as the runtime's)
+        self._grip: codec.GripperCmd | None = None
+        self._grip_sent = 0.0
+        self._grip_n = int(time.time() * 1000)
+        self._grip_seq = 0
 
     def __enter__(self) -> Teacher:
         with contextlib.ExitStack() as stack:
             self.pub = stack.enter_context(self.session.declare_publisher(
                 self.keys.target, congestion_control=zenoh.CongestionControl.DROP, express=True,
                 encoding=MSGPACK))
+            self.pub_gripper = stack.enter_context(self.session.declare_publisher(
+                self.keys.gripper, express=True, encoding=MSGPACK))
             stack.enter_context(self.session.declare_subscriber(self.keys.status, self._on_status))
             self._decls = stack.pop_all()
         return self
@@ -196,10 +205,26 @@ class Teacher:
         pose = se3.pose_from_flat(F)
         if not all(math.isfinite(x) for x in pose):
             raise TeachingError(f"a non-finite target in phase {self.phase}: {pose}")
-        self.pub.put(codec.encode_target(self.seq, time.time(), pose, self.phase, SKILL, -1))
+        now = time.time()
+        self.pub.put(codec.encode_target(self.seq, now, pose, self.phase, SKILL, -1))
         self.seq += 1
+        if self._grip is not None and now - self._grip_sent >= GRIP_REPEAT:
+            self._put_grip(now)
         self._F_last = F
         self.T_target = se3.transform_from_flat(F)
+
+    def grip(self, action: str, force: float | None = None) -> None:
+        """Command the fingers (``close`` squeezing at most ``force`` N, ``open``): sent at
+        once, then repeated with the targets every :data:`GRIP_REPEAT` s."""
+        self._grip_n += 1
+        self._grip = codec.GripperCmd(0, 0.0, self._grip_n, action, force=force, skill=SKILL)
+        self._put_grip(time.time())
+
+    def _put_grip(self, now: float) -> None:
+        assert self._grip is not None
+        self.pub_gripper.put(codec.encode_gripper(self._grip._replace(seq=self._grip_seq, stamp=now)))
+        self._grip_seq += 1
+        self._grip_sent = now
 
     def hold(self, until: Callable[[], bool], timeout: float) -> bool:
         """Hold the last target (the arm's pose if there is none yet) until ``until()``

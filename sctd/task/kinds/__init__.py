@@ -10,6 +10,7 @@ hand. Each kind is one class that holds everything sctd knows of it:
 - its readings (``<body>.<quantity>``, :attr:`Facet.quantities`);
 - its physics in the simulator (:meth:`Facet.physics`: pure numpy on a :class:`World`);
 - the simulated user's behaviour for a step (:meth:`StepKind.mind`);
+- the demonstrator's plan for a step (:meth:`StepKind.legs`);
 - the demonstrator's plan for a step (:meth:`StepKind.waypoints`);
 - its drawing in the view (:meth:`Facet.shapes`: boxes and cylinders, as data).
 
@@ -30,7 +31,7 @@ import importlib
 from functools import cache
 from importlib.metadata import entry_points
 
-from .base import Facet, FacetPhysics, Fingers, Person, Shape, Sight, StepKind, StepMind, Want, World
+from .base import Facet, FacetPhysics, Fingers, Leg, Person, Shape, Sight, StepKind, StepMind, Want, World
 
 GROUP = "sctd.task_kinds"
 BUILTIN = {
@@ -83,5 +84,5 @@ def step_kinds() -> dict[str, type[StepKind]]:
     return {k: c for k, c in registry().items() if issubclass(c, StepKind)}
 
 
-__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Person", "Shape", "Sight",
-           "StepKind", "StepMind", "Want", "World", "facets", "registry", "step_kinds"]
+__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Leg", "Person", "Shape",
+           "Sight", "StepKind", "StepMind", "Want", "World", "facets", "registry", "step_kinds"]

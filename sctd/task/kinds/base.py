@@ -199,6 +199,21 @@ class StepMind(ABC):
         """How the hand should move now, and the fingers."""
 
 
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a demonstration of a step: the hand to ``T_world_ee`` (world, as the
+    demonstration's scene stands at its start), at ``speed`` times the task's reach speed
+    and turn rate (slower coming onto a grip), then the fingers do ``grip`` (``close`` with
+    ``force`` N, ``open``; None: nothing), then the demonstrator holds the hand still until
+    the reading ``until[0]`` is ``until[1]`` (None: no wait)."""
+
+    T_world_ee: Array
+    speed: float = 1.0
+    grip: str | None = None
+    force: float | None = None
+    until: tuple[str, bool] | None = None
+
+
 class StepKind(ABC):
     """A kind of intent step: ``intent[i].<key>`` in a task file.
 
@@ -229,3 +244,10 @@ class StepKind(ABC):
     @abstractmethod
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         """The simulated person's behaviour for it."""
+
+    @abstractmethod
+    def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
+             mistake: bool = False) -> list[Leg]:
+        """A demonstration of it (``sctd teach``): the hand's legs from ``T_world_ee`` with
+        the bodies at ``poses`` (world), varied by ``rng`` as a person's demonstrations
+        vary; with ``mistake``, the way a person gets it wrong (a grasp beside the item)."""

@@ -20,13 +20,14 @@ the kind.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..model import Outcome, Scene, Step
-from .base import Array, Person, Sight, StepKind, StepMind, Want
+from .base import Array, Leg, Person, Sight, StepKind, StepMind, Want
 from .pickable import Item, Support, facet_of
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -38,6 +39,12 @@ STILL = 0.01  # m/s: the hand this slow to close the fingers
 TOUCH = 1.0  # N: the top pushes back this hard on an item being lowered: it is down
 LOWER_SPEED = 0.02  # m/s: lowering onto the top
 PLACED = 0.006  # m: lowered to within this of the top, it is down as well
+# how a person's demonstrations vary (sctd teach)
+TURN_AWAY = 0.15  # rad: the hand's yaw about the vertical, either way, as it comes in
+HIGHER = 0.02  # m: lifted or carried up to this much higher than the step says
+OFF_SPOT = 0.01  # m: put down up to this far from the spot, each way
+MISS = 0.03  # m: a mistaken grasp closes this far beside the item's axis
+SLOW = 0.4  # coming onto a grip or down onto a top: this share of the reach speed
 
 
 def _f(x: float) -> float:
@@ -74,6 +81,30 @@ def _ahead(T_world_ee: Array, to_grip: Array) -> Array:
         if n > 0.3:
             return d / n
     return np.array([1.0, 0.0, 0.0])
+
+
+def _pose(R: Array, p: Array) -> Array:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def _yawed(R: Array, rng: np.random.Generator, spread: float) -> Array:
+    """``R`` turned about the vertical by a yaw drawn from [-spread, spread]."""
+    a = float(rng.uniform(-spread, spread))
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
+
+
+def take_legs(R: Array, grip: Array, approach: float, force: float, held: str, rng: np.random.Generator,
+              mistake: bool) -> list[Leg]:
+    """The legs of taking something at ``grip`` (world) with the hand turned ``R``: to the
+    point ``approach`` back along its x, slowly in (beside it along its y, for a mistake),
+    close with ``force`` and wait until ``held`` is true."""
+    ahead = _ahead(_pose(R, grip), np.zeros(3))
+    at = grip + (MISS * R[:, 1] if mistake else 0.0)
+    return [Leg(_pose(R, at - approach * ahead)),
+            Leg(_pose(R, at), SLOW, "close", force, (held, True))]
 
 
 def _weights(person: Person, turning: bool) -> Array:
@@ -122,6 +153,17 @@ class GraspStep(StepKind):
 
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return GraspMind(self, facet_of(scene, self.item, Item), person)
+
+    def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
+             mistake: bool = False) -> list[Leg]:
+        """To it, in, close until it is held, lift it (up to :data:`HIGHER` more)."""
+        item = facet_of(scene, self.item, Item)
+        T = poses[self.item]
+        grip = T[:3, 3] + item.grip * T[:3, 2]
+        R = _yawed(T_world_ee[:3, :3], rng, TURN_AWAY)
+        up = grip + (self.lift + float(rng.uniform(0.0, HIGHER))) * UP
+        return [*take_legs(R, grip, self.approach, self.force, f"{self.item}.held", rng, mistake),
+                Leg(_pose(R, up), SLOW)]
 
 
 class GraspMind(StepMind):
@@ -234,6 +276,23 @@ class PlaceStep(StepKind):
 
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return PlaceMind(self, facet_of(scene, self.item, Item), facet_of(scene, self.onto, Support), person)
+
+    def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
+             mistake: bool = False) -> list[Leg]:
+        """Up to the carrying height, over the spot (up to :data:`OFF_SPOT` off it), down
+        onto the top, open until it is let go, back along the hand's x."""
+        item, sup = facet_of(scene, self.item, Item), facet_of(scene, self.onto, Support)
+        S, R = poses[self.onto], T_world_ee[:3, :3]
+        off = rng.uniform(-OFF_SPOT, OFF_SPOT, 2)
+        spot = S[:3, :3] @ np.array([self.at[0] + off[0], self.at[1] + off[1], 0.0]) + S[:3, 3]
+        high = float(spot[2]) + sup.rim + self.hover + float(rng.uniform(0.0, HIGHER)) + item.grip
+        here = T_world_ee[:3, 3]
+        down = spot + (item.grip + 0.002) * S[:3, 2]
+        ahead = _ahead(T_world_ee, np.zeros(3))
+        return [Leg(_pose(R, np.array([here[0], here[1], max(high, float(here[2]))]))),
+                Leg(_pose(R, np.array([down[0], down[1], max(high, float(here[2]))]))),
+                Leg(_pose(R, down), SLOW, "open", None, (f"{self.item}.held", False)),
+                Leg(_pose(R, down - self.clear * ahead + 0.01 * UP), SLOW)]
 
 
 class PlaceMind(StepMind):

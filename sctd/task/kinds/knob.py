@@ -23,6 +23,7 @@ let go short of it is taken again.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,8 +33,21 @@ from sctd import se3
 
 from ..judge import thresholds
 from ..model import Outcome, Scene, Step
-from .base import Array, Facet, FacetPhysics, Person, Shape, Sight, StepKind, StepMind, Want, World
-from .handling import AT_GRIP, IN_REACH, STRAY, _ahead, _saturate, _square, _weights
+from .base import Array, Facet, FacetPhysics, Leg, Person, Shape, Sight, StepKind, StepMind, Want, World
+from .handling import (
+    AT_GRIP,
+    IN_REACH,
+    SLOW,
+    STRAY,
+    TURN_AWAY,
+    _ahead,
+    _pose,
+    _saturate,
+    _square,
+    _weights,
+    _yawed,
+    take_legs,
+)
 from .pickable import FREE, across_fingers, facet_of
 
 STOP = 20.0  # N m/rad: an end stop's stiffness
@@ -236,6 +250,22 @@ class TurnStep(StepKind):
 
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return TurnMind(self, facet_of(scene, self.knob, Knob), person)
+
+    def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
+             mistake: bool = False) -> list[Leg]:
+        """To it, in, close until it is held, turn it to the threshold plus up to the
+        overshoot (slowly, about its axis), open until it is let go, back along the hand's x."""
+        knob = facet_of(scene, self.knob, Knob)
+        T = poses[self.knob]
+        axis = T[:3, 2]
+        grip = T[:3, 3] + knob.grip * axis
+        R = _yawed(T_world_ee[:3, :3], rng, TURN_AWAY / 3)
+        turn = self.target - self.overshoot + float(rng.uniform(0.3, 1.0)) * self.overshoot
+        R_turned = se3.matrix_from_rotvec(turn * axis) @ R
+        ahead = _ahead(_pose(R_turned, grip), np.zeros(3))
+        return [*take_legs(R, grip, self.approach, self.force, f"{self.knob}.held", rng, mistake),
+                Leg(_pose(R_turned, grip), SLOW, "open", None, (f"{self.knob}.held", False)),
+                Leg(_pose(R_turned, grip - self.clear * ahead), SLOW)]
 
 
 class TurnMind(StepMind):
