@@ -8,7 +8,11 @@ own clock (its ``stamp``), strictly increasing (a sample whose state has not adv
 is skipped), quaternions unit and in the ``qw >= 0`` hemisphere. Where the first sampled
 state carries a gripper reading, every row also has the fingers' ``gripper`` width (m)
 and ``grasped`` (0/1) (``t,x,y,z,qx,qy,qz,qw,gripper,grasped``; a later state without a
-reading repeats the last one); otherwise the file is exactly the pose's columns.
+reading repeats the last one); otherwise the file is exactly the pose's columns. Every
+other body whose pose is known at the first row (``objects/<name>`` but the task
+object's; with ``--bodies``, those named, the first row waiting for them) adds seven
+columns, its pose in the task object's frame (``<body>.x, ..., <body>.qw``,
+:mod:`sctd.learn.demos`): the learner chooses each state's frame among them.
 
 Files: the rows go to a hidden ``.demo-*.part`` file in the output folder, flushed as
 they are written; on exit (``--duration`` elapsed, SIGINT or SIGTERM) it is synced and
@@ -70,11 +74,16 @@ def row_from_poses(t: float, pose_world_ee: list[float], pose_world_obj: list[fl
     return [t, p[0], p[1], p[2], p[3] * s, p[4] * s, p[5] * s, p[6] * s]
 
 
-def format_row(row: list[float]) -> str:
-    """One CSV line (time to the microsecond, poses to 1e-9; a row of 10 has the fingers'
-    width to the micrometre and grasped as 0 or 1)."""
-    grip = f",{row[8]:.6f},{int(row[9])}" if len(row) > 8 else ""
-    return f"{row[0]:.6f}," + ",".join(f"{x:.9f}" for x in row[1:8]) + grip + "\n"
+def format_row(row: list[float], bodies: tuple[str, ...] = ()) -> str:
+    """One CSV line (time to the microsecond, poses to 1e-9; a row with the gripper's
+    columns has the fingers' width to the micrometre and grasped as 0 or 1; then each of
+    ``bodies``' poses; :func:`sctd.wire.codec.format_demo_row`)."""
+    return codec.format_demo_row(row, codec.demo_columns([row], bodies)) + "\n"
+
+
+def body_pose(pose_world_body: list[float], pose_world_obj: list[float]) -> list[float]:
+    """A body's pose in the task object's frame (qw >= 0): a row's seven ``<body>.*``."""
+    return row_from_poses(0.0, pose_world_body, pose_world_obj)[1:]
 
 
 def gripper_values(reading: codec.GripperReading) -> list[float]:
@@ -110,13 +119,17 @@ class Recorder:
     task : str or None
         The task its demonstrations are published under; None: the scene the simulator
         announces (``pour``, ``drawer``), else the object's name.
+    bodies : tuple of str or None
+        The other bodies whose poses each row carries (in the object's frame); None:
+        every body whose pose is known at the first row.
     """
 
     def __init__(self, session: zenoh.Session, robot: str, object_name: str | None,
-                 task: str | None = None) -> None:
+                 task: str | None = None, bodies: tuple[str, ...] | None = None) -> None:
         self.session = session
         self.keys = Keys(robot)
         self.object_name = object_name
+        self.bodies = bodies  # the other bodies recorded (None: all known at the first row)
         self.state: codec.StateMsg | None = None
         self.objects: dict[str, list[float]] = {}
         self._task = task
@@ -184,6 +197,14 @@ class Recorder:
             return None
         return st.stamp, st.pose, obj, st.gripper
 
+    def row_bodies(self) -> tuple[str, ...] | None:
+        """The bodies a take's first row fixes: :attr:`bodies` when all are known (None
+        while one is not), else every known body but the task object, sorted."""
+        if self.bodies is not None:
+            named = tuple(b for b in self.bodies if b != self.object_name)
+            return named if all(b in self.objects for b in named) else None
+        return tuple(sorted(n for n in self.objects if n != self.object_name))
+
 
 class Take:
     """One demonstration being recorded, then kept or discarded.
@@ -217,7 +238,10 @@ class Take:
     ----------
     rows : list of list of float
         The rows as written (``t, x, y, z, qx, qy, qz, qw`` and, where the state has a
-        gripper, ``gripper, grasped``), so the file and the message agree.
+        gripper, ``gripper, grasped``, then seven per body), so the file and the message
+        agree.
+    bodies : tuple of str
+        The bodies whose poses the rows carry (fixed by the first row).
     path : Path or None
         The kept file.
     key : str or None
@@ -231,6 +255,7 @@ class Take:
         self.rate = rate
         self.min_distance = min_distance
         self.rows: list[list[float]] = []
+        self.bodies: tuple[str, ...] = ()
         self.path: Path | None = None
         self.key: str | None = None
         self._fh: TextIO | None = None
@@ -261,7 +286,8 @@ class Take:
     def record(self, stop: threading.Event, duration: float | None = None) -> None:
         """Sample rows in this thread until ``stop`` is set or ``duration`` s passed."""
         assert self._fh is not None, "Take.record outside its with block"
-        _record_rows(self.rec, self._fh, self.rate, self.min_distance, stop, duration, self.rows)
+        self.bodies = _record_rows(self.rec, self._fh, self.rate, self.min_distance, stop, duration,
+                                   self.rows)
 
     def start(self) -> Take:
         """Sample rows in a background thread until :meth:`stop` (ValueError, before
@@ -328,7 +354,7 @@ class Take:
         task = rec.task
         assert rec.object_name is not None and task is not None
         self.key = rec.keys.demos(task, name)
-        rec.session.put(self.key, codec.encode_demo(task, name, rec.object_name, self.rows),
+        rec.session.put(self.key, codec.encode_demo(task, name, rec.object_name, self.rows, self.bodies),
                         congestion_control=zenoh.CongestionControl.BLOCK, encoding=MSGPACK)
 
 
@@ -370,6 +396,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the task the demonstration is published under, sctd/<robot>/demos/<task>/<name> "
                         "(default: the scene the simulator announces, else the object's name)")
     add_robot_argument(p)
+    p.add_argument("--bodies", default=None, metavar="NAME,...",
+                   help="the other bodies whose poses each row carries, in the object's frame "
+                        "(default: every body whose pose is known at the first row; '' for none)")
     p.add_argument("--rate", type=float, default=100.0, help="sampling rate, Hz (default %(default)s)")
     p.add_argument("--min-distance", type=float, default=0.0, metavar="M",
                    help="skip samples closer than this (m, ee position) to the last row (default 0)")
@@ -385,12 +414,18 @@ def run(args: argparse.Namespace) -> int:
     code (1: nothing recorded, 2: bad flags)."""
     if args.rate <= 0 or args.min_distance < 0 or (args.duration is not None and args.duration <= 0):
         return fail("record", "--rate, --duration: must be > 0; --min-distance: must be >= 0")
+    bodies = None if args.bodies is None else tuple(b for b in args.bodies.split(",") if b)
+    for b in bodies or ():
+        problem = codec.name_problem(b) or ("the task object" if b == args.object else "")
+        if problem:
+            return fail("record", f"--bodies: {b!r}: {problem}")
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *a: stop.set())
     signal.signal(signal.SIGTERM, lambda *a: stop.set())
-    with session_from_args(args) as session, Recorder(session, args.robot, args.object, args.task) as rec:
+    with session_from_args(args) as session, Recorder(session, args.robot, args.object, args.task,
+                                                            bodies) as rec:
         if not _wait_for_first_sample(rec, args.wait, stop):
             return 1
         try:
@@ -440,17 +475,20 @@ def _wait_for_first_sample(rec: Recorder, wait: float, stop: threading.Event) ->
 
 
 def _record_rows(rec: Recorder, fh: TextIO, rate: float, min_distance: float, stop: threading.Event,
-                 duration: float | None, out: list[list[float]]) -> None:
+                 duration: float | None, out: list[list[float]]) -> tuple[str, ...]:
     """One row per tick at ``rate`` Hz until ``stop`` or ``duration`` s, skipping samples
     whose state has not advanced or that lie closer than ``min_distance`` to the last
     row; each row written is appended to ``out`` (as written: the file and the message
     agree). The first row fixes the columns and writes the header: the gripper's too
-    when its state has a gripper reading (then a state without one repeats the last)."""
+    when its state has a gripper reading (then a state without one repeats the last),
+    and the bodies' (:meth:`Recorder.row_bodies`, each at its newest pose); returns the
+    bodies."""
     ticker = Ticker(1.0 / rate, spin=0.0)
     end = None if duration is None else time.monotonic() + duration
     t0 = last_t = None
     last_p = None
     grip: list[float] | None = None  # the newest gripper values, once the columns have them
+    bodies: tuple[str, ...] = ()
     while not stop.is_set():
         now, _ = ticker.wait()
         if end is not None and now >= end:
@@ -468,16 +506,24 @@ def _record_rows(rec: Recorder, fh: TextIO, rate: float, min_distance: float, st
         if last_p is not None and min_distance > 0 and math.dist(row[1:4], last_p) < min_distance:
             continue
         if not out:  # the first row: the header, with the gripper's columns if it has a reading
+            known = rec.row_bodies()
+            if known is None:
+                continue  # a body asked for has not been seen yet
+            bodies = known
             grip = None if reading is None else gripper_values(reading)
-            fh.write((COLUMNS if grip is None else GRIPPER_COLUMNS) + "\n")
+            header = COLUMNS if grip is None else GRIPPER_COLUMNS
+            fh.write(header + "".join("," + ",".join(codec.demo_body_columns(b)) for b in bodies) + "\n")
         if grip is not None:
             grip = gripper_values(reading) if reading is not None else grip
             row += grip
-        line = format_row(row)
+        for b in bodies:
+            row += body_pose(rec.objects[b], pose_obj)
+        line = format_row(row, bodies)
         fh.write(line)
         fh.flush()
         out.append([float(x) for x in line.split(",")])
         last_t, last_p = t, row[1:4]
+    return bodies
 
 
 def _mkstemp(out_dir: Path) -> tuple[int, str]:

@@ -4,6 +4,10 @@ A demonstration is a CSV file with the header ``t,x,y,z,qx,qy,qz,qw`` (other col
 are ignored): the end-effector pose over time in the task object's frame
 (``T_obj_ee``). Optionally, both or neither, ``gripper`` (the fingers' width, m) and
 ``grasped`` (0/1: they hold something), the hand's fingers (:data:`GRIPPER_COLUMNS`).
+Optionally, the scene's other bodies: for each, seven columns ``<body>.x, <body>.y,
+<body>.z, <body>.qx, <body>.qy, <body>.qz, <body>.qw``, its pose in the task object's
+frame (``T_obj_body``; :attr:`Demo.bodies`), from which the hand in that body's frame is
+``T_obj_body^-1 T_obj_ee`` (:meth:`Demo.poses_in`).
 :func:`read_demos` reads a folder of them and either returns every demonstration or
 raises :class:`DemoError` naming the file, the row (and column) and the reason; nothing
 is half-loaded.
@@ -23,7 +27,7 @@ from __future__ import annotations
 import csv
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +38,7 @@ from scipy.ndimage import uniform_filter1d
 
 from .. import se3
 from ..files import FileError, open_regular
+from ..wire.codec import DEMO_BODY_FIELDS, MAX_DEMO_BODIES, name_problem
 
 Array = NDArray[np.float64]
 
@@ -62,7 +67,9 @@ class DemoError(ValueError):
 class Demo:
     """One demonstration: times (n,) and end-effector poses (n, 7) in the object frame,
     and, where it has the gripper's columns, the fingers' ``width`` (n,) in m and
-    ``grasped`` (n,) of bool (None without them).
+    ``grasped`` (n,) of bool (None without them), and where it has other bodies'
+    columns, ``bodies``: each body's pose (n, 7) in the object frame (``T_obj_body``;
+    empty without them).
 
     Quaternions are normalised to the canonical hemisphere (qw >= 0).
     """
@@ -72,11 +79,30 @@ class Demo:
     poses: Array
     width: Array | None = None
     grasped: NDArray[np.bool_] | None = None
+    bodies: dict[str, Array] = field(default_factory=dict)
 
     @property
     def T(self) -> Array:
         """Homogeneous ``T_obj_ee`` (n, 4, 4)."""
         return se3.transform_from_pose(self.poses)
+
+    def poses_in(self, body: str) -> Array:
+        """The end-effector's poses (n, 7) in ``body``'s frame, ``T_body_ee = T_obj_body^-1
+        T_obj_ee`` (qw >= 0): :attr:`poses` for the task object (any name not in
+        :attr:`bodies`: a caller asks for a body it knows the demonstration has)."""
+        if body not in self.bodies:
+            return self.poses
+        T = np.linalg.inv(se3.transform_from_pose(self.bodies[body])) @ self.T
+        P = se3.pose_from_transform(T)
+        P[:, 3:] *= np.where(P[:, 6:7] < 0.0, -1.0, 1.0)
+        return P
+
+    def select(self, index: NDArray[np.int64] | NDArray[np.bool_]) -> Demo:
+        """The demonstration's rows ``index`` (an index array or a mask), every column."""
+        return Demo(self.name, self.t[index], self.poses[index],
+                    None if self.width is None else self.width[index],
+                    None if self.grasped is None else self.grasped[index],
+                    {b: P[index] for b, P in self.bodies.items()})
 
     def __len__(self) -> int:
         return len(self.t)
@@ -86,22 +112,22 @@ MAX_DEMO_FILE_BYTES = 64 * 1024 * 1024  # a demonstration's CSV: 100,000 rows ar
 MAX_DEMO_ROWS = 100_000  # over 16 minutes at 100 Hz (as the wire contract's demonstrations)
 
 
-def _rows(name: str, reader: Any, quat_tolerance: float) -> list[list[float]]:
-    """The rows' values of ``COLUMNS`` (and of ``GRIPPER_COLUMNS`` where the header has
-    them), validated."""
-    cols, width = _columns(name, next(reader, None))
+def _rows(name: str, reader: Any, quat_tolerance: float) -> tuple[list[list[float]], list[str]]:
+    """The rows' values of ``COLUMNS`` (and of ``GRIPPER_COLUMNS`` and the bodies'
+    where the header has them), validated, and those columns' names."""
+    cols, width, names = _columns(name, next(reader, None))
     rows: list[list[float]] = []
     for k, rec in enumerate(reader, start=1):
         if not rec or all(not x.strip() for x in rec):
             continue
         if len(rows) >= MAX_DEMO_ROWS:
             raise DemoError(name, k, f"more than {MAX_DEMO_ROWS} rows")
-        vals = _row(name, k, rec, cols, width, quat_tolerance)
+        vals = _row(name, k, rec, cols, names, width, quat_tolerance)
         if rows and vals[0] <= rows[-1][0]:
             raise DemoError(name, k, f"time {vals[0]} does not increase "
                             f"(previous row has {rows[-1][0]})")
         rows.append(vals)
-    return rows
+    return rows, names
 
 
 def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
@@ -126,7 +152,7 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
         raise DemoError(name, None, exc.problem) from None
     with io.TextIOWrapper(raw, encoding="utf-8", errors="strict", newline="") as fh:
         try:
-            rows = _rows(name, csv.reader(fh), quat_tolerance)
+            rows, names = _rows(name, csv.reader(fh), quat_tolerance)
         except UnicodeDecodeError as exc:
             raise DemoError(name, None, f"not UTF-8 text (byte {exc.start} of a block)") from None
         except csv.Error as exc:
@@ -136,14 +162,21 @@ def read_demo_csv(path: str | Path, min_samples: int = MIN_SAMPLES,
                         f"too few samples: {len(rows)} rows, need at least {min_samples}")
     a = np.array(rows)
     poses = np.concatenate([a[:, 1:4], se3.quaternion_normalize(a[:, 4:8])], axis=1)
-    if a.shape[1] == len(COLUMNS):
-        return Demo(name=path.name, t=a[:, 0], poses=poses)
-    return Demo(name=path.name, t=a[:, 0], poses=poses, width=a[:, 8], grasped=a[:, 9] == 1.0)
+    grip = len(names) > len(COLUMNS) and names[len(COLUMNS)] == GRIPPER_COLUMNS[0]
+    start = len(COLUMNS) + (len(GRIPPER_COLUMNS) if grip else 0)
+    bodies = {}
+    for i in range(start, len(names), len(DEMO_BODY_FIELDS)):
+        q = se3.quaternion_normalize(a[:, i + 3:i + 7])
+        bodies[names[i].rsplit(".", 1)[0]] = np.concatenate([a[:, i:i + 3], q * np.where(
+            q[:, 3:] < 0.0, -1.0, 1.0)], axis=1)
+    return Demo(name=path.name, t=a[:, 0], poses=poses, width=a[:, 8] if grip else None,
+                grasped=a[:, 9] == 1.0 if grip else None, bodies=bodies)
 
 
-def _columns(name: str, header: list[str] | None) -> tuple[list[int], int]:
+def _columns(name: str, header: list[str] | None) -> tuple[list[int], int, list[str]]:
     """Index of each of ``COLUMNS`` in the header (and of ``GRIPPER_COLUMNS`` after them,
-    where it has both), and the header's width."""
+    where it has both, and of the bodies' columns after those), the header's width and
+    the names of the columns indexed."""
     if header is None:
         raise DemoError(name, None, f"empty file (expected the header {','.join(COLUMNS)})")
     header = [h.strip() for h in header]
@@ -156,18 +189,44 @@ def _columns(name: str, header: list[str] | None) -> tuple[list[int], int]:
         lacking = next(c for c in GRIPPER_COLUMNS if c not in grip)
         raise DemoError(name, None, f"column {grip[0]} without column {lacking} (the gripper's "
                         f"columns {','.join(GRIPPER_COLUMNS)} come both or neither)")
-    return [header.index(c) for c in COLUMNS + tuple(grip)], len(header)
+    names = list(COLUMNS) + grip + _body_columns(name, header)
+    return [header.index(c) for c in names], len(header), names
 
 
-def _row(name: str, k: int, rec: list[str], cols: list[int], width: int,
+def _body_columns(name: str, header: list[str]) -> list[str]:
+    """The bodies' columns of a header, seven per body (``<body>.x`` ... ``<body>.qw``),
+    bodies in the order of their first column: a column ``<name>.<x|y|z|qx|qy|qz|qw>``
+    is a body's, and a body's columns come all seven or none."""
+    bodies: list[str] = []
+    for h in header:
+        body, _, part = h.rpartition(".")
+        if body and part in DEMO_BODY_FIELDS and body not in bodies:
+            bodies.append(body)
+    if len(bodies) > MAX_DEMO_BODIES:
+        raise DemoError(name, None, f"{len(bodies)} bodies' columns, at most {MAX_DEMO_BODIES}")
+    out: list[str] = []
+    for body in bodies:
+        problem = name_problem(body)
+        if problem:
+            raise DemoError(name, None, f"column {body}.{DEMO_BODY_FIELDS[0]}: not a body's name: {problem}")
+        cols = [f"{body}.{c}" for c in DEMO_BODY_FIELDS]
+        lacking = [c for c in cols if c not in header]
+        if lacking:
+            raise DemoError(name, None, f"body {body}: missing column(s) {', '.join(lacking)} (a "
+                            f"body's pose is all of {','.join(cols)})")
+        out += cols
+    return out
+
+
+def _row(name: str, k: int, rec: list[str], cols: list[int], names: list[str], width: int,
          quat_tolerance: float) -> list[float]:
-    """The values of ``COLUMNS`` (and the gripper's, where ``cols`` has them) in data row
-    ``k``: finite numbers, a unit quaternion, a width in [0, MAX_GRIPPER_WIDTH] m,
+    """The values of ``names`` (at ``cols``) in data row ``k``: finite numbers, unit
+    quaternions (the hand's and each body's), a width in [0, MAX_GRIPPER_WIDTH] m,
     grasped 0 or 1."""
     if len(rec) < width:
         raise DemoError(name, k, f"expected {width} values, got {len(rec)}")
     vals = []
-    for c, j in zip(COLUMNS + GRIPPER_COLUMNS, cols, strict=False):
+    for c, j in zip(names, cols, strict=True):
         s = rec[j].strip()
         try:
             v = float(s)
@@ -180,7 +239,14 @@ def _row(name: str, k: int, rec: list[str], cols: list[int], width: int,
     if abs(qn - 1.0) > quat_tolerance:
         raise DemoError(name, k, f"quaternion (qx, qy, qz, qw) has norm {qn:.6f}, "
                         f"not unit (tolerance {quat_tolerance})")
-    if len(vals) > len(COLUMNS):
+    for i, c in enumerate(names):
+        if c.endswith(".qx"):
+            qn = math.sqrt(sum(x * x for x in vals[i:i + 4]))
+            if abs(qn - 1.0) > quat_tolerance:
+                body = c[:-3]
+                raise DemoError(name, k, f"columns {body}.qx..{body}.qw: quaternion has norm {qn:.6f}, "
+                                f"not unit (tolerance {quat_tolerance})")
+    if len(names) > len(COLUMNS) and names[len(COLUMNS)] == GRIPPER_COLUMNS[0]:
         if not 0.0 <= vals[8] <= MAX_GRIPPER_WIDTH:
             raise DemoError(name, k, f"column gripper: width {vals[8]:g} m not in "
                             f"[0, {MAX_GRIPPER_WIDTH:g}]")

@@ -402,19 +402,52 @@ MIN_DEMO_ROWS = 10  # what the learner needs (sctd.learn.demos.MIN_SAMPLES)
 DEMO_QUAT_TOLERANCE = 1e-3  # as the learner's CSV reader
 
 
+# Optional, last, any number of bodies: each body's pose in the task object's frame
+# (T_obj_body), seven columns ``<body>.x, <body>.y, ..., <body>.qw`` per body: the other
+# bodies of the scene, whose frames a skill's states may be in (docs/learning.md).
+DEMO_BODY_FIELDS = ("x", "y", "z", "qx", "qy", "qz", "qw")
+MAX_DEMO_BODIES = 16  # bodies one demonstration may carry
+
+
 class DemoMsg(NamedTuple):
     task: str
     name: str
     object: str
     rows: list[list[float]]  # t, x, y, z, qx, qy, qz, qw: the ee in the object's frame
-    columns: tuple[str, ...] = DEMO_COLUMNS  # or DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS
+    columns: tuple[str, ...] = DEMO_COLUMNS  # and the gripper's, and the bodies' (demo_bodies)
 
 
-def demo_columns(rows: list[list[float]]) -> tuple[str, ...]:
-    """The columns of demonstration rows: the pose's, and the gripper's when the rows
-    carry them (10 numbers each)."""
-    with_gripper = bool(rows) and len(rows[0]) == len(DEMO_COLUMNS) + len(DEMO_GRIPPER_COLUMNS)
-    return DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS if with_gripper else DEMO_COLUMNS
+def demo_body_columns(body: str) -> tuple[str, ...]:
+    """The seven columns of ``body``'s pose in the task object's frame."""
+    return tuple(f"{body}.{c}" for c in DEMO_BODY_FIELDS)
+
+
+def demo_bodies(columns: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """The bodies whose poses demonstration ``columns`` carry, in their order (each
+    seven :func:`demo_body_columns` after the pose's and the gripper's)."""
+    start = len(DEMO_COLUMNS)
+    if tuple(columns[start:start + len(DEMO_GRIPPER_COLUMNS)]) == DEMO_GRIPPER_COLUMNS:
+        start += len(DEMO_GRIPPER_COLUMNS)
+    return tuple(c.rsplit(".", 1)[0] for c in columns[start::len(DEMO_BODY_FIELDS)])
+
+
+def demo_columns(rows: list[list[float]], bodies: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The columns of demonstration rows: the pose's, the gripper's when the rows carry
+    them (10 numbers each, before the bodies'), and seven for each of ``bodies``."""
+    extra = len(DEMO_BODY_FIELDS) * len(bodies)
+    with_gripper = bool(rows) and len(rows[0]) - extra == len(DEMO_COLUMNS) + len(DEMO_GRIPPER_COLUMNS)
+    base = DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS if with_gripper else DEMO_COLUMNS
+    return base + tuple(c for b in bodies for c in demo_body_columns(b))
+
+
+def format_demo_row(row: list[float], columns: tuple[str, ...] | list[str]) -> str:
+    """One demonstration row as a CSV line without its newline, as the recorder writes
+    it: time to the microsecond, poses (the hand's and the bodies') to 1e-9, the
+    fingers' width to the micrometre and grasped 0 or 1."""
+    out = [f"{row[0]:.6f}"]
+    for c, x in zip(columns[1:], row[1:], strict=True):
+        out.append(f"{x:.6f}" if c == "gripper" else str(int(x)) if c == "grasped" else f"{x:.9f}")
+    return ",".join(out)
 
 
 MAX_NAME = 64  # characters of a task, demonstration, object or skill name
@@ -447,12 +480,14 @@ def _chunk(obj: dict, key: str) -> str:
     return x
 
 
-def encode_demo(task: str, name: str, object_name: str, rows: list[list[float]]) -> bytes:
+def encode_demo(task: str, name: str, object_name: str, rows: list[list[float]],
+                bodies: tuple[str, ...] = ()) -> bytes:
     """A finished demonstration: rows ``t, x, y, z, qx, qy, qz, qw`` (the end-effector in
     the task object's frame, ``t`` from 0, strictly increasing), each followed by
-    ``gripper, grasped`` where the rows carry the fingers (:func:`demo_columns`)."""
+    ``gripper, grasped`` where the rows carry the fingers and by the pose of each of
+    ``bodies`` in the object's frame (:func:`demo_columns`)."""
     return pack({"task": task, "name": name, "object": object_name,
-                 "columns": list(demo_columns(rows)),
+                 "columns": list(demo_columns(rows, bodies)),
                  "rows": [[float(x) for x in r] for r in rows]})
 
 
@@ -473,9 +508,9 @@ def decode_demo(data: bytes) -> DemoMsg:
         raise
     task, name, object_name = _chunk(obj, "task"), _chunk(obj, "name"), _chunk(obj, "object")
     columns = obj.get("columns")
-    if columns not in (list(DEMO_COLUMNS), list(DEMO_COLUMNS + DEMO_GRIPPER_COLUMNS)):
-        raise DecodeError("bad_columns", f"expected {list(DEMO_COLUMNS)}, optionally followed by "
-                                         f"{list(DEMO_GRIPPER_COLUMNS)}")
+    problem = demo_columns_problem(columns, object_name)
+    if problem:
+        raise DecodeError("bad_columns", problem)
     assert isinstance(columns, list)
     rows = obj.get("rows")
     if not isinstance(rows, list) or len(rows) < MIN_DEMO_ROWS:
@@ -483,7 +518,7 @@ def decode_demo(data: bytes) -> DemoMsg:
     out = []
     last_t = -math.inf
     for k, row in enumerate(rows):
-        problem = _demo_row_problem(row, last_t, len(columns))
+        problem = _demo_row_problem(row, last_t, columns)
         if problem:
             raise DecodeError("bad_rows", f"row {k}: {problem}")
         out.append(list(map(float, row)))
@@ -491,22 +526,71 @@ def decode_demo(data: bytes) -> DemoMsg:
     return DemoMsg(task, name, object_name, out, tuple(columns))
 
 
-def _demo_row_problem(row: Any, last_t: float, width: int = len(DEMO_COLUMNS)) -> str:
-    """What is wrong with one demonstration row of ``width`` numbers ("" when nothing
-    is)."""
+def demo_columns_problem(columns: Any, object_name: str) -> str:
+    """What is wrong with a demonstration's ``columns`` ("" when nothing is):
+    :data:`DEMO_COLUMNS`, optionally :data:`DEMO_GRIPPER_COLUMNS`, then the seven
+    :func:`demo_body_columns` of each of at most :data:`MAX_DEMO_BODIES` bodies (names
+    as :func:`name_problem` takes them, each once, none the task object)."""
+    expected = (f"expected {list(DEMO_COLUMNS)}, optionally followed by {list(DEMO_GRIPPER_COLUMNS)}, "
+                f"then <body>.{', <body>.'.join(DEMO_BODY_FIELDS)} per body")
+    if not isinstance(columns, list) or not all(isinstance(c, str) for c in columns) \
+            or columns[:len(DEMO_COLUMNS)] != list(DEMO_COLUMNS):
+        return expected
+    rest = columns[len(DEMO_COLUMNS):]
+    if rest[:1] == ["gripper"] or rest[:1] == ["grasped"]:
+        if rest[:2] != list(DEMO_GRIPPER_COLUMNS):
+            return expected
+        rest = rest[2:]
+    n = len(DEMO_BODY_FIELDS)
+    if len(rest) % n or len(rest) > n * MAX_DEMO_BODIES:
+        return f"{expected} (at most {MAX_DEMO_BODIES} bodies)"
+    bodies: list[str] = []
+    for i in range(0, len(rest), n):
+        body = rest[i].rsplit(".", 1)[0]
+        problem = name_problem(body)
+        if problem or rest[i:i + n] != list(demo_body_columns(body)):
+            return f"column {rest[i]!r}: {problem or expected}"
+        if body == object_name:
+            return f"column {rest[i]!r}: body {body!r} is the task object (its frame is the hand's)"
+        if body in bodies:
+            return f"column {rest[i]!r}: body {body!r} twice"
+        bodies.append(body)
+    return ""
+
+
+def _demo_row_problem(row: Any, last_t: float, columns: list[str]) -> str:
+    """What is wrong with one demonstration row of ``len(columns)`` numbers ("" when
+    nothing is)."""
+    width = len(columns)
     if not isinstance(row, list | tuple) or len(row) != width:
         return f"expected {width} numbers"
     if not _NUMBERS.issuperset(map(type, row)) or not _finite(list(row)):
         return "not all finite numbers"
     if row[0] <= last_t:
         return f"t {row[0]!r} not after the previous row's {last_t!r}"
-    qn = math.sqrt(sum(q * q for q in row[4:8]))
+    start = len(DEMO_COLUMNS)
+    if width > start and columns[start] == "gripper":
+        problem = demo_gripper_problem(row[8], row[9])
+        if problem:
+            return problem
+        start += len(DEMO_GRIPPER_COLUMNS)
+    for i in (1, *range(start, width, len(DEMO_BODY_FIELDS))):
+        problem = _demo_pose_problem(row[i:i + 7], "" if i == 1 else columns[i].rsplit(".", 1)[0])
+        if problem:
+            return problem
+    return ""
+
+
+def _demo_pose_problem(pose: Any, body: str) -> str:
+    """What is wrong with a demonstration row's pose (the hand's, ``body`` "", or a
+    body's): a unit quaternion, a position within :data:`MAX_POSITION`."""
+    where = f"columns {body}.qx..{body}.qw: " if body else ""
+    qn = math.sqrt(sum(q * q for q in pose[3:7]))
     if abs(qn - 1.0) > DEMO_QUAT_TOLERANCE:
-        return f"quaternion norm {qn:.6f} is not unit (tolerance {DEMO_QUAT_TOLERANCE})"
-    if max(abs(row[1]), abs(row[2]), abs(row[3])) > MAX_POSITION:
-        return f"position beyond {MAX_POSITION:g} m"
-    if width > len(DEMO_COLUMNS):
-        return demo_gripper_problem(row[8], row[9])
+        return f"{where}quaternion norm {qn:.6f} is not unit (tolerance {DEMO_QUAT_TOLERANCE})"
+    if max(abs(pose[0]), abs(pose[1]), abs(pose[2])) > MAX_POSITION:
+        where = f"columns {body}.x..{body}.z: " if body else ""
+        return f"{where}position beyond {MAX_POSITION:g} m"
     return ""
 
 

@@ -62,12 +62,13 @@ def _write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def csv_text(rows: list[list[float]]) -> str:
-    """A demonstration's CSV (the recorder's format: time to the microsecond, poses to
-    1e-9, the fingers' width to the micrometre and grasped 0/1 where the rows have them)."""
-    lines = [",".join(codec.demo_columns(rows))]
-    lines += [f"{r[0]:.6f}," + ",".join(f"{x:.9f}" for x in r[1:8])
-              + (f",{r[8]:.6f},{int(r[9])}" if len(r) > 8 else "") for r in rows]
+def csv_text(rows: list[list[float]], columns: tuple[str, ...] | None = None) -> str:
+    """A demonstration's CSV (the recorder's format, :func:`sctd.wire.codec.format_demo_row`:
+    time to the microsecond, poses to 1e-9, the fingers' width to the micrometre and
+    grasped 0/1 where the rows have them, the other bodies' poses where ``columns`` name
+    them; None: the pose's and the gripper's by the rows' width)."""
+    cols = codec.demo_columns(rows) if columns is None else columns
+    lines = [",".join(cols)] + [codec.format_demo_row(r, cols) for r in rows]
     return "\n".join(lines) + "\n"
 
 
@@ -146,7 +147,7 @@ class Store:
         (``StoreFull`` past them)."""
         folder = self.demos_dir / msg.task
         folder.mkdir(parents=True, exist_ok=True)
-        text = csv_text(msg.rows)
+        text = csv_text(msg.rows, msg.columns)
         name = msg.name
         path = folder / f"{name}.csv"
         if not path.exists():
