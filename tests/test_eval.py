@@ -221,12 +221,14 @@ def test_eval_cli_json_is_one_object(tmp_path):
     doc = json.loads(proc.stdout)  # the whole of stdout: one object
     assert isinstance(doc, dict) and "trials" in proc.stderr
     r = doc["results"][0]
-    for key in ("skill", "name", "id", "trials", "successes", "success_rate", "time_s", "spill_mean",
+    for key in ("skill", "name", "id", "trials", "successes", "success_rate", "time_s", "readings_mean",
                 "dtw", "mode_switches_mean", "switch_time_s_mean", "effort_mean", "stuck", "limits",
                 "per_trial"):
         assert key in r, key
     assert doc["task"] == "pour" and r["trials"] == 1 and len(r["per_trial"]) == 1
     assert r["skill"] == str(POUR)
+    assert set(r["readings_mean"]) == {"bottle.poured", "bottle.spilled"}  # the pour file's numbers
+    assert set(r["per_trial"][0]["readings"]) == {"bottle.poured", "bottle.flowing", "bottle.spilled"}
     assert r["successes"] == sum(t["outcome"] == "success" for t in r["per_trial"])
     assert json.loads((tmp_path / "rep" / "evaluation.json").read_text())["results"][0]["id"] == r["id"]
     assert list((tmp_path / "rep").glob("*.png"))
@@ -323,7 +325,7 @@ def test_a_user_who_pours_from_close_enough_is_not_stuck(tilting):
 def _fake_trial(path, spec, seed, demos, keep, logdir):
     """A trial that fails for odd seeds (no simulation)."""
     return {"seed": seed, "outcome": "failure" if seed % 2 else "success", "reason": "", "time_s": 1.0,
-            "duration_s": 1.0, "spill": 0.0, "progress": 0.0, "mode_switches": 0, "switch_time_s": 0.0,
+            "duration_s": 1.0, "readings": {}, "progress": 0.0, "mode_switches": 0, "switch_time_s": 0.0,
             "effort": 0.0, "stuck_episodes": 0}
 
 
@@ -353,3 +355,21 @@ def test_evaluate_stops_when_until_says_and_cancels_the_rest(tmp_path, pooled):
     [full] = evaluate(ents, TaskSpec.of(find_task("pour")), 4, 0, job=_fake_trial, until=lambda p: False,
                       logdir=tmp_path)
     assert full["trials"] == 4 and full["stopped_early"] is False
+
+
+def _summary(readings_mean: dict[str, float]) -> dict:
+    return {"skill": "s.yaml", "successes": 2, "trials": 2,
+            "time_s": {"mean": 10.0, "std": 1.0, "median": 10.0}, "readings_mean": readings_mean,
+            "dtw": None, "mode_switches_mean": 1.0, "switch_time_s_mean": 1.0, "effort_mean": 5.0, "stuck": 0}
+
+
+def test_the_table_has_a_spill_column_only_for_a_task_that_reports_a_spill():
+    """The column is headed by the task file's reading (the held object's ``spilled``);
+    a task without contents has none."""
+    from sctd_services.eval.evaluate import table
+
+    head, _, row = table([_summary({"bottle.poured": 0.6, "bottle.spilled": 0.0125})])
+    assert "bottle.spilled" in head and "poured" not in head and "0.013" in row
+    assert head.index("bottle.spilled") + len("bottle.spilled") == row.index("0.013") + len("0.013")
+    plain, _, _ = table([_summary({"drawer.position": 0.2, "drawer.grasps": 1.0})])
+    assert "spill" not in plain and plain == head.replace("  bottle.spilled", "")

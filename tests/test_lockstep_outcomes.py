@@ -50,6 +50,8 @@ def outcome(skill: str, seed: int) -> dict[str, Any]:
     task = task_of([loaded], None)
     spec = TaskSpec.of(task, time_limit=TIME_LIMIT)
     r = run_trial(loaded, spec, seed, task=task).as_dict()
+    # the file's spill: the task's spill reading (<held>.spilled), 0 for a task without one
+    r["spill"] = next((v for k, v in r["readings"].items() if k.endswith(".spilled")), 0.0)
     got = {k: r[k] for k in FIELDS}
     for k in ("time_s", "duration_s"):
         got[k] = None if got[k] is None else round(got[k], 3)

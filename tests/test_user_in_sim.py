@@ -116,6 +116,6 @@ def test_the_intent_alone_gives_the_person_a_sip_in_the_simulation(seed):
     res, lag = steer(task, seed)
     assert (res.outcome, res.reason) == ("success", "drunk"), res
     assert list(res.phase_s) == ["bring", "sip", "upright", "away"], res
-    assert res.spill == 0.0 and 0.2 <= res.progress <= 0.3, res
+    assert res.readings["cup.spilled"] == 0.0 and 0.2 <= res.progress <= 0.3, res
     assert res.time_s is not None and res.time_s < 12.0, res
     assert lag < 0.02, lag

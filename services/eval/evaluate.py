@@ -322,6 +322,15 @@ def _stats(xs: list[float]) -> dict[str, float | None]:
             "median": round(float(np.median(a)), 3)}
 
 
+def _readings_mean(per_trial: list[dict[str, Any]]) -> dict[str, float]:
+    """The mean over the trials of each number among their ``readings`` (flags left out),
+    in the order the first trial names them."""
+    names = dict.fromkeys(k for t in per_trial for k, v in t.get("readings", {}).items()
+                          if not isinstance(v, bool))
+    return {k: round(float(np.mean([t["readings"][k] for t in per_trial if k in t["readings"]])), 5)
+            for k in names}
+
+
 def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float) -> dict[str, Any]:
     """The figures of one skill over its trials (the JSON of ``sctd eval --json``).
     ``time_s_limited_median`` counts every trial that did not succeed at ``time_limit``
@@ -345,7 +354,7 @@ def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float) -> d
         "success_rate": round(len(ok) / n, 4) if n else 0.0,
         "time_s": _stats(times),
         "time_s_limited_median": round(float(np.median(limited)), 3) if n else None,
-        "spill_mean": round(float(np.mean([t["spill"] for t in per_trial])), 5) if n else 0.0,
+        "readings_mean": _readings_mean(per_trial),
         "dtw": {k: v for k, v in _stats(dtws).items() if k != "median"} if dtws else None,
         "mode_switches_mean": round(float(np.mean([t["mode_switches"] for t in per_trial])), 3) if n else 0.0,
         "switch_time_s_mean": round(float(np.mean(switch)), 3) if n else 0.0,
@@ -358,23 +367,42 @@ def summarise(e: Entry, per_trial: list[dict[str, Any]], time_limit: float) -> d
     }
 
 
+SPILLED = "spilled"
+"""The quantity of held contents' reading of what missed the container (``<held>.spilled``,
+docs/tasks.md): the table shows a column of it for a task that reports it."""
+
+
+def spill_readings(results: list[dict[str, Any]]) -> list[str]:
+    """The readings among the results' means that are a spill (:data:`SPILLED`), named as
+    the task file names them (``bottle.spilled``)."""
+    return list(dict.fromkeys(k for r in results for k in r.get("readings_mean", {})
+                              if k.rpartition(".")[2] == SPILLED))
+
+
 def table(results: list[dict[str, Any]]) -> list[str]:
-    """Rows like the thesis' Tables 5.1-5.4."""
+    """Rows like the thesis' Tables 5.1-5.4, with a column of the mean spill for a task
+    whose held contents report one (headed by its reading's name)."""
 
     def pm(d: dict | None, digits: int = 2) -> str:
         if not d or d.get("mean") is None:
             return "-"
         return f"{d['mean']:.{digits}f} +- {d['std']:.{digits}f}"
 
+    def spills(r: dict[str, Any]) -> str:
+        means = r.get("readings_mean", {})
+        return "".join(f"  {'-' if k not in means else f'{means[k]:.3f}':>{max(6, len(k))}}" for k in spill)
+
+    spill = spill_readings(results)
     w = max(12, *(len(r["skill"]) for r in results))
-    head = (f"{'skill':<{w}}  {'success':>9}  {'time [s] (median)':>22}  {'spill':>6}  {'DTW':>15}  "
+    head = (f"{'skill':<{w}}  {'success':>9}  {'time [s] (median)':>22}"
+            + "".join(f"  {k:>6}" for k in spill) + f"  {'DTW':>15}  "
             f"{'switches (s)':>13}  {'effort':>7}  {'stuck':>5}")
     rows = [head, "-" * len(head)]
     for r in results:
         t = r["time_s"]
         time_cell = "-" if t["mean"] is None else f"{pm(t)} ({t['median']:.2f})"
-        rows.append(f"{r['skill']:<{w}}  {r['successes']:>4}/{r['trials']:<4}  {time_cell:>22}  "
-                    f"{r['spill_mean']:>6.3f}  {pm(r['dtw'], 3):>15}  "
+        rows.append(f"{r['skill']:<{w}}  {r['successes']:>4}/{r['trials']:<4}  {time_cell:>22}"
+                    f"{spills(r)}  {pm(r['dtw'], 3):>15}  "
                     f"{r['mode_switches_mean']:>5.1f} ({r['switch_time_s_mean']:>4.1f})  "
                     f"{r['effort_mean']:>7.2f}  {r['stuck']:>5}")
     return rows

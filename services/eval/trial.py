@@ -28,7 +28,8 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import Task
-from sctd.task.judge import holds
+from sctd.task.judge import holds, readings_of
+from sctd.task.model import AllOf
 from sctd_services.user.agent import REPROBE_AFTER
 from sctd_services.user.intent import Observation, TaskIntent
 
@@ -84,7 +85,7 @@ class TrialResult:
     reason: str
     time_s: float | None  # the thesis' clock; None when the task never started or ended
     duration_s: float  # from the trial's start to its end
-    spill: float
+    readings: dict[str, float | bool]  # at the end, those the task's done, success and fail rules read
     progress: float  # the task's progress reading (the poured fraction, the drawer's opening)
     mode_switches: int
     switch_time_s: float
@@ -129,6 +130,8 @@ class TrialRecorder:
         self.stuck_after = stuck_after
         self.record_every = record_every
         self.observer = TaskIntent(self.spec)  # judges progress; never steers
+        o = self.spec.outcome
+        self.judged = readings_of(AllOf((o.done, o.success, *(f.when for f in o.fail))))
         self.t0: float | None = None
         self.t_task: float | None = None
         self.t_end_task: float | None = None
@@ -253,7 +256,7 @@ class TrialRecorder:
         duration = (self.t_stop - self.t0) if self.t0 is not None and self.outcome else 0.0
         res = TrialResult(
             seed=self.seed, outcome=self.outcome or "failure", reason=self.reason or "not finished",
-            time_s=time_s, duration_s=round(duration, 3), spill=float(scene.get("spilled_amount", 0.0)),
+            time_s=time_s, duration_s=round(duration, 3), readings=self._judged_readings(),
             progress=float(progress), mode_switches=self.switches,
             switch_time_s=self.switches * self.switch_time, effort=round(self.effort, 4),
             stuck_episodes=self.stuck_episodes, trajectory=self.trajectory, series=self.series,
@@ -261,6 +264,12 @@ class TrialRecorder:
         if demos and self.t_task is not None:
             res.dtw = dtw_to_demos(self._task_part(), demos)
         return res
+
+    def _judged_readings(self) -> dict[str, float | bool]:
+        """The readings the task's outcome judges by (:attr:`judged`), as the scene last
+        reported them: flags as flags, numbers as floats; one not reported is left out."""
+        r = _readings(self._scene)
+        return {k: r[k] if isinstance(r[k], bool) else float(r[k]) for k in self.judged if k in r}
 
     def _task_part(self) -> Array:
         """The recorded poses on the thesis' clock (object frame)."""

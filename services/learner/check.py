@@ -196,7 +196,7 @@ def evaluation(stored: StoredSkill, task: Task, settings: CheckSettings, seed: i
             for e in entries([str(stored.path)], baseline=False, workdir=stored.path.parent)]
     [res] = evaluate(ents, TaskSpec.of(task), settings.trials, seed, jobs=settings.jobs,
                      progress=progress, pool=pool, until=until)
-    res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "spill")}
+    res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "readings")}
                         for t in res["per_trial"]]
     res.update(task=task.name, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
                table=table([res]))
