@@ -11,10 +11,10 @@ The learner: training requests with hyperparameters out of range, a skipped chec
 names that are paths, and demonstrations that are too long, misnamed or over a task's
 quota; the figures are what the learner replied or said on its status.
 
-All of it next to ``sctd sim --scene pour``, ``sctd run`` and ``sctd learner`` (a
-private store; the task and skill of ``sctd/app/defaults.yaml``), with the daemon's
-worst lateness window over a quiet phase, while the tools read the files, and while the
-learner is attacked.
+All of it next to ``sctd sim --task``, ``sctd run`` and ``sctd learner`` (a
+private store; the task and skill of ``sctd/app/defaults.yaml``, the hostile skill
+folders copies of its learned skill), with the daemon's worst lateness window over a
+quiet phase, while the tools read the files, and while the learner is attacked.
 """
 
 from __future__ import annotations
@@ -34,7 +34,8 @@ import zenoh
 from sctd.app.defaults import defaults
 from sctd.bench import run_and_report
 from sctd.cli.procs import Child, free_port
-from sctd.skill.catalog import shipped_folder
+from sctd.skill import bundle_from_file
+from sctd.skill.catalog import find_skill
 from sctd.task import Task, find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, session
@@ -119,18 +120,21 @@ def map_files(d: Path) -> list[tuple[str, str]]:
     ]
 
 
-def skill_folders(d: Path) -> list[tuple[str, str]]:
-    """(what, path) of skill files and folders that must not load."""
+def skill_folders(d: Path, learned: Path) -> list[tuple[str, str]]:
+    """(what, path) of skill files and folders that must not load: copies of the skill
+    file ``learned`` (one with model files) whose model files are hostile symlinks."""
     out: list[tuple[str, str]] = []
     secret = d / "secret.npz"
     secret.write_text(SECRET + "\n")
+    models = list(bundle_from_file(learned).files)  # the model files its YAML names, relative to it
     for what, target in (("model file symlinked to /dev/zero", "/dev/zero"),
                          ("model file symlinked outside its folder", str(secret))):
         f = d / f"skill-{len(out)}"
         f.mkdir()
-        (f / "pour-vf.yaml").write_bytes((shipped_folder() / "pour-vf.yaml").read_bytes())
-        (f / "pour-vf.npz").symlink_to(target)
-        out.append((what, str(f / "pour-vf.yaml")))
+        (f / learned.name).write_bytes(learned.read_bytes())
+        for rel in models:
+            (f / rel).symlink_to(target)
+        out.append((what, str(f / learned.name)))
     deep = d / "deep.yaml"
     deep.write_text("[" * 100_000 + "]" * 100_000)
     latin = d / "latin1.yaml"
@@ -209,7 +213,7 @@ def files_phase(d: Path) -> dict[str, list[dict[str, Any]]]:
         (d / sub).mkdir()
     for what, path in map_files(d / "maps"):
         out["maps"].append({"what": what, **run_command(["input", "keyboard", "--map", path])})
-    for what, path in skill_folders(d / "skills"):
+    for what, path in skill_folders(d / "skills", find_skill(defaults().learned_skill)):
         for cmd in ("inspect", "swap"):
             out["skills"].append({"what": f"{what} ({cmd})", **run_command([cmd, path, "--timeout", "2"]
                                                                           if cmd == "swap" else [cmd, path])})
