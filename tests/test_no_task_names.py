@@ -109,9 +109,6 @@ as the plain word. Never a task's name."""
 ALLOWED = {
     ("sim/demogen.py", "--pour-jitter"): "the flag of the previous release, kept as a deprecated "
                                          "alias of --tilt-jitter that says so on stderr",
-    ("services/user/grasping.py", "TAP"): "a tap of the grasp button (a short press), not the tap task; "
-                                          "to be renamed by the file's owner",
-    ("services/user/grasping.py", "tap"): "the same tap, as the button's field",
 }
 """``(file, text)`` the names check lets stand, each with why."""
 

@@ -593,3 +593,20 @@ def test_the_view_draws_each_facets_shapes_with_its_body():
     assert np.allclose(hi, [0.035, 0.035, 0.2], atol=1e-9)
     carried = se3.transform_from_rt(np.eye(3), [0.5, 0.2, 0.9])
     assert part_pose(bottle, task, {"bottle": carried}, None) is carried
+
+
+def test_a_pick_and_place_floor_is_the_straight_way_through_its_points():
+    """cup_to_table at 0.1 m/s: the clock starts 20 cm from the cup's base, the grip 5 cm
+    over it (so 15 cm to go), the 5 cm lift, straight to where the hand holds the cup
+    down on the table top's middle, 10 cm back."""
+    from sctd.skill.model import Limits
+    from sctd_services.eval.suite import floor
+
+    task = find_task(CUP)
+    lift_top = np.array([0.68, 0.18, 0.79 + 0.05])
+    down = np.array([0.60, -0.18, 0.58 + 0.05])
+    metres = 0.15 + 0.05 + float(np.linalg.norm(down - lift_top)) + 0.10
+    assert floor(task, Limits(max_linear_speed=0.1, max_angular_speed=0.5)) == pytest.approx(metres / 0.1)
+    # the tap: 17 cm to the grip (the clock's 20 cm less the grip's 3 cm), 9 cm back, 60 deg
+    tap = floor(find_task("tap"), Limits(max_linear_speed=0.1, max_angular_speed=0.5))
+    assert tap == pytest.approx((0.17 + 0.09) / 0.1 + math.radians(60.0) / 0.5)

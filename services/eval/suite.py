@@ -12,6 +12,7 @@ skill's speed limits, whatever the assistance.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from sctd.skill.catalog import shipped_skills
 from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, handle_jacobian
 from sctd.task.judge import thresholds
+from sctd.task.kinds import StepKind
 from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
 
 from .evaluate import (
@@ -74,6 +76,8 @@ def floor(task: Task, limits: Limits, cap: SpeedNear | None = None) -> float:
     that straight way within the cap's distance of the task object, and a tilt whose
     frame's goal is there, go at the cap's speeds (the reach's frame taken for the cap's
     point: a cup's rim)."""
+    if isinstance(task.intent[0].action, StepKind):
+        return _kinds_floor(task, limits)
     done = thresholds(task.outcome.done)
     sc = task.scene
     obj = sc.bodies[task.object].T_world
@@ -107,6 +111,27 @@ def floor(task: Task, limits: Limits, cap: SpeedNear | None = None) -> float:
         elif isinstance(s.action, Tilt):
             spin += s.action.to
     return (travel - slow) / limits.max_linear_speed + slow / v_slow + spin / w
+
+
+def _kinds_floor(task: Task, limits: Limits) -> float:
+    """The floor of a task whose intent begins with steps of registered kinds: the
+    straight way through the points each such step's hand must pass
+    (:meth:`~sctd.task.kinds.StepKind.floor_path`) at full linear speed, its turns at
+    full angular speed; the way to the first point from where the completion clock
+    starts when that is nearer (a ``near`` clock starts on a sphere about its body's
+    origin: at least ``within`` less the point's distance from that origin away)."""
+    points, radians = [task.scene.start.T_world[:3, 3]], 0.0
+    for s in task.intent:
+        if isinstance(s.action, StepKind):  # (a lower bound: other steps are not counted)
+            p, r = s.action.floor_path(task.scene)
+            points += p
+            radians += r
+    legs = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points)]
+    clock = task.outcome.clock
+    if isinstance(clock, Near) and clock.to in task.scene.bodies:
+        origin = task.scene.bodies[clock.to].T_world[:3, 3]
+        legs[0] = min(legs[0], max(0.0, clock.within - float(np.linalg.norm(points[1] - origin))))
+    return sum(legs) / limits.max_linear_speed + radians / limits.max_angular_speed
 
 
 def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> float:

@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-TAP = 0.15
+SHORT = 0.15
 """s the button is held down for a press."""
 HOLD = 0.8
 """s it is held down to open fingers that hold something (the runtime asks for 0.5 s)."""
@@ -40,7 +40,7 @@ class GraspButton:
         How often it was pressed.
     """
 
-    tap: float = TAP
+    short: float = SHORT
     hold: float = HOLD
     wait: float = WAIT
     presses: int = 0
@@ -60,9 +60,9 @@ class GraspButton:
         closing, holding = bool(g.get("closing", False)), bool(g.get("grasped", False))
         length = 0.0
         if want == "close" and not closing:
-            length = self.tap
+            length = self.short
         elif closing and not holding and not g.get("moving", False):  # closed on nothing: open
-            length = self.tap
+            length = self.short
         elif want == "open" and holding:
             length = self.hold
         if length <= 0.0:

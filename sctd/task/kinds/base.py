@@ -246,6 +246,13 @@ class StepKind(ABC):
         """The simulated person's behaviour for it."""
 
     @abstractmethod
+    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+        """A lower bound of the hand's path through the step with the scene at its
+        defaults: the points (world, m) the hand must pass through in order, straight
+        from one to the next being the shortest way, and the radians it must turn at least
+        (a task's floor, ``sctd suite``)."""
+
+    @abstractmethod
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
         """A demonstration of it (``sctd teach``): the hand's legs from ``T_world_ee`` with

@@ -154,6 +154,12 @@ class GraspStep(StepKind):
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return GraspMind(self, facet_of(scene, self.item, Item), person)
 
+    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+        """To the grip, then the lift."""
+        T = scene.bodies[self.item].T_world
+        grip = T[:3, 3] + facet_of(scene, self.item, Item).grip * T[:3, 2]
+        return [grip, grip + self.lift * UP], 0.0
+
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
         """To it, in, close until it is held, lift it (up to :data:`HIGHER` more)."""
@@ -276,6 +282,14 @@ class PlaceStep(StepKind):
 
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return PlaceMind(self, facet_of(scene, self.item, Item), facet_of(scene, self.onto, Support), person)
+
+    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+        """To where the hand holds the item down on the spot, then ``clear`` back."""
+        S = scene.bodies[self.onto].T_world
+        grip = facet_of(scene, self.item, Item).grip
+        down = S[:3, :3] @ np.array([self.at[0], self.at[1], grip]) + S[:3, 3]
+        back = down - self.clear * _ahead(scene.start.T_world, np.zeros(3))
+        return [down, back], 0.0
 
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:

@@ -251,6 +251,13 @@ class TurnStep(StepKind):
     def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
         return TurnMind(self, facet_of(scene, self.knob, Knob), person)
 
+    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+        """To the grip, the turn to the task's threshold, ``clear`` back."""
+        T = scene.bodies[self.knob].T_world
+        grip = T[:3, 3] + facet_of(scene, self.knob, Knob).grip * T[:3, 2]
+        back = grip - self.clear * _ahead(scene.start.T_world, np.zeros(3))
+        return [grip, back], self.target - self.overshoot
+
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
         """To it, in, close until it is held, turn it to the threshold plus up to the
