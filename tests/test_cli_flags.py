@@ -1,0 +1,87 @@
+"""Every ``sctd`` command takes the flags it took: the same names, destinations, defaults,
+types, choices and actions, against the table in ``tests/data/cli_flags.json``.
+
+The table guards refactorings of how flags are defined (a flag derived from a dataclass
+field instead of written by hand must be the same flag). A deliberate change of a flag
+rewrites it: ``python -m tests.test_cli_flags`` (and say why in the commit). Help texts
+and metavars are left out: they may improve.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+import pytest
+
+from sctd.cli.main import COMMANDS, build_parser
+from tests.conftest import ROOT
+
+TABLE = ROOT / "tests" / "data" / "cli_flags.json"
+
+
+def _argvs() -> list[list[str]]:
+    """The argv that builds each command's parser (a group: each of its subcommands)."""
+    return [[name, sub] for name, cmd in COMMANDS.items() for sub in cmd.group] + \
+        [[name] for name, cmd in COMMANDS.items() if not cmd.group]
+
+
+def _row(a: argparse.Action) -> dict[str, Any]:
+    return {"options": sorted(a.option_strings), "dest": a.dest, "default": repr(a.default),
+            "type": getattr(a.type, "__name__", repr(a.type)), "nargs": a.nargs, "const": repr(a.const),
+            "choices": None if a.choices is None else [repr(c) for c in a.choices],
+            "action": type(a).__name__, "required": a.required}
+
+
+def flag_table(parser: argparse.ArgumentParser, prefix: str = "") -> dict[str, dict[str, Any]]:
+    """One row per flag or positional of ``parser`` and of the subcommands it was built
+    with, keyed by ``<command path> <first option or dest>``."""
+    rows: dict[str, dict[str, Any]] = {}
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, sub in a.choices.items():
+                rows.update(flag_table(sub, f"{prefix} {name}".strip()))
+        elif not isinstance(a, argparse._HelpAction):
+            rows[f"{prefix} {a.option_strings[0] if a.option_strings else a.dest}".strip()] = _row(a)
+    return rows
+
+
+def _table(argv: list[str]) -> dict[str, dict[str, Any]]:
+    try:
+        parser = build_parser(argv)
+    except SystemExit:  # the command's optional extra is not installed here
+        pytest.skip(f"sctd {' '.join(argv)}: its extra is not installed")
+    return {k: v for k, v in flag_table(parser).items() if k.startswith(" ".join(argv) + " ")}
+
+
+@pytest.mark.parametrize("argv", _argvs(), ids=" ".join)
+def test_every_command_takes_the_flags_it_took(argv):
+    want = {k: v for k, v in json.loads(TABLE.read_text()).items() if k.startswith(" ".join(argv) + " ")}
+    got = _table(argv)
+    assert sorted(got) == sorted(want), "flags added or removed (python -m tests.test_cli_flags rewrites)"
+    for key in want:
+        assert got[key] == want[key], key
+
+
+def test_the_table_tells_a_changed_default():
+    """The comparison can fail: a parser whose default moved gives another row."""
+    p = argparse.ArgumentParser()
+    p.add_argument("--rate", type=float, default=1.0)
+    before = flag_table(p)
+    p.set_defaults(rate=2.0)
+    assert flag_table(p) != before
+
+
+def _write() -> None:
+    rows: dict[str, dict[str, Any]] = {}
+    for argv in _argvs():
+        rows.update({k: v for k, v in flag_table(build_parser(argv)).items()
+                     if k.startswith(" ".join(argv) + " ")})
+    TABLE.write_text(json.dumps(rows, indent=1, sort_keys=True) + "\n")
+    print(f"{TABLE}: {len(rows)} flags", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    _write()
