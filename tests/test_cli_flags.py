@@ -23,9 +23,10 @@ TABLE = ROOT / "tests" / "data" / "cli_flags.json"
 
 
 def _argvs() -> list[list[str]]:
-    """The argv that builds each command's parser (a group: each of its subcommands)."""
+    """The argv that builds each command's parser (a group: each of its subcommands;
+    ``robot NAME``: each built-in driver's)."""
     return [[name, sub] for name, cmd in COMMANDS.items() for sub in cmd.group] + \
-        [[name] for name, cmd in COMMANDS.items() if not cmd.group]
+        [[name] for name, cmd in COMMANDS.items() if not cmd.group] + [["robot", d] for d in _drivers()]
 
 
 def _row(a: argparse.Action) -> dict[str, Any]:
@@ -48,12 +49,34 @@ def flag_table(parser: argparse.ArgumentParser, prefix: str = "") -> dict[str, d
     return rows
 
 
+def _drivers() -> list[str]:
+    from sctd.robots.registry import BUILTIN
+
+    return list(BUILTIN)
+
+
+def _parser(argv: list[str]) -> argparse.ArgumentParser:
+    """The parser of ``sctd ARGV``; ``robot NAME``: the driver's (parsed after the name)."""
+    if argv[0] == "robot" and len(argv) == 2:
+        from sctd.robots.registry import get_driver
+        from sctd_services.robots.service import driver_parser
+
+        parser = argparse.ArgumentParser()
+        parser.add_subparsers().add_parser("robot").add_subparsers().add_parser(
+            argv[1], parents=[driver_parser(get_driver(argv[1]))], add_help=False)
+        return parser
+    return build_parser(argv)
+
+
+def _rows(argv: list[str]) -> dict[str, dict[str, Any]]:
+    return {k: v for k, v in flag_table(_parser(argv)).items() if k.startswith(" ".join(argv) + " ")}
+
+
 def _table(argv: list[str]) -> dict[str, dict[str, Any]]:
     try:
-        parser = build_parser(argv)
-    except SystemExit:  # the command's optional extra is not installed here
+        return _rows(argv)
+    except (SystemExit, ModuleNotFoundError):  # the command's optional extra is not installed here
         pytest.skip(f"sctd {' '.join(argv)}: its extra is not installed")
-    return {k: v for k, v in flag_table(parser).items() if k.startswith(" ".join(argv) + " ")}
 
 
 @pytest.mark.parametrize("argv", _argvs(), ids=" ".join)
@@ -77,8 +100,7 @@ def test_the_table_tells_a_changed_default():
 def _write() -> None:
     rows: dict[str, dict[str, Any]] = {}
     for argv in _argvs():
-        rows.update({k: v for k, v in flag_table(build_parser(argv)).items()
-                     if k.startswith(" ".join(argv) + " ")})
+        rows.update(_rows(argv))
     TABLE.write_text(json.dumps(rows, indent=1, sort_keys=True) + "\n")
     print(f"{TABLE}: {len(rows)} flags", file=sys.stderr)
 
