@@ -71,7 +71,8 @@ def _parser(argv: list[str]) -> argparse.ArgumentParser:
 def _own(rows: dict[str, dict[str, Any]], argv: list[str]) -> dict[str, dict[str, Any]]:
     """The rows of the command ``argv`` itself (not of ``robot``'s drivers under ``robot``)."""
     head = " ".join(argv) + " "
-    return {k: v for k, v in rows.items() if k.startswith(head) and " " not in k[len(head):]}
+    deeper = tuple(" ".join(a) + " " for a in _argvs() if len(a) > len(argv) and a[:len(argv)] == argv)
+    return {k: v for k, v in rows.items() if k.startswith(head) and not k.startswith(deeper)}
 
 
 def _rows(argv: list[str]) -> dict[str, dict[str, Any]]:
