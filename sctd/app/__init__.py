@@ -14,10 +14,11 @@ from .options import (
     add_task_argument,
     add_zenoh_arguments,
     check_ranges,
+    field_of,
     flag_name,
     from_namespace,
 )
 
 __all__ = ["EXIT_CODES", "EXIT_FAILED", "EXIT_FORCED", "EXIT_OK", "EXIT_USAGE", "SKILL_HELP", "TASK_HELP",
            "Parser", "add_arguments", "add_deprecated_alias", "add_robot_argument", "add_task_argument",
-           "add_zenoh_arguments", "check_ranges", "fail", "flag_name", "from_namespace"]
+           "add_zenoh_arguments", "check_ranges", "fail", "field_of", "flag_name", "from_namespace"]

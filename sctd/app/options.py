@@ -13,6 +13,10 @@ needs no import from here) says how:
     The allowed values.
 ``metavar`` (optional)
     The value's name in the usage line (default the field name in capitals).
+``repeatable`` (optional)
+    The flag may be given more than once, each time one element of the field's tuple
+    (``--mistake 2 --mistake 5`` for ``mistakes: tuple[int, ...]``); without it a tuple
+    of names is given comma-separated (``--frames a,b``).
 
 Booleans become switches: a field defaulting to False is set by its flag
 (``--dtw-align``), one defaulting to True is cleared by it (``--no-despike``, whose
@@ -21,6 +25,14 @@ name the ``flag`` entry gives). The argparse destination is always the field nam
 
     add_arguments(parser, LinearIMLearner)
     learner = from_namespace(LinearIMLearner, parser.parse_args())
+
+A default kept in ``sctd/app/defaults.yaml`` (:mod:`.defaults`) replaces the field's
+with ``parser.set_defaults(name=...)`` after :func:`add_arguments`. Each flag made here
+remembers its field (:func:`field_of`): ``tests/test_cli_fields.py`` fails when a flag
+that sets a field of a command's options is written by hand instead.
+
+Adding a parameter is adding a field with ``help`` metadata to the class the command
+builds; its flag, help, default and type follow, and nothing else is written.
 """
 
 from __future__ import annotations
@@ -36,9 +48,11 @@ from ..wire import DEFAULT_ROBOT
 from ..wire.session import add_zenoh_arguments
 
 __all__ = ["SKILL_HELP", "TASK_HELP", "add_arguments", "add_deprecated_alias", "add_robot_argument",
-           "add_task_argument", "add_zenoh_arguments", "check_ranges", "flag_name", "from_namespace"]
+           "add_task_argument", "add_zenoh_arguments", "check_ranges", "field_of", "flag_name",
+           "from_namespace"]
 
 T = TypeVar("T")
+_FIELD = "sctd_field"  # the attribute of an argparse action made from a field: (class, field name)
 
 # The help of every --skill / SKILL argument: how sctd.skill.catalog.find_skill resolves it.
 SKILL_HELP = ("a skill: a path, a skill in the learner's store (NAME@ID, ID, or NAME: the newest), or "
@@ -102,7 +116,10 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         kind = _scalar_type(hints[f.name])
         kwargs: dict[str, Any] = {"dest": dest_prefix + f.name, "help": help_prefix + f.metadata["help"],
                                   "default": f.default}
-        if typing.get_origin(kind) is tuple:  # a list of names, given comma-separated
+        if f.metadata.get("repeatable"):  # one element each time (argparse appends to a list)
+            kind, kwargs["action"], kwargs["default"] = typing.get_args(kind)[0], "append", list(f.default)
+            kwargs["help"] += " (repeatable)"
+        elif typing.get_origin(kind) is tuple:  # a list of names, given comma-separated
             kind = _names
         if kind is bool:
             kwargs["action"] = "store_false" if f.default else "store_true"
@@ -114,7 +131,13 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
                 kwargs["choices"] = tuple(f.metadata["choices"])
             if f.metadata.get("metavar") is not None:
                 kwargs["metavar"] = f.metadata["metavar"]
-        parser.add_argument(flag_name(f), **kwargs)
+        setattr(parser.add_argument(flag_name(f), **kwargs), _FIELD, (cls, f.name))
+
+
+def field_of(action: argparse.Action) -> tuple[type, str] | None:
+    """(dataclass, field name) of a flag :func:`add_arguments` made; None for a flag
+    written by hand."""
+    return getattr(action, _FIELD, None)
 
 
 def from_namespace(cls: type[T], namespace: argparse.Namespace, dest_prefix: str = "") -> T:
@@ -124,6 +147,9 @@ def from_namespace(cls: type[T], namespace: argparse.Namespace, dest_prefix: str
     given = vars(namespace)
     values = {f.name: given[dest_prefix + f.name] for f in dataclasses.fields(cls)  # type: ignore[arg-type]
               if f.init and dest_prefix + f.name in given}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if f.metadata.get("repeatable") and isinstance(values.get(f.name), list):
+            values[f.name] = tuple(values[f.name])
     return cls(**values)
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import os
 import signal
 import sys
@@ -64,10 +63,7 @@ def add_teach_arguments(p: argparse.ArgumentParser) -> None:
     add_task_argument(p, defaults().task, help="the task to demonstrate: a name sctd tasks lists, or a "
                                                "task file (the simulator's scene)")
     add_arguments(p, TeachOptions, exclude=(*own_default, "task"), show_default=True)
-    add_arguments(p, TeachOptions, only=own_default[:2])
-    mistakes = next(f for f in dataclasses.fields(TeachOptions) if f.name == "mistakes")
-    p.add_argument("--mistake", dest="mistakes", type=int, action="append", default=[],
-                   metavar="N", help=mistakes.metadata["help"] + " (repeatable)")
+    add_arguments(p, TeachOptions, only=own_default)
     p.add_argument("--logs", metavar="DIR",
                    help="keep the simulator's log (and the learner's and daemon's) in this folder "
                         "(default: a temporary one)")
@@ -129,7 +125,6 @@ def main_teach(args: argparse.Namespace) -> int:
 
 def _main_teach(args: argparse.Namespace) -> int:
     try:
-        args.mistakes = tuple(args.mistakes)
         options = from_namespace(TeachOptions, args)
     except ValueError as e:
         return fail("teach", str(e))

@@ -89,7 +89,7 @@ class TeachOptions:
                                             "task's miss: a bottle's opening beside the mug, it "
                                             "spills; a hand beside a handle, it never grasps), to "
                                             "see one discarded",
-                                        metavar="N")
+                                        metavar="N", flag="--mistake", repeatable=True)
 
     def __post_init__(self) -> None:
         problems = [(self.demos >= 1, "--demos: must be >= 1"),
