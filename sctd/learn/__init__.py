@@ -56,6 +56,7 @@ from .linear import (
     selection_matrix,
 )
 from .metrics import field_kinds_by_phase, segmentation_accuracy
+from .objects import ObjectChoice, candidate_bodies, choose_objects
 from .params import HyperparameterError, get_params, hyperparameter
 from .pipeline import (
     METHODS,
@@ -85,6 +86,7 @@ __all__ = [
     "IMLabel",
     "LinearIMLearner",
     "LinearResult",
+    "ObjectChoice",
     "Prepared",
     "Preprocessing",
     "Progress",
@@ -96,7 +98,9 @@ __all__ = [
     "VectorFieldResult",
     "alpha_beta_swap",
     "alpha_expansion",
+    "candidate_bodies",
     "check_hyperparameters",
+    "choose_objects",
     "dtw",
     "energy",
     "field_kinds_by_phase",

@@ -86,15 +86,23 @@ def linear_skill(result: LinearResult, name: str) -> Skill:
     r = Reader(f"{name}.yaml", {})
     frames = builtin_frames() | {k: Frame(k, "ee", r.pose(rounded(v), f"frames.{k}.pose"))
                                  for k, v in result.frames.items()}
+    task_object = result.options.object
+    own = [c.object if c.object != task_object else None for c in result.objects] or [None] * len(L.states_)
     states = tuple(State(name=state_name(k), active_constraints=(), input_mappings=(
-        LinearMapping(frame=st.label.frame, matrix=np.array(rounded(st.label.matrix))),))
-        for k, st in enumerate(L.states_))
+        LinearMapping(frame=st.label.frame, matrix=np.array(rounded(st.label.matrix))),), object=obj)
+        for k, (st, obj) in enumerate(zip(L.states_, own, strict=True)))
     transitions: list[Transition] = []
     for h in L.transitions_:
         a, b = state_name(h.source), state_name(h.target)
         n, o = np.array(rounded(h.normal, 6)), round(float(h.offset), 6)
         transitions.append(Hyperplane(source=a, target=b, frame=h.frame, normal=n, offset=o,
                                       margin=h.margin))
+        back = result.back.get(h.source)
+        if back is not None:  # the way back is in the other state's frame: a plane of its own
+            transitions.append(Hyperplane(source=b, target=a, frame=back.frame,
+                                          normal=np.array(rounded(back.normal, 6)),
+                                          offset=round(float(back.offset), 6), margin=back.margin))
+            continue
         # The way back on the same plane: the margins leave a dead band between them.
         transitions.append(Hyperplane(source=b, target=a, frame=h.frame, normal=-n, offset=-o,
                                       margin=h.margin))
@@ -111,7 +119,8 @@ def _gripped(result: LinearResult | VectorFieldResult, skill: Skill) -> Skill:
     the gripper (:mod:`sctd.learn.gripper`); unchanged without events."""
     if result.gripper is None:
         return skill
-    return with_gripper(skill, result.labels, result.gripper, result.gripper_options)
+    return with_gripper(skill, result.labels, result.gripper, result.gripper_options,
+                        frame=result.frame or None)
 
 
 def _gripper_header(result: LinearResult | VectorFieldResult, skill: Skill) -> str:
@@ -119,6 +128,15 @@ def _gripper_header(result: LinearResult | VectorFieldResult, skill: Skill) -> s
         return ""
     return "\n".join(["", "Gripper (the demonstrations' events, states renamed in order):",
                       *(f"  {line}" for line in gripper_lines(result.gripper, skill))])
+
+
+def _objects_header(result: LinearResult) -> str:
+    """Where the demonstrations carry other bodies: each state's frame and why (nothing
+    without them)."""
+    if not any(c.spread for c in result.objects):
+        return ""
+    return "\n".join(["", "Frames (each state's, among the demonstrations' bodies):",
+                      *(f"  {c.line(state_name(c.state))}" for c in result.objects)])
 
 
 def _linear_header(result: LinearResult) -> str:
@@ -230,6 +248,8 @@ def vf_skill(result: VectorFieldResult, name: str) -> Skill:
                      direction="below", margin=0.0)
             for h in plan.transitions)
         min_dwell = 0.1
+    if result.frame and result.frame != result.options.object:  # learned in another body's frame
+        states = tuple(dataclasses.replace(s, object=result.frame) for s in states)
     return _gripped(result, Skill(name=name, object=result.options.object, frames=builtin_frames(),
                                   states=_capped(states, result),
                                   transitions=transitions, start=names[0], end=names[-1],
@@ -275,6 +295,7 @@ def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
     """
     if isinstance(result, LinearResult):
         skill = linear_skill(result, name)
-        return bundle_from_skill(skill, _linear_header(result) + _gripper_header(result, skill))
+        return bundle_from_skill(skill, _linear_header(result) + _objects_header(result)
+                                 + _gripper_header(result, skill))
     skill = vf_skill(result, name)
     return bundle_from_skill(skill, _vf_header(result) + _gripper_header(result, skill))

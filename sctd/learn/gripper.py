@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,6 +86,13 @@ class GripperEvent:
     spread: float
     radius: float
     by_position: bool
+    # The same in each other body's frame the demonstrations carry (body -> (point,
+    # radius, by_position)): the way in from a state in that body's frame.
+    by_body: dict[str, tuple[Array, float, bool]] = field(default_factory=dict)
+
+    def place(self, body: str | None) -> tuple[Array, float, bool]:
+        """(point, radius, by_position) in ``body``'s frame (None: the task object's)."""
+        return (self.point, self.radius, self.by_position) if body is None else self.by_body[body]
 
 
 @dataclass(frozen=True)
@@ -142,14 +149,31 @@ def plan_gripper(demos: list[Demo], options: GripperOptions | None = None) -> Gr
 
 def _event(demos: list[Demo], rows: dict[str, list[tuple[int, str]]], e: int, action: str,
            options: GripperOptions) -> GripperEvent:
-    """The ``e``-th event over all demonstrations."""
-    at = np.array([d.poses[rows[d.name][e][0], :3] for d in demos])
+    """The ``e``-th event over all demonstrations (in the task object's frame, and in
+    each other body's every demonstration carries)."""
+    bodies = [b for b in demos[0].bodies if all(b in d.bodies for d in demos)]
+    point, spread, radius, by_position = _place(demos, rows, e, None, options)
+    by_body = {}
+    for b in bodies:
+        p, _, r, pos = _place(demos, rows, e, b, options)
+        by_body[b] = (p, r, pos)
+    return GripperEvent(e, action, point, spread, radius, by_position, by_body)
+
+
+def _place(demos: list[Demo], rows: dict[str, list[tuple[int, str]]], e: int, body: str | None,
+           options: GripperOptions) -> tuple[Array, float, float, bool]:
+    """The median hand position at event ``e`` in ``body``'s frame (None: the task
+    object's), the demonstrations' RMS spread about it, the distance transition's radius
+    and whether the position tells the event from the start of its phase."""
+    poses = [d.poses if body is None else d.poses_in(body) for d in demos]
+    at = np.array([P[rows[d.name][e][0], :3] for P, d in zip(poses, demos, strict=True)])
     point = np.median(at, axis=0)
     spread = float(np.sqrt(np.mean(np.sum((at - point) ** 2, axis=1))))
     radius = max(options.gripper_radius, 2.0 * spread)
-    starts = np.array([d.poses[0 if e == 0 else rows[d.name][e - 1][0], :3] for d in demos])
+    starts = np.array([P[0 if e == 0 else rows[d.name][e - 1][0], :3]
+                       for P, d in zip(poses, demos, strict=True)])
     far = np.linalg.norm(starts - point, axis=1) > radius + 2.0 * options.gripper_radius
-    return GripperEvent(e, action, point, spread, radius, bool(np.all(far)))
+    return point, spread, radius, bool(np.all(far))
 
 
 def _most_common(values: list[int], fallback: int) -> int:
@@ -195,9 +219,11 @@ def _phases(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan) -> _P
 
 
 def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
-                 options: GripperOptions | None = None) -> Skill:
+                 options: GripperOptions | None = None, frame: str | None = None) -> Skill:
     """``skill`` (learned, one state per label of ``labels``) split at ``plan``'s events,
-    each event a state commanding the gripper (the module's docstring).
+    each event a state commanding the gripper (the module's docstring). ``frame`` is the
+    body whose frame the plan's places are in (None: the skill's object); a way into an
+    event from a state in another body's frame uses the place in that body's.
 
     The states are named ``s0``, ``s1``, ... in order: phase 0's, the first event's, phase
     1's, and so on.
@@ -223,8 +249,12 @@ def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
         transitions += [dataclasses.replace(t, source=name_of[p, index[t.source]],
                                             target=name_of[p, index[t.target]])
                         for t in skill.transitions if index[t.source] in used and index[t.target] in used]
+    frame = skill.object if frame is None else frame
+    own = {s.name: None if (s.object or skill.object) == frame else s.object or skill.object
+           for s in states}  # each state's body, None where it is the plan's frame
     for ev, name in zip(plan.events, event_state, strict=True):
-        transitions += _event_transitions(ev, name, [name_of[ev.index, k] for k in ph.used[ev.index]],
+        transitions += _event_transitions(ev, name, [(name_of[ev.index, k], own[name_of[ev.index, k]])
+                                                     for k in ph.used[ev.index]],
                                           name_of[ev.index, ph.exit[ev.index]],
                                           name_of[ev.index + 1, ph.entry[ev.index + 1]], options)
     last = len(plan.events)
@@ -236,19 +266,21 @@ def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
         min_dwell=max(skill.min_dwell, 0.1), id="")
 
 
-def _event_transitions(ev: GripperEvent, name: str, before: list[str], exit_: str, after: str,
-                       options: GripperOptions) -> list[Transition]:
-    """Into the event's state ``name`` from the phase's states ``before``; out of it to
-    ``after`` once the fingers read as they should, back to ``exit_`` when they do not
-    within the timeout."""
+def _event_transitions(ev: GripperEvent, name: str, before: list[tuple[str, str | None]], exit_: str,
+                       after: str, options: GripperOptions) -> list[Transition]:
+    """Into the event's state ``name`` from the phase's states ``before`` (each with its
+    own object: the place is in its frame); out of it to ``after`` once the fingers read
+    as they should, back to ``exit_`` when they do not within the timeout."""
     holds = ev.action == "close"
-    into: list[Transition]
-    if ev.by_position:
-        point = np.array([round(float(x), 6) for x in ev.point])
-        into = [Distance(source=s, target=name, frame="ee", point=point, threshold=round(ev.radius, 6),
-                         direction="below", margin=0.0) for s in before]
-    else:
-        into = [Gripper(source=s, target=name, grasped=holds) for s in before]
+    into: list[Transition] = []
+    for s, body in before:
+        at, radius, by_position = ev.place(body)
+        if by_position:
+            point = np.array([round(float(x), 6) for x in at])
+            into.append(Distance(source=s, target=name, frame="ee", point=point, threshold=round(radius, 6),
+                                 direction="below", margin=0.0))
+        else:
+            into.append(Gripper(source=s, target=name, grasped=holds))
     return [*into, Gripper(source=name, target=after, grasped=holds),
             Timeout(source=name, target=exit_, after=float(options.grasp_timeout))]
 

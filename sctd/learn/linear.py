@@ -463,8 +463,7 @@ class LinearIMLearner:
 
     def _fit_costs(self, demos: list[Array]) -> None:
         """Steps 1-3: displacements of every frame and the cost of every label."""
-        offsets = [self.frame_offsets_[n] for n in self.frame_names_]
-        self.d6_ = [np.stack([frame_displacements(T, off) for off in offsets]) for T in demos]
+        self.d6_ = [self.displacements(T) for T in demos]
         self.costs_ = [im_costs(D, self.labels_, self.frame_names_, self.alpha, self.beta)
                        for D in self.d6_]
 
@@ -600,39 +599,70 @@ class LinearIMLearner:
         return best >= 0.2
 
     def _fit_transitions(self, demos: list[Array]) -> None:
+        self.transitions_ = []
+        for k in range(len(self.states_) - 1):
+            h = self.fit_transition(demos, k, k + 1)
+            if h is not None:
+                self.transitions_.append(h)
+
+    def fit_transition(self, demos: list[Array], source: int, target: int) -> Hyperplane | None:
+        """The hyperplane ``source -> target`` (a linear SVM between the two states' poses,
+        eq. 4.17, in the frame ``demos`` are in: the object's, or the source state's own
+        body's, :mod:`sctd.learn.objects`); None when a state has no pose.
+
+        Parameters
+        ----------
+        demos : list of ndarray, each (n_i, 4, 4)
+            The subsampled poses, labelled by :attr:`state_labels_` (one per displacement:
+            its start pose).
+        """
         from sklearn.svm import SVC
 
-        self.transitions_ = []
-        starts = [T[:-1] for T in demos]
-        for k in range(len(self.states_) - 1):
-            sel = [(T, s) for T, s in zip(starts, self.state_labels_, strict=True)]
-            A = np.concatenate([T[s == k] for T, s in sel])
-            B = np.concatenate([T[s == k + 1] for T, s in sel])
-            if len(A) == 0 or len(B) == 0:
-                continue
-            # Poses near the end of state k, where the IM must reach the plane.
-            tail = np.concatenate([T[s == k][-max(1, (s == k).sum() // 3):] for T, s in sel
-                                   if np.any(s == k)])
-            best = None
-            cands = {}
-            for frame in self.frame_names_:
-                X = np.concatenate([self.frame_positions(A, frame), self.frame_positions(B, frame)])
-                y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])
-                # Metres, as the thesis' C = 1000 assumes (eq. 4.17).
-                svm = SVC(kernel="linear", C=self.C, class_weight="balanced", max_iter=1_000_000,
-                          random_state=self.random_state)
-                svm.fit(X, y)
-                w = svm.coef_[0]
-                b = float(svm.intercept_[0])
-                pred = np.sign(X @ w + b)
-                acc = 0.5 * (np.mean(pred[y < 0] < 0) + np.mean(pred[y > 0] > 0))
-                reach = self._reachable(self.states_[k], frame, w, tail)
-                norm = float(np.linalg.norm(w))
-                cands[frame] = {"accuracy": float(acc), "reachable": bool(reach)}
-                key = (reach, round(acc, 3), -norm)
-                if best is None or key > best[0]:
-                    best = (key, frame, w / norm, b / norm, acc, reach)
-            assert best is not None
-            _, frame, n, o, acc, reach = best
-            self.transitions_.append(Hyperplane(k, k + 1, frame, n, float(o), self.margin,
-                                                float(acc), bool(reach), cands))
+        sel = [(T[:-1], s) for T, s in zip(demos, self.state_labels_, strict=True)]
+        A = np.concatenate([T[s == source] for T, s in sel])
+        B = np.concatenate([T[s == target] for T, s in sel])
+        if len(A) == 0 or len(B) == 0:
+            return None
+        # Poses near where the source state meets the target, where the IM must reach the
+        # plane: its end on the way forward, its start on the way back.
+        ahead = target > source
+        tail = np.concatenate([T[s == source][-max(1, (s == source).sum() // 3):] if ahead
+                               else T[s == source][:max(1, (s == source).sum() // 3)]
+                               for T, s in sel if np.any(s == source)])
+        best = None
+        cands = {}
+        for frame in self.frame_names_:
+            X = np.concatenate([self.frame_positions(A, frame), self.frame_positions(B, frame)])
+            y = np.concatenate([-np.ones(len(A)), np.ones(len(B))])
+            # Metres, as the thesis' C = 1000 assumes (eq. 4.17).
+            svm = SVC(kernel="linear", C=self.C, class_weight="balanced", max_iter=1_000_000,
+                      random_state=self.random_state)
+            svm.fit(X, y)
+            w = svm.coef_[0]
+            b = float(svm.intercept_[0])
+            pred = np.sign(X @ w + b)
+            acc = 0.5 * (np.mean(pred[y < 0] < 0) + np.mean(pred[y > 0] > 0))
+            reach = self._reachable(self.states_[source], frame, w, tail)
+            norm = float(np.linalg.norm(w))
+            cands[frame] = {"accuracy": float(acc), "reachable": bool(reach)}
+            key = (reach, round(acc, 3), -norm)
+            if best is None or key > best[0]:
+                best = (key, frame, w / norm, b / norm, acc, reach)
+        assert best is not None
+        _, frame, n, o, acc, reach = best
+        return Hyperplane(source, target, frame, n, float(o), self.margin, float(acc), bool(reach), cands)
+
+    def refit_state(self, k: int, d6: list[Array]) -> None:
+        """State ``k``'s IM re-derived, as :meth:`fit` derives it, from displacements seen
+        in another frame (the state's own body's, :mod:`sctd.learn.objects`): ``d6`` per
+        demonstration (F, m_i, 6), every feature frame's displacements, labelled by
+        :attr:`state_labels_`."""
+        segments = [(gl[sl == k], D[:, sl == k])
+                    for gl, sl, D in zip(self.graph_labels_, self.state_labels_, d6, strict=True)
+                    if np.any(sl == k)]
+        if segments:
+            self.states_[k] = self._state_from_segments(segments)
+
+    def displacements(self, T_obj_ee: Array) -> Array:
+        """Every feature frame's displacements (F, n - 1, 6) along poses (n, 4, 4)."""
+        return np.stack([frame_displacements(T_obj_ee, self.frame_offsets_[f]) for f in self.frame_names_])

@@ -21,12 +21,13 @@ from ..skill import Skill, skill_from_bundle
 from .bundle import skill_bundle
 from .demos import Demo
 from .frames import automatic_frames, frames_to_use
-from .gripper import GripperOptions, plan_gripper
-from .linear import LinearIMLearner, Progress
+from .gripper import GripperOptions, GripperPlan, plan_gripper
+from .linear import Hyperplane, LinearIMLearner, Progress
+from .objects import ObjectChoice, choose_objects, learning_frame, rebased, reframe_linear
 from .params import HyperparameterError, check_params, param_problem
-from .preprocess import Preprocessing, preprocess, raw_labels
+from .preprocess import Prepared, Preprocessing, preprocess, raw_labels
 from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorFieldResult
-from .traps import fix_traps
+from .traps import TrapFinding, fix_traps
 from .vf import VectorFieldLearner
 from .vfstates import StatePlan, plan_states
 
@@ -82,6 +83,7 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     for part in (preprocessing, learner, options, gripper):
         check_params(part)  # before any work: a value out of range is named, not trained
     events = plan_gripper(demos, gripper)  # before any work too: mixed columns are refused
+    demos, frame, events = _in_learning_frame(demos, options.object, gripper, events)
     t0 = time.perf_counter()
     found = []
     if not frames and learner.auto_frames:
@@ -95,11 +97,43 @@ def learn_linear(demos: list[Demo], frames: Mapping[str, ArrayLike] | None = Non
     T_obj_ee: list[ArrayLike] = [se3.transform_from_pose(p.poses) for p in prepared]
     learner.fit(T_obj_ee, {k: se3.transform_from_pose(v) for k, v in pose_of.items()},
                 progress=progress)
-    traps = fix_traps(learner, T_obj_ee)  # Ch. 6.2: a state that traps gets the missing DoF
     labels = {p.name: raw_labels(p, s) for p, s in zip(prepared, learner.state_labels_, strict=True)}
+    choices, back, traps = _frames_and_traps(learner, demos, prepared, labels, T_obj_ee, frame,
+                                             None if events is None else events.phases)
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     return LinearResult(preprocessing, options, pose_of, prepared, learner, labels, timings, traps,
-                        found_frames=found, gripper=events, gripper_options=gripper)
+                        found_frames=found, gripper=events, gripper_options=gripper,
+                        objects=choices, back=back, frame=frame)
+
+
+def _in_learning_frame(demos: list[Demo], task_object: str, gripper: GripperOptions,
+                       events: GripperPlan | None) -> tuple[list[Demo], str, GripperPlan | None]:
+    """The demonstrations in the frame they are learned in (sctd.learn.objects: the task
+    object's unless it moves with the hand in a gripper phase and another body never
+    does), that frame's name and the gripper's events in it."""
+    frame = learning_frame(demos, task_object, None if events is None else events.phases)
+    if frame == task_object:
+        return demos, frame, events
+    demos = rebased(demos, frame, task_object)
+    return demos, frame, plan_gripper(demos, gripper)
+
+
+def _frames_and_traps(learner: LinearIMLearner, demos: list[Demo], prepared: list[Prepared],
+                      labels: dict[str, list[int]], T_obj_ee: list[ArrayLike], task_object: str,
+                      phases: dict[str, list[int]] | None
+                      ) -> tuple[list[ObjectChoice], dict[int, Hyperplane], list[TrapFinding]]:
+    """Each state's frame among the demonstrations' bodies and, where one is not the task
+    object's, the states and transitions re-derived in their frames (sctd.learn.objects;
+    without bodies nothing changes); then the traps (Ch. 6.2: a state that traps gets the
+    missing DoF), each judged in its state's frame."""
+    choices = choose_objects(demos, labels, len(learner.states_), task_object, phases=phases)
+    objects = [c.object for c in choices]
+    back: dict[int, Hyperplane] = {}
+    in_frame_of = None
+    if any(o != task_object for o in objects):
+        back, per_state = reframe_linear(learner, prepared, demos, objects, task_object)
+        in_frame_of = per_state.__getitem__
+    return choices, back, fix_traps(learner, T_obj_ee, in_frame_of)
 
 
 def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None = None,
@@ -121,6 +155,7 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     for part in (preprocessing, learner, options, field_options, gripper):
         check_params(part)  # before any work: a value out of range is named, not trained
     events = plan_gripper(demos, gripper)
+    demos, frame, events = _in_learning_frame(demos, options.object, gripper, events)
     t0 = time.perf_counter()
     prepared = preprocess(demos, preprocessing, preprocessing.vf_spacing, 0.0,
                           translation_only=True)
@@ -143,7 +178,7 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
     return VectorFieldResult(preprocessing, SkillOptions() if options is None else options,
                              field_options, prepared, learner, labels, field_labels, timings, plan,
-                             gripper=events, gripper_options=gripper)
+                             gripper=events, gripper_options=gripper, frame=frame)
 
 
 def _states_of(fields: list[int], state_of: dict[int, int]) -> list[int]:

@@ -18,7 +18,8 @@ from ..skill.frames import builtin_frames
 from ..skill.reader import Reader
 from .frames import FoundFrame
 from .gripper import GripperOptions, GripperPlan
-from .linear import LinearIMLearner
+from .linear import Hyperplane, LinearIMLearner
+from .objects import ObjectChoice
 from .params import Interval, OneOf, Text, Valid, get_params, hyperparameter
 from .preprocess import Prepared, Preprocessing
 from .traps import TrapFinding
@@ -188,6 +189,9 @@ class LinearResult:
     found_frames: list[FoundFrame] = field(default_factory=list)  # found, not given (frames.py)
     gripper: GripperPlan | None = None  # the demonstrations' gripper events (gripper.py), if any
     gripper_options: GripperOptions = field(default_factory=GripperOptions)
+    objects: list[ObjectChoice] = field(default_factory=list)  # each state's frame (objects.py)
+    back: dict[int, Hyperplane] = field(default_factory=dict)  # k+1 -> k in another frame, by k
+    frame: str = ""  # the frame it was learned in (objects.py); "": the task object's
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name (the gripper's where the
@@ -211,6 +215,7 @@ class VectorFieldResult:
     plan: StatePlan = field(default_factory=StatePlan)  # the fields as states, or why not
     gripper: GripperPlan | None = None  # the demonstrations' gripper events (gripper.py), if any
     gripper_options: GripperOptions = field(default_factory=GripperOptions)
+    frame: str = ""  # the frame it was learned in (objects.py); "": the task object's
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name (the gripper's where the

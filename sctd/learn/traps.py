@@ -144,10 +144,14 @@ def fixed_state(state: StateIM, h: Hyperplane, lowest: float) -> StateIM | None:
     return StateIM(IMLabel(label.frame, tuple(sorted((*label.axes, a)))), state.support)
 
 
-def fix_traps(learner: LinearIMLearner, T_obj_ee: Sequence[ArrayLike]) -> list[TrapFinding]:
+def fix_traps(learner: LinearIMLearner, T_obj_ee: Sequence[ArrayLike],
+              in_frame_of: Callable[[int], Sequence[ArrayLike]] | None = None) -> list[TrapFinding]:
     """Check every learned transition of a fitted ``learner`` (its demonstrations'
     poses ``T_obj_ee``, each (n_i, 4, 4), as it was fitted on); a trap's state gets the
     missing DoF in ``learner.states_`` and its transition is then ``reachable``.
+    ``in_frame_of(k)``, where states are in frames of their own
+    (:mod:`sctd.learn.objects`), gives the poses in state k's frame: a transition is
+    judged in its source state's.
 
     Returns
     -------
@@ -159,12 +163,17 @@ def fix_traps(learner: LinearIMLearner, T_obj_ee: Sequence[ArrayLike]) -> list[T
     TrapError
         A trap that cannot be fixed (its message names the state and the plane).
     """
-    args = (learner.frame_offsets_, [np.asarray(T, dtype=float) for T in T_obj_ee],
-            learner.state_labels_)
+    poses = [np.asarray(T, dtype=float) for T in T_obj_ee]
+
+    def args(k: int) -> tuple:
+        """What a reach is judged on: state k's poses in its own frame."""
+        T = poses if in_frame_of is None else [np.asarray(x, dtype=float) for x in in_frame_of(k)]
+        return learner.frame_offsets_, T, learner.state_labels_
+
     states = learner.states_
     found = []
     for h in learner.transitions_:
-        lowest = _entry_reach(states[h.source], h, h.source, *args)
+        lowest = _entry_reach(states[h.source], h, h.source, *args(h.source))
         fixed = fixed_state(states[h.source], h, lowest)
         added = None
         if fixed is not None:
@@ -173,5 +182,5 @@ def fix_traps(learner: LinearIMLearner, T_obj_ee: Sequence[ArrayLike]) -> list[T
             h.reachable = True  # a translation along the normal's largest part reaches it
         found.append((h, lowest, added))
     return [TrapFinding(h.source, h.target, h.frame, lowest, added,
-                        _entry_reach(states[h.target], h, h.target, *args) >= MIN_REACH)
+                        _entry_reach(states[h.target], h, h.target, *args(h.target)) >= MIN_REACH)
             for h, lowest, added in found]
