@@ -43,7 +43,7 @@ from sctd_services.user import PROFILES
 
 from ..app.errors import EXIT_FAILED, fail
 from ..app.logs import log_folder
-from ..app.options import TASK_HELP
+from ..app.options import TASK_HELP, add_arguments
 from ..runtime.sets import goal_set
 from .eval_realtime import realtime_job
 
@@ -85,11 +85,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
-    p.add_argument("--arm-lag", type=float, default=0.0, metavar="S",
-                   help="with --lockstep: the arm takes each target this many s after the daemon "
-                        "published it (a delay line), as an arm whose tracking lags (franky's impedance "
-                        "controller on franky-sim: about 0.05 s): how well a skill and the simulated "
-                        "user hold up on a slower arm (default 0)")
+    add_arguments(p, TaskSpec, only=("arm_lag",))
     p.add_argument("--driver", metavar="NAME", default=None,
                    help="real time only: run the trials on the arm this robot driver serves (sctd robot "
                         "--list; e.g. franky against franky-sim) instead of sctd's simulator, the task's "
@@ -97,8 +93,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--driver-args", metavar="FLAGS", default="",
                    help="the driver's flags, one string: --driver-args '--host 127.0.0.1 --realtime ignore'")
     p.add_argument("--jobs", type=int, default=None, help="lockstep trials run in parallel (default: CPUs)")
-    p.add_argument("--time-limit", type=float, default=None,
-                   help="s per trial (default: the task file's time_limit; with --set, each goal's)")
+    add_arguments(p, TaskSpec, only=("time_limit",))
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
     p.add_argument("--report", metavar="DIR", help="write evaluation.json and figures here")
     p.add_argument("--logs", metavar="DIR", help="keep the real-time trials' process logs here")

@@ -55,9 +55,15 @@ class TaskSpec:
     task: str
     axes: int = 3
     profile: str = "steady"
-    time_limit: float | None = None
+    time_limit: float | None = field(default=None, metadata={
+        "help": "s per trial (default: the task file's time_limit; with --set, each goal's)"})
     stuck_after: float = 10.0
-    arm_lag: float = 0.0
+    arm_lag: float = field(default=0.0, metadata={
+        "metavar": "S",
+        "help": "with --lockstep: the arm takes each target this many s after the daemon published it "
+                "(a delay line), as an arm whose tracking lags (franky's impedance controller on "
+                "franky-sim: about 0.05 s): how well a skill and the simulated user hold up on a slower "
+                "arm (default 0)"})
     task_file: str = ""
 
     @classmethod
