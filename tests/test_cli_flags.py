@@ -29,9 +29,17 @@ def _argvs() -> list[list[str]]:
         [[name] for name, cmd in COMMANDS.items() if not cmd.group] + [["robot", d] for d in _drivers()]
 
 
+def _type(a: argparse.Action) -> str:
+    """The name of the flag's type; ``str`` for a value taken as given (argparse's
+    default), whether said or not."""
+    if a.type is None and a.nargs != 0:
+        return "str"
+    return getattr(a.type, "__name__", repr(a.type))
+
+
 def _row(a: argparse.Action) -> dict[str, Any]:
     return {"options": sorted(a.option_strings), "dest": a.dest, "default": repr(a.default),
-            "type": getattr(a.type, "__name__", repr(a.type)), "nargs": a.nargs, "const": repr(a.const),
+            "type": _type(a), "nargs": a.nargs, "const": repr(a.const),
             "choices": None if a.choices is None else [repr(c) for c in a.choices],
             "action": type(a).__name__, "required": a.required}
 
