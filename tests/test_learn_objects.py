@@ -161,9 +161,12 @@ def test_a_task_object_carried_by_the_hand_is_not_the_frame_learned_in(picks):
 
 @pytest.mark.parametrize("method", ["linear", "vf"])
 def test_the_learner_puts_the_carry_in_the_table_tops_frame(picks, method):
-    from sctd.learn import learn_skill
+    from sctd.learn import learn, skill_bundle
+    from sctd.skill import skill_from_bundle
 
-    skill = learn_skill(picks, method, name="pick", object="cup")
+    bundle = skill_bundle(learn(picks, method, object="cup"), "pick")
+    assert "# Learned in the frame of tabletop: cup moves with the hand" in bundle.yaml_text
+    skill = skill_from_bundle(bundle)
     assert skill.object == "cup" and "tabletop" in skill.objects()
     grips = [s.name for s in skill.states if s.gripper is not None]
     assert [skill.states[skill.state_index(n)].gripper.action for n in grips] == ["close", "open"]

@@ -130,13 +130,17 @@ def _gripper_header(result: LinearResult | VectorFieldResult, skill: Skill) -> s
                       *(f"  {line}" for line in gripper_lines(result.gripper, skill))])
 
 
-def _objects_header(result: LinearResult) -> str:
-    """Where the demonstrations carry other bodies: each state's frame and why (nothing
-    without them)."""
-    if not any(c.spread for c in result.objects):
-        return ""
-    return "\n".join(["", "Frames (each state's, among the demonstrations' bodies):",
-                      *(f"  {c.line(state_name(c.state))}" for c in result.objects)])
+def _objects_header(result: LinearResult | VectorFieldResult) -> str:
+    """Where the demonstrations carry other bodies: the frame learned in where it is not
+    the task object's, and each linear state's frame and why (nothing without them)."""
+    lines = []
+    if result.frame and result.frame != result.options.object:
+        lines += ["", f"Learned in the frame of {result.frame}: {result.options.object} moves with the "
+                      "hand in a gripper phase (docs/learning.md, \"Other bodies\")."]
+    if isinstance(result, LinearResult) and any(c.spread for c in result.objects):
+        lines += ["", "Frames (each state's, among the demonstrations' bodies):",
+                  *(f"  {c.line(state_name(c.state))}" for c in result.objects)]
+    return "\n".join(lines)
 
 
 def _linear_header(result: LinearResult) -> str:
@@ -298,4 +302,5 @@ def skill_bundle(result: LinearResult | VectorFieldResult, name: str) -> Bundle:
         return bundle_from_skill(skill, _linear_header(result) + _objects_header(result)
                                  + _gripper_header(result, skill))
     skill = vf_skill(result, name)
-    return bundle_from_skill(skill, _vf_header(result) + _gripper_header(result, skill))
+    return bundle_from_skill(skill, _vf_header(result) + _objects_header(result)
+                             + _gripper_header(result, skill))
