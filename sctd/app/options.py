@@ -93,7 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
     exclude : collection of str
         Field names to leave out (a flag another call adds, or a differently grouped one).
     show_default : bool
-        End each help text of a flag taking a value with ``(default <value>)``.
+        End each help text of a flag taking a value with ``(default <value>)`` (but for a
+        default of None, which the help says in words).
     dest_prefix : str
         Prefix of the argparse destinations (``emg_`` keeps a device's filter settings
         apart from other flags); :func:`from_namespace` takes the same prefix.
@@ -117,14 +118,15 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls
         kwargs: dict[str, Any] = {"dest": dest_prefix + f.name, "help": help_prefix + f.metadata["help"],
                                   "default": f.default}
         if f.metadata.get("repeatable"):  # one element each time (argparse appends to a list)
-            kind, kwargs["action"], kwargs["default"] = typing.get_args(kind)[0], "append", list(f.default)
+            kind, kwargs["action"] = typing.get_args(kind)[0], "append"
+            kwargs["default"] = list(f.default)  # type: ignore[arg-type]
             kwargs["help"] += " (repeatable)"
         elif typing.get_origin(kind) is tuple:  # a list of names, given comma-separated
             kind = _names
         if kind is bool:
             kwargs["action"] = "store_false" if f.default else "store_true"
         else:
-            if show_default:
+            if show_default and f.default is not None:
                 kwargs["help"] += " (default %(default)s)"
             kwargs["type"] = kind
             if f.metadata.get("choices") is not None:

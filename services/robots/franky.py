@@ -32,12 +32,14 @@ from __future__ import annotations
 import argparse
 import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sctd import se3
+from sctd.app.options import add_arguments, from_namespace
 from sctd.robots import Reading, RobotDriver, RobotError, RobotFault
 
 Array = np.ndarray
@@ -146,20 +148,73 @@ class ClockMap:
         self._anchor = (t_arm, wall)
 
 
+def _flag(default: Any, help: str, **meta: Any) -> Any:
+    return field(default=default, metadata={"help": help, **meta})
+
+
+@dataclass(frozen=True)
+class FrankyOptions:
+    """The franky driver's settings as ``sctd robot franky`` takes them: each field is the
+    flag of the same name (:mod:`sctd.app.options`), poses and per-joint values as the
+    text given (:meth:`FrankyDriver.from_options` parses and checks them)."""
+
+    host: str | None = _flag(None, "the arm's FCI address (franky-sim prints its own); needed to serve")
+    tool: str | None = _flag(None, "the task's hand frame in the arm's nominal end effector (the flange "
+                                   "and the hand Desk is configured with), set on the arm at every "
+                                   "connection (set_ee, NE_T_EE; default: identity, the nominal end "
+                                   "effector)", metavar="x,y,z,qx,qy,qz,qw")
+    base: str | None = _flag(None, "the arm's base in the task's world (default: the world is the base)",
+                             metavar="x,y,z,qx,qy,qz,qw")
+    stiffness: float = _flag(2000.0, "translational stiffness of the tracking controller, N/m")
+    rotational_stiffness: float = _flag(150.0, "rotational stiffness, N m/rad")
+    realtime: str = _flag("enforce", "libfranka's real-time check: enforce (a real arm: a PREEMPT_RT "
+                                     "kernel) or ignore (franky-sim, a laptop)",
+                          choices=("enforce", "ignore"))
+    start_dynamics: float = _flag(0.1, "with --move-to-start: the fraction of the arm's velocity, "
+                                       "acceleration and jerk limits the move takes")
+    urdf: str | None = _flag(None, "the arm's URDF, for --move-to-start's joint posture (default: "
+                                   "franky-sim's FR3 where franky-sim is installed)", metavar="FILE")
+    ee_frame: str = _flag("fr3_hand_tcp", "the URDF's frame of the arm's nominal end effector",
+                          metavar="NAME")
+    posture_stiffness: float = _flag(5.0, "N m/rad of the tracking controller's nullspace pull towards "
+                                          "the start posture (with --move-to-start)")
+    friction: str | None = _flag(None, "each joint's Coulomb friction, N m, that the tracking controller "
+                                       "compensates (franky's friction compensation, capped at these "
+                                       "values); identify your arm's before using it (franky-sim's FR3: "
+                                       f"{','.join(f'{x:g}' for x in FRANKY_SIM_FRICTION)}; default: none)",
+                                 metavar="N_M,... (7)")
+    friction_viscous: str | None = _flag(None, "each joint's viscous friction, N m s/rad, compensated "
+                                               "with --friction (default: none)", metavar="N_M_S,... (7)")
+    load: str = _flag("none", "the payload set on the arm (libfranka's set_load) at each connection: "
+                              "task: --task's held object, its mass with its contents and its centre of "
+                              "mass (a real arm holding it needs it for its gravity and collision "
+                              "models); none: no payload, set so whatever an earlier program set goes "
+                              "(franky-sim holds no object, and a load set there would lift the hand)",
+                      choices=("none", "task"))
+    gripper: bool = _flag(False, "drive the arm's Franka Hand too (franky's Gripper): commands from "
+                                 "sctd/<robot>/gripper, its width and grasp in every state")
+    connect_timeout: float = _flag(5.0, "s to wait for the arm's answer when connecting")
+    collision_torque: float = _flag(20.0, "joint torque threshold of the arm's collision reflex, N m")
+    collision_force: float = _flag(30.0, "Cartesian force threshold of the collision reflex, N")
+
+
 class FrankyDriver(RobotDriver):
-    """See the module doc. Flags: ``--host`` (the arm's FCI address), ``--tool``,
-    ``--base``, ``--stiffness``, ``--rotational-stiffness``, ``--friction``,
-    ``--friction-viscous``, ``--realtime``, ``--collision-torque``, ``--collision-force``."""
+    """See the module doc. Its settings and flags: :class:`FrankyOptions`."""
 
     name = "franky"
     description = "a Franka FR3 or Panda through franky and libfranka's protocol (franky-sim too)"
 
     def __init__(self, host: str, *, tool: Array | None = None, base: Array | None = None,
-                 stiffness: float = 2000.0, rotational_stiffness: float = 150.0, realtime: str = "enforce",
-                 collision_torque: float = 20.0, collision_force: float = 30.0, connect_timeout: float = 5.0,
-                 start_dynamics: float = 0.1, urdf: Path | None = None, ee_frame: str = "fr3_hand_tcp",
-                 posture_stiffness: float = 5.0, friction: Array | None = None,
-                 friction_viscous: Array | None = None, gripper: bool = False,
+                 stiffness: float = FrankyOptions.stiffness,
+                 rotational_stiffness: float = FrankyOptions.rotational_stiffness,
+                 realtime: str = FrankyOptions.realtime,
+                 collision_torque: float = FrankyOptions.collision_torque,
+                 collision_force: float = FrankyOptions.collision_force,
+                 connect_timeout: float = FrankyOptions.connect_timeout,
+                 start_dynamics: float = FrankyOptions.start_dynamics, urdf: Path | None = None,
+                 ee_frame: str = FrankyOptions.ee_frame,
+                 posture_stiffness: float = FrankyOptions.posture_stiffness,
+                 friction: Array | None = None, friction_viscous: Array | None = None, gripper: bool = False,
                  load: tuple[float, Array] | None = None):
         self.host = host
         self.load = load  # (kg, centre of mass in the task's hand frame) set with set_load
@@ -194,67 +249,22 @@ class FrankyDriver(RobotDriver):
     # -- flags -------------------------------------------------------------------------
     @classmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
-        parser.add_argument("--host", help="the arm's FCI address (franky-sim prints its own); needed "
-                                           "to serve")
-        parser.add_argument("--tool", default=None, metavar="x,y,z,qx,qy,qz,qw",
-                            help="the task's hand frame in the arm's nominal end effector (the flange and "
-                                 "the hand Desk is configured with), set on the arm at every connection "
-                                 "(set_ee, NE_T_EE; default: identity, the nominal end effector)")
-        parser.add_argument("--base", default=None, metavar="x,y,z,qx,qy,qz,qw",
-                            help="the arm's base in the task's world (default: the world is the base)")
-        parser.add_argument("--stiffness", type=float, default=2000.0,
-                            help="translational stiffness of the tracking controller, N/m "
-                                 "(default %(default)s)")
-        parser.add_argument("--rotational-stiffness", type=float, default=150.0,
-                            help="rotational stiffness, N m/rad (default %(default)s)")
-        parser.add_argument("--realtime", choices=("enforce", "ignore"), default="enforce",
-                            help="libfranka's real-time check: enforce (a real arm: a PREEMPT_RT kernel) or "
-                                 "ignore (franky-sim, a laptop) (default %(default)s)")
-        parser.add_argument("--start-dynamics", type=float, default=0.1,
-                            help="with --move-to-start: the fraction of the arm's velocity, acceleration and "
-                                 "jerk limits the move takes (default %(default)s)")
-        parser.add_argument("--urdf", default=None, metavar="FILE",
-                            help="the arm's URDF, for --move-to-start's joint posture (default: franky-sim's "
-                                 "FR3 where franky-sim is installed)")
-        parser.add_argument("--ee-frame", default="fr3_hand_tcp", metavar="NAME",
-                            help="the URDF's frame of the arm's nominal end effector (default %(default)s)")
-        parser.add_argument("--posture-stiffness", type=float, default=5.0,
-                            help="N m/rad of the tracking controller's nullspace pull towards the start "
-                                 "posture (with --move-to-start; default %(default)s)")
-        parser.add_argument("--friction", default=None, metavar="N_M,... (7)",
-                            help="each joint's Coulomb friction, N m, that the tracking controller "
-                                 "compensates (franky's friction compensation, capped at these values); "
-                                 "identify your arm's before using it (franky-sim's FR3: "
-                                 f"{','.join(f'{x:g}' for x in FRANKY_SIM_FRICTION)}; default: none)")
-        parser.add_argument("--friction-viscous", default=None, metavar="N_M_S,... (7)",
-                            help="each joint's viscous friction, N m s/rad, compensated with --friction "
-                                 "(default: none)")
-        parser.add_argument("--load", choices=("none", "task"), default="none",
-                            help="the payload set on the arm (libfranka's set_load) at each connection: "
-                                 "task: --task's held object, its mass with its contents and its centre "
-                                 "of mass (a real arm holding it needs it for its gravity and collision "
-                                 "models); none (default: no payload, set so whatever an earlier "
-                                 "program set; franky-sim holds no object, and a load set there would "
-                                 "lift the hand)")
-        parser.add_argument("--gripper", action="store_true",
-                            help="drive the arm's Franka Hand too (franky's Gripper): commands from "
-                                 "sctd/<robot>/gripper, its width and grasp in every state")
-        parser.add_argument("--connect-timeout", type=float, default=5.0,
-                            help="s to wait for the arm's answer when connecting (default %(default)s)")
-        parser.add_argument("--collision-torque", type=float, default=20.0,
-                            help="joint torque threshold of the arm's collision reflex, N m "
-                                 "(default %(default)s)")
-        parser.add_argument("--collision-force", type=float, default=30.0,
-                            help="Cartesian force threshold of the collision reflex, N (default %(default)s)")
+        add_arguments(parser, FrankyOptions, show_default=True)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace, task: Any) -> FrankyDriver:
-        if not args.host:
+        return cls.from_options(from_namespace(FrankyOptions, args), task)
+
+    @classmethod
+    def from_options(cls, o: FrankyOptions, task: Any) -> FrankyDriver:
+        """The driver of checked options (the poses and per-joint values parsed);
+        RobotError naming the flag otherwise."""
+        if not o.host:
             raise RobotError("--host: the arm's FCI address is needed (franky-sim prints its own)")
         poses = {}  # the flags of poses and of per-joint values, parsed
         for flag, parse in (("tool", _pose_flag), ("base", _pose_flag), ("friction", _joint_flag),
                             ("friction_viscous", _joint_flag)):
-            text = getattr(args, flag)
+            text = getattr(o, flag)
             try:
                 poses[flag] = None if text is None else parse(text)
             except ValueError as e:
@@ -263,17 +273,17 @@ class FrankyDriver(RobotDriver):
             raise RobotError("--friction-viscous: needs --friction (the Coulomb part)")
         for flag in ("stiffness", "rotational_stiffness", "collision_torque", "collision_force",
                      "connect_timeout", "start_dynamics", "posture_stiffness"):
-            v = getattr(args, flag)
+            v = getattr(o, flag)
             if not (np.isfinite(v) and v > 0):
                 raise RobotError(f"--{flag.replace('_', '-')}: must be positive, got {v}")
-        return cls(args.host, tool=poses["tool"], base=poses["base"], stiffness=args.stiffness,
-                   rotational_stiffness=args.rotational_stiffness, realtime=args.realtime,
-                   collision_torque=args.collision_torque, collision_force=args.collision_force,
-                   connect_timeout=args.connect_timeout, start_dynamics=min(1.0, args.start_dynamics),
-                   urdf=Path(args.urdf) if args.urdf else None, ee_frame=args.ee_frame,
-                   posture_stiffness=args.posture_stiffness, friction=poses["friction"],
-                   friction_viscous=poses["friction_viscous"], gripper=args.gripper,
-                   load=_task_load(task) if args.load == "task" else None)
+        return cls(o.host, tool=poses["tool"], base=poses["base"], stiffness=o.stiffness,
+                   rotational_stiffness=o.rotational_stiffness, realtime=o.realtime,
+                   collision_torque=o.collision_torque, collision_force=o.collision_force,
+                   connect_timeout=o.connect_timeout, start_dynamics=min(1.0, o.start_dynamics),
+                   urdf=Path(o.urdf) if o.urdf else None, ee_frame=o.ee_frame,
+                   posture_stiffness=o.posture_stiffness, friction=poses["friction"],
+                   friction_viscous=poses["friction_viscous"], gripper=o.gripper,
+                   load=_task_load(task) if o.load == "task" else None)
 
     @property
     def rate(self) -> float:
