@@ -11,10 +11,11 @@ builds its parser without loading the simulator. The arm's flags (``--urdf``,
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from sctd.app.defaults import defaults
-from sctd.app.options import add_robot_argument, add_task_argument
+from sctd.app.options import add_arguments, add_robot_argument, add_task_argument
 from sctd.wire.ros_options import add_ros_arguments
 from sctd.wire.session import add_zenoh_arguments
 
@@ -22,6 +23,30 @@ from .guard import add_limit_arguments
 
 if TYPE_CHECKING:
     from .robot import ArmModel
+
+
+def _setting(default: Any, help: str, **meta: Any) -> Any:
+    return field(default=default, metadata={"help": help, **meta})
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """The simulator's rates and joint bus. Each field is a ``sctd sim`` flag of the same
+    name (``--state-rate``, :mod:`sctd.app.options`); :class:`~sctd_sim.service.SimService`
+    and :class:`~sctd_sim.simulation.Simulation` take their defaults from here."""
+
+    rate: float = _setting(1000.0, "simulation cycle rate, Hz")
+    state_rate: float = _setting(1000.0, "state publication rate, Hz, at most --rate")
+    object_rate: float = _setting(50.0, "objects rate, Hz")
+    scene_rate: float = _setting(10.0, "scene key (task outcome, health) rate, Hz")
+    faults: str = _setting("", "joint-bus faults, e.g. drop=0.01,corrupt=0.001,delay=0.002 (also "
+                               "duplicate, delay_rate, bus_off, tx=0/1, rx=0/1, seed)", metavar="SPEC")
+    can_interface: str = _setting("virtual", "joint bus: python-can's in-process virtual bus (default), a "
+                                             "socketcan interface such as vcan0, or auto (socketcan when "
+                                             "--can-channel exists)",
+                                  choices=("virtual", "socketcan", "auto"))
+    can_channel: str | None = _setting(None, "socketcan interface name (default vcan0 for socketcan/auto)")
+    drive_timeout: float = _setting(0.01, "drive command timeout before it brakes, s")
 
 
 def add_service_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,24 +59,10 @@ def add_service_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trial-seed", type=int, default=None, metavar="N",
                    help="start from the seeded random start N of an evaluation trial (the hand and the "
                         "objects moved within what the task file's vary fields say)")
-    p.add_argument("--rate", type=float, default=1000.0,
-                   help="simulation cycle rate, Hz (default %(default)s)")
-    p.add_argument("--state-rate", type=float, default=1000.0,
-                   help="state publication rate, Hz, at most --rate (default %(default)s)")
-    p.add_argument("--object-rate", type=float, default=50.0,
-                   help="objects rate, Hz (default %(default)s)")
-    p.add_argument("--scene-rate", type=float, default=10.0,
-                   help="scene key (task outcome, health) rate, Hz (default %(default)s)")
-    p.add_argument("--faults", default="", metavar="SPEC",
-                   help="joint-bus faults, e.g. drop=0.01,corrupt=0.001,delay=0.002 "
-                        "(also duplicate, delay_rate, bus_off, tx=0/1, rx=0/1, seed)")
-    p.add_argument("--can-interface", choices=("virtual", "socketcan", "auto"), default="virtual",
-                   help="joint bus: python-can's in-process virtual bus (default), a socketcan "
-                        "interface such as vcan0, or auto (socketcan when --can-channel exists)")
-    p.add_argument("--can-channel", default=None,
-                   help="socketcan interface name (default vcan0 for socketcan/auto)")
-    p.add_argument("--drive-timeout", type=float, default=0.01,
-                   help="drive command timeout before it brakes, s (default %(default)s)")
+    # three calls keep the flags' order: only the numbers say their default in the help
+    add_arguments(p, SimSettings, only=("rate", "state_rate", "object_rate", "scene_rate"), show_default=True)
+    add_arguments(p, SimSettings, only=("faults", "can_interface", "can_channel"))
+    add_arguments(p, SimSettings, only=("drive_timeout",), show_default=True)
     add_limit_arguments(p)
     p.add_argument("--no-stamp-check", action="store_true",
                    help="do not refuse targets stamped before the simulator started (senders "

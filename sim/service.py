@@ -63,7 +63,7 @@ from sctd.wire.session import MSGPACK, session_from_args
 from .canbus import FastVirtualBus, FaultConfig
 from .canbus.zenoh_interface import FrameDecodeError, can_key, decode_frames, encode_frames
 from .guard import TargetGuard, TargetLimits, limits_from_args
-from .options import add_service_arguments, arm_from_args
+from .options import SimSettings, add_service_arguments, arm_from_args
 
 if TYPE_CHECKING:
     from .robot import ArmModel
@@ -167,7 +167,8 @@ class SimService:
     """
 
     def __init__(self, session: zenoh.Session, sim, robot: str = DEFAULT_ROBOT,
-                 state_rate: float = 1000.0, object_rate: float = 50.0, scene_rate: float = 10.0,
+                 state_rate: float = SimSettings.state_rate, object_rate: float = SimSettings.object_rate,
+                 scene_rate: float = SimSettings.scene_rate,
                  viewer=None, limits: TargetLimits | None = None, stamp_check: bool = True,
                  ros=None) -> None:
         self.session = session

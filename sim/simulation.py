@@ -26,6 +26,7 @@ from sctd.task import Task
 from .arm import SimArm
 from .canbus import FaultConfig
 from .controller import ImpedanceGains
+from .options import SimSettings
 from .robot import ArmModel, inverse_kinematics, load_arm_model
 from .scenes import Scene, make_scene
 
@@ -69,14 +70,14 @@ class Simulation:
     def __init__(
         self,
         scene: Task | Scene,
-        rate: float = 1000.0,
+        rate: float = SimSettings.rate,
         *,
         q0: np.ndarray | None = None,
         gains: ImpedanceGains | None = None,
         channel: str | None = None,
         bus_factory: Callable[[str], can.BusABC] | None = None,
         faults: FaultConfig | None = None,
-        drive_timeout: float = 0.01,
+        drive_timeout: float = SimSettings.drive_timeout,
         arm: ArmModel | None = None,
         compensate_payload: bool = True,
     ) -> None:

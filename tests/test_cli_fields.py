@@ -22,6 +22,7 @@ from sctd.runtime.controller import RuntimeConfig
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.teach.demonstrator import TeachOptions
 from sctd_sim.guard import TargetLimits
+from sctd_sim.options import SimSettings
 
 # The command (``robot NAME``: the driver's parser) -> the dataclasses it builds from flags.
 OPTIONS: dict[str, tuple[type, ...]] = {
@@ -29,7 +30,7 @@ OPTIONS: dict[str, tuple[type, ...]] = {
     "learn": (Preprocessing, LinearIMLearner, VectorFieldLearner, VectorFieldOptions, SkillOptions),
     "teach": (TeachOptions,),
     "eval": (TaskSpec,),
-    "sim": (TargetLimits,),
+    "sim": (SimSettings, TargetLimits),
     "robot sim": (TargetLimits,),
     "robot kinematic": (TargetLimits,),
     "robot franky": (TargetLimits,),  # and FrankyOptions, below (its extra may be missing)
