@@ -204,15 +204,18 @@ def _failures(per_trial: list[dict[str, Any]]) -> dict[str, int]:
 
 
 def table(rows_: list[dict[str, Any]]) -> list[str]:
-    """The suite's table, one line per task and skill."""
-    head = (f"{'task':<14} {'skill':<24} {'success':>9} {'median [s]':>10} {'vs base':>8} "
+    """The suite's table, one line per task and skill (the columns as wide as the longest
+    task and skill names)."""
+    tw = max([14, *(len(r["task"]) for r in rows_)])
+    sw = max([24, *(len(r["skill"]) for r in rows_)])
+    head = (f"{'task':<{tw}} {'skill':<{sw}} {'success':>9} {'median [s]':>10} {'vs base':>8} "
             f"{'floor [s]':>9} {'switches':>8} {'effort':>7}  failures")
     lines = [head, "-" * len(head)]
     for r in rows_:
         med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
         vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
         why = ", ".join(f"{k} x{v}" for k, v in r["failures"].items())
-        lines.append(f"{r['task']:<14} {r['skill']:<24} {r['successes']:>4}/{r['trials']:<4} {med:>10} "
+        lines.append(f"{r['task']:<{tw}} {r['skill']:<{sw}} {r['successes']:>4}/{r['trials']:<4} {med:>10} "
                      f"{vs:>8} {r['floor_s']:>9.2f} {r['mode_switches']:>8.1f} {r['effort']:>7.2f}  {why}")
     return lines
 
