@@ -18,6 +18,7 @@ import yaml
 
 from sctd import se3
 from sctd.task import TaskError, find_task, task_from_document
+from sctd.task.judge import holds
 from sctd.task.kinds import (
     BUILTIN,
     Facet,
@@ -359,6 +360,10 @@ def test_let_go_over_a_support_it_lands_standing_in_the_air_it_is_dropped():
         run(sc, pose, 0.5)
         r = readings(sc)
         assert r["cup.dropped"] and not r["cup.resting"] and r["tabletop.items"] == 0
+        # the outcome reports it: the task's fail rule holds, it is not done
+        task = find_task(CUP)
+        assert [f.reason for f in task.outcome.fail if holds(f.when, r, sc.positions())] == ["dropped"]
+        assert not sc.outcome()["done"]
 
 
 def test_a_support_pushes_back_on_an_item_carried_into_it():
@@ -610,3 +615,134 @@ def test_a_pick_and_place_floor_is_the_straight_way_through_its_points():
     # the tap: 17 cm to the grip (the clock's 20 cm less the grip's 3 cm), 9 cm back, 60 deg
     tap = floor(find_task("tap"), Limits(max_linear_speed=0.1, max_angular_speed=0.5))
     assert tap == pytest.approx((0.17 + 0.09) / 0.1 + math.radians(60.0) / 0.5)
+
+
+# -- sections: kinds that own a section of the scene ------------------------------------------
+def test_the_head_is_a_registered_section_with_every_part():
+    from sctd.task.kinds import Section, sections
+    from sctd.task.kinds.head import Head
+
+    assert sections()["heads"] is Head and registry()["heads"] is Head
+    task = find_task("drink")
+    head = task.scene.sections["heads"]["face"]
+    assert isinstance(head, Section) and task.scene.heads == {"face": head}
+    assert Head.read(_reader(), "face", copy.deepcopy(head.to_yaml()), "x", task.scene) == head
+    assert isinstance(head.physics(task.scene), FacetPhysics)
+    assert head.body() == "mouth" and [s.kind for s in head.shapes()] == ["sphere"]
+    (centre, radius), = head.footprint(task.scene)
+    assert radius == 0.09 and np.allclose(centre, head.centre(task.scene.bodies["mouth"].T_world))
+
+
+LAMP_DOC = {"sctd_task": 1, "name": "lamps_test", "object": "desk",
+            "scene": {"start": {"position": [0.45, 0.0, 0.6]},
+                      "bodies": {"desk": {"position": [0.6, 0.0, 0.6]}},
+                      "lamps": {"lamp": {"over": "desk", "within": 0.1}}},
+            "outcome": {"done": {"reading": "lamp.lit_for", "at_least": 0.5}, "progress": "lamp.lit_for",
+                        "clock": True, "time_limit": 10},
+            "intent": [{"name": "go", "reach": {"frame": "hand", "to": [0, 0, 0],
+                                                "reached": {"radial": 0.01, "height": 0.01}}}]}
+
+
+@pytest.fixture
+def lamps(monkeypatch):
+    """A section kind of the test's own (``scene.lamps.<name>: {over, within}``: a lamp
+    that lights while the hand is within ``within`` of the body ``over``), registered."""
+    from dataclasses import dataclass
+
+    from sctd.task import kinds
+    from sctd.task.kinds import Section
+
+    @dataclass(frozen=True)
+    class Lamp(Section):
+        key = "lamps"
+        noun = "lamp"
+        order = 90
+        quantities = ("lit", "lit_for")
+        flags = ("lit",)
+        name: str
+        over: str
+        within: float
+
+        @classmethod
+        def read(cls, r, name, v, path, scene):
+            d = r.fields(v, path, {"over", "within"})
+            if d["over"] not in scene.bodies:
+                raise r.fail(f"{path}.over", f"unknown body {d['over']!r}")
+            return cls(name, d["over"], r.positive(d["within"], f"{path}.within"))
+
+        def to_yaml(self):
+            return {"over": self.over, "within": float(self.within)}
+
+        def physics(self, scene):
+            return _LampPhysics(self)
+
+        def body(self):
+            return self.over
+
+        def shapes(self):
+            return [Shape("sphere", (0.02, 0.02, 0.02), np.eye(4), (1.0, 1.0, 0.0))]
+
+    class _LampPhysics(FacetPhysics):
+        def __init__(self, lamp):
+            self.lamp, self.t = lamp, 0.0
+
+        def reset(self, world):
+            self.t = 0.0
+
+        def _lit(self, world):
+            d = world.T_world_ee[:3, 3] - world.poses[self.lamp.over][:3, 3]
+            return float(np.linalg.norm(d)) < self.lamp.within
+
+        def step(self, world, dt):
+            self.t += dt if self._lit(world) else 0.0
+            return np.zeros(6)
+
+        def readings(self, world):
+            n = self.lamp.name
+            return {f"{n}.lit": self._lit(world), f"{n}.lit_for": self.t}
+
+    real = kinds.sections()
+    monkeypatch.setattr(kinds, "sections", lambda: {**real, "lamps": Lamp})
+    return Lamp
+
+
+def test_a_section_kind_is_read_written_simulated_and_drawn(lamps):
+    """A kind that owns a section of the scene: the reader reads its entries by name (its
+    readings by the entry's name), the writer writes them back, the simulator steps its
+    physics and the view draws it with its body."""
+    from sctd.task.writer import task_to_yaml
+    from sctd_services.view.task_scene import task_parts
+
+    task = read(copy.deepcopy(LAMP_DOC))
+    assert task.scene.sections == {"lamps": {"lamp": lamps("lamp", "desk", 0.1)}}
+    assert task.outcome.progress.element == "lamp"
+    assert task_to_yaml(task)["scene"]["lamps"] == {"lamp": {"over": "desk", "within": 0.1}}
+    assert read(task_to_yaml(task)).scene.sections == task.scene.sections
+    scene = make_scene(task)
+    T = task.scene.bodies["desk"].T_world.copy()
+    for _ in range(100):
+        scene.step(T, np.zeros(6), 0.01)
+    out = scene.outcome()
+    assert out["readings"]["lamp.lit"] is True and out["done"]
+    assert [(p.name, p.anchor) for p in task_parts(task)] == [("lamp/lamp", ("body", "desk"))]
+
+
+@pytest.mark.parametrize("edit, where, what", [
+    (lambda d: d["scene"].update(lamps={}), "scene.lamps", "expected at least one lamp (or no lamps field)"),
+    (lambda d: d["scene"]["lamps"].update(Lamp={"over": "desk", "within": 0.1}), "scene.lamps.Lamp",
+     "expected a name of lower-case letters"),
+    (lambda d: d["scene"]["lamps"].update(desk={"over": "desk", "within": 0.1}), "scene",
+     "the name 'desk' is used twice (bodies, held frames, joints, heads, lamps, zones and 'hand'"),
+    (lambda d: d["scene"]["lamps"]["lamp"].update(over="chair"), "scene.lamps.lamp.over",
+     "unknown body 'chair'"),
+    (lambda d: d["outcome"].update(progress="lamp.colour"), "outcome.progress",
+     "a lamp reports lit, lit_for; got 'colour'"),
+    (lambda d: d["outcome"].update(done={"reading": "lamp.lit", "at_least": 1}), "outcome.done",
+     "lamp.lit is a flag"),
+])
+def test_bad_section_entries_are_refused_naming_them(lamps, edit, where, what):
+    doc = copy.deepcopy(LAMP_DOC)
+    edit(doc)
+    with pytest.raises(TaskError) as e:
+        read(doc)
+    assert e.value.path == where and what in e.value.problem, str(e.value)
