@@ -22,9 +22,10 @@ knows a task:
   spring-damper and friction, and a **button** in it (:class:`PushButton`, a light
   switch) that gives way under the push against its spring and switches when pushed past
   its click depth;
-- **heads** (:class:`HeadContact`): a person's head, a sphere behind a body's frame
-  (the mouth), whose contact spring pushes back on the hand and the held object's frames
-  inside it, and reports the force;
+- the elements of registered kinds (:mod:`sctd.task.kinds`): a section's entries (a
+  person's head, whose contact spring pushes back on the hand and the held object's
+  frames inside it) and the bodies' facets (an item the fingers take), each stepped by
+  its kind's physics on a :class:`~sctd.task.kinds.World`;
 - **zones** (:class:`ZoneWatch`): a goal pose of a frame of the hand within tolerances,
   timed while the frame stays inside (a cup held at the lips for 2 s).
 
@@ -48,7 +49,7 @@ from sctd import se3
 from sctd.task import Task, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
-from sctd.task.model import Body, Button, Container, Contents, Head, Held, Joint, Zone
+from sctd.task.model import Body, Button, Container, Contents, Held, Joint, Zone
 from sctd.task.reader import HAND
 from sctd.wire.codec import GripperCmd, GripperReading
 
@@ -525,64 +526,6 @@ def contacts(task: Task) -> list[Contact]:
     frames = {HAND: np.eye(4), **(sc.held.frames if sc.held is not None else {})}
     return [(PushButton if b.button is not None else Contact)(b, [frames[f] for f in b.surface.touch])
             for b in sc.bodies.values() if b.surface is not None]
-# -- a person's head --------------------------------------------------------------------
-class HeadContact:
-    """A person's head (:class:`~sctd.task.model.Head`): a sphere behind a body's frame
-    (the mouth) that pushes back on the hand's points inside it.
-
-    The points are the hand's origin and the held object's frames (``T_ee_points``).
-    Each one at depth ``e = r - |p - c|`` inside the sphere (centre ``c``, radius
-    ``r``), moving along the outward normal ``n`` at ``v_n``, is pushed out by
-    ``f = max(0, k e - d v_n) n``: a spring and a damper that push and never pull.
-    The forces act on the hand at their points, as a wrench at the ee's origin.
-
-    Attributes
-    ----------
-    force : float
-        The norm of the contact force on the head now, N.
-    max_force : float
-        The highest ``force`` so far, N.
-    """
-
-    def __init__(self, head: Head, T_ee_points: list[np.ndarray]):
-        self.head = head
-        self.name = head.name
-        self.points = [T[:3, 3].copy() for T in T_ee_points]
-        self.reset()
-
-    def reset(self) -> None:
-        """No contact."""
-        self.force = 0.0
-        self.max_force = 0.0
-
-    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_front: np.ndarray) -> np.ndarray:
-        """The wrench the head exerts on the hand (world axes at the ee's origin), shape (6,)."""
-        h = self.head
-        c = h.centre(T_world_front)
-        R, p_ee = T_world_ee[:3, :3], T_world_ee[:3, 3]
-        v, w = twist[:3], twist[3:]
-        wrench = np.zeros(6)
-        for offset in self.points:
-            arm = R @ offset  # from the ee's origin to the point
-            d = p_ee + arm - c
-            dist = float(np.linalg.norm(d))
-            depth = h.radius - dist
-            if depth <= 0.0 or dist < 1e-9:  # (outside, or at the centre: no normal)
-                continue
-            n = d / dist
-            v_n = float((v + np.cross(w, arm)) @ n)
-            push = max(0.0, h.stiffness * depth - h.damping * v_n)
-            wrench[:3] += push * n
-            wrench[3:] += np.cross(arm, push * n)
-        self.force = float(np.linalg.norm(wrench[:3]))
-        self.max_force = max(self.max_force, self.force)
-        return wrench
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {f"{n}.force": self.force, f"{n}.max_force": self.max_force}
-
-
 class ZoneWatch:
     """Times a :class:`~sctd.task.model.Zone`: ``dwell`` grows by each step's ``dt``
     while the frame is inside and falls to 0 when it leaves; ``max_dwell`` is the
@@ -641,8 +584,6 @@ class TaskScene:
             self.flow = Flow(sc.held, sc.held.contents, container)
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
         self.contacts = contacts(task)
-        points = [np.eye(4), *(sc.held.frames.values() if sc.held is not None else ())]
-        self.heads = [HeadContact(h, points) for h in sc.heads.values()]
         frames = sc.held.frames if sc.held is not None else {}
         self.zones = [ZoneWatch(z, frames.get(z.frame, np.eye(4))) for z in sc.zones.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
@@ -650,13 +591,18 @@ class TaskScene:
         self.fingers = Fingers()
         self.live = {n: T.copy() for n, T in self.poses.items()}  # the bodies now (an item moves)
         self.world = World(self._T_world_ee, np.zeros(6), self.live, self.fingers, {})
+        for key, entries in sc.sections.items():  # (sections first: stepped before the facets)
+            for name, entry in entries.items():
+                section = entry.physics(sc)
+                if section is not None:
+                    self.world.physics.setdefault(name, {})[key] = section
         for name, body in sc.bodies.items():
             for key, facet in body.facets.items():
                 phys = facet.physics(name, sc)
                 if phys is not None:
                     self.world.physics.setdefault(name, {})[key] = phys
         self._physics: list[FacetPhysics] = [p for facets in self.world.physics.values()
-                                             for p in facets.values()]  # (in the file's order)
+                                             for p in facets.values()]  # (sections, then the facets)
         self.reset()
 
     def reset(self) -> None:
@@ -668,8 +614,6 @@ class TaskScene:
             h.reset()
         for c in self.contacts:
             c.reset()
-        for head in self.heads:
-            head.reset()
         for z in self.zones:
             z.reset()
         self.live.clear()
@@ -704,13 +648,11 @@ class TaskScene:
             wrench[:3] += h.step(T_world_ee, twist, live[h.joint.handle], dt)
         for c in self.contacts:
             wrench += c.step(T_world_ee, twist, live[c.name], dt)
-        for head in self.heads:
-            wrench += head.step(T_world_ee, twist, live[head.head.behind])
         for z in self.zones:
             z.step(T_world_ee, live[z.zone.around], dt)
         self.fingers.advance(dt)
         self.world.T_world_ee, self.world.twist = T_world_ee, twist
-        for p in self._physics:  # (the registered kinds' elements: an item, in the hand or not)
+        for p in self._physics:  # (the registered kinds' elements: a head, an item in the hand or not)
             wrench += p.step(self.world, dt)
         load = self.payload()
         if load is not None:
@@ -761,8 +703,6 @@ class TaskScene:
             out.update(h.readings())
         for c in self.contacts:
             out.update(c.readings())
-        for head in self.heads:
-            out.update(head.readings())
         for z in self.zones:
             out.update(z.readings())
         for p in self._physics:

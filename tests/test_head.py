@@ -15,8 +15,9 @@ import yaml
 from sctd import se3
 from sctd.task import TaskError, find_task, shipped_folder, task_from_document
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import READINGS, Head
-from sctd_sim.scenes import HeadContact, TaskScene, make_scene
+from sctd.task.kinds import World
+from sctd.task.kinds.head import Head, HeadPhysics
+from sctd_sim.scenes import TaskScene, make_scene
 
 DRINK = shipped_folder() / "drink.yaml"
 DT = 1e-3
@@ -30,7 +31,7 @@ def test_the_drink_task_reads_as_the_file_says():
     t = find_task("drink")
     assert t.object == "mouth" and t.scene.heads == {
         "face": Head("face", "mouth", 0.09, stiffness=1000.0, damping=20.0)}
-    assert READINGS["head"] == ("force", "max_force")
+    assert Head.quantities == ("force", "max_force")
     assert thresholds(t.outcome.done) == {"cup.poured": 0.2}
     mouth = t.scene.bodies["mouth"]
     yaw = math.radians(50)
@@ -153,20 +154,24 @@ def test_the_rim_inside_the_lips_is_pushed_out_by_the_spring():
 
 def test_the_damper_pushes_harder_going_in_and_never_pulls():
     head = Head("face", "mouth", 0.09, stiffness=1000.0, damping=20.0)
-    contact = HeadContact(head, [np.eye(4)])  # the hand's origin alone
+    contact = HeadPhysics(head, [np.eye(4)])  # the hand's origin alone
     T_mouth = np.eye(4)
+
+    def step(T_ee: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        return contact.step(World(T_ee, twist, {"mouth": T_mouth}), DT)
+
     T_ee = se3.transform_from_rt(np.eye(3), [-0.002, 0.0, 0.0])  # 2 mm in, along the mouth's x
     going_in = np.array([-0.05, 0.0, 0.0, 0.0, 0.0, 0.0])
-    w = contact.step(T_ee, going_in, T_mouth)
+    w = step(T_ee, going_in)
     assert w[0] == pytest.approx(1000.0 * 0.002 + 20.0 * 0.05)
     going_out = np.array([0.5, 0.0, 0.0, 0.0, 0.0, 0.0])  # faster out than the spring pushes
-    assert np.array_equal(contact.step(T_ee, going_out, T_mouth), np.zeros(6))
+    assert np.array_equal(step(T_ee, going_out), np.zeros(6))
     assert contact.force == 0.0 and contact.max_force == pytest.approx(3.0)
     # a turning hand: its point's speed is the twist's at the point
-    contact = HeadContact(head, [se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.1])])
+    contact = HeadPhysics(head, [se3.transform_from_rt(np.eye(3), [0.0, 0.0, 0.1])])
     T_ee = se3.transform_from_rt(np.eye(3), [-0.002, 0.0, -0.1])
     spin = np.array([0.0, 0.0, 0.0, 0.0, -0.5, 0.0])  # about -y: the point 0.1 m up moves along -x
-    w = contact.step(T_ee, spin, T_mouth)
+    w = step(T_ee, spin)
     n = np.array([-0.002 + 0.09, 0.0, 0.0])
     n /= np.linalg.norm(n)
     assert w[0] == pytest.approx(1000.0 * 0.002 + 20.0 * 0.05 * n[0])

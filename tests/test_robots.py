@@ -112,7 +112,7 @@ def test_the_observer_judges_a_pour_from_the_hand_and_refuses_contact_tasks():
     obs.step(10.2, T1)
     tip = obs.objects()["bottle_tip"]
     assert np.allclose(tip[:3, 3], (T1 @ pour.scene.held.frames["bottle_tip"])[:3, 3])
-    assert observer_for(find_task("drink")).scene.heads  # watched, not felt
+    assert "face.force" in observer_for(find_task("drink")).scene.readings()  # watched, not felt
     for contact_task in ("drawer", "light_switch"):
         with pytest.raises(RobotError, match="needs contact physics"):
             observer_for(find_task(contact_task))

@@ -28,8 +28,10 @@ from numpy.typing import NDArray
 
 from sctd import se3
 
+from . import kinds
+from .kinds import Section
 from .kinematics import handle_pose
-from .model import Body, Head, Joint, Scene, Task, Zone
+from .model import Body, Joint, Scene, Task, Zone
 from .reader import TaskError
 
 Array = NDArray[np.float64]
@@ -48,9 +50,11 @@ def footprint(task: Task, T: Array | None = None) -> tuple[Array, float]:
     T = np.eye(4) if T is None else T
     points = [b.T_world[:3, 3] for b in sc.bodies.values()]
     pad = [b.container.radius if b.container is not None else 0.0 for b in sc.bodies.values()]
-    for h in sc.heads.values():  # a person's head: its sphere
-        points.append(h.centre(sc.bodies[h.behind].T_world))
-        pad.append(h.radius)
+    for entries in sc.sections.values():  # (a person's head: its sphere)
+        for e in entries.values():
+            for centre, r in e.footprint(sc):
+                points.append(centre)
+                pad.append(r)
     for j in sc.joints.values():
         T0 = sc.bodies[j.handle].T_world
         for q in np.linspace(0.0, j.travel, 9):
@@ -135,14 +139,14 @@ def compose(tasks: list[Task]) -> Task:
         placed_walls += walls(t)
     bodies: dict[str, Body] = {}
     joints: dict[str, Joint] = {}
-    heads: dict[str, Head] = {}
+    sections: dict[str, dict[str, Section]] = {}
     zones: dict[str, Zone] = {}
     held = None
     for t in placed_tasks:
         sc = t.scene
-        names = set(sc.bodies) | set(sc.joints) | set(sc.heads) | set(sc.zones) | \
+        names = set(sc.bodies) | set(sc.joints) | _entries(sc.sections) | set(sc.zones) | \
             ({sc.held.name, *sc.held.frames} if sc.held else set())
-        taken = set(bodies) | set(joints) | set(heads) | set(zones) | \
+        taken = set(bodies) | set(joints) | _entries(sections) | set(zones) | \
             ({held.name, *held.frames} if held else set())
         clash = sorted(names & taken)
         if clash:
@@ -153,10 +157,18 @@ def compose(tasks: list[Task]) -> Task:
                                                             "for an earlier task: it holds one thing")
         bodies.update(sc.bodies)
         joints.update(sc.joints)
-        heads.update(sc.heads)
+        for key, entries in sc.sections.items():
+            sections[key] = {**sections.get(key, {}), **entries}
         zones.update(sc.zones)
         held = held or sc.held
-    scene = Scene(first.scene.start, bodies, held, joints, heads, zones)
+    order = list(kinds.sections())
+    sections = {k: sections[k] for k in sorted(sections, key=order.index)}
+    scene = Scene(first.scene.start, bodies, held, joints, zones, sections)
     name = "+".join(t.name for t in placed_tasks)
     return replace(first, name=name, title=" and ".join(t.title for t in placed_tasks), scene=scene,
                    parts=tuple(placed_tasks))
+
+
+def _entries(sections: dict[str, dict[str, Section]]) -> set[str]:
+    """The names of every section's entries."""
+    return {n for entries in sections.values() for n in entries}

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # (the kinds' classes type their scene with this module's)
-    from .kinds import Facet, StepKind
+    from .kinds import Facet, Section, StepKind
 
 Array = NDArray[np.float64]
 
@@ -336,41 +336,6 @@ class Button:
     def click_force(self) -> float:
         """The push that takes the face to its click depth, N."""
         return self.preload + self.spring * self.click
-# -- a person's head --------------------------------------------------------------------
-@dataclass(frozen=True)
-class Head:
-    """A person's head: a sphere the hand and what it holds must not press into.
-
-    The sphere's surface passes through the origin of the body ``behind`` (the mouth:
-    the middle of the lips), its centre ``radius`` behind it along that frame's -x (x
-    points out of the mouth), so the head moves with the mouth where a trial puts it.
-    A frame of the hand (its origin, the held object's frames) inside the sphere meets a
-    contact spring: ``stiffness`` (N/m) times its depth inside, plus ``damping`` (N s/m)
-    times its speed inwards, pushing it out along the normal (never pulling).
-
-    Attributes
-    ----------
-    name : str
-        What its readings are called (``<name>.force``).
-    behind : str
-        The body on its surface, in front of it.
-    radius : float
-        m.
-    stiffness, damping : float
-    """
-
-    name: str
-    behind: str
-    radius: float
-    stiffness: float
-    damping: float
-
-    def centre(self, T_world_front: Array) -> Array:
-        """The sphere's centre (world, shape (3,)) for the body ``behind`` at
-        ``T_world_front``."""
-        return T_world_front[:3, 3] - self.radius * T_world_front[:3, 0]
-
-
 # -- a goal pose held for a time ------------------------------------------------------
 @dataclass(frozen=True)
 class Zone:
@@ -421,14 +386,28 @@ class Start:
 
 @dataclass(frozen=True)
 class Scene:
-    """Everything in the world, and the hand's start."""
+    """Everything in the world, and the hand's start.
+
+    ``sections`` holds the scene's sections of registered kinds
+    (:class:`~sctd.task.kinds.Section`: ``scene.<key>.<name>`` in a file, a person's
+    ``heads``), by their key and then their entries' names, in the kinds' order; a
+    section the file does not give is not there."""
 
     start: Start
     bodies: dict[str, Body]
     held: Held | None = None
     joints: dict[str, Joint] = field(default_factory=dict)
-    heads: dict[str, Head] = field(default_factory=dict)
     zones: dict[str, Zone] = field(default_factory=dict)
+    sections: dict[str, dict[str, Section]] = field(default_factory=dict)
+
+    @property
+    def heads(self) -> dict[str, Any]:
+        """The entries of the ``heads`` section (a person's heads: :class:`~sctd.task.kinds.head.Head`)."""
+        return self.section("heads")
+
+    def section(self, key: str) -> dict[str, Any]:
+        """The entries of section ``key``, by name (none when the file gives none)."""
+        return self.sections.get(key, {})
 
     def frames(self) -> list[str]:
         """The names of every published frame: the bodies', then the held object's, then
@@ -447,18 +426,17 @@ READINGS = {
     "joint": ("position", "speed", "held", "grasps", "max_position"),
     "surface": ("force", "max_force", "touching"),
     "button": ("force", "max_force", "touching", "position", "on", "presses"),
-    "head": ("force", "max_force"),
     "zone": ("inside", "dwell", "max_dwell"),
 }
-"""What each kind of scene element reports, as ``<element>.<quantity>``: contents (by
+"""What each kind of scene element not in the registry reports (a registered kind's
+class says its own, :mod:`sctd.task.kinds`), as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
 left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
 is held, how often it was grasped and the furthest position reached (m, m/s; rad, rad/s
 for a revolute joint); a body's surface (by the body's name) the normal force the hand
 presses it with now and the highest so far (N), and whether the hand touches it; a
 surface with a button besides how far the button is pushed in (m), whether it is on and
-how often it switched; a head the force of its contact now and the
-highest so far (N); a zone whether its frame is inside, for how long it has been inside
+how often it switched; a zone whether its frame is inside, for how long it has been inside
 without a break and the longest such time so far (s)."""
 FLAGS = ("flowing", "held", "touching", "on", "inside")
 """The readings that are flags (compared with ``is: true|false``)."""

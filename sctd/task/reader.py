@@ -37,7 +37,6 @@ from .model import (
     Contents,
     FailRule,
     Grasp,
-    Head,
     Held,
     Hinge,
     Joint,
@@ -194,7 +193,9 @@ def task_from_document(doc: Any, file: str) -> Task:
         raise r.fail("object", f"unknown body {obj!r} (bodies: {', '.join(scene.bodies)})")
     outcome = _outcome(r, d["outcome"], "outcome", scene)
     intent = _intent(r, d["intent"], "intent", scene, outcome)
-    _goals_outside_heads(r, intent, scene, obj)
+    for entries in scene.sections.values():
+        for e in entries.values():
+            e.check_intent(r, scene, obj, intent)
     teach = _teach(r, d["teach"], "teach", intent, scene) if "teach" in d else Teach()
     text = {k: (r.string(d[k], k) if k in d else "") for k in ("title", "description", "source")}
     return Task(name, text["title"] or name, text["description"], text["source"], obj, scene, outcome,
@@ -202,7 +203,8 @@ def task_from_document(doc: Any, file: str) -> Task:
 
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
-    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "heads", "zones"})
+    section_kinds = kinds.sections()
+    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "zones", *section_kinds})
     s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
     start = Start(r.transform(s, f"{path}.start"),
                   r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
@@ -218,21 +220,43 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
         where = f"{path}.joints.{key}"
         joints[r.name(key, where)] = _joint(r, key, j, where, bodies)
-    heads = _heads(r, d["heads"], f"{path}.heads", bodies) if "heads" in d else {}
-    zones = _zones(r, d["zones"], f"{path}.zones", bodies, held) if "zones" in d else {}
-    scene = Scene(start, bodies, held, joints, heads, zones)
-    names = [*scene.frames(), *joints, *heads, *zones, HAND]
+    scene = Scene(start, bodies, held, joints)
+    for key, cls in section_kinds.items():
+        if key in d:
+            sections = {**scene.sections, key: _section(r, cls, d[key], f"{path}.{key}", scene)}
+            scene = dataclasses.replace(scene, sections=sections)
+    if "zones" in d:
+        scene = dataclasses.replace(scene, zones=_zones(r, d["zones"], f"{path}.zones", bodies, held))
+    named = [n for entries in scene.sections.values() for n in entries]
+    names = [*scene.frames(), *joints, *named, *scene.zones, HAND]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise r.fail(path, f"the name {twice[0]!r} is used twice (bodies, held frames, joints, heads, "
-                           f"zones and {HAND!r} share one namespace)")
+        shared = ", ".join(["bodies", "held frames", "joints", *section_kinds, "zones"])
+        raise r.fail(path, f"the name {twice[0]!r} is used twice ({shared} and {HAND!r} share one "
+                           "namespace)")
     for name, b in bodies.items():
         for key, facet in b.facets.items():
             facet.check(r, name, scene, f"{path}.bodies.{name}.{key}")
     _quantities_once(r, scene, path)
     _in_front(r, scene, path)
-    _outside_heads(r, scene, path)
+    for entries in scene.sections.values():
+        for e in entries.values():
+            e.check(r, scene, path)
     return scene
+
+
+def _section(r: _Reader, cls: type[kinds.Section], v: Any, path: str,
+             scene: Scene) -> dict[str, kinds.Section]:
+    """A section of a registered kind: ``{name: entry}``, at least one (``scene``: as read
+    so far)."""
+    items = r.mapping(v, path).items()
+    if not items:
+        raise r.fail(path, f"expected at least one {cls.noun} (or no {cls.key} field)")
+    out: dict[str, kinds.Section] = {}
+    for key, e in items:
+        name = r.name(key, f"{path}.{key}")
+        out[name] = cls.read(r, name, e, f"{path}.{key}", scene)
+    return out
 
 
 def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
@@ -404,27 +428,6 @@ def _in_front(r: _Reader, scene: Scene, path: str) -> None:
             if not x > 0.0:
                 raise r.fail(f"{path}.start", f"{f} starts {-x:.3g} m behind the surface of {name!r}: "
                                               "a surface is solid behind its plane (the body's -x side)")
-# -- a person's head ----------------------------------------------------------------------
-def _heads(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> dict[str, Head]:
-    """``{name: {behind, radius, contact: {stiffness, damping}}}``, at least one."""
-    heads: dict[str, Head] = {}
-    items = r.mapping(v, path).items()
-    if not items:
-        raise r.fail(path, "expected at least one head (or no heads field)")
-    for key, h in items:
-        where = f"{path}.{key}"
-        name = r.name(key, where)
-        d = r.fields(h, where, {"behind", "radius", "contact"})
-        front = r.string(d["behind"], f"{where}.behind")
-        if front not in bodies:
-            raise r.fail(f"{where}.behind", f"unknown body {front!r} (bodies: {', '.join(bodies)})")
-        radius = r.number(d["radius"], f"{where}.radius", lo=MIN_HEAD, hi=MAX_HEAD)
-        c = r.fields(d["contact"], f"{where}.contact", {"stiffness", "damping"})
-        heads[name] = Head(name, front, radius, r.positive(c["stiffness"], f"{where}.contact.stiffness"),
-                           r.nonneg(c["damping"], f"{where}.contact.damping"))
-    return heads
-
-
 # -- a goal pose held for a time -----------------------------------------------------------
 def _zones(r: _Reader, v: Any, path: str, bodies: dict[str, Body], held: Held | None) -> dict[str, Zone]:
     """``{name: {frame, around, position, within, axis?, tilt?}}``, at least one."""
@@ -458,43 +461,6 @@ def _zones(r: _Reader, v: Any, path: str, bodies: dict[str, Body], held: Held | 
     return zones
 
 
-MIN_HEAD, MAX_HEAD = 0.03, 0.30
-"""m: the radii a head's sphere may have."""
-
-
-def _outside_heads(r: _Reader, scene: Scene, path: str) -> None:
-    """Refuse a scene whose hand starts inside a head (it, or a frame of what it holds),
-    at the file's poses: the first contact would be a blow, not a touch."""
-    T_start = scene.start.T_world
-    points = {HAND: T_start[:3, 3]}
-    if scene.held is not None:
-        points |= {n: (T_start @ T)[:3, 3] for n, T in scene.held.frames.items()}
-    for head in scene.heads.values():
-        centre = head.centre(scene.bodies[head.behind].T_world)
-        for name, p in points.items():
-            depth = head.radius - float(np.linalg.norm(p - centre))
-            if depth >= 0.0:
-                raise r.fail(f"{path}.start", f"{name} starts {depth:.3f} m inside the head "
-                                              f"{head.name!r} (its sphere of {head.radius} m behind "
-                                              f"{head.behind!r})")
-
-
-def _goals_outside_heads(r: _Reader, intent: tuple[Step, ...], scene: Scene, obj: str) -> None:
-    """Refuse a reach whose goal (``to``, in the task object's frame) lies inside a head
-    at the file's poses: a person never wants the hand pressed into a face."""
-    T_obj = scene.bodies[obj].T_world
-    for i, s in enumerate(intent):
-        a = s.action
-        if not isinstance(a, Reach) or a.to is None:
-            continue
-        goal = T_obj[:3, :3] @ a.to + T_obj[:3, 3]
-        for head in scene.heads.values():
-            depth = head.radius - float(np.linalg.norm(goal - head.centre(scene.bodies[head.behind].T_world)))
-            if depth >= 0.0:
-                raise r.fail(f"intent[{i}].reach.to", f"the goal lies {depth:.3f} m inside the head "
-                                                      f"{head.name!r}")
-
-
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
@@ -503,7 +469,7 @@ def _elements(scene: Scene) -> dict[str, str]:
         out[scene.held.name] = "contents"
     out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
                 if b.surface is not None})
-    out |= {h: "head" for h in scene.heads}
+    out |= {n: kinds.sections()[key].noun for key, entries in scene.sections.items() for n in entries}
     out |= {z: "zone" for z in scene.zones}
     for n, b in scene.bodies.items():  # (a body's facets of registered kinds: the first with readings)
         first = next((k for k, f in b.facets.items() if f.quantities), None)
@@ -513,10 +479,19 @@ def _elements(scene: Scene) -> dict[str, str]:
 
 
 def quantities(kind: str) -> tuple[str, ...]:
-    """What an element of ``kind`` reports (:data:`READINGS`, or a registered facet's)."""
+    """What an element of ``kind`` reports (:data:`READINGS`, or a registered facet's, or
+    a registered section's by its noun)."""
     if kind in READINGS:
         return READINGS[kind]
-    return kinds.facets()[kind].quantities
+    facet = kinds.facets().get(kind)
+    if facet is not None:
+        return facet.quantities
+    return next(c.quantities for c in kinds.sections().values() if c.noun == kind)
+
+
+def _entry(scene: Scene, element: str) -> kinds.Section | None:
+    """The section entry called ``element``, if one is."""
+    return next((e[element] for e in scene.sections.values() if element in e), None)
 
 
 def _flag(reading: Reading, scene: Scene) -> bool:
@@ -525,6 +500,9 @@ def _flag(reading: Reading, scene: Scene) -> bool:
     for f in body.facets.values() if body is not None else ():
         if reading.quantity in f.quantities:
             return reading.quantity in f.flags
+    entry = _entry(scene, reading.element)
+    if entry is not None:
+        return reading.quantity in entry.flags
     return reading.quantity in FLAGS
 
 
@@ -577,6 +555,9 @@ def _angular(reading: Reading, scene: Scene) -> bool:
     body = scene.bodies.get(reading.element)
     if body is not None and any(reading.quantity in f.angular for f in body.facets.values()):
         return True
+    entry = _entry(scene, reading.element)
+    if entry is not None:
+        return reading.quantity in entry.angular
     return joint is not None and joint.kind == "revolute" and reading.quantity in ("position",
                                                                                    "max_position")
 

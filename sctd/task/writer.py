@@ -12,7 +12,8 @@ bit where the reader made it of angles in (-pi, pi], pitch in (-pi/2, pi/2)
 What equals the reader's default is left out only where the reader fills that same
 value back (a container's ``rim_margin``, a joint's ``friction_speed``, a step's
 ``orientation: free``); what it fills in from the rest of the scene (a surface's
-``touch``) is always written. A composed task (:func:`~.compose.compose`) has no file:
+``touch``) is always written. The scene's sections of registered kinds (``heads``) are
+written by their entries' ``to_yaml()``. A composed task (:func:`~.compose.compose`) has no file:
 writing one is a ValueError.
 
 Elements of kinds registered outside this module (``sctd.task.kinds``) write themselves
@@ -208,10 +209,8 @@ def _scene(sc: Scene) -> Doc:
         out["held"] = _held(sc.held)
     if sc.joints:
         out["joints"] = {n: _joint(j) for n, j in sc.joints.items()}
-    if sc.heads:
-        out["heads"] = {n: {"behind": h.behind, "radius": float(h.radius),
-                            "contact": {"stiffness": float(h.stiffness), "damping": float(h.damping)}}
-                        for n, h in sc.heads.items()}
+    for key, entries in sc.sections.items():  # (the sections of registered kinds)
+        out[key] = {n: e.to_yaml() for n, e in entries.items()}
     if sc.zones:
         out["zones"] = {n: _zone(z) for n, z in sc.zones.items()}
     out.update(_extra_sections(sc))
@@ -300,7 +299,7 @@ def _extra_sections(scene: Scene) -> Doc:
     :class:`~.model.Scene` this module does not write itself, as ``{field: {name:
     element.to_yaml()}}`` (or ``{field: element.to_yaml()}`` for one element). Scene has
     no such field today: nothing."""
-    known = {"start", "bodies", "held", "joints", "heads", "zones"}
+    known = {"start", "bodies", "held", "joints", "zones", "sections"}
     out: Doc = {}
     for f in dataclasses.fields(scene):
         if f.name not in known:

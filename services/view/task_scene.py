@@ -8,7 +8,8 @@ places it once and only moves that frame:
 
 - a body's container (an open cylinder below its opening), surface (a slab behind its
   plane), button (a disc on its face);
-- a head (its sphere, behind the body it is behind);
+- the shapes of the elements of registered kinds (:mod:`sctd.task.kinds`): a body's
+  facets' and a section's entries' (a head's sphere, behind the body it is behind);
 - a joint's moving part: a drawer's front and box behind a prismatic handle, a door's
   panel from a revolute handle's hinge to past the handle; it moves with the handle
   (:func:`sctd.task.kinematics.handle_pose` at the joint's position);
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import Task
-from sctd.task.kinds import Facet
+from sctd.task.kinds import Facet, Section, Shape
 from sctd.task.kinematics import handle_pose
 
 Array = NDArray[np.float64]
@@ -44,7 +45,7 @@ HANDLE_OUT = 0.03  # m: how far a handle stands out of its drawer front or door
 PANEL_THICKNESS = 0.02  # m: a revolute joint's panel (a door)
 HELD_RADIUS = 0.03  # m: the held object's cylinder
 RGB = {"container": (110, 110, 130), "surface": (170, 170, 160), "button": (200, 60, 60),
-       "head": (225, 185, 150), "joint": (150, 110, 70), "held": (70, 150, 70)}
+       "joint": (150, 110, 70), "held": (70, 150, 70)}
 
 
 @dataclass(frozen=True)
@@ -91,10 +92,9 @@ def task_parts(task: Task) -> list[Part]:
             m.apply_transform(_turn_z_to_x())
             parts.append(_part(f"{name}/button", f"{name}", "button", ("body", name), m))
         parts += _facet_parts(name, b.facets)
-    for name, h in sc.heads.items():
-        m = trimesh.creation.icosphere(subdivisions=2, radius=h.radius)
-        m.apply_translation((-h.radius, 0.0, 0.0))
-        parts.append(_part(f"{name}/head", f"{name}", "head", ("body", h.behind), m, 0.8))
+    for entries in sc.sections.values():
+        for name, e in entries.items():
+            parts += _section_parts(name, e)
     for name, j in sc.joints.items():
         parts.append(_part(f"{name}/moving", f"{name} ({j.kind})", "joint", ("handle", name),
                            _joint_mesh(j), 0.8))
@@ -137,19 +137,32 @@ def _part(name: str, label: str, kind: str, anchor, m: trimesh.Trimesh, opacity:
 def _facet_parts(body: str, facets: dict[str, Facet]) -> list[Part]:
     """The shapes a body's facets of registered kinds draw (:meth:`Facet.shapes`), moving
     with the body (an item carried moves with it)."""
-    out = []
-    for key, facet in facets.items():
-        for k, shape in enumerate(facet.shapes()):
-            if shape.kind == "box":
-                m = trimesh.creation.box(extents=shape.size)
-            else:
-                m = trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[2])
-            m.apply_transform(shape.T_body_shape)
-            rgb = tuple(round(255 * c) for c in shape.colour)
-            out.append(Part(f"{body}/{key}{k}", f"{body} ({key})", "facet", ("body", body),
-                            np.asarray(m.vertices, dtype=float), np.asarray(m.faces, dtype=np.int64),
-                            shape.opacity, (rgb[0], rgb[1], rgb[2])))
-    return out
+    return [_shape_part(f"{body}/{key}{k}", f"{body} ({key})", "facet", body, shape)
+            for key, facet in facets.items() for k, shape in enumerate(facet.shapes())]
+
+
+def _section_parts(name: str, entry: Section) -> list[Part]:
+    """The shapes a section's entry draws (:meth:`Section.shapes`: a head's sphere), moving
+    with its body."""
+    body = entry.body()
+    if body is None:
+        return []
+    return [_shape_part(f"{name}/{entry.noun}{k or ''}", name, entry.noun, body, shape)
+            for k, shape in enumerate(entry.shapes())]
+
+
+def _shape_part(name: str, label: str, kind: str, body: str, shape: Shape) -> Part:
+    """A kind's :class:`Shape` as a part moving with ``body``."""
+    if shape.kind == "box":
+        m = trimesh.creation.box(extents=shape.size)
+    elif shape.kind == "sphere":
+        m = trimesh.creation.icosphere(subdivisions=2, radius=shape.size[0])
+    else:
+        m = trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[2])
+    m.apply_transform(shape.T_body_shape)
+    rgb = tuple(round(255 * c) for c in shape.colour)
+    return Part(name, label, kind, ("body", body), np.asarray(m.vertices, dtype=float),
+                np.asarray(m.faces, dtype=np.int64), shape.opacity, (rgb[0], rgb[1], rgb[2]))
 
 
 def _turn_z_to_x() -> Array:

@@ -1,18 +1,22 @@
 """Kinds of task element as a registry: what a task file may say, one class a kind.
 
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
-support things rest on, an item the hand can pick up, a knob it turns. A **step kind** is
+support things rest on, an item the hand can pick up, a knob it turns. A **section** is a
+kind of scene element with a section of the scene of its own (``scene.<key>.<name>``): a
+person's head. A **step kind** is
 a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a knob in the
 hand. Each kind is one class that holds everything sctd knows of it:
 
 - its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
 - its writer (``to_yaml``: a task file's fields, read back to the same element);
-- its readings (``<body>.<quantity>``, :attr:`Facet.quantities`);
-- its physics in the simulator (:meth:`Facet.physics`: pure numpy on a :class:`World`);
+- its readings (``<body>.<quantity>``, :attr:`Facet.quantities`; a section's entry's
+  by its name);
+- its physics in the simulator (:meth:`Facet.physics`, :meth:`Section.physics`: pure
+  numpy on a :class:`World`);
 - the simulated user's behaviour for a step (:meth:`StepKind.mind`);
 - the demonstrator's plan for a step (:meth:`StepKind.legs`);
-- the demonstrator's plan for a step (:meth:`StepKind.waypoints`);
-- its drawing in the view (:meth:`Facet.shapes`: boxes and cylinders, as data).
+- its drawing in the view (:meth:`Facet.shapes`, :meth:`Section.shapes`: boxes,
+  cylinders and spheres, as data).
 
 The kinds shipped with sctd are listed in :data:`BUILTIN`; a package adds its own under
 the entry-point group ``sctd.task_kinds`` (a name for the kind's key, the class as its
@@ -31,7 +35,20 @@ import importlib
 from functools import cache
 from importlib.metadata import entry_points
 
-from .base import Facet, FacetPhysics, Fingers, Leg, Person, Shape, Sight, StepKind, StepMind, Want, World
+from .base import (
+    Facet,
+    FacetPhysics,
+    Fingers,
+    Leg,
+    Person,
+    Section,
+    Shape,
+    Sight,
+    StepKind,
+    StepMind,
+    Want,
+    World,
+)
 
 GROUP = "sctd.task_kinds"
 BUILTIN = {
@@ -41,6 +58,7 @@ BUILTIN = {
     "place": "sctd.task.kinds.handling:PlaceStep",
     "knob": "sctd.task.kinds.knob:Knob",
     "turn": "sctd.task.kinds.knob:TurnStep",
+    "heads": "sctd.task.kinds.head:Head",
 }
 """The shipped kinds, by their key in a task file."""
 
@@ -49,21 +67,25 @@ class KindError(ValueError):
     """A registered kind that does not load or is not a kind."""
 
 
-def _load(key: str, target: str) -> type[Facet] | type[StepKind]:
+Kind = type[Facet] | type[Section] | type[StepKind]
+
+
+def _load(key: str, target: str) -> Kind:
     module, _, attr = target.partition(":")
     try:
         cls = getattr(importlib.import_module(module), attr)
     except (ImportError, AttributeError) as e:
         raise KindError(f"task element kind {key!r} ({target}) does not load: {e}") from e
-    if not (isinstance(cls, type) and issubclass(cls, Facet | StepKind)):
-        raise KindError(f"task element kind {key!r} ({target}): not a Facet or StepKind subclass")
+    if not (isinstance(cls, type) and issubclass(cls, Facet | Section | StepKind)):
+        raise KindError(f"task element kind {key!r} ({target}): not a Facet or StepKind subclass, "
+                        "nor a Section")
     if cls.key != key:
         raise KindError(f"task element kind {key!r} ({target}): its class says key {cls.key!r}")
     return cls
 
 
 @cache
-def registry() -> dict[str, type[Facet] | type[StepKind]]:
+def registry() -> dict[str, Kind]:
     """Every kind by its key: the built-in ones, then the registered ones (loaded once)."""
     out = {key: _load(key, target) for key, target in BUILTIN.items()}
     for ep in sorted(entry_points(group=GROUP), key=lambda e: e.name):
@@ -79,10 +101,17 @@ def facets() -> dict[str, type[Facet]]:
     return {c.key: c for c in sorted(kinds, key=lambda c: c.order)}
 
 
+def sections() -> dict[str, type[Section]]:
+    """The section kinds, by key (the scene's field), in their order."""
+    kinds = [c for c in registry().values() if issubclass(c, Section)]
+    return {c.key: c for c in sorted(kinds, key=lambda c: c.order)}
+
+
 def step_kinds() -> dict[str, type[StepKind]]:
     """The step kinds, by key."""
     return {k: c for k, c in registry().items() if issubclass(c, StepKind)}
 
 
-__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Leg", "Person", "Shape",
-           "Sight", "StepKind", "StepMind", "Want", "World", "facets", "registry", "step_kinds"]
+__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Leg", "Person", "Section",
+           "Shape", "Sight", "StepKind", "StepMind", "Want", "World", "facets", "registry", "sections",
+           "step_kinds"]

@@ -51,8 +51,9 @@ class World:
     fingers : Fingers or None
         The hand's fingers; None for a hand without.
     physics : dict of str to dict of str to FacetPhysics
-        Every facet's physics, by body and key: what one facet asks of another (an item
-        asks the supports where it can rest).
+        Every facet's physics, by body and key, and every section entry's, by its name
+        and its section's key: what one facet asks of another (an item asks the supports
+        where it can rest).
     """
 
     T_world_ee: Array
@@ -90,9 +91,10 @@ class FacetPhysics(ABC):
 
 @dataclass(frozen=True)
 class Shape:
-    """A solid to draw, in its body's frame: a ``box`` of full ``size`` (x, y, z) or a
-    ``cylinder`` of ``size`` (radius, radius, height) about its z, centred at
-    ``T_body_shape``'s origin; ``colour`` RGB in [0, 1]."""
+    """A solid to draw, in its body's frame: a ``box`` of full ``size`` (x, y, z), a
+    ``cylinder`` of ``size`` (radius, radius, height) about its z or a ``sphere`` of
+    ``size`` (radius, radius, radius), centred at ``T_body_shape``'s origin; ``colour``
+    RGB in [0, 1]."""
 
     kind: str
     size: tuple[float, float, float]
@@ -148,6 +150,75 @@ class Facet(ABC):
 
     def shapes(self) -> list[Shape]:
         """What the view draws of it, in its body's frame."""
+        return []
+
+
+class Section(ABC):
+    """A kind of scene element that is an entry of a section of the scene of its own,
+    ``scene.<key>.<name>`` in a task file (a person's head: ``scene.heads.face``), rather
+    than a facet of one body. Its readings are ``<name>.<quantity>``; the name shares the
+    scene's one namespace (bodies, held frames, joints, every section's entries, ``hand``).
+
+    Class attributes
+    ----------------
+    key : str
+        The scene's field it is read from (``heads``); a section in a file holds at least
+        one entry.
+    noun : str
+        What one entry is called in messages (``head``: ``a head reports force, ...``).
+    order : int
+        Sections are read, checked and stepped in this order (one that refers to another
+        comes after it), before the bodies' facets.
+    quantities, flags, angular : tuple of str
+        As a :class:`Facet`'s, of ``<name>.<quantity>``.
+
+    Attributes
+    ----------
+    name : str
+        Its entry's name in the section.
+    """
+
+    key: ClassVar[str]
+    noun: ClassVar[str]
+    order: ClassVar[int] = 0
+    quantities: ClassVar[tuple[str, ...]] = ()
+    flags: ClassVar[tuple[str, ...]] = ()
+    angular: ClassVar[tuple[str, ...]] = ()
+
+    name: str
+
+    @classmethod
+    @abstractmethod
+    def read(cls, r: Any, name: str, v: Any, path: str, scene: Scene) -> Section:
+        """The entry ``name`` a task file's field ``v`` at ``path`` says; ``scene`` is the
+        scene read so far (its start, bodies, held object, joints and the sections before
+        this one)."""
+
+    def check(self, r: Any, scene: Scene, path: str) -> None:  # noqa: B027 - most check nothing
+        """Cross-checks once the whole scene is read (``path``: the scene's)."""
+
+    def check_intent(self, r: Any, scene: Scene, obj: str, intent: tuple[Step, ...]) -> None:  # noqa: B027
+        """Cross-checks of the intent against it, once read (``obj``: the task object)."""
+
+    @abstractmethod
+    def to_yaml(self) -> dict[str, Any]:
+        """Its entry's fields: :meth:`read` gives the same element back."""
+
+    def physics(self, scene: Scene) -> FacetPhysics | None:
+        """Its physics in the simulator (its readings by its ``name``); None for none."""
+        return None
+
+    def body(self) -> str | None:
+        """The body its drawing moves with (None: drawn nowhere)."""
+        return None
+
+    def shapes(self) -> list[Shape]:
+        """What the view draws of it, in :meth:`body`'s frame."""
+        return []
+
+    def footprint(self, scene: Scene) -> list[tuple[Array, float]]:
+        """Balls (centre in the world, radius) it takes up, at the file's poses: where
+        another task composed into the room must not come (:func:`sctd.task.compose.compose`)."""
         return []
 
 
