@@ -39,6 +39,7 @@ from ...learn import (
     read_demo_csv,
     read_demos,
 )
+from ...learn.gripper import GripperOptions
 from ...learn.pipeline import hyperparameter_fields
 from ...skill import SkillError
 from ...task.demos import DEMOS_FILE, read_demos_info
@@ -68,6 +69,8 @@ def add_learn_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPar
     add_arguments(g, VectorFieldLearner, exclude=("random_state",))
     add_arguments(g, VectorFieldOptions)
     add_arguments(g, SkillOptions, exclude=("object",))
+    add_arguments(parser.add_argument_group("gripper events (demonstrations with the fingers)"),
+                  GripperOptions)
     return parser
 
 
@@ -140,11 +143,12 @@ def _learn(args: argparse.Namespace, demos: list[Demo],
     if args.method == "linear":
         frames = dict(parse_frame(f) for f in args.frame)
         return learn_linear(demos, frames, learner=from_namespace(LinearIMLearner, args),
-                            preprocessing=preprocessing, options=options, progress=progress)
+                            preprocessing=preprocessing, options=options, progress=progress,
+                            gripper=from_namespace(GripperOptions, args))
     return learn_vector_fields(demos, learner=from_namespace(VectorFieldLearner, args),
                                preprocessing=preprocessing, options=options,
                                field_options=from_namespace(VectorFieldOptions, args),
-                               progress=progress)
+                               progress=progress, gripper=from_namespace(GripperOptions, args))
 
 
 def _settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -152,7 +156,7 @@ def _settings(args: argparse.Namespace) -> dict[str, Any]:
     ``summary.json`` has always given ``random_state``): its ``hyperparameters`` keep
     every key they had, whatever the method."""
     names = [f.name for cls in (Preprocessing, LinearIMLearner, VectorFieldLearner, VectorFieldOptions,
-                                SkillOptions)
+                                SkillOptions, GripperOptions)
              for f in dataclasses.fields(cls) if "help" in f.metadata]
     return {**{n: getattr(args, n) for n in names if hasattr(args, n)}, "seed": args.random_state}
 
