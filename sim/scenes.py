@@ -24,10 +24,9 @@ knows a task:
   its click depth;
 - the elements of registered kinds (:mod:`sctd.task.kinds`): a section's entries (a
   person's head, whose contact spring pushes back on the hand and the held object's
-  frames inside it) and the bodies' facets (an item the fingers take), each stepped by
-  its kind's physics on a :class:`~sctd.task.kinds.World`;
-- **zones** (:class:`ZoneWatch`): a goal pose of a frame of the hand within tolerances,
-  timed while the frame stays inside (a cup held at the lips for 2 s).
+  frames inside it; a zone, a goal pose of a frame of the hand timed while the frame
+  stays inside) and the bodies' facets (an item the fingers take), each stepped by its
+  kind's physics on a :class:`~sctd.task.kinds.World`.
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -49,7 +48,7 @@ from sctd import se3
 from sctd.task import Task, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
-from sctd.task.model import Body, Button, Container, Contents, Held, Joint, Zone
+from sctd.task.model import Body, Button, Container, Contents, Held, Joint
 from sctd.task.reader import HAND
 from sctd.wire.codec import GripperCmd, GripperReading
 
@@ -526,32 +525,6 @@ def contacts(task: Task) -> list[Contact]:
     frames = {HAND: np.eye(4), **(sc.held.frames if sc.held is not None else {})}
     return [(PushButton if b.button is not None else Contact)(b, [frames[f] for f in b.surface.touch])
             for b in sc.bodies.values() if b.surface is not None]
-class ZoneWatch:
-    """Times a :class:`~sctd.task.model.Zone`: ``dwell`` grows by each step's ``dt``
-    while the frame is inside and falls to 0 when it leaves; ``max_dwell`` is the
-    longest so far."""
-
-    def __init__(self, zone: Zone, T_ee_frame: np.ndarray):
-        self.zone = zone
-        self.name = zone.name
-        self.T_ee_frame = T_ee_frame
-        self.reset()
-
-    def reset(self) -> None:
-        self.inside = False
-        self.dwell = 0.0
-        self.max_dwell = 0.0
-
-    def step(self, T_world_ee: np.ndarray, T_world_around: np.ndarray, dt: float) -> None:
-        self.inside = self.zone.inside(T_world_around, T_world_ee @ self.T_ee_frame)
-        self.dwell = self.dwell + dt if self.inside else 0.0
-        self.max_dwell = max(self.max_dwell, self.dwell)
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {f"{n}.inside": self.inside, f"{n}.dwell": self.dwell, f"{n}.max_dwell": self.max_dwell}
-
-
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -584,8 +557,6 @@ class TaskScene:
             self.flow = Flow(sc.held, sc.held.contents, container)
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
         self.contacts = contacts(task)
-        frames = sc.held.frames if sc.held is not None else {}
-        self.zones = [ZoneWatch(z, frames.get(z.frame, np.eye(4))) for z in sc.zones.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.fingers = Fingers()
@@ -614,8 +585,6 @@ class TaskScene:
             h.reset()
         for c in self.contacts:
             c.reset()
-        for z in self.zones:
-            z.reset()
         self.live.clear()
         self.live.update({n: T.copy() for n, T in self.poses.items()})
         self.fingers.reset()
@@ -648,8 +617,6 @@ class TaskScene:
             wrench[:3] += h.step(T_world_ee, twist, live[h.joint.handle], dt)
         for c in self.contacts:
             wrench += c.step(T_world_ee, twist, live[c.name], dt)
-        for z in self.zones:
-            z.step(T_world_ee, live[z.zone.around], dt)
         self.fingers.advance(dt)
         self.world.T_world_ee, self.world.twist = T_world_ee, twist
         for p in self._physics:  # (the registered kinds' elements: a head, an item in the hand or not)
@@ -703,8 +670,6 @@ class TaskScene:
             out.update(h.readings())
         for c in self.contacts:
             out.update(c.readings())
-        for z in self.zones:
-            out.update(z.readings())
         for p in self._physics:
             out.update(p.readings(self.world))
         return out

@@ -633,6 +633,20 @@ def test_the_head_is_a_registered_section_with_every_part():
     assert radius == 0.09 and np.allclose(centre, head.centre(task.scene.bodies["mouth"].T_world))
 
 
+def test_the_zone_is_a_registered_section_read_back_by_its_writer():
+    from sctd.task.kinds import sections
+    from sctd.task.kinds.zone import Zone, ZoneWatch
+    from tests.test_zone import drink_with_zone
+
+    assert list(sections())[:2] == ["heads", "zones"] and sections()["zones"] is Zone
+    task = read(drink_with_zone())
+    zone = task.scene.sections["zones"]["at_lips"]
+    assert task.scene.zones == {"at_lips": zone}
+    back = Zone.read(_reader(), "at_lips", copy.deepcopy(zone.to_yaml()), "x", task.scene)
+    assert back.to_yaml() == zone.to_yaml() and back.tilt == zone.tilt
+    assert isinstance(zone.physics(task.scene), ZoneWatch) and zone.shapes() == []
+
+
 LAMP_DOC = {"sctd_task": 1, "name": "lamps_test", "object": "desk",
             "scene": {"start": {"position": [0.45, 0.0, 0.6]},
                       "bodies": {"desk": {"position": [0.6, 0.0, 0.6]}},
@@ -732,7 +746,7 @@ def test_a_section_kind_is_read_written_simulated_and_drawn(lamps):
     (lambda d: d["scene"]["lamps"].update(Lamp={"over": "desk", "within": 0.1}), "scene.lamps.Lamp",
      "expected a name of lower-case letters"),
     (lambda d: d["scene"]["lamps"].update(desk={"over": "desk", "within": 0.1}), "scene",
-     "the name 'desk' is used twice (bodies, held frames, joints, heads, lamps, zones and 'hand'"),
+     "the name 'desk' is used twice (bodies, held frames, joints, heads, zones, lamps and 'hand'"),
     (lambda d: d["scene"]["lamps"]["lamp"].update(over="chair"), "scene.lamps.lamp.over",
      "unknown body 'chair'"),
     (lambda d: d["outcome"].update(progress="lamp.colour"), "outcome.progress",

@@ -17,7 +17,7 @@ from sctd import se3
 from sctd.task import TaskError, find_task, shipped_folder, task_from_document
 from sctd.task.compose import compose
 from sctd.task.judge import holds
-from sctd.task.model import READINGS, Zone
+from sctd.task.kinds.zone import Zone
 from sctd_sim.scenes import TaskScene
 
 DT = 1e-3
@@ -41,7 +41,7 @@ def test_a_zone_reads_as_the_file_says():
     np.testing.assert_allclose(z.position, [0.01, 0.0, 0.01])
     np.testing.assert_allclose(z.within, [0.01, 0.01, 0.008])
     assert z.tilt == pytest.approx(math.radians(20))
-    assert READINGS["zone"] == ("inside", "dwell", "max_dwell")
+    assert Zone.quantities == ("inside", "dwell", "max_dwell")
     # one number: the same tolerance along every axis; no axis: any orientation
     t = task_from_document(drink_with_zone({"frame": "hand", "around": "mouth", "position": [0.1, 0, 0],
                                             "within": 0.02}), "f.yaml")

@@ -31,7 +31,7 @@ from sctd import se3
 from . import kinds
 from .kinds import Section
 from .kinematics import handle_pose
-from .model import Body, Joint, Scene, Task, Zone
+from .model import Body, Joint, Scene, Task
 from .reader import TaskError
 
 Array = NDArray[np.float64]
@@ -140,13 +140,12 @@ def compose(tasks: list[Task]) -> Task:
     bodies: dict[str, Body] = {}
     joints: dict[str, Joint] = {}
     sections: dict[str, dict[str, Section]] = {}
-    zones: dict[str, Zone] = {}
     held = None
     for t in placed_tasks:
         sc = t.scene
-        names = set(sc.bodies) | set(sc.joints) | _entries(sc.sections) | set(sc.zones) | \
+        names = set(sc.bodies) | set(sc.joints) | _entries(sc.sections) | \
             ({sc.held.name, *sc.held.frames} if sc.held else set())
-        taken = set(bodies) | set(joints) | _entries(sections) | set(zones) | \
+        taken = set(bodies) | set(joints) | _entries(sections) | \
             ({held.name, *held.frames} if held else set())
         clash = sorted(names & taken)
         if clash:
@@ -159,11 +158,10 @@ def compose(tasks: list[Task]) -> Task:
         joints.update(sc.joints)
         for key, entries in sc.sections.items():
             sections[key] = {**sections.get(key, {}), **entries}
-        zones.update(sc.zones)
         held = held or sc.held
     order = list(kinds.sections())
     sections = {k: sections[k] for k in sorted(sections, key=order.index)}
-    scene = Scene(first.scene.start, bodies, held, joints, zones, sections)
+    scene = Scene(first.scene.start, bodies, held, joints, sections)
     name = "+".join(t.name for t in placed_tasks)
     return replace(first, name=name, title=" and ".join(t.title for t in placed_tasks), scene=scene,
                    parts=tuple(placed_tasks))

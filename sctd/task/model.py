@@ -24,7 +24,6 @@ radians.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -336,46 +335,6 @@ class Button:
     def click_force(self) -> float:
         """The push that takes the face to its click depth, N."""
         return self.preload + self.spring * self.click
-# -- a goal pose held for a time ------------------------------------------------------
-@dataclass(frozen=True)
-class Zone:
-    """A goal pose of a frame of the hand, within tolerances: the frame ``frame`` (``hand``
-    or a frame of what the hand holds) is inside while its origin is within ``within``
-    (half-widths, m, along the axes of the body ``around``) of ``position`` (in that
-    body's frame) and, with ``tilt``, its z axis within ``tilt`` rad of ``axis`` (a unit
-    vector in the body's frame; its spin about it is free). Its readings: ``inside``, how
-    long it has been inside without a break (``dwell``, s) and the longest so far
-    (``max_dwell``): "the cup held at the lips for 2 s" is ``{reading: <zone>.dwell,
-    at_least: 2}``.
-
-    Attributes
-    ----------
-    name, frame, around : str
-    position, within, axis : ndarray (3,)
-    tilt : float or None
-        rad; None: any orientation.
-    """
-
-    name: str
-    frame: str
-    around: str
-    position: Array
-    within: Array
-    axis: Array
-    tilt: float | None = None
-
-    def inside(self, T_world_around: Array, T_world_frame: Array) -> bool:
-        """Whether the frame at ``T_world_frame`` is inside, the body at ``T_world_around``."""
-        R, o = T_world_around[:3, :3], T_world_around[:3, 3]
-        d = R.T @ (T_world_frame[:3, 3] - o) - self.position
-        if bool(np.any(np.abs(d) > self.within)):
-            return False
-        if self.tilt is None:
-            return True
-        c = float((R.T @ T_world_frame[:3, 2]) @ self.axis)
-        return math.acos(max(-1.0, min(1.0, c))) <= self.tilt
-
-
 @dataclass(frozen=True)
 class Start:
     """The hand's start: ``T_world`` and how much it varies between trials."""
@@ -390,20 +349,24 @@ class Scene:
 
     ``sections`` holds the scene's sections of registered kinds
     (:class:`~sctd.task.kinds.Section`: ``scene.<key>.<name>`` in a file, a person's
-    ``heads``), by their key and then their entries' names, in the kinds' order; a
+    ``heads``, ``zones``), by their key and then their entries' names, in the kinds' order; a
     section the file does not give is not there."""
 
     start: Start
     bodies: dict[str, Body]
     held: Held | None = None
     joints: dict[str, Joint] = field(default_factory=dict)
-    zones: dict[str, Zone] = field(default_factory=dict)
     sections: dict[str, dict[str, Section]] = field(default_factory=dict)
 
     @property
     def heads(self) -> dict[str, Any]:
         """The entries of the ``heads`` section (a person's heads: :class:`~sctd.task.kinds.head.Head`)."""
         return self.section("heads")
+
+    @property
+    def zones(self) -> dict[str, Any]:
+        """The entries of the ``zones`` section (:class:`~sctd.task.kinds.zone.Zone`)."""
+        return self.section("zones")
 
     def section(self, key: str) -> dict[str, Any]:
         """The entries of section ``key``, by name (none when the file gives none)."""
@@ -426,7 +389,6 @@ READINGS = {
     "joint": ("position", "speed", "held", "grasps", "max_position"),
     "surface": ("force", "max_force", "touching"),
     "button": ("force", "max_force", "touching", "position", "on", "presses"),
-    "zone": ("inside", "dwell", "max_dwell"),
 }
 """What each kind of scene element not in the registry reports (a registered kind's
 class says its own, :mod:`sctd.task.kinds`), as ``<element>.<quantity>``: contents (by
@@ -436,9 +398,8 @@ is held, how often it was grasped and the furthest position reached (m, m/s; rad
 for a revolute joint); a body's surface (by the body's name) the normal force the hand
 presses it with now and the highest so far (N), and whether the hand touches it; a
 surface with a button besides how far the button is pushed in (m), whether it is on and
-how often it switched; a zone whether its frame is inside, for how long it has been inside
-without a break and the longest such time so far (s)."""
-FLAGS = ("flowing", "held", "touching", "on", "inside")
+how often it switched."""
+FLAGS = ("flowing", "held", "touching", "on")
 """The readings that are flags (compared with ``is: true|false``)."""
 
 

@@ -60,7 +60,6 @@ from .model import (
     Tilt,
     Upright,
     Vary,
-    Zone,
 )
 
 NAME = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
@@ -204,7 +203,7 @@ def task_from_document(doc: Any, file: str) -> Task:
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
     section_kinds = kinds.sections()
-    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", "zones", *section_kinds})
+    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", *section_kinds})
     s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
     start = Start(r.transform(s, f"{path}.start"),
                   r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
@@ -225,13 +224,11 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
         if key in d:
             sections = {**scene.sections, key: _section(r, cls, d[key], f"{path}.{key}", scene)}
             scene = dataclasses.replace(scene, sections=sections)
-    if "zones" in d:
-        scene = dataclasses.replace(scene, zones=_zones(r, d["zones"], f"{path}.zones", bodies, held))
     named = [n for entries in scene.sections.values() for n in entries]
-    names = [*scene.frames(), *joints, *named, *scene.zones, HAND]
+    names = [*scene.frames(), *joints, *named, HAND]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        shared = ", ".join(["bodies", "held frames", "joints", *section_kinds, "zones"])
+        shared = ", ".join(["bodies", "held frames", "joints", *section_kinds])
         raise r.fail(path, f"the name {twice[0]!r} is used twice ({shared} and {HAND!r} share one "
                            "namespace)")
     for name, b in bodies.items():
@@ -428,39 +425,6 @@ def _in_front(r: _Reader, scene: Scene, path: str) -> None:
             if not x > 0.0:
                 raise r.fail(f"{path}.start", f"{f} starts {-x:.3g} m behind the surface of {name!r}: "
                                               "a surface is solid behind its plane (the body's -x side)")
-# -- a goal pose held for a time -----------------------------------------------------------
-def _zones(r: _Reader, v: Any, path: str, bodies: dict[str, Body], held: Held | None) -> dict[str, Zone]:
-    """``{name: {frame, around, position, within, axis?, tilt?}}``, at least one."""
-    zones: dict[str, Zone] = {}
-    items = r.mapping(v, path).items()
-    if not items:
-        raise r.fail(path, "expected at least one zone (or no zones field)")
-    frames = [HAND, *(held.frames if held is not None else ())]
-    for key, z in items:
-        where = f"{path}.{key}"
-        name = r.name(key, where)
-        d = r.fields(z, where, {"frame", "around", "position", "within"}, {"axis", "tilt"})
-        frame = r.string(d["frame"], f"{where}.frame")
-        if frame not in frames:
-            raise r.fail(f"{where}.frame", f"expected {HAND!r} or a frame of what the hand holds "
-                                           f"({', '.join(frames)}), got {frame!r}")
-        around = r.string(d["around"], f"{where}.around")
-        if around not in bodies:
-            raise r.fail(f"{where}.around", f"unknown body {around!r} (bodies: {', '.join(bodies)})")
-        w = d["within"]
-        within = (np.full(3, r.positive(w, f"{where}.within")) if not isinstance(w, list)
-                  else r.vector(w, f"{where}.within", 3))
-        if not np.all(within > 0.0):
-            raise r.fail(f"{where}.within", "must be > 0 on every axis")
-        if ("axis" in d) != ("tilt" in d):
-            raise r.fail(where, "axis and tilt go together: the frame's z within tilt of axis")
-        axis = r.vector(d["axis"], f"{where}.axis", 3, unit=True) if "axis" in d else np.eye(3)[2]
-        tilt = r.tilt(d["tilt"], f"{where}.tilt") if "tilt" in d else None
-        zones[name] = Zone(name, frame, around, r.vector(d["position"], f"{where}.position", 3), within,
-                           axis, tilt)
-    return zones
-
-
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
@@ -470,7 +434,6 @@ def _elements(scene: Scene) -> dict[str, str]:
     out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
                 if b.surface is not None})
     out |= {n: kinds.sections()[key].noun for key, entries in scene.sections.items() for n in entries}
-    out |= {z: "zone" for z in scene.zones}
     for n, b in scene.bodies.items():  # (a body's facets of registered kinds: the first with readings)
         first = next((k for k, f in b.facets.items() if f.quantities), None)
         if first is not None:

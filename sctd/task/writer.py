@@ -12,9 +12,10 @@ bit where the reader made it of angles in (-pi, pi], pitch in (-pi/2, pi/2)
 What equals the reader's default is left out only where the reader fills that same
 value back (a container's ``rim_margin``, a joint's ``friction_speed``, a step's
 ``orientation: free``); what it fills in from the rest of the scene (a surface's
-``touch``) is always written. The scene's sections of registered kinds (``heads``) are
-written by their entries' ``to_yaml()``. A composed task (:func:`~.compose.compose`) has no file:
-writing one is a ValueError.
+``touch``) is always written. The scene's sections of registered kinds (``heads``,
+``zones``) are written by their entries' ``to_yaml()`` (which may use :func:`_angle`
+and :func:`_per_axis`). A composed task (:func:`~.compose.compose`) has no file: writing
+one is a ValueError.
 
 Elements of kinds registered outside this module (``sctd.task.kinds``) write themselves
 with their ``to_yaml()``: an intent step's action that has one, and a scene's or a
@@ -57,7 +58,6 @@ from .model import (
     Tilt,
     Upright,
     Vary,
-    Zone,
 )
 from .reader import KINDS, TEACH_SPEEDS, _angular, rpy_matrix
 
@@ -211,8 +211,6 @@ def _scene(sc: Scene) -> Doc:
         out["joints"] = {n: _joint(j) for n, j in sc.joints.items()}
     for key, entries in sc.sections.items():  # (the sections of registered kinds)
         out[key] = {n: e.to_yaml() for n, e in entries.items()}
-    if sc.zones:
-        out["zones"] = {n: _zone(z) for n, z in sc.zones.items()}
     out.update(_extra_sections(sc))
     return out
 
@@ -272,15 +270,6 @@ def _joint(j: Joint) -> Doc:
     return out
 
 
-def _zone(z: Zone) -> Doc:
-    out: Doc = {"frame": z.frame, "around": z.around, "position": _floats(z.position),
-                "within": _per_axis(z.within)}
-    if z.tilt is not None:  # (without a tilt the reader's axis is z, and unused)
-        out["axis"] = _floats(z.axis)
-        out["tilt"] = _angle(z.tilt)
-    return out
-
-
 def _elements(value: Any, where: str) -> list[tuple[str | None, Any]]:
     """(key, element) of a field's value that is an element with ``to_yaml()`` (key None),
     or a mapping of them (by its keys); nothing for an empty value; ValueError else."""
@@ -299,7 +288,7 @@ def _extra_sections(scene: Scene) -> Doc:
     :class:`~.model.Scene` this module does not write itself, as ``{field: {name:
     element.to_yaml()}}`` (or ``{field: element.to_yaml()}`` for one element). Scene has
     no such field today: nothing."""
-    known = {"start", "bodies", "held", "joints", "zones", "sections"}
+    known = {"start", "bodies", "held", "joints", "sections"}
     out: Doc = {}
     for f in dataclasses.fields(scene):
         if f.name not in known:

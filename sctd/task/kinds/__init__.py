@@ -3,7 +3,7 @@
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
 support things rest on, an item the hand can pick up, a knob it turns. A **section** is a
 kind of scene element with a section of the scene of its own (``scene.<key>.<name>``): a
-person's head. A **step kind** is
+person's head, a zone a frame of the hand is timed in. A **step kind** is
 a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a knob in the
 hand. Each kind is one class that holds everything sctd knows of it:
 
@@ -59,6 +59,7 @@ BUILTIN = {
     "knob": "sctd.task.kinds.knob:Knob",
     "turn": "sctd.task.kinds.knob:TurnStep",
     "heads": "sctd.task.kinds.head:Head",
+    "zones": "sctd.task.kinds.zone:Zone",
 }
 """The shipped kinds, by their key in a task file."""
 
