@@ -262,11 +262,42 @@ def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
                                           name_of[ev.index + 1, ph.entry[ev.index + 1]], options)
     last = len(plan.events)
     end = index[skill.end]
-    return dataclasses.replace(
-        skill, states=tuple(states), transitions=tuple(transitions),
-        start=name_of[0, ph.entry[0]],
+    start = name_of[0, ph.entry[0]]
+    states, transitions = _reachable(states, transitions, start)
+    return _renamed(dataclasses.replace(
+        skill, states=tuple(states), transitions=tuple(transitions), start=start,
         end=name_of[last, end] if (last, end) in name_of else name_of[last, ph.exit[last]],
-        min_dwell=max(skill.min_dwell, 0.1), id="")
+        min_dwell=max(skill.min_dwell, 0.1), id=""))
+
+
+def _reachable(states: list[State], transitions: list[Transition], start: str
+               ) -> tuple[list[State], list[Transition]]:
+    """The states a transition reaches from ``start`` (with the transitions between them):
+    a learned state the demonstrations used in a phase but never entered from the phase's
+    entry there (a copy no learned transition leads to) is left out, with its transitions."""
+    seen, todo = {start}, [start]
+    while todo:
+        here = todo.pop()
+        for t in transitions:
+            if t.source == here and t.target not in seen:
+                seen.add(t.target)
+                todo.append(t.target)
+    return ([s for s in states if s.name in seen],
+            [t for t in transitions if t.source in seen and t.target in seen])
+
+
+def _renamed(skill: Skill) -> Skill:
+    """``skill`` with its states named ``s0``, ``s1``, ... in their order (GripperError when
+    its end is not among them: no way through the events reaches it)."""
+    new = {s.name: f"s{k}" for k, s in enumerate(skill.states)}
+    if skill.end not in new:
+        raise GripperError("no learned transition leads from the start through the gripper events to the "
+                           "end: the demonstrations' phases share no state the learner could join them by")
+    return dataclasses.replace(
+        skill, states=tuple(dataclasses.replace(s, name=new[s.name]) for s in skill.states),
+        transitions=tuple(dataclasses.replace(t, source=new[t.source], target=new[t.target])
+                          for t in skill.transitions),
+        start=new[skill.start], end=new[skill.end])
 
 
 def _event_transitions(ev: GripperEvent, name: str, before: list[tuple[str, str | None]], exit_: str,
