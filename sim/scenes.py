@@ -17,16 +17,15 @@ knows a task:
   joint resists with a spring, viscous damping and Coulomb friction, and stops at its
   end stops. The handle's published frame stays at the joint's 0, so opening a drawer
   shows as hand motion along the frame's +x, and a door as motion along its arc;
-- **surfaces** (:class:`Contact`): a body's solid plane (through its origin, normal to
-  its x axis) that pushes the points of the hand touching it back out with a contact
-  spring-damper and friction, and a **button** in it (:class:`PushButton`, a light
-  switch) that gives way under the push against its spring and switches when pushed past
-  its click depth;
 - the elements of registered kinds (:mod:`sctd.task.kinds`): a section's entries (a
   person's head, whose contact spring pushes back on the hand and the held object's
   frames inside it; a zone, a goal pose of a frame of the hand timed while the frame
   stays inside) and the bodies' facets (an item the fingers take), each stepped by its
-  kind's physics on a :class:`~sctd.task.kinds.World`.
+  kind's physics on a :class:`~sctd.task.kinds.World`. Among the facets: a body's solid
+  **surface** (a plane through its origin, normal to its x axis) that pushes the points
+  of the hand touching it back out with a contact spring-damper and friction, and a
+  **button** in it (a light switch) that gives way under the push against its spring
+  and switches when pushed past its click depth.
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -48,8 +47,7 @@ from sctd import se3
 from sctd.task import Task, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
-from sctd.task.model import Body, Button, Container, Contents, Held, Joint
-from sctd.task.reader import HAND
+from sctd.task.model import Container, Contents, Held, Joint
 from sctd.wire.codec import GripperCmd, GripperReading
 
 from .fingers import Fingers
@@ -367,164 +365,6 @@ HANDLES: dict[str, type[Handle]] = {"prismatic": PrismaticHandle, "revolute": Re
 """The handle element of each kind of joint (:data:`sctd.task.model.JOINT_KINDS`)."""
 
 
-# -- a surface the hand touches, and a button in it -------------------------------------
-class Contact:
-    """A body's solid surface (:class:`~sctd.task.model.Surface`): the plane through the
-    body's origin normal to its x axis, solid behind it, against the points of the hand
-    that touch it (its ``touch`` frames, fixed in the hand).
-
-    A point ``d`` m behind the plane, moving into it at ``v_in`` and along it at ``v_t``,
-    is pushed out along the normal by ``F_n = max(0, k (d - s) + c v_in)`` (``s``: how
-    far the surface gave way there, 0 but in a button) and held back along the plane by
-    ``mu F_n tanh(|v_t| / v_s)`` against its slip. The force acts at the point: on the
-    hand it is that force and its moment about the hand's origin. A point first seen
-    behind the plane (a start drawn into the wall) is not pushed until it has come out
-    in front: only what comes through the plane meets it.
-
-    Attributes
-    ----------
-    force, max_force : float
-        The normal force the hand presses the surface with (its points summed), now and
-        the highest so far, N.
-    touching : bool
-        Whether a point of the hand is pressed into it.
-    """
-
-    def __init__(self, body: Body, T_ee_points: list[np.ndarray]):
-        assert body.surface is not None  # (only a body with a surface has one)
-        self.name = body.name
-        self.surface = body.surface
-        self._points = [tuple(T[:3, 3].tolist()) for T in T_ee_points]
-        self.reset()
-
-    def reset(self) -> None:
-        """Nothing touching, no force so far."""
-        self.force = self.max_force = 0.0
-        self.touching = False
-        self._front = [False] * len(self._points)  # per point: it has been in front of the plane
-
-    def _give(self, y: float, z: float, depth: float) -> float:
-        """How far the surface gives way where a point presses it at ``(y, z)`` (body
-        frame), ``depth`` m past the plane: not at all."""
-        return 0.0
-
-    def _begin(self) -> None:
-        """Before the points of a step."""
-
-    def _end(self) -> None:
-        """After the points of a step."""
-
-    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_body: np.ndarray,
-             dt: float) -> np.ndarray:
-        """The points against the surface now; return the wrench on the ee, shape (6,)."""
-        # (on floats, as a handle's step: numpy's per-call cost would dominate)
-        S = self.surface
-        (r00, r01, r02, ex), (r10, r11, r12, ey), (r20, r21, r22, ez), _ = T_world_ee.tolist()
-        (b00, b01, b02, bx), (b10, b11, b12, by), (b20, b21, b22, bz), _ = T_world_body.tolist()
-        vx, vy, vz, wx, wy, wz = twist.tolist()
-        wrench = [0.0] * 6
-        total, touching = 0.0, False
-        self._begin()
-        for i, (px, py, pz) in enumerate(self._points):
-            ox, oy, oz = r00 * px + r01 * py + r02 * pz, r10 * px + r11 * py + r12 * pz, \
-                r20 * px + r21 * py + r22 * pz  # the point from the ee's origin (world)
-            qx, qy, qz = ex + ox - bx, ey + oy - by, ez + oz - bz
-            x = b00 * qx + b10 * qy + b20 * qz  # in the body's frame
-            if x > 0.0 or not self._front[i]:
-                self._front[i] = self._front[i] or x > 0.0
-                continue
-            y, z = b01 * qx + b11 * qy + b21 * qz, b02 * qx + b12 * qy + b22 * qz
-            press = -x - self._give(y, z, -x)
-            if press <= 0.0:
-                continue
-            touching = True
-            ux, uy, uz = vx + wy * oz - wz * oy, vy + wz * ox - wx * oz, vz + wx * oy - wy * ox
-            fn = S.stiffness * press - S.damping * (b00 * ux + b10 * uy + b20 * uz)
-            if fn <= 0.0:
-                continue
-            ty, tz = b01 * ux + b11 * uy + b21 * uz, b02 * ux + b12 * uy + b22 * uz  # slip
-            slip = math.sqrt(ty * ty + tz * tz)
-            held = S.friction * fn * math.tanh(slip / S.friction_speed) / slip if slip > 1e-12 else 0.0
-            fy, fz = -held * ty, -held * tz
-            Fx, Fy, Fz = b00 * fn + b01 * fy + b02 * fz, b10 * fn + b11 * fy + b12 * fz, \
-                b20 * fn + b21 * fy + b22 * fz
-            for k, f in enumerate((Fx, Fy, Fz, oy * Fz - oz * Fy, oz * Fx - ox * Fz, ox * Fy - oy * Fx)):
-                wrench[k] += f
-            total += fn
-        self._end()
-        self.force, self.touching = total, touching
-        self.max_force = max(self.max_force, total)
-        return np.array(wrench)
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {f"{n}.force": self.force, f"{n}.max_force": self.max_force, f"{n}.touching": self.touching}
-
-
-class PushButton(Contact):
-    """A surface with a push button in it (:class:`~sctd.task.model.Button`): within the
-    button's radius of the body's origin the surface is the button's face, light beside
-    the hand, where the contact and the button's spring balance, ``k (d - s) = preload +
-    spring s`` with ``s`` in [0, travel] (beyond its travel it rests on the wall, which
-    then holds the push with the contact's stiffness). Pushed in past its click depth it
-    switches (``on`` toggles, ``presses`` counts), and again only once it has come back
-    out to half that depth.
-
-    Attributes
-    ----------
-    position : float
-        How far the face is pushed in, m (the deepest point's).
-    on : bool
-    presses : int
-    """
-
-    def __init__(self, body: Body, T_ee_points: list[np.ndarray]):
-        assert body.button is not None
-        self.button: Button = body.button
-        super().__init__(body, T_ee_points)
-
-    def reset(self) -> None:
-        """Out and off, never pressed."""
-        super().reset()
-        self.position = 0.0
-        self.on = False
-        self.presses = 0
-        self._armed = True  # it switches when next pushed past its click depth
-        self._pushed = 0.0
-
-    def _begin(self) -> None:
-        self._pushed = 0.0
-
-    def _give(self, y: float, z: float, depth: float) -> float:
-        B = self.button
-        if y * y + z * z > B.radius * B.radius:  # the wall around it
-            return 0.0
-        k = self.surface.stiffness
-        s = min(B.travel, max(0.0, (k * depth - B.preload) / (k + B.spring)))
-        self._pushed = max(self._pushed, s)
-        return s
-
-    def _end(self) -> None:
-        B = self.button
-        self.position = self._pushed
-        if self._armed and self.position >= B.click:
-            self.on, self.presses, self._armed = not self.on, self.presses + 1, False
-        elif not self._armed and self.position <= 0.5 * B.click:
-            self._armed = True
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {**super().readings(), f"{n}.position": self.position, f"{n}.on": self.on,
-                f"{n}.presses": float(self.presses)}
-
-
-def contacts(task: Task) -> list[Contact]:
-    """The surfaces of ``task``'s bodies (a :class:`PushButton` where one has a button),
-    each against the points of its ``touch`` frames."""
-    sc = task.scene
-    frames = {HAND: np.eye(4), **(sc.held.frames if sc.held is not None else {})}
-    return [(PushButton if b.button is not None else Contact)(b, [frames[f] for f in b.surface.touch])
-            for b in sc.bodies.values() if b.surface is not None]
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -556,7 +396,6 @@ class TaskScene:
             assert container is not None  # (the reader checks: contents go into a container)
             self.flow = Flow(sc.held, sc.held.contents, container)
         self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
-        self.contacts = contacts(task)
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.fingers = Fingers()
@@ -583,13 +422,16 @@ class TaskScene:
             self.flow.reset()
         for h in self.handles:
             h.reset()
-        for c in self.contacts:
-            c.reset()
         self.live.clear()
         self.live.update({n: T.copy() for n, T in self.poses.items()})
         self.fingers.reset()
         for p in self._physics:
             p.reset(self.world)
+
+    @property
+    def contacts(self) -> list[FacetPhysics]:
+        """The physics of the bodies' surfaces (a button's among them), in the file's order."""
+        return [p for facets in self.world.physics.values() for k, p in facets.items() if k == "surface"]
 
     def grip(self, cmd: GripperCmd) -> bool:
         """Take a gripper command (once per number); whether it was new."""
@@ -615,8 +457,6 @@ class TaskScene:
         wrench = np.zeros(6)
         for h in self.handles:
             wrench[:3] += h.step(T_world_ee, twist, live[h.joint.handle], dt)
-        for c in self.contacts:
-            wrench += c.step(T_world_ee, twist, live[c.name], dt)
         self.fingers.advance(dt)
         self.world.T_world_ee, self.world.twist = T_world_ee, twist
         for p in self._physics:  # (the registered kinds' elements: a head, an item in the hand or not)
@@ -668,8 +508,6 @@ class TaskScene:
             out.update(self.flow.readings())
         for h in self.handles:
             out.update(h.readings())
-        for c in self.contacts:
-            out.update(c.readings())
         for p in self._physics:
             out.update(p.readings(self.world))
         return out

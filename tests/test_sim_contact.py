@@ -16,7 +16,8 @@ from can.interfaces import virtual as can_virtual
 
 from sctd import se3
 from sctd.task import find_task, shipped_folder, task_from_document
-from sctd_sim.scenes import Contact, PushButton, TaskScene
+from sctd.task.kinds.surface import Contact, PushButton
+from sctd_sim.scenes import TaskScene
 from sctd_sim.simulation import Simulation
 
 TASK = find_task("light_switch")

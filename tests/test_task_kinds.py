@@ -52,7 +52,7 @@ def read(doc: dict):
 def test_the_shipped_kinds_are_registered_with_every_part(name):
     reg = registry()
     assert set(BUILTIN) <= set(reg)
-    assert list(facets()) == ["support", "item", "knob"]  # (a support before the items resting on it)
+    assert list(facets()) == ["surface", "button", "support", "item", "knob"]  # (a support before its items)
     assert set(step_kinds()) >= {"grasp", "place", "turn"}
     task = find_task(name)
     for body, b in task.scene.bodies.items():
@@ -615,6 +615,28 @@ def test_a_pick_and_place_floor_is_the_straight_way_through_its_points():
     # the tap: 17 cm to the grip (the clock's 20 cm less the grip's 3 cm), 9 cm back, 60 deg
     tap = floor(find_task("tap"), Limits(max_linear_speed=0.1, max_angular_speed=0.5))
     assert tap == pytest.approx((0.17 + 0.09) / 0.1 + math.radians(60.0) / 0.5)
+
+
+def test_the_surface_and_its_button_are_registered_facets():
+    """The light switch's wall and button: facets read back by their writer, the surface's
+    physics a contact that gives way at the button (the button has none of its own), the
+    readings named by the button, the last of the body's facets with readings."""
+    from sctd.task.kinds.surface import Button, Contact, PushButton, Surface
+    from sctd.task.reader import _elements
+
+    task = find_task("light_switch")
+    body = task.scene.bodies["light_switch"]
+    assert list(body.facets) == ["surface", "button"]
+    assert body.surface is body.facets["surface"] and body.button is body.facets["button"]
+    for key, cls in (("surface", Surface), ("button", Button)):
+        facet = body.facets[key]
+        assert type(facet) is registry()[key] is cls
+        assert cls.read(_reader(), copy.deepcopy(facet.to_yaml()), "x") == facet and facet.shapes()
+    physics = body.surface.physics("light_switch", task.scene)
+    assert isinstance(physics, PushButton) and isinstance(physics, Contact)
+    assert body.button.physics("light_switch", task.scene) is None
+    assert _elements(task.scene)["light_switch"] == "button"
+    assert isinstance(TaskScene(task).contacts[0], PushButton)
 
 
 # -- sections: kinds that own a section of the scene ------------------------------------------

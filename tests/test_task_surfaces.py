@@ -11,7 +11,8 @@ import pytest
 import yaml
 
 from sctd.task import TaskError, find_task, shipped_folder, task_from_document
-from sctd.task.model import PRESS_MARGIN, Button, Press, Reach, Surface, TeachStep
+from sctd.task.kinds.surface import Button, Surface
+from sctd.task.model import PRESS_MARGIN, Press, Reach, TeachStep
 
 SWITCH = shipped_folder() / "light_switch.yaml"
 DELETE = object()

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # (the kinds' classes type their scene with this module's)
     from .kinds import Facet, Section, StepKind
+    from .kinds.surface import Button, Surface
 
 Array = NDArray[np.float64]
 
@@ -92,23 +93,28 @@ class Body:
     vary : Vary
         How far a trial's pose is from the default.
     container : Container or None
-    surface : Surface or None
-        A solid surface the hand touches (a wall): the plane through its origin normal to
-        its x axis.
-    button : Button or None
-        A push button in that surface, its face centred on the origin.
     facets : dict of str to Facet
         Its elements of the registered kinds (:mod:`sctd.task.kinds`), by key: a
-        ``support`` things rest on, an ``item`` the hand picks up.
+        ``surface`` the hand touches and a ``button`` in it, a ``support`` things rest
+        on, an ``item`` the hand picks up.
     """
 
     name: str
     T_world: Array
     vary: Vary = field(default_factory=Vary)
     container: Container | None = None
-    surface: Surface | None = None
-    button: Button | None = None
     facets: dict[str, Facet] = field(default_factory=dict)
+
+    @property
+    def surface(self) -> Surface | None:
+        """Its ``surface`` facet (a wall: the plane through its origin normal to its x
+        axis), if it has one."""
+        return self.facets.get("surface")  # type: ignore[return-value]
+
+    @property
+    def button(self) -> Button | None:
+        """Its ``button`` facet (a push button in its surface), if it has one."""
+        return self.facets.get("button")  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -266,75 +272,6 @@ class Joint:
         return "rad" if self.kind == "revolute" else "m"
 
 
-# -- surfaces and buttons ---------------------------------------------------------------
-@dataclass(frozen=True)
-class Surface:
-    """A body's solid surface: the plane through the body's origin normal to its x axis,
-    solid behind it (towards -x).
-
-    A point of the hand (``touch``) that is ``d`` behind the plane is pushed out along
-    the normal by ``max(0, stiffness d + damping v_in)`` (``v_in`` its speed into the
-    surface) and held back along it by Coulomb friction, ``friction`` times that, built
-    up over ``friction_speed`` (tanh).
-
-    Attributes
-    ----------
-    stiffness : float
-        N/m of the contact (a fingertip's or a tool's against the wall).
-    damping : float
-        N s/m.
-    friction : float
-        The coefficient of friction (tangential over normal force).
-    friction_speed : float
-        m/s over which the friction builds up.
-    touch : tuple of str
-        The frames that touch it: ``hand`` (the end-effector's origin) and held frames.
-    """
-
-    stiffness: float
-    damping: float
-    friction: float
-    friction_speed: float
-    touch: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class Button:
-    """A push button in a body's surface (a light switch, an elevator's call button): its
-    face, a disc of ``radius`` centred on the body's origin, flush with the surface at
-    rest, travels in (along -x) against a spring up to ``travel``, where it rests on the
-    wall; pushed in past ``click`` it switches (its flag ``on`` toggles), and switches
-    again only once it came back out to half that.
-
-    The button is light beside the hand: at every instant its face is where the contact
-    and its spring balance, ``stiffness (d - s) = preload + spring s`` for the hand's
-    point ``d`` past the face's rest plane and the face pushed in by ``s`` in [0,
-    travel] (the surface's contact stiffness).
-
-    Attributes
-    ----------
-    radius : float
-        m of the face.
-    travel : float
-        m from rest to where it rests on the wall.
-    click : float
-        m pushed in past which it switches; at most ``travel``.
-    spring : float
-        N/m of its return spring.
-    preload : float
-        N its spring holds it out with: the push it takes to start moving.
-    """
-
-    radius: float
-    travel: float
-    click: float
-    spring: float
-    preload: float
-
-    @property
-    def click_force(self) -> float:
-        """The push that takes the face to its click depth, N."""
-        return self.preload + self.spring * self.click
 @dataclass(frozen=True)
 class Start:
     """The hand's start: ``T_world`` and how much it varies between trials."""
@@ -387,19 +324,14 @@ class Scene:
 READINGS = {
     "contents": ("poured", "spilled", "remaining", "flowing"),
     "joint": ("position", "speed", "held", "grasps", "max_position"),
-    "surface": ("force", "max_force", "touching"),
-    "button": ("force", "max_force", "touching", "position", "on", "presses"),
 }
 """What each kind of scene element not in the registry reports (a registered kind's
 class says its own, :mod:`sctd.task.kinds`), as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
 left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
 is held, how often it was grasped and the furthest position reached (m, m/s; rad, rad/s
-for a revolute joint); a body's surface (by the body's name) the normal force the hand
-presses it with now and the highest so far (N), and whether the hand touches it; a
-surface with a button besides how far the button is pushed in (m), whether it is on and
-how often it switched."""
-FLAGS = ("flowing", "held", "touching", "on")
+for a revolute joint)."""
+FLAGS = ("flowing", "held")
 """The readings that are flags (compared with ``is: true|false``)."""
 
 

@@ -31,7 +31,6 @@ from .model import (
     AllOf,
     AnyOf,
     Body,
-    Button,
     Compare,
     Container,
     Contents,
@@ -53,7 +52,6 @@ from .model import (
     Scene,
     Start,
     Step,
-    Surface,
     Task,
     Teach,
     TeachStep,
@@ -214,7 +212,7 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
     if not bodies:
         raise r.fail(f"{path}.bodies", "expected at least one body")
     held = _held(r, d["held"], f"{path}.held", bodies) if "held" in d else None
-    bodies = _touching(r, bodies, held, f"{path}.bodies")
+    bodies = _completed(r, Scene(start, bodies, held), f"{path}.bodies")
     joints: dict[str, Joint] = {}
     for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
         where = f"{path}.joints.{key}"
@@ -235,7 +233,6 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
         for key, facet in b.facets.items():
             facet.check(r, name, scene, f"{path}.bodies.{name}.{key}")
     _quantities_once(r, scene, path)
-    _in_front(r, scene, path)
     for entries in scene.sections.values():
         for e in entries.values():
             e.check(r, scene, path)
@@ -258,7 +255,7 @@ def _section(r: _Reader, cls: type[kinds.Section], v: Any, path: str,
 
 def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
     facet_kinds = kinds.facets()
-    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", "surface", "button", *facet_kinds})
+    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", *facet_kinds})
     container = None
     if "container" in d:
         c = r.fields(d["container"], f"{path}.container", {"radius", "depth"}, {"rim_margin", "max_drop"})
@@ -268,10 +265,9 @@ def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
             raise r.fail(f"{path}.container.rim_margin", f"must be below the radius {radius}, got {margin}")
         container = Container(radius, r.positive(c["depth"], f"{path}.container.depth"), margin,
                               r.positive(c.get("max_drop", 0.15), f"{path}.container.max_drop"))
-    surface, button = _contact(r, d, path)
     facets = {k: cls.read(r, d[k], f"{path}.{k}") for k, cls in facet_kinds.items() if k in d}
     return Body(name, r.transform(d, path), r.vary(d["vary"], f"{path}.vary") if "vary" in d else Vary(),
-                container, surface, button, facets)
+                container, facets)
 
 
 def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
@@ -346,98 +342,27 @@ def _hinge(r: _Reader, v: Any, path: str) -> Hinge:
     return hinge
 
 
-# -- surfaces and buttons -------------------------------------------------------------
-MAX_STIFFNESS = 50000.0
-"""N/m: the stiffest contact the simulator's 1 kHz step integrates stably against the
-arm's effective mass at the hand."""
-
-
-def _contact(r: _Reader, d: dict, path: str) -> tuple[Surface | None, Button | None]:
-    """A body's ``surface`` and the ``button`` in it (a button needs the surface). The
-    surface's ``touch`` frames are names still to be checked (:func:`_touching`)."""
-    surface = _surface(r, d["surface"], f"{path}.surface") if "surface" in d else None
-    if "button" not in d:
-        return surface, None
-    if surface is None:
-        raise r.fail(f"{path}.button", "a button sits in its body's surface: the body needs a surface "
-                                       "(the wall it is pushed into)")
-    return surface, _button(r, d["button"], f"{path}.button")
-
-
-def _surface(r: _Reader, v: Any, path: str) -> Surface:
-    d = r.fields(v, path, {"stiffness"}, {"damping", "friction", "friction_speed", "touch"})
-    stiffness = r.number(d["stiffness"], f"{path}.stiffness", lo=0.0, hi=MAX_STIFFNESS, lo_open=True)
-    damping, friction = (r.nonneg(d.get(k, 0.0), f"{path}.{k}") for k in ("damping", "friction"))
-    touch: tuple[str, ...] = ()
-    if "touch" in d:
-        names = d["touch"]
-        if not isinstance(names, list) or not names:
-            raise r.fail(f"{path}.touch", f"expected a non-empty list of frames, got {kind_of(names)}")
-        touch = tuple(r.string(n, f"{path}.touch[{i}]") for i, n in enumerate(names))
-        if len(set(touch)) < len(touch):
-            raise r.fail(f"{path}.touch", f"a frame is listed twice: {', '.join(touch)}")
-    return Surface(stiffness, damping, friction,
-                   r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed"), touch)
-
-
-def _button(r: _Reader, v: Any, path: str) -> Button:
-    d = r.fields(v, path, {"radius", "travel", "click"}, {"spring", "preload"})
-    radius, travel, click = (r.positive(d[k], f"{path}.{k}") for k in ("radius", "travel", "click"))
-    if click > travel:
-        raise r.fail(f"{path}.click", f"must be at most the travel {travel}, got {click}")
-    spring, preload = (r.nonneg(d.get(k, 0.0), f"{path}.{k}") for k in ("spring", "preload"))
-    return Button(radius, travel, click, spring, preload)
-
-
-def _touching(r: _Reader, bodies: dict[str, Body], held: Held | None, path: str) -> dict[str, Body]:
-    """The bodies with each surface's ``touch`` checked against the frames that move with
-    the hand (``hand`` and the held frames), or set to all of them when not given."""
-    moving = (HAND, *(held.frames if held else ()))
+def _completed(r: _Reader, scene: Scene, path: str) -> dict[str, Body]:
+    """The bodies with their facets completed from the rest of the scene (its bodies and
+    held object, :meth:`~sctd.task.kinds.Facet.completed`: a surface's ``touch``)."""
     out = {}
-    for name, b in bodies.items():
-        if b.surface is not None:
-            for i, f in enumerate(b.surface.touch):
-                if f not in moving:
-                    raise r.fail(f"{path}.{name}.surface.touch[{i}]", f"expected a frame that moves with "
-                                                                      f"the hand, got {f!r} (frames: "
-                                                                      f"{', '.join(moving)})")
-            if held is not None and name == held.name:
-                raise r.fail(f"{path}.{name}.surface", f"the held object is called {name!r} too: a "
-                                                       "surface reports its readings by its body's name")
-            surface = dataclasses.replace(b.surface, touch=b.surface.touch or moving)
-            b = dataclasses.replace(b, surface=surface)
-        out[name] = b
+    for name, b in scene.bodies.items():
+        facets = {k: f.completed(r, name, scene, f"{path}.{name}.{k}") for k, f in b.facets.items()}
+        out[name] = dataclasses.replace(b, facets=facets)
     return out
 
 
-def _in_front(r: _Reader, scene: Scene, path: str) -> None:
-    """Every frame that touches a surface starts in front of it (a surface is solid
-    behind its plane)."""
-    T_start = scene.start.T_world
-    frames = scene.held.frames if scene.held is not None else {}
-    for name, b in scene.bodies.items():
-        if b.surface is None:
-            continue
-        T_body_world = se3.invert_transform(b.T_world)
-        for f in b.surface.touch:
-            T = T_start @ frames[f] if f != HAND else T_start
-            x = float((T_body_world @ T)[0, 3])
-            if not x > 0.0:
-                raise r.fail(f"{path}.start", f"{f} starts {-x:.3g} m behind the surface of {name!r}: "
-                                              "a surface is solid behind its plane (the body's -x side)")
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
     out = {j: "joint" for j in scene.joints}
     if scene.held is not None and scene.held.contents is not None:
         out[scene.held.name] = "contents"
-    out.update({n: "button" if b.button is not None else "surface" for n, b in scene.bodies.items()
-                if b.surface is not None})
     out |= {n: kinds.sections()[key].noun for key, entries in scene.sections.items() for n in entries}
-    for n, b in scene.bodies.items():  # (a body's facets of registered kinds: the first with readings)
-        first = next((k for k, f in b.facets.items() if f.quantities), None)
-        if first is not None:
-            out[n] = first
+    for n, b in scene.bodies.items():  # (a body's facets: the last with readings names it, a button)
+        last = [k for k, f in b.facets.items() if f.quantities]
+        if last:
+            out[n] = last[-1]
     return out
 
 
@@ -470,10 +395,9 @@ def _flag(reading: Reading, scene: Scene) -> bool:
 
 
 def _quantities_once(r: _Reader, scene: Scene, path: str) -> None:
-    """A body reports each quantity once: its facets with readings do not share one, nor
-    with its surface."""
+    """A body reports each quantity once: its facets with readings do not share one."""
     for n, b in scene.bodies.items():
-        seen = list(READINGS["button" if b.button else "surface"]) if b.surface is not None else []
+        seen: list[str] = []
         for k, f in b.facets.items():
             twice = sorted(set(seen) & set(f.quantities))
             if twice:
@@ -498,12 +422,12 @@ def _reading(r: _Reader, v: Any, path: str, scene: Scene) -> Reading:
 
 
 def _all_quantities(scene: Scene, element: str, kind: str) -> tuple[str, ...]:
-    """Every quantity ``element`` reports: its kind's, and a body's other facets'."""
-    out = list(quantities(kind))
+    """Every quantity ``element`` reports: a body's facets', in their order; else its kind's."""
     body = scene.bodies.get(element)
-    if body is not None and body.surface is not None:
-        out += [q for q in READINGS["button" if body.button else "surface"] if q not in out]
-    for f in body.facets.values() if body is not None else ():
+    if body is None:
+        return quantities(kind)
+    out: list[str] = []
+    for f in body.facets.values():
         out += [q for q in f.quantities if q not in out]
     return tuple(out)
 

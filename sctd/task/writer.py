@@ -51,7 +51,6 @@ from .model import (
     Reach,
     Scene,
     Step,
-    Surface,
     Task,
     Teach,
     TeachStep,
@@ -64,7 +63,7 @@ from .reader import KINDS, TEACH_SPEEDS, _angular, rpy_matrix
 Doc = dict[str, Any]
 
 FRICTION_SPEED = 0.01
-"""m/s (rad/s): a joint's and a surface's ``friction_speed`` when the file leaves it out."""
+"""m/s (rad/s): a joint's ``friction_speed`` when the file leaves it out."""
 ULPS = 3
 """How many ulps either way of the closed-form angles :func:`rpy_from_matrix` tries."""
 
@@ -224,23 +223,7 @@ def _body(b: Body) -> Doc:
         out["container"] = {"radius": float(c.radius), "depth": float(c.depth)}
         _put(out["container"], "rim_margin", c.rim_margin, 0.005)
         _put(out["container"], "max_drop", c.max_drop, 0.15)
-    if b.surface is not None:
-        out["surface"] = _surface(b.surface)
-    if b.button is not None:
-        k = b.button
-        out["button"] = {"radius": float(k.radius), "travel": float(k.travel), "click": float(k.click)}
-        _put(out["button"], "spring", k.spring, 0.0)
-        _put(out["button"], "preload", k.preload, 0.0)
     out.update(_extra_facets(b))
-    return out
-
-
-def _surface(s: Surface) -> Doc:
-    out: Doc = {"stiffness": float(s.stiffness)}
-    _put(out, "damping", s.damping, 0.0)
-    _put(out, "friction", s.friction, 0.0)
-    _put(out, "friction_speed", s.friction_speed, FRICTION_SPEED)
-    out["touch"] = list(s.touch)  # (its default depends on the held object: written)
     return out
 
 
@@ -303,7 +286,7 @@ def _extra_facets(body: Body) -> Doc:
     :class:`~.model.Body` this module does not write itself holds elements with
     ``to_yaml()``, written under their kind's ``key`` (or the mapping's keys) in the
     body's mapping. Body has no such field today: nothing."""
-    known = {"name", "T_world", "vary", "container", "surface", "button"}
+    known = {"name", "T_world", "vary", "container"}
     out: Doc = {}
     for f in dataclasses.fields(body):
         if f.name not in known:

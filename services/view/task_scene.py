@@ -6,10 +6,10 @@ joint's handle and hinge, what the hand holds and its frames. Each becomes a par
 (:class:`Part`): a triangle mesh in the frame of what it moves with, so that a view
 places it once and only moves that frame:
 
-- a body's container (an open cylinder below its opening), surface (a slab behind its
-  plane), button (a disc on its face);
+- a body's container (an open cylinder below its opening);
 - the shapes of the elements of registered kinds (:mod:`sctd.task.kinds`): a body's
-  facets' and a section's entries' (a head's sphere, behind the body it is behind);
+  facets' (a surface's slab behind its plane, a button's disc on its face) and a
+  section's entries' (a head's sphere, behind the body it is behind);
 - a joint's moving part: a drawer's front and box behind a prismatic handle, a door's
   panel from a revolute handle's hinge to past the handle; it moves with the handle
   (:func:`sctd.task.kinematics.handle_pose` at the joint's position);
@@ -22,7 +22,6 @@ the constants below: they show where things are, not what collides.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -30,22 +29,18 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from sctd import se3
 from sctd.task import Task
 from sctd.task.kinds import Facet, Section, Shape
 from sctd.task.kinematics import handle_pose
 
 Array = NDArray[np.float64]
 
-WALL = 0.6  # m: the side of a surface's slab as drawn
-WALL_DEPTH = 0.02  # m: its thickness behind the plane
 BOX_FRONT = (0.40, 0.16)  # m: a prismatic joint's box (a drawer): its front's width and height
 BOX_DEPTH = 0.30  # m: the box's depth behind its front
 HANDLE_OUT = 0.03  # m: how far a handle stands out of its drawer front or door
 PANEL_THICKNESS = 0.02  # m: a revolute joint's panel (a door)
 HELD_RADIUS = 0.03  # m: the held object's cylinder
-RGB = {"container": (110, 110, 130), "surface": (170, 170, 160), "button": (200, 60, 60),
-       "joint": (150, 110, 70), "held": (70, 150, 70)}
+RGB = {"container": (110, 110, 130), "joint": (150, 110, 70), "held": (70, 150, 70)}
 
 
 @dataclass(frozen=True)
@@ -83,14 +78,6 @@ def task_parts(task: Task) -> list[Part]:
             m.apply_translation((0.0, 0.0, -c.depth / 2))
             parts.append(_part(f"{name}/container", f"{name} ({c.radius * 200:.0f} cm wide)", "container",
                                ("body", name), m, 0.7))
-        if b.surface is not None:
-            m = trimesh.creation.box(extents=(WALL_DEPTH, WALL, WALL))
-            m.apply_translation((-WALL_DEPTH / 2 - 1e-3, 0.0, 0.0))
-            parts.append(_part(f"{name}/surface", f"{name}'s surface", "surface", ("body", name), m))
-        if b.button is not None:
-            m = trimesh.creation.cylinder(radius=b.button.radius, height=0.01)
-            m.apply_transform(_turn_z_to_x())
-            parts.append(_part(f"{name}/button", f"{name}", "button", ("body", name), m))
         parts += _facet_parts(name, b.facets)
     for entries in sc.sections.values():
         for name, e in entries.items():
@@ -163,11 +150,6 @@ def _shape_part(name: str, label: str, kind: str, body: str, shape: Shape) -> Pa
     rgb = tuple(round(255 * c) for c in shape.colour)
     return Part(name, label, kind, ("body", body), np.asarray(m.vertices, dtype=float),
                 np.asarray(m.faces, dtype=np.int64), shape.opacity, (rgb[0], rgb[1], rgb[2]))
-
-
-def _turn_z_to_x() -> Array:
-    """A transform turning a shape along z onto x."""
-    return se3.transform_from_pose([0.0, 0.0, 0.0, 0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4)])
 
 
 def _joint_mesh(j) -> trimesh.Trimesh:

@@ -1,11 +1,12 @@
 """Kinds of task element as a registry: what a task file may say, one class a kind.
 
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
-support things rest on, an item the hand can pick up, a knob it turns. A **section** is a
-kind of scene element with a section of the scene of its own (``scene.<key>.<name>``): a
-person's head, a zone a frame of the hand is timed in. A **step kind** is
-a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a knob in the
-hand. Each kind is one class that holds everything sctd knows of it:
+solid surface the hand touches and a push button in it, a support things rest on, an
+item the hand can pick up, a knob it turns. A **section** is a kind of scene element
+with a section of the scene of its own (``scene.<key>.<name>``): a person's head, a zone
+a frame of the hand is timed in. A **step kind** is a kind of intent step
+(``intent[i].<key>``): grasp an item, place it, turn a knob in the hand. Each kind is one
+class that holds everything sctd knows of it:
 
 - its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
 - its writer (``to_yaml``: a task file's fields, read back to the same element);
@@ -52,6 +53,8 @@ from .base import (
 
 GROUP = "sctd.task_kinds"
 BUILTIN = {
+    "surface": "sctd.task.kinds.surface:Surface",
+    "button": "sctd.task.kinds.surface:Button",
     "support": "sctd.task.kinds.pickable:Support",
     "item": "sctd.task.kinds.pickable:Item",
     "grasp": "sctd.task.kinds.handling:GraspStep",

@@ -133,6 +133,12 @@ class Facet(ABC):
         """The facet a task file's field ``v`` at ``path`` says (``r``: the task reader,
         whose ``fail(path, problem)`` is the error to raise)."""
 
+    def completed(self, r: Any, body: str, scene: Scene, path: str) -> Facet:
+        """The facet with what it takes from the rest of the scene filled in, once the
+        bodies and the held object are read (``scene``: them; a surface's ``touch``
+        defaults to every frame that moves with the hand); itself by default."""
+        return self
+
     def check(self, r: Any, body: str, scene: Scene, path: str) -> None:  # noqa: B027 - most check nothing
         """Cross-checks once the whole scene is read (what it names exists)."""
 
