@@ -26,7 +26,7 @@ from sctd.app.defaults import DefaultsError, defaults
 from sctd.app.errors import fail
 from sctd.app.options import add_robot_argument
 from sctd.task import Task, TaskError, find_task
-from sctd.task.model import Joint
+from sctd.task.kinds.joint import Joint
 from sctd.timing import Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import add_zenoh_arguments, session_from_args

@@ -10,15 +10,14 @@ knows a task:
   bottle's opening) and its **contents** (:class:`Flow`): they flow out of the outlet
   frame while its axis is tilted past the flow angle, into the container if the outlet
   is over its opening, otherwise they are spilled;
-- **joints** (:class:`Handle`): a handle body on a prismatic joint along its own x
-  axis (:class:`PrismaticHandle`, a drawer) or on a revolute joint about a hinge line
-  (:class:`RevoluteHandle`, a door), grasped when the hand comes within the grasp
-  radius of where the handle is, then coupled to the hand by a stiff spring-damper; the
-  joint resists with a spring, viscous damping and Coulomb friction, and stops at its
-  end stops. The handle's published frame stays at the joint's 0, so opening a drawer
-  shows as hand motion along the frame's +x, and a door as motion along its arc;
 - the elements of registered kinds (:mod:`sctd.task.kinds`): a section's entries (a
-  person's head, whose contact spring pushes back on the hand and the held object's
+  **joint**'s handle, on a prismatic joint along its own x axis, a drawer, or on a
+  revolute joint about a hinge line, a door, grasped when the hand comes within the
+  grasp radius of where the handle is, then coupled to the hand by a stiff
+  spring-damper, the joint resisting with a spring, viscous damping and Coulomb
+  friction and stopping at its end stops: the handle's published frame stays at the
+  joint's 0, so opening a drawer shows as hand motion along the frame's +x, and a door
+  as motion along its arc; a person's head, whose contact spring pushes back on the hand and the held object's
   frames inside it; a zone, a goal pose of a frame of the hand timed while the frame
   stays inside) and the bodies' facets (an item the fingers take), each stepped by its
   kind's physics on a :class:`~sctd.task.kinds.World`. Among the facets: a body's solid
@@ -44,10 +43,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from sctd import se3
-from sctd.task import Task, handle_pose
+from sctd.task import Task
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
-from sctd.task.model import Container, Contents, Held, Joint
+from sctd.task.model import Container, Contents, Held
 from sctd.wire.codec import GripperCmd, GripperReading
 
 from .fingers import Fingers
@@ -221,150 +220,6 @@ class Flow:
         return out
 
 
-# -- a handle on a joint -------------------------------------------------------------
-def joint_force(position: float, speed: float, joint: Joint) -> float:
-    """Resistance of the joint in its own unit, N along a prismatic joint's axis or N m
-    about a revolute joint's hinge (negative: resists opening)."""
-    return (-joint.spring * position - joint.damping * speed
-            - joint.friction * math.tanh(speed / joint.friction_speed))
-
-
-class Handle:
-    """A handle on a joint, pulled by the hand that grasped it: the parts every kind of
-    joint shares. A kind says where its handle is and how it moves (:meth:`_path`).
-
-    The hand grasps the handle when it comes within the grasp radius of where the handle
-    is now and lets go beyond the release distance; while held, a spring-damper joins
-    them, ``F_ee = -k (p_ee - p_handle) - c (v_ee - J qdot)`` with ``J = dp_handle/dq``.
-    The joint is driven by the generalised force ``J . (-F_ee)`` (for a hinge the torque
-    ``((p_handle - p_hinge) x F_handle) . axis``), resisted by :func:`joint_force`, and
-    stops at 0 and at its travel.
-
-    Attributes
-    ----------
-    position : float
-        From 0, m or rad.
-    speed : float
-        m/s or rad/s.
-    attached : bool
-        Whether the hand holds the handle.
-    """
-
-    def __init__(self, joint: Joint):
-        self.joint = joint
-        self.name = joint.name
-        self.inertia = joint.inertia
-        self.reset()
-
-    def reset(self) -> None:
-        """At 0, released."""
-        self.position = 0.0
-        self.speed = 0.0
-        self.attached = False
-        self.max_position = 0.0
-        self.grasps = 0
-
-    def handle_transform(self, T_world_handle0: np.ndarray) -> np.ndarray:
-        """``T_world_handle`` at the current position (``T_world_handle0``: at 0)."""
-        return handle_pose(self.joint, T_world_handle0, self.position)
-
-    def _path(self, T_world_handle0: np.ndarray) -> tuple[float, float, float, float, float, float]:
-        """The handle's origin at the current position and its derivative by the
-        position (world), as floats."""
-        raise NotImplementedError
-
-    def step(self, T_world_ee: np.ndarray, twist: np.ndarray, T_world_handle0: np.ndarray,
-             dt: float) -> np.ndarray:
-        """Grasp or release, move by ``dt``; return the force on the ee, shape (3,)."""
-        # (on floats: the same numbers as on 3-vectors, without numpy's per-call cost)
-        J, G = self.joint, self.joint.grasp
-        px, py, pz, jx, jy, jz = self._path(T_world_handle0)  # the handle, d handle / d position
-        (_, _, _, ex), (_, _, _, ey), (_, _, _, ez), _ = T_world_ee.tolist()
-        dx, dy, dz = ex - px, ey - py, ez - pz
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if not self.attached and dist <= G.radius:
-            self.attached = True
-            self.grasps += 1
-        elif self.attached and dist > G.release:
-            self.attached = False
-        fx = fy = fz = pull = 0.0  # force on the ee, and the generalised force on the joint
-        if self.attached:
-            k, c, s = G.stiffness, G.damping, self.speed
-            vx, vy, vz = twist[:3].tolist()
-            fx, fy, fz = (-k * dx - c * (vx - s * jx), -k * dy - c * (vy - s * jy),
-                          -k * dz - c * (vz - s * jz))
-            pull = 0.0 + -fx * jx + -fy * jy + -fz * jz  # (summed as numpy's dot sums)
-        accel = (pull + joint_force(self.position, self.speed, J)) / self.inertia
-        self.speed += accel * dt
-        self.position += self.speed * dt
-        if self.position <= 0.0:
-            self.position, self.speed = 0.0, max(self.speed, 0.0)
-        elif self.position >= J.travel:
-            self.position, self.speed = J.travel, min(self.speed, 0.0)
-        self.max_position = max(self.max_position, self.position)
-        return np.array((fx, fy, fz))
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {f"{n}.position": self.position, f"{n}.speed": self.speed, f"{n}.held": self.attached,
-                f"{n}.grasps": float(self.grasps), f"{n}.max_position": self.max_position}
-
-    def outcome(self, thresholds: dict[str, float]) -> dict[str, Any]:
-        """Opening (the joint's unit), the opening to reach (the task's ``thresholds``:
-        the travel when it names none), whether the handle is held, how often it was
-        grasped."""
-        return {"opening": self.position, "open_fraction": self.position / self.joint.travel,
-                "max_opening": self.max_position, "attached": self.attached, "grasps": self.grasps,
-                "target_opening": thresholds.get(f"{self.name}.position", self.joint.travel)}
-
-
-class PrismaticHandle(Handle):
-    """A handle on a prismatic joint along the handle body's x axis (a drawer): the
-    handle at ``h0 + q x0``, ``J = x0``, driven by the pull along its axis."""
-
-    def _path(self, T_world_handle0: np.ndarray) -> tuple[float, float, float, float, float, float]:
-        (ax, _, _, hx), (ay, _, _, hy), (az, _, _, hz), _ = T_world_handle0.tolist()  # axis, handle
-        o = self.position
-        return hx + o * ax, hy + o * ay, hz + o * az, ax, ay, az
-
-
-class RevoluteHandle(Handle):
-    """A handle on a revolute joint (a hinged door), turned about the hinge line by the
-    angle ``q``: with ``r0 = p_handle0 - p_hinge`` split into ``r_par`` along the unit
-    axis ``a`` and ``r_perp`` across it, the handle is at ``p_hinge + r_par + cos q
-    r_perp + sin q (a x r_perp)`` and ``J = a x (p_handle - p_hinge)``, of length the
-    lever; driven by the torque about the hinge, of inertia ``mass lever^2``."""
-
-    def __init__(self, joint: Joint):
-        super().__init__(joint)
-        self._key = b""  # the pose at 0 (bytes) that _arm was worked out for
-        self._arm: tuple[float, ...] = ()
-
-    def _path(self, T_world_handle0: np.ndarray) -> tuple[float, float, float, float, float, float]:
-        key = T_world_handle0.tobytes()
-        if key != self._key:
-            self._arm, self._key = self._arm_of(T_world_handle0), key
-        ox, oy, oz, ux, uy, uz, bx, by, bz = self._arm
-        c, s = math.cos(self.position), math.sin(self.position)
-        rx, ry, rz = c * ux + s * bx, c * uy + s * by, c * uz + s * bz  # r now, less r_par
-        return ox + rx, oy + ry, oz + rz, c * bx - s * ux, c * by - s * uy, c * bz - s * uz
-
-    def _arm_of(self, T_world_handle0: np.ndarray) -> tuple[float, ...]:
-        """``p_hinge + r_par``, ``r_perp`` and ``a x r_perp`` (world), as floats."""
-        hinge = self.joint.hinge
-        assert hinge is not None  # (a revolute joint has one)
-        R0, p0 = T_world_handle0[:3, :3], T_world_handle0[:3, 3]
-        a = R0 @ hinge.axis
-        centre = R0 @ hinge.point + p0
-        r0 = p0 - centre
-        across = r0 - float(r0 @ a) * a
-        return (*(p0 - across).tolist(), *across.tolist(), *np.cross(a, across).tolist())
-
-
-HANDLES: dict[str, type[Handle]] = {"prismatic": PrismaticHandle, "revolute": RevoluteHandle}
-"""The handle element of each kind of joint (:data:`sctd.task.model.JOINT_KINDS`)."""
-
-
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -395,7 +250,6 @@ class TaskScene:
             container = sc.bodies[sc.held.contents.into].container
             assert container is not None  # (the reader checks: contents go into a container)
             self.flow = Flow(sc.held, sc.held.contents, container)
-        self.handles = [HANDLES[j.kind](j) for j in sc.joints.values()]
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.fingers = Fingers()
@@ -420,13 +274,16 @@ class TaskScene:
         and off)."""
         if self.flow is not None:
             self.flow.reset()
-        for h in self.handles:
-            h.reset()
         self.live.clear()
         self.live.update({n: T.copy() for n, T in self.poses.items()})
         self.fingers.reset()
         for p in self._physics:
             p.reset(self.world)
+
+    @property
+    def handles(self) -> list[FacetPhysics]:
+        """The physics of the joints' handles, in the file's order."""
+        return [p for facets in self.world.physics.values() for k, p in facets.items() if k == "joints"]
 
     @property
     def contacts(self) -> list[FacetPhysics]:
@@ -455,8 +312,6 @@ class TaskScene:
         if self.flow is not None:
             self.flow.step(T_world_ee, live[self.flow.contents.into], dt)
         wrench = np.zeros(6)
-        for h in self.handles:
-            wrench[:3] += h.step(T_world_ee, twist, live[h.joint.handle], dt)
         self.fingers.advance(dt)
         self.world.T_world_ee, self.world.twist = T_world_ee, twist
         for p in self._physics:  # (the registered kinds' elements: a head, an item in the hand or not)
@@ -506,8 +361,6 @@ class TaskScene:
         out: dict[str, float | bool] = {}
         if self.flow is not None:
             out.update(self.flow.readings())
-        for h in self.handles:
-            out.update(h.readings())
         for p in self._physics:
             out.update(p.readings(self.world))
         return out
@@ -540,8 +393,8 @@ class TaskScene:
             out["tasks"] = {t.name: _judged(t, r, pos) for t in self.task.parts}
         if self.flow is not None:
             out.update(self.flow.outcome(self.thresholds))
-        for h in self.handles:
-            out.update(h.outcome(self.thresholds))
+        for p in self._physics:  # (a joint's opening)
+            out.update(p.outcome(self.world, self.thresholds))
         return out
 
 

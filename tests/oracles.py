@@ -13,7 +13,7 @@ from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from sctd.learn import energy
 from sctd.task import handle_jacobian, handle_pose
-from sctd.task.model import Joint
+from sctd.task.kinds.joint import Joint
 
 
 def reference_swap(unary, edges, weights, smoothness, labels=None, scale: float = 1e6,

@@ -13,8 +13,10 @@ from can.interfaces import virtual as can_virtual
 from sctd import se3
 from sctd.task import TaskError, find_task, handle_jacobian, handle_pose
 from sctd.task.judge import holds
+from sctd.task.kinds import World
+from sctd.task.kinds.joint import joint_force
 from sctd.task.model import Near
-from sctd_sim.scenes import EmptyScene, TaskScene, joint_force, make_scene, outlet_geometry, outlet_stream
+from sctd_sim.scenes import EmptyScene, TaskScene, make_scene, outlet_geometry, outlet_stream
 from sctd_sim.simulation import Simulation
 from tests.oracles import HandleState, reference_handle_step
 
@@ -166,8 +168,8 @@ def drawer_scene(**joint) -> TaskScene:
     if joint:  # the same task with other joint parameters
         task = scene.task
         j = dataclasses.replace(task.scene.joints["drawer"], **joint)
-        joints = {"drawer": j}
-        scene = make_scene(dataclasses.replace(task, scene=dataclasses.replace(task.scene, joints=joints)))
+        sc = dataclasses.replace(task.scene, sections={**task.scene.sections, "joints": {"drawer": j}})
+        scene = make_scene(dataclasses.replace(task, scene=sc))
     assert isinstance(scene, TaskScene)
     return scene
 
@@ -328,8 +330,9 @@ def cabinet_scene(**joint) -> TaskScene:
     scene = make_scene(find_task("cabinet"))
     if joint:  # the same task with other joint parameters
         task = scene.task
-        joints = {"door": dataclasses.replace(task.scene.joints["door"], **joint)}
-        scene = make_scene(dataclasses.replace(task, scene=dataclasses.replace(task.scene, joints=joints)))
+        door = dataclasses.replace(task.scene.joints["door"], **joint)
+        sc = dataclasses.replace(task.scene, sections={**task.scene.sections, "joints": {"door": door}})
+        scene = make_scene(dataclasses.replace(task, scene=sc))
     assert isinstance(scene, TaskScene)
     return scene
 
@@ -444,7 +447,7 @@ def test_a_handle_steps_as_its_equations_say(task):
         p = p + v * DT
         T, twist = ee_at(p), np.concatenate([v, rng.normal(0.0, 0.1, 3)])
         f_ref = reference_handle_step(joint, ref, T, twist, T0, DT)
-        f = element.step(T, twist, T0, DT)
+        f = element.step(World(T, twist, {joint.handle: T0}), DT)[:3]
         if task == "drawer":
             assert (element.position, element.speed) == (ref.position, ref.speed)
             assert element.attached == ref.attached

@@ -660,13 +660,36 @@ def test_the_zone_is_a_registered_section_read_back_by_its_writer():
     from sctd.task.kinds.zone import Zone, ZoneWatch
     from tests.test_zone import drink_with_zone
 
-    assert list(sections())[:2] == ["heads", "zones"] and sections()["zones"] is Zone
+    assert list(sections())[:3] == ["joints", "heads", "zones"] and sections()["zones"] is Zone
     task = read(drink_with_zone())
     zone = task.scene.sections["zones"]["at_lips"]
     assert task.scene.zones == {"at_lips": zone}
     back = Zone.read(_reader(), "at_lips", copy.deepcopy(zone.to_yaml()), "x", task.scene)
     assert back.to_yaml() == zone.to_yaml() and back.tilt == zone.tilt
     assert isinstance(zone.physics(task.scene), ZoneWatch) and zone.shapes() == []
+
+
+@pytest.mark.parametrize("name", ["drawer", "cabinet"])
+def test_the_joint_is_a_registered_section_drawn_at_its_handle(name):
+    """A joint: read back by its writer, its handle's physics, its footprint the handle's
+    path, and its drawing where the joint's position has moved the handle."""
+    from sctd.task import handle_pose
+    from sctd.task.kinds import sections
+    from sctd.task.kinds.joint import Handle, Joint
+
+    assert sections()["joints"] is Joint
+    task = find_task(name)
+    (joint_name, joint), = task.scene.joints.items()
+    assert task.scene.sections["joints"] == {joint_name: joint}
+    back = Joint.read(_reader(), joint_name, copy.deepcopy(joint.to_yaml()), "x", task.scene)
+    assert back.to_yaml() == joint.to_yaml() and back.travel == joint.travel
+    assert isinstance(joint.physics(task.scene), Handle)
+    T0 = task.scene.bodies[joint.handle].T_world
+    path = joint.footprint(task.scene)
+    assert len(path) == 9 and np.allclose(path[-1][0], handle_pose(joint, T0, joint.travel)[:3, 3])
+    at = joint.drawn_at({joint.handle: T0}, {f"{joint_name}.position": 0.1})
+    assert np.allclose(at, handle_pose(joint, T0, 0.1)) and joint.drawn_at({}, {}) is None
+    assert [s.name for s in joint.shapes()] == ["moving"]
 
 
 LAMP_DOC = {"sctd_task": 1, "name": "lamps_test", "object": "desk",
@@ -760,7 +783,7 @@ def test_a_section_kind_is_read_written_simulated_and_drawn(lamps):
         scene.step(T, np.zeros(6), 0.01)
     out = scene.outcome()
     assert out["readings"]["lamp.lit"] is True and out["done"]
-    assert [(p.name, p.anchor) for p in task_parts(task)] == [("lamp/lamp", ("body", "desk"))]
+    assert [(p.name, p.anchor) for p in task_parts(task)] == [("lamp/lamp", ("entry", "lamps/lamp"))]
 
 
 @pytest.mark.parametrize("edit, where, what", [

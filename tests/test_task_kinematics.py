@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from sctd import se3
 from sctd.task import find_task, handle_jacobian, handle_pose
-from sctd.task.model import Grasp, Hinge, Joint
+from sctd.task.kinds.joint import Grasp, Hinge, Joint
 from tests.strategies import poses
 
 GRASP = Grasp(0.02, 0.06, 2000.0, 60.0)

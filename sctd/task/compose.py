@@ -30,8 +30,7 @@ from sctd import se3
 
 from . import kinds
 from .kinds import Section
-from .kinematics import handle_pose
-from .model import Body, Joint, Scene, Task
+from .model import Body, Scene, Task
 from .reader import TaskError
 
 Array = NDArray[np.float64]
@@ -50,16 +49,11 @@ def footprint(task: Task, T: Array | None = None) -> tuple[Array, float]:
     T = np.eye(4) if T is None else T
     points = [b.T_world[:3, 3] for b in sc.bodies.values()]
     pad = [b.container.radius if b.container is not None else 0.0 for b in sc.bodies.values()]
-    for entries in sc.sections.values():  # (a person's head: its sphere)
+    for entries in sc.sections.values():  # (a joint's handle's path, a person's head's sphere)
         for e in entries.values():
             for centre, r in e.footprint(sc):
                 points.append(centre)
                 pad.append(r)
-    for j in sc.joints.values():
-        T0 = sc.bodies[j.handle].T_world
-        for q in np.linspace(0.0, j.travel, 9):
-            points.append(handle_pose(j, T0, float(q))[:3, 3])
-            pad.append(0.0)
     P = (T[:3, :3] @ np.array(points).T).T + T[:3, 3]
     centre = P.mean(axis=0)
     radius = max(float(np.linalg.norm(p - centre)) + r for p, r in zip(P, pad, strict=True))
@@ -138,14 +132,13 @@ def compose(tasks: list[Task]) -> Task:
         placed.append(footprint(t))
         placed_walls += walls(t)
     bodies: dict[str, Body] = {}
-    joints: dict[str, Joint] = {}
     sections: dict[str, dict[str, Section]] = {}
     held = None
     for t in placed_tasks:
         sc = t.scene
-        names = set(sc.bodies) | set(sc.joints) | _entries(sc.sections) | \
+        names = set(sc.bodies) | _entries(sc.sections) | \
             ({sc.held.name, *sc.held.frames} if sc.held else set())
-        taken = set(bodies) | set(joints) | _entries(sections) | \
+        taken = set(bodies) | _entries(sections) | \
             ({held.name, *held.frames} if held else set())
         clash = sorted(names & taken)
         if clash:
@@ -155,13 +148,12 @@ def compose(tasks: list[Task]) -> Task:
             raise TaskError(t.file or t.name, "scene.held", f"the hand already holds {held.name!r} "
                                                             "for an earlier task: it holds one thing")
         bodies.update(sc.bodies)
-        joints.update(sc.joints)
         for key, entries in sc.sections.items():
             sections[key] = {**sections.get(key, {}), **entries}
         held = held or sc.held
     order = list(kinds.sections())
     sections = {k: sections[k] for k in sorted(sections, key=order.index)}
-    scene = Scene(first.scene.start, bodies, held, joints, sections)
+    scene = Scene(first.scene.start, bodies, held, sections)
     name = "+".join(t.name for t in placed_tasks)
     return replace(first, name=name, title=" and ".join(t.title for t in placed_tasks), scene=scene,
                    parts=tuple(placed_tasks))

@@ -14,12 +14,15 @@ with ``p`` and ``a`` the hinge's point and axis in the handle's frame.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numpy.typing import NDArray
 
 from sctd import se3
 
-from .model import Joint
+if TYPE_CHECKING:  # (the joint's kind draws itself with these functions)
+    from .kinds.joint import Joint
 
 Array = NDArray[np.float64]
 

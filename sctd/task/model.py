@@ -25,13 +25,14 @@ radians.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # (the kinds' classes type their scene with this module's)
     from .kinds import Facet, Section, StepKind
+    from .kinds.joint import Joint
     from .kinds.surface import Button, Surface
 
 Array = NDArray[np.float64]
@@ -167,112 +168,6 @@ class Held:
 
 
 @dataclass(frozen=True)
-class Grasp:
-    """How the hand takes hold of a joint's handle.
-
-    Attributes
-    ----------
-    radius : float
-        The hand grasps the handle when it comes this close, m.
-    release : float
-        It lets go when pulled this far from the handle, m.
-    stiffness, damping : float
-        Spring (N/m) and damper (N s/m) between the hand and the grasped handle.
-    """
-
-    radius: float
-    release: float
-    stiffness: float
-    damping: float
-
-
-@dataclass(frozen=True)
-class Hinge:
-    """The line a revolute joint turns its handle about, in the handle's frame at 0.
-
-    Attributes
-    ----------
-    point : ndarray, shape (3,)
-        A point on the line, m.
-    axis : ndarray, shape (3,)
-        Its unit direction: a positive joint position turns the handle about it by the
-        right-hand rule.
-    """
-
-    point: Array
-    axis: Array
-
-    @property
-    def lever(self) -> float:
-        """The handle's distance from the line, m (the handle is the frame's origin)."""
-        d = -self.point
-        return float(np.linalg.norm(d - float(d @ self.axis) * self.axis))
-
-
-JOINT_KINDS = ("prismatic", "revolute")
-"""The kinds of joint, as a file's ``type`` names them."""
-
-
-@dataclass(frozen=True)
-class Joint:
-    """A handle on a joint: a drawer (prismatic) or a hinged door (revolute).
-
-    The handle is the body ``handle``. A prismatic joint moves it along that body's own x
-    axis from 0 (its default pose) to ``travel`` (m); a revolute joint turns it about
-    ``hinge`` from 0 (its default pose) to ``travel`` (rad). The body's published frame
-    stays at 0 (:func:`~sctd.task.kinematics.handle_pose` gives it at a position).
-    Quantities are in the joint's unit: m for a prismatic joint, rad for a revolute one.
-
-    Attributes
-    ----------
-    name : str
-    kind : {"prismatic", "revolute"}
-    handle : str
-        The body that moves with the joint.
-    travel : float
-        Range of the joint from its default pose (0) to the end stop, m or rad.
-    mass : float
-        Moving mass as the hand feels it at the handle, kg; a revolute joint's inertia
-        about its hinge is ``mass * hinge.lever**2`` (:attr:`inertia`).
-    spring, damping, friction : float
-        Towards 0 (N/m or N m/rad), viscous (N s/m or N m s/rad) and Coulomb friction
-        (N or N m).
-    friction_speed : float
-        Speed over which the friction builds up (tanh), m/s or rad/s.
-    grasp : Grasp
-    hinge : Hinge or None
-        A revolute joint's hinge line; None for a prismatic joint.
-    """
-
-    name: str
-    kind: Literal["prismatic", "revolute"]
-    handle: str
-    travel: float
-    mass: float
-    spring: float
-    damping: float
-    friction: float
-    friction_speed: float
-    grasp: Grasp
-    hinge: Hinge | None = None
-
-    def __post_init__(self) -> None:
-        if (self.kind == "revolute") != (self.hinge is not None):
-            raise ValueError(f"joint {self.name!r}: a revolute joint has a hinge, a prismatic one none")
-
-    @property
-    def inertia(self) -> float:
-        """What resists the joint's acceleration: kg (prismatic, the mass) or kg m^2
-        (revolute, ``mass * lever**2``)."""
-        return self.mass if self.hinge is None else self.mass * self.hinge.lever ** 2
-
-    @property
-    def unit(self) -> str:
-        """The unit of its position: ``m`` or ``rad``."""
-        return "rad" if self.kind == "revolute" else "m"
-
-
-@dataclass(frozen=True)
 class Start:
     """The hand's start: ``T_world`` and how much it varies between trials."""
 
@@ -285,15 +180,19 @@ class Scene:
     """Everything in the world, and the hand's start.
 
     ``sections`` holds the scene's sections of registered kinds
-    (:class:`~sctd.task.kinds.Section`: ``scene.<key>.<name>`` in a file, a person's
-    ``heads``, ``zones``), by their key and then their entries' names, in the kinds' order; a
-    section the file does not give is not there."""
+    (:class:`~sctd.task.kinds.Section`: ``scene.<key>.<name>`` in a file: the ``joints``,
+    a person's ``heads``, the ``zones``), by their key and then their entries' names, in
+    the kinds' order; a section the file does not give is not there."""
 
     start: Start
     bodies: dict[str, Body]
     held: Held | None = None
-    joints: dict[str, Joint] = field(default_factory=dict)
     sections: dict[str, dict[str, Section]] = field(default_factory=dict)
+
+    @property
+    def joints(self) -> dict[str, Joint]:
+        """The entries of the ``joints`` section (:class:`~sctd.task.kinds.joint.Joint`)."""
+        return self.section("joints")
 
     @property
     def heads(self) -> dict[str, Any]:
@@ -323,15 +222,12 @@ class Scene:
 # -- predicates -----------------------------------------------------------------------
 READINGS = {
     "contents": ("poured", "spilled", "remaining", "flowing"),
-    "joint": ("position", "speed", "held", "grasps", "max_position"),
 }
 """What each kind of scene element not in the registry reports (a registered kind's
 class says its own, :mod:`sctd.task.kinds`), as ``<element>.<quantity>``: contents (by
 the held object's name) the fractions of them poured into the container, spilled and
-left, and whether they flow; a joint its position (m), speed (m/s), whether its handle
-is held, how often it was grasped and the furthest position reached (m, m/s; rad, rad/s
-for a revolute joint)."""
-FLAGS = ("flowing", "held")
+left, and whether they flow."""
+FLAGS = ("flowing",)
 """The readings that are flags (compared with ``is: true|false``)."""
 
 

@@ -23,7 +23,6 @@ from .judge import thresholds
 from .model import (
     DONE,
     FLAGS,
-    JOINT_KINDS,
     READINGS,
     VERSION,
     Accept,
@@ -35,10 +34,7 @@ from .model import (
     Container,
     Contents,
     FailRule,
-    Grasp,
     Held,
-    Hinge,
-    Joint,
     Lift,
     MoveJoint,
     Near,
@@ -201,7 +197,7 @@ def task_from_document(doc: Any, file: str) -> Task:
 
 def _scene(r: _Reader, v: Any, path: str) -> Scene:
     section_kinds = kinds.sections()
-    d = r.fields(v, path, {"start", "bodies"}, {"held", "joints", *section_kinds})
+    d = r.fields(v, path, {"start", "bodies"}, {"held", *section_kinds})
     s = r.fields(d["start"], f"{path}.start", {"position"}, {"rpy", "vary"})
     start = Start(r.transform(s, f"{path}.start"),
                   r.vary(s["vary"], f"{path}.start.vary") if "vary" in s else Vary())
@@ -213,20 +209,16 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
         raise r.fail(f"{path}.bodies", "expected at least one body")
     held = _held(r, d["held"], f"{path}.held", bodies) if "held" in d else None
     bodies = _completed(r, Scene(start, bodies, held), f"{path}.bodies")
-    joints: dict[str, Joint] = {}
-    for key, j in r.mapping(d.get("joints", {}), f"{path}.joints").items():
-        where = f"{path}.joints.{key}"
-        joints[r.name(key, where)] = _joint(r, key, j, where, bodies)
-    scene = Scene(start, bodies, held, joints)
+    scene = Scene(start, bodies, held)
     for key, cls in section_kinds.items():
         if key in d:
             sections = {**scene.sections, key: _section(r, cls, d[key], f"{path}.{key}", scene)}
             scene = dataclasses.replace(scene, sections=sections)
     named = [n for entries in scene.sections.values() for n in entries]
-    names = [*scene.frames(), *joints, *named, HAND]
+    names = [*scene.frames(), *named, HAND]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        shared = ", ".join(["bodies", "held frames", "joints", *section_kinds])
+        shared = ", ".join(["bodies", "held frames", *section_kinds])
         raise r.fail(path, f"the name {twice[0]!r} is used twice ({shared} and {HAND!r} share one "
                            "namespace)")
     for name, b in bodies.items():
@@ -295,53 +287,6 @@ def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
                 r.vector(d["com"], f"{path}.com", 3), frames, contents)
 
 
-JOINT_FIELDS = {"prismatic": set(), "revolute": {"hinge"}}
-"""The fields a kind of joint has besides those every joint has."""
-MIN_LEVER = 0.01
-"""m: the nearest a revolute joint's handle may be to its hinge line."""
-
-
-def _joint(r: _Reader, name: str, v: Any, path: str, bodies: dict[str, Body]) -> Joint:
-    m = r.mapping(v, path)
-    if "type" not in m:  # (it says which other fields there are)
-        raise r.fail(f"{path}.type", "missing")
-    kind = r.choice(m["type"], f"{path}.type", JOINT_KINDS)
-    d = r.fields(v, path, {"type", "handle", "travel", "mass", "grasp", *JOINT_FIELDS[kind]},
-                 {"spring", "damping", "friction", "friction_speed"})
-    handle = r.string(d["handle"], f"{path}.handle")
-    if handle not in bodies:
-        raise r.fail(f"{path}.handle", f"unknown body {handle!r} (bodies: {', '.join(bodies)})")
-    g = r.fields(d["grasp"], f"{path}.grasp", {"radius", "release", "stiffness", "damping"})
-    radius, release, stiffness, damping = (r.positive(g[k], f"{path}.grasp.{k}")
-                                           for k in ("radius", "release", "stiffness", "damping"))
-    grasp = Grasp(radius, release, stiffness, damping)
-    if grasp.release <= grasp.radius:
-        raise r.fail(f"{path}.grasp.release", f"must be above the grasp radius {grasp.radius}, "
-                                              f"got {grasp.release}")
-    spring, viscous, friction = (r.nonneg(d.get(k, 0.0), f"{path}.{k}")
-                                 for k in ("spring", "damping", "friction"))
-    mass = r.positive(d["mass"], f"{path}.mass")
-    friction_speed = r.positive(d.get("friction_speed", 0.01), f"{path}.friction_speed")
-    if kind == "prismatic":
-        return Joint(name, "prismatic", handle, r.positive(d["travel"], f"{path}.travel"), mass, spring,
-                     viscous, friction, friction_speed, grasp)
-    # at most a full turn: past it the handle would come round to where it was
-    travel = r.angle(d["travel"], f"{path}.travel", lo=0.0, hi=2 * math.pi, lo_open=True)
-    return Joint(name, "revolute", handle, travel, mass, spring, viscous, friction, friction_speed, grasp,
-                 _hinge(r, d["hinge"], f"{path}.hinge"))
-
-
-def _hinge(r: _Reader, v: Any, path: str) -> Hinge:
-    """``{point: [3], axis: [3]}`` in the handle's frame; the axis normalised, the handle
-    (the frame's origin) at least :data:`MIN_LEVER` from the line."""
-    d = r.fields(v, path, {"point", "axis"})
-    hinge = Hinge(r.vector(d["point"], f"{path}.point", 3), r.vector(d["axis"], f"{path}.axis", 3, unit=True))
-    if not hinge.lever >= MIN_LEVER:
-        raise r.fail(f"{path}.point", f"the handle (the frame's origin) is {hinge.lever:.4g} m from the "
-                                      f"hinge line: it must be at least {MIN_LEVER} m off it")
-    return hinge
-
-
 def _completed(r: _Reader, scene: Scene, path: str) -> dict[str, Body]:
     """The bodies with their facets completed from the rest of the scene (its bodies and
     held object, :meth:`~sctd.task.kinds.Facet.completed`: a surface's ``touch``)."""
@@ -355,7 +300,7 @@ def _completed(r: _Reader, scene: Scene, path: str) -> dict[str, Body]:
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
-    out = {j: "joint" for j in scene.joints}
+    out: dict[str, str] = {}
     if scene.held is not None and scene.held.contents is not None:
         out[scene.held.name] = "contents"
     out |= {n: kinds.sections()[key].noun for key, entries in scene.sections.items() for n in entries}
@@ -438,15 +383,11 @@ COMPARISONS = ("at_least", "at_most", "above", "below", "is")
 def _angular(reading: Reading, scene: Scene) -> bool:
     """Whether ``reading`` is an angle (a revolute joint's position): its bounds may be
     written in degrees."""
-    joint = scene.joints.get(reading.element)
     body = scene.bodies.get(reading.element)
     if body is not None and any(reading.quantity in f.angular for f in body.facets.values()):
         return True
     entry = _entry(scene, reading.element)
-    if entry is not None:
-        return reading.quantity in entry.angular
-    return joint is not None and joint.kind == "revolute" and reading.quantity in ("position",
-                                                                                   "max_position")
+    return entry is not None and entry.is_angular(reading.quantity)
 
 
 def predicate(r: _Reader, v: Any, path: str, scene: Scene) -> Predicate:

@@ -10,10 +10,10 @@ bit where the reader made it of angles in (-pi, pi], pitch in (-pi/2, pi/2)
 (:func:`rpy_from_matrix`), else within 1e-12; the position is exact.
 
 What equals the reader's default is left out only where the reader fills that same
-value back (a container's ``rim_margin``, a joint's ``friction_speed``, a step's
+value back (a container's ``rim_margin``, a step's
 ``orientation: free``); what it fills in from the rest of the scene (a surface's
-``touch``) is always written. The scene's sections of registered kinds (``heads``,
-``zones``) are written by their entries' ``to_yaml()`` (which may use :func:`_angle`
+``touch``) is always written. The scene's sections of registered kinds (``joints``,
+``heads``, ``zones``) are written by their entries' ``to_yaml()`` (which may use :func:`_angle`
 and :func:`_per_axis`). A composed task (:func:`~.compose.compose`) has no file: writing
 one is a ValueError.
 
@@ -41,7 +41,6 @@ from .model import (
     Body,
     Compare,
     Held,
-    Joint,
     MoveJoint,
     Near,
     Not,
@@ -62,8 +61,6 @@ from .reader import KINDS, TEACH_SPEEDS, _angular, rpy_matrix
 
 Doc = dict[str, Any]
 
-FRICTION_SPEED = 0.01
-"""m/s (rad/s): a joint's ``friction_speed`` when the file leaves it out."""
 ULPS = 3
 """How many ulps either way of the closed-form angles :func:`rpy_from_matrix` tries."""
 
@@ -206,8 +203,6 @@ def _scene(sc: Scene) -> Doc:
     out: Doc = {"start": start, "bodies": {n: _body(b) for n, b in sc.bodies.items()}}
     if sc.held is not None:
         out["held"] = _held(sc.held)
-    if sc.joints:
-        out["joints"] = {n: _joint(j) for n, j in sc.joints.items()}
     for key, entries in sc.sections.items():  # (the sections of registered kinds)
         out[key] = {n: e.to_yaml() for n, e in entries.items()}
     out.update(_extra_sections(sc))
@@ -238,21 +233,6 @@ def _held(h: Held) -> Doc:
     return out
 
 
-def _joint(j: Joint) -> Doc:
-    out: Doc = {"type": j.kind, "handle": j.handle}
-    if j.hinge is not None:
-        out["hinge"] = {"point": _floats(j.hinge.point), "axis": _floats(j.hinge.axis)}
-    out["travel"] = _angle(j.travel) if j.kind == "revolute" else float(j.travel)
-    out["mass"] = float(j.mass)
-    for key in ("spring", "damping", "friction"):
-        _put(out, key, getattr(j, key), 0.0)
-    _put(out, "friction_speed", j.friction_speed, FRICTION_SPEED)
-    g = j.grasp
-    out["grasp"] = {"radius": float(g.radius), "release": float(g.release), "stiffness": float(g.stiffness),
-                    "damping": float(g.damping)}
-    return out
-
-
 def _elements(value: Any, where: str) -> list[tuple[str | None, Any]]:
     """(key, element) of a field's value that is an element with ``to_yaml()`` (key None),
     or a mapping of them (by its keys); nothing for an empty value; ValueError else."""
@@ -271,7 +251,7 @@ def _extra_sections(scene: Scene) -> Doc:
     :class:`~.model.Scene` this module does not write itself, as ``{field: {name:
     element.to_yaml()}}`` (or ``{field: element.to_yaml()}`` for one element). Scene has
     no such field today: nothing."""
-    known = {"start", "bodies", "held", "joints", "sections"}
+    known = {"start", "bodies", "held", "sections"}
     out: Doc = {}
     for f in dataclasses.fields(scene):
         if f.name not in known:

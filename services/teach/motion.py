@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import handle_jacobian, handle_pose
 from sctd.task.kinds import Leg, StepKind
-from sctd.task.model import Joint
+from sctd.task.kinds.joint import Joint
 
 from .plan import PRESS_STANDOFF, DemoPlan, SceneGeometry, Speeds, StepPlan
 

@@ -29,12 +29,12 @@ from sctd import se3
 from sctd.task import Task, handle_jacobian, handle_pose
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import Sight, StepKind, StepMind
+from sctd.task.kinds.joint import Joint
 from sctd.task.model import (
     DONE,
     Action,
     AllOf,
     AnyOf,
-    Joint,
     Lift,
     MoveJoint,
     Near,

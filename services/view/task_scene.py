@@ -9,15 +9,15 @@ places it once and only moves that frame:
 - a body's container (an open cylinder below its opening);
 - the shapes of the elements of registered kinds (:mod:`sctd.task.kinds`): a body's
   facets' (a surface's slab behind its plane, a button's disc on its face) and a
-  section's entries' (a head's sphere, behind the body it is behind);
-- a joint's moving part: a drawer's front and box behind a prismatic handle, a door's
-  panel from a revolute handle's hinge to past the handle; it moves with the handle
-  (:func:`sctd.task.kinematics.handle_pose` at the joint's position);
+  section's entries' (a joint's moving part, a drawer's box behind a prismatic handle or
+  a door's panel from a revolute handle's hinge to past the handle, moving with the
+  handle where the joint's position puts it; a head's sphere, behind the body it is
+  behind);
 - what the hand holds: a cylinder from the hand to its furthest frame (the bottle's
   opening), moving with the hand.
 
 The sizes a file does not give (a drawer front's width, a wall's extent) are drawn at
-the constants below: they show where things are, not what collides.
+constants of their kinds: they show where things are, not what collides.
 """
 
 from __future__ import annotations
@@ -31,16 +31,11 @@ from numpy.typing import NDArray
 
 from sctd.task import Task
 from sctd.task.kinds import Facet, Section, Shape
-from sctd.task.kinematics import handle_pose
 
 Array = NDArray[np.float64]
 
-BOX_FRONT = (0.40, 0.16)  # m: a prismatic joint's box (a drawer): its front's width and height
-BOX_DEPTH = 0.30  # m: the box's depth behind its front
-HANDLE_OUT = 0.03  # m: how far a handle stands out of its drawer front or door
-PANEL_THICKNESS = 0.02  # m: a revolute joint's panel (a door)
 HELD_RADIUS = 0.03  # m: the held object's cylinder
-RGB = {"container": (110, 110, 130), "joint": (150, 110, 70), "held": (70, 150, 70)}
+RGB = {"container": (110, 110, 130), "held": (70, 150, 70)}
 
 
 @dataclass(frozen=True)
@@ -48,15 +43,16 @@ class Part:
     """One solid part of the scene.
 
     ``anchor`` says what it moves with: ``("body", name)`` the body's pose,
-    ``("handle", joint)`` the joint's handle at the joint's position, ``("hand", "")``
-    the end-effector. ``vertices`` (n, 3; in the anchor's frame) and ``faces`` (m, 3)
-    make its mesh; ``kind`` picks its colour (:data:`RGB`).
+    ``("entry", "<section>/<name>")`` where a section's entry draws itself (a joint's
+    handle at the joint's position), ``("hand", "")`` the end-effector. ``vertices`` (n,
+    3; in the anchor's frame) and ``faces`` (m, 3) make its mesh; ``kind`` picks its
+    colour (:data:`RGB`) where it gives none of its own.
     """
 
     name: str
     label: str
     kind: str
-    anchor: tuple[Literal["body", "handle", "hand"], str]
+    anchor: tuple[Literal["body", "entry", "hand"], str]
     vertices: Array
     faces: NDArray[np.int64]
     opacity: float = 1.0
@@ -79,12 +75,9 @@ def task_parts(task: Task) -> list[Part]:
             parts.append(_part(f"{name}/container", f"{name} ({c.radius * 200:.0f} cm wide)", "container",
                                ("body", name), m, 0.7))
         parts += _facet_parts(name, b.facets)
-    for entries in sc.sections.values():
+    for key, entries in sc.sections.items():
         for name, e in entries.items():
-            parts += _section_parts(name, e)
-    for name, j in sc.joints.items():
-        parts.append(_part(f"{name}/moving", f"{name} ({j.kind})", "joint", ("handle", name),
-                           _joint_mesh(j), 0.8))
+            parts += _section_parts(key, name, e)
     if sc.held is not None and sc.held.frames:
         far = max(sc.held.frames.values(), key=lambda T: float(np.linalg.norm(T[:3, 3])))[:3, 3]
         length = float(np.linalg.norm(far))
@@ -96,19 +89,17 @@ def task_parts(task: Task) -> list[Part]:
 
 def part_pose(part: Part, task: Task, T_world: dict[str, Array], T_world_ee: Array | None,
               readings: dict[str, float] | None = None) -> Array | None:
-    """Where ``part``'s anchor is: the body's pose in ``T_world`` (name -> (4, 4)), the
-    handle at its joint's position in ``readings`` (``<joint>.position``, 0 when
-    missing), or the hand ``T_world_ee``; None when that is not known."""
+    """Where ``part``'s anchor is: the body's pose in ``T_world`` (name -> (4, 4)), where
+    a section's entry draws itself with the bodies there and the scene's ``readings`` (a
+    joint's handle at the joint's position, :meth:`~sctd.task.kinds.Section.drawn_at`),
+    or the hand ``T_world_ee``; None when that is not known."""
     kind, name = part.anchor
     if kind == "hand":
         return T_world_ee
     if kind == "body":
         return T_world.get(name)
-    joint = task.scene.joints[name]
-    T0 = T_world.get(joint.handle)
-    if T0 is None:
-        return None
-    return handle_pose(joint, T0, float((readings or {}).get(f"{name}.position", 0.0)))
+    key, _, entry = name.partition("/")
+    return task.scene.sections[key][entry].drawn_at(T_world, dict(readings or {}))
 
 
 def default_poses(task: Task) -> dict[str, Array]:
@@ -124,22 +115,22 @@ def _part(name: str, label: str, kind: str, anchor, m: trimesh.Trimesh, opacity:
 def _facet_parts(body: str, facets: dict[str, Facet]) -> list[Part]:
     """The shapes a body's facets of registered kinds draw (:meth:`Facet.shapes`), moving
     with the body (an item carried moves with it)."""
-    return [_shape_part(f"{body}/{key}{k}", f"{body} ({key})", "facet", body, shape)
+    return [_shape_part(f"{body}/{shape.name or key + str(k)}", f"{body} ({key})", "facet", ("body", body),
+                        shape)
             for key, facet in facets.items() for k, shape in enumerate(facet.shapes())]
 
 
-def _section_parts(name: str, entry: Section) -> list[Part]:
-    """The shapes a section's entry draws (:meth:`Section.shapes`: a head's sphere), moving
-    with its body."""
-    body = entry.body()
-    if body is None:
-        return []
-    return [_shape_part(f"{name}/{entry.noun}{k or ''}", name, entry.noun, body, shape)
+def _section_parts(key: str, name: str, entry: Section) -> list[Part]:
+    """The shapes a section's entry draws (:meth:`Section.shapes`: a joint's drawer box or
+    door panel, moving with its handle; a head's sphere), where it says."""
+    return [_shape_part(f"{name}/{shape.name or entry.noun + str(k or '')}", entry.label(), entry.noun,
+                        ("entry", f"{key}/{name}"), shape)
             for k, shape in enumerate(entry.shapes())]
 
 
-def _shape_part(name: str, label: str, kind: str, body: str, shape: Shape) -> Part:
-    """A kind's :class:`Shape` as a part moving with ``body``."""
+def _shape_part(name: str, label: str, kind: str, anchor: tuple[Literal["body", "entry", "hand"], str],
+                shape: Shape) -> Part:
+    """A kind's :class:`Shape` as a part moving with its ``anchor``."""
     if shape.kind == "box":
         m = trimesh.creation.box(extents=shape.size)
     elif shape.kind == "sphere":
@@ -148,28 +139,5 @@ def _shape_part(name: str, label: str, kind: str, body: str, shape: Shape) -> Pa
         m = trimesh.creation.cylinder(radius=shape.size[0], height=shape.size[2])
     m.apply_transform(shape.T_body_shape)
     rgb = tuple(round(255 * c) for c in shape.colour)
-    return Part(name, label, kind, ("body", body), np.asarray(m.vertices, dtype=float),
+    return Part(name, label, kind, anchor, np.asarray(m.vertices, dtype=float),
                 np.asarray(m.faces, dtype=np.int64), shape.opacity, (rgb[0], rgb[1], rgb[2]))
-
-
-def _joint_mesh(j) -> trimesh.Trimesh:
-    """The part that moves with a joint's handle, in the handle's frame (x out of it)."""
-    if j.hinge is None:  # a drawer: its front behind the handle and the box behind it
-        w, h = BOX_FRONT
-        box = trimesh.creation.box(extents=(BOX_DEPTH, w, h))
-        box.apply_translation((-HANDLE_OUT - BOX_DEPTH / 2, 0.0, 0.0))
-        return box
-    # a door: the panel from the hinge line past the handle, in the plane of the hinge's
-    # axis and the handle's arm, behind the handle
-    a = j.hinge.axis / np.linalg.norm(j.hinge.axis)
-    p = j.hinge.point
-    arm = -p - float(-p @ a) * a
-    lever = float(np.linalg.norm(arm))
-    u = arm / lever
-    n = np.cross(a, u)
-    height = min(max(1.5 * lever, 0.3), 0.6)
-    foot = p + float(-p @ a) * a  # the hinge line's point level with the handle
-    back = -(np.sign(float(n[0])) or 1.0) * n  # the panel's thickness goes away from the handle (-x)
-    corners = [foot + s * u + t * a + d * back for s in (0.0, lever + 0.05)
-               for t in (-height / 2, height / 2) for d in (0.0, PANEL_THICKNESS)]
-    return trimesh.convex.convex_hull(np.array(corners))

@@ -3,10 +3,10 @@
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
 solid surface the hand touches and a push button in it, a support things rest on, an
 item the hand can pick up, a knob it turns. A **section** is a kind of scene element
-with a section of the scene of its own (``scene.<key>.<name>``): a person's head, a zone
-a frame of the hand is timed in. A **step kind** is a kind of intent step
-(``intent[i].<key>``): grasp an item, place it, turn a knob in the hand. Each kind is one
-class that holds everything sctd knows of it:
+with a section of the scene of its own (``scene.<key>.<name>``): a joint moving a handle
+the hand grasps, a person's head, a zone a frame of the hand is timed in. A **step
+kind** is a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a
+knob in the hand. Each kind is one class that holds everything sctd knows of it:
 
 - its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
 - its writer (``to_yaml``: a task file's fields, read back to the same element);
@@ -61,6 +61,7 @@ BUILTIN = {
     "place": "sctd.task.kinds.handling:PlaceStep",
     "knob": "sctd.task.kinds.knob:Knob",
     "turn": "sctd.task.kinds.knob:TurnStep",
+    "joints": "sctd.task.kinds.joint:Joint",
     "heads": "sctd.task.kinds.head:Head",
     "zones": "sctd.task.kinds.zone:Zone",
 }

@@ -88,19 +88,26 @@ class FacetPhysics(ABC):
         """Frames it publishes besides its body's (world, 4x4)."""
         return {}
 
+    def outcome(self, world: World, thresholds: dict[str, float]) -> dict[str, Any]:
+        """Fields of its own for the scene's outcome (a joint's ``opening``), given the
+        task's thresholds; none by default."""
+        return {}
+
 
 @dataclass(frozen=True)
 class Shape:
     """A solid to draw, in its body's frame: a ``box`` of full ``size`` (x, y, z), a
     ``cylinder`` of ``size`` (radius, radius, height) about its z or a ``sphere`` of
     ``size`` (radius, radius, radius), centred at ``T_body_shape``'s origin; ``colour``
-    RGB in [0, 1]."""
+    RGB in [0, 1]; ``name`` what the view calls its part (``<element>/<name>``; empty:
+    named after its kind and place)."""
 
     kind: str
     size: tuple[float, float, float]
     T_body_shape: Array
     colour: tuple[float, float, float] = (0.6, 0.6, 0.6)
     opacity: float = 1.0
+    name: str = ""
 
 
 # -- kinds -------------------------------------------------------------------------------
@@ -214,12 +221,28 @@ class Section(ABC):
         """Its physics in the simulator (its readings by its ``name``); None for none."""
         return None
 
+    def is_angular(self, quantity: str) -> bool:
+        """Whether its reading ``quantity`` is an angle (a file may write its bounds in
+        degrees): those in :attr:`angular`, unless the entry says otherwise."""
+        return quantity in self.angular
+
     def body(self) -> str | None:
         """The body its drawing moves with (None: drawn nowhere)."""
         return None
 
+    def label(self) -> str:
+        """What the view calls it."""
+        return self.name
+
+    def drawn_at(self, T_world: dict[str, Array], readings: dict[str, Any]) -> Array | None:
+        """Where its shapes are drawn (world, 4x4), the bodies at ``T_world`` and the
+        scene's ``readings`` as given: :meth:`body`'s pose (a joint's: its handle where
+        the joint has moved it); None when not known."""
+        body = self.body()
+        return None if body is None else T_world.get(body)
+
     def shapes(self) -> list[Shape]:
-        """What the view draws of it, in :meth:`body`'s frame."""
+        """What the view draws of it, in the frame :meth:`drawn_at` gives."""
         return []
 
     def footprint(self, scene: Scene) -> list[tuple[Array, float]]:

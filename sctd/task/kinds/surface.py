@@ -142,7 +142,8 @@ class Surface(Facet):
 
     def shapes(self) -> list[Shape]:
         slab = se3.transform_from_rt(np.eye(3), [-WALL_DEPTH / 2 - 1e-3, 0.0, 0.0])
-        return [Shape("box", (WALL_DEPTH, WALL, WALL), slab, (170 / 255, 170 / 255, 160 / 255))]
+        grey = (170 / 255, 170 / 255, 160 / 255)
+        return [Shape("box", (WALL_DEPTH, WALL, WALL), slab, grey, name="surface")]
 
 
 @dataclass(frozen=True)
@@ -206,7 +207,8 @@ class Button(Facet):
     def shapes(self) -> list[Shape]:
         q = math.sin(math.pi / 4), math.cos(math.pi / 4)  # (a disc about z turned onto x)
         z_to_x = se3.transform_from_pose([0.0, 0.0, 0.0, 0.0, q[0], 0.0, q[1]])
-        return [Shape("cylinder", (self.radius, self.radius, 0.01), z_to_x, (200 / 255, 60 / 255, 60 / 255))]
+        return [Shape("cylinder", (self.radius, self.radius, 0.01), z_to_x, (200 / 255, 60 / 255, 60 / 255),
+                      name="button")]
 
 
 class Contact(FacetPhysics):
