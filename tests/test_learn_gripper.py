@@ -226,16 +226,19 @@ def test_the_shipped_drawer_demonstrations_still_learn_the_shipped_skill():
     assert all(s.gripper is None for s in learned.states)
 
 
-def test_the_shipped_tap_demonstrations_learn_the_shipped_skill_with_its_grasp():
-    """Known answer: skills/README.md's command for tap-linear (taught with the fingers)
-    learns its file, text for text: one state closes where the demonstrations closed,
-    within 8 mm of the tap's grip, one opens on the fingers' reading, and every state is
-    reachable (a learned state the demonstrations used after the grasp but never entered
-    there is left out)."""
-    demos = read_demos(ROOT / "skills" / "demos" / "tap")
-    result = learn(demos, "linear", object="tap", random_state=0)
-    bundle = skill_bundle(result, "tap-linear")
-    assert bundle.yaml_text == (ROOT / "skills" / "tap-linear.yaml").read_text()
+@pytest.mark.parametrize("task, obj", [("tap", "tap"), ("cup_to_table", "cup"),
+                                       ("bottle_to_fridge", "bottle")])
+def test_the_shipped_demonstrations_with_the_fingers_learn_the_shipped_skills(task, obj):
+    """Known answer: skills/README.md's commands for the skills taught with the fingers
+    learn their files, text for text: one state closes where the demonstrations closed,
+    within 8 mm of the grip, one opens where they opened (or on the fingers' reading),
+    and every state is reachable (a learned state the demonstrations used after the grasp
+    but never entered there is left out)."""
+    demos = read_demos(ROOT / "skills" / "demos" / task)
+    result = learn(demos, "linear", object=obj, random_state=0)
+    name = f"{task}-linear"
+    bundle = skill_bundle(result, name)
+    assert bundle.yaml_text == (ROOT / "skills" / f"{name}.yaml").read_text()
     skill = skill_from_bundle(bundle)
     actions = [(s.name, s.gripper.action) for s in skill.states if s.gripper is not None]
     assert [a for _, a in actions] == ["close", "open"]
