@@ -124,6 +124,18 @@ class SimArm:
         self.master.q[:] = self.dynamics.q
         self.master.dq[:] = self.dynamics.dq
 
+    def set_posture(self, q: np.ndarray) -> None:
+        """Put the arm at rest in posture ``q`` (clipped to its limits) at once, its
+        controller holding the pose there: a simulator's known posture between taught
+        demonstrations (nothing a real arm does). The controller's next measurement is
+        the new state, as at power-up."""
+        dyn = self.dynamics
+        dyn.q = np.clip(np.asarray(q, dtype=float), self.arm.q_lower, self.arm.q_upper)
+        dyn.dq = np.zeros(self.arm.nq)
+        self.master.q[:] = dyn.q
+        self.master.dq[:] = dyn.dq
+        self.controller.hold_at(ee_transform(self.arm, dyn.q))
+
     # -- one cycle -------------------------------------------------------------------
     def step(self) -> None:
         """Advance one cycle (``1 / rate`` s) along the full data path."""

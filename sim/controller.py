@@ -232,6 +232,12 @@ class CartesianImpedanceController:
         self._rx_t = self.t
         self.holding = False
 
+    def hold_at(self, T_world_ee: np.ndarray) -> None:
+        """Hold ``T_world_ee`` (the arm was put there: :meth:`SimArm.set_posture
+        <sctd_sim.arm.SimArm.set_posture>`), as if it were the last measured pose."""
+        self.T_world_ee = np.array(T_world_ee, dtype=float)
+        self.hold()
+
     def hold(self) -> None:
         """Hold the last measured pose (as if the target had gone stale)."""
         self.holding = True

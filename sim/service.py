@@ -123,6 +123,7 @@ class _PendingReset:
 
     done: threading.Event
     t: float = 0.0
+    home: bool = False  # also put the arm back in its start posture
 
 
 def reset_request_error(payload: bytes, scene: str) -> str | None:
@@ -130,7 +131,8 @@ def reset_request_error(payload: bytes, scene: str) -> str | None:
     None when it may be carried out.
 
     The request is empty or a msgpack map whose optional field ``scene`` (str) names
-    the scene the asker expects (a reset meant for another scene is refused); fields it
+    the scene the asker expects (a reset meant for another scene is refused) and whose
+    optional ``arm`` (bool) puts the arm back in its start posture as well; fields it
     does not know are ignored (wire contract v1). Its size is checked before (the
     queryable refuses one over MAX_RESET_BYTES uncopied).
     """
@@ -143,6 +145,8 @@ def reset_request_error(payload: bytes, scene: str) -> str | None:
     expected = msg.get("scene")
     if expected is not None and not isinstance(expected, str):
         return f"scene: must be a string, got {type(expected).__name__}"
+    if not isinstance(msg.get("arm", False), bool):
+        return f"arm: must be true or false, got {type(msg['arm']).__name__}"
     if expected is not None and expected != scene:
         return f"scene: the simulator runs scene {scene!r}, not {expected!r}"
     return None
@@ -184,6 +188,7 @@ class SimService:
         self.dropped: Counter[str] = Counter()
         self.targets = 0
         self.gripper_commands = 0
+        self.homes = 0  # resets that put the arm back in its start posture
         self.injected = 0
         self.seq = 0
         self.cycles = 0
@@ -266,8 +271,10 @@ class SimService:
                 error = reset_request_error(payload.to_bytes() if payload else b"", scene)
             t = None
             if error is None:
+                home = payload is not None and size > 0 and \
+                    bool(codec.unpack_map(payload.to_bytes()).get("arm", False))
                 with self._reset_serial:
-                    t = self._reset_on_loop()
+                    t = self._reset_on_loop(home)
                 if t is None:
                     error = f"the simulation loop did not reach a cycle boundary in {RESET_WAIT:g} s"
             if error is not None:
@@ -276,10 +283,11 @@ class SimService:
             query.reply(self.keys.sim_reset, codec.pack({"ok": True, "scene": scene, "t": t}),
                         encoding=MSGPACK)
 
-    def _reset_on_loop(self) -> float | None:
-        """Hand a reset to the loop and wait for it: its simulated time, or None (the
-        request withdrawn, nothing reset) when the loop did not take it in RESET_WAIT s."""
-        pending = _PendingReset(threading.Event())
+    def _reset_on_loop(self, home: bool = False) -> float | None:
+        """Hand a reset to the loop (with ``home``, the arm's start posture too) and wait
+        for it: its simulated time, or None (the request withdrawn, nothing reset) when the
+        loop did not take it in RESET_WAIT s."""
+        pending = _PendingReset(threading.Event(), home=home)
         with self._reset_lock:
             self._reset = pending
         deadline = time.monotonic() + RESET_WAIT
@@ -296,12 +304,15 @@ class SimService:
 
     def _apply_reset(self) -> None:
         """On the loop thread, between two cycles: the scene's task state back to its
-        start (the arm is not touched)."""
+        start; the arm untouched, or with ``home`` back at rest in its start posture."""
         with self._reset_lock:
             pending, self._reset = self._reset, None
             if pending is None:
                 return
             self.sim.scene.reset()
+            if pending.home:
+                self.sim.home()
+                self.homes += 1
             self.resets += 1
             pending.t = self.sim.t
             pending.done.set()
@@ -396,8 +407,9 @@ class SimService:
         ``out_of_order``, ``before_start``),
         ``dropped`` (reason -> count), ``can_injected`` (frames put on the bus from
         Zenoh), ``link`` (joint-bus counters of both ends, brakes, injected faults),
-        ``resets`` (scene resets done through ``sim/reset``), ``gripper_commands`` (gripper
-        commands carried out: each number once).
+        ``resets`` (scene resets done through ``sim/reset``), ``homes`` (those of them that
+        put the arm back in its start posture), ``gripper_commands`` (gripper commands
+        carried out: each number once).
         """
         sim = self.sim
         now = time.monotonic()
@@ -417,7 +429,7 @@ class SimService:
             target_rejected=self.guard.total_rejected,
             target_rejected_reasons=dict(self.guard.rejected),
             dropped=dict(self.dropped), can_injected=self.injected, link=sim.link_stats(),
-            resets=self.resets, gripper_commands=self.gripper_commands,
+            resets=self.resets, homes=self.homes, gripper_commands=self.gripper_commands,
         )
         return msg
 

@@ -89,6 +89,7 @@ class Simulation:
                                                                        None))
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
                           bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
+        self.q_home = self.arm.dynamics.q.copy()  # the known posture: where the arm started
         self._load: tuple[float, Any] = (-1.0, None)  # the payload the controller was last given
         self._payload()
         self._wrench = np.zeros(6)
@@ -148,6 +149,11 @@ class Simulation:
         if math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) < 1e-6:
             return
         self.arm.set_target(se3.transform_from_flat(se3.flat_from_pose(p)), stamp)
+
+    def home(self) -> None:
+        """The arm back at rest in the posture it started in (:attr:`q_home`), holding
+        there: a known posture between taught demonstrations."""
+        self.arm.set_posture(self.q_home)
 
     def state_message(self) -> dict[str, Any]:
         """``pose`` [7], ``q`` [7], ``dq`` [7], ``wrench`` [6] and ``gripper`` (the fingers'

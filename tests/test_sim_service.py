@@ -240,6 +240,7 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             w = Watcher(s)
             assert wait_for(lambda: w.get("scene") and w.get("state"), 60), proc.output()
             pub = s.declare_publisher(KEYS.target)
+            start = list(w.get("state")["pose"])
             # spill: tip the bottle past its pouring angle over the table, then upright
             R0 = se3.matrix_from_quaternion(w.get("state")["pose"][3:])
             _turn(w, pub, R0 @ se3.matrix_from_rotvec([0.0, 1.7, 0.0]), hold=1.0)
@@ -251,6 +252,7 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             assert resets == 0
             for bad, says in ((b"\xc1garbage", "msgpack map"), (msgpack.packb([1, 2]), "msgpack map"),
                               (codec.pack({"scene": 3}), "scene: must be a string"),
+                              (codec.pack({"arm": "yes"}), "arm: must be true or false"),
                               (codec.pack({"scene": "drawer"}), "runs scene 'pour', not 'drawer'")):
                 ok, body = _reset(s, bad)
                 assert not ok and says in body["error"], (bad, body)
@@ -268,6 +270,17 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             assert math.dist(before[:3], after[:3]) < 0.002, (before, after)
             ok, body = _reset(s, None)  # an empty request resets too
             assert ok and body["scene"] == "pour"
+            # with arm: the arm back at rest in the posture it started in, holding there
+            _turn(w, pub, R0 @ se3.matrix_from_rotvec([0.0, 0.0, 0.6]))
+            away = w.get("state")["pose"]
+            assert se3.angle_between3(se3.matrix_from_quaternion(away[3:]), R0) > 0.4
+            ok, body = _reset(s, codec.pack({"scene": "pour", "arm": True}))
+            assert ok, body
+            assert wait_for(lambda: w.get("scene")["t"] > body["t"] + 0.3, 5)
+            home, sc = w.get("state")["pose"], w.get("scene")
+            assert sc["homes"] == 1 and sc["resets"] == 3 and sc["holding"], sc
+            assert se3.angle_between3(se3.matrix_from_quaternion(home[3:]), R0) < 0.02
+            assert math.dist(home[:3], start[:3]) < 0.005, (home, start)
             w.sub.undeclare()
             pub.undeclare()
     finally:

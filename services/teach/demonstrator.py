@@ -275,10 +275,13 @@ def _attempt(teacher: Teacher, rec: Recorder, plan: DemoPlan, geometry: SceneGeo
     finally:
         with contextlib.suppress(TeachingError):  # whatever happened: leave the task
             _leave(teacher, plan, geometry, options, speeds)
-        # An arm that could not follow is left where it is, not where its last target
-        # was: the next attempt's move starts from there (it failed at once, every
-        # attempt after the first that got stuck, chasing the stuck target)
-        teacher.reseed_if_behind()
+        # An arm that could not follow (a joint at its limit, the hand against something)
+        # is put back at rest in its start posture, a known one, and the next attempt's
+        # move starts from there (it failed at once, every attempt after the first that
+        # got stuck, chasing the stuck target)
+        if teacher.reseed_if_behind():
+            with contextlib.suppress(TeachingError):
+                teacher.reset_scene(options.name, home=True)
     attempt.elapsed = time.monotonic() - t0
     return attempt
 

@@ -303,15 +303,18 @@ class Teacher:
         return d <= tolerance and a <= tolerance_rotation
 
     # -- the scene --------------------------------------------------------------------
-    def reset_scene(self, scene: str, timeout: float = 10.0) -> dict:
-        """Reset the scene (``sim/reset``) while holding the arm; the reply's map.
+    def reset_scene(self, scene: str, timeout: float = 10.0, home: bool = False) -> dict:
+        """Reset the scene (``sim/reset``) while holding the arm; with ``home``, the arm
+        put back at rest in its start posture as well (the teacher then starts again from
+        where the arm is); the reply's map.
 
         Raises
         ------
         TeachingError
             An error reply, or none within ``timeout`` s.
         """
-        replies = self.session.get(self.keys.sim_reset, payload=codec.pack({"scene": scene}),
+        request = {"scene": scene, "arm": True} if home else {"scene": scene}
+        replies = self.session.get(self.keys.sim_reset, payload=codec.pack(request),
                                    encoding=MSGPACK, timeout=timeout)
         got: list[zenoh.Reply] = []
 
@@ -323,7 +326,12 @@ class Teacher:
             if r is not None:
                 got.append(r)
             return bool(got)
-        self.hold(answered, timeout + 1.0)
+        if home:  # (no target meanwhile: the arm is put where no old target may pull it from)
+            end = time.monotonic() + timeout + 1.0
+            while not answered() and time.monotonic() < end:
+                time.sleep(self.period)
+        else:
+            self.hold(answered, timeout + 1.0)
         if not got:
             raise TeachingError(f"no simulator answered on {self.keys.sim_reset} within {timeout:g} s")
         reply = got[0]
@@ -336,6 +344,12 @@ class Teacher:
             raise TeachingError(f"{self.keys.sim_reset}: a reply that does not decode ({e})") from None
         if reply.ok is None:
             raise TeachingError(f"{self.keys.sim_reset}: refused: {body.get('error')}")
+        if home:  # start again from the arm, once its state shows it there
+            asked = time.time()
+            self._F_last = self.T_target = None
+            end = time.monotonic() + self.limits.state_timeout
+            while (self.rec.state is None or self.rec.state.stamp <= asked) and time.monotonic() < end:
+                time.sleep(self.period)
         return body
 
     def scene_after(self, stamp: float, timeout: float = 3.0) -> dict:
