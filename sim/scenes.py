@@ -1,30 +1,29 @@
 """Task scenes: what the arm interacts with and how well the task went (pure logic).
 
 A scene is built from a task file (:mod:`sctd.task`: ``tasks/pour.yaml``,
-``tasks/drawer.yaml``, or any other) out of a few kinds of element, none of which
-knows a task:
+``tasks/drawer.yaml``, or any other); none of its parts knows a task. Bodies stand in
+the world, each a published frame; the hand holds an object (mass, centre of mass,
+named frames fixed in the hand, such as a bottle's opening). Everything else is an
+element of a registered kind (:mod:`sctd.task.kinds`), stepped by its kind's physics on
+a :class:`~sctd.task.kinds.World`, in this order:
 
-- **bodies** standing in the world, each a published frame (a container's opening is
-  its origin, z up);
-- the **held object** (mass, centre of mass, named frames fixed in the hand, such as a
-  bottle's opening) and its **contents** (:class:`Flow`): they flow out of the outlet
-  frame while its axis is tilted past the flow angle, into the container if the outlet
-  is over its opening, otherwise they are spilled;
-- the elements of registered kinds (:mod:`sctd.task.kinds`): a section's entries (a
-  **joint**'s handle, on a prismatic joint along its own x axis, a drawer, or on a
-  revolute joint about a hinge line, a door, grasped when the hand comes within the
-  grasp radius of where the handle is, then coupled to the hand by a stiff
-  spring-damper, the joint resisting with a spring, viscous damping and Coulomb
-  friction and stopping at its end stops: the handle's published frame stays at the
+- the held object's facets: its **contents**, which flow out of the outlet frame while
+  its axis is tilted past the flow angle, into a body's **container** if the outlet is
+  over its opening, otherwise they are spilled (what is left of them the arm carries);
+- the scene's sections: a **joint**'s handle (on a prismatic joint along its own x axis,
+  a drawer, or on a revolute joint about a hinge line, a door), grasped when the hand
+  comes within the grasp radius of where the handle is, then coupled to the hand by a
+  stiff spring-damper, the joint resisting with a spring, viscous damping and Coulomb
+  friction and stopping at its end stops (the handle's published frame stays at the
   joint's 0, so opening a drawer shows as hand motion along the frame's +x, and a door
-  as motion along its arc; a person's head, whose contact spring pushes back on the hand and the held object's
-  frames inside it; a zone, a goal pose of a frame of the hand timed while the frame
-  stays inside) and the bodies' facets (an item the fingers take), each stepped by its
-  kind's physics on a :class:`~sctd.task.kinds.World`. Among the facets: a body's solid
-  **surface** (a plane through its origin, normal to its x axis) that pushes the points
-  of the hand touching it back out with a contact spring-damper and friction, and a
-  **button** in it (a light switch) that gives way under the push against its spring
-  and switches when pushed past its click depth.
+  as motion along its arc); a person's **head**, whose contact spring pushes back on the
+  hand and the held object's frames inside it; a **zone**, a goal pose of a frame of the
+  hand timed while the frame stays inside;
+- the bodies' facets, in the file's order: a body's solid **surface** (a plane through
+  its origin, normal to its x axis) that pushes the points of the hand touching it back
+  out with a contact spring-damper and friction, and a **button** in it (a light
+  switch) that gives way under the push and switches past its click depth; a
+  **support**, an **item** the fingers take, a **knob** they turn.
 
 A scene is stepped once per cycle with the true ee pose and twist; it returns the
 external wrench it exerts on the ee (world axes at the ee origin, N and N m), names its
@@ -36,8 +35,6 @@ World is the arm's base frame.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -46,7 +43,6 @@ from sctd import se3
 from sctd.task import Task
 from sctd.task.judge import holds, thresholds
 from sctd.task.kinds import FacetPhysics, World
-from sctd.task.model import Container, Contents, Held
 from sctd.wire.codec import GripperCmd, GripperReading
 
 from .fingers import Fingers
@@ -86,140 +82,6 @@ class Scene(Protocol):
         """The fingers now (the state's ``gripper``)."""
 
 
-# -- contents that flow --------------------------------------------------------------
-@dataclass(frozen=True)
-class OutletGeometry:
-    """Where the outlet is relative to the container's opening.
-
-    Attributes
-    ----------
-    outlet_in_container : ndarray, shape (3,)
-        The outlet in the container's frame, m.
-    above_rim : float
-        Height of the outlet above the container's opening, m.
-    radial : float
-        Horizontal distance of the outlet from the container's axis, m.
-    tilt : float
-        Angle between the outlet's axis and world up, rad (0 upright, pi upside down).
-    over_opening : bool
-        Whether a stream from the outlet lands inside the container.
-    """
-
-    outlet_in_container: np.ndarray
-    above_rim: float
-    radial: float
-    tilt: float
-    over_opening: bool
-
-
-def outlet_geometry(T_world_outlet: np.ndarray, container: Container, T_container_world: np.ndarray
-                    ) -> OutletGeometry:
-    """The outlet relative to the container's opening (``T_container_world``: the
-    inverse of the container body's pose), and the outlet's tilt."""
-    p = (T_container_world @ T_world_outlet)[:3, 3]
-    x, y, above = p.tolist()
-    radial = math.hypot(x, y)
-    tilt = math.acos(min(1.0, max(-1.0, float(T_world_outlet[2, 2]))))
-    over = radial <= container.radius - container.rim_margin and 0.0 <= above <= container.max_drop
-    return OutletGeometry(p.copy(), above, radial, tilt, over)
-
-
-def outlet_stream(tilt: float, contents: Contents) -> float:
-    """The stream out of the outlet at ``tilt`` (fraction of the full contents per
-    second): none up to the contents' flow angle, then growing with the tilt past it."""
-    past = tilt - contents.flow_angle
-    if past <= 0.0:
-        return 0.0
-    return contents.flow_rate * math.sin(min(past, math.pi / 2))
-
-
-class Flow:
-    """The held object's contents, poured into a container body or spilled.
-
-    Attributes
-    ----------
-    remaining, poured, spilled : float
-        Fractions of the full contents: still held, in the container, spilled.
-    """
-
-    def __init__(self, held: Held, contents: Contents, container: Container):
-        self.name = held.name
-        self.contents = contents
-        self.container = container
-        self.T_ee_outlet = held.frames[contents.outlet]
-        # the outlet's axis in the ee frame: the outlet's tilt from the hand's rotation
-        self._outlet_axis = tuple(self.T_ee_outlet[:3, 2].tolist())
-        self._key = b""  # the container pose (bytes) _T_container_world inverts
-        self._T_container_world = np.eye(4)
-        self.reset()
-
-    def reset(self) -> None:
-        """Full, nothing poured."""
-        self.remaining = 1.0
-        self.poured = 0.0
-        self.spilled = 0.0
-        self._tilt: float | None = None
-        self._at: tuple[np.ndarray, np.ndarray] | None = None  # (T_world_ee, T_container_world)
-        self._geometry: OutletGeometry | None = None
-
-    def step(self, T_world_ee: np.ndarray, T_world_container: np.ndarray, dt: float) -> None:
-        """Pour for ``dt`` s from the hand at ``T_world_ee`` (which must not change
-        afterwards: :attr:`geometry` is worked out from it when asked)."""
-        # Only the outlet's tilt decides the flow; where it points (the geometry) is
-        # worked out when something pours, or when asked.
-        a0, a1, a2 = self._outlet_axis
-        r20, r21, r22 = T_world_ee[2, :3].tolist()
-        self._tilt = tilt = math.acos(min(1.0, max(-1.0, r20 * a0 + r21 * a1 + r22 * a2)))
-        self._at = (T_world_ee, self._inverse(T_world_container))
-        self._geometry = None
-        out = min(self.remaining, outlet_stream(tilt, self.contents) * dt)
-        if out > 0.0:
-            self.remaining -= out
-            g = self.geometry
-            if g is not None and g.over_opening:
-                self.poured += out
-            else:
-                self.spilled += out
-
-    @property
-    def geometry(self) -> OutletGeometry | None:
-        """Where the outlet was at the last :meth:`step` (None before one)."""
-        if self._geometry is None and self._at is not None:
-            T_world_ee, T_container_world = self._at
-            self._geometry = outlet_geometry(T_world_ee @ self.T_ee_outlet, self.container,
-                                             T_container_world)
-        return self._geometry
-
-    def _inverse(self, T: np.ndarray) -> np.ndarray:
-        """``T_container_world``, computed again only when the container moved."""
-        key = T.tobytes()
-        if key != self._key:
-            self._T_container_world, self._key = se3.invert_transform(T), key
-        return self._T_container_world
-
-    @property
-    def flowing(self) -> bool:
-        tilt = self._tilt
-        return tilt is not None and outlet_stream(tilt, self.contents) > 0.0 and self.remaining > 0.0
-
-    def readings(self) -> dict[str, float | bool]:
-        n = self.name
-        return {f"{n}.poured": self.poured, f"{n}.spilled": self.spilled, f"{n}.remaining": self.remaining,
-                f"{n}.flowing": self.flowing}
-
-    def outcome(self, thresholds: dict[str, float]) -> dict[str, Any]:
-        """The poured, spilled and remaining fractions, the fraction to pour (the task's
-        ``thresholds``: 1 when it names none) and the outlet's geometry."""
-        out: dict[str, Any] = {"poured": self.poured, "spilled_amount": self.spilled,
-                               "spilled": self.spilled > 1e-9, "remaining": self.remaining,
-                               "fill_target": thresholds.get(f"{self.name}.poured", 1.0)}
-        g = self.geometry
-        if g is not None:
-            out.update(outlet_in_container=g.outlet_in_container.tolist(), above_rim=g.above_rim,
-                       radial=g.radial, tilt=g.tilt, over_opening=g.over_opening, pouring=self.flowing)
-        return out
-
-
 # -- the scene of a task ----------------------------------------------------------------
 class TaskScene:
     """The scene a task file describes (see the module doc).
@@ -245,17 +107,16 @@ class TaskScene:
         self.start_position = sc.start.T_world[:3, 3].copy()
         self.start_yaw = 0.0
         self.held = sc.held
-        self.flow: Flow | None = None
-        if sc.held is not None and sc.held.contents is not None:
-            container = sc.bodies[sc.held.contents.into].container
-            assert container is not None  # (the reader checks: contents go into a container)
-            self.flow = Flow(sc.held, sc.held.contents, container)
         self.thresholds = thresholds(task.outcome.done)  # what a reading must reach: done
         self._T_world_ee = np.eye(4)  # the hand as last stepped (where its held frames are)
         self.fingers = Fingers()
         self.live = {n: T.copy() for n, T in self.poses.items()}  # the bodies now (an item moves)
         self.world = World(self._T_world_ee, np.zeros(6), self.live, self.fingers, {})
-        for key, entries in sc.sections.items():  # (sections first: stepped before the facets)
+        for key, facet in sc.held.facets.items() if sc.held is not None else ():  # (its contents: first)
+            phys = facet.physics(sc.held.name, sc)  # type: ignore[union-attr]
+            if phys is not None:
+                self.world.physics.setdefault(sc.held.name, {})[key] = phys  # type: ignore[union-attr]
+        for key, entries in sc.sections.items():  # (then the sections, then the bodies' facets)
             for name, entry in entries.items():
                 section = entry.physics(sc)
                 if section is not None:
@@ -266,14 +127,12 @@ class TaskScene:
                 if phys is not None:
                     self.world.physics.setdefault(name, {})[key] = phys
         self._physics: list[FacetPhysics] = [p for facets in self.world.physics.values()
-                                             for p in facets.values()]  # (sections, then the facets)
+                                             for p in facets.values()]  # (in that order)
         self.reset()
 
     def reset(self) -> None:
         """Back to the initial state (contents full, joints at 0 and released, buttons out
         and off)."""
-        if self.flow is not None:
-            self.flow.reset()
         self.live.clear()
         self.live.update({n: T.copy() for n, T in self.poses.items()})
         self.fingers.reset()
@@ -308,13 +167,10 @@ class TaskScene:
         """Advance by ``dt``; return the wrench of the held load, the grasped handles, the
         surfaces the hand touches and the heads pressed into."""
         self._T_world_ee = T_world_ee = T_world_ee.copy()  # (kept: never changed in place)
-        live = self.live
-        if self.flow is not None:
-            self.flow.step(T_world_ee, live[self.flow.contents.into], dt)
         wrench = np.zeros(6)
         self.fingers.advance(dt)
         self.world.T_world_ee, self.world.twist = T_world_ee, twist
-        for p in self._physics:  # (the registered kinds' elements: a head, an item in the hand or not)
+        for p in self._physics:  # (the elements of every kind: the contents, a handle, a head, an item)
             wrench += p.step(self.world, dt)
         load = self.payload()
         if load is not None:
@@ -336,8 +192,7 @@ class TaskScene:
         loads = [p.load() for p in self._physics]
         carried = [x for x in loads if x is not None]
         if self.held is not None:
-            left = self.held.contents.mass * self.flow.remaining if self.flow is not None and \
-                self.held.contents is not None else 0.0
+            left = sum(p.held_mass() for p in self._physics)  # (what is left of its contents)
             if not carried:
                 return self.held.mass + left, self.held.com
             carried.append((self.held.mass + left, self.held.com))
@@ -357,10 +212,8 @@ class TaskScene:
         return out
 
     def readings(self) -> dict[str, float | bool]:
-        """Every element's ``<element>.<quantity>`` (:data:`sctd.task.model.READINGS`)."""
+        """Every element's ``<element>.<quantity>``."""
         out: dict[str, float | bool] = {}
-        if self.flow is not None:
-            out.update(self.flow.readings())
         for p in self._physics:
             out.update(p.readings(self.world))
         return out
@@ -391,9 +244,7 @@ class TaskScene:
                           "closing": self.fingers.closing}
         if self.task.parts:  # several tasks in one room: each judged on the same readings
             out["tasks"] = {t.name: _judged(t, r, pos) for t in self.task.parts}
-        if self.flow is not None:
-            out.update(self.flow.outcome(self.thresholds))
-        for p in self._physics:  # (a joint's opening)
+        for p in self._physics:  # (the contents' poured and spilled, a joint's opening)
             out.update(p.outcome(self.world, self.thresholds))
         return out
 

@@ -52,7 +52,7 @@ def read(doc: dict):
 def test_the_shipped_kinds_are_registered_with_every_part(name):
     reg = registry()
     assert set(BUILTIN) <= set(reg)
-    assert list(facets()) == ["surface", "button", "support", "item", "knob"]  # (a support before its items)
+    assert list(facets()) == ["container", "surface", "button", "support", "item", "knob"]  # (support, item)
     assert set(step_kinds()) >= {"grasp", "place", "turn"}
     task = find_task(name)
     for body, b in task.scene.bodies.items():
@@ -637,6 +637,27 @@ def test_the_surface_and_its_button_are_registered_facets():
     assert body.button.physics("light_switch", task.scene) is None
     assert _elements(task.scene)["light_switch"] == "button"
     assert isinstance(TaskScene(task).contacts[0], PushButton)
+
+
+def test_the_container_and_the_contents_are_registered_facets():
+    """The pour's mug and what the bottle holds: the container a facet of its body, the
+    contents one of the held object (its readings by the held object's name), both read
+    back by their writers; the contents' physics pours and the arm carries what is left."""
+    from sctd.task.kinds import held_facets
+    from sctd.task.kinds.contents import Container, Contents, Flow
+    from sctd.task.reader import _elements
+
+    assert "container" in facets() and list(held_facets()) == ["contents"]
+    task = find_task("pour")
+    mug, held = task.scene.bodies["mug"], task.scene.held
+    assert isinstance(mug.container, Container) and mug.facets == {"container": mug.container}
+    assert isinstance(held.contents, Contents) and held.facets == {"contents": held.contents}
+    for facet in (mug.container, held.contents):
+        assert type(facet).read(_reader(), copy.deepcopy(facet.to_yaml()), "x") == facet
+    assert mug.container.extent() == 0.04 and [s.name for s in mug.container.shapes()] == ["container"]
+    flow = held.contents.physics(held.name, task.scene)
+    assert isinstance(flow, Flow) and flow.held_mass() == held.contents.mass
+    assert _elements(task.scene)["bottle"] == "contents"
 
 
 # -- sections: kinds that own a section of the scene ------------------------------------------

@@ -249,7 +249,7 @@ def _changed(task: Task, where: str) -> Task:
     if where == "scene.bodies.mug.container.radius":
         mug = sc.bodies["mug"]
         assert mug.container is not None
-        mug = r(mug, container=r(mug.container, radius=0.045))
+        mug = r(mug, facets={**mug.facets, "container": r(mug.container, radius=0.045)})
         return r(task, scene=r(sc, bodies={**sc.bodies, "mug": mug}))
     if where == "intent[0].reach.to":
         step = task.intent[0]

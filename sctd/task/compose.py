@@ -48,7 +48,8 @@ def footprint(task: Task, T: Array | None = None) -> tuple[Array, float]:
     sc = task.scene
     T = np.eye(4) if T is None else T
     points = [b.T_world[:3, 3] for b in sc.bodies.values()]
-    pad = [b.container.radius if b.container is not None else 0.0 for b in sc.bodies.values()]
+    pad = [max((f.extent() for f in b.facets.values()), default=0.0)  # (a container's radius)
+           for b in sc.bodies.values()]
     for entries in sc.sections.values():  # (a joint's handle's path, a person's head's sphere)
         for e in entries.values():
             for centre, r in e.footprint(sc):

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # (the kinds' classes type their scene with this module's)
     from .kinds import Facet, Section, StepKind
+    from .kinds.contents import Container, Contents
     from .kinds.joint import Joint
     from .kinds.surface import Button, Surface
 
@@ -59,29 +60,6 @@ class Vary:
 
 
 @dataclass(frozen=True)
-class Container:
-    """A body that holds what is poured into it: its opening is the body's origin
-    (z up, the opening's plane its xy plane).
-
-    Attributes
-    ----------
-    radius : float
-        Inner radius of the opening, m.
-    depth : float
-        How deep it is below the opening, m.
-    rim_margin : float
-        A stream lands inside when it falls within ``radius - rim_margin`` of the axis.
-    max_drop : float
-        The highest above the opening a stream still lands inside from, m.
-    """
-
-    radius: float
-    depth: float
-    rim_margin: float = 0.005
-    max_drop: float = 0.15
-
-
-@dataclass(frozen=True)
 class Body:
     """Something standing in the world.
 
@@ -93,18 +71,21 @@ class Body:
         Its default pose.
     vary : Vary
         How far a trial's pose is from the default.
-    container : Container or None
     facets : dict of str to Facet
         Its elements of the registered kinds (:mod:`sctd.task.kinds`), by key: a
-        ``surface`` the hand touches and a ``button`` in it, a ``support`` things rest
-        on, an ``item`` the hand picks up.
+        ``container`` things are poured into, a ``surface`` the hand touches and a
+        ``button`` in it, a ``support`` things rest on, an ``item`` the hand picks up.
     """
 
     name: str
     T_world: Array
     vary: Vary = field(default_factory=Vary)
-    container: Container | None = None
     facets: dict[str, Facet] = field(default_factory=dict)
+
+    @property
+    def container(self) -> Container | None:
+        """Its ``container`` facet (its opening the body's origin), if it has one."""
+        return self.facets.get("container")  # type: ignore[return-value]
 
     @property
     def surface(self) -> Surface | None:
@@ -116,32 +97,6 @@ class Body:
     def button(self) -> Button | None:
         """Its ``button`` facet (a push button in its surface), if it has one."""
         return self.facets.get("button")  # type: ignore[return-value]
-
-
-@dataclass(frozen=True)
-class Contents:
-    """What flows out of the held object when it is tilted.
-
-    Attributes
-    ----------
-    mass : float
-        kg when full.
-    outlet : str
-        The held object's frame it flows out of (its z axis: out of the opening).
-    into : str
-        The container body it is meant to go into; what misses it is spilled.
-    flow_angle : float
-        Tilt of the outlet's axis from the vertical past which it flows, rad.
-    flow_rate : float
-        Fraction of the full contents per second at 90 deg past ``flow_angle``; the flow
-        grows as the sine of the tilt past it.
-    """
-
-    mass: float
-    outlet: str
-    into: str
-    flow_angle: float
-    flow_rate: float
 
 
 @dataclass(frozen=True)
@@ -157,14 +112,21 @@ class Held:
         Centre of mass in the hand's frame, m (the contents' too).
     frames : dict of str to ndarray (4, 4)
         Named frames fixed in the hand's frame (``T_ee_frame``), published as objects.
-    contents : Contents or None
+    facets : dict of str to Facet
+        Its elements of the registered kinds (:mod:`sctd.task.kinds`) whose holder is the
+        held object, by key: its ``contents``.
     """
 
     name: str
     mass: float
     com: Array
     frames: dict[str, Array]
-    contents: Contents | None = None
+    facets: dict[str, Facet] = field(default_factory=dict)
+
+    @property
+    def contents(self) -> Contents | None:
+        """Its ``contents`` facet (what flows out of it when tilted), if it has one."""
+        return self.facets.get("contents")  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
@@ -220,20 +182,12 @@ class Scene:
 
 
 # -- predicates -----------------------------------------------------------------------
-READINGS = {
-    "contents": ("poured", "spilled", "remaining", "flowing"),
-}
-"""What each kind of scene element not in the registry reports (a registered kind's
-class says its own, :mod:`sctd.task.kinds`), as ``<element>.<quantity>``: contents (by
-the held object's name) the fractions of them poured into the container, spilled and
-left, and whether they flow."""
-FLAGS = ("flowing",)
-"""The readings that are flags (compared with ``is: true|false``)."""
 
 
 @dataclass(frozen=True)
 class Reading:
-    """``<element>.<quantity>`` (:data:`READINGS`)."""
+    """``<element>.<quantity>``: what the scene's elements of each kind report (their
+    kind's class says, :mod:`sctd.task.kinds`)."""
 
     element: str
     quantity: str

@@ -22,8 +22,6 @@ from . import kinds
 from .judge import thresholds
 from .model import (
     DONE,
-    FLAGS,
-    READINGS,
     VERSION,
     Accept,
     Action,
@@ -31,8 +29,6 @@ from .model import (
     AnyOf,
     Body,
     Compare,
-    Container,
-    Contents,
     FailRule,
     Held,
     Lift,
@@ -207,9 +203,9 @@ def _scene(r: _Reader, v: Any, path: str) -> Scene:
         bodies[r.name(key, where)] = _body(r, key, b, where)
     if not bodies:
         raise r.fail(f"{path}.bodies", "expected at least one body")
-    held = _held(r, d["held"], f"{path}.held", bodies) if "held" in d else None
-    bodies = _completed(r, Scene(start, bodies, held), f"{path}.bodies")
-    scene = Scene(start, bodies, held)
+    held = _held(r, d["held"], f"{path}.held") if "held" in d else None
+    scene = _completed(r, Scene(start, bodies, held), path)
+    bodies, held = scene.bodies, scene.held
     for key, cls in section_kinds.items():
         if key in d:
             sections = {**scene.sections, key: _section(r, cls, d[key], f"{path}.{key}", scene)}
@@ -247,62 +243,56 @@ def _section(r: _Reader, cls: type[kinds.Section], v: Any, path: str,
 
 def _body(r: _Reader, name: str, v: Any, path: str) -> Body:
     facet_kinds = kinds.facets()
-    d = r.fields(v, path, {"position"}, {"rpy", "vary", "container", *facet_kinds})
-    container = None
-    if "container" in d:
-        c = r.fields(d["container"], f"{path}.container", {"radius", "depth"}, {"rim_margin", "max_drop"})
-        radius = r.positive(c["radius"], f"{path}.container.radius")
-        margin = r.nonneg(c.get("rim_margin", 0.005), f"{path}.container.rim_margin")
-        if margin >= radius:
-            raise r.fail(f"{path}.container.rim_margin", f"must be below the radius {radius}, got {margin}")
-        container = Container(radius, r.positive(c["depth"], f"{path}.container.depth"), margin,
-                              r.positive(c.get("max_drop", 0.15), f"{path}.container.max_drop"))
+    d = r.fields(v, path, {"position"}, {"rpy", "vary", *facet_kinds})
     facets = {k: cls.read(r, d[k], f"{path}.{k}") for k, cls in facet_kinds.items() if k in d}
     return Body(name, r.transform(d, path), r.vary(d["vary"], f"{path}.vary") if "vary" in d else Vary(),
-                container, facets)
+                facets)
 
 
-def _held(r: _Reader, v: Any, path: str, bodies: dict[str, Body]) -> Held:
-    d = r.fields(v, path, {"name", "mass", "com"}, {"frames", "contents"})
+def _held(r: _Reader, v: Any, path: str) -> Held:
+    facet_kinds = kinds.held_facets()
+    d = r.fields(v, path, {"name", "mass", "com"}, {"frames", *facet_kinds})
     frames: dict[str, np.ndarray] = {}
     for key, f in r.mapping(d.get("frames", {}), f"{path}.frames").items():
         where = f"{path}.frames.{key}"
         frames[r.name(key, where)] = r.transform(r.fields(f, where, {"position"}, {"rpy"}), where)
-    contents = None
-    if "contents" in d:
-        where = f"{path}.contents"
-        c = r.fields(d["contents"], where, {"mass", "outlet", "into", "flow_angle", "flow_rate"})
-        outlet = r.string(c["outlet"], f"{where}.outlet")
-        if outlet not in frames:
-            raise r.fail(f"{where}.outlet", f"unknown frame {outlet!r} of the held object "
-                                            f"(frames: {', '.join(frames) or 'none'})")
-        into = r.string(c["into"], f"{where}.into")
-        if into not in bodies or bodies[into].container is None:
-            raise r.fail(f"{where}.into", f"expected a body with a container, got {into!r} (containers: "
-                                          f"{', '.join(b for b in bodies if bodies[b].container) or 'none'})")
-        contents = Contents(r.positive(c["mass"], f"{where}.mass"), outlet, into,
-                            r.angle(c["flow_angle"], f"{where}.flow_angle", lo=0.0, hi=math.pi),
-                            r.positive(c["flow_rate"], f"{where}.flow_rate"))
+    facets = {k: cls.read(r, d[k], f"{path}.{k}") for k, cls in facet_kinds.items() if k in d}
     return Held(r.name(d["name"], f"{path}.name"), r.nonneg(d["mass"], f"{path}.mass"),
-                r.vector(d["com"], f"{path}.com", 3), frames, contents)
+                r.vector(d["com"], f"{path}.com", 3), frames, facets)
 
 
-def _completed(r: _Reader, scene: Scene, path: str) -> dict[str, Body]:
-    """The bodies with their facets completed from the rest of the scene (its bodies and
-    held object, :meth:`~sctd.task.kinds.Facet.completed`: a surface's ``touch``)."""
-    out = {}
+def _completed(r: _Reader, scene: Scene, path: str) -> Scene:
+    """The scene with its facets completed from the rest of it (its bodies and held
+    object, :meth:`~sctd.task.kinds.Facet.completed`: the contents' outlet and
+    container, a surface's ``touch``): the held object's first, then the bodies'."""
+    held = scene.held
+    if held is not None:
+        facets = {k: f.completed(r, held.name, scene, f"{path}.held.{k}") for k, f in held.facets.items()}
+        held = dataclasses.replace(held, facets=facets)
+    bodies = {}
     for name, b in scene.bodies.items():
-        facets = {k: f.completed(r, name, scene, f"{path}.{name}.{k}") for k, f in b.facets.items()}
-        out[name] = dataclasses.replace(b, facets=facets)
-    return out
+        facets = {k: f.completed(r, name, scene, f"{path}.bodies.{name}.{k}") for k, f in b.facets.items()}
+        bodies[name] = dataclasses.replace(b, facets=facets)
+    return dataclasses.replace(scene, bodies=bodies, held=held)
+
+
+def _facets_of(scene: Scene, element: str) -> dict[str, kinds.Facet]:
+    """The facets of the body called ``element``, or of the held object so called; none
+    for another element."""
+    body = scene.bodies.get(element)
+    if body is not None:
+        return body.facets
+    return scene.held.facets if scene.held is not None and scene.held.name == element else {}
 
 
 # -- the outcome ----------------------------------------------------------------------
 def _elements(scene: Scene) -> dict[str, str]:
     """Element name -> kind, of what reports readings."""
     out: dict[str, str] = {}
-    if scene.held is not None and scene.held.contents is not None:
-        out[scene.held.name] = "contents"
+    if scene.held is not None:  # (the held object's facets: its contents)
+        first = next((k for k, f in scene.held.facets.items() if f.quantities), None)
+        if first is not None:
+            out[scene.held.name] = first
     out |= {n: kinds.sections()[key].noun for key, entries in scene.sections.items() for n in entries}
     for n, b in scene.bodies.items():  # (a body's facets: the last with readings names it, a button)
         last = [k for k, f in b.facets.items() if f.quantities]
@@ -312,11 +302,9 @@ def _elements(scene: Scene) -> dict[str, str]:
 
 
 def quantities(kind: str) -> tuple[str, ...]:
-    """What an element of ``kind`` reports (:data:`READINGS`, or a registered facet's, or
-    a registered section's by its noun)."""
-    if kind in READINGS:
-        return READINGS[kind]
-    facet = kinds.facets().get(kind)
+    """What an element of ``kind`` reports: a registered facet's, by its key, or a
+    registered section's, by its noun."""
+    facet = {**kinds.held_facets(), **kinds.facets()}.get(kind)
     if facet is not None:
         return facet.quantities
     return next(c.quantities for c in kinds.sections().values() if c.noun == kind)
@@ -329,14 +317,11 @@ def _entry(scene: Scene, element: str) -> kinds.Section | None:
 
 def _flag(reading: Reading, scene: Scene) -> bool:
     """Whether ``reading`` is true or false rather than a number."""
-    body = scene.bodies.get(reading.element)
-    for f in body.facets.values() if body is not None else ():
+    for f in _facets_of(scene, reading.element).values():
         if reading.quantity in f.quantities:
             return reading.quantity in f.flags
     entry = _entry(scene, reading.element)
-    if entry is not None:
-        return reading.quantity in entry.flags
-    return reading.quantity in FLAGS
+    return entry is not None and reading.quantity in entry.flags
 
 
 def _quantities_once(r: _Reader, scene: Scene, path: str) -> None:
@@ -367,12 +352,13 @@ def _reading(r: _Reader, v: Any, path: str, scene: Scene) -> Reading:
 
 
 def _all_quantities(scene: Scene, element: str, kind: str) -> tuple[str, ...]:
-    """Every quantity ``element`` reports: a body's facets', in their order; else its kind's."""
-    body = scene.bodies.get(element)
-    if body is None:
+    """Every quantity ``element`` reports: a body's (or the held object's) facets', in their
+    order; else its kind's."""
+    facets = _facets_of(scene, element)
+    if not facets:
         return quantities(kind)
     out: list[str] = []
-    for f in body.facets.values():
+    for f in facets.values():
         out += [q for q in f.quantities if q not in out]
     return tuple(out)
 
@@ -383,8 +369,7 @@ COMPARISONS = ("at_least", "at_most", "above", "below", "is")
 def _angular(reading: Reading, scene: Scene) -> bool:
     """Whether ``reading`` is an angle (a revolute joint's position): its bounds may be
     written in degrees."""
-    body = scene.bodies.get(reading.element)
-    if body is not None and any(reading.quantity in f.angular for f in body.facets.values()):
+    if any(reading.quantity in f.angular for f in _facets_of(scene, reading.element).values()):
         return True
     entry = _entry(scene, reading.element)
     return entry is not None and entry.is_angular(reading.quantity)

@@ -213,11 +213,6 @@ def _body(b: Body) -> Doc:
     out = _pose(b.T_world)
     if _vary(b.vary):
         out["vary"] = _vary(b.vary)
-    if b.container is not None:
-        c = b.container
-        out["container"] = {"radius": float(c.radius), "depth": float(c.depth)}
-        _put(out["container"], "rim_margin", c.rim_margin, 0.005)
-        _put(out["container"], "max_drop", c.max_drop, 0.15)
     out.update(_extra_facets(b))
     return out
 
@@ -226,10 +221,7 @@ def _held(h: Held) -> Doc:
     out: Doc = {"name": h.name, "mass": float(h.mass), "com": _floats(h.com)}
     if h.frames:
         out["frames"] = {n: _pose(T) for n, T in h.frames.items()}
-    if h.contents is not None:
-        c = h.contents
-        out["contents"] = {"mass": float(c.mass), "outlet": c.outlet, "into": c.into,
-                           "flow_angle": _angle(c.flow_angle), "flow_rate": float(c.flow_rate)}
+    out.update({k: f.to_yaml() for k, f in h.facets.items()})  # (its contents)
     return out
 
 
@@ -265,8 +257,8 @@ def _extra_facets(body: Body) -> Doc:
     """A body's facets of kinds registered in ``sctd.task.kinds``: each field of
     :class:`~.model.Body` this module does not write itself holds elements with
     ``to_yaml()``, written under their kind's ``key`` (or the mapping's keys) in the
-    body's mapping. Body has no such field today: nothing."""
-    known = {"name", "T_world", "vary", "container"}
+    body's mapping: its ``facets`` (a container, a surface, an item)."""
+    known = {"name", "T_world", "vary"}
     out: Doc = {}
     for f in dataclasses.fields(body):
         if f.name not in known:

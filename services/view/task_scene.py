@@ -6,13 +6,12 @@ joint's handle and hinge, what the hand holds and its frames. Each becomes a par
 (:class:`Part`): a triangle mesh in the frame of what it moves with, so that a view
 places it once and only moves that frame:
 
-- a body's container (an open cylinder below its opening);
 - the shapes of the elements of registered kinds (:mod:`sctd.task.kinds`): a body's
-  facets' (a surface's slab behind its plane, a button's disc on its face) and a
-  section's entries' (a joint's moving part, a drawer's box behind a prismatic handle or
-  a door's panel from a revolute handle's hinge to past the handle, moving with the
-  handle where the joint's position puts it; a head's sphere, behind the body it is
-  behind);
+  facets' (a container's cylinder below its opening, a surface's slab behind its plane,
+  a button's disc on its face) and a section's entries' (a joint's moving part, a
+  drawer's box behind a prismatic handle or a door's panel from a revolute handle's
+  hinge to past the handle, moving with the handle where the joint's position puts it;
+  a head's sphere, behind the body it is behind);
 - what the hand holds: a cylinder from the hand to its furthest frame (the bottle's
   opening), moving with the hand.
 
@@ -35,7 +34,7 @@ from sctd.task.kinds import Facet, Section, Shape
 Array = NDArray[np.float64]
 
 HELD_RADIUS = 0.03  # m: the held object's cylinder
-RGB = {"container": (110, 110, 130), "held": (70, 150, 70)}
+RGB = {"held": (70, 150, 70)}
 
 
 @dataclass(frozen=True)
@@ -68,12 +67,6 @@ def task_parts(task: Task) -> list[Part]:
     parts: list[Part] = []
     sc = task.scene
     for name, b in sc.bodies.items():
-        if b.container is not None:
-            c = b.container
-            m = trimesh.creation.cylinder(radius=c.radius, height=c.depth)
-            m.apply_translation((0.0, 0.0, -c.depth / 2))
-            parts.append(_part(f"{name}/container", f"{name} ({c.radius * 200:.0f} cm wide)", "container",
-                               ("body", name), m, 0.7))
         parts += _facet_parts(name, b.facets)
     for key, entries in sc.sections.items():
         for name, e in entries.items():
@@ -115,8 +108,9 @@ def _part(name: str, label: str, kind: str, anchor, m: trimesh.Trimesh, opacity:
 def _facet_parts(body: str, facets: dict[str, Facet]) -> list[Part]:
     """The shapes a body's facets of registered kinds draw (:meth:`Facet.shapes`), moving
     with the body (an item carried moves with it)."""
-    return [_shape_part(f"{body}/{shape.name or key + str(k)}", f"{body} ({key})", "facet", ("body", body),
-                        shape)
+    return [_shape_part(f"{body}/{shape.name or key + str(k)}",
+                        shape.label.format(body=body) if shape.label else f"{body} ({key})", "facet",
+                        ("body", body), shape)
             for key, facet in facets.items() for k, shape in enumerate(facet.shapes())]
 
 

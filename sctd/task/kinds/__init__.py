@@ -1,9 +1,11 @@
 """Kinds of task element as a registry: what a task file may say, one class a kind.
 
 A **facet** is a kind of scene element that a body has (``bodies.<name>.<key>``): a
-solid surface the hand touches and a push button in it, a support things rest on, an
-item the hand can pick up, a knob it turns. A **section** is a kind of scene element
-with a section of the scene of its own (``scene.<key>.<name>``): a joint moving a handle
+container things are poured into, a solid surface the hand touches and a push button in
+it, a support things rest on, an item the hand can pick up, a knob it turns; or that the
+object the hand holds from the start has (``held.<key>``): its contents, which flow out
+when it is tilted. A **section** is a kind of scene element with a section of the scene
+of its own (``scene.<key>.<name>``): a joint moving a handle
 the hand grasps, a person's head, a zone a frame of the hand is timed in. A **step
 kind** is a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a
 knob in the hand. Each kind is one class that holds everything sctd knows of it:
@@ -53,6 +55,8 @@ from .base import (
 
 GROUP = "sctd.task_kinds"
 BUILTIN = {
+    "container": "sctd.task.kinds.contents:Container",
+    "contents": "sctd.task.kinds.contents:Contents",
     "surface": "sctd.task.kinds.surface:Surface",
     "button": "sctd.task.kinds.surface:Button",
     "support": "sctd.task.kinds.pickable:Support",
@@ -100,9 +104,15 @@ def registry() -> dict[str, Kind]:
 
 
 def facets() -> dict[str, type[Facet]]:
-    """The facet kinds, by key (in registration order: a facet that another one refers to
-    comes first: supports before items)."""
-    kinds = [c for c in registry().values() if issubclass(c, Facet)]
+    """The facet kinds of bodies, by key (in their order: a facet that another one refers
+    to comes first: supports before items)."""
+    kinds = [c for c in registry().values() if issubclass(c, Facet) and c.holder == "body"]
+    return {c.key: c for c in sorted(kinds, key=lambda c: c.order)}
+
+
+def held_facets() -> dict[str, type[Facet]]:
+    """The facet kinds of the object the hand holds from the start (its contents), by key."""
+    kinds = [c for c in registry().values() if issubclass(c, Facet) and c.holder == "held"]
     return {c.key: c for c in sorted(kinds, key=lambda c: c.order)}
 
 
@@ -118,5 +128,5 @@ def step_kinds() -> dict[str, type[StepKind]]:
 
 
 __all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Leg", "Person", "Section",
-           "Shape", "Sight", "StepKind", "StepMind", "Want", "World", "facets", "registry", "sections",
-           "step_kinds"]
+           "Shape", "Sight", "StepKind", "StepMind", "Want", "World", "facets", "held_facets", "registry",
+           "sections", "step_kinds"]

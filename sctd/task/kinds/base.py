@@ -88,6 +88,11 @@ class FacetPhysics(ABC):
         """Frames it publishes besides its body's (world, 4x4)."""
         return {}
 
+    def held_mass(self) -> float:
+        """kg it adds to the object the hand holds from the start, at that object's centre
+        of mass (what is left of its contents); 0 by default."""
+        return 0.0
+
     def outcome(self, world: World, thresholds: dict[str, float]) -> dict[str, Any]:
         """Fields of its own for the scene's outcome (a joint's ``opening``), given the
         task's thresholds; none by default."""
@@ -100,7 +105,8 @@ class Shape:
     ``cylinder`` of ``size`` (radius, radius, height) about its z or a ``sphere`` of
     ``size`` (radius, radius, radius), centred at ``T_body_shape``'s origin; ``colour``
     RGB in [0, 1]; ``name`` what the view calls its part (``<element>/<name>``; empty:
-    named after its kind and place)."""
+    named after its kind and place), ``label`` what it shows as its label (``{body}``
+    standing for its body's name; empty: the body and the kind)."""
 
     kind: str
     size: tuple[float, float, float]
@@ -108,6 +114,7 @@ class Shape:
     colour: tuple[float, float, float] = (0.6, 0.6, 0.6)
     opacity: float = 1.0
     name: str = ""
+    label: str = ""
 
 
 # -- kinds -------------------------------------------------------------------------------
@@ -117,7 +124,11 @@ class Facet(ABC):
     Class attributes
     ----------------
     key : str
-        Its field in a body's mapping.
+        Its field in a body's mapping (or in the held object's).
+    holder : str
+        ``body`` (a facet of a body, ``bodies.<name>.<key>``) or ``held`` (of the object
+        the hand holds from the start, ``held.<key>``: its contents; its readings are the
+        held object's, ``<held>.<quantity>``).
     order : int
         Facets are read and stepped in this order (one that refers to another comes after it).
     quantities : tuple of str
@@ -129,6 +140,7 @@ class Facet(ABC):
     """
 
     key: ClassVar[str]
+    holder: ClassVar[str] = "body"
     order: ClassVar[int] = 0
     quantities: ClassVar[tuple[str, ...]] = ()
     flags: ClassVar[tuple[str, ...]] = ()
@@ -164,6 +176,11 @@ class Facet(ABC):
     def shapes(self) -> list[Shape]:
         """What the view draws of it, in its body's frame."""
         return []
+
+    def extent(self) -> float:
+        """How far it reaches around its body's origin, m, in a room of several tasks
+        (a container's radius); 0 by default."""
+        return 0.0
 
 
 class Section(ABC):

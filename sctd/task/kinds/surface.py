@@ -143,7 +143,7 @@ class Surface(Facet):
     def shapes(self) -> list[Shape]:
         slab = se3.transform_from_rt(np.eye(3), [-WALL_DEPTH / 2 - 1e-3, 0.0, 0.0])
         grey = (170 / 255, 170 / 255, 160 / 255)
-        return [Shape("box", (WALL_DEPTH, WALL, WALL), slab, grey, name="surface")]
+        return [Shape("box", (WALL_DEPTH, WALL, WALL), slab, grey, name="surface", label="{body}'s surface")]
 
 
 @dataclass(frozen=True)
@@ -208,7 +208,7 @@ class Button(Facet):
         q = math.sin(math.pi / 4), math.cos(math.pi / 4)  # (a disc about z turned onto x)
         z_to_x = se3.transform_from_pose([0.0, 0.0, 0.0, 0.0, q[0], 0.0, q[1]])
         return [Shape("cylinder", (self.radius, self.radius, 0.01), z_to_x, (200 / 255, 60 / 255, 60 / 255),
-                      name="button")]
+                      name="button", label="{body}")]
 
 
 class Contact(FacetPhysics):
