@@ -326,15 +326,16 @@ class PlaceMind(StepMind):
         if bool(r.get(f"{n}.held", False)):
             self._released = False
             return "carry"
-        if self._released or (bool(r.get(f"{n}.resting", False)) and self._near_spot(sight)):
+        if self._released or (bool(r.get(f"{n}.resting", False)) and self._on_top(sight)):
             self._released = True
             return "away"
         return "lost"
 
-    def _near_spot(self, sight: Sight) -> bool:
-        spot, _ = self._spot(sight)
-        base = sight.objects[self.step.item][:3, 3]
-        return float(np.linalg.norm((base - spot)[:2])) < self.support.size[0] + self.support.size[1]
+    def _on_top(self, sight: Sight) -> bool:
+        """Whether the item stands on the support it is to go onto (its base on the top)."""
+        S = sight.objects[self.step.onto]
+        p = S[:3, :3].T @ (sight.objects[self.step.item][:3, 3] - S[:3, 3])
+        return abs(float(p[2])) < 0.005 and self.support.inside(p)
 
     def _clear_of(self, sight: Sight) -> float:
         """How far the hand is from the item's axis, m."""
