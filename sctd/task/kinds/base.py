@@ -154,8 +154,9 @@ class Facet(ABC):
 
     def completed(self, r: Any, body: str, scene: Scene, path: str) -> Facet:
         """The facet with what it takes from the rest of the scene filled in, once the
-        bodies and the held object are read (``scene``: them; a surface's ``touch``
-        defaults to every frame that moves with the hand); itself by default."""
+        bodies and the held object are read (``body``: its holder's name; ``scene``: them;
+        a surface's ``touch`` defaults to every frame that moves with the hand; the
+        contents' outlet and container are checked); itself by default."""
         return self
 
     def check(self, r: Any, body: str, scene: Scene, path: str) -> None:  # noqa: B027 - most check nothing
@@ -185,9 +186,10 @@ class Facet(ABC):
 
 class Section(ABC):
     """A kind of scene element that is an entry of a section of the scene of its own,
-    ``scene.<key>.<name>`` in a task file (a person's head: ``scene.heads.face``), rather
-    than a facet of one body. Its readings are ``<name>.<quantity>``; the name shares the
-    scene's one namespace (bodies, held frames, joints, every section's entries, ``hand``).
+    ``scene.<key>.<name>`` in a task file (a joint: ``scene.joints.drawer``; a person's
+    head: ``scene.heads.face``), rather than a facet of one body. Its readings are
+    ``<name>.<quantity>``; the name shares the scene's one namespace (bodies, held
+    frames, every section's entries, ``hand``).
 
     Class attributes
     ----------------
@@ -198,7 +200,7 @@ class Section(ABC):
         What one entry is called in messages (``head``: ``a head reports force, ...``).
     order : int
         Sections are read, checked and stepped in this order (one that refers to another
-        comes after it), before the bodies' facets.
+        comes after it): after the held object's facets, before the bodies' facets.
     quantities, flags, angular : tuple of str
         As a :class:`Facet`'s, of ``<name>.<quantity>``.
 
@@ -221,8 +223,8 @@ class Section(ABC):
     @abstractmethod
     def read(cls, r: Any, name: str, v: Any, path: str, scene: Scene) -> Section:
         """The entry ``name`` a task file's field ``v`` at ``path`` says; ``scene`` is the
-        scene read so far (its start, bodies, held object, joints and the sections before
-        this one)."""
+        scene read so far (its start, bodies, held object and the sections before this
+        one)."""
 
     def check(self, r: Any, scene: Scene, path: str) -> None:  # noqa: B027 - most check nothing
         """Cross-checks once the whole scene is read (``path``: the scene's)."""
