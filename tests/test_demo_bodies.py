@@ -61,8 +61,11 @@ def test_the_gripper_and_bodies_read_together(tmp_path):
     assert d.width is not None and list(d.bodies) == ["tabletop"]
 
 
-def test_old_demonstrations_read_without_bodies():
-    for f in sorted((ROOT / "skills" / "demos").glob("*/*.csv"))[:6]:
+@pytest.mark.parametrize("task", ["pour", "drawer", "cabinet", "drink", "light_switch", "oven"])
+def test_old_demonstrations_read_without_bodies(task):
+    """The shipped demonstrations made before bodies were recorded read with none (those
+    of the tasks with the fingers carry theirs: tests/test_learn_gripper.py)."""
+    for f in sorted((ROOT / "skills" / "demos" / task).glob("*.csv"))[:3]:
         assert read_demo_csv(f).bodies == {}
 
 

@@ -77,7 +77,8 @@ def test_estimators_follow_the_get_params_convention():
 
 
 def test_every_hyperparameter_flag_of_sctd_learn():
-    """Flags derived from the definitions: exactly those sctd learn always had."""
+    """Flags derived from the definitions: exactly those sctd learn always had, and the
+    gripper events' (GripperOptions)."""
     parser = add_learn_arguments(argparse.ArgumentParser())
     flags = {s for a in parser._actions for s in a.option_strings} - {"-h", "--help"}
     assert flags == {
@@ -92,7 +93,8 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
         "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine", "--vf-direction", "--vf-states",
-        "--max-linear-speed", "--max-angular-speed", "--speed-near"}
+        "--max-linear-speed", "--max-angular-speed", "--speed-near",
+        "--grasp-force", "--grasp-timeout", "--gripper-radius"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])
     assert ns.smoothness == 0.005 and ns.random_state == 0 and ns.vf_max_n == 5 and ns.despike
     assert ns.models == ("translation", "cylinder", "sphere", "general")

@@ -272,6 +272,8 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             assert ok and body["scene"] == "pour"
             # with arm: the arm back at rest in the posture it started in, holding there
             _turn(w, pub, R0 @ se3.matrix_from_rotvec([0.0, 0.0, 0.6]))
+            # every target taken (a late one would pull the arm back from its posture)
+            assert wait_for(lambda: w.get("scene")["holding"], 5)
             away = w.get("state")["pose"]
             assert se3.angle_between3(se3.matrix_from_quaternion(away[3:]), R0) > 0.4
             ok, body = _reset(s, codec.pack({"scene": "pour", "arm": True}))
