@@ -826,3 +826,13 @@ def test_bad_section_entries_are_refused_naming_them(lamps, edit, where, what):
     with pytest.raises(TaskError) as e:
         read(doc)
     assert e.value.path == where and what in e.value.problem, str(e.value)
+
+
+def test_tasks_show_prints_the_registered_kinds_fields(capsys):
+    from sctd.cli.main import main
+
+    assert main(["tasks", "show", CUP, "--no-reach"]) == 0
+    out = capsys.readouterr().out
+    assert "  support tabletop: size [0.3, 0.3]\n" in out
+    assert "  item cup: rests_on shelf, mass 0.25, radius 0.035, height 0.1, grip 0.05, frames " in out
+    assert "  intent: take (grasp), put (place)\n" in out

@@ -105,6 +105,8 @@ def summary(task: Task) -> dict[str, Any]:
         "time_limit": task.outcome.time_limit,
         "facets": {n: {k: f.to_yaml() for k, f in b.facets.items()}
                    for n, b in sc.bodies.items() if b.facets},
+        "sections": {k: {n: e.to_yaml() for n, e in entries.items()} for k, entries in sc.sections.items()
+                     if k not in _SHOWN_SECTIONS},
         "intent": [{"name": s.name, "kind": _step_kind(s.action)} for s in task.intent],
     }
 
@@ -114,6 +116,24 @@ def _step_kind(action: Any) -> str:
     if isinstance(action, StepKind):
         return action.key
     return next(k for k, c in KINDS.items() if isinstance(action, c))
+
+
+_SHOWN_FACETS = ("container", "surface", "button")
+"""Facets ``sctd tasks show`` prints lines of its own for; other kinds' print their fields."""
+_SHOWN_SECTIONS = ("joints", "heads", "zones")
+
+
+def _fields(d: dict[str, Any]) -> str:
+    """A kind's task-file fields on one line: ``mass 0.25, radius 0.035, ...``."""
+    def text(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:g}"
+        if isinstance(v, list):
+            return "[" + ", ".join(text(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f"{k}: {text(x)}" for k, x in v.items()) + "}"
+        return str(v)
+    return ", ".join(f"{k} {text(v)}" for k, v in d.items())
 
 
 def _flag_terms(p: Predicate) -> list[str]:
@@ -221,6 +241,13 @@ def _print_show(s: dict[str, Any], args: argparse.Namespace) -> None:
         turned = f", z within {math.degrees(z['tilt']):.0f} deg of {_vec(z['axis'])}" if z["tilt"] else ""
         print(f"  zone {n}: {z['frame']} within {_vec(z['within'])} m of {_vec(z['position'])} in "
               f"{z['around']}{turned}")
+    for n, facets in s["facets"].items():  # (the registered kinds the lines above do not show)
+        for k, f in facets.items():
+            if k not in _SHOWN_FACETS:
+                print(f"  {k} {n}: {_fields(f)}")
+    for k, entries in s["sections"].items():
+        for n, e in entries.items():
+            print(f"  {k} {n}: {_fields(e)}")
     targets = ", ".join(f"{k} >= {v:g}" for k, v in s["thresholds"].items()) or _flags(s["done"])
     print(f"  done ({s['done_reason']}) at {targets}; progress {s['progress']}; "
           f"fails: {', '.join(s['fails']) or 'none'}; time limit {s['time_limit']:g} s")
