@@ -87,3 +87,24 @@ class Fingers:
         holding = self._blocked is not None and self.closing
         moving = not holding and abs(self.width - self.target) > 1e-5
         return GripperReading(self.width, holding, moving, self.cmd)
+
+
+class MirroredFingers(Fingers):
+    """Fingers that show a real gripper's readings (``sctd robot NAME`` beside an arm that
+    is not ours): the scene judges what the hand takes from what the gripper reports
+    (:meth:`mirror`), and moves nothing on its own. Holding something (``grasped``), they
+    close on it with the squeeze of an arm's hand that holds it (:data:`MAX_FORCE`)."""
+
+    def mirror(self, width: float, grasped: bool) -> None:
+        """The gripper's newest reading: its ``width`` (m) and whether it holds something."""
+        self.width = self.target = min(max(0.0, float(width)), self.max_width)
+        self.closing = bool(grasped)
+        self.force = MAX_FORCE if grasped else 0.0
+
+    def advance(self, dt: float) -> None:
+        """Nothing moves but the real fingers (:meth:`mirror`)."""
+        self._blocked = None
+
+    def block(self, width: float) -> None:
+        """What the scene says lies between them (the width stays the reading's)."""
+        self._blocked = width

@@ -836,3 +836,35 @@ def test_tasks_show_prints_the_registered_kinds_fields(capsys):
     assert "  support tabletop: size [0.3, 0.3]\n" in out
     assert "  item cup: rests_on shelf, mass 0.25, radius 0.035, height 0.1, grip 0.05, frames " in out
     assert "  intent: take (grasp), put (place)\n" in out
+
+
+def test_an_observer_beside_a_real_arm_judges_a_pick_and_place_from_its_gripper():
+    """sctd robot NAME --task cup_to_table: the scene follows the arm's measured hand and
+    its gripper's readings (no physics of its own): the cup taken when the real fingers
+    hold something about its axis, put down when they open over the table top."""
+    from sctd.wire.codec import GripperReading
+    from sctd_services.robots.observer import observer_for
+
+    obs = observer_for(find_task(CUP))
+    cup = obs.scene.live["cup"].copy()
+    grip = se3.transform_from_rt(np.eye(3), cup[:3, 3] + [0.0, 0.0, 0.05])
+    t = 0.0
+
+    def go(T: np.ndarray, width: float, grasped: bool, seconds: float = 0.2) -> dict:
+        nonlocal t
+        for _ in range(round(seconds / 0.01)):
+            t += 0.01
+            obs.step(t, T, GripperReading(width, grasped))
+        return obs.outcome()["readings"]
+
+    assert not go(grip, 0.08, False)["cup.held"]  # (open fingers about it: not taken)
+    assert go(grip, 0.07, True)["cup.held"]
+    table = obs.scene.live["tabletop"]
+    over = se3.transform_from_rt(np.eye(3), table[:3, 3] + [0.0, 0.0, 0.05 + 0.005])
+    assert go(over, 0.07, True)["cup.lifted"] < 0.0  # (carried: the table is lower)
+    r = go(over, 0.08, False)
+    assert not r["cup.held"] and r["cup.resting"] and r["tabletop.items"] == 1
+    away = over.copy()
+    away[0, 3] -= 0.12
+    go(away, 0.08, False)
+    assert obs.outcome()["done"] and obs.outcome()["success"]

@@ -3,7 +3,9 @@ puts them (the held ones carried by the hand), and the outcome from the hand's r
 
 It applies no physics: the arm's own stack moves the hand. Tasks whose outcome needs the
 scene to push back (a handle on a joint, a surface, a button) stay in sctd's simulator,
-which has the physics; :func:`observer_for` says so. A head (the drink's face) is judged
+which has the physics; :func:`observer_for` says so. What the hand takes (an item, a
+knob) is judged from the arm's gripper readings: the item taken when the real fingers
+hold something with its axis between them, let go when they open. A head (the drink's face) is judged
 from the hand's pose alone: its readings need no force, and the face's push back, which
 sctd's simulator applies, is not felt by the arm.
 """
@@ -17,6 +19,8 @@ import numpy as np
 from sctd import se3
 from sctd.robots import RobotError
 from sctd.task import Task
+from sctd.wire.codec import GripperReading
+from sctd_sim.fingers import MirroredFingers
 from sctd_sim.scenes import TaskScene, make_scene
 
 Array = np.ndarray
@@ -35,11 +39,16 @@ class SceneObserver:
         scene = make_scene(task, trial_seed=trial_seed)
         assert isinstance(scene, TaskScene)
         self.scene = scene
+        # the arm's own gripper, as its readings say: what the hand takes is judged from them
+        self.fingers = scene.fingers = scene.world.fingers = MirroredFingers()
         self.t = 0.0
         self._last: tuple[float, Array] | None = None  # (stamp, T_world_ee) of the last reading
 
-    def step(self, stamp: float, T_world_ee: Array) -> None:
-        """One reading: the scene advances by the time since the previous one."""
+    def step(self, stamp: float, T_world_ee: Array, gripper: GripperReading | None = None) -> None:
+        """One reading (with the gripper's, where the arm has one): the scene advances by
+        the time since the previous one."""
+        if gripper is not None:
+            self.fingers.mirror(gripper.width, gripper.grasped)
         if self._last is None:
             self._last = (stamp, T_world_ee)
             self.scene.step(T_world_ee, np.zeros(6), 0.0)

@@ -228,7 +228,7 @@ class RobotService:
                                               fault=fault, gripper=r.gripper))
         self.seq += 1
         if self.observer is not None:
-            self.observer.step(r.stamp, r.T_world_ee)
+            self.observer.step(r.stamp, r.T_world_ee, r.gripper)
         now = time.monotonic()
         if now >= self._due["objects"]:
             self._due["objects"] = now + 1.0 / OBJECT_RATE
