@@ -234,10 +234,10 @@ def markdown(rows_: list[dict[str, Any]]) -> str:
 
 def figure(rows_: list[dict[str, Any]]) -> Figure:
     """Success, completion times (each task's floor marked) and mode switches and effort
-    per task and skill, side by side: the suite at a glance."""
-    fig = Figure(figsize=(15, 4.5))
-    ax_s, ax_t, ax_e = fig.subplots(1, 3)
-    labels = [f"{r['task']}\n{r['skill']}" for r in rows_]
+    per task and skill, one above the other on the same rows: the suite at a glance."""
+    fig = Figure(figsize=(max(8.0, 0.42 * len(rows_) + 2.0), 11))  # (wider with more rows)
+    ax_s, ax_t, ax_e = fig.subplots(3, 1, sharex=True)
+    labels = [f"{r['task']}: {r['skill']}" for r in rows_]
     x = np.arange(len(rows_))
     colours = [_COLOURS[sorted({r['task'] for r in rows_}).index(r["task"]) % len(_COLOURS)] for r in rows_]
     ax_s.bar(x, [100 * r["success_rate"] for r in rows_], color=colours)
@@ -252,10 +252,10 @@ def figure(rows_: list[dict[str, Any]]) -> Figure:
     ax_e.bar(x + 0.2, [r["effort"] / 10 for r in rows_], width=0.4, color="0.6", label="effort / 10")
     ax_e.set(title="mode switches and effort (per trial)")
     ax_e.legend(loc="upper left")
-    for ax in (ax_s, ax_t, ax_e):
-        ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    ax_e.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)  # (the panels share them)
     fig.tight_layout()
     return fig
 
 
-_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:olive")
+_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:olive",
+            "tab:cyan", "tab:pink", "tab:gray")
