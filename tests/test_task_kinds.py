@@ -868,3 +868,13 @@ def test_an_observer_beside_a_real_arm_judges_a_pick_and_place_from_its_gripper(
     away[0, 3] -= 0.12
     go(away, 0.08, False)
     assert obs.outcome()["done"] and obs.outcome()["success"]
+
+
+def test_inspect_says_which_states_are_in_another_bodys_frame(capsys):
+    from sctd.cli.main import main
+
+    assert main(["inspect", str(Path(__file__).parents[1] / "skills" / "cup_to_table-linear.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "object cup:" in out and "  state s0 (start) in the frame of shelf\n" in out
+    assert main(["inspect", str(Path(__file__).parents[1] / "skills" / "tap-linear.yaml")]) == 0
+    assert "in the frame of" not in capsys.readouterr().out  # (every state in the skill's object's)

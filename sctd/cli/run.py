@@ -257,7 +257,8 @@ def _print_summary(skill: Skill, s: dict[str, Any]) -> None:
     for state, st in zip(skill.states, s["states"], strict=True):
         mark = " (start)" if st["name"] == s["start"] else ""
         mark += " (end)" if st["name"] == s["end"] else ""
-        print(f"  state {st['name']}{mark}")
+        frame = f" in the frame of {state.object}" if state.object and state.object != skill.object else ""
+        print(f"  state {st['name']}{mark}{frame}")
         for m in state.input_mappings:
             print(f"    IM {m.type} on {m.frame}: {m.describe()}")
         for c in st["active_constraints"]:
