@@ -73,7 +73,9 @@ class TargetGuard:
     """Admits or refuses each target the robot receives.
 
     A target is refused (and the arm should hold where it is) when it is stamped before
-    ``started`` (``before_start``, unless ``stamp_check`` is off), further from the
+    ``started`` or the last :meth:`restart` (``before_start``, unless ``stamp_check`` is
+    off: a target sent before the arm was put back in a known posture, and delivered
+    late, must not pull it away again), further from the
     measured pose than the offset limits (``offset``), or, while the arm is following
     targets, stamped no later than the previous accepted one (``out_of_order``) or
     further from it than the speed limits allow over the time between their stamps,
@@ -98,6 +100,12 @@ class TargetGuard:
         self.stamp_check = stamp_check
         self.rejected: Counter[str] = Counter()
         self._last: tuple[se3.Flat, float] | None = None  # the last accepted target and stamp
+
+    def restart(self, at: float) -> None:
+        """The arm was put somewhere by other means at Unix time ``at``: refuse targets
+        stamped before it, and judge the next one by its offset alone."""
+        self.started = max(self.started, at)
+        self._last = None
 
     def admit(self, pose: list[float], stamp: float, F_measured: se3.Flat, following: bool) -> bool:
         """Whether to follow the target ``pose`` (world) stamped ``stamp``, for the arm

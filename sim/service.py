@@ -312,6 +312,7 @@ class SimService:
             self.sim.scene.reset()
             if pending.home:
                 self.sim.home()
+                self.guard.restart(time.time())  # a late target from before must not pull it away
                 self.homes += 1
             self.resets += 1
             pending.t = self.sim.t

@@ -283,6 +283,15 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             assert sc["homes"] == 1 and sc["resets"] == 3 and sc["holding"], sc
             assert se3.angle_between3(se3.matrix_from_quaternion(home[3:]), R0) < 0.02
             assert math.dist(home[:3], start[:3]) < 0.005, (home, start)
+            # a target sent before the home and delivered late is refused, however near
+            before_home = sc.get("target_rejected_reasons", {}).get("before_start", 0)
+            late = R0 @ se3.matrix_from_rotvec([0.0, 0.0, 0.3])
+            q_late = se3.quaternion_from_matrix(late).tolist()
+            pub.put(codec.encode_target(1, time.time() - 1.0, [*home[:3], *q_late], "test", "test", -1))
+            assert wait_for(lambda: w.get("scene").get("target_rejected_reasons", {})
+                            .get("before_start", 0) > before_home, 5), w.get("scene")
+            still = w.get("state")["pose"]
+            assert se3.angle_between3(se3.matrix_from_quaternion(still[3:]), R0) < 0.02
             w.sub.undeclare()
             pub.undeclare()
     finally:
