@@ -110,7 +110,8 @@ def test_a_rest_at_the_mug_after_a_change_of_mind_engages_the_pour():
     pour there and carries the bottle to the mug, which lies on the way from the drawer
     to the light switch. Its stop at the mug engages the pour, which pours; without the
     rest's evidence (rest_speed 0) the belief stays split between the mug and the
-    switch, nothing engages, and teleoperation cannot pour."""
+    switch, nothing engages, and the set's teleoperation (about the hand's origin) cannot
+    pour; the competent baseline (about the bottle's opening) can."""
     from sctd.skill.catalog import find_skill_set
 
     kitchen = str(find_skill_set("kitchen-pour"))
@@ -118,7 +119,7 @@ def test_a_rest_at_the_mug_after_a_change_of_mind_engages_the_pour():
     assert (r["goal"], r["detour"]) == ("pour", "drawer") and r["first_engaged"] == "drawer"
     assert r["right_engaged"] and r["t_engaged"] > r["changed_at"]
     assert [c[2] for c in r["changes"]] == ["drawer", "teleop", "pour"]
-    assert r["set"]["reason"] == "poured" and r["teleop"]["outcome"] != "success"
+    assert r["set"]["reason"] == "poured" and r["teleop"]["reason"] == "poured"
     flat = set_job(SetSpec(kitchen, detour=True, belief=(("rest_speed", 0.0),)), 0)
     assert [c[2] for c in flat["changes"]] == ["drawer", "teleop"] and not flat["right_engaged"]
     assert flat["set"]["outcome"] != "success"
@@ -249,3 +250,27 @@ def test_eval_refuses_a_bad_belief_or_practice_without_a_set(capsys):
     ]:
         assert main(["eval", *argv, "--trials", "1"]) == 2, argv
         assert problem in capsys.readouterr().err, argv
+
+
+def test_teleoperation_in_a_room_is_the_goals_competent_baseline():
+    """The teleop condition runs the set's teleoperation as `sctd eval` and `sctd suite`
+    compare a skill with: the goal member's limits, turning about the tip of what the
+    hand holds where the goal tilts it. With it, the pour that teleoperation about the
+    hand's origin never finished is poured; the report names each goal's baseline."""
+    from sctd_services.eval.goals import format_set_report
+
+    path = str(ROOT / "skills" / "sets" / "kitchen-pour.yaml")
+    names = ["pour", "drawer", "light_switch"]
+    seed = next(s for s in range(20) if goal_of(s, names) == "pour")
+    r = set_job(SetSpec(path, conditions=("teleop",)), seed)
+    assert r["goal"] == "pour" and r["baseline"] == "teleop (limits of pour, control frame bottle_tip)"
+    assert r["teleop"]["outcome"] == "success", r["teleop"]
+    seed = next(s for s in range(20) if goal_of(s, names) == "drawer")
+    d = set_job(SetSpec(path, conditions=("teleop",)), seed)
+    assert d["baseline"] == "teleop (limits of drawer)"  # (the drawer tilts nothing held)
+    summary = summarise_set([r, d], ("teleop",))
+    summary.update(set="kitchen-pour", members=names, room=names, teleop="teleop", profile="pausing",
+                   seed=0, baselines={"pour": r["baseline"], "drawer": d["baseline"]})
+    text = format_set_report(summary)
+    assert "teleop for pour: teleop (limits of pour, control frame bottle_tip)" in text
+    assert "teleop for drawer: teleop (limits of drawer)" in text

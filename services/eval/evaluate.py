@@ -71,15 +71,12 @@ def task_of(skills: list[Skill], task: Task | None, ref: str | None = None) -> T
     return found
 
 
-def with_limits(path: Path, limits: Limits, directory: Path,
-                control: tuple[str, np.ndarray] | None = None,
-                cap: tuple[str, SpeedNear] | None = None) -> Path:
-    """A copy of the skill file at ``path`` (and its model files) with other limits; with
-    ``control`` (a frame's name and ``T_ee_frame``), a teleoperation skill's control
-    frame: its rotations turn about that frame's origin (:func:`control_frame`); with
-    ``cap`` (an object's name and a ``speed_near``), that cap near that object
-    (:func:`_capped`)."""
-    bundle = bundle_from_file(path)
+def restyled(bundle: Bundle, limits: Limits, control: tuple[str, np.ndarray] | None = None,
+             cap: tuple[str, SpeedNear] | None = None) -> Bundle:
+    """``bundle`` (a skill and its model files) with other limits; with ``control`` (a
+    frame's name and ``T_ee_frame``), a teleoperation skill's control frame: its rotations
+    turn about that frame's origin (:func:`control_frame`); with ``cap`` (an object's name
+    and a ``speed_near``), that cap near that object (:func:`_capped`)."""
     doc = parse_yaml(bundle.yaml_text, bundle.name)
     doc["limits"] = {"max_linear_speed": limits.max_linear_speed,
                      "max_angular_speed": limits.max_angular_speed}
@@ -93,13 +90,40 @@ def with_limits(path: Path, limits: Limits, directory: Path,
                     m["frame"] = name
     if cap is not None:
         _capped(doc, cap)
+    return Bundle(name=bundle.name, yaml_text=yaml.safe_dump(doc, sort_keys=False), files=bundle.files)
+
+
+def with_limits(path: Path, limits: Limits, directory: Path,
+                control: tuple[str, np.ndarray] | None = None,
+                cap: tuple[str, SpeedNear] | None = None) -> Path:
+    """A copy of the skill file at ``path`` (and its model files) in ``directory``,
+    :func:`restyled`."""
+    bundle = restyled(bundle_from_file(path), limits, control, cap)
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / Path(bundle.name).name
-    out.write_text(yaml.safe_dump(doc, sort_keys=False))
+    out.write_text(bundle.yaml_text)
     for rel, data in bundle.files.items():
         (directory / rel).parent.mkdir(parents=True, exist_ok=True)
         (directory / rel).write_bytes(data)
     return out
+
+
+def competent_baseline(teleop: Bundle, ref: Skill, task: Task | None) -> tuple[Bundle, str]:
+    """The competent baseline of the assisted skill ``ref`` on ``task``: the
+    teleoperation skill ``teleop`` with ``ref``'s speed limits, its ``speed_near`` cap
+    near its object (:func:`cap_of`) and the task's control frame
+    (:func:`control_frame`), and the label that says so."""
+    control = control_frame(task)
+    c = cap_of(ref)
+    bundle = restyled(teleop, ref.limits, control, None if c is None else (ref.object, c))
+    return bundle, baseline_label(ref.name, control, ref.object if c is not None else None)
+
+
+def baseline_label(ref: str, control: tuple[str, np.ndarray] | None, capped_near: str | None) -> str:
+    """``teleop (limits of REF, control frame F, capped near OBJECT)``."""
+    at = f", control frame {control[0]}" if control is not None else ""
+    near = "" if capped_near is None else f", capped near {capped_near}"
+    return f"teleop (limits of {ref}{at}{near})"
 
 
 ROTATIONS = ("rx", "ry", "rz")
@@ -154,7 +178,6 @@ def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None =
     given = [Entry(p, Path(p), load_skill(p)) for p in paths]
     assisted = [e for e in given if e.skill.object != WORLD_OBJECT]
     control = control_frame(task)
-    at = f", control frame {control[0]}" if control is not None else ""
     out: list[Entry] = []
     for e in given:
         if e.skill.object == WORLD_OBJECT and assisted:
@@ -176,8 +199,8 @@ def entries(paths: list[str], baseline: bool, workdir: Path, task: Task | None =
             done.append(key)
             cap = None if c is None else (ref.skill.object, c)
             p = with_limits(TELEOP, ref.skill.limits, workdir / f"teleop-as-{ref.skill.name}", control, cap)
-            near = "" if c is None else f", capped near {ref.skill.object}"
-            out.append(Entry(f"teleop (limits of {ref.label}{at}{near})", p, load_skill(p), ref.label))
+            label = baseline_label(ref.label, control, None if c is None else ref.skill.object)
+            out.append(Entry(label, p, load_skill(p), ref.label))
     return out
 
 

@@ -13,7 +13,11 @@ than its own):
   until a member engages;
 - **preselected**: the goal task's member alone, as if a person had picked it from a
   menu before starting;
-- **teleop**: the set's teleoperation alone (the baseline's modes).
+- **teleop**: the competent baseline for the goal (:func:`~.evaluate.competent_baseline`):
+  the set's teleoperation with the goal member's speed limits and ``speed_near`` cap and
+  the goal task's control frame, as ``sctd eval`` and ``sctd suite`` compare a skill
+  with. (Under **set**, the set's own teleoperation runs until a member engages, as its
+  file says: the report names both.)
 
 With ``practice``, the user is practised (:class:`~sctd_services.user.SimulatedUser`):
 before the trials it did the goal's task once with the goal's skill and once with
@@ -49,12 +53,13 @@ from typing import Any
 import numpy as np
 
 from sctd.runtime.sets import belief_model, goal_set
-from sctd.skill import Skill
+from sctd.skill import Skill, skill_from_bundle
 from sctd.skill.skillset import SkillSet, load_skill_set
 from sctd.task import Task, task_for_object
 from sctd.task.compose import compose
 from sctd_services.user import DeviceModel
 
+from .evaluate import competent_baseline
 from .lockstep import practise, run_set_trial, run_trial
 from .numerics import describe, numerics
 from .trial import TaskSpec
@@ -158,10 +163,12 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=stuck)
     right = skills[names.index(goal)]
     out: dict[str, Any] = {"seed": seed, "goal": goal, "skill": right.name}
-    known: dict[str, dict[str, DeviceModel]] = {"preselected": {}, "teleop": {}}
-    if spec.practice:
-        for c, index in (("preselected", names.index(goal)), ("teleop", -1)):
-            known[c] = _practised(spec.set_file, goal, index, spec.profile)
+    known: dict[str, dict[str, DeviceModel]] = {"preselected": {}, "teleop": {}, "set_teleop": {}}
+    if spec.practice:  # (the set's own teleoperation, and the baseline's, each practised)
+        for c, index in (("preselected", names.index(goal)), ("set_teleop", SET_TELEOP),
+                         ("teleop", BASELINE)):
+            if c != "set_teleop" or "set" in spec.runs:
+                known[c] = _practised(spec.set_file, goal, index, spec.profile)
     detour = detour_skill = None
     if spec.detour:
         first = detour_of(seed, names)
@@ -170,7 +177,7 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     if "set" in spec.runs:
         goals = goal_set(skill_set)
         shown = {f"{right.name}:{m}": d for m, d in known["preselected"].items()}
-        shown.update({f"{skill_set.teleop.name}:{m}": d for m, d in known["teleop"].items()})
+        shown.update({f"{skill_set.teleop.name}:{m}": d for m, d in known["set_teleop"].items()})
         res, watch = run_set_trial(goals, task, tspec, seed, known=shown, detour=detour)
         if spec.practice:
             out["practised_modes"] = sorted(shown)
@@ -182,21 +189,30 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
         out["preselected"] = run_trial(right, tspec, seed, task=task, known=known["preselected"],
                                        detour=detour).as_dict(with_trajectory=False)
     if "teleop" in spec.runs:
-        out["teleop"] = run_trial(skill_set.teleop, tspec, seed, task=task, known=known["teleop"],
+        baseline, out["baseline"] = competent_baseline(skill_set.teleop_bundle, right, task)
+        out["teleop"] = run_trial(skill_from_bundle(baseline), tspec, seed, task=task, known=known["teleop"],
                                   detour=detour).as_dict(with_trajectory=False)
     return out
+
+
+SET_TELEOP, BASELINE = -1, -2  # _practised's members other than the set's skills
 
 
 @functools.lru_cache(maxsize=64)
 def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str, DeviceModel]:
     """What the user learned of the device doing ``goal``'s task once from
-    :data:`PRACTICE_SEED` with member ``member``'s skill (-1: teleoperation), by mode
-    (once per process: every trial of an evaluation starts from the same practice)."""
+    :data:`PRACTICE_SEED` with member ``member``'s skill (:data:`SET_TELEOP`: the set's
+    teleoperation; :data:`BASELINE`: the goal's competent baseline), by mode (once per
+    process: every trial of an evaluation starts from the same practice)."""
     skill_set = load_skill_set(set_file)
     tasks = tasks_of([m.skill for m in skill_set.members])
-    skill = skill_set.teleop if member < 0 else skill_set.members[member].skill
-    tspec = TaskSpec(goal, profile=profile)
-    return practise(skill, tspec, PRACTICE_SEED, task=room_task(tasks, goal))[1]
+    room = room_task(tasks, goal)
+    right = skill_set.members[[t.name for t in tasks].index(goal)].skill
+    if member == BASELINE:
+        skill = skill_from_bundle(competent_baseline(skill_set.teleop_bundle, right, room)[0])
+    else:
+        skill = skill_set.teleop if member == SET_TELEOP else skill_set.members[member].skill
+    return practise(skill, TaskSpec(goal, profile=profile), PRACTICE_SEED, task=room)[1]
 
 
 def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str,
@@ -258,6 +274,7 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
     out.update(set=skill_set.name, set_file=spec.set_file, members=[m.name for m in skill_set.members],
                room=[t.name for t in tasks_of([m.skill for m in skill_set.members])],
                teleop=skill_set.teleop.name,
+               baselines={r["goal"]: r["baseline"] for r in per_trial if "baseline" in r},
                profile=spec.profile, practice=spec.practice, detour=spec.detour, seed=seed,
                belief=dataclasses.asdict(belief_model(skill_set)), numerics=numerics(),
                per_trial=per_trial)
@@ -313,9 +330,9 @@ def _figures(rows: Sequence[dict[str, Any]], conditions: Sequence[str]) -> dict[
 def format_set_report(r: dict[str, Any]) -> str:
     """Human-readable table of :func:`evaluate_set`'s result."""
     practised = " (practised)" if r.get("practice") else ""
-    lines = [f"skill set {r['set']}: {', '.join(r['members'])} (teleoperation {r['teleop']}) in a room "
-             f"of {', '.join(r['room'])}; user {r['profile']}{practised}, {r['trials']} lockstep trials "
-             f"from seed {r['seed']}",
+    lines = [f"skill set {r['set']}: {', '.join(r['members'])} (teleoperation until a member engages: "
+             f"{r['teleop']}) in a room of {', '.join(r['room'])}; user {r['profile']}{practised}, "
+             f"{r['trials']} lockstep trials from seed {r['seed']}",
              "goal            trials  right first  right at all  t engaged [s]  wrong (undone, median s)  "
              "success set/pre/teleop  median s set/pre/teleop  set/pre  set/teleop"]
     rows = [*(("all", r["overall"]),), *r["by_goal"].items()]
@@ -334,6 +351,8 @@ def format_set_report(r: dict[str, Any]) -> str:
                      f"mind in {o['engaged_at_change']} of {o['trials']} trials, escaped in "
                      f"{o['undone_after_change']}, median {_fmt(o['after_change_median_s'])} s after "
                      "the change")
+    for goal, label in sorted(r.get("baselines", {}).items()):
+        lines.append(f"teleop for {goal}: {label}")
     if "numerics" in r:
         lines.append(describe(r["numerics"]))
     return "\n".join(lines)
