@@ -34,7 +34,7 @@ from sctd.timing import RoundTrips, Ticker, set_timer_slack
 from sctd.wire import Keys, codec
 from sctd.wire.session import MSGPACK, add_zenoh_arguments, session_from_args
 
-from .user import PROFILES, Observation, SimulatedUser
+from .user import DEFAULT_MODEL, PROFILES, USER_MODELS, Observation, SimulatedUser
 
 
 def task_frames(task: Task) -> tuple[str, ...]:
@@ -150,6 +150,8 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sctd-simulated-user", description=__doc__.split("\n\n")[0])
     p.add_argument("--task", required=True, metavar="NAME|FILE", help=TASK_HELP)
     p.add_argument("--profile", default="steady", choices=sorted(PROFILES))
+    p.add_argument("--user-model", default=DEFAULT_MODEL, choices=sorted(USER_MODELS),
+                   help="how the user learns the device (default %(default)s)")
     p.add_argument("--axes", type=int, default=3, help="input axes of the device (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="the user's noise seed")
     add_robot_argument(p)
@@ -184,6 +186,7 @@ def _report(client: UserClient, args: argparse.Namespace, elapsed: float) -> dic
     return {
         "task": args.task,
         "profile": args.profile,
+        "user_model": args.user_model,
         "inputs_sent": client.seq,
         "targets_received": info["targets"],
         "target_rate": round(info["targets"] / elapsed, 1) if elapsed > 0 else 0.0,
@@ -214,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     except TaskError as e:
         print(f"sctd-simulated-user: --task: {e}", file=sys.stderr)
         return EXIT_USAGE
-    user = SimulatedUser(task, args.axes, args.profile, seed=args.seed)
+    user = SimulatedUser(task, args.axes, args.profile, seed=args.seed, model=args.user_model)
     # The hand's pose at 250 Hz is plenty for a person deciding at 100 Hz: Zenoh drops the
     # rest of the state's 1 kHz on arrival, leaving the CPU to the simulator and the daemon
     # (the targets, whose in_seq the latency measurement needs, all arrive).

@@ -504,3 +504,67 @@ def test_a_mode_change_the_user_did_not_ask_for_ends_a_sub_goal_close_enough(ask
         assert t > 0.6 + REPROBE_AFTER
     else:
         assert t < 0.6 + 2 * PROFILES["steady"].reaction_delay + PROFILES["steady"].update_period
+
+
+class LaggingToyDrawer(ToyDrawer):
+    """The toy drawer's hand answering the stick ``lag`` s late (a daemon's tick and an
+    arm's tracking)."""
+
+    def __init__(self, B, lag, dt=0.01):
+        super().__init__(B)
+        self.line = [np.zeros(3)] * round(lag / dt)
+
+    def step(self, u, dt):
+        self.line.append(np.asarray(u, dtype=float))
+        super().step(self.line.pop(0), dt)
+
+
+def test_an_adaptive_user_learns_the_device_s_delay_and_its_axes_without_crosstalk():
+    """The hand answers 30 ms late. The plain user pairs each motion with the stick held at
+    the same moments, and credits each axis with part of what the axis tried before it
+    did; the adaptive user finds the delay (one model per candidate, the best predictor
+    kept) and learns each axis alone. Both open the drawer."""
+    from sctd_services.user import DelayedDeviceModel, DeviceModel
+
+    B = np.zeros((6, 3))
+    B[1, 0], B[0, 2], B[2, 1] = 0.1, -0.1, 0.1
+    learned = {}
+    for model in ("plain", "adaptive"):
+        user = SimulatedUser(DRAWER, 3, PROFILES["steady"], seed=4, model=model)
+        _drive_toy(user, LaggingToyDrawer(B, 0.03))
+        assert user.done, model
+        learned[model] = user.models["m"]
+    plain, adaptive = learned["plain"], learned["adaptive"]
+    assert isinstance(plain, DeviceModel) and isinstance(adaptive, DelayedDeviceModel)
+    assert adaptive.lag == pytest.approx(0.03, abs=0.011), adaptive.errors
+    off = B[:3] == 0.0
+    crosstalk = {k: float(np.abs(m.B[:3][off]).max()) for k, m in learned.items()}
+    assert crosstalk["adaptive"] < 0.001 < 0.004 < crosstalk["plain"], crosstalk
+    np.testing.assert_allclose(adaptive.B[:3], B[:3], atol=0.01)
+
+
+def test_a_delayed_device_model_picks_the_delay_that_explains_the_motion():
+    """Known answer: the motion is exactly what the stick did 20 ms before; the candidate
+    paired so predicts it without error and is chosen, its matrix the device's."""
+    from sctd_services.user import DelayedDeviceModel
+
+    rng = np.random.default_rng(0)
+    B = rng.normal(0.0, 0.1, (6, 3))
+    lags = (0.0, 0.01, 0.02, 0.03)
+    model = DelayedDeviceModel(3, lags)
+    dt, steps = 0.001, 15  # a pair per 15 ms of motion, the stick changing every 50 ms
+    u_of = [rng.uniform(-1.0, 1.0, 3) for _ in range(200)]
+
+    def stick(t):
+        return u_of[int(t // 0.05)] if t >= 0 else np.zeros(3)
+
+    for k in range(400):
+        t0, t1 = k * steps * dt, (k + 1) * steps * dt
+        grid = t0 + dt * (np.arange(steps) + 0.5)
+        inputs = [np.mean([stick(t - lag) for t in grid], axis=0) for lag in lags]
+        model.update(inputs, B @ inputs[2])
+    others = np.delete(model.errors, 2)
+    assert model.lag == 0.02 and model.errors[2] < 1e-3 * others.min(), model.errors
+    np.testing.assert_allclose(model.B, B, atol=1e-6)
+    with pytest.raises(ValueError, match="2 for 4 candidate delays"):
+        model.update(inputs[:2], B @ inputs[2])

@@ -85,6 +85,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
+    add_arguments(p, TaskSpec, only=("user_model",))
     add_arguments(p, TaskSpec, only=("arm_lag",))
     p.add_argument("--driver", metavar="NAME", default=None,
                    help="real time only: run the trials on the arm this robot driver serves (sctd robot "
@@ -203,7 +204,8 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))
     # the trials' workers find the task as it was named (spec.task: TaskSpec)
-    spec = TaskSpec.of(task, args.task, profile=args.user, time_limit=args.time_limit, arm_lag=args.arm_lag)
+    spec = TaskSpec.of(task, args.task, profile=args.user, user_model=args.user_model,
+                       time_limit=args.time_limit, arm_lag=args.arm_lag)
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
@@ -244,7 +246,8 @@ def _evaluate_set(args: argparse.Namespace) -> int:
     pre-selected and teleoperation, in lockstep (:mod:`sctd_services.eval.goals`)."""
     try:
         belief = tuple((k, float(v)) for k, _, v in (kv.partition("=") for kv in args.belief))
-        spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, time_limit=args.time_limit,
+        spec = SetSpec(str(find_skill_set(args.skill_set)), profile=args.user, user_model=args.user_model,
+                       time_limit=args.time_limit,
                        practice=args.practised, belief=belief, detour=args.change_of_mind)
         tasks_of([m.skill for m in goal_members(spec.set_file)])
         goal_set(spec.skill_set())  # (the belief's parameters checked before any trial)

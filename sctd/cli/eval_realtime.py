@@ -171,7 +171,8 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
                         raise RuntimeError(f"trial {seed}: no targets within {startup:.0f} s; see {logdir}")
                     time.sleep(0.05)
                 with Child("sctd_services.simulated_user", "--task", spec.task, "--seed", str(seed),
-                           "--profile", spec.profile, "--axes", str(spec.axes),
+                           "--profile", spec.profile, "--user-model", spec.user_model,
+                           "--axes", str(spec.axes),
                            "--duration", str(rec.time_limit + 30), "--connect", hub, "--listen", ep(),
                            log=logdir / f"user-{seed}.log"):
                     period = 1.0 / WATCH_RATE

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sctd.task import TaskError, find_task, known_tasks
 from sctd_services.eval.suite import figure, markdown, rows, run_suite, table
+from sctd_services.user import DEFAULT_MODEL, USER_MODELS
 
 from ..app.errors import EXIT_OK, fail
 from .eval import _progress_bar
@@ -28,6 +29,10 @@ def add_suite_arguments(p: argparse.ArgumentParser) -> None:
                    help="a task to run (repeatable; default every task sctd tasks lists)")
     p.add_argument("--trials", type=int, default=20, help="lockstep trials per skill (default %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="first trial seed (default %(default)s)")
+    p.add_argument("--user-model", action="append", default=[], choices=sorted(USER_MODELS), metavar="NAME",
+                   help="how the simulated user learns the device (repeatable: the same trials with each, "
+                        f"side by side; {', '.join(f'{k}: {m.about}' for k, m in USER_MODELS.items())}; "
+                        f"default {DEFAULT_MODEL})")
     p.add_argument("--jobs", type=int, default=None, help="trials run in parallel (default: CPUs)")
     p.add_argument("--out", metavar="DIR", help="write suite.json, suite.md and suite.png here")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
@@ -42,12 +47,17 @@ def main_suite(args: argparse.Namespace) -> int:
     except TaskError as e:
         return fail("suite", f"--task: {e}")
     jobs = args.jobs or os.cpu_count() or 1
+    models = list(dict.fromkeys(args.user_model)) or [DEFAULT_MODEL]
     with tempfile.TemporaryDirectory(prefix="sctd-suite-") as work:
-        runs = run_suite(tasks, args.trials, args.seed, jobs, Path(work), progress=_progress_bar())
+        runs = run_suite(tasks, args.trials, args.seed, jobs, Path(work), progress=_progress_bar(),
+                         user_models=models)
     print(file=sys.stderr)
     table_rows = rows(runs)
     doc = {"trials": args.trials, "seed": args.seed, "tasks": [t.name for _, t in tasks], "rows": table_rows,
-           "results": {run.task.name: run.results for run in runs}}
+           "user_models": models,
+           "results": {run.task.name: run.results for run in runs if run.user_model == models[0]},
+           "results_by_user_model": {m: {run.task.name: run.results for run in runs if run.user_model == m}
+                                     for m in models}}
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -58,7 +68,8 @@ def main_suite(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(doc))
         return EXIT_OK
-    print(f"sctd suite: {len(tasks)} tasks, {args.trials} lockstep trials per skill from seed {args.seed}; "
+    print(f"sctd suite: {len(tasks)} tasks, {args.trials} lockstep trials per skill from seed {args.seed}, "
+          f"user model{'s' if len(models) > 1 else ''} {', '.join(models)}; "
           "the baseline is mode-switching teleop with the task's control frame")
     for line in table(table_rows):
         print("  " + line)

@@ -30,7 +30,7 @@ from sctd.skill.catalog import shipped_folder
 from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, find_task, load_task, task_for_object
 from sctd.task.model import Reach, Tilt, Upright
-from sctd_services.user import PROFILES
+from sctd_services.user import PROFILES, USER_MODELS
 
 from .lockstep import run_trial
 from .trial import TaskSpec, TrialResult
@@ -435,7 +435,8 @@ def profile_line(spec: TaskSpec) -> str:
     p = PROFILES[spec.profile]
     return (f"user {p.name}: reaction delay {p.reaction_delay} s, update every {p.update_period} s, "
             f"noise {p.noise_constant} + {p.noise_gain} |u|, dead zone {p.dead_zone}, "
-            f"mode switch {p.switch_time} s")
+            f"mode switch {p.switch_time} s; learning the device {spec.user_model} "
+            f"({USER_MODELS[spec.user_model].about})")
 
 
 def limits_line(r: dict[str, Any]) -> str:

@@ -57,7 +57,8 @@ from sctd.skill import Skill, skill_from_bundle
 from sctd.skill.skillset import SkillSet, load_skill_set
 from sctd.task import Task, task_for_object
 from sctd.task.compose import compose
-from sctd_services.user import DeviceModel
+from sctd_services.user import DEFAULT_MODEL
+from sctd_services.user.agent import Device
 
 from .evaluate import competent_baseline
 from .lockstep import practise, run_set_trial, run_trial
@@ -79,6 +80,7 @@ class SetSpec:
 
     set_file: str
     profile: str = "pausing"
+    user_model: str = DEFAULT_MODEL
     time_limit: float | None = None  # s per trial; None: the goal task file's own
     stuck_after: float = 10.0
     conditions: tuple[str, ...] = CONDITIONS
@@ -160,15 +162,16 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     goal = goal_of(seed, names)
     task = room_task(tasks, goal)
     stuck = spec.stuck_after + (DETOUR_STUCK if spec.detour else 0.0)
-    tspec = TaskSpec(goal, profile=spec.profile, time_limit=spec.time_limit, stuck_after=stuck)
+    tspec = TaskSpec(goal, profile=spec.profile, user_model=spec.user_model, time_limit=spec.time_limit,
+                     stuck_after=stuck)
     right = skills[names.index(goal)]
     out: dict[str, Any] = {"seed": seed, "goal": goal, "skill": right.name}
-    known: dict[str, dict[str, DeviceModel]] = {"preselected": {}, "teleop": {}, "set_teleop": {}}
+    known: dict[str, dict[str, Device]] = {"preselected": {}, "teleop": {}, "set_teleop": {}}
     if spec.practice:  # (the set's own teleoperation, and the baseline's, each practised)
         for c, index in (("preselected", names.index(goal)), ("set_teleop", SET_TELEOP),
                          ("teleop", BASELINE)):
             if c != "set_teleop" or "set" in spec.runs:
-                known[c] = _practised(spec.set_file, goal, index, spec.profile)
+                known[c] = _practised(spec.set_file, goal, index, spec.profile, spec.user_model)
     detour = detour_skill = None
     if spec.detour:
         first = detour_of(seed, names)
@@ -199,7 +202,8 @@ SET_TELEOP, BASELINE = -1, -2  # _practised's members other than the set's skill
 
 
 @functools.lru_cache(maxsize=64)
-def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str, DeviceModel]:
+def _practised(set_file: str, goal: str, member: int, profile: str, user_model: str = DEFAULT_MODEL
+               ) -> dict[str, Device]:
     """What the user learned of the device doing ``goal``'s task once from
     :data:`PRACTICE_SEED` with member ``member``'s skill (:data:`SET_TELEOP`: the set's
     teleoperation; :data:`BASELINE`: the goal's competent baseline), by mode (once per
@@ -212,7 +216,8 @@ def _practised(set_file: str, goal: str, member: int, profile: str) -> dict[str,
         skill = skill_from_bundle(competent_baseline(skill_set.teleop_bundle, right, room)[0])
     else:
         skill = skill_set.teleop if member == SET_TELEOP else skill_set.members[member].skill
-    return practise(skill, TaskSpec(goal, profile=profile), PRACTICE_SEED, task=room)[1]
+    spec = TaskSpec(goal, profile=profile, user_model=user_model)
+    return practise(skill, spec, PRACTICE_SEED, task=room)[1]
 
 
 def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str,
@@ -275,7 +280,8 @@ def evaluate_set(spec: SetSpec, trials: int, seed: int = 0, jobs: int = 1,
                room=[t.name for t in tasks_of([m.skill for m in skill_set.members])],
                teleop=skill_set.teleop.name,
                baselines={r["goal"]: r["baseline"] for r in per_trial if "baseline" in r},
-               profile=spec.profile, practice=spec.practice, detour=spec.detour, seed=seed,
+               profile=spec.profile, user_model=spec.user_model,
+               practice=spec.practice, detour=spec.detour, seed=seed,
                belief=dataclasses.asdict(belief_model(skill_set)), numerics=numerics(),
                per_trial=per_trial)
     return out

@@ -23,7 +23,8 @@ from sctd.runtime.goals import GoalSet
 from sctd.skill import Skill
 from sctd.task import Task
 from sctd.wire import codec
-from sctd_services.user import DeviceModel, Observation, SetUser, SimulatedUser
+from sctd_services.user import Observation, SetUser, SimulatedUser
+from sctd_services.user.agent import Device
 from sctd_sim.guard import TargetGuard, TargetLimits
 from sctd_sim.simulation import Simulation, trial_scene
 
@@ -37,7 +38,7 @@ USER_DEVICE = "user"  # the simulated user's device name (input/<name>)
 
 def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
               keep_series: bool = False, *, task: Task,
-              known: Mapping[str, DeviceModel] | None = None, detour: Task | None = None) -> TrialResult:
+              known: Mapping[str, Device] | None = None, detour: Task | None = None) -> TrialResult:
     """One trial of ``skill`` on ``task`` (``spec.task`` resolved, or a composed room whose
     first part is the user's goal) from the seeded start ``seed``; ``known``: what a practised
     user knows of the device (:class:`~sctd_services.user.SimulatedUser`); ``detour``:
@@ -55,31 +56,31 @@ def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None
 
 
 def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None, *, task: Task,
-             known: Mapping[str, DeviceModel] | None = None) -> tuple[TrialResult, dict[str, DeviceModel]]:
+             known: Mapping[str, Device] | None = None) -> tuple[TrialResult, dict[str, Device]]:
     """:func:`run_trial`, and what its user learned of the device by the end: a model per
     mode (the skill's state names) it used."""
     scene, q0 = trial_scene(task, seed)
     sim = Simulation(scene=scene, q0=q0)
-    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known)
+    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known, model=spec.user_model)
     try:
         return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos, user), user.models
     finally:
         sim.close()
 
 
-def set_user(task: Task, spec: TaskSpec, seed: int, known: Mapping[str, DeviceModel] | None = None,
+def set_user(task: Task, spec: TaskSpec, seed: int, known: Mapping[str, Device] | None = None,
              detour: Task | None = None) -> SetUser:
     """The person of a trial in a room of several tasks (:class:`~sctd_services.user.SetUser`):
     going for ``task``'s goal, or first for ``detour``'s."""
-    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known)
+    user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known, model=spec.user_model)
     if detour is None:
         return SetUser(user, task.object)
-    first = SimulatedUser(detour, spec.axes, spec.profile, seed=seed + 1)
+    first = SimulatedUser(detour, spec.axes, spec.profile, seed=seed + 1, model=spec.user_model)
     return SetUser(user, task.object, first, detour.object)
 
 
 def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int,
-                  known: Mapping[str, DeviceModel] | None = None,
+                  known: Mapping[str, Device] | None = None,
                   detour: Task | None = None) -> tuple[TrialResult, SetWatch]:
     """One trial of a skill set (:mod:`sctd.runtime.goals`) in the composed room ``task``
     (its first part is the user's goal) from the seeded start ``seed``: the user does

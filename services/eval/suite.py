@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,6 +29,7 @@ from sctd.task import Task, handle_jacobian
 from sctd.task.judge import thresholds
 from sctd.task.kinds import StepKind
 from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
+from sctd_services.user import DEFAULT_MODEL
 
 from .evaluate import (
     TELEOP,
@@ -50,6 +51,7 @@ class TaskRun:
     task: Task
     skills: list[str]
     results: list[dict[str, Any]] = field(default_factory=list)
+    user_model: str = DEFAULT_MODEL  # how the simulated user learned the device
 
     @property
     def baseline(self) -> dict[str, Any] | None:
@@ -150,20 +152,23 @@ def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> 
 
 
 def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, workdir: Path,
-              progress: Callable[[int, int, str], None] | None = None) -> list[TaskRun]:
+              progress: Callable[[int, int, str], None] | None = None,
+              user_models: Sequence[str] = (DEFAULT_MODEL,)) -> list[TaskRun]:
     """Every task's skills and its competent baseline, ``trials`` lockstep trials each
-    from seed ``seed``; a task with no shipped skill runs the baseline alone. ``tasks``:
-    (how the task was named: a name or a file, the task)."""
+    from seed ``seed``, once per user model (:data:`~sctd_services.user.USER_MODELS`:
+    the same trials with a person who learns the device another way); a task with no
+    shipped skill runs the baseline alone. ``tasks``: (how the task was named: a name or
+    a file, the task)."""
     runs = []
-    for ref, task in tasks:
+    for (ref, task), model in itertools.product(tasks, user_models):
         skills = skills_for(task)
         paths = skills or [str(TELEOP)]
         ents = entries(paths, baseline=bool(skills), workdir=workdir / task.name, task=task)
         if not skills:  # the baseline alone (with the task's control frame: entries)
             ents = [Entry("teleop", e.path, e.skill, "-") for e in ents]
-        spec = TaskSpec.of(task, ref)
+        spec = TaskSpec.of(task, ref, user_model=model)
         results = evaluate(ents, spec, trials, seed, lockstep_job, jobs, progress=progress)
-        runs.append(TaskRun(task, skills, strip_trajectories(results)))
+        runs.append(TaskRun(task, skills, strip_trajectories(results), model))
     return runs
 
 
@@ -182,7 +187,8 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
             of = r.get("baseline_of")
             skill = r["name"] if not of else "baseline" if of not in names else f"baseline ({names[of]})"
             out.append({
-                "task": run.task.name, "skill": skill, "label": r["skill"], "trials": r["trials"],
+                "task": run.task.name, "skill": skill, "user_model": run.user_model, "label": r["skill"],
+                "trials": r["trials"],
                 "successes": r["successes"], "success_rate": r["success_rate"], "median_s": median,
                 "times_s": [t["time_s"] for t in r["per_trial"] if t["outcome"] == "success"],
                 "vs_baseline": round(median / b, 3) if median is not None and b else None,
@@ -208,26 +214,38 @@ def table(rows_: list[dict[str, Any]]) -> list[str]:
     task and skill names)."""
     tw = max([14, *(len(r["task"]) for r in rows_)])
     sw = max([24, *(len(r["skill"]) for r in rows_)])
-    head = (f"{'task':<{tw}} {'skill':<{sw}} {'success':>9} {'median [s]':>10} {'vs base':>8} "
+    users = _several_users(rows_)
+    user = f"{'user':<9}" if users else ""
+    head = (f"{'task':<{tw}} {user}{'skill':<{sw}} {'success':>9} {'median [s]':>10} {'vs base':>8} "
             f"{'floor [s]':>9} {'switches':>8} {'effort':>7}  failures")
     lines = [head, "-" * len(head)]
     for r in rows_:
         med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
         vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
         why = ", ".join(f"{k} x{v}" for k, v in r["failures"].items())
-        lines.append(f"{r['task']:<{tw}} {r['skill']:<{sw}} {r['successes']:>4}/{r['trials']:<4} {med:>10} "
-                     f"{vs:>8} {r['floor_s']:>9.2f} {r['mode_switches']:>8.1f} {r['effort']:>7.2f}  {why}")
+        user = f"{r['user_model']:<9}" if users else ""
+        lines.append(f"{r['task']:<{tw}} {user}{r['skill']:<{sw}} {r['successes']:>4}/{r['trials']:<4} "
+                     f"{med:>10} {vs:>8} {r['floor_s']:>9.2f} {r['mode_switches']:>8.1f} "
+                     f"{r['effort']:>7.2f}  {why}")
     return lines
+
+
+def _several_users(rows_: list[dict[str, Any]]) -> bool:
+    """Whether the rows are of more than one user model (a column says which)."""
+    return len({r.get("user_model", DEFAULT_MODEL) for r in rows_}) > 1
 
 
 def markdown(rows_: list[dict[str, Any]]) -> str:
     """The table as Markdown, for the docs."""
-    out = ["| task | skill | success | median time [s] | vs baseline | floor [s] | mode switches | effort |",
-           "|---|---|---|---|---|---|---|---|"]
+    users = _several_users(rows_)
+    user = " user |" if users else ""
+    out = [f"| task |{user} skill | success | median time [s] | vs baseline | floor [s] | mode switches | "
+           "effort |", "|---|" + ("---|" if users else "") + "---|---|---|---|---|---|---|"]
     for r in rows_:
         med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
         vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
-        out.append(f"| {r['task']} | {r['skill']} | {r['successes']}/{r['trials']} | {med} | {vs} | "
+        user = f" {r['user_model']} |" if users else ""
+        out.append(f"| {r['task']} |{user} {r['skill']} | {r['successes']}/{r['trials']} | {med} | {vs} | "
                    f"{r['floor_s']:.2f} | {r['mode_switches']:.1f} | {r['effort']:.2f} |")
     return "\n".join(out) + "\n"
 
@@ -237,7 +255,8 @@ def figure(rows_: list[dict[str, Any]]) -> Figure:
     per task and skill, one above the other on the same rows: the suite at a glance."""
     fig = Figure(figsize=(max(8.0, 0.42 * len(rows_) + 2.0), 11))  # (wider with more rows)
     ax_s, ax_t, ax_e = fig.subplots(3, 1, sharex=True)
-    labels = [f"{r['task']}: {r['skill']}" for r in rows_]
+    users = _several_users(rows_)
+    labels = [f"{r['task']}: {r['skill']}" + (f" [{r['user_model']}]" if users else "") for r in rows_]
     x = np.arange(len(rows_))
     colours = [_COLOURS[sorted({r['task'] for r in rows_}).index(r["task"]) % len(_COLOURS)] for r in rows_]
     ax_s.bar(x, [100 * r["success_rate"] for r in rows_], color=colours)

@@ -30,6 +30,7 @@ from sctd import se3
 from sctd.task import Task
 from sctd.task.judge import holds, readings_of
 from sctd.task.model import AllOf
+from sctd_services.user import DEFAULT_MODEL, USER_MODELS
 from sctd_services.user.agent import REPROBE_AFTER
 from sctd_services.user.intent import Observation, TaskIntent
 
@@ -55,6 +56,11 @@ class TaskSpec:
     task: str
     axes: int = 3
     profile: str = "steady"
+    user_model: str = field(default=DEFAULT_MODEL, metadata={
+        "choices": tuple(USER_MODELS),
+        "help": "how the simulated user learns the device: plain (pairs each motion with the stick held at "
+                "the same moments) or adaptive (learns the input-to-motion delay too; docs/evaluation.md) "
+                "(default %(default)s)"})
     time_limit: float | None = field(default=None, metadata={
         "help": "s per trial (default: the task file's time_limit; with --set, each goal's)"})
     stuck_after: float = 10.0

@@ -7,10 +7,11 @@ is :mod:`sctd_services.simulated_user`.
 """
 
 from .agent import SimulatedUser, twist_between
-from .device import DeviceModel
-from .human import DEFAULT_PROFILE, PROFILES, HumanProfile
+from .device import DelayedDeviceModel, DeviceModel
+from .human import DEFAULT_MODEL, DEFAULT_PROFILE, PROFILES, USER_MODELS, HumanProfile, UserModel
 from .intent import Desire, Observation, TaskIntent
 from .setuser import SetUser
 
-__all__ = ["DEFAULT_PROFILE", "PROFILES", "Desire", "DeviceModel", "HumanProfile", "Observation",
-           "SetUser", "SimulatedUser", "TaskIntent", "twist_between"]
+__all__ = ["DEFAULT_MODEL", "DEFAULT_PROFILE", "PROFILES", "USER_MODELS", "DelayedDeviceModel", "Desire",
+           "DeviceModel", "HumanProfile", "Observation", "SetUser", "SimulatedUser", "TaskIntent",
+           "UserModel", "twist_between"]

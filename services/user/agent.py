@@ -42,12 +42,13 @@ from sctd import se3
 from sctd.task import Task
 from sctd.task.kinds import StepKind
 
-from .device import DeviceModel
+from .device import DelayedDeviceModel, DeviceModel
 from .grasping import GraspButton
-from .human import PROFILES, HumanProfile
+from .human import DEFAULT_MODEL, PROFILES, USER_MODELS, HumanProfile, UserModel
 from .intent import Desire, Observation, TaskIntent
 
 Array = NDArray[np.float64]
+Device = DeviceModel | DelayedDeviceModel  # what the person learns of one mode
 PROBE = 0.6  # deflection of a trial push
 PROGRESS = 0.003  # decrease of the intent's error that counts as getting closer
 LACKING = 0.9  # a mode that leaves this much of the most wanted part undone cannot give it
@@ -84,16 +85,21 @@ class SimulatedUser:
     known : mapping of str to DeviceModel, optional
         What a practised user knows of the device (module doc): a model per displayed
         mode, copied, and learned further in this run.
+    model : UserModel or str
+        How they learn a mode (:data:`~.human.USER_MODELS`): ``plain`` pairs each motion
+        with the stick held at the same moments, ``adaptive`` learns the delay too.
     """
 
     def __init__(self, task: Task, n_axes: int = 3, profile: HumanProfile | str = "steady",
-                 seed: int = 0, known: Mapping[str, DeviceModel] | None = None):
+                 seed: int = 0, known: Mapping[str, Device] | None = None,
+                 model: UserModel | str = DEFAULT_MODEL):
         self.task = task
         self.intent = TaskIntent(task)
         self.n = n_axes
         self.profile = PROFILES[profile] if isinstance(profile, str) else profile
+        self.model = USER_MODELS[model] if isinstance(model, str) else model
         self.rng = np.random.default_rng(seed)
-        self.models: dict[str, DeviceModel] = {m: copy.deepcopy(d) for m, d in (known or {}).items()}
+        self.models: dict[str, Device] = {m: copy.deepcopy(d) for m, d in (known or {}).items()}
         self._seen: deque[Observation] = deque()
         self._history: deque[tuple[float, Array]] = deque()  # (time, output) as applied
         self._perceived: Observation | None = None
@@ -165,6 +171,11 @@ class SimulatedUser:
 
     # -- parts ---------------------------------------------------------------------------
 
+    def _new_model(self) -> Device:
+        """What the person learns of a mode new to them (:attr:`model`)."""
+        lags = self.model.lags
+        return DeviceModel(self.n) if lags == (0.0,) else DelayedDeviceModel(self.n, lags)
+
     def _perceive(self, t: float) -> Observation | None:
         """The newest observation at least a reaction delay old."""
         cutoff = t - self.profile.reaction_delay
@@ -201,8 +212,12 @@ class SimulatedUser:
         dt = now.t - last.t
         if dt < 1e-3:
             return
-        model = self.models.setdefault(now.mode, DeviceModel(self.n))
-        model.update(self._applied(last.t, now.t), twist_between(last.T_world_ee, now.T_world_ee, dt))
+        model = self.models.setdefault(now.mode, self._new_model())
+        twist = twist_between(last.T_world_ee, now.T_world_ee, dt)
+        if isinstance(model, DelayedDeviceModel):
+            model.update([self._applied(last.t - lag, now.t - lag) for lag in model.lags], twist)
+        else:
+            model.update(self._applied(last.t, now.t), twist)
 
     def _decide(self, t: float, obs: Observation) -> tuple[Array, tuple[int, int, int]]:
         zero = np.zeros(self.n)
@@ -233,7 +248,7 @@ class SimulatedUser:
             desire = self.desire = self.intent.desire(obs)
         if desire.done or self._pausing(t, desire.phase):
             return zero, (0, 1, 0)
-        model = self.models.setdefault(obs.mode, DeviceModel(self.n))
+        model = self.models.setdefault(obs.mode, self._new_model())
         if self._no_progress(t, desire) and model.known and obs.mode not in self._probes \
                 and not self.intent.touching(obs):
             if desire.close_enough:
@@ -291,7 +306,7 @@ class SimulatedUser:
         return False
 
     @staticmethod
-    def _best_effort(model: DeviceModel, desire: Desire) -> tuple[Array, float]:
+    def _best_effort(model: Device, desire: Desire) -> tuple[Array, float]:
         """The input for what is wanted; when the mode cannot give all of it (its axes
         couple what the user wants apart), one thing at a time: the position, or else
         the orientation, as a person would. The residual is of the whole wish."""
@@ -310,7 +325,7 @@ class SimulatedUser:
                 return u_part, whole
         return u, residual
 
-    def _probe(self, mode: str, model: DeviceModel) -> Array:
+    def _probe(self, mode: str, model: Device) -> Array:
         """Try each axis both ways, one correction each (a person wiggling the stick to
         see what it does); then wait for the response before using the model."""
         queue = self._probes.get(mode)
@@ -327,7 +342,7 @@ class SimulatedUser:
         return np.zeros(self.n)
 
     @staticmethod
-    def _lacking(model: DeviceModel, desire: Desire) -> float:
+    def _lacking(model: Device, desire: Desire) -> float:
         """How little of the most wanted part of the wish (the position, or the
         orientation: the one with the larger weighted share) this mode can give when it
         is asked for that part alone: 1 when pushing the stick does nothing for it (a

@@ -13,6 +13,19 @@ for a while grow without bound (wind-up), and then the hand's small transient tu
 it starts or stops a translation are read as what those axes do: the model would
 promise that a translation mode turns the hand, and the user would never look for the
 mode that does.
+
+The hand answers the stick a moment late (the daemon's tick, the arm's tracking: 10-20
+ms for a translation and 20-30 ms for a turn on the simulated arm). A model that pairs
+each motion with the stick held over the same moments (:class:`DeviceModel` alone)
+credits part of each push to the axis pushed just before: trying the axes of a rotate
+mode one after the other, it learns that each turns about the others' axes as well,
+and pushing them together the turns never separate. People adapt to a delay between
+their action and what they see of it (Foulkes & Miall 2000, "Adaptation to visual
+feedback delays in a human manual tracking task", Exp. Brain Res. 131; Cunningham,
+Billock & Tsou 2001, "Sensorimotor adaptation to violations of temporal contiguity",
+Psychol. Sci. 12): :class:`DelayedDeviceModel` learns the delay with the device, one
+model per candidate delay, and uses the one whose predictions came closest to what the
+hand then did.
 """
 
 from __future__ import annotations
@@ -96,3 +109,74 @@ class DeviceModel:
         want = float(np.linalg.norm(b))
         residual = float(np.linalg.norm(A @ u - b)) / want if want > 1e-9 else 0.0
         return u, residual
+
+
+# A twist's error as the person judges a prediction: 0.1 m/s counts as much as 0.5 rad/s
+# (the speeds a teleoperated arm's modes give).
+ERROR_SCALE = np.array([10.0, 10.0, 10.0, 2.0, 2.0, 2.0])
+
+
+class DelayedDeviceModel:
+    """The device and its input-to-motion delay: a :class:`DeviceModel` per candidate
+    delay in ``lags`` (s), each fitted to the hand's motion paired with the stick held
+    that long before; the one whose predictions (made before each pair teaches it) erred
+    least, exponentially weighted by ``memory`` per pair, is the person's model.
+
+    It answers what :class:`DeviceModel` answers (``B``, ``known``, :meth:`command`...)
+    with its best model; :meth:`update` takes one input per candidate delay.
+    """
+
+    def __init__(self, n_axes: int, lags: tuple[float, ...], memory: float = 0.95):
+        if not lags:
+            raise ValueError("lags: at least one candidate delay")
+        self.n = n_axes
+        self.lags = tuple(lags)
+        self.models = [DeviceModel(n_axes) for _ in self.lags]
+        self.errors = np.zeros(len(self.lags))  # weighted squared prediction error per candidate
+        self.memory = memory
+        self.best = 0
+
+    def update(self, inputs: list[Array], twist: Array, min_input: float = 0.1) -> None:
+        """Learn from the motion ``twist`` (6,) and ``inputs[k]``, the stick held
+        ``lags[k]`` earlier: first score each candidate's prediction of it, then teach
+        every candidate its pair."""
+        if len(inputs) != len(self.models):
+            raise ValueError(f"inputs: {len(inputs)} for {len(self.models)} candidate delays")
+        for k, (m, u) in enumerate(zip(self.models, inputs, strict=True)):
+            if m.updates and float(np.max(np.abs(u))) >= min_input:
+                e = (twist - m.predict(u)) * ERROR_SCALE
+                self.errors[k] = self.memory * self.errors[k] + float(e @ e)
+            m.update(u, twist, min_input)
+        self.best = int(np.argmin(self.errors))
+
+    @property
+    def lag(self) -> float:
+        """The delay the person now expects, s."""
+        return self.lags[self.best]
+
+    @property
+    def model(self) -> DeviceModel:
+        return self.models[self.best]
+
+    @property
+    def B(self) -> Array:
+        return self.model.B
+
+    @property
+    def updates(self) -> int:
+        return self.model.updates
+
+    @property
+    def known(self) -> bool:
+        return self.model.known
+
+    def predict(self, u: Array) -> Array:
+        return self.model.predict(u)
+
+    def relearn(self, prior: float = 10.0) -> None:
+        """Doubt every candidate (:meth:`DeviceModel.relearn`); the delay is kept."""
+        for m in self.models:
+            m.relearn(prior)
+
+    def command(self, twist: Array, W: Array, effort: float = 1e-3) -> tuple[Array, float]:
+        return self.model.command(twist, W, effort)

@@ -72,3 +72,25 @@ PROFILES = {
     "hesitant": HumanProfile("hesitant", step_pause=0.5, regrip_every=1.5, regrip_time=0.3),
 }
 DEFAULT_PROFILE = "steady"
+
+
+@dataclass(frozen=True)
+class UserModel:
+    """How the simulated person learns the device (:mod:`.device`), apart from their
+    limits: ``lags``, the input-to-motion delays (s) they may come to expect; one
+    delay of 0: every motion is paired with the stick held at the same moments."""
+
+    name: str
+    lags: tuple[float, ...]
+    about: str
+
+    def describe(self) -> dict:
+        return asdict(self)
+
+
+USER_MODELS = {
+    "plain": UserModel("plain", (0.0,), "pairs each motion with the stick held at the same moments"),
+    "adaptive": UserModel("adaptive", (0.0, 0.01, 0.02, 0.03, 0.04, 0.05),
+                          "learns the input-to-motion delay (0-50 ms) with the device"),
+}
+DEFAULT_MODEL = "plain"
