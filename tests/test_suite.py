@@ -151,3 +151,33 @@ def test_the_floor_of_a_press_is_its_approach():
     assert floor(task, Limits()) == pytest.approx(0.20 / 0.10)
     free = dataclasses.replace(task, outcome=dataclasses.replace(task.outcome, clock=True))
     assert floor(free, Limits()) == pytest.approx(way / 0.10)
+
+
+def test_a_failure_from_another_tasks_start_says_whose_start_it_was():
+    limits = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}
+    r = _result("a", limits, [4.0, None, None], label="a.yaml")
+    r["per_trial"][1]["start_of"], r["per_trial"][2]["start_of"] = "pour", "drawer"
+    out = rows([TaskRun(find_task("drawer"), ["a.yaml"], [r], "adaptive")])
+    assert out[0]["failures"] == {"time limit (from pour's start)": 1, "time limit": 1}
+    assert out[0]["user_model"] == "adaptive"
+
+
+@pytest.mark.slow
+def test_sctd_suite_runs_each_user_model_from_foreign_starts(tmp_path):
+    """--user-model twice: the same trials under each, side by side (a user column);
+    --starts foreign: every trial from another task's start, which each trial names."""
+    run = run_sctd("suite", "--task", "light_switch", "--trials", "2", "--jobs", "2", "--starts", "foreign",
+                   "--user-model", "plain", "--user-model", "adaptive", "--out", str(tmp_path), "--json",
+                   timeout=600)
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(run.stdout)
+    assert doc["user_models"] == ["plain", "adaptive"] and doc["starts"] == "foreign"
+    assert [(r["user_model"], r["skill"]) for r in doc["rows"]] == [
+        ("plain", "light_switch-vf"), ("plain", "baseline (light_switch-vf)"),
+        ("adaptive", "light_switch-vf"), ("adaptive", "baseline (light_switch-vf)")]
+    for model in ("plain", "adaptive"):
+        for result in doc["results_by_user_model"][model]["light_switch"]:
+            whose = [t["start_of"] for t in result["per_trial"]]
+            assert len(whose) == 2 and "light_switch" not in whose and whose[0] != whose[1], whose
+    md = (tmp_path / "suite.md").read_text()
+    assert md.startswith("| task | user | skill |") and md.count("| light_switch | adaptive |") == 2

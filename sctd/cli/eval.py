@@ -85,7 +85,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lockstep", action="store_true",
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
-    add_arguments(p, TaskSpec, only=("user_model",))
+    add_arguments(p, TaskSpec, only=("user_model", "starts"))
     add_arguments(p, TaskSpec, only=("arm_lag",))
     p.add_argument("--driver", metavar="NAME", default=None,
                    help="real time only: run the trials on the arm this robot driver serves (sctd robot "
@@ -117,6 +117,8 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--jobs: must be >= 1"
     if args.driver is not None and (args.lockstep or args.skill_set is not None):
         return "--driver: real-time trials of --skill only (lockstep trials step sctd's own arm)"
+    if args.starts != "own" and (not args.lockstep or args.skill_set is not None):
+        return f"--starts {args.starts}: only with --lockstep and --skill (a set's room has its own start)"
     if args.arm_lag and (not args.lockstep or args.skill_set is not None):
         return "--arm-lag: only with --lockstep and --skill (a real-time arm lags as it does)"
     if not (math.isfinite(args.arm_lag) and 0.0 <= args.arm_lag <= 1.0):
@@ -204,7 +206,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     except (SkillError, ValueError) as e:
         return fail("eval", str(e))
     # the trials' workers find the task as it was named (spec.task: TaskSpec)
-    spec = TaskSpec.of(task, args.task, profile=args.user, user_model=args.user_model,
+    spec = TaskSpec.of(task, args.task, profile=args.user, user_model=args.user_model, starts=args.starts,
                        time_limit=args.time_limit, arm_lag=args.arm_lag)
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time

@@ -18,9 +18,11 @@ from pathlib import Path
 
 from sctd.task import TaskError, find_task, known_tasks
 from sctd_services.eval.suite import figure, markdown, rows, run_suite, table
+from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import DEFAULT_MODEL, USER_MODELS
 
 from ..app.errors import EXIT_OK, fail
+from ..app.options import add_arguments
 from .eval import _progress_bar
 
 
@@ -33,6 +35,7 @@ def add_suite_arguments(p: argparse.ArgumentParser) -> None:
                    help="how the simulated user learns the device (repeatable: the same trials with each, "
                         f"side by side; {', '.join(f'{k}: {m.about}' for k, m in USER_MODELS.items())}; "
                         f"default {DEFAULT_MODEL})")
+    add_arguments(p, TaskSpec, only=("starts",))
     p.add_argument("--jobs", type=int, default=None, help="trials run in parallel (default: CPUs)")
     p.add_argument("--out", metavar="DIR", help="write suite.json, suite.md and suite.png here")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout, nothing else")
@@ -50,11 +53,11 @@ def main_suite(args: argparse.Namespace) -> int:
     models = list(dict.fromkeys(args.user_model)) or [DEFAULT_MODEL]
     with tempfile.TemporaryDirectory(prefix="sctd-suite-") as work:
         runs = run_suite(tasks, args.trials, args.seed, jobs, Path(work), progress=_progress_bar(),
-                         user_models=models)
+                         user_models=models, starts=args.starts)
     print(file=sys.stderr)
     table_rows = rows(runs)
     doc = {"trials": args.trials, "seed": args.seed, "tasks": [t.name for _, t in tasks], "rows": table_rows,
-           "user_models": models,
+           "user_models": models, "starts": args.starts,
            "results": {run.task.name: run.results for run in runs if run.user_model == models[0]},
            "results_by_user_model": {m: {run.task.name: run.results for run in runs if run.user_model == m}
                                      for m in models}}
@@ -69,7 +72,7 @@ def main_suite(args: argparse.Namespace) -> int:
         print(json.dumps(doc))
         return EXIT_OK
     print(f"sctd suite: {len(tasks)} tasks, {args.trials} lockstep trials per skill from seed {args.seed}, "
-          f"user model{'s' if len(models) > 1 else ''} {', '.join(models)}; "
+          f"user model{'s' if len(models) > 1 else ''} {', '.join(models)}, starts {args.starts}; "
           "the baseline is mode-switching teleop with the task's control frame")
     for line in table(table_rows):
         print("  " + line)

@@ -33,6 +33,7 @@ from sctd.task.model import Reach, Tilt, Upright
 from sctd_services.user import PROFILES, USER_MODELS
 
 from .lockstep import run_trial
+from .starts import starts_task
 from .trial import TaskSpec, TrialResult
 
 TELEOP = shipped_folder() / "teleop.yaml"  # the unassisted baseline, always the shipped one
@@ -216,8 +217,9 @@ def lockstep_job(path: str, spec: TaskSpec, seed: int, demos_dir: str | None, ke
     worker's entry point: ``spec.task`` arrived as a name or file and is resolved here,
     once (:class:`~.trial.TaskSpec`)."""
     demos = read_demo_poses(demos_dir) if demos_dir else None
-    task = find_task(spec.task)
-    return run_trial(load_skill(path), spec, seed, demos, task=task).as_dict(with_trajectory=keep)
+    task, start_of = starts_task(find_task(spec.task), spec.starts, seed)
+    out = run_trial(load_skill(path), spec, seed, demos, task=task).as_dict(with_trajectory=keep)
+    return {**out, "start_of": start_of}
 
 
 @dataclass(frozen=True)
@@ -250,8 +252,10 @@ def shipped_job(shipped: Shipped, spec: TaskSpec, seed: int, keep: bool) -> dict
     with tempfile.TemporaryDirectory(prefix="sctd-trial-") as tmp:
         file = Path(tmp) / f"{shipped.task_name}.yaml"
         file.write_text(shipped.task_text)
-        return run_trial(skill, replace(spec, task=str(file), task_file=str(file)), seed, shipped.demos,
-                         task=load_task(file)).as_dict(with_trajectory=keep)
+        task, start_of = starts_task(load_task(file), spec.starts, seed)
+        out = run_trial(skill, replace(spec, task=str(file), task_file=str(file)), seed, shipped.demos,
+                        task=task).as_dict(with_trajectory=keep)
+        return {**out, "start_of": start_of}
 
 
 @dataclass(frozen=True)

@@ -153,12 +153,12 @@ def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> 
 
 def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, workdir: Path,
               progress: Callable[[int, int, str], None] | None = None,
-              user_models: Sequence[str] = (DEFAULT_MODEL,)) -> list[TaskRun]:
+              user_models: Sequence[str] = (DEFAULT_MODEL,), starts: str = "own") -> list[TaskRun]:
     """Every task's skills and its competent baseline, ``trials`` lockstep trials each
     from seed ``seed``, once per user model (:data:`~sctd_services.user.USER_MODELS`:
     the same trials with a person who learns the device another way); a task with no
     shipped skill runs the baseline alone. ``tasks``: (how the task was named: a name or
-    a file, the task)."""
+    a file, the task); ``starts``: where the hands start (:data:`~sctd.task.starts.STARTS`)."""
     runs = []
     for (ref, task), model in itertools.product(tasks, user_models):
         skills = skills_for(task)
@@ -166,7 +166,7 @@ def run_suite(tasks: list[tuple[str, Task]], trials: int, seed: int, jobs: int, 
         ents = entries(paths, baseline=bool(skills), workdir=workdir / task.name, task=task)
         if not skills:  # the baseline alone (with the task's control frame: entries)
             ents = [Entry("teleop", e.path, e.skill, "-") for e in ents]
-        spec = TaskSpec.of(task, ref, user_model=model)
+        spec = TaskSpec.of(task, ref, user_model=model, starts=starts)
         results = evaluate(ents, spec, trials, seed, lockstep_job, jobs, progress=progress)
         runs.append(TaskRun(task, skills, strip_trajectories(results), model))
     return runs
@@ -195,16 +195,18 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "floor_s": round(floor(run.task, lim, result_cap(r)), 2),
                 "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
-                "failures": _failures(r["per_trial"]),
+                "failures": _failures(r["per_trial"], run.task.name),
             })
     return out
 
 
-def _failures(per_trial: list[dict[str, Any]]) -> dict[str, int]:
+def _failures(per_trial: list[dict[str, Any]], task: str) -> dict[str, int]:
     out: dict[str, int] = {}
     for t in per_trial:
         if t["outcome"] != "success":
             why = str(t.get("reason") or t["outcome"])
+            if t.get("start_of") and t["start_of"] != task:
+                why += f" (from {t['start_of']}'s start)"
             out[why] = out.get(why, 0) + 1
     return out
 

@@ -30,6 +30,7 @@ from sctd import se3
 from sctd.task import Task
 from sctd.task.judge import holds, readings_of
 from sctd.task.model import AllOf
+from sctd.task.starts import STARTS
 from sctd_services.user import DEFAULT_MODEL, USER_MODELS
 from sctd_services.user.agent import REPROBE_AFTER
 from sctd_services.user.intent import Observation, TaskIntent
@@ -61,6 +62,11 @@ class TaskSpec:
         "help": "how the simulated user learns the device: plain (pairs each motion with the stick held at "
                 "the same moments) or adaptive (learns the input-to-motion delay too; docs/evaluation.md) "
                 "(default %(default)s)"})
+    starts: str = field(default="own", metadata={
+        "choices": STARTS,
+        "help": "where each trial's hand starts: own (the task file's start and vary), wide (drawn twice "
+                "as far each way), foreign (another task's start in turn, in this task's scene; "
+                "docs/evaluation.md) (default %(default)s)"})
     time_limit: float | None = field(default=None, metadata={
         "help": "s per trial (default: the task file's time_limit; with --set, each goal's)"})
     stuck_after: float = 10.0
