@@ -23,6 +23,7 @@ from sctd.task.kinds import (
     BUILTIN,
     Facet,
     FacetPhysics,
+    Run,
     Shape,
     StepKind,
     StepMind,
@@ -64,12 +65,14 @@ def test_the_shipped_kinds_are_registered_with_every_part(name):
             assert all(isinstance(s, Shape) for s in facet.shapes()) and facet.shapes()
             assert isinstance(facet.physics(body, task.scene), FacetPhysics)
             assert set(facet.flags) <= set(facet.quantities)
-    for step in task.intent:
+    run = Run(task, TaskIntent(task))
+    for i, step in enumerate(task.intent):
         assert isinstance(step.action, StepKind)
-        back = type(step.action).read(_reader(), copy.deepcopy(step.action.to_yaml()), "x", task.scene,
-                                      task.outcome)
+        back = type(step.action).read(_reader(), copy.deepcopy(step.action.to_yaml(task.scene)), "x",
+                                      task.scene, task.outcome, task.intent[:i])
         assert back == step.action
-        assert isinstance(step.action.mind(task.scene, task.intent, TaskIntent(task)), StepMind)
+        run.minds.append(step.action.mind(run, i))
+        assert isinstance(run.minds[-1], StepMind)
 
 
 def _reader():
