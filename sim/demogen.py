@@ -60,7 +60,8 @@ from sctd import se3
 from sctd.app import add_deprecated_alias
 from sctd.task import Task, find_task
 from sctd.task.demos import DEMOS_FILE, DemosInfo
-from sctd.task.model import Reach, Tilt
+from sctd.task.kinds.reach import Reach
+from sctd.task.kinds.tilt import Tilt
 
 Array = NDArray[np.float64]
 
@@ -126,7 +127,7 @@ def _tilt_kind(t: Task) -> Kind:
     outlet = held.contents.outlet
     k = next((i for i, s in enumerate(t.intent) if isinstance(s.action, Tilt)), None)
     reach = next((s.action for s in reversed(t.intent[:k or 0]) if isinstance(s.action, Reach)), None)
-    if k is None or reach is None or reach.frame != outlet or reach.to is None:
+    if k is None or reach is None or reach.frame() != outlet or reach.to is None:
         raise ValueError(f"{t.file or t.name}: intent: the generator tilts the held object about its "
                          f"outlet {outlet!r} at the goal of a reach with that frame before a tilt step")
     return Kind(t.name, "tilt", t.object, ("carry", t.intent[k].name),

@@ -27,19 +27,18 @@ from sctd.task import (
 )
 from sctd.task import catalog as catalog_module
 from sctd.task.judge import holds, thresholds
+from sctd.task.kinds.move_joint import MoveJoint
+from sctd.task.kinds.reach import Reach
+from sctd.task.kinds.tilt import Tilt, Upright
 from sctd.task.model import (
     AllOf,
     AnyOf,
     Compare,
-    MoveJoint,
     Near,
     Not,
-    Reach,
     Reading,
     Teach,
     TeachStep,
-    Tilt,
-    Upright,
 )
 from tests.conftest import ROOT
 
@@ -313,7 +312,8 @@ def test_the_intent_reads_as_the_file_says():
     pour = find_task("pour").intent
     assert [s.name for s in pour] == ["bring", "pour", "upright"]
     bring, tilt, upright = (s.action for s in pour)
-    assert isinstance(bring, Reach) and bring.frame == "bottle_tip" and bring.to.tolist() == [0.0, 0.0, 0.05]
+    assert isinstance(bring, Reach) and bring.frame() == "bottle_tip"
+    assert bring.to.tolist() == [0.0, 0.0, 0.05]
     assert (bring.lift.height, bring.lift.start, bring.lift.span) == (0.04, 0.02, 0.05)
     assert (bring.reached.radial, bring.reached.height, bring.upright) == (0.025, 0.02, 0.5)
     assert (bring.accept.radial, bring.accept.height, bring.accept.tilt) == (0.03, (0.02, 0.10), 0.5)

@@ -5,6 +5,7 @@ another package is found through its entry point, and the pick-and-place kinds b
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import os
 import subprocess
@@ -23,6 +24,7 @@ from sctd.task.kinds import (
     BUILTIN,
     Facet,
     FacetPhysics,
+    Run,
     Shape,
     StepKind,
     StepMind,
@@ -53,7 +55,8 @@ def test_the_shipped_kinds_are_registered_with_every_part(name):
     reg = registry()
     assert set(BUILTIN) <= set(reg)
     assert list(facets()) == ["container", "surface", "button", "support", "item", "knob"]  # (support, item)
-    assert set(step_kinds()) >= {"grasp", "place", "turn"}
+    assert list(step_kinds())[:8] == ["reach", "tilt", "upright", "move_joint", "press", "grasp", "place",
+                                      "turn"]
     task = find_task(name)
     for body, b in task.scene.bodies.items():
         for key, facet in b.facets.items():
@@ -64,18 +67,58 @@ def test_the_shipped_kinds_are_registered_with_every_part(name):
             assert all(isinstance(s, Shape) for s in facet.shapes()) and facet.shapes()
             assert isinstance(facet.physics(body, task.scene), FacetPhysics)
             assert set(facet.flags) <= set(facet.quantities)
-    for step in task.intent:
+    run = Run(task, TaskIntent(task))
+    for i, step in enumerate(task.intent):
         assert isinstance(step.action, StepKind)
-        back = type(step.action).read(_reader(), copy.deepcopy(step.action.to_yaml()), "x", task.scene,
-                                      task.outcome)
+        back = type(step.action).read(_reader(), copy.deepcopy(step.action.to_yaml(task.scene)), "x",
+                                      task.scene, task.outcome, task.intent[:i])
         assert back == step.action
-        assert isinstance(step.action.mind(task.scene, task.intent, TaskIntent(task)), StepMind)
+        run.minds.append(step.action.mind(run, i))
+        assert isinstance(run.minds[-1], StepMind)
 
 
 def _reader():
     from sctd.task.reader import _Reader
 
     return _Reader("test.yaml")
+
+
+@pytest.mark.parametrize("name", ["pour", "drink", "drawer", "cabinet", "oven", "light_switch"])
+def test_the_older_steps_are_registered_kinds_written_and_read_back(name):
+    """Reaches, tilts, uprights, joint moves and presses are step kinds like any other:
+    each in the registry under its key, written by its own to_yaml and read back equal
+    (with the steps before it: a tilt takes the frame of the reach before it), with a
+    mind for a run of the task."""
+    from sctd.task.kinds.move_joint import MoveJoint
+    from sctd.task.kinds.press import Press
+    from sctd.task.kinds.reach import Reach
+    from sctd.task.kinds.tilt import Tilt, Upright
+
+    reg = registry()
+    assert [reg[k] for k in ("reach", "tilt", "upright", "move_joint", "press")] == [Reach, Tilt, Upright,
+                                                                                      MoveJoint, Press]
+    task = find_task(name)
+    run = Run(task, TaskIntent(task))
+    for i, step in enumerate(task.intent):
+        kind = type(step.action)
+        assert reg[kind.key] is kind
+        doc = copy.deepcopy(step.action.to_yaml(task.scene))
+        back = kind.read(_reader(), doc, "x", task.scene, task.outcome, task.intent[:i])
+        assert back == step.action and back.frame() == step.action.frame()
+        assert back.to_yaml(task.scene) == step.action.to_yaml(task.scene)
+        run.minds.append(step.action.mind(run, i))
+    assert all(isinstance(m, StepMind) for m in run.minds)
+
+
+def test_a_tilt_without_a_reach_before_it_is_refused_by_its_kind():
+    from sctd.task.kinds.tilt import Tilt
+
+    pour = find_task("pour")
+    tilt = pour.intent[1].action
+    doc = tilt.to_yaml(pour.scene)
+    with pytest.raises(TaskError, match=r"x: a tilt step moves the frame of a reach before it: the first"):
+        Tilt.read(_reader(), doc, "x", pour.scene, pour.outcome, ())
+    assert Tilt.read(_reader(), doc, "x", pour.scene, pour.outcome, pour.intent[:1]).frame() == "bottle_tip"
 
 
 TEST_KIND = '''
@@ -878,3 +921,109 @@ def test_inspect_says_which_states_are_in_another_bodys_frame(capsys):
     assert "object cup:" in out and "  state s0 (start) in the frame of shelf\n" in out
     assert main(["inspect", str(Path(__file__).parents[1] / "skills" / "tap-linear.yaml")]) == 0
     assert "in the frame of" not in capsys.readouterr().out  # (every state in the skill's object's)
+
+
+# -- a step kind of another package, with the hooks the older kinds use ------------------------
+def hold_doc() -> dict:
+    """The light switch's scene and outcome, its intent a reach and a hold after it."""
+    doc = yaml.safe_load(Path(find_task("light_switch").file).read_text())
+    doc.pop("teach", None)
+    go = {"frame": "hand", "to": [0.1, 0.0, 0.0], "reached": {"radial": 0.01}}
+    doc["intent"] = [{"name": "go", "reach": go},
+                     {"name": "stay", "hold": {"within": 0.02, "turn": 0.5}}]
+    return doc
+
+
+@pytest.fixture
+def hold(monkeypatch):
+    """A step kind of the test's own (``hold: {within, turn}``: keep the frame of the reach
+    before it at that reach's goal), registered: it reads with the steps before it, finds
+    the reach's mind in its run, shares its look, settles within ``2 within`` and adds its
+    turn to the floor."""
+    from dataclasses import dataclass, field
+
+    from sctd.task import kinds
+    from sctd.task.kinds import Floor, StepKind, StepMind, Want
+    from sctd.task.kinds.reach import anchor_mind, anchor_of
+
+    @dataclass(frozen=True)
+    class Hold(StepKind):
+        key = "hold"
+        within: float
+        turn: float
+        frame_name: str = field(default="hand", compare=False)
+
+        @classmethod
+        def read(cls, r, v, path, scene, outcome, before):
+            anchor = anchor_of(r, cls.key, path, before)
+            d = r.fields(v, path, {"within", "turn"})
+            return cls(r.positive(d["within"], f"{path}.within"), r.positive(d["turn"], f"{path}.turn"),
+                       anchor.frame())
+
+        def to_yaml(self, scene):
+            return {"within": float(self.within), "turn": float(self.turn)}
+
+        def frame(self):
+            return self.frame_name
+
+        def mind(self, run, index):
+            return HoldMind(self, anchor_mind(run, index), index)
+
+        def floor_path(self, task, before):
+            return Floor(radians=self.turn)
+
+    class HoldMind(StepMind):
+        def __init__(self, step, reach, index):
+            self.step, self.reach, self.index = step, reach, index
+
+        def move(self, sight):
+            return 0
+
+        def error(self, sight):
+            return self.reach.look(sight).to_goal
+
+        def want(self, sight):
+            return Want(np.ones(6), np.eye(6))
+
+        def close_enough(self, sight):
+            return self.reach.look(sight).to_goal < 2 * self.step.within
+
+        def settle(self):
+            return True
+
+    real = kinds.step_kinds()
+    monkeypatch.setattr(kinds, "step_kinds", lambda: {**real, "hold": Hold})
+    return Hold
+
+
+def test_a_step_kind_of_its_own_reads_runs_settles_plans_and_counts_in_the_floor(hold):
+    from sctd.skill import Limits
+    from sctd.task.writer import task_to_yaml
+    from sctd_services.eval.suite import floor
+    from sctd_services.teach.plan import plan_demonstration, scene_geometry
+
+    task = read(hold_doc())
+    stay = task.intent[1].action
+    assert stay == hold(0.02, 0.5) and stay.frame() == "hand"  # (the reach's frame, from the steps before)
+    assert task_to_yaml(task)["intent"][1] == {"name": "stay", "hold": {"within": 0.02, "turn": 0.5}}
+    assert read(task_to_yaml(task)).intent == task.intent
+    first = hold_doc()
+    first["intent"] = first["intent"][1:]
+    with pytest.raises(TaskError, match=r"intent\[0\]\.hold: a hold step moves the frame of a reach before"):
+        read(first)
+    # its mind runs in the task's intent, sharing the reach's look of the goal
+    it = TaskIntent(task)
+    T_obj = task.scene.bodies["light_switch"].T_world
+    T_goal = np.eye(4)
+    T_goal[:3, 3] = T_obj[:3, :3] @ [0.1, 0.0, 0.0] + T_obj[:3, 3]
+    obs = Observation(0.0, T_goal, {"light_switch": T_obj}, {"readings": {}})
+    d = it.desire(obs)  # the reach is done at its goal: on to the hold
+    assert (it.phase, d.error, d.close_enough, d.twist.tolist()) == ("stay", 0.0, True, [1.0] * 6)
+    it.settle()  # its kind says a person settles: on past it
+    assert it.phase == "done"
+    # the demonstrator plans it by its legs (the default plan), the floor adds its turn
+    p = plan_demonstration(scene_geometry(task), 0, 1)
+    assert [(s.kind, s.frame) for s in p.steps] == [("reach", "hand"), ("hold", "hand")]
+    lim = Limits(max_linear_speed=0.1, max_angular_speed=0.5)
+    without = dataclasses.replace(task, intent=task.intent[:1])
+    assert floor(task, lim) == pytest.approx(floor(without, lim) + 1.0)

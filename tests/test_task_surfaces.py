@@ -11,8 +11,10 @@ import pytest
 import yaml
 
 from sctd.task import TaskError, find_task, shipped_folder, task_from_document
+from sctd.task.kinds.press import Press
+from sctd.task.kinds.reach import Reach
 from sctd.task.kinds.surface import Button, Surface
-from sctd.task.model import PRESS_MARGIN, Press, Reach, TeachStep
+from sctd.task.model import PRESS_MARGIN, TeachStep
 
 SWITCH = shipped_folder() / "light_switch.yaml"
 DELETE = object()
@@ -56,7 +58,7 @@ def test_the_light_switch_reads_as_the_file_says():
     assert body.button.click_force == pytest.approx(3.75)
     press, retreat = (s.action for s in t.intent)
     assert isinstance(press, Press) and isinstance(retreat, Reach)
-    assert (press.frame, press.button, press.force) == ("hand", "light_switch", 8.0)
+    assert (press.frame(), press.button, press.force) == ("hand", "light_switch", 8.0)
     assert str(press.until.reading) == "light_switch.on" and press.until.is_ is True
     assert t.teach.press_speed == 0.02
     assert t.teach.step("press") == TeachStep(margin=(0.005, 0.007), miss=0.03)
@@ -67,7 +69,7 @@ def test_a_surface_touches_every_frame_of_the_hand_unless_told():
     doc = with_stylus(switch_doc())
     t = task_from_document(doc, "mine.yaml")
     assert t.scene.bodies["light_switch"].surface.touch == ("stylus_tip",)
-    assert t.intent[0].action.frame == "stylus_tip"
+    assert t.intent[0].action.frame() == "stylus_tip"
     del doc["scene"]["bodies"]["light_switch"]["surface"]["touch"]
     t = task_from_document(doc, "mine.yaml")
     assert t.scene.bodies["light_switch"].surface.touch == ("hand", "stylus_tip")

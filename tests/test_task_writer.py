@@ -25,7 +25,8 @@ from hypothesis import strategies as st
 from sctd.task import TaskError, known_tasks, load_task, task_from_document
 from sctd.task import model as task_model
 from sctd.task.compose import compose
-from sctd.task.model import Reach, Scene, Step, Task
+from sctd.task.kinds.reach import Reach
+from sctd.task.model import Scene, Step, Task
 from sctd.task.reader import DEGREES, rpy_matrix
 from sctd.task.writer import dump_task, rpy_from_matrix, task_to_yaml
 from tests.conftest import ROOT
@@ -318,7 +319,7 @@ class Wave:
     key: ClassVar[str] = "wave"
     times: int
 
-    def to_yaml(self) -> dict[str, Any]:
+    def to_yaml(self, scene: Scene) -> dict[str, Any]:
         return {"times": self.times}
 
 

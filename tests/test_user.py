@@ -559,7 +559,7 @@ def test_a_delayed_device_model_picks_the_delay_that_explains_the_motion():
         return u_of[int(t // 0.05)] if t >= 0 else np.zeros(3)
 
     for k in range(400):
-        t0, t1 = k * steps * dt, (k + 1) * steps * dt
+        t0 = k * steps * dt
         grid = t0 + dt * (np.arange(steps) + 0.5)
         inputs = [np.mean([stick(t - lag) for t in grid], axis=0) for lag in lags]
         model.update(inputs, B @ inputs[2])

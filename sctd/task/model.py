@@ -14,8 +14,8 @@ A task knows nothing of any skill. It holds:
   the task is done, whether it then succeeded, what ends it early as a failure, what
   counts as progress, when the completion clock starts, and the time limit;
 - the **intent**: what a person doing the task wants, as ordered sub-goals (:class:`Step`)
-  in the task object's frame: reach a region, tilt, bring upright, move a joint, press
-  a button;
+  in the task object's frame, each of a registered kind (:mod:`sctd.task.kinds`): reach
+  a region, tilt, bring upright, move a joint, press a button, take an item, ...;
 - **teach**: how a person's demonstrations of it vary (:class:`Teach`).
 
 Every pose is in the world frame, the arm's base (x forward, z up), in metres and
@@ -277,127 +277,6 @@ class Outcome:
 
 
 # -- the intent ------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Lift:
-    """A reach's goal raised while the frame is still far from it: by ``height`` times
-    ``(radial - start) / span`` clipped to [0, 1], ``radial`` the frame's distance from
-    the goal's vertical (m)."""
-
-    height: float
-    start: float
-    span: float
-
-
-@dataclass(frozen=True)
-class Reached:
-    """When a reach is done: the frame within ``radial`` m of the goal's vertical and
-    within ``height`` m of the goal's height (either None: not asked)."""
-
-    radial: float | None = None
-    height: float | None = None
-
-
-@dataclass(frozen=True)
-class Accept:
-    """The region a person who cannot get any closer settles for: within ``radial`` m of
-    the goal's vertical, the frame's height in the goal's reference frame strictly
-    between ``height`` (m; None: any) and its axis tilted less than ``tilt`` (rad; None:
-    any)."""
-
-    radial: float
-    height: tuple[float, float] | None = None
-    tilt: float | None = None
-
-
-@dataclass(frozen=True)
-class Reach:
-    """Move ``frame`` (``hand`` or a held frame) to a goal.
-
-    Attributes
-    ----------
-    frame : str
-    to : ndarray, shape (3,), or None
-        The goal in the task object's frame, m (the reference frame of ``reached`` and
-        ``accept``).
-    handle : str or None
-        Or a joint: the goal is its handle where the joint's position has moved it
-        (:func:`~sctd.task.kinematics.handle_pose`; the reference frame is the handle's
-        frame so moved).
-    lift : Lift or None
-    reached : Reached or None
-        The tolerances that complete the step.
-    accept : Accept or None
-        What a person who cannot get closer settles for.
-    until : Predicate or None
-        Completes the step as well (the handle grasped).
-    upright : float or None
-        The frame is kept upright: a tilt of its z axis up to this (rad) is tolerated,
-        more is undone, its spin about its own axis does not matter. None: its
-        orientation is free.
-    """
-
-    frame: str
-    to: Array | None = None
-    handle: str | None = None
-    lift: Lift | None = None
-    reached: Reached | None = None
-    accept: Accept | None = None
-    until: Predicate | None = None
-    upright: float | None = None
-
-
-@dataclass(frozen=True)
-class Tilt:
-    """Tilt the frame of the reach before it about a horizontal axis to ``to`` (rad),
-    holding it at that reach's goal, until ``until`` holds; back to the previous step
-    when the frame is further than ``off_by`` (m) from the goal's vertical.
-
-    ``weight``: m of progress per unit of the readings ``until`` requires still to go
-    (its :func:`~sctd.task.judge.thresholds`)."""
-
-    to: float
-    until: Predicate
-    weight: float = 1.0
-    off_by: float | None = None
-
-
-@dataclass(frozen=True)
-class Upright:
-    """Bring the frame of the reach before it upright again, holding it at that reach's
-    goal: done when its z axis is tilted less than ``below`` (rad)."""
-
-    below: float
-
-
-@dataclass(frozen=True)
-class MoveJoint:
-    """Move ``joint``'s handle (held by the frame of the reach before it) along its path
-    (a prismatic joint's axis, a revolute joint's arc) to the joint's threshold in the
-    task's ``done`` plus ``overshoot`` (the joint's unit: m or rad); back to the previous
-    step when ``back`` holds (the handle let go)."""
-
-    joint: str
-    overshoot: float = 0.0
-    back: Predicate | None = None
-
-
-@dataclass(frozen=True)
-class Press:
-    """Press ``button`` (a body with a button) with ``frame`` (``hand`` or a held frame):
-    bring the frame in front of the button's face, onto its axis, and push it in along
-    its inward normal (the body's -x), never harder than ``force`` (N), until ``until``
-    holds (the light on)."""
-
-    frame: str
-    button: str
-    until: Predicate
-    force: float
-
-
-Action = Reach | Tilt | Upright | MoveJoint | Press
-"""The built-in kinds of step; a step of a registered kind holds a
-:class:`~sctd.task.kinds.StepKind` instead."""
-
 DONE = "done"
 """The phase after the intent's last step (no step may be called so)."""
 
@@ -405,10 +284,11 @@ DONE = "done"
 @dataclass(frozen=True)
 class Step:
     """One sub-goal of the intent: its ``name`` (the phase the evaluation reports) and
-    what it does."""
+    what it does, a step of a registered kind (:class:`~sctd.task.kinds.StepKind`: a
+    reach, a tilt, an upright, a joint's move, a press, a grasp, ...)."""
 
     name: str
-    action: Action | StepKind
+    action: StepKind
 
 
 # -- how demonstrations vary ---------------------------------------------------------------

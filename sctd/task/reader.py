@@ -19,27 +19,19 @@ from sctd import se3
 from sctd.skill.reader import Reader, kind_of
 
 from . import kinds
-from .judge import thresholds
 from .model import (
     DONE,
     VERSION,
-    Accept,
-    Action,
     AllOf,
     AnyOf,
     Body,
     Compare,
     FailRule,
     Held,
-    Lift,
-    MoveJoint,
     Near,
     Not,
     Outcome,
     Predicate,
-    Press,
-    Reach,
-    Reached,
     Reading,
     Scene,
     Start,
@@ -47,8 +39,6 @@ from .model import (
     Task,
     Teach,
     TeachStep,
-    Tilt,
-    Upright,
     Vary,
 )
 
@@ -446,158 +436,30 @@ def _outcome(r: _Reader, v: Any, path: str, scene: Scene) -> Outcome:
 
 
 # -- the intent ---------------------------------------------------------------------------
-KINDS: dict[str, type] = {"reach": Reach, "tilt": Tilt, "upright": Upright, "move_joint": MoveJoint,
-                          "press": Press}
-"""The kinds of step, by the key that gives one (each step has one besides its ``name``)."""
-
-
 def _intent(r: _Reader, v: Any, path: str, scene: Scene, outcome: Outcome) -> tuple[Step, ...]:
-    """The ordered steps; the first one a reach (the others move the frame of the reach
-    before them)."""
+    """The ordered steps, each of a registered kind (:mod:`.kinds`), read with the steps
+    before it (a tilt, an upright or a joint's move refuses to come before any reach)."""
     if not isinstance(v, list) or not v:
         raise r.fail(path, f"expected a non-empty list of steps, got {kind_of(v)}")
     steps: list[Step] = []
-    anchor: Reach | None = None
     registered = kinds.step_kinds()
-    every = [*KINDS, *(k for k in registered if k not in KINDS)]
     for i, item in enumerate(v):
         where = f"{path}[{i}]"
         d = r.mapping(item, where)
-        r.known_keys(d, where, {"name", *every})
+        r.known_keys(d, where, {"name", *registered})
         if "name" not in d:
             raise r.fail(f"{where}.name", "missing")
         name = r.name(d["name"], f"{where}.name")
         if name == DONE or name in (s.name for s in steps):
             why = "the phase after the last step" if name == DONE else "the name of an earlier step"
             raise r.fail(f"{where}.name", f"{name!r} is {why}")
-        given = [k for k in every if k in d]
+        given = [k for k in registered if k in d]
         if len(given) != 1:
-            raise r.fail(where, f"expected one of {', '.join(every)}; got {', '.join(given) or 'none'}")
+            raise r.fail(where, f"expected one of {', '.join(registered)}; got {', '.join(given) or 'none'}")
         kind = given[0]
-        if kind not in KINDS:  # (a registered kind names the frames it moves)
-            steps.append(Step(name, registered[kind].read(r, d[kind], f"{where}.{kind}", scene, outcome)))
-            continue
-        if anchor is None and kind not in ("reach", "press"):  # (a press names its frame)
-            raise r.fail(f"{where}.{kind}", f"a {kind} step moves the frame of a reach before it: "
-                                            + ("the first step must be a reach" if not steps
-                                               else "no reach comes before it"))
-        action = _action(r, kind, d[kind], f"{where}.{kind}", scene, outcome, anchor)
-        if isinstance(action, Reach):
-            anchor = action
-        steps.append(Step(name, action))
+        steps.append(Step(name, registered[kind].read(r, d[kind], f"{where}.{kind}", scene, outcome,
+                                                      tuple(steps))))
     return tuple(steps)
-
-
-def _action(r: _Reader, kind: str, v: Any, path: str, scene: Scene, outcome: Outcome,
-            anchor: Reach | None) -> Action:
-    if kind == "reach":
-        return _reach(r, v, path, scene)
-    if kind == "tilt":
-        d = r.fields(v, path, {"to", "until"}, {"weight", "off_by"})
-        return Tilt(r.tilt(d["to"], f"{path}.to"), predicate(r, d["until"], f"{path}.until", scene),
-                    r.nonneg(d.get("weight", 1.0), f"{path}.weight"),
-                    r.positive(d["off_by"], f"{path}.off_by") if "off_by" in d else None)
-    if kind == "upright":
-        d = r.fields(v, path, {"below"})
-        return Upright(r.tilt(d["below"], f"{path}.below"))
-    if kind == "press":
-        return _press(r, v, path, scene)
-    d = r.fields(v, path, {"joint"}, {"overshoot", "back"})
-    joint = _joint_name(r, d["joint"], f"{path}.joint", scene)
-    if f"{joint}.position" not in thresholds(outcome.done):
-        raise r.fail(f"{path}.joint", f"outcome.done sets no at_least on {joint}.position: the joint "
-                                      "has no target to move it to")
-    if anchor is None or anchor.handle != joint:
-        raise r.fail(f"{path}.joint", f"the reach before it must go to the handle of {joint!r} "
-                                      f"(handle: {joint}): that is what moves it")
-    read = r.angle if scene.joints[joint].kind == "revolute" else r.number  # (in the joint's unit)
-    overshoot = read(d.get("overshoot", 0.0), f"{path}.overshoot", lo=0.0)
-    return MoveJoint(joint, overshoot,
-                     predicate(r, d["back"], f"{path}.back", scene) if "back" in d else None)
-
-
-def _press(r: _Reader, v: Any, path: str, scene: Scene) -> Press:
-    """``{frame, button, until, force}``: a frame that touches the button's surface, a
-    body with a button, what completes the step, and a push bound the button can be
-    switched under."""
-    d = r.fields(v, path, {"frame", "button", "until", "force"})
-    name = r.string(d["button"], f"{path}.button")
-    body = scene.bodies.get(name)
-    if body is None or body.button is None or body.surface is None:
-        buttons = [n for n, b in scene.bodies.items() if b.button is not None]
-        raise r.fail(f"{path}.button", f"expected a body with a button, got {name!r} (buttons: "
-                                       f"{', '.join(buttons) or 'none'})")
-    frame = r.string(d["frame"], f"{path}.frame")
-    if frame not in body.surface.touch:
-        raise r.fail(f"{path}.frame", f"expected a frame that touches the surface of {name!r}, got "
-                                      f"{frame!r} (its touch: {', '.join(body.surface.touch)})")
-    force = r.positive(d["force"], f"{path}.force")
-    needs = body.button.click_force
-    if not force > needs:
-        raise r.fail(f"{path}.force", f"the button takes {needs:g} N to push to its click depth: a push "
-                                      f"of at most {force:g} N never switches it")
-    return Press(frame, name, predicate(r, d["until"], f"{path}.until", scene), force)
-
-
-def _joint_name(r: _Reader, v: Any, path: str, scene: Scene) -> str:
-    name = r.string(v, path)
-    if name not in scene.joints:
-        raise r.fail(path, f"unknown joint {name!r} (joints: {', '.join(scene.joints) or 'none'})")
-    return name
-
-
-def _reach(r: _Reader, v: Any, path: str, scene: Scene) -> Reach:
-    d = r.fields(v, path, {"frame"}, {"to", "handle", "lift", "reached", "accept", "until", "orientation"})
-    frame = r.string(d["frame"], f"{path}.frame")
-    moving = [HAND, *(scene.held.frames if scene.held else ())]
-    if frame not in moving:
-        raise r.fail(f"{path}.frame", f"expected a frame that moves with the hand, got {frame!r} "
-                                      f"(frames: {', '.join(moving)})")
-    if ("to" in d) == ("handle" in d):
-        raise r.fail(path, "expected one goal: to: [x, y, z] (in the task object's frame) or "
-                           "handle: <joint>")
-    handle = _joint_name(r, d["handle"], f"{path}.handle", scene) if "handle" in d else None
-    until = predicate(r, d["until"], f"{path}.until", scene) if "until" in d else None
-    reached = _reached(r, d["reached"], f"{path}.reached") if "reached" in d else None
-    if reached is None and until is None:
-        raise r.fail(path, "expected reached, until or both: what completes the step")
-    return Reach(frame, r.vector(d["to"], f"{path}.to", 3) if "to" in d else None, handle,
-                 _lift(r, d["lift"], f"{path}.lift") if "lift" in d else None, reached,
-                 _accept(r, d["accept"], f"{path}.accept") if "accept" in d else None, until,
-                 _orientation(r, d.get("orientation", "free"), f"{path}.orientation"))
-
-
-def _lift(r: _Reader, v: Any, path: str) -> Lift:
-    d = r.fields(v, path, {"height", "between"})
-    start, end = r.pair(d["between"], f"{path}.between")
-    if start < 0.0:
-        raise r.fail(f"{path}.between", f"distances are >= 0, got {start}")
-    return Lift(r.positive(d["height"], f"{path}.height"), start, end - start)
-
-
-def _reached(r: _Reader, v: Any, path: str) -> Reached:
-    d = r.fields(v, path, set(), {"radial", "height"})
-    if not d:
-        raise r.fail(path, "expected radial, height or both (m)")
-    radial, height = (r.positive(d[k], f"{path}.{k}") if k in d else None for k in ("radial", "height"))
-    return Reached(radial, height)
-
-
-def _accept(r: _Reader, v: Any, path: str) -> Accept:
-    d = r.fields(v, path, {"radial"}, {"height", "tilt"})
-    return Accept(r.positive(d["radial"], f"{path}.radial"),
-                  r.pair(d["height"], f"{path}.height") if "height" in d else None,
-                  r.tilt(d["tilt"], f"{path}.tilt") if "tilt" in d else None)
-
-
-def _orientation(r: _Reader, v: Any, path: str) -> float | None:
-    """``free`` (None), or ``{upright: <tilt tolerated>}``."""
-    if v == "free":
-        return None
-    if not isinstance(v, dict):
-        raise r.fail(path, f"expected free or {{upright: <tilt>}}, got {v!r}")
-    d = r.fields(v, path, {"upright"})
-    return r.tilt(d["upright"], f"{path}.upright")
 
 
 TEACH_SPEEDS = {"reach": "reach_speed", "turn": "turn_rate", "tilt": "tilt_rate", "joint": "joint_speed",
@@ -628,18 +490,17 @@ def _teach(r: _Reader, v: Any, path: str, intent: tuple[Step, ...], scene: Scene
             if k in sp:
                 out[f] = r.positive(sp[k], f"{path}.speeds.{k}")
     if "steps" in d:
-        by_name = {s.name: s.action for s in intent if not isinstance(s.action, kinds.StepKind)}
+        by_name = {s.name: s.action for s in intent if type(s.action).teaches is not None}
         steps = r.fields(d["steps"], f"{path}.steps", set(), set(by_name))
         out["steps"] = {str(n): _teach_step(r, x, f"{path}.steps.{n}", by_name[str(n)], scene)
                         for n, x in steps.items()}
     return Teach(**out)
 
 
-def _teach_step(r: _Reader, v: Any, path: str, action: Action, scene: Scene) -> TeachStep:
-    """A step's variation: what a step of its kind can vary."""
-    allowed = {Reach: {"yaw", "height", "miss"}, Tilt: {"to"}, MoveJoint: {"to"}, Upright: set(),
-               Press: {"margin", "miss"}}
-    d = r.fields(v, path, set(), allowed[type(action)])
+def _teach_step(r: _Reader, v: Any, path: str, action: kinds.StepKind, scene: Scene) -> TeachStep:
+    """A step's variation: what a step of its kind can vary (:attr:`~.kinds.StepKind.teaches`;
+    ``yaw``, ``miss`` and ``margin`` read here, the rest by its kind)."""
+    d = r.fields(v, path, set(), set(type(action).teaches or ()))
     out: dict[str, Any] = {}
     if "yaw" in d:
         out["yaw"] = r.angle(d["yaw"], f"{path}.yaw", lo=0.0, hi=math.pi)
@@ -649,34 +510,5 @@ def _teach_step(r: _Reader, v: Any, path: str, action: Action, scene: Scene) -> 
         lo, hi = out["margin"] = r.pair(d["margin"], f"{path}.margin")
         if lo < 0.0:
             raise r.fail(f"{path}.margin", f"expected depths >= 0 past the click, got [{lo}, {hi}]")
-    if "height" in d:
-        if not isinstance(action, Reach) or action.to is None:
-            raise r.fail(f"{path}.height", "only a reach to a point (to) has a goal height to vary")
-        out["height"] = r.pair(d["height"], f"{path}.height")
-    if "to" in d:
-        if isinstance(action, Tilt):
-            two = _two(r, d["to"], f"{path}.to")
-            out["to"] = tuple(r.tilt(a, f"{path}.to[{i}]") for i, a in enumerate(two))
-            if not out["to"][0] < out["to"][1]:
-                raise r.fail(f"{path}.to", "expected [low, high] with low < high")
-        else:
-            assert isinstance(action, MoveJoint)  # (the only other kind with a target)
-            joint = scene.joints[action.joint]
-            if joint.hinge is not None:  # a revolute joint's positions are angles
-                two = _two(r, d["to"], f"{path}.to")
-                lo, hi = out["to"] = tuple(r.angle(a, f"{path}.to[{i}]") for i, a in enumerate(two))
-                if not lo < hi:
-                    raise r.fail(f"{path}.to", "expected [low, high] with low < high")
-            else:
-                lo, hi = out["to"] = r.pair(d["to"], f"{path}.to")
-            travel = joint.travel
-            if not (0.0 < lo and hi <= travel):
-                raise r.fail(f"{path}.to", f"expected positions within the joint's travel (0, {travel:g}], "
-                                           f"got [{lo}, {hi}]")
+    out.update(action.read_teach(r, d, path, scene))
     return TeachStep(**out)
-
-
-def _two(r: _Reader, v: Any, path: str) -> list:
-    if not isinstance(v, list) or len(v) != 2:
-        raise r.fail(path, f"expected a list of 2 angles, got {kind_of(v)}")
-    return v

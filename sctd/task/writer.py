@@ -17,9 +17,11 @@ value back (a container's ``rim_margin``, a step's
 and :func:`_per_axis`). A composed task (:func:`~.compose.compose`) has no file: writing
 one is a ValueError.
 
-Elements of kinds registered outside this module (``sctd.task.kinds``) write themselves
-with their ``to_yaml()``: an intent step's action that has one, and a scene's or a
-body's field this module does not know (:func:`_extra_sections`, :func:`_extra_facets`).
+Elements of kinds registered in ``sctd.task.kinds`` write themselves with their
+``to_yaml()``: every intent step (given the scene, which says how a predicate's bounds
+are written; a kind may use :func:`_predicate`, :func:`_angle` and :func:`_floats`), and
+a scene's or a body's field this module does not know (:func:`_extra_sections`,
+:func:`_extra_facets`).
 """
 
 from __future__ import annotations
@@ -33,31 +35,26 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .kinds import StepKind
 from .model import (
     VERSION,
-    Action,
     AllOf,
     AnyOf,
     Body,
     Compare,
     Held,
-    MoveJoint,
     Near,
     Not,
     Outcome,
     Predicate,
-    Press,
-    Reach,
     Scene,
     Step,
     Task,
     Teach,
     TeachStep,
-    Tilt,
-    Upright,
     Vary,
 )
-from .reader import KINDS, TEACH_SPEEDS, _angular, rpy_matrix
+from .reader import TEACH_SPEEDS, _angular, rpy_matrix
 
 Doc = dict[str, Any]
 
@@ -303,35 +300,8 @@ def _outcome(o: Outcome, sc: Scene) -> Doc:
 
 # -- the intent ---------------------------------------------------------------------------
 def _step(s: Step, sc: Scene) -> Doc:
-    a: Any = s.action
-    if hasattr(a, "to_yaml"):  # a step kind registered in sctd.task.kinds
-        return {"name": s.name, type(a).key: a.to_yaml()}
-    key = next((k for k, cls in KINDS.items() if type(a) is cls), None)
-    if key is None:
-        raise ValueError(f"intent step {s.name!r}: not a step the task writer knows: {a!r}")
-    return {"name": s.name, key: _action(a, sc)}
-
-
-def _action(a: Action, sc: Scene) -> Doc:
-    if isinstance(a, Reach):
-        return _reach(a, sc)
-    if isinstance(a, Tilt):
-        out: Doc = {"to": _angle(a.to), "until": _predicate(a.until, sc)}
-        _put(out, "weight", a.weight, 1.0)
-        if a.off_by is not None:
-            out["off_by"] = float(a.off_by)
-        return out
-    if isinstance(a, Upright):
-        return {"below": _angle(a.below)}
-    if isinstance(a, Press):
-        return {"frame": a.frame, "button": a.button, "until": _predicate(a.until, sc),
-                "force": float(a.force)}
-    assert isinstance(a, MoveJoint)
-    out = {"joint": a.joint}
-    _put(out, "overshoot", a.overshoot, 0.0, _angle if sc.joints[a.joint].kind == "revolute" else float)
-    if a.back is not None:
-        out["back"] = _predicate(a.back, sc)
-    return out
+    """``{name, <its kind's key>: its fields}``: a step writes itself (``to_yaml``)."""
+    return {"name": s.name, type(s.action).key: s.action.to_yaml(sc)}
 
 
 def _end(start: float, span: float) -> float:
@@ -341,31 +311,6 @@ def _end(start: float, span: float) -> float:
         if b - start == span:
             return b
     return start + span
-
-
-def _reach(a: Reach, sc: Scene) -> Doc:
-    out: Doc = {"frame": a.frame}
-    if a.to is not None:
-        out["to"] = _floats(a.to)
-    if a.handle is not None:
-        out["handle"] = a.handle
-    if a.lift is not None:
-        out["lift"] = {"height": float(a.lift.height),
-                       "between": [float(a.lift.start), _end(a.lift.start, a.lift.span)]}
-    if a.reached is not None:
-        out["reached"] = {k: float(v) for k in ("radial", "height")
-                          if (v := getattr(a.reached, k)) is not None}
-    if a.accept is not None:
-        out["accept"] = {"radial": float(a.accept.radial)}
-        if a.accept.height is not None:
-            out["accept"]["height"] = _floats(a.accept.height)
-        if a.accept.tilt is not None:
-            out["accept"]["tilt"] = _angle(a.accept.tilt)
-    if a.until is not None:
-        out["until"] = _predicate(a.until, sc)
-    if a.upright is not None:  # (None: orientation free, the reader's default)
-        out["orientation"] = {"upright": _angle(a.upright)}
-    return out
 
 
 # -- how demonstrations vary --------------------------------------------------------------
@@ -386,20 +331,17 @@ def _teach(t: Teach, intent: tuple[Step, ...], sc: Scene) -> Doc:
         out["speeds"] = speeds
     if t.steps:
         actions = {s.name: s.action for s in intent}
-        out["steps"] = {n: _teach_step(ts, actions.get(n), sc) for n, ts in t.steps.items()}
+        out["steps"] = {n: _teach_step(ts, actions[n], sc) for n, ts in t.steps.items()}
     return out
 
 
-def _teach_step(ts: TeachStep, action: object, sc: Scene) -> Doc:
-    """What of a step varies (``{}`` when all is as by default: the step is still named)."""
+def _teach_step(ts: TeachStep, action: StepKind, sc: Scene) -> Doc:
+    """What of a step varies (``{}`` when all is as by default: the step is still named);
+    what its kind reads itself, its kind writes (``teach_to_yaml``)."""
     default = TeachStep()
     out: Doc = {}
     _put(out, "yaw", ts.yaw, default.yaw, _angle)
-    if ts.height is not None:
-        out["height"] = _floats(ts.height)
-    if ts.to is not None:
-        revolute = isinstance(action, MoveJoint) and sc.joints[action.joint].kind == "revolute"
-        out["to"] = _angles(ts.to) if isinstance(action, Tilt) or revolute else _floats(ts.to)
+    out.update(action.teach_to_yaml(ts, sc))
     if ts.margin is not None:
         out["margin"] = _floats(ts.margin)
     _put(out, "miss", ts.miss, default.miss)

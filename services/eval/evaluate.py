@@ -29,7 +29,7 @@ from sctd.skill import WORLD_OBJECT, Bundle, Limits, Skill, bundle_from_file, lo
 from sctd.skill.catalog import shipped_folder
 from sctd.skill.constraints import SpeedNear
 from sctd.task import Task, find_task, load_task, task_for_object
-from sctd.task.model import Reach, Tilt, Upright
+from sctd.task.kinds.tilt import Tilt, Upright
 from sctd_services.user import PROFILES, USER_MODELS
 
 from .lockstep import run_trial
@@ -162,12 +162,9 @@ def control_frame(task: Task | None) -> tuple[str, np.ndarray] | None:
     if task is None or task.scene.held is None:
         return None
     frames = task.scene.held.frames
-    anchor = None
-    for s in task.intent:
-        if isinstance(s.action, Reach):
-            anchor = s.action.frame
-        elif isinstance(s.action, Tilt | Upright) and anchor in frames:
-            return anchor, frames[anchor]
+    for s in task.intent:  # (a tilt's, an upright's frame: the reach's before it)
+        if isinstance(s.action, Tilt | Upright) and s.action.frame() in frames:
+            return s.action.frame(), frames[s.action.frame()]
     return None
 
 

@@ -25,10 +25,9 @@ from matplotlib.figure import Figure
 from sctd.skill import WORLD_OBJECT, Limits, load_skill
 from sctd.skill.catalog import shipped_skills
 from sctd.skill.constraints import SpeedNear
-from sctd.task import Task, handle_jacobian
-from sctd.task.judge import thresholds
-from sctd.task.kinds import StepKind
-from sctd.task.model import MoveJoint, Near, Press, Reach, Tilt
+from sctd.task import Task
+from sctd.task.kinds import Floor
+from sctd.task.model import Near
 from sctd_services.user import DEFAULT_MODEL
 
 from .evaluate import (
@@ -69,71 +68,46 @@ def skills_for(task: Task, shipped: list[Path] | None = None) -> list[str]:
 
 
 def floor(task: Task, limits: Limits, cap: SpeedNear | None = None) -> float:
-    """A lower bound of the completion time at ``limits``: the first reach's (or press's)
-    frame from where it starts (or from where the completion clock starts, when that is
-    nearer: a ``near`` clock on the task object) straight to its goal (a button's face) at
-    full linear speed, then every joint's handle along its path to its threshold (a
-    revolute joint's angle times its lever) at full linear speed and every tilt at full
-    angular speed. With ``cap`` (a skill's ``speed_near``, :func:`cap_of`) the part of
-    that straight way within the cap's distance of the task object, and a tilt whose
-    frame's goal is there, go at the cap's speeds (the reach's frame taken for the cap's
+    """A lower bound of the completion time at ``limits``: the way through the points
+    each step's hand must pass (its kind's :meth:`~sctd.task.kinds.StepKind.floor_path`:
+    the first reach's or press's frame to its goal, a button's face; a grasp's grip and
+    lift, ...) from where the first of them starts, straight from one to the next, and
+    every path a step adds besides (a joint's handle along its path to its threshold, a
+    revolute joint's angle times its lever), at full linear speed; every turn (a tilt's)
+    at full angular speed. The way to the first point starts where a ``near`` completion
+    clock starts when that is nearer, as that step's part says (:class:`~sctd.task.kinds.Floor`).
+    With ``cap`` (a skill's ``speed_near``, :func:`cap_of`) the part of the way to the
+    first point within the cap's distance of the task object, and the turns when that
+    point is there, go at the cap's speeds (the first step's frame taken for the cap's
     point: a cup's rim)."""
-    if isinstance(task.intent[0].action, StepKind):
-        return _kinds_floor(task, limits)
-    done = thresholds(task.outcome.done)
     sc = task.scene
-    obj = sc.bodies[task.object].T_world
-    spin = 0.0
-    first = next(s.action for s in task.intent if isinstance(s.action, Reach | Press))
-    assert isinstance(first, Reach | Press)  # (the reader: the first step is a reach or a press)
+    parts: list[Floor] = []
+    for s in task.intent:
+        parts.append(s.action.floor_path(task, tuple(parts)))
+    lead = next(p for p in parts if p.points)
     held = sc.held.frames if sc.held is not None else {}
-    start = (sc.start.T_world @ held.get(first.frame, np.eye(4)))[:3, 3]
-    if isinstance(first, Press):
-        goal = sc.bodies[first.button].T_world[:3, 3]
-    elif first.to is not None:
-        goal = obj[:3, :3] @ first.to + obj[:3, 3]
-    else:
-        assert first.handle is not None  # (the reader asks for one goal)
-        goal = sc.bodies[sc.joints[first.handle].handle].T_world[:3, 3]
-    travel = float(np.linalg.norm(goal - start))
+    start = (sc.start.T_world @ held.get(lead.frame, np.eye(4)))[:3, 3]
+    points = [start, *(q for p in parts for q in p.points)]
+    legs = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points)]
+    goal, obj = points[1], sc.bodies[task.object].T_world
     clock = task.outcome.clock
-    if isinstance(clock, Near) and clock.to == task.object and clock.within < travel:
-        start = goal + (start - goal) * (clock.within / travel)
-        travel = clock.within
+    if isinstance(clock, Near) and lead.clock == "goal":  # within ``within`` of the goal
+        if clock.to == task.object and clock.within < legs[0]:
+            start = goal + (start - goal) * (clock.within / legs[0])
+            legs[0] = clock.within
+    elif isinstance(clock, Near) and clock.to in sc.bodies:  # on the sphere about its body
+        origin = sc.bodies[clock.to].T_world[:3, 3]
+        legs[0] = min(legs[0], max(0.0, clock.within - float(np.linalg.norm(goal - origin))))
+    travel, spin = sum(legs), 0.0
+    for p in parts:
+        travel += p.along
+        spin += p.radians
     slow = 0.0 if cap is None else _inside(start, goal, obj[:3, 3], cap.within)
     v_slow = limits.max_linear_speed if cap is None else min(limits.max_linear_speed, cap.max_linear_speed)
     near = cap is not None and float(np.linalg.norm(goal - obj[:3, 3])) < cap.within
     w = min(limits.max_angular_speed, cap.max_angular_speed) if near and cap is not None \
         else limits.max_angular_speed
-    for s in task.intent:
-        if isinstance(s.action, MoveJoint):  # a revolute joint's angle times its lever
-            j = sc.joints[s.action.joint]
-            lever = float(np.linalg.norm(handle_jacobian(j, sc.bodies[j.handle].T_world, 0.0)))
-            travel += done.get(f"{s.action.joint}.position", 0.0) * lever
-        elif isinstance(s.action, Tilt):
-            spin += s.action.to
     return (travel - slow) / limits.max_linear_speed + slow / v_slow + spin / w
-
-
-def _kinds_floor(task: Task, limits: Limits) -> float:
-    """The floor of a task whose intent begins with steps of registered kinds: the
-    straight way through the points each such step's hand must pass
-    (:meth:`~sctd.task.kinds.StepKind.floor_path`) at full linear speed, its turns at
-    full angular speed; the way to the first point from where the completion clock
-    starts when that is nearer (a ``near`` clock starts on a sphere about its body's
-    origin: at least ``within`` less the point's distance from that origin away)."""
-    points, radians = [task.scene.start.T_world[:3, 3]], 0.0
-    for s in task.intent:
-        if isinstance(s.action, StepKind):  # (a lower bound: other steps are not counted)
-            p, r = s.action.floor_path(task.scene)
-            points += p
-            radians += r
-    legs = [float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(points)]
-    clock = task.outcome.clock
-    if isinstance(clock, Near) and clock.to in task.scene.bodies:
-        origin = task.scene.bodies[clock.to].T_world[:3, 3]
-        legs[0] = min(legs[0], max(0.0, clock.within - float(np.linalg.norm(points[1] - origin))))
-    return sum(legs) / limits.max_linear_speed + radians / limits.max_angular_speed
 
 
 def _inside(a: np.ndarray, b: np.ndarray, centre: np.ndarray, radius: float) -> float:

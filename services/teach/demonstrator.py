@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from sctd import se3
 from sctd.task import Task, TaskError, find_task
 from sctd.task.judge import holds, thresholds
-from sctd.task.model import AllOf, AnyOf, Compare, MoveJoint, Not, Predicate, Press, Tilt
+from sctd.task.model import AllOf, AnyOf, Compare, Not, Predicate
 from sctd.wire import DEFAULT_ROBOT
 
 from ..record import Recorder, Take
@@ -359,47 +359,49 @@ def _record(teacher: Teacher, take: Take, attempt: Attempt, geometry: SceneGeome
 
 
 def _show(teacher: Teacher, task: Task, step: StepPlan, motion: Motion, T_world_obj: Array) -> bool:
-    """Show one step: its motion, stopped when a failure rule holds; a tilt then held
-    until its predicate holds (TeachingError when it does not in TILT_TIMEOUT s). False
-    when a failure rule holds."""
+    """Show one step as its plan says: a kind's legs, a press, or a motion, after waiting
+    for the hand to hold what the plan names (``grasped``) and followed by holding still
+    until the plan's ``until`` holds (TeachingError when it does not in TILT_TIMEOUT s);
+    stopped when a failure rule holds (False then)."""
     teacher.phase = step.name
     failed = _failing(teacher, task)
-    action = next(s.action for s in task.intent if s.name == step.name)
     if isinstance(motion, LegsMotion):
         return _legs(teacher, step, motion, T_world_obj, failed)
-    if isinstance(action, Press):
-        assert isinstance(motion, PressMotion)  # (a press's motion)
-        return _press(teacher, step, motion, action, T_world_obj, failed)
-    if isinstance(action, MoveJoint):
+    if isinstance(motion, PressMotion):
+        return _press(teacher, step, motion, T_world_obj, failed)
+    if step.grasped:
         # a person at the handle waits until the hand has closed on it before pulling:
         # an arm still behind the reach's end (a loaded host) would turn away short of
         # the grasp radius. A hand beside the handle (a mistake) stops once it is still.
-        held = f"{action.joint}.held"
+        held = step.grasped
         teacher.hold(lambda: bool(_readings(teacher).get(held)) or teacher.settled(), GRASP_WAIT)
-    if not isinstance(action, Tilt):
+    until = step.until
+    if until is None:
         teacher.follow(motion, T_world_obj, stop_when=failed)
         return not failed()
 
     def enough() -> bool:
-        return failed() or holds(action.until, _readings(teacher), {})
+        return failed() or holds(until, _readings(teacher), {})
     if teacher.follow(motion, T_world_obj, stop_when=enough) and not teacher.hold(enough, TILT_TIMEOUT):
-        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
+        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), until)} not reached in "
                             f"{TILT_TIMEOUT:g} s of holding the tilt")
     return not failed()
 
 
-def _press(teacher: Teacher, step: StepPlan, motion: PressMotion, action: Press, T_world_obj: Array,
+def _press(teacher: Teacher, step: StepPlan, motion: PressMotion, T_world_obj: Array,
            failed: Callable[[], bool]) -> bool:
     """Show a press: in to the planned depth, held until the step's predicate holds
     (TeachingError when it does not in PRESS_TIMEOUT s), out again; stopped when a
     failure rule holds (False then)."""
     if not teacher.follow(motion.inward, T_world_obj, stop_when=failed):
         return False
+    until = step.until
+    assert until is not None  # (a press's plan has one)
 
     def enough() -> bool:
-        return failed() or holds(action.until, _readings(teacher), {})
+        return failed() or holds(until, _readings(teacher), {})
     if not teacher.hold(enough, PRESS_TIMEOUT):
-        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), action.until)} not reached in "
+        raise TeachingError(f"{step.name}: {_explain(_readings(teacher), until)} not reached in "
                             f"{PRESS_TIMEOUT:g} s of holding the button pushed in")
     return not failed() and teacher.follow(motion.outward, T_world_obj, stop_when=failed)
 

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 
 from sctd import se3
 from sctd.task import handle_jacobian, handle_pose
-from sctd.task.kinds import Leg, StepKind
+from sctd.task.kinds import Leg
 from sctd.task.kinds.joint import Joint
 
 from .plan import PRESS_STANDOFF, DemoPlan, SceneGeometry, Speeds, StepPlan
@@ -163,10 +163,12 @@ class TipTurn:
 
 def task_motions(plan: DemoPlan, geometry: SceneGeometry) -> list[tuple[StepPlan, Motion]]:
     """The motion of each step of ``plan``, in order (each starts where the one before
-    ends): a reach is a :class:`Line` through its via point; a tilt a :class:`TipTurn`
-    about the frame's point and the hand's y axis; an upright a :class:`TipTurn` bringing
-    the frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis or
-    a :class:`HandlePath` along a revolute joint's arc; a press a :class:`PressMotion`.
+    ends), as its plan's ``kind`` names it (:class:`~sctd.task.kinds.teaching.StepPlan`):
+    a reach is a :class:`Line` through its via point; a tilt a :class:`TipTurn` about the
+    frame's point and the hand's y axis; an upright a :class:`TipTurn` bringing the
+    frame's axis up; a joint's move a :class:`Line` along a prismatic joint's axis or a
+    :class:`HandlePath` along a revolute joint's arc; a press a :class:`PressMotion`;
+    another its kind's legs (:class:`LegsMotion`).
 
     The recorded steps (:attr:`SceneGeometry.recorded`) run as one movement: from rest
     into the first, at their mean speeds through the middle ones, to rest at the end of
@@ -227,7 +229,6 @@ def legs_motion(here: Array, s: StepPlan, geometry: SceneGeometry, speed: float,
     """The legs of step ``s`` (of a registered kind) from ``here``, planned in the task
     object's frame with the bodies at their defaults in it, drawn from ``s.draw``."""
     action = next(x.action for x in geometry.task.intent if x.name == s.name)
-    assert isinstance(action, StepKind)  # (the plan gives its kind's key only to these)
     poses = {n: geometry.body(n) for n in geometry.task.scene.bodies}
     legs = action.legs(geometry.task.scene, poses, here, np.random.default_rng(s.draw), mistake)
     out = []

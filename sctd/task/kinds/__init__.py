@@ -7,7 +7,8 @@ object the hand holds from the start has (``held.<key>``): its contents, which f
 when it is tilted. A **section** is a kind of scene element with a section of the scene
 of its own (``scene.<key>.<name>``): a joint moving a handle
 the hand grasps, a person's head, a zone a frame of the hand is timed in. A **step
-kind** is a kind of intent step (``intent[i].<key>``): grasp an item, place it, turn a
+kind** is a kind of intent step (``intent[i].<key>``): reach a goal with a frame, tilt it,
+bring it upright, move a joint's handle, press a button, grasp an item, place it, turn a
 knob in the hand. Each kind is one class that holds everything sctd knows of it:
 
 - its data (the instance's fields) and its reader (:meth:`Facet.read`, :meth:`StepKind.read`);
@@ -16,8 +17,11 @@ knob in the hand. Each kind is one class that holds everything sctd knows of it:
   by its name);
 - its physics in the simulator (:meth:`Facet.physics`, :meth:`Section.physics`: pure
   numpy on a :class:`World`);
-- the simulated user's behaviour for a step (:meth:`StepKind.mind`);
-- the demonstrator's plan for a step (:meth:`StepKind.legs`);
+- the simulated user's behaviour for a step (:meth:`StepKind.mind`: the minds of one
+  run share a :class:`Run`, and may see each other's, a tilt its reach's);
+- the demonstrator's plan for a step (:meth:`StepKind.plan`, by default its
+  :meth:`StepKind.legs`; :mod:`.teaching`);
+- its part of a task's floor (:meth:`StepKind.floor_path`, a :class:`Floor`);
 - its drawing in the view (:meth:`Facet.shapes`, :meth:`Section.shapes`: boxes,
   cylinders and spheres, as data).
 
@@ -42,8 +46,10 @@ from .base import (
     Facet,
     FacetPhysics,
     Fingers,
+    Floor,
     Leg,
     Person,
+    Run,
     Section,
     Shape,
     Sight,
@@ -61,6 +67,11 @@ BUILTIN = {
     "button": "sctd.task.kinds.surface:Button",
     "support": "sctd.task.kinds.pickable:Support",
     "item": "sctd.task.kinds.pickable:Item",
+    "reach": "sctd.task.kinds.reach:Reach",
+    "tilt": "sctd.task.kinds.tilt:Tilt",
+    "upright": "sctd.task.kinds.tilt:Upright",
+    "move_joint": "sctd.task.kinds.move_joint:MoveJoint",
+    "press": "sctd.task.kinds.press:Press",
     "grasp": "sctd.task.kinds.handling:GraspStep",
     "place": "sctd.task.kinds.handling:PlaceStep",
     "knob": "sctd.task.kinds.knob:Knob",
@@ -127,6 +138,6 @@ def step_kinds() -> dict[str, type[StepKind]]:
     return {k: c for k, c in registry().items() if issubclass(c, StepKind)}
 
 
-__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "KindError", "Leg", "Person", "Section",
-           "Shape", "Sight", "StepKind", "StepMind", "Want", "World", "facets", "held_facets", "registry",
-           "sections", "step_kinds"]
+__all__ = ["BUILTIN", "GROUP", "Facet", "FacetPhysics", "Fingers", "Floor", "KindError", "Leg", "Person",
+           "Run", "Section", "Shape", "Sight", "StepKind", "StepMind", "Want", "World", "facets",
+           "held_facets", "registry", "sections", "step_kinds"]

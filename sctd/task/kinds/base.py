@@ -11,8 +11,11 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from sctd import se3
+
 if TYPE_CHECKING:  # (typing only: the reader imports the registry)
-    from ..model import Outcome, Scene, Step
+    from ..model import Outcome, Scene, Step, Task, TeachStep
+    from .teaching import Draft, StepPlan
 
 Array = NDArray[np.float64]
 
@@ -279,6 +282,9 @@ class Sight:
     objects: Mapping[str, Array]
     readings: Mapping[str, Any]
     positions: Mapping[str, Array]
+    memo: dict[Any, Any] = field(default_factory=dict)
+    """What the minds worked out of this sight for one another, by a key of their own (a
+    reach's view of its goal, which the tilt after it shares): worked out once a look."""
 
 
 @dataclass
@@ -293,13 +299,62 @@ class Want:
 
 
 class Person(Protocol):
-    """How a simulated person moves (:class:`sctd_services.user.intent.TaskIntent` is one)."""
+    """How a simulated person moves (:class:`sctd_services.user.intent.TaskIntent` is one,
+    whose doc says what each is)."""
 
     gain: float
     v_max: float
     w_max: float
     free_weight: float
     per_rad: float
+    lean: float
+    ahead: float
+    past: float
+    press_speed: float
+    slow: float
+    clearance: float
+    aim: float
+
+
+class Run:
+    """What the minds of one run of a task's intent share (one simulated person's).
+
+    Attributes
+    ----------
+    task : Task
+    person : Person
+    minds : list of StepMind
+        The steps' minds by index, as they are made, in order: a step's mind is made
+        with those of the steps before it here (a tilt's finds the reach whose frame it
+        moves).
+    wanted : int
+        The step whose :meth:`StepMind.want` was asked last (-1: none yet): a mind that
+        keeps a choice while its step is wanted look after look (a tilt's axis) makes it
+        again when another step was wanted in between.
+    """
+
+    def __init__(self, task: Task, person: Person):
+        self.task, self.person = task, person
+        self.minds: list[StepMind] = []
+        self.wanted = -1
+        self._inverses: dict[str, tuple[bytes, Array]] = {}
+
+    @property
+    def scene(self) -> Scene:
+        return self.task.scene
+
+    @property
+    def steps(self) -> tuple[Step, ...]:
+        return self.task.intent
+
+    def inverse(self, name: str, T: Array) -> Array:
+        """``T`` (4, 4) inverted, worked out again only when the frame ``name`` moved (the
+        minds of a run share it)."""
+        key = T.tobytes()
+        kept = self._inverses.get(name)
+        if kept is None or kept[0] != key:
+            kept = self._inverses[name] = (key, se3.invert_transform(T))
+        return kept[1]
 
 
 class StepMind(ABC):
@@ -317,6 +372,21 @@ class StepMind(ABC):
     def want(self, sight: Sight) -> Want:
         """How the hand should move now, and the fingers."""
 
+    def rest(self, sight: Sight) -> Want:
+        """What the hand should do once the intent is done, this being its last step: stay
+        still (no twist; by default every error weighed alike)."""
+        return Want(np.zeros(6), np.eye(6))
+
+    def close_enough(self, sight: Sight) -> bool:
+        """Whether the step is short of complete but within what the task tolerates (a
+        person who cannot get any closer may :meth:`settle`); False by default."""
+        return False
+
+    def settle(self) -> bool:
+        """Whether a person who got no closer, :meth:`close_enough`, takes the step as done
+        (then the intent goes on to the next); False by default."""
+        return False
+
 
 @dataclass(frozen=True)
 class Leg:
@@ -333,6 +403,39 @@ class Leg:
     until: tuple[str, bool] | None = None
 
 
+@dataclass(frozen=True)
+class Floor:
+    """A step's part of a lower bound of the hand's path through a task with the scene at
+    its defaults (a task's floor, ``sctd suite``).
+
+    Attributes
+    ----------
+    points : tuple of ndarray (3,)
+        The points (world, m) the frame must pass through, in order, straight from one to
+        the next being the shortest way (from where the frame of the first step with
+        points starts, or from the last point before).
+    radians : float
+        The radians it must turn at least.
+    along : float
+        m the hand must go besides, on a path of its own (a joint's handle along its
+        path to the task's threshold).
+    frame : str
+        The frame whose points they are (``hand``, or a frame of what the hand holds):
+        where the first step with points starts it is where the way starts.
+    clock : str
+        How a ``near`` clock shortens the way to the first point, given by the first
+        step with points: ``body`` (the clock starts on the sphere about its body's
+        origin: at least ``within`` less the point's distance from it away) or ``goal``
+        (on a clock about the task object, at most ``within`` from the point).
+    """
+
+    points: tuple[Array, ...] = ()
+    radians: float = 0.0
+    along: float = 0.0
+    frame: str = "hand"
+    clock: str = "body"
+
+
 class StepKind(ABC):
     """A kind of intent step: ``intent[i].<key>`` in a task file.
 
@@ -342,38 +445,71 @@ class StepKind(ABC):
         Its field in a step's mapping.
     grips : bool
         Whether the step works the fingers (a person doing it uses the grasp button).
+    finish : bool
+        Whether it finishes the task once it is shown (a frame brought upright after a
+        pour): a demonstration does not record it when only such steps come after it.
+    teaches : tuple of str or None
+        The fields of :class:`~sctd.task.model.TeachStep` a task's ``teach.steps.<name>``
+        may give a step of this kind (``yaw``, ``height``, ``to``, ``miss``, ``margin``;
+        those of them a kind reads itself, :meth:`read_teach`); None: the step may not be
+        named there.
     """
 
     key: ClassVar[str]
     grips: ClassVar[bool] = False
+    finish: ClassVar[bool] = False
+    teaches: ClassVar[tuple[str, ...] | None] = None
 
     @classmethod
     @abstractmethod
-    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome) -> StepKind:
-        """The step a task file's field ``v`` at ``path`` says."""
+    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome,
+             before: tuple[Step, ...]) -> StepKind:
+        """The step a task file's field ``v`` at ``path`` says (``before``: the intent's
+        steps read before it; a tilt moves the frame of the reach before it)."""
 
     @abstractmethod
-    def to_yaml(self) -> dict[str, Any]:
-        """Its task-file field: :meth:`read` gives the same step back."""
+    def to_yaml(self, scene: Scene) -> dict[str, Any]:
+        """Its task-file field: :meth:`read` gives the same step back (``scene``: the
+        task's, which says whether a predicate's bound is an angle)."""
+
+    def read_teach(self, r: Any, d: dict[str, Any], path: str, scene: Scene) -> dict[str, Any]:
+        """The fields of its :class:`~sctd.task.model.TeachStep` that its kind reads from
+        ``d`` (``teach.steps.<name>``, its keys among :attr:`teaches`): a reach's goal
+        ``height``, a tilt's ``to``; the reader reads ``yaw``, ``miss`` and ``margin``. None
+        by default."""
+        return {}
+
+    def teach_to_yaml(self, ts: TeachStep, scene: Scene) -> dict[str, Any]:
+        """The fields :meth:`read_teach` reads, as a task file writes them; none by default."""
+        return {}
 
     @abstractmethod
     def frame(self) -> str:
         """The frame the step moves (``hand``, or a frame of what the hand holds)."""
 
     @abstractmethod
-    def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
-        """The simulated person's behaviour for it."""
+    def mind(self, run: Run, index: int) -> StepMind:
+        """The simulated person's behaviour for it, as step ``index`` of ``run`` (whose
+        minds hold those of the steps before it)."""
 
     @abstractmethod
-    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
-        """A lower bound of the hand's path through the step with the scene at its
-        defaults: the points (world, m) the hand must pass through in order, straight
-        from one to the next being the shortest way, and the radians it must turn at least
-        (a task's floor, ``sctd suite``)."""
+    def floor_path(self, task: Task, before: tuple[Floor, ...]) -> Floor:
+        """Its part of a lower bound of the hand's path through ``task`` with its scene at
+        its defaults (:class:`Floor`; ``before``: the parts of the steps before it)."""
 
-    @abstractmethod
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
-        """A demonstration of it (``sctd teach``): the hand's legs from ``T_world_ee`` with
-        the bodies at ``poses`` (world), varied by ``rng`` as a person's demonstrations
-        vary; with ``mistake``, the way a person gets it wrong (a grasp beside the item)."""
+        """A demonstration of it (``sctd teach``) as the default :meth:`plan` shows it: the
+        hand's legs from ``T_world_ee`` with the bodies at ``poses`` (world), varied by
+        ``rng`` as a person's demonstrations vary; with ``mistake``, the way a person gets
+        it wrong (a grasp beside the item). None by default (a kind that plans its
+        demonstration otherwise)."""
+        return []
+
+    def plan(self, draft: Draft, rng: np.random.Generator) -> StepPlan:
+        """How a demonstration shows it (``sctd teach``), its variations drawn from ``rng``
+        (the plan's, in the intent's order: draw nothing more than the step needs, always
+        the same draws). By default by its :meth:`legs`, drawn from a seed drawn here."""
+        from .teaching import StepPlan  # (the plan's data)
+
+        return StepPlan(draft.name, self.key, self.frame(), draw=int(rng.integers(2**31)))

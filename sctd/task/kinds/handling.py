@@ -22,13 +22,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..model import Outcome, Scene, Step
-from .base import Array, Leg, Person, Sight, StepKind, StepMind, Want
+from .base import Array, Floor, Leg, Person, Run, Sight, StepKind, StepMind, Want
 from .pickable import Item, Support, facet_of
+
+if TYPE_CHECKING:  # (typing only)
+    from ..model import Task
 
 UP = np.array([0.0, 0.0, 1.0])
 IN_REACH = 0.015  # m: at the point before the grasp, near enough to come in
@@ -138,27 +141,29 @@ class GraspStep(StepKind):
     approach: float = 0.08
 
     @classmethod
-    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome) -> GraspStep:
+    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome,
+             before: tuple[Step, ...]) -> GraspStep:
         d = r.fields(v, path, {"item", "force"}, {"lift", "approach"})
         return cls(_item(r, d["item"], f"{path}.item", scene), r.positive(d["force"], f"{path}.force"),
                    r.positive(d.get("lift", 0.05), f"{path}.lift"),
                    r.positive(d.get("approach", 0.08), f"{path}.approach"))
 
-    def to_yaml(self) -> dict[str, Any]:
+    def to_yaml(self, scene: Scene) -> dict[str, Any]:
         return {"item": self.item, "force": _f(self.force), "lift": _f(self.lift),
                 "approach": _f(self.approach)}
 
     def frame(self) -> str:
         return "hand"
 
-    def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
-        return GraspMind(self, facet_of(scene, self.item, Item), person)
+    def mind(self, run: Run, index: int) -> StepMind:
+        return GraspMind(self, facet_of(run.scene, self.item, Item), run.person)
 
-    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+    def floor_path(self, task: Task, before: tuple[Floor, ...]) -> Floor:
         """To the grip, then the lift."""
+        scene = task.scene
         T = scene.bodies[self.item].T_world
         grip = T[:3, 3] + facet_of(scene, self.item, Item).grip * T[:3, 2]
-        return [grip, grip + self.lift * UP], 0.0
+        return Floor((grip, grip + self.lift * UP), 0.0)
 
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
@@ -256,7 +261,8 @@ class PlaceStep(StepKind):
     clear: float = 0.06
 
     @classmethod
-    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome) -> PlaceStep:
+    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome,
+             before: tuple[Step, ...]) -> PlaceStep:
         d = r.fields(v, path, {"item", "onto"}, {"at", "hover", "clear"})
         item = _item(r, d["item"], f"{path}.item", scene)
         onto = r.name(d["onto"], f"{path}.onto")
@@ -273,23 +279,25 @@ class PlaceStep(StepKind):
         return cls(item, onto, (at[0], at[1]), r.positive(d.get("hover", 0.05), f"{path}.hover"),
                    r.positive(d.get("clear", 0.06), f"{path}.clear"))
 
-    def to_yaml(self) -> dict[str, Any]:
+    def to_yaml(self, scene: Scene) -> dict[str, Any]:
         return {"item": self.item, "onto": self.onto, "at": [_f(self.at[0]), _f(self.at[1])],
                 "hover": _f(self.hover), "clear": _f(self.clear)}
 
     def frame(self) -> str:
         return self.item
 
-    def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
-        return PlaceMind(self, facet_of(scene, self.item, Item), facet_of(scene, self.onto, Support), person)
+    def mind(self, run: Run, index: int) -> StepMind:
+        return PlaceMind(self, facet_of(run.scene, self.item, Item), facet_of(run.scene, self.onto, Support),
+                         run.person)
 
-    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+    def floor_path(self, task: Task, before: tuple[Floor, ...]) -> Floor:
         """To where the hand holds the item down on the spot, then ``clear`` back."""
+        scene = task.scene
         S = scene.bodies[self.onto].T_world
         grip = facet_of(scene, self.item, Item).grip
         down = S[:3, :3] @ np.array([self.at[0], self.at[1], grip]) + S[:3, 3]
         back = down - self.clear * _ahead(scene.start.T_world, np.zeros(3))
-        return [down, back], 0.0
+        return Floor((down, back), 0.0)
 
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:

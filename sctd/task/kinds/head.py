@@ -22,8 +22,9 @@ import numpy as np
 
 from sctd import se3
 
-from ..model import Reach, Scene, Step
+from ..model import Scene, Step
 from .base import Array, FacetPhysics, Section, Shape, World
+from .reach import Reach
 
 MIN_HEAD, MAX_HEAD = 0.03, 0.30
 """m: the radii a head's sphere may have."""
@@ -98,7 +99,7 @@ class Head(Section):
         centre = self.centre(scene.bodies[self.behind].T_world)
         for i, s in enumerate(intent):
             a = s.action
-            if not isinstance(a, Reach) or a.to is None:
+            if not isinstance(a, Reach) or a.to is None:  # (a reach to a point)
                 continue
             goal = T_obj[:3, :3] @ a.to + T_obj[:3, 3]
             depth = self.radius - float(np.linalg.norm(goal - centre))

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,7 +33,21 @@ from sctd import se3
 
 from ..judge import thresholds
 from ..model import Outcome, Scene, Step
-from .base import Array, Facet, FacetPhysics, Leg, Person, Shape, Sight, StepKind, StepMind, Want, World
+from .base import (
+    Array,
+    Facet,
+    FacetPhysics,
+    Floor,
+    Leg,
+    Person,
+    Run,
+    Shape,
+    Sight,
+    StepKind,
+    StepMind,
+    Want,
+    World,
+)
 from .handling import (
     AT_GRIP,
     IN_REACH,
@@ -49,6 +63,9 @@ from .handling import (
     take_legs,
 )
 from .pickable import FREE, across_fingers, facet_of
+
+if TYPE_CHECKING:  # (typing only)
+    from ..model import Task
 
 STOP = 20.0  # N m/rad: an end stop's stiffness
 SHAFT = 5.0  # N m/rad: the knob's shaft against tilting it
@@ -223,7 +240,8 @@ class TurnStep(StepKind):
     clear: float = 0.08
 
     @classmethod
-    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome) -> TurnStep:
+    def read(cls, r: Any, v: Any, path: str, scene: Scene, outcome: Outcome,
+             before: tuple[Step, ...]) -> TurnStep:
         d = r.fields(v, path, {"knob", "force"}, {"overshoot", "approach", "clear"})
         name = r.name(d["knob"], f"{path}.knob")
         knobs = scene.with_facet("knob")
@@ -241,22 +259,23 @@ class TurnStep(StepKind):
                    r.positive(d.get("approach", 0.08), f"{path}.approach"),
                    r.positive(d.get("clear", 0.08), f"{path}.clear"))
 
-    def to_yaml(self) -> dict[str, Any]:
+    def to_yaml(self, scene: Scene) -> dict[str, Any]:
         return {"knob": self.knob, "force": _f(self.force), "overshoot": _f(self.overshoot),
                 "approach": _f(self.approach), "clear": _f(self.clear)}
 
     def frame(self) -> str:
         return "hand"
 
-    def mind(self, scene: Scene, steps: tuple[Step, ...], person: Person) -> StepMind:
-        return TurnMind(self, facet_of(scene, self.knob, Knob), person)
+    def mind(self, run: Run, index: int) -> StepMind:
+        return TurnMind(self, facet_of(run.scene, self.knob, Knob), run.person)
 
-    def floor_path(self, scene: Scene) -> tuple[list[Array], float]:
+    def floor_path(self, task: Task, before: tuple[Floor, ...]) -> Floor:
         """To the grip, the turn to the task's threshold, ``clear`` back."""
+        scene = task.scene
         T = scene.bodies[self.knob].T_world
         grip = T[:3, 3] + facet_of(scene, self.knob, Knob).grip * T[:3, 2]
         back = grip - self.clear * _ahead(scene.start.T_world, np.zeros(3))
-        return [grip, back], self.target - self.overshoot
+        return Floor((grip, back), self.target - self.overshoot)
 
     def legs(self, scene: Scene, poses: Mapping[str, Array], T_world_ee: Array, rng: np.random.Generator,
              mistake: bool = False) -> list[Leg]:
