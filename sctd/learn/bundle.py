@@ -34,6 +34,7 @@ from ..skill import (
 )
 from ..skill.frames import builtin_frames
 from ..skill.reader import Reader
+from ..skill.region import Region
 from ..skill.summary import field_summary
 from .gripper import gripper_lines, with_gripper
 from .linear import AXIS_NAMES
@@ -115,8 +116,12 @@ def linear_skill(result: LinearResult, name: str) -> Skill:
 
 
 def _gripped(result: LinearResult | VectorFieldResult, skill: Skill) -> Skill:
-    """``skill`` split at the demonstrations' gripper events, each a state that commands
-    the gripper (:mod:`sctd.learn.gripper`); unchanged without events."""
+    """``skill`` with the region its demonstrations went through (:mod:`sctd.skill.region`)
+    and split at the demonstrations' gripper events, each a state that commands the
+    gripper (:mod:`sctd.learn.gripper`)."""
+    points = np.concatenate([p.poses[:, :3] for p in result.prepared])
+    skill = dataclasses.replace(skill, region=Region.around(result.frame or result.options.object, points,
+                                                            demonstrations=len(result.prepared)))
     if result.gripper is None:
         return skill
     return with_gripper(skill, result.labels, result.gripper, result.gripper_options,

@@ -126,6 +126,25 @@ class TickDriver:
 
     # --- the tick -------------------------------------------------------------------------
 
+    def region(self) -> dict[str, object] | None:
+        """``status.region``: where the hand's origin is against the running skill's
+        region (:mod:`sctd.skill.region`): ``inside``, ``outside_by`` (m), the region's
+        ``frame``, ``centre`` and ``half_extents`` (in that frame); None when the skill
+        states no region or the hand or that body has not been seen."""
+        region = self.controller.skill.region
+        if region is None or self.state is None:
+            return None
+        body = self.objects.get(region.frame)
+        if body is None or body.F is None or self.state.F is None:
+            return None
+        F, h = body.F, self.state.F
+        d = (h[9] - F[9], h[10] - F[10], h[11] - F[11])
+        p = (F[0] * d[0] + F[3] * d[1] + F[6] * d[2], F[1] * d[0] + F[4] * d[1] + F[7] * d[2],
+             F[2] * d[0] + F[5] * d[1] + F[8] * d[2])  # R^T d: the hand in the body's frame
+        out = region.outside_by(p)
+        return {"inside": out == 0.0, "outside_by": round(out, 4), "frame": region.frame,
+                "centre": list(region.centre), "half_extents": list(region.half_extents)}
+
     def object_sample(self, now: float, wall: float) -> Sample | None:
         """The active state's object as the tick sees it (its own ``object``, else the
         skill's; the world is always there and always fresh)."""

@@ -154,6 +154,7 @@ class DaemonStatus:
             "state": ctl.engine.state,
             "finished": ctl.engine.finished,
             "stuck": ctl.stuck(now),
+            "region": drv.region(),
             "mode": ctl.mode,
             "rate": ctl.config.rate,
             "realtime": self.realtime,

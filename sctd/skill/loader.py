@@ -26,6 +26,7 @@ from .gripper import GripperAction
 from .mappings import MAPPINGS
 from .model import Limits, Skill, State
 from .reader import Reader, check_relative, kind_of
+from .region import Region
 from .registry import Registry
 from .transitions import TRANSITIONS, Transition
 
@@ -169,7 +170,7 @@ class _Parser(Reader):
     def skill(self, doc: Any) -> Skill:
         doc = self.mapping(doc, "")
         self.known_keys(doc, "", {"sctd_skill", "name", "description", "object", "limits",
-                                  "frames", "fsm", "states", "candidate_frames"})
+                                  "frames", "fsm", "states", "candidate_frames", "region"})
         version = doc.get("sctd_skill")
         if version != FORMAT_VERSION:
             raise self.fail("sctd_skill", f"expected format version {FORMAT_VERSION}, got {version!r}")
@@ -185,6 +186,7 @@ class _Parser(Reader):
             name=name, object=obj, frames=self.frames, states=states, transitions=transitions,
             start=start, end=end, limits=limits, min_dwell=min_dwell, description=description,
             id=self.bundle.id, source=self.file, candidate_frames=self.candidate_frames(doc),
+            region=self.region(doc.get("region"), {obj, *(s.object for s in states if s.object)}),
         )
 
     def texts(self, doc: dict) -> tuple[str, str, str]:
@@ -249,6 +251,25 @@ class _Parser(Reader):
             self.string(c.get("name"), f"candidate_frames[{i}].name")
             self.vector(c.get("position"), f"candidate_frames[{i}].position", 3)
         return tuple(cands)
+
+    def region(self, v: Any, bodies: set[str]) -> Region | None:
+        """``region``: a box in the frame of one of ``bodies`` (the skill's object and its
+        states' own; :mod:`.region`), or None."""
+        if v is None:
+            return None
+        d = self.mapping(v, "region")
+        self.known_keys(d, "region", {"frame", "centre", "half_extents", "demonstrations"})
+        frame = self.string(d.get("frame"), "region.frame")
+        if frame not in bodies:
+            known = ", ".join(sorted(bodies))
+            raise self.fail("region.frame", f"{frame!r} is no body of the skill ({known})")
+        centre = self.vector(d.get("centre"), "region.centre", 3)
+        half = self.vector(d.get("half_extents"), "region.half_extents", 3)
+        for i, h in enumerate(half.tolist()):
+            if not 0.0 < h <= 10.0:
+                raise self.fail(f"region.half_extents[{i}]", f"must be > 0 and <= 10 m, got {h}")
+        n = self.integer(d.get("demonstrations", 0), "region.demonstrations")
+        return Region(frame, tuple(centre.tolist()), tuple(half.tolist()), n)
 
     def check_reachable(self, start: str, end: str, names: list[str],
                         transitions: tuple[Transition, ...]) -> None:

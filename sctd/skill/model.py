@@ -21,6 +21,7 @@ from .frames import Frame
 from .gripper import GripperAction
 from .mappings import InputMapping
 from .modelfile import VectorFieldModel
+from .region import Region
 from .transitions import Transition
 
 
@@ -74,6 +75,7 @@ class Skill:
     id: str = ""
     source: str = ""
     candidate_frames: tuple[dict, ...] = ()
+    region: Region | None = None  # where its demonstrations went (:mod:`.region`); None: not said
 
     def models(self) -> dict[str, VectorFieldModel]:
         """The model files the states' elements read, by relative path, in the order

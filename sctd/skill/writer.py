@@ -29,7 +29,7 @@ def skill_to_yaml(skill: Skill) -> dict[str, Any]:
     Every setting is written, defaults too; what the format lets a file leave out when
     empty is left out: the description, frames beyond the built-in ``ee`` and
     ``object``, a state's own object, mappings, constraints or gripper action, the
-    candidate frames.
+    candidate frames, the region.
     """
     doc: dict[str, Any] = {"sctd_skill": FORMAT_VERSION, "name": skill.name}
     if skill.description:
@@ -45,6 +45,8 @@ def skill_to_yaml(skill: Skill) -> dict[str, Any]:
     doc["states"] = {s.name: _state(s) for s in skill.states}
     if skill.candidate_frames:
         doc["candidate_frames"] = [dict(c) for c in skill.candidate_frames]
+    if skill.region is not None:
+        doc["region"] = skill.region.to_yaml()
     return doc
 
 
