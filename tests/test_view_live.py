@@ -96,7 +96,8 @@ def test_the_persons_panel_says_the_mode_the_axes_and_why_it_holds(server):
     T_ee = T_mug @ se3.transform_from_pose([0.045, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0])
     snap = Snapshot(t=1.0, pose=pose_of(T_ee), objects={"mug": pose_of(T_mug)},
                     target={"pose": pose_of(T_ee), "state": "pour"},
-                    status={"mode": "hold", "state": "pour", "stuck": {"state": "pour", "since": 6.2}})
+                    status={"mode": "hold", "state": "pour", "stuck": {"state": "pour", "since": 6.2},
+                            "region": {"inside": False, "outside_by": 0.234, "frame": "mug"}})
     view.draw(snap)
     text = view.person.content
     assert "mode: <b>pour</b>" in text
@@ -104,10 +105,12 @@ def test_the_persons_panel_says_the_mode_the_axes_and_why_it_holds(server):
     assert "held by: tip stays in this box" in text
     assert "the robot's state or the object's pose is stale" in text
     assert "stuck in pour for 6 s" in text
+    assert "out of this skill's region: 23 cm from where it was taught (around mug)" in text
     snap.status = {"mode": "running", "state": "pour"}
     snap.pose = pose_of(T_mug @ se3.transform_from_pose([0.0, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0]))
     view.draw(snap)
     assert "held by" not in view.person.content and "holding" not in view.person.content
+    assert "region" not in view.person.content
 
 
 def test_the_plots_show_the_input_of_the_device_that_owns_the_motion(server):

@@ -306,6 +306,11 @@ class LiveView:
         if stuck:
             lines.append(f"<b>stuck in {stuck.get('state')} for {stuck.get('since', 0):.0f} s: the escape "
                          "button goes back</b>")
+        region = status.get("region")
+        if isinstance(region, dict) and region.get("inside") is False:
+            away = float(region.get("outside_by", 0.0)) * 100
+            lines.append(f"<b>out of this skill's region: {away:.0f} cm from where it was taught "
+                         f"(around {region.get('frame')})</b>")
         lines += goal_lines(status)
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
 
