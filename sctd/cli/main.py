@@ -97,6 +97,9 @@ BENCHES: dict[str, Command] = {
     "robot": Command("sctd's path to a franky arm (target stamp -> reference handed to franky, tracking, "
                      "the driver's CPU) against a bare franky client's loop, both on franky-sim",
                      "sctd.bench.robot", "add_bench_robot_arguments", "main_bench_robot"),
+    "kernels": Command("the same sctd suite trials with this CPU's BLAS kernels and with others "
+                       "(OPENBLAS_CORETYPE, default Haswell): the outcomes that differ, trial for trial",
+                       "sctd.bench.kernels", "add_bench_kernels_arguments", "main_bench_kernels"),
     "cluster": Command("short lockstep trials on local processes and on a loopback Dask cluster with as "
                        "many workers: the cluster's overhead per trial", "sctd.bench.cluster",
                        "add_bench_cluster_arguments", "main_bench_cluster"),

@@ -17,6 +17,7 @@ import tempfile
 from pathlib import Path
 
 from sctd.task import TaskError, find_task, known_tasks
+from sctd_services.eval.numerics import numerics
 from sctd_services.eval.suite import figure, markdown, rows, run_suite, table
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user import DEFAULT_MODEL, USER_MODELS
@@ -57,7 +58,7 @@ def main_suite(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     table_rows = rows(runs)
     doc = {"trials": args.trials, "seed": args.seed, "tasks": [t.name for _, t in tasks], "rows": table_rows,
-           "user_models": models, "starts": args.starts,
+           "user_models": models, "starts": args.starts, "numerics": numerics(),
            "results": {run.task.name: run.results for run in runs if run.user_model == models[0]},
            "results_by_user_model": {m: {run.task.name: run.results for run in runs if run.user_model == m}
                                      for m in models}}
