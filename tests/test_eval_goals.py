@@ -10,11 +10,11 @@ import pytest
 
 from sctd.skill import load_skill
 from sctd.task import find_task
+from sctd.task.compose import room as room_task
 from sctd_services.eval.goals import (
     SetSpec,
     engagements,
     goal_of,
-    room_task,
     set_job,
     summarise_set,
     tasks_of,

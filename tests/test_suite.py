@@ -157,8 +157,10 @@ def test_a_failure_from_another_tasks_start_says_whose_start_it_was():
     limits = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}
     r = _result("a", limits, [4.0, None, None], label="a.yaml")
     r["per_trial"][1]["start_of"], r["per_trial"][2]["start_of"] = "pour", "drawer"
+    r["per_trial"][1]["outside_region"] = 0.31
     out = rows([TaskRun(find_task("drawer"), ["a.yaml"], [r], "adaptive")])
-    assert out[0]["failures"] == {"time limit (from pour's start)": 1, "time limit": 1}
+    assert out[0]["failures"] == {"time limit (from pour's start) [out of region]": 1, "time limit": 1}
+    assert out[0]["started_outside_region"] == 1
     assert out[0]["user_model"] == "adaptive"
 
 

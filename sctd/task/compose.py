@@ -163,3 +163,22 @@ def compose(tasks: list[Task]) -> Task:
 def _entries(sections: dict[str, dict[str, Section]]) -> set[str]:
     """The names of every section's entries."""
     return {n for entries in sections.values() for n in entries}
+
+
+def room(tasks: list[Task], goal: str) -> Task:
+    """The room of ``tasks`` laid out in that order (:func:`compose`), as the task a
+    person going for the one named ``goal`` does (its outcome and intent first), with the
+    hand's start of the room's first task whatever the goal.
+
+    Raises
+    ------
+    TaskError
+        As :func:`compose`; ValueError: no task named ``goal``.
+    """
+    placed = compose(list(tasks))
+    parts = list(placed.parts) if len(tasks) > 1 else [placed]
+    first = next((p for p in parts if p.name == goal), None)
+    if first is None:
+        raise ValueError(f"no task {goal!r} among {', '.join(p.name for p in parts)}")
+    task = compose([first, *(p for p in parts if p is not first)])
+    return replace(task, scene=replace(task.scene, start=placed.scene.start))

@@ -1,7 +1,7 @@
 """Goal inference in a room of several tasks (``sctd eval --set``): the skill set against
 the right skill pre-selected and against teleoperation, trial by trial.
 
-The room is the members' tasks composed into one scene (:func:`room_task`), laid out
+The room is the members' tasks composed into one scene (:func:`~sctd.task.compose.room`), laid out
 once in the set's order (the first member's task gives the hand's start), so that every
 trial's room is the same whatever the user goes for. Each trial draws the user's goal
 at random from its seed (:func:`goal_of`) and runs three lockstep trials from the same
@@ -56,7 +56,7 @@ from sctd.runtime.sets import belief_model, goal_set
 from sctd.skill import Skill, skill_from_bundle
 from sctd.skill.skillset import SkillSet, load_skill_set
 from sctd.task import Task, task_for_object
-from sctd.task.compose import compose
+from sctd.task.compose import room
 from sctd_services.user import DEFAULT_MODEL
 from sctd_services.user.agent import Device
 
@@ -129,17 +129,6 @@ def goal_members(set_file: str) -> tuple:
     return load_skill_set(set_file).members
 
 
-def room_task(tasks: Sequence[Task], goal: str) -> Task:
-    """The room of ``tasks`` laid out in that order, as the task a user going for the
-    one named ``goal`` does (its outcome and intent first), with the hand's start of the
-    room's first task whatever the goal."""
-    placed = compose(list(tasks))
-    parts = list(placed.parts) if len(tasks) > 1 else [placed]
-    first = next(p for p in parts if p.name == goal)
-    task = compose([first, *(p for p in parts if p is not first)])
-    return replace(task, scene=replace(task.scene, start=placed.scene.start))
-
-
 def goal_of(seed: int, names: Sequence[str]) -> str:
     """The task the user of trial ``seed`` goes for (uniform, from the seed alone)."""
     return names[int(np.random.default_rng([seed, 31]).integers(len(names)))]
@@ -160,7 +149,7 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     tasks = tasks_of(skills)
     names = [t.name for t in tasks]
     goal = goal_of(seed, names)
-    task = room_task(tasks, goal)
+    task = room(tasks, goal)
     stuck = spec.stuck_after + (DETOUR_STUCK if spec.detour else 0.0)
     tspec = TaskSpec(goal, profile=spec.profile, user_model=spec.user_model, time_limit=spec.time_limit,
                      stuck_after=stuck)
@@ -175,7 +164,7 @@ def set_job(spec: SetSpec, seed: int) -> dict[str, Any]:
     detour = detour_skill = None
     if spec.detour:
         first = detour_of(seed, names)
-        detour, detour_skill = room_task(tasks, first), skills[names.index(first)].name
+        detour, detour_skill = room(tasks, first), skills[names.index(first)].name
         out.update(detour=first, detour_skill=detour_skill)
     if "set" in spec.runs:
         goals = goal_set(skill_set)
@@ -210,14 +199,14 @@ def _practised(set_file: str, goal: str, member: int, profile: str, user_model: 
     process: every trial of an evaluation starts from the same practice)."""
     skill_set = load_skill_set(set_file)
     tasks = tasks_of([m.skill for m in skill_set.members])
-    room = room_task(tasks, goal)
+    place = room(tasks, goal)
     right = skill_set.members[[t.name for t in tasks].index(goal)].skill
     if member == BASELINE:
-        skill = skill_from_bundle(competent_baseline(skill_set.teleop_bundle, right, room)[0])
+        skill = skill_from_bundle(competent_baseline(skill_set.teleop_bundle, right, place)[0])
     else:
         skill = skill_set.teleop if member == SET_TELEOP else skill_set.members[member].skill
     spec = TaskSpec(goal, profile=profile, user_model=user_model)
-    return practise(skill, spec, PRACTICE_SEED, task=room)[1]
+    return practise(skill, spec, PRACTICE_SEED, task=place)[1]
 
 
 def engagements(changes: Sequence[tuple[float, str, str]], right: str, teleop: str,

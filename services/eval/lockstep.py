@@ -60,12 +60,30 @@ def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
     """:func:`run_trial`, and what its user learned of the device by the end: a model per
     mode (the skill's state names) it used."""
     scene, q0 = trial_scene(task, seed)
+    outside = outside_region(skill, scene)
     sim = Simulation(scene=scene, q0=q0)
     user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known, model=spec.user_model)
     try:
-        return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos, user), user.models
+        result = _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos, user)
     finally:
         sim.close()
+    result.outside_region = outside
+    return result, user.models
+
+
+def outside_region(skill: Skill, scene: Any) -> float | None:
+    """How far (m) the hand starts outside ``skill``'s region (:mod:`sctd.skill.region`;
+    0 inside), with the scene's bodies where they start; None when the skill states no
+    region or the scene has no such body."""
+    region = skill.region
+    if region is None:
+        return None
+    T_ee = scene.start_pose()
+    T_body = scene.objects(T_ee).get(region.frame)
+    if T_body is None:
+        return None
+    p = T_body[:3, :3].T @ (T_ee[:3, 3] - T_body[:3, 3])
+    return round(region.outside_by(p.tolist()), 4)
 
 
 def set_user(task: Task, spec: TaskSpec, seed: int, known: Mapping[str, Device] | None = None,

@@ -170,6 +170,7 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "mode_switches": r["mode_switches_mean"], "effort": r["effort_mean"],
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
                 "failures": _failures(r["per_trial"], run.task.name),
+                "started_outside_region": sum(1 for t in r["per_trial"] if t.get("outside_region")),
             })
     return out
 
@@ -181,6 +182,8 @@ def _failures(per_trial: list[dict[str, Any]], task: str) -> dict[str, int]:
             why = str(t.get("reason") or t["outcome"])
             if t.get("start_of") and t["start_of"] != task:
                 why += f" (from {t['start_of']}'s start)"
+            if t.get("outside_region"):
+                why += " [out of region]"
             out[why] = out.get(why, 0) + 1
     return out
 

@@ -112,6 +112,8 @@ class TrialResult:
     dtw: float | None = None
     phase_s: dict[str, float] = field(default_factory=dict)  # s spent in each of the intent's steps
     sim_rtf: float | None = None  # real time: simulated / wall time over the trial (None in lockstep)
+    # m the hand started outside the skill's region (0 inside; None: the skill states none)
+    outside_region: float | None = None
     trajectory: list[list[float]] = field(default_factory=list, repr=False)  # t, T_obj_ee pose
     series: dict[str, list[Any]] = field(default_factory=dict, repr=False)
 
