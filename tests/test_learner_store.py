@@ -197,6 +197,10 @@ def test_the_check_passes_at_the_floor_and_within_the_tolerance_of_the_active_sk
     assert ok and "6/6 trials succeeded: accepted by the sequential test (success rate >= 0.95 " \
                   "against <= 0.80, at most 20 trials; the floor 0.90)" in why
     assert not verdict(_ev(5, 5), "pour", s, None)[0]  # undecided: too few
+    on = {**_ev(6, 6), "numerics": {"blas": ["openblas 0.3.31 Haswell"], "machine": "x86_64", "numpy": "2.4.6",
+                                    "openblas_coretype": "Haswell"}}
+    assert verdict(on, "pour", s, None)[1].endswith(
+        "; numerics: openblas 0.3.31 Haswell (x86_64, numpy 2.4.6, OPENBLAS_CORETYPE=Haswell)")
     assert not verdict(_ev(0, 2), "pour", s, None)[0]
     assert verdict(_ev(6, 6), "pour", s, _ev(10))[0]  # raised to 1.0 - 0.1: the same test
     ok, why = verdict(_ev(9, 10), "pour", CheckSettings(floor=0.5, tolerance=0.05), _ev(10))

@@ -19,6 +19,7 @@ from typing import Any
 from sctd.skill.catalog import StoredSkill
 from sctd.task import Task, TaskError, find_task
 from sctd_services.eval.evaluate import entries, evaluate, table
+from sctd_services.eval.numerics import describe, numerics
 from sctd_services.eval.trial import TaskSpec
 
 
@@ -199,7 +200,7 @@ def evaluation(stored: StoredSkill, task: Task, settings: CheckSettings, seed: i
     res["per_trial"] = [{k: t[k] for k in ("seed", "outcome", "reason", "time_s", "readings")}
                         for t in res["per_trial"]]
     res.update(task=task.name, seed=seed, lockstep=True, wall_s=round(time.monotonic() - t0, 2),
-               table=table([res]))
+               table=table([res]), numerics=numerics())
     return res
 
 
@@ -221,8 +222,11 @@ def verdict(ev: dict[str, Any] | None, task: str, settings: CheckSettings,
         floor = (f"the active skill's {active['success_rate']:.2f} minus the tolerance "
                  f"{settings.tolerance:.2f}")
     test = f"the sequential test ({rule.describe()}; {floor})"
+    # the BLAS kernels the trials ran on, so that a verdict read on another machine says
+    # where it came from (sctd bench kernels compares outcomes across kernels)
+    on = f"; {describe(ev['numerics'])}" if ev.get("numerics") else ""
     if d is None:
-        return False, f"{got}: too few for {test} to decide"
+        return False, f"{got}: too few for {test} to decide{on}"
     if not d:
-        return False, f"{got}: rejected by {test}"
-    return True, f"{got}: accepted by {test}"
+        return False, f"{got}: rejected by {test}{on}"
+    return True, f"{got}: accepted by {test}{on}"
