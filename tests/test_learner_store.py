@@ -197,8 +197,9 @@ def test_the_check_passes_at_the_floor_and_within_the_tolerance_of_the_active_sk
     assert ok and "6/6 trials succeeded: accepted by the sequential test (success rate >= 0.95 " \
                   "against <= 0.80, at most 20 trials; the floor 0.90)" in why
     assert not verdict(_ev(5, 5), "pour", s, None)[0]  # undecided: too few
-    on = {**_ev(6, 6), "numerics": {"blas": ["openblas 0.3.31 Haswell"], "machine": "x86_64", "numpy": "2.4.6",
-                                    "openblas_coretype": "Haswell"}}
+    kernels = {"blas": ["openblas 0.3.31 Haswell"], "machine": "x86_64", "numpy": "2.4.6",
+               "openblas_coretype": "Haswell"}
+    on = {**_ev(6, 6), "numerics": kernels}
     assert verdict(on, "pour", s, None)[1].endswith(
         "; numerics: openblas 0.3.31 Haswell (x86_64, numpy 2.4.6, OPENBLAS_CORETYPE=Haswell)")
     assert not verdict(_ev(0, 2), "pour", s, None)[0]
