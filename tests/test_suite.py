@@ -168,18 +168,18 @@ def test_a_failure_from_another_tasks_start_says_whose_start_it_was():
 def test_sctd_suite_runs_each_user_model_from_foreign_starts(tmp_path):
     """--user-model twice: the same trials under each, side by side (a user column);
     --starts foreign: every trial from another task's start, which each trial names."""
-    run = run_sctd("suite", "--task", "light_switch", "--trials", "2", "--jobs", "2", "--starts", "foreign",
+    run = run_sctd("suite", "--task", "oven", "--trials", "2", "--jobs", "2", "--starts", "foreign",
                    "--user-model", "plain", "--user-model", "adaptive", "--out", str(tmp_path), "--json",
                    timeout=600)
     assert run.returncode == 0, run.stderr
     doc = json.loads(run.stdout)
     assert doc["user_models"] == ["plain", "adaptive"] and doc["starts"] == "foreign"
     assert [(r["user_model"], r["skill"]) for r in doc["rows"]] == [
-        ("plain", "light_switch-vf"), ("plain", "baseline (light_switch-vf)"),
-        ("adaptive", "light_switch-vf"), ("adaptive", "baseline (light_switch-vf)")]
+        ("plain", "oven-vf"), ("plain", "baseline (oven-vf)"),
+        ("adaptive", "oven-vf"), ("adaptive", "baseline (oven-vf)")]
     for model in ("plain", "adaptive"):
-        for result in doc["results_by_user_model"][model]["light_switch"]:
+        for result in doc["results_by_user_model"][model]["oven"]:
             whose = [t["start_of"] for t in result["per_trial"]]
-            assert len(whose) == 2 and "light_switch" not in whose and whose[0] != whose[1], whose
+            assert len(whose) == 2 and "oven" not in whose and whose[0] != whose[1], whose
     md = (tmp_path / "suite.md").read_text()
-    assert md.startswith("| task | user | skill |") and md.count("| light_switch | adaptive |") == 2
+    assert md.startswith("| task | user | skill |") and md.count("| oven | adaptive |") == 2
