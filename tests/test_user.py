@@ -568,3 +568,25 @@ def test_a_delayed_device_model_picks_the_delay_that_explains_the_motion():
     np.testing.assert_allclose(model.B, B, atol=1e-6)
     with pytest.raises(ValueError, match="2 for 4 candidate delays"):
         model.update(inputs[:2], B @ inputs[2])
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.3, math.pi - 0.3, math.pi])
+def test_the_pour_tips_the_opening_away_from_the_arm_however_the_hand_is_turned(yaw):
+    """Over the mug, upright, wanting to pour: the person tips the bottle's top away from
+    the arm (the mug's x, as the task file turns it, points back at the arm), whether the
+    hand comes in as at the pour's start or turned half a turn (a cabinet's start), where
+    tipping it the other way about the hand's y runs the wrist into its limit."""
+    mug = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, math.pi]), MUG[:3, 3])
+    R = se3.matrix_from_rotvec([0.0, 0.0, yaw])
+    T = se3.transform_from_rt(R, MUG[:3, 3] + [0.0, 0.0, 0.05] - R @ [0.0, 0.0, 0.12])
+    it = TaskIntent(POUR)
+
+    def obs(t):
+        return Observation(t, T, {"mug": mug, "bottle_tip": T @ T_EE_TIP}, {"readings": {"bottle.poured": 0.0}}, "m")
+
+    it.desire(obs(0.0))
+    it.settle()
+    d = it.desire(obs(0.1))
+    assert d.phase == "pour"
+    top = np.cross(d.twist[3:], [0.0, 0.0, 1.0])  # where the turn takes an upright top
+    assert top[0] > 0.9 * np.linalg.norm(top) > 0.1  # away from the arm: world +x

@@ -124,7 +124,8 @@ def two_of(r: Any, v: Any, path: str) -> list[Any]:
 class TiltMind(StepMind):
     """A person tilting the frame of the reach before, held at its goal (the module doc):
     about the way the frame already leans when it leans clearly (more than the person's
-    ``lean``), else about the hand's y axis; the axis kept while the step is wanted look
+    ``lean``), else about the hand's y axis, tipping the top away from the arm's side
+    (:meth:`_wrist_axis`); the axis kept while the step is wanted look
     after look."""
 
     def __init__(self, step: Tilt, run: Run, index: int):
@@ -152,12 +153,22 @@ class TiltMind(StepMind):
     def want(self, sight: Sight) -> Want:
         seen, v = _held_still(self.run, self.index, sight)
         if self._axis is None or self.run.wanted != self.index:
-            a = np.cross(UP, seen.z) if seen.tilt > self.run.person.lean else sight.T_world_ee[:3, 1].copy()
+            a = np.cross(UP, seen.z) if seen.tilt > self.run.person.lean else self._wrist_axis(sight)
             a[2] = 0.0
             n = float(np.linalg.norm(a))
             self._axis = a / n if n > 1e-9 else np.array([0.0, 1.0, 0.0])
         w = self._axis * self.run.person.gain * (self.step.to - seen.tilt)
         return frame_want(self.run.person, seen, sight.T_world_ee, v, w)
+
+    def _wrist_axis(self, sight: Sight) -> Array:
+        """The hand's y axis, turned the way that tips the frame's top away from the side
+        the arm comes from: the task object's x axis (a task file turns it towards the
+        arm: a mug's back towards the robot, the lips' out of the mouth). A hand carried
+        in turned half a turn from its task's start tips the other way about its y."""
+        a = sight.T_world_ee[:3, 1].copy()
+        x_obj = sight.objects[self.run.task.object][:3, 0]
+        tips = np.cross(a, UP)  # where a turn about a takes an upright frame's top
+        return -a if float(tips[0] * x_obj[0] + tips[1] * x_obj[1]) > 0.0 else a
 
     def rest(self, sight: Sight) -> Want:
         seen = anchor_mind(self.run, self.index).look(sight)
