@@ -561,3 +561,43 @@ def test_a_faulted_arm_holds_the_target_and_re_seeds_only_from_zero_input():
     t += 0.001
     r = c.tick(t, t, inp([0, 0, 0], t, seq=99), state(T, t), obj(t))
     assert r.pose is not None and r.seed and np.allclose(r.T_world_target, T, atol=1e-15)
+
+
+MOVE_AND_TURN = """
+sctd_skill: 1
+name: move-and-turn
+object: world
+limits: {max_linear_speed: 0.1, max_angular_speed: 0.5}
+fsm: {start: go, end: go}
+states:
+  go:
+    input_mapping:
+      - {type: linear, frame: ee, axes: [tx]}
+      - {type: linear, frame: ee, axes: [rz]}
+"""
+
+
+def test_a_step_whose_turn_the_arm_does_not_follow_still_moves():
+    """The arm follows the target's position but not its turn (a wrist at its limit):
+    once the turn reaches the rotation offset bound, a push moves the target on without
+    turning it further (``turn_held``); with an arm that follows nothing, both offset
+    bounds hold and the steps beyond them are refused (``offset_limited``)."""
+    skill = skill_from_bundle(Bundle("move-and-turn.yaml", MOVE_AND_TURN, {}))
+    c = ctl(skill, max_offset_rotation=0.2)
+    t = 0.0
+    for k in range(1500):  # 1.5 s at full push: 0.75 rad of turn asked, 15 cm of move
+        T = c.T_world_target
+        meas = T_START.copy() if T is None else se3.transform_from_rt(T_START[:3, :3], T[:3, 3])
+        c.tick(t, t, inp([1.0, 0, 0], t, seq=k), state(meas, t), obj(t))
+        t += 0.001
+    T = c.T_world_target
+    turned = se3.angle_between3(T_START[:3, :3], T[:3, :3])
+    assert 0.2 - 0.5 * 0.001 < turned <= 0.2 + 1e-9  # the turn stopped at its bound
+    assert T[0, 3] - T_START[0, 3] > 0.1  # the move went on, nearly all of it
+    assert c.counters.turn_held > 1000 and c.counters.offset_limited == 0
+    c2 = ctl(skill, max_offset_rotation=0.2)
+    run(c2, [[1.0, 0, 0]] * 700, T_meas=T_START)  # the arm does not move at all
+    T = c2.T_world_target
+    assert np.linalg.norm(T[:3, 3] - T_START[:3, 3]) <= 0.05 + 1e-12  # both bounds hold
+    assert se3.angle_between3(T_START[:3, :3], T[:3, :3]) <= 0.2 + 1e-9
+    assert c2.counters.offset_limited > 100

@@ -379,3 +379,23 @@ def test_the_table_has_a_spill_column_only_for_a_task_that_reports_a_spill():
     assert head.index("bottle.spilled") + len("bottle.spilled") == row.index("0.013") + len("0.013")
     plain, _, _ = table([_summary({"drawer.position": 0.2, "drawer.grasps": 1.0})])
     assert "spill" not in plain and plain == head.replace("  bottle.spilled", "")
+
+
+def test_a_trial_names_the_joints_that_sat_at_a_limit_through_its_last_second():
+    """Joint 1 reaches its limit and stays; joint 3 touches its own and leaves; joint 7
+    comes to a limit only in the last half second: joint 1 alone is named."""
+    from sctd_services.eval.lockstep import JointLimits
+
+    lo, hi = -np.ones(7), np.ones(7)
+    limits = JointLimits(lo, hi)
+    for k in range(300):  # 3 s at 100 Hz
+        t = 0.01 * k
+        q = np.zeros(7)
+        if t >= 1.0:
+            q[0] = -1.0
+        if 1.5 <= t < 2.0:
+            q[2] = 1.0 - 1e-4
+        if t >= 2.5:
+            q[6] = 1.0
+        limits.look(q, t)
+    assert limits.at_the_end() == [1]

@@ -414,6 +414,50 @@ def test_neighbour_orientation_by_pose_follows_the_demonstrations_turned_as_the_
     assert np.isclose(angle(project(by_pose, T_turned, c)), 1.0, atol=1e-9)
 
 
+@pytest.mark.parametrize("max_turn", [None, 1.2])
+def test_a_hand_turned_away_from_every_demonstration_keeps_its_orientation(max_turn):
+    """The demonstrations near held the hand at rz 0.4: a hand within ``max_turn``
+    (default 90 deg) of that is turned towards it; one brought in turned further (half a
+    turn about the vertical, from another task's start) keeps its own, and still moves."""
+    files = {"m.json": vector_field_model_to_bytes(x_field_model(), "m.json")}
+    doc = vf_skill_doc("m.json")
+    if max_turn is not None:
+        doc["states"]["go"]["active_constraints"][0]["max_turn"] = max_turn
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    c = eng.skill.states[0].active_constraints[0]
+    limit = math.pi / 2 if max_turn is None else max_turn
+    assert c.max_turn == limit and (("max_turn" in c.to_yaml()) == (max_turn is not None))
+    dt = 0.01
+    for off in (limit - 0.05, limit + 0.05, math.pi - 0.01):
+        T = se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, 0.4 + off]), [0.0, 0.0, 0.0])
+        T1 = command(eng, T, np.array([1.0, 0, 0]), dt)
+        turned = se3.angle_between3(T[:3, :3], T1[:3, :3])
+        assert T1[0, 3] > 0.0  # the push moves it either way
+        if off < limit:
+            assert np.isclose(turned, 0.5 * dt, atol=1e-9)  # towards the demonstrations
+        else:
+            assert turned == 0.0
+
+
+def test_rigid_motion_on_a_hand_turned_away_from_the_demonstrations_only_translates():
+    """On the pouring sphere a hand held as the demonstrations held it turns about the
+    opening as it moves; the same hand turned half a turn about the vertical moves the
+    same way without turning (the wrist is not wound on from there)."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0]["motion"] = "rigid"
+    doc["states"]["go"]["active_constraints"] = []
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    dt, u = 0.01, np.array([1.0, 0.0, 0.0])
+    T = se3.transform_from_rt(np.eye(3), centre - pivot)
+    assert se3.angle_between3(T[:3, :3], command(eng, T, u, dt)[:3, :3]) > 0.5 * 0.1 * dt / 0.12
+    R = se3.matrix_from_rotvec([0.0, 0.0, math.pi])
+    T_away = se3.transform_from_rt(R, centre - R @ pivot)
+    T1 = command(eng, T_away, u, dt)
+    assert np.array_equal(T1[:3, :3], T_away[:3, :3]) and T1[0, 3] - T_away[0, 3] > 0.0
+
+
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))
 @settings(deadline=None)
 def test_blend_bends_but_keeps_magnitude_and_zero_stays_zero(u):

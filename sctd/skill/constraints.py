@@ -103,6 +103,7 @@ def _rotate_about(F: Flat, G: Flat, R: Array) -> Flat:
 
 TILT_CONE_LENGTH = 0.08  # m: how long a tilt cone is drawn
 BAND_SIZE = 0.3  # m: the side of a band's bounds as drawn
+MAX_TURN = math.pi / 2  # rad: a neighbour orientation turns a frame at most this far from its own
 
 
 @CONSTRAINTS.register
@@ -274,6 +275,13 @@ class NeighbourOrientation(ActiveConstraint):
     ``rotation_weight`` (m per rad): > 0 picks the neighbours nearest in pose, not in
     position alone (the demonstrations near where the hand is *and* as it is turned).
     Within a command it turns at most ``ws.turn_budget``.
+
+    ``max_turn`` (rad): a frame turned further than this from the neighbours' mean
+    orientation keeps its own. The hand was brought in turned another way (from another
+    task's start, half a turn about the vertical), away from every demonstration; turning
+    it back the shortest way, unasked, is a motion the person did not command and winds
+    the wrist into its limit, where the arm then follows nothing (the skill's position
+    guidance holds as before).
     """
 
     type: ClassVar[str] = "neighbour_orientation"
@@ -284,6 +292,7 @@ class NeighbourOrientation(ActiveConstraint):
     max_d: float = 0.15
     pivot: Array | None = None
     rotation_weight: float = 0.0
+    max_turn: float = MAX_TURN
     _pivot3: Vec3 | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -291,7 +300,8 @@ class NeighbourOrientation(ActiveConstraint):
 
     @classmethod
     def from_yaml(cls, r: Reader, cd: dict, path: str) -> NeighbourOrientation:
-        r.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d", "pivot", "rotation_weight"})
+        r.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d", "pivot", "rotation_weight",
+                                "max_turn"})
         model_file = r.string(cd.get("model"), f"{path}.model")
         return cls(
             model_file=model_file,
@@ -301,6 +311,7 @@ class NeighbourOrientation(ActiveConstraint):
             max_d=r.number(cd.get("max_d", 0.15), f"{path}.max_d", 0.0, lo_open=True),
             pivot=None if cd.get("pivot") is None else r.vector(cd["pivot"], f"{path}.pivot", 3),
             rotation_weight=r.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
+            max_turn=r.number(cd.get("max_turn", MAX_TURN), f"{path}.max_turn", 0.0, math.pi, lo_open=True),
         )
 
     def to_yaml(self) -> dict[str, Any]:
@@ -308,6 +319,8 @@ class NeighbourOrientation(ActiveConstraint):
                "max_d": self.max_d, "rotation_weight": self.rotation_weight}
         if self.pivot is not None:
             out["pivot"] = self.pivot.tolist()
+        if self.max_turn != MAX_TURN:
+            out["max_turn"] = self.max_turn
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -355,7 +368,10 @@ class NeighbourOrientation(ActiveConstraint):
         if n < 1e-12:
             return F
         budget = ws.turn_budget
-        if vn > 1e-15 and 2.0 * math.atan2(vn, cw) > budget:
+        angle = 2.0 * math.atan2(vn, cw)
+        if angle > self.max_turn:
+            return F  # turned another way than every demonstration near: keeps its own
+        if vn > 1e-15 and angle > budget:
             h = 0.5 * budget
             k = math.sin(h) / vn
             cx, cy, cz, cw = cx * k, cy * k, cz * k, math.cos(h)

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import se3
+from .constraints import MAX_TURN
 from .fields import Field, sigmoid
 from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
@@ -412,9 +413,25 @@ class VectorFieldMapping(InputMapping):
         ws.membership = P
         c = ws.speeds[0] * dt
         d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
-        if self.motion == "rigid":
+        if self.motion == "rigid" and not self._turned_away(G, ws):
             return rigid_step(F, G, d, P.tolist(), self.model.fields)
         return se3.translate_flat(F, *d)
+
+    def _turned_away(self, G: Flat, ws: Workspace) -> bool:
+        """Whether the frame at pose G is turned further than ``MAX_TURN`` from the mean
+        orientation of the demonstration points near it (none near: not): then the move
+        is a translation, as the neighbour orientation leaves such a frame as it is
+        (:class:`~sctd.skill.constraints.NeighbourOrientation`): a turn with the field
+        would wind the wrist on from an orientation no demonstration held."""
+        nb = ws.neighbours[self.model_file]
+        mean = nb.mean_orientation(nb.query(G[9:], self.max_n, self.max_d))
+        if mean is None:
+            return False
+        gx, gy, gz, gw = mean
+        fx, fy, fz, fw = se3.quaternion_from_flat(G)
+        n = math.sqrt(gx * gx + gy * gy + gz * gz + gw * gw)
+        c = abs(gx * fx + gy * fy + gz * fz + gw * fw) / n if n > 1e-12 else 1.0
+        return 2.0 * math.acos(min(1.0, c)) > MAX_TURN
 
     def _step(self, ws: Workspace, p: Vec3, u: Vec3, unit: Vec3, mag: float
               ) -> tuple[Array, Vec3, float]:

@@ -16,6 +16,8 @@ from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any
 
+import numpy as np
+
 from sctd import se3
 from sctd.runtime.controller import RuntimeConfig, TickResult
 from sctd.runtime.driver import TickDriver
@@ -179,6 +181,7 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
     k, seq = 0, 0
     # spec.arm_lag: the targets reach the arm through a delay line of that many ticks
     late: deque[list[float] | None] | None = deque() if spec.arm_lag > 0 else None
+    limits = JointLimits(sim.arm.arm.q_lower, sim.arm.arm.q_upper)
     lag_ticks = round(spec.arm_lag / sim.dt)
     while True:
         t = sim.t
@@ -192,6 +195,7 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
         if k % every_scene == 0:
             scene = sim.scene_outcome()
         if k % every_user == 0:
+            limits.look(sim.arm.dynamics.q, t)
             obs = Observation(t, se3.transform_from_pose(pose), objects, scene, mode)
             eng = drv.engine
             membership = None if eng.last_membership is None else eng.last_membership.tolist()
@@ -217,7 +221,33 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             sim.arm.controller.hold()
         sim.step()
         k += 1
-    return rec.result(demos)
+    result = rec.result(demos)
+    result.joint_limits = limits.at_the_end()
+    return result
+
+
+class JointLimits:
+    """Which of the arm's joints sit at a limit (within ``EPS`` rad of it), looked at
+    the user's rate: the joints that did over the trial's last ``LAST`` seconds, where a
+    trial that ended stuck or out of time ends (the arm cannot go on that way, whatever
+    commands it)."""
+
+    EPS = 1e-3  # rad
+    LAST = 1.0  # s
+
+    def __init__(self, lower: Any, upper: Any):
+        self.lower, self.upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        self.since: dict[int, float] = {}  # joint (from 1) -> when it came to its limit
+        self.t = 0.0
+
+    def look(self, q: Any, t: float) -> None:
+        at = np.flatnonzero((q - self.lower < self.EPS) | (self.upper - q < self.EPS)) + 1
+        self.since = {j: self.since.get(j, t) for j in at.tolist()}
+        self.t = t
+
+    def at_the_end(self) -> list[int]:
+        """The joints that sat at a limit throughout the last :attr:`LAST` seconds."""
+        return sorted(j for j, t0 in self.since.items() if self.t - t0 >= self.LAST)
 
 
 class Feed:

@@ -171,6 +171,8 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "stuck": r["stuck"], "limited_median_s": r["time_s_limited_median"],
                 "failures": _failures(r["per_trial"], run.task.name),
                 "started_outside_region": sum(1 for t in r["per_trial"] if t.get("outside_region")),
+                "failed_at_joint_limit": sum(1 for t in r["per_trial"]
+                                             if t["outcome"] != "success" and t.get("joint_limits")),
             })
     return out
 
@@ -184,6 +186,8 @@ def _failures(per_trial: list[dict[str, Any]], task: str) -> dict[str, int]:
                 why += f" (from {t['start_of']}'s start)"
             if t.get("outside_region"):
                 why += " [out of region]"
+            if t.get("joint_limits"):
+                why += f" [joint {', '.join(map(str, t['joint_limits']))} at its limit]"
             out[why] = out.get(why, 0) + 1
     return out
 

@@ -114,6 +114,8 @@ class TrialResult:
     sim_rtf: float | None = None  # real time: simulated / wall time over the trial (None in lockstep)
     # m the hand started outside the skill's region (0 inside; None: the skill states none)
     outside_region: float | None = None
+    # the arm's joints (from 1) at a limit over the trial's last second (lockstep; None: not looked at)
+    joint_limits: list[int] | None = None
     trajectory: list[list[float]] = field(default_factory=list, repr=False)  # t, T_obj_ee pose
     series: dict[str, list[Any]] = field(default_factory=dict, repr=False)
 
