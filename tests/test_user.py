@@ -582,7 +582,8 @@ def test_the_pour_tips_the_opening_away_from_the_arm_however_the_hand_is_turned(
     it = TaskIntent(POUR)
 
     def obs(t):
-        return Observation(t, T, {"mug": mug, "bottle_tip": T @ T_EE_TIP}, {"readings": {"bottle.poured": 0.0}}, "m")
+        seen = {"mug": mug, "bottle_tip": T @ T_EE_TIP}
+        return Observation(t, T, seen, {"readings": {"bottle.poured": 0.0}}, "m")
 
     it.desire(obs(0.0))
     it.settle()
