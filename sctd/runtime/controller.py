@@ -157,7 +157,6 @@ class Counters:
     stale_object: int = 0
     nonfinite_output: int = 0
     offset_limited: int = 0
-    turn_held: int = 0  # steps moved without their turn, which the arm did not follow
     state_discontinuity: int = 0
     reseeds: int = 0
     transitions: int = 0
@@ -416,23 +415,10 @@ class Controller:
         if F_new is F_prev:
             return True
         if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
-            self._unturned(F_prev, F_new, F_meas)
+            self.counters.offset_limited += 1  # refused: the arm lags or is blocked
         elif not self._accept(F_new):
             self.counters.nonfinite_output += 1  # never publish a non-finite target
         return True
-
-    def _unturned(self, F_prev: se3.Flat, F_new: se3.Flat, F_meas: se3.Flat) -> None:
-        """A step refused for growing the offset: its move without its turn when that
-        grows neither offset (the arm does not follow the turn, a wrist at its limit, but
-        can follow the move: a door's handle swung by a hand turned half a turn from how
-        the demonstrations held it), else nothing."""
-        cfg = self.config
-        F_kept = (*F_prev[:9], *F_new[9:])
-        if F_kept != F_prev and not grows_offset(F_prev, F_kept, F_meas, cfg.max_offset,
-                                                 cfg.max_offset_rotation) and self._accept(F_kept):
-            self.counters.turn_held += 1
-        else:
-            self.counters.offset_limited += 1  # refused: the arm lags or is blocked
 
     def _quiet(self, mode: str, cmd: Command) -> TickResult:
         """A tick that publishes nothing; the next target will be a (re-)seed."""
