@@ -55,8 +55,8 @@ def test_a_skills_speed_cap_near_the_object_raises_its_floor():
 
 
 def _result(name, limits, times, baseline_of=None, label=None):
-    per_trial = [{"outcome": "success" if t else "failure", "time_s": t,
-                  "reason": None if t else "time limit"} for t in times]
+    per_trial = [{"seed": k, "outcome": "success" if t else "failure", "time_s": t,
+                  "reason": None if t else "time limit"} for k, t in enumerate(times)]
     ok = [t for t in times if t]
     return {"skill": label or name, "name": name, "baseline_of": baseline_of, "trials": len(times),
             "successes": len(ok), "success_rate": len(ok) / len(times),
@@ -162,6 +162,22 @@ def test_a_failure_from_another_tasks_start_says_whose_start_it_was():
     assert out[0]["failures"] == {"time limit (from pour's start) [out of region]": 1, "time limit": 1}
     assert out[0]["started_outside_region"] == 1
     assert out[0]["user_model"] == "adaptive"
+
+
+def test_a_skill_is_also_judged_on_the_starts_its_baseline_finished_from():
+    """Trials 1 and 3 the baseline did not finish either (the arm at a limit from there):
+    over the other three the skill finished two; a failure at a joint limit says so."""
+    limits = {"max_linear_speed": 0.1, "max_angular_speed": 0.5}
+    a = _result("a", limits, [4.0, None, None, None, 5.0], label="a.yaml")
+    a["per_trial"][1]["joint_limits"] = [1]
+    base = _result("teleop", limits, [6.0, None, 6.0, None, 6.0], baseline_of="a.yaml")
+    out = rows([TaskRun(find_task("drawer"), ["a.yaml"], [a, base])])
+    assert out[0]["where_baseline_finished"] == [2, 3] and out[1]["where_baseline_finished"] is None
+    assert out[0]["failed_at_joint_limit"] == 1
+    assert out[0]["failures"] == {"time limit [joint 1 at its limit]": 1, "time limit": 2}
+    assert "2/3" in table(out, paired=True)[2] and "2/3" not in table(out)[2]
+    line = markdown(out, paired=True).splitlines()[2]
+    assert line == "| drawer | a | 2/5 | 2/3 | 5.00 | 0.83 | 4.00 | 1.0 | 5.00 |"
 
 
 @pytest.mark.slow

@@ -66,7 +66,7 @@ def main_suite(args: argparse.Namespace) -> int:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "suite.json").write_text(json.dumps(doc))
-        (out / "suite.md").write_text(markdown(table_rows))
+        (out / "suite.md").write_text(markdown(table_rows, paired=args.starts != "own"))
         figure(table_rows).savefig(out / "suite.png", dpi=100)
         print(f"sctd suite: wrote suite.json, suite.md and suite.png in {out}", file=sys.stderr)
     if args.json:
@@ -75,6 +75,6 @@ def main_suite(args: argparse.Namespace) -> int:
     print(f"sctd suite: {len(tasks)} tasks, {args.trials} lockstep trials per skill from seed {args.seed}, "
           f"user model{'s' if len(models) > 1 else ''} {', '.join(models)}, starts {args.starts}; "
           "the baseline is mode-switching teleop with the task's control frame")
-    for line in table(table_rows):
+    for line in table(table_rows, paired=args.starts != "own"):
         print("  " + line)
     return EXIT_OK

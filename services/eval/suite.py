@@ -173,8 +173,17 @@ def rows(runs: list[TaskRun]) -> list[dict[str, Any]]:
                 "started_outside_region": sum(1 for t in r["per_trial"] if t.get("outside_region")),
                 "failed_at_joint_limit": sum(1 for t in r["per_trial"]
                                              if t["outcome"] != "success" and t.get("joint_limits")),
+                "where_baseline_finished": None if base is None or base is r else _paired(r, base),
             })
     return out
+
+
+def _paired(r: dict[str, Any], base: dict[str, Any]) -> list[int]:
+    """[successes, trials] of ``r`` over the seeds from which its baseline finished the
+    task: the starts from which the same person reached the goal unassisted."""
+    finished = {t["seed"] for t in base["per_trial"] if t["outcome"] == "success"}
+    mine = [t for t in r["per_trial"] if t["seed"] in finished]
+    return [sum(t["outcome"] == "success" for t in mine), len(mine)]
 
 
 def _failures(per_trial: list[dict[str, Any]], task: str) -> dict[str, int]:
@@ -192,14 +201,16 @@ def _failures(per_trial: list[dict[str, Any]], task: str) -> dict[str, int]:
     return out
 
 
-def table(rows_: list[dict[str, Any]]) -> list[str]:
+def table(rows_: list[dict[str, Any]], paired: bool = False) -> list[str]:
     """The suite's table, one line per task and skill (the columns as wide as the longest
-    task and skill names)."""
+    task and skill names); ``paired``: with each skill's success over the starts its
+    baseline finished from (:func:`_paired`)."""
     tw = max([14, *(len(r["task"]) for r in rows_)])
     sw = max([24, *(len(r["skill"]) for r in rows_)])
     users = _several_users(rows_)
     user = f"{'user':<9}" if users else ""
-    head = (f"{'task':<{tw}} {user}{'skill':<{sw}} {'success':>9} {'median [s]':>10} {'vs base':>8} "
+    pair = f" {'base done':>9}" if paired else ""
+    head = (f"{'task':<{tw}} {user}{'skill':<{sw}} {'success':>9}{pair} {'median [s]':>10} {'vs base':>8} "
             f"{'floor [s]':>9} {'switches':>8} {'effort':>7}  failures")
     lines = [head, "-" * len(head)]
     for r in rows_:
@@ -207,7 +218,8 @@ def table(rows_: list[dict[str, Any]]) -> list[str]:
         vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
         why = ", ".join(f"{k} x{v}" for k, v in r["failures"].items())
         user = f"{r['user_model']:<9}" if users else ""
-        lines.append(f"{r['task']:<{tw}} {user}{r['skill']:<{sw}} {r['successes']:>4}/{r['trials']:<4} "
+        pair = f" {_pair_text(r):>9}" if paired else ""
+        lines.append(f"{r['task']:<{tw}} {user}{r['skill']:<{sw}} {r['successes']:>4}/{r['trials']:<4}{pair} "
                      f"{med:>10} {vs:>8} {r['floor_s']:>9.2f} {r['mode_switches']:>8.1f} "
                      f"{r['effort']:>7.2f}  {why}")
     return lines
@@ -218,18 +230,26 @@ def _several_users(rows_: list[dict[str, Any]]) -> bool:
     return len({r.get("user_model", DEFAULT_MODEL) for r in rows_}) > 1
 
 
-def markdown(rows_: list[dict[str, Any]]) -> str:
-    """The table as Markdown, for the docs."""
+def _pair_text(r: dict[str, Any]) -> str:
+    p = r.get("where_baseline_finished")
+    return "-" if p is None else f"{p[0]}/{p[1]}"
+
+
+def markdown(rows_: list[dict[str, Any]], paired: bool = False) -> str:
+    """The table as Markdown, for the docs (``paired``: as :func:`table`'s)."""
     users = _several_users(rows_)
     user = " user |" if users else ""
-    out = [f"| task |{user} skill | success | median time [s] | vs baseline | floor [s] | mode switches | "
-           "effort |", "|---|" + ("---|" if users else "") + "---|---|---|---|---|---|---|"]
+    pair = " where the baseline finished |" if paired else ""
+    out = [f"| task |{user} skill | success |{pair} median time [s] | vs baseline | floor [s] | "
+           "mode switches | effort |",
+           "|---|" + ("---|" if users else "") + ("---|" if paired else "") + "---|---|---|---|---|---|---|"]
     for r in rows_:
         med = "-" if r["median_s"] is None else f"{r['median_s']:.2f}"
         vs = "-" if r["vs_baseline"] is None else f"{r['vs_baseline']:.2f}"
         user = f" {r['user_model']} |" if users else ""
-        out.append(f"| {r['task']} |{user} {r['skill']} | {r['successes']}/{r['trials']} | {med} | {vs} | "
-                   f"{r['floor_s']:.2f} | {r['mode_switches']:.1f} | {r['effort']:.2f} |")
+        pair = f" {_pair_text(r)} |" if paired else ""
+        out.append(f"| {r['task']} |{user} {r['skill']} | {r['successes']}/{r['trials']} |{pair} {med} | "
+                   f"{vs} | {r['floor_s']:.2f} | {r['mode_switches']:.1f} | {r['effort']:.2f} |")
     return "\n".join(out) + "\n"
 
 
