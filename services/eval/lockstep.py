@@ -172,8 +172,8 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
     every_scene = max(1, round(1.0 / (SCENE_RATE * sim.dt)))
     scene: dict[str, Any] = {}
     objects: dict[str, Any] = {}
-    u: tuple[float, ...] = (0.0,) * spec.axes
-    b: tuple[int, ...] = (0, 1, 0)
+    limits = JointLimits(sim.arm.arm.q_lower, sim.arm.arm.q_upper)
+    u, b = (0.0,) * spec.axes, (0, 1, 0)
     mode = drv.engine.state
     engaged: str | None = None
     if watch is not None:
@@ -181,7 +181,6 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
     k, seq = 0, 0
     # spec.arm_lag: the targets reach the arm through a delay line of that many ticks
     late: deque[list[float] | None] | None = deque() if spec.arm_lag > 0 else None
-    limits = JointLimits(sim.arm.arm.q_lower, sim.arm.arm.q_upper)
     lag_ticks = round(spec.arm_lag / sim.dt)
     while True:
         t = sim.t
@@ -221,9 +220,7 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             sim.arm.controller.hold()
         sim.step()
         k += 1
-    result = rec.result(demos)
-    result.joint_limits = limits.at_the_end()
-    return result
+    return limits.noted(rec.result(demos))
 
 
 class JointLimits:
@@ -244,6 +241,11 @@ class JointLimits:
         at = np.flatnonzero((q - self.lower < self.EPS) | (self.upper - q < self.EPS)) + 1
         self.since = {j: self.since.get(j, t) for j in at.tolist()}
         self.t = t
+
+    def noted(self, result: TrialResult) -> TrialResult:
+        """``result`` with :meth:`at_the_end` as its ``joint_limits``."""
+        result.joint_limits = self.at_the_end()
+        return result
 
     def at_the_end(self) -> list[int]:
         """The joints that sat at a limit throughout the last :attr:`LAST` seconds."""
