@@ -439,23 +439,44 @@ def test_a_hand_turned_away_from_every_demonstration_keeps_its_orientation(max_t
             assert turned == 0.0
 
 
-def test_rigid_motion_on_a_hand_turned_away_from_the_demonstrations_only_translates():
-    """On the pouring sphere a hand held as the demonstrations held it turns about the
-    opening as it moves; the same hand turned half a turn about the vertical moves the
-    same way without turning (the wrist is not wound on from there)."""
-    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+def cylinder_model(radius=0.3) -> VectorFieldModel:
+    """A door's handle swung about the vertical axis through the origin, demonstrated by a
+    hand that turned with it (points on a quarter arc, each turned by its angle)."""
+    a = np.linspace(0.0, math.pi / 2, 25)
+    pts = np.array([[radius * math.cos(x), radius * math.sin(x), 0.0] for x in a])
+    q = np.array([se3.quaternion_from_rotvec([0.0, 0.0, x]) for x in a])
+    f = CylinderField(weight=1.0, axis=np.array([0.0, 0.0, 1.0]), point=np.zeros(3))
+    return VectorFieldModel((f,), pts, q, np.ones((len(a), 1)))
+
+
+@pytest.mark.parametrize("field", ["sphere", "cylinder"])
+def test_rigid_motion_does_not_wind_a_turned_away_hand_further_about_its_turn(field):
+    """A hand held as the demonstrations held it turns with the field as it moves. The
+    same hand brought in turned half a turn about the vertical: a tilt across that axis
+    (the pour's sphere) still turns it, a turn about the vertical itself (a door's
+    cylinder, which would wind the wrist on into its limit) only translates."""
     doc = vf_skill_doc("m.json")
     doc["states"]["go"]["input_mapping"][0]["motion"] = "rigid"
     doc["states"]["go"]["active_constraints"] = []
-    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    if field == "sphere":
+        centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+        model, at, u = sphere_model(centre, pivot), centre, np.array([1.0, 0.0, 0.0])
+    else:
+        pivot, model = np.zeros(3), cylinder_model()
+        at, u = np.array([0.3, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    files = {"m.json": vector_field_model_to_bytes(model, "m.json")}
     eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
-    dt, u = 0.01, np.array([1.0, 0.0, 0.0])
-    T = se3.transform_from_rt(np.eye(3), centre - pivot)
-    assert se3.angle_between3(T[:3, :3], command(eng, T, u, dt)[:3, :3]) > 0.5 * 0.1 * dt / 0.12
-    R = se3.matrix_from_rotvec([0.0, 0.0, math.pi])
-    T_away = se3.transform_from_rt(R, centre - R @ pivot)
-    T1 = command(eng, T_away, u, dt)
-    assert np.array_equal(T1[:3, :3], T_away[:3, :3]) and T1[0, 3] - T_away[0, 3] > 0.0
+    dt = 0.01
+    for yaw in (0.0, math.pi):
+        R = se3.matrix_from_rotvec([0.0, 0.0, yaw])
+        T = se3.transform_from_rt(R, at - R @ pivot)
+        T1 = command(eng, T, u, dt)
+        turned = se3.angle_between3(T[:3, :3], T1[:3, :3])
+        assert np.linalg.norm(T1[:3, 3] - T[:3, 3]) > 0.5 * 0.1 * dt  # it moves either way
+        if yaw == 0.0 or field == "sphere":
+            assert turned > 0.5 * 0.1 * dt / 0.3
+        else:
+            assert turned == 0.0
 
 
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3))

@@ -274,12 +274,22 @@ def _product3(A: Sequence[float], B: Sequence[float]) -> tuple[float, ...]:
             a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
 
 
-def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field]) -> Flat:
+RIGID_ALONG_TURN = math.cos(math.pi / 4)  # a rigid turn within 45 deg of a wound axis: none
+
+
+def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field],
+               wound: Vec3 | None = None) -> Flat:
     """Move the hand F (object frame) by the displacement ``d`` (3 floats) of the frame at
     pose ``G``: the part of it along each rotational field (weighted by its membership
     ``P`` (K,)) as a rotation of the whole hand about the field's centre (sphere) or
     axis (cylinder), the rest as a translation
-    (:meth:`~sctd.skill.fields.Field.rigid_part`). On floats (the tick)."""
+    (:meth:`~sctd.skill.fields.Field.rigid_part`). On floats (the tick).
+
+    ``wound``: the axis about which the hand is turned far from every demonstration
+    near (a hand brought in half a turn about the vertical): a field's rotation within
+    45 deg of it is not made (its part translates): the wrist that turns the hand about
+    it is the one the way in has wound towards its limit (a door's swing about its
+    hinge), while a tilt across it is as the demonstrations' (a bottle's pour)."""
     R_hand: Sequence[float] = F  # the hand's rotation, row-major (its first nine entries)
     x, y, z = F[9], F[10], F[11]
     rx, ry, rz = d
@@ -293,6 +303,9 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
         t, w, (c0, c1, c2) = part
         if not (t[0] or t[1] or t[2]):
             continue
+        if wound is not None and abs(w[0] * wound[0] + w[1] * wound[1] + w[2] * wound[2]) > (
+                RIGID_ALONG_TURN * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])):
+            continue  # about the wound axis: translated (below)
         R = _rodrigues(*w)
         R_hand = _product3(R, R_hand)
         a0, a1, a2 = x - c0, y - c1, z - c2
@@ -413,25 +426,31 @@ class VectorFieldMapping(InputMapping):
         ws.membership = P
         c = ws.speeds[0] * dt
         d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
-        if self.motion == "rigid" and not self._turned_away(G, ws):
-            return rigid_step(F, G, d, P.tolist(), self.model.fields)
+        if self.motion == "rigid":
+            return rigid_step(F, G, d, P.tolist(), self.model.fields, self._turned_away(G, ws))
         return se3.translate_flat(F, *d)
 
-    def _turned_away(self, G: Flat, ws: Workspace) -> bool:
-        """Whether the frame at pose G is turned further than ``MAX_TURN`` from the mean
-        orientation of the demonstration points near it (none near: not): then the move
-        is a translation, as the neighbour orientation leaves such a frame as it is
-        (:class:`~sctd.skill.constraints.NeighbourOrientation`): a turn with the field
-        would wind the wrist on from an orientation no demonstration held."""
+    def _turned_away(self, G: Flat, ws: Workspace) -> Vec3 | None:
+        """The axis (unit, object frame) about which the frame at pose G is turned
+        further than ``MAX_TURN`` from the mean orientation of the demonstration points
+        near it; None when it is not (or none is near). The neighbour orientation leaves
+        such a frame as it is (:class:`~sctd.skill.constraints.NeighbourOrientation`), and
+        a rigid motion does not turn it further about that axis (:func:`rigid_step`)."""
         nb = ws.neighbours[self.model_file]
         mean = nb.mean_orientation(nb.query(G[9:], self.max_n, self.max_d))
         if mean is None:
-            return False
+            return None
         gx, gy, gz, gw = mean
         fx, fy, fz, fw = se3.quaternion_from_flat(G)
-        n = math.sqrt(gx * gx + gy * gy + gz * gz + gw * gw)
-        c = abs(gx * fx + gy * fy + gz * fz + gw * fw) / n if n > 1e-12 else 1.0
-        return 2.0 * math.acos(min(1.0, c)) > MAX_TURN
+        # the turn from the frame to the mean, q_mean * q_frame^-1 (as the constraint's)
+        cw = gw * fw + gx * fx + gy * fy + gz * fz
+        cx = -gw * fx + gx * fw - gy * fz + gz * fy
+        cy = -gw * fy + gy * fw - gz * fx + gx * fz
+        cz = -gw * fz + gz * fw - gx * fy + gy * fx
+        vn = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if vn < 1e-12 or 2.0 * math.atan2(vn, abs(cw)) <= MAX_TURN:
+            return None
+        return cx / vn, cy / vn, cz / vn
 
     def _step(self, ws: Workspace, p: Vec3, u: Vec3, unit: Vec3, mag: float
               ) -> tuple[Array, Vec3, float]:
