@@ -107,3 +107,36 @@ def test_status_region_tells_where_the_hand_is_against_the_region():
     assert Rig(skill, "cup", mug, [1.0, 0.25, 0.5, 0, 0, 0, 1]).drv.region() is None  # (the mug unseen)
     plain = load_skill(ROOT / "skills" / "pour.yaml")
     assert plain.region is None and Rig(plain, "mug", mug, [1.0, 0.25, 0.5, 0, 0, 0, 1]).drv.region() is None
+
+
+def test_a_skill_out_of_its_region_whose_object_is_absent_or_stale_holds_and_says_why():
+    """cabinet-vf pushed from outside its region: with the handle never seen it waits and
+    publishes nothing (no region to tell); seen once, it runs and says how far outside
+    its region the hand is; once the handle's pose is older than the object timeout the
+    hand holds where it was, still saying so."""
+    from sctd.wire.codec import InputMsg
+
+    drv = TickDriver(load_skill(ROOT / "skills" / "cabinet-vf.yaml"), RuntimeConfig())
+    hand = [0.3, 0.3, 0.7, 0.0, 0.0, 0.0, 1.0]
+    held = None
+    for k in range(1, 1400):
+        t = 0.001 * k
+        drv.take_state(StateMsg(k, t, hand, None), t)
+        if k == 100:
+            drv.take_object("door_handle", ObjectMsg(1, t, [0.69, -0.18, 0.62, 0.0, 0.0, 1.0, 0.0]), t)
+        drv.take_input("pad", InputMsg(k, t, (1.0, 0.0, 0.0), ()), t)
+        res = drv.tick(t, t)
+        drv.after_tick()
+        region = drv.region()
+        if k < 100:
+            assert res.mode == "waiting" and res.pose is None and region is None
+            continue
+        assert region is not None and not region["inside"] and region["outside_by"] > 0.2
+        stale_at = 0.1 + RuntimeConfig().object_timeout
+        if t > stale_at + 0.01:
+            assert res.mode == "hold"
+            held = held or res.pose
+            assert res.pose == held
+        elif 0.11 < t < stale_at - 0.01:
+            assert res.mode == "running"
+    assert held is not None and drv.counters.stale_object >= 1
