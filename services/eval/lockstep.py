@@ -211,13 +211,19 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
         if late is not None:
             late.append(pose)
             pose = late.popleft() if len(late) > lag_ticks else None
-        if pose is not None and guard.admit(pose, t, F, not sim.arm.controller.holding):
-            sim.set_target(pose, t)
-        elif pose is not None and not sim.arm.controller.holding:
-            sim.arm.controller.hold()
+        _hand_over(sim, guard, pose, t, F)
         sim.step()
         k += 1
     return rec.result(demos)
+
+
+def _hand_over(sim: Simulation, guard: TargetGuard, pose: list[float] | None, t: float, F: Any) -> None:
+    """The tick's target to the arm, through the simulator's target guard: a target it
+    refuses holds the arm (``pose`` None: nothing reaches the arm this tick)."""
+    if pose is not None and guard.admit(pose, t, F, not sim.arm.controller.holding):
+        sim.set_target(pose, t)
+    elif pose is not None and not sim.arm.controller.holding:
+        sim.arm.controller.hold()
 
 
 class Feed:
