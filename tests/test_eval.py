@@ -132,7 +132,7 @@ def test_baseline_runs_with_the_assisted_skills_limits(tmp_path):
     assert [e.skill.limits for e in base] == [pour.limits, load_skill(vf).limits]
     assert task_of([e.skill for e in ents], None).name == "pour"
     p = with_limits(ROOT / "skills" / "pour-vf.yaml", pour.limits, tmp_path / "vf")
-    assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf.npz").exists()
+    assert load_skill(p).limits == pour.limits and (p.parent / "pour-vf-s1.npz").exists()
 
 
 def test_the_baseline_turns_about_the_tip_of_what_the_hand_holds(tmp_path):

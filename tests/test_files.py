@@ -84,8 +84,8 @@ def test_recursive_aliases_deep_nesting_and_bad_bytes_are_errors_not_tracebacks(
 def _skill_folder(tmp_path: Path) -> Path:
     d = tmp_path / "skill"
     d.mkdir()
-    shutil.copy(ROOT / "skills" / "pour-vf.yaml", d / "pour-vf.yaml")
-    shutil.copy(ROOT / "skills" / "pour-vf.npz", d / "pour-vf.npz")
+    for f in (ROOT / "skills").glob("pour-vf*"):  # the skill and its states' model files
+        shutil.copy(f, d / f.name)
     return d
 
 
@@ -94,13 +94,13 @@ def test_a_model_file_must_resolve_inside_the_skill_folder(tmp_path):
     assert load_skill(d / "pour-vf.yaml").name
     secret = tmp_path / "secret.npz"
     secret.write_bytes(b"PASSWORD=hunter2\n" * 40)
-    (d / "pour-vf.npz").unlink()
-    (d / "pour-vf.npz").symlink_to(secret)
+    (d / "pour-vf-s1.npz").unlink()
+    (d / "pour-vf-s1.npz").symlink_to(secret)
     with pytest.raises(SkillError) as e:
         load_skill(d / "pour-vf.yaml")
     assert "resolves outside" in str(e.value) and "hunter2" not in str(e.value)
-    (d / "pour-vf.npz").unlink()
-    (d / "pour-vf.npz").symlink_to("/dev/zero")
+    (d / "pour-vf-s1.npz").unlink()
+    (d / "pour-vf-s1.npz").symlink_to("/dev/zero")
     with pytest.raises(SkillError, match="resolves outside"):
         load_skill(d / "pour-vf.yaml")
 

@@ -3,6 +3,8 @@ order the demonstrations use them, on when the hand is where they switched."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -73,3 +75,19 @@ def test_fields_used_back_and_forth_stay_blended():
     assert len(vf.fields_) == 2
     plan = plan_states(vf)
     assert not plan.sequential and plan.reason
+
+
+def test_a_state_of_one_field_scales_by_parts_and_a_blended_one_as_a_whole():
+    """The shipped pour's demonstrations as states: the pour state's sphere turns the
+    hand, and each part of a push is scaled on its own there; blended, the whole push."""
+    from sctd.learn import learn, read_demos
+
+    demos = read_demos(Path(__file__).resolve().parents[1] / "skills" / "demos" / "pour")
+    kinds = ["translation", "cylinder", "sphere", "point", "general"]
+    for states, expected in (("auto", [("point", "parts"), ("sphere", "parts")]),
+                             ("blend", [("point sphere", "whole")])):
+        res = learn(demos, method="vf", random_state=0, models=kinds, vf_states=states, object="mug")
+        skill = skill_from_bundle(skill_bundle(res, "pour-vf"))
+        got = [(" ".join(f.type for f in m.model.fields), m.scale_by)
+               for m in (s.input_mappings[0] for s in skill.states)]
+        assert got == expected

@@ -593,6 +593,36 @@ def test_rigid_motion_turns_the_hand_about_its_pivot_on_a_sphere():
     assert np.allclose(T2[:3, :3], np.eye(3)) and 0 < d[0] <= 0.1 * dt and np.allclose(d[1:], 0)
 
 
+def test_rigid_motion_moves_each_part_of_a_push_at_its_own_agreement():
+    """A push 0.6 along the pouring sphere and 0.8 across it (down, off the sphere) at its
+    bottom: the bottle tilts at 0.6 of full speed (not at the sigmoid of the whole push's
+    agreement, f(0.6) = 1/3 at k_s 0.5), and the opening it turns about moves down at
+    min_v (0.1) of the 0.8 only."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "scale_by": "parts"}
+    doc["states"]["go"]["active_constraints"] = []
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    T = se3.transform_from_rt(np.eye(3), centre - pivot)
+    dt = 0.01
+    T1 = command(eng, T, np.array([0.6, 0.0, -0.8]), dt)
+    w = se3.rotvec_from_matrix(T1[:3, :3])
+    assert w[1] < 0 and np.isclose(np.linalg.norm(w), 0.6 * 0.1 * dt / 0.12, rtol=1e-3)
+    moved = (T1 @ np.append(pivot, 1.0))[:3] - centre
+    assert np.allclose(moved, [0.0, 0.0, -0.1 * 0.8 * 0.1 * dt], atol=1e-12)
+    assert eng.last_scale < 0.34  # the whole push's scaling, as status reports it
+    assert np.array_equal(command(eng, T, np.zeros(3), dt), T)  # zero input: nothing moves
+    # scaled as a whole (the thesis, what a file without scale_by reads): both parts at f(0.6) = 1/3
+    del doc["states"]["go"]["input_mapping"][0]["scale_by"]
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    T2 = command(eng, T, np.array([0.6, 0.0, -0.8]), dt)
+    w2 = se3.rotvec_from_matrix(T2[:3, :3])
+    assert np.isclose(np.linalg.norm(w2), 0.6 * 0.1 * dt / 0.12 / 3, rtol=1e-3)
+    moved = (T2 @ np.append(pivot, 1.0))[:3] - centre
+    assert np.allclose(moved, [0.0, 0.0, -0.8 * 0.1 * dt / 3], atol=1e-12)
+
+
 @given(st.sampled_from(["translation", "sphere", "cylinder"]),
        st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3),
        st.lists(st.floats(-1, 1), min_size=3, max_size=3))

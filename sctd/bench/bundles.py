@@ -61,8 +61,8 @@ def malformed_bundles(skill: Path, learned: Path) -> list[tuple[str, bytes]]:
         ("wrong format", packed(format="zip", version=99)),
         ("files not bytes", packed(files={"m.npz": "text"})),
         ("escaping file name", Bundle(vf.name, vf.yaml_text, {**vf.files, "../x.npz": b""}).pack()),
-        ("corrupt npz", Bundle(vf.name, vf.yaml_text, {rel: b"PK\x03\x04broken"}).pack()),
-        ("npz zip bomb", Bundle(vf.name, vf.yaml_text, {rel: bomb.getvalue()}).pack()),
+        ("corrupt npz", Bundle(vf.name, vf.yaml_text, {**vf.files, rel: b"PK\x03\x04broken"}).pack()),
+        ("npz zip bomb", Bundle(vf.name, vf.yaml_text, {**vf.files, rel: bomb.getvalue()}).pack()),
         ("missing model file", Bundle(vf.name, vf.yaml_text, {}).pack()),
         ("deeply nested yaml", yaml("[" * 5000)),
         ("yaml syntax error", yaml("states: [a, b\nfsm: {")),
@@ -80,20 +80,24 @@ def malformed_bundles(skill: Path, learned: Path) -> list[tuple[str, bytes]]:
 
 
 def big_bundle(learned: Path, seed: int, size: int = MAX_BUNDLE_BYTES - 4096) -> Bundle:
-    """The vector-field skill file ``learned`` with its model grown to a packed bundle of
-    about ``size`` bytes (at most the limit): each demonstration point repeated with 0.5
-    mm of noise (quaternions 1e-3, normalised), stored uncompressed. ``seed`` makes
-    bundles that differ (other ids) and behave alike."""
+    """The vector-field skill file ``learned`` with its models grown to a packed bundle of
+    about ``size`` bytes (at most the limit), the room shared equally among its model
+    files (one per state of a skill learned as states): each demonstration point
+    repeated with 0.5 mm of noise (quaternions 1e-3, normalised), stored uncompressed.
+    ``seed`` makes bundles that differ (other ids) and behave alike."""
     vf = bundle_from_file(learned)
-    rel = next(iter(vf.files))
-    with np.load(io.BytesIO(vf.files[rel]), allow_pickle=False) as z:
-        fields, P, Q, R = z["fields"], z["points"], z["quaternions"], z["responsibilities"]
-    room = size - len(Bundle(vf.name, vf.yaml_text, {rel: b""}).pack()) - 2048  # 2 kB: the npz's own
-    n = room // (8 * (P.shape[1] + Q.shape[1] + R.shape[1]))
+    room = size - len(Bundle(vf.name, vf.yaml_text, {rel: b"" for rel in vf.files}).pack())
+    room = room // len(vf.files) - 2048  # 2 kB: each npz's own
     rng = np.random.default_rng(seed)
-    i = np.arange(n) % len(P)
-    Q2 = Q[i] + rng.normal(scale=1e-3, size=(n, 4))
-    buf = io.BytesIO()
-    np.savez(buf, fields=fields, points=P[i] + rng.normal(scale=5e-4, size=(n, 3)),
-             quaternions=Q2 / np.linalg.norm(Q2, axis=1)[:, None], responsibilities=R[i])
-    return Bundle(vf.name, vf.yaml_text, {rel: buf.getvalue()})
+    files = {}
+    for rel, data in vf.files.items():
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            fields, P, Q, R = z["fields"], z["points"], z["quaternions"], z["responsibilities"]
+        n = room // (8 * (P.shape[1] + Q.shape[1] + R.shape[1]))
+        i = np.arange(n) % len(P)
+        Q2 = Q[i] + rng.normal(scale=1e-3, size=(n, 4))
+        buf = io.BytesIO()
+        np.savez(buf, fields=fields, points=P[i] + rng.normal(scale=5e-4, size=(n, 3)),
+                 quaternions=Q2 / np.linalg.norm(Q2, axis=1)[:, None], responsibilities=R[i])
+        files[rel] = buf.getvalue()
+    return Bundle(vf.name, vf.yaml_text, files)

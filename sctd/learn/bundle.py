@@ -209,7 +209,10 @@ def _stored(f: Field) -> Field:
 def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorFieldModel,
               fields: list[Field]) -> State:
     """One state of a vector-field skill: a vector-field IM and a neighbour-orientation AC
-    on ``model``, the model file ``rel`` (fitted as ``fields``)."""
+    on ``model``, the model file ``rel`` (fitted as ``fields``). A state of one field
+    scales each part of a push by its own agreement (``scale_by: parts``): the part across
+    its field is off every field the state has; a state that blends fields scales the
+    whole push (the thesis), since a part across one field may be along another."""
     p = result.field_options
     pivot = None
     pivots = [f for f in fields if f.pivot is not None]
@@ -218,7 +221,8 @@ def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorField
     mapping = VectorFieldMapping(model_file=rel, model=model, frame="ee", mode="scale",
                                  combine=p.vf_combine, min_v=p.min_v, k_s=p.k_s,  # type: ignore[arg-type]
                                  max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion,  # type: ignore[arg-type]
-                                 direction=p.vf_direction)  # type: ignore[arg-type]
+                                 direction=p.vf_direction,  # type: ignore[arg-type]
+                                 scale_by="parts" if len(fields) == 1 else "whole")
     constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
                                       max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot)
     return State(name=name, input_mappings=(mapping,), active_constraints=(constraint,))

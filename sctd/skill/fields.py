@@ -14,7 +14,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,6 +32,24 @@ RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought t
 
 
 Vec3 = tuple[float, float, float]
+
+
+class RigidPart(NamedTuple):
+    """What a rotational field makes of a frame displacement ``d`` (object frame) under
+    rigid motion (:func:`sctd.skill.mappings.rigid_step`).
+
+    ``t``: the part of ``d`` along the field's turn (tangent to a sphere through the
+    frame, around a cylinder's axis); ``w``: the rotation vector that moves the frame
+    by ``t`` about ``centre``; ``reach`` in [0, 1]: how much of ``t`` turns the hand
+    (1 with the field's pivot on its centre or axis, 0 with the pivot not brought there
+    yet, :data:`RIGID_FULL`, :data:`RIGID_REACH`). The rest of ``d``, ``d - t``, is motion
+    across the field.
+    """
+
+    t: Vec3
+    w: Vec3
+    centre: Vec3
+    reach: float
 
 
 def _dot3(a: Sequence[float], b: Sequence[float]) -> float:
@@ -211,12 +229,11 @@ class Field(ByValue, ABC):
         4.35's ``v_F``): its own direction there."""
         return self.vectors(point)[0]
 
-    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
-        """The part of the frame displacement ``d`` that turns the whole hand about this
-        field, for the frame at pose ``G`` (flat, see :mod:`sctd.se3`: its rotation,
-        then its position p), as ``(t, w, centre)``: the displacement of p it takes,
-        the rotation vector and the point it turns about (3 floats each, object frame);
-        None for a field that does not turn. On floats (the runtime's tick)."""
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> RigidPart | None:
+        """The part of the frame displacement ``d`` along this field's turn, for the frame
+        at pose ``G`` (flat, see :mod:`sctd.se3`: its rotation, then its position p)
+        (:class:`RigidPart`); None for a field that does not turn, or for a frame too
+        close to its centre or axis to turn about it. On floats (the runtime's tick)."""
         return None
 
 
@@ -297,17 +314,17 @@ class CylinderField(Field):
         n = math.sqrt(vx * vx + vy * vy + vz * vz)
         return (vx / n, vy / n, vz / n) if n > 1e-9 else (0.0, 0.0, 0.0)
 
-    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> RigidPart | None:
         """Around the axis: the part of ``d`` along the circulation at the frame."""
         a0, a1, a2 = a = self.axis.tolist()
         c0, c1, c2 = centre = self.point.tolist()
+        k = 1.0
         if self.pivot is not None:
             o0, o1, o2 = centre
             c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
             v = (c0 - o0, c1 - o1, c2 - o2)
             va = _dot3(v, a)
             k = _pivot_reach(_norm3(v[0] - va * a0, v[1] - va * a1, v[2] - va * a2))
-            d = (d[0] * k, d[1] * k, d[2] * k)
         r = (G[9] - c0, G[10] - c1, G[11] - c2)
         ra = _dot3(r, a)
         r_perp = (r[0] - ra * a0, r[1] - ra * a1, r[2] - ra * a2)
@@ -318,7 +335,8 @@ class CylinderField(Field):
         e = (x / rho, y / rho, z / rho)
         along = _dot3(d, e)
         w = along / rho
-        return (along * e[0], along * e[1], along * e[2]), (a0 * w, a1 * w, a2 * w), centre
+        return RigidPart((along * e[0], along * e[1], along * e[2]), (a0 * w, a1 * w, a2 * w),
+                         (c0, c1, c2), k)
 
 
 @FIELDS.register
@@ -391,14 +409,14 @@ class SphereField(Field):
         n = float(np.linalg.norm(t))
         return t / n if n > 1e-9 else np.zeros(3)
 
-    def rigid_part(self, G: Sequence[float], d: Vec3) -> tuple[Vec3, Vec3, Vec3] | None:
+    def rigid_part(self, G: Sequence[float], d: Vec3) -> RigidPart | None:
         """About the centre: the part of ``d`` tangent to the sphere through the frame."""
         c0, c1, c2 = centre = self.centre.tolist()
+        k = 1.0
         if self.pivot is not None:
             s0, s1, s2 = centre
             c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
             k = _pivot_reach(_norm3(c0 - s0, c1 - s1, c2 - s2))
-            d = (d[0] * k, d[1] * k, d[2] * k)
         r0, r1, r2 = G[9] - c0, G[10] - c1, G[11] - c2
         rho = _norm3(r0, r1, r2)
         if rho < RIGID_MIN_RADIUS:
@@ -407,7 +425,7 @@ class SphereField(Field):
         dn = _dot3(d, n)
         t = (d[0] - dn * n[0], d[1] - dn * n[1], d[2] - dn * n[2])  # tangent to the sphere
         x, y, z = _cross3(n, t)
-        return t, (x / rho, y / rho, z / rho), centre
+        return RigidPart(t, (x / rho, y / rho, z / rho), (c0, c1, c2), k)
 
 
 @FIELDS.register

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -278,41 +278,64 @@ RIGID_ALONG_TURN = math.cos(math.pi / 4)  # a rigid turn within 45 deg of a woun
 
 
 def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field],
+               scale: float = 1.0, scale_of: Callable[[Vec3], float] | None = None,
                wound: Vec3 | None = None) -> Flat:
-    """Move the hand F (object frame) by the displacement ``d`` (3 floats) of the frame at
-    pose ``G``: the part of it along each rotational field (weighted by its membership
-    ``P`` (K,)) as a rotation of the whole hand about the field's centre (sphere) or
-    axis (cylinder), the rest as a translation
-    (:meth:`~sctd.skill.fields.Field.rigid_part`). On floats (the tick).
+    """Move the hand F (object frame) by the command ``d`` (3 floats: the displacement of
+    the frame at pose ``G`` at the command's own speed), each field's share of it
+    weighted by its membership ``P`` (K,).
+
+    The share of a rotational field (:meth:`~sctd.skill.fields.Field.rigid_part`) is
+    split into its part along the field, which turns the whole hand about the field's
+    centre (sphere) or axis (cylinder), and its part across the field (off the sphere,
+    away from the axis), a translation; ``scale_of`` gives each part's scaling by its
+    own agreement with the fields (eq. 4.34 applied to the parts, not to the whole
+    push). So a push half along a pouring sphere tilts the bottle at half the speed, not
+    at the sigmoid of the whole push's agreement, and its other half does not carry the
+    bottle's opening off the point it turns about faster than ``min_v``. Where the
+    field's pivot is not brought to it (``reach`` < 1) the rest of the share, and every
+    other field's share, is a translation at ``scale`` (the whole push's scaling).
+    Without ``scale_of`` (``scale_by: whole``, or ``blend`` mode: ``d`` already scaled or
+    bent, ``scale`` 1) the share's part along the field turns the hand and the rest
+    translates it. On floats (the tick).
 
     ``wound``: the axis about which the hand is turned far from every demonstration
-    near (a hand brought in half a turn about the vertical): a field's rotation within
-    45 deg of it is not made (its part translates): the wrist that turns the hand about
-    it is the one the way in has wound towards its limit (a door's swing about its
-    hinge), while a tilt across it is as the demonstrations' (a bottle's pour)."""
+    near (a hand brought in half a turn about the vertical): a field's turn within 45
+    deg of it is not made, its part along the field translates instead: the wrist that
+    turns the hand about it is the one the way in has wound towards its limit (a door's
+    swing about its hinge), while a tilt across it is as the demonstrations' (a bottle's
+    pour)."""
     R_hand: Sequence[float] = F  # the hand's rotation, row-major (its first nine entries)
     x, y, z = F[9], F[10], F[11]
-    rx, ry, rz = d
+    rx, ry, rz = d[0] * scale, d[1] * scale, d[2] * scale  # the translation: every share at the scale
     for k, f in enumerate(fields):
         pk = P[k]
         if pk < 1e-6:
             continue
-        part = f.rigid_part(G, (pk * d[0], pk * d[1], pk * d[2]))
-        if part is None:
+        s0, s1, s2 = pk * d[0], pk * d[1], pk * d[2]
+        part = f.rigid_part(G, (s0, s1, s2))
+        if part is None or not part.reach:
             continue
-        t, w, (c0, c1, c2) = part
-        if not (t[0] or t[1] or t[2]):
+        t, w, (c0, c1, c2), reach = part
+        n0, n1, n2 = s0 - t[0], s1 - t[1], s2 - t[2]  # the share's part across the field
+        along, across = (1.0, 1.0) if scale_of is None else (scale_of(t), scale_of((n0, n1, n2)))
+        a = reach * across + (1.0 - reach) * scale
+        b = (1.0 - reach) * scale  # the part along the field that does not turn the hand
+        rx += a * n0 + b * t[0] - scale * s0
+        ry += a * n1 + b * t[1] - scale * s1
+        rz += a * n2 + b * t[2] - scale * s2
+        g = reach * along
+        if not (t[0] or t[1] or t[2]) or not g:
             continue
         if wound is not None and abs(w[0] * wound[0] + w[1] * wound[1] + w[2] * wound[2]) > (
                 RIGID_ALONG_TURN * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])):
-            continue  # about the wound axis: translated (below)
-        R = _rodrigues(*w)
+            rx, ry, rz = rx + g * t[0], ry + g * t[1], rz + g * t[2]  # about the wound axis
+            continue
+        R = _rodrigues(w[0] * g, w[1] * g, w[2] * g)
         R_hand = _product3(R, R_hand)
         a0, a1, a2 = x - c0, y - c1, z - c2
         x = R[0] * a0 + R[1] * a1 + R[2] * a2 + c0
         y = R[3] * a0 + R[4] * a1 + R[5] * a2 + c1
         z = R[6] * a0 + R[7] * a1 + R[8] * a2 + c2
-        rx, ry, rz = rx - t[0], ry - t[1], rz - t[2]
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R_hand[:9]
     return (r0, r1, r2, r3, r4, r5, r6, r7, r8, x + rx, y + ry, z + rz)
 
@@ -347,6 +370,14 @@ class VectorFieldMapping(InputMapping):
     scaled down to ``min_v``; ``both`` takes the field's line both ways (``|s|``, and in
     ``blend`` the bend towards whichever way the push goes): the hand goes back the way
     it came (out of a drawer, off a person's lips) as fast as it came.
+
+    ``scale_by`` (``scale`` mode with ``rigid`` motion): ``whole`` (the thesis, eq. 4.34)
+    scales the whole push by its agreement; ``parts`` splits a rotational field's share
+    of it into the part along the field and the part across it and scales each by its
+    own agreement (:func:`rigid_step`): the push along a pouring sphere turns the bottle
+    at the push's speed, its part off the sphere moves the opening at ``min_v``. Learned
+    for a state of its own field (``sctd learn --vf-states auto``), where the part across
+    the field is off every field of the state.
     """
 
     type: ClassVar[str] = "vector_field"
@@ -362,11 +393,12 @@ class VectorFieldMapping(InputMapping):
     blend: float = 0.5
     motion: Literal["translate", "rigid"] = "translate"
     direction: Literal["forward", "both"] = "forward"
+    scale_by: Literal["whole", "parts"] = "whole"
 
     @classmethod
     def from_yaml(cls, r: Reader, md: dict, path: str) -> VectorFieldMapping:
-        r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s",
-                                "max_n", "max_d", "blend", "motion", "intent_kappa", "direction"})
+        r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s", "max_n",
+                                "max_d", "blend", "motion", "intent_kappa", "direction", "scale_by"})
         model_file = r.string(md.get("model"), f"{path}.model")
         return cls(
             model_file=model_file,
@@ -385,13 +417,20 @@ class VectorFieldMapping(InputMapping):
                             ("translate", "rigid")),
             direction=r.choice(md.get("direction", "forward"), f"{path}.direction",  # type: ignore[arg-type]
                                ("forward", "both")),
+            scale_by=r.choice(md.get("scale_by", "whole"), f"{path}.scale_by",  # type: ignore[arg-type]
+                              ("whole", "parts")),
         )
 
     def to_yaml(self) -> dict[str, Any]:
-        return {"type": self.type, "model": self.model_file, "frame": self.frame, "mode": self.mode,
-                "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
-                "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
-                "motion": self.motion, "direction": self.direction}
+        """Every parameter; ``scale_by`` only where it is not ``whole`` (what a file
+        without it reads), so that the text of a skill scaled as a whole stays as it was."""
+        out = {"type": self.type, "model": self.model_file, "frame": self.frame, "mode": self.mode,
+               "combine": self.combine, "intent_kappa": self.intent_kappa, "min_v": self.min_v,
+               "k_s": self.k_s, "max_n": self.max_n, "max_d": self.max_d, "blend": self.blend,
+               "motion": self.motion, "direction": self.direction}
+        if self.scale_by != "whole":
+            out["scale_by"] = self.scale_by
+        return out
 
     def summary(self) -> dict[str, Any]:
         """:meth:`to_yaml` and how many fields the model has."""
@@ -425,9 +464,13 @@ class VectorFieldMapping(InputMapping):
                                                (u0 / mag, u1 / mag, u2 / mag), mag)
         ws.membership = P
         c = ws.speeds[0] * dt
+        if self.motion == "rigid" and self.mode == "scale" and self.scale_by == "parts":
+            p, Pk = (G[9], G[10], G[11]), P.tolist()
+            return rigid_step(F, G, (u0 * c, u1 * c, u2 * c), Pk, self.model.fields, ws.scale,
+                              lambda v: self._part_scale(p, v, Pk), self._turned_away(G, ws))
         d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
         if self.motion == "rigid":
-            return rigid_step(F, G, d, P.tolist(), self.model.fields, self._turned_away(G, ws))
+            return rigid_step(F, G, d, P.tolist(), self.model.fields, wound=self._turned_away(G, ws))
         return se3.translate_flat(F, *d)
 
     def _turned_away(self, G: Flat, ws: Workspace) -> Vec3 | None:
@@ -474,6 +517,21 @@ class VectorFieldMapping(InputMapping):
             s = sum(Pk[k] * a for k, a in enumerate(agree))
         scale = min(1.0, max(self.min_v, float(sigmoid(s, self.k_s))))
         return P, (u[0] * scale, u[1] * scale, u[2] * scale), scale
+
+    def _part_scale(self, p: Vec3, v: Vec3, P: Sequence[float]) -> float:
+        """The scaling (eqs. 4.31-4.34) of a part ``v`` of the frame's displacement at
+        ``p``: its direction's agreement with the fields, weighted by the membership
+        ``P`` the whole push was given (the most probable field's alone with
+        ``most_probable``)."""
+        n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if n < 1e-15:
+            return 1.0
+        agree = self._agreements(p, (v[0] / n, v[1] / n, v[2] / n))
+        if self.combine == "most_probable":
+            s = agree[max(range(len(P)), key=P.__getitem__)]
+        else:
+            s = sum(pk * a for pk, a in zip(P, agree, strict=True))
+        return min(1.0, max(self.min_v, float(sigmoid(s, self.k_s))))
 
     def _agreements(self, p: Vec3, unit: Vec3) -> list[float]:
         """Each field's agreement with the unit command (both ways along it, with

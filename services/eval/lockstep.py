@@ -214,10 +214,7 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
         if late is not None:
             late.append(pose)
             pose = late.popleft() if len(late) > lag_ticks else None
-        if pose is not None and guard.admit(pose, t, F, not sim.arm.controller.holding):
-            sim.set_target(pose, t)
-        elif pose is not None and not sim.arm.controller.holding:
-            sim.arm.controller.hold()
+        _hand_over(sim, guard, pose, t, F)
         sim.step()
         k += 1
     return limits.noted(rec.result(demos))
@@ -250,6 +247,15 @@ class JointLimits:
     def at_the_end(self) -> list[int]:
         """The joints that sat at a limit throughout the last :attr:`LAST` seconds."""
         return sorted(j for j, t0 in self.since.items() if self.t - t0 >= self.LAST)
+
+
+def _hand_over(sim: Simulation, guard: TargetGuard, pose: list[float] | None, t: float, F: Any) -> None:
+    """The tick's target to the arm, through the simulator's target guard: a target it
+    refuses holds the arm (``pose`` None: nothing reaches the arm this tick)."""
+    if pose is not None and guard.admit(pose, t, F, not sim.arm.controller.holding):
+        sim.set_target(pose, t)
+    elif pose is not None and not sim.arm.controller.holding:
+        sim.arm.controller.hold()
 
 
 class Feed:

@@ -46,7 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--tolerance", type=float, default=d.tolerance,
                    help="how much lower than the active skill's stored evaluation the new "
                         "one's success rate may be (default %(default)s)")
-    g.add_argument("--seed", type=int, default=d.seed, help="the trials' first seed (default %(default)s)")
+    g.add_argument("--seed", type=int, default=d.seed,
+                   help="the trials' first seed (default %(default)s: sctd eval's and sctd suite's "
+                        "seeds 0-19 stay held out)")
     g.add_argument("--jobs", type=int, default=d.jobs,
                    help="trial processes, kept warm (default %(default)s)")
     g.add_argument("--allow-unchecked", action="store_true",
