@@ -450,11 +450,11 @@ def cylinder_model(radius=0.3) -> VectorFieldModel:
 
 
 @pytest.mark.parametrize("field", ["sphere", "cylinder"])
-def test_rigid_motion_does_not_wind_a_turned_away_hand_further_about_its_turn(field):
+def test_rigid_motion_moves_a_turned_away_hand_along_a_far_axis_unturned(field):
     """A hand held as the demonstrations held it turns with the field as it moves. The
-    same hand brought in turned half a turn about the vertical: a tilt across that axis
-    (the pour's sphere) still turns it, a turn about the vertical itself (a door's
-    cylinder, which would wind the wrist on into its limit) only translates."""
+    same hand brought in turned half a turn about the vertical: the pour's sphere, a
+    turn about a point of the hand (its pivot), still turns it; a door's cylinder, a
+    turn about a far axis, moves it along the arc without turning it."""
     doc = vf_skill_doc("m.json")
     doc["states"]["go"]["input_mapping"][0]["motion"] = "rigid"
     doc["states"]["go"]["active_constraints"] = []

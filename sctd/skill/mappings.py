@@ -274,9 +274,6 @@ def _product3(A: Sequence[float], B: Sequence[float]) -> tuple[float, ...]:
             a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
 
 
-RIGID_ALONG_TURN = math.cos(math.pi / 4)  # a rigid turn within 45 deg of a wound axis: none
-
-
 def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field],
                scale: float = 1.0, scale_of: Callable[[Vec3], float] | None = None,
                wound: Vec3 | None = None) -> Flat:
@@ -298,12 +295,15 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
     bent, ``scale`` 1) the share's part along the field turns the hand and the rest
     translates it. On floats (the tick).
 
-    ``wound``: the axis about which the hand is turned far from every demonstration
-    near (a hand brought in half a turn about the vertical): a field's turn within 45
-    deg of it is not made, its part along the field translates instead: the wrist that
-    turns the hand about it is the one the way in has wound towards its limit (a door's
-    swing about its hinge), while a tilt across it is as the demonstrations' (a bottle's
-    pour)."""
+    ``wound``: not None when the hand is turned far from every demonstration near (a
+    hand brought in half a turn about the vertical; the axis it is turned about). Then
+    a field that turns the hand about a far axis or centre (no ``pivot``: a door's
+    hinge, 30 cm from the handle) moves the hand along its arc without turning it: the
+    demonstrations' turn would take the wrist on from where no demonstration held it,
+    into its limits (traced: the cabinet's last joint, the oven's sixth), and the
+    grasp holds the handle either way. A field that turns the hand about a point of its
+    own (a ``pivot``: a bottle's opening) still turns it: that turn is the task (the
+    pour), and moving the point instead would carry the opening off the mug."""
     R_hand: Sequence[float] = F  # the hand's rotation, row-major (its first nine entries)
     x, y, z = F[9], F[10], F[11]
     rx, ry, rz = d[0] * scale, d[1] * scale, d[2] * scale  # the translation: every share at the scale
@@ -326,9 +326,8 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
         g = reach * along
         if not (t[0] or t[1] or t[2]) or not g:
             continue
-        if wound is not None and abs(w[0] * wound[0] + w[1] * wound[1] + w[2] * wound[2]) > (
-                RIGID_ALONG_TURN * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])):
-            rx, ry, rz = rx + g * t[0], ry + g * t[1], rz + g * t[2]  # about the wound axis
+        if wound is not None and f.pivot is None:
+            rx, ry, rz = rx + g * t[0], ry + g * t[1], rz + g * t[2]  # along the arc, unturned
             continue
         R = _rodrigues(w[0] * g, w[1] * g, w[2] * g)
         R_hand = _product3(R, R_hand)
