@@ -1,5 +1,6 @@
 """Skill loading, validation errors, and the engine's mappings, constraints and FSM."""
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -25,7 +26,7 @@ from sctd.skill import (
     skill_summary,
     vector_field_model_to_bytes,
 )
-from sctd.skill.fields import sigmoid
+from sctd.skill.fields import Field, sigmoid
 
 ROOT = Path(__file__).resolve().parents[1]
 POUR = ROOT / "skills" / "pour.yaml"
@@ -591,6 +592,37 @@ def test_rigid_motion_turns_the_hand_about_its_pivot_on_a_sphere():
     T2 = command(eng, T_far, np.array([1.0, 0.0, 0.0]), dt)
     d = T2[:3, 3] - T_far[:3, 3]
     assert np.allclose(T2[:3, :3], np.eye(3)) and 0 < d[0] <= 0.1 * dt and np.allclose(d[1:], 0)
+
+
+def test_a_fields_pivot_within_makes_a_hand_on_its_way_in_move_not_turn():
+    """The opening 2.5 cm from the sphere's centre: by default (fully within 3.5 cm) a push
+    along the sphere turns the hand about it; with ``pivot_within: 0.012`` (none from 2.4
+    cm) the same push moves the hand, and with the opening on the centre it turns it."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0]["motion"] = "rigid"
+    doc["states"]["go"]["active_constraints"] = []
+    model = sphere_model(centre, pivot)
+    near = VectorFieldModel((dataclasses.replace(model.fields[0], pivot_within=0.012),), model.points,
+                            model.quaternions, model.responsibilities)
+    T_in = se3.transform_from_rt(np.eye(3), centre - pivot + [0.025, 0.0, 0.0])
+    T_on = se3.transform_from_rt(np.eye(3), centre - pivot)
+    turned = {}
+    for name, m in (("default", model), ("near", near)):
+        blob = vector_field_model_to_bytes(m, "m.json")
+        for where, T in (("in", T_in), ("on", T_on)):
+            eng = SkillEngine(load_text(yaml.safe_dump(doc), {"m.json": blob}))
+            T1 = command(eng, T, np.array([1.0, 0.0, 0.0]), 0.01)
+            turned[name, where] = float(np.linalg.norm(se3.rotvec_from_matrix(T1[:3, :3])))
+            assert np.array_equal(command(eng, T, np.zeros(3), 0.01), T)  # zero input: nothing moves
+    assert turned["default", "in"] > 0.005 and turned["near", "in"] == 0.0
+    assert np.isclose(turned["near", "on"], turned["default", "on"]) and turned["near", "on"] > 0.005
+    text = json.dumps(near.fields[0].to_yaml())
+    assert '"pivot_within": 0.012' in text and "pivot_within" not in json.dumps(model.fields[0].to_yaml())
+    back = Field.from_yaml(json.loads(text), "m.json", "fields[0]")
+    assert back.pivot_within == 0.012
+    with pytest.raises(SkillError, match="pivot_within"):
+        Field.from_yaml(json.loads(text.replace("0.012", "0")), "m.json", "fields[0]")
 
 
 def test_rigid_motion_moves_each_part_of_a_push_at_its_own_agreement():

@@ -104,7 +104,8 @@ def test_an_unknown_type_lists_the_registered_ones():
 def test_a_field_entry_with_an_unknown_key_is_refused_naming_it():
     """A misspelt parameter would silently take its default: it is refused, named."""
     with pytest.raises(SkillError, match=r"m.json: fields\[0\]\.pviot: unknown field of a sphere field "
-                                         r"\(allowed: centre, inliers, pivot, radius, sigma, type, weight\)"):
+                                         r"\(allowed: centre, inliers, pivot, pivot_within, radius, sigma, "
+                                         r"type, weight\)"):
         Field.from_yaml({"type": "sphere", "centre": [0, 0, 0], "pviot": [0, 0, 0.1]}, "fields[0]", "m.json")
     with pytest.raises(SkillError, match=r"fields\[0\]\.radius: unknown field of a translation"):
         Field.from_yaml({"type": "translation", "direction": [1, 0, 0], "radius": 0.1}, "fields[0]", "m.json")

@@ -186,7 +186,8 @@ def vf_model(result: VectorFieldResult, fields: tuple[int, ...] | None = None) -
     L = result.learner
     if not L.fields_:
         raise ValueError("no vector field was found in the demonstrations")
-    chosen = [_stored(f) for f in (L.fields_ if fields is None else [L.fields_[m] for m in fields])]
+    within = result.field_options.vf_pivot_within or None
+    chosen = [_stored(f, within) for f in (L.fields_ if fields is None else [L.fields_[m] for m in fields])]
     if fields is None:
         return VectorFieldModel(fields=tuple(chosen), points=L.points_,
                                 quaternions=L.quaternions_, responsibilities=L.responsibilities_)
@@ -198,11 +199,14 @@ def vf_model(result: VectorFieldResult, fields: tuple[int, ...] | None = None) -
                             quaternions=L.quaternions_[sel], responsibilities=R)
 
 
-def _stored(f: Field) -> Field:
+def _stored(f: Field, pivot_within: float | None = None) -> Field:
     """The field with its arrays rounded to 12 decimals (a general field renormalises its
-    directions)."""
+    directions) and, if it has a ``pivot``, ``pivot_within`` (None: not written, the
+    runtime's default)."""
     arrays: dict[str, Any] = {d.name: np.round(v, 12) for d in dataclasses.fields(f)
                               if isinstance(v := getattr(f, d.name), np.ndarray)}
+    if f.pivot is not None and pivot_within is not None:
+        arrays["pivot_within"] = pivot_within
     return dataclasses.replace(f, **arrays)
 
 

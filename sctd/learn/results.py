@@ -145,6 +145,10 @@ class VectorFieldOptions:
     vf_states : {"auto", "blend"}
         Sequential fields become states (:func:`~sctd.learn.vfstates.plan_states`) or
         all blend in one state (the thesis).
+    vf_pivot_within : float
+        m: a field the hand turned about a point of (its ``pivot``) turns it fully only
+        with that point within this of the field's centre or axis, not at all from twice
+        it; nearer the hand is moved, not turned (0: the runtime's 3.5 and 7 cm).
     """
 
     min_v: float = hyperparameter(0.1, "eq. 4.34 floor", valid=Interval(0, 1))
@@ -172,6 +176,11 @@ class VectorFieldOptions:
         "blend", "auto: fields the demonstrations use one after the other, in separate places, "
         "become states with hyperplane transitions between them; blend: one state blends all "
         "fields, as in the thesis (default %(default)s)", choices=VF_STATES, valid=OneOf(VF_STATES))
+    vf_pivot_within: float = hyperparameter(
+        0.0, "m: a sphere or cylinder the hand turned about a point of (a cup's rim) turns it "
+        "fully only with that point within this of its centre or axis, not at all from twice "
+        "it; further out a push moves the hand (0: 3.5 and 7 cm) (default %(default)s)",
+        valid=Interval(0, 0.5))
 
 
 @dataclass

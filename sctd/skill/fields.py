@@ -29,6 +29,7 @@ POINT_UNDEFINED = 1e-3  # m: a point field has no direction this close to its po
 RIGID_MIN_RADIUS = 0.02  # m: closer to a field's centre or axis than this, no turning
 RIGID_FULL = 0.035  # m: a field's pivot turns the hand fully within this of the field's
 RIGID_REACH = 0.07  # centre or axis, not at all this far from it (not brought there yet)
+# (a field's own ``pivot_within`` W: fully within W, not at all from 2 W)
 
 
 Vec3 = tuple[float, float, float]
@@ -42,7 +43,8 @@ class RigidPart(NamedTuple):
     frame, around a cylinder's axis); ``w``: the rotation vector that moves the frame
     by ``t`` about ``centre``; ``reach`` in [0, 1]: how much of ``t`` turns the hand
     (1 with the field's pivot on its centre or axis, 0 with the pivot not brought there
-    yet, :data:`RIGID_FULL`, :data:`RIGID_REACH`). The rest of ``d``, ``d - t``, is motion
+    yet, :data:`RIGID_FULL`, :data:`RIGID_REACH`, or the field's ``pivot_within``). The
+    rest of ``d``, ``d - t``, is motion
     across the field.
     """
 
@@ -113,6 +115,15 @@ class FieldReader:
     def pivot(self) -> Array | None:
         return None if self.fd.get("pivot") is None else self.vec("pivot")
 
+    def pivot_within(self) -> float | None:
+        """m, > 0; None when absent."""
+        if self.fd.get("pivot_within") is None:
+            return None
+        v = self.num("pivot_within", 0.0)
+        if v <= 0.0:
+            raise self.fail("pivot_within", f"expected a number > 0, got {v!r}")
+        return v
+
     def rows(self, key: str, max_rows: int) -> Array:
         """A non-empty list of at most ``max_rows`` rows of 3 finite numbers (shape (n, 3))."""
         v = self.fd.get(key)
@@ -140,12 +151,15 @@ class Field(ByValue, ABC):
     """
 
     type: ClassVar[str]
-    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot"})
+    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot", "pivot_within"})
     """Keys an entry may hold that :meth:`to_yaml` leaves out when they are unset."""
     weight: float = 1.0
     sigma: float = 0.3
     inliers: int = 0
     pivot: Array | None = None
+    # m: the pivot turns the hand fully within this of the centre or axis, not at all from
+    # twice it (None: RIGID_FULL, RIGID_REACH); a hand still on its way there is moved, not turned
+    pivot_within: float | None = None
 
     @classmethod
     def from_yaml(cls, fd: Any, path: str, where: str) -> Field:
@@ -178,6 +192,8 @@ class Field(ByValue, ABC):
                                "sigma": self.sigma, **self._parameters()}
         if self.pivot is not None:
             out["pivot"] = self.pivot.tolist()
+        if self.pivot_within is not None:
+            out["pivot_within"] = self.pivot_within
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -237,9 +253,12 @@ class Field(ByValue, ABC):
         return None
 
 
-def _pivot_reach(off: float) -> float:
-    """How much of a turn a pivot ``off`` metres from the field's centre or axis makes."""
-    return min(1.0, max(0.0, (RIGID_REACH - off) / (RIGID_REACH - RIGID_FULL)))
+def _pivot_reach(off: float, within: float | None = None) -> float:
+    """How much of a turn a pivot ``off`` metres from the field's centre or axis makes:
+    all of it within ``within`` (:data:`RIGID_FULL` when None), none from twice that
+    (:data:`RIGID_REACH`)."""
+    full, none = (RIGID_FULL, RIGID_REACH) if within is None else (within, 2.0 * within)
+    return min(1.0, max(0.0, (none - off) / (none - full)))
 
 
 FIELDS: Registry[Field] = Registry("vector field")
@@ -287,8 +306,8 @@ class CylinderField(Field):
 
     @classmethod
     def read(cls, r: FieldReader, common: dict[str, Any]) -> CylinderField:
-        pivot = r.pivot()
-        return cls(**common, point=r.vec("point"), axis=r.vec("axis", unit=True), pivot=pivot)
+        return cls(**common, point=r.vec("point"), axis=r.vec("axis", unit=True), pivot=r.pivot(),
+                   pivot_within=r.pivot_within())
 
     def _parameters(self) -> dict[str, Any]:
         return {"point": self.point.tolist(), "axis": self.axis.tolist()}
@@ -324,7 +343,7 @@ class CylinderField(Field):
             c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
             v = (c0 - o0, c1 - o1, c2 - o2)
             va = _dot3(v, a)
-            k = _pivot_reach(_norm3(v[0] - va * a0, v[1] - va * a1, v[2] - va * a2))
+            k = _pivot_reach(_norm3(v[0] - va * a0, v[1] - va * a1, v[2] - va * a2), self.pivot_within)
         r = (G[9] - c0, G[10] - c1, G[11] - c2)
         ra = _dot3(r, a)
         r_perp = (r[0] - ra * a0, r[1] - ra * a1, r[2] - ra * a2)
@@ -351,16 +370,15 @@ class SphereField(Field):
     """
 
     type: ClassVar[str] = "sphere"
-    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot", "radius"})
+    optional_keys: ClassVar[frozenset[str]] = frozenset({"pivot", "pivot_within", "radius"})
     centre: Array
     radius: float | None = None
 
     @classmethod
     def read(cls, r: FieldReader, common: dict[str, Any]) -> SphereField:
-        pivot = r.pivot()
         radius = r.fd.get("radius")
-        return cls(**common, centre=r.vec("centre"),
-                   radius=None if radius is None else r.num("radius", 0.0), pivot=pivot)
+        return cls(**common, centre=r.vec("centre"), radius=None if radius is None else r.num("radius", 0.0),
+                   pivot=r.pivot(), pivot_within=r.pivot_within())
 
     def _parameters(self) -> dict[str, Any]:
         out: dict[str, Any] = {"centre": self.centre.tolist()}
@@ -416,7 +434,7 @@ class SphereField(Field):
         if self.pivot is not None:
             s0, s1, s2 = centre
             c0, c1, c2 = centre = _pivot_centre(G, self.pivot)
-            k = _pivot_reach(_norm3(c0 - s0, c1 - s1, c2 - s2))
+            k = _pivot_reach(_norm3(c0 - s0, c1 - s1, c2 - s2), self.pivot_within)
         r0, r1, r2 = G[9] - c0, G[10] - c1, G[11] - c2
         rho = _norm3(r0, r1, r2)
         if rho < RIGID_MIN_RADIUS:
