@@ -295,15 +295,9 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
     bent, ``scale`` 1) the share's part along the field turns the hand and the rest
     translates it. On floats (the tick).
 
-    ``wound``: not None when the hand is turned far from every demonstration near (a
-    hand brought in half a turn about the vertical; the axis it is turned about). Then
-    a field that turns the hand about a far axis or centre (no ``pivot``: a door's
-    hinge, 30 cm from the handle) moves the hand along its arc without turning it: the
-    demonstrations' turn would take the wrist on from where no demonstration held it,
-    into its limits (traced: the cabinet's last joint, the oven's sixth), and the
-    grasp holds the handle either way. A field that turns the hand about a point of its
-    own (a ``pivot``: a bottle's opening) still turns it: that turn is the task (the
-    pour), and moving the point instead would carry the opening off the mug."""
+    ``wound``: the hand is turned far from every demonstration near (not None): a field
+    without a ``pivot`` (a door's hinge, 30 cm off) moves it along the arc unturned, one
+    with (a bottle's opening) still turns it (:meth:`VectorFieldMapping._turned_away`)."""
     R_hand: Sequence[float] = F  # the hand's rotation, row-major (its first nine entries)
     x, y, z = F[9], F[10], F[11]
     rx, ry, rz = d[0] * scale, d[1] * scale, d[2] * scale  # the translation: every share at the scale
@@ -477,7 +471,13 @@ class VectorFieldMapping(InputMapping):
         further than ``MAX_TURN`` from the mean orientation of the demonstration points
         near it; None when it is not (or none is near). The neighbour orientation leaves
         such a frame as it is (:class:`~sctd.skill.constraints.NeighbourOrientation`), and
-        a rigid motion does not turn it further about that axis (:func:`rigid_step`)."""
+        :func:`rigid_step` moves it along the arc of a field that turns about a far axis
+        or centre (no ``pivot``: a door's hinge, 30 cm from the handle) without turning
+        it: the demonstrations' turn would take the wrist on from where no demonstration
+        held it, into its limits (traced: the cabinet's last joint, the oven's sixth),
+        and the grasp holds the handle either way. A field that turns the hand about a
+        point of its own (a ``pivot``: a bottle's opening) still turns it: that turn is
+        the task, and moving the point instead would carry the opening off the mug."""
         nb = ws.neighbours[self.model_file]
         mean = nb.mean_orientation(nb.query(G[9:], self.max_n, self.max_d))
         if mean is None:
