@@ -106,12 +106,13 @@ def test_an_8_mib_bundle_swaps_and_is_answered_one_swap_at_a_time(rig):
     for k, b in enumerate(bundles):
         assert len(got[k]) == 1 and got[k][0].ok is not None, got[k]
         body = msgpack.unpackb(got[k][0].ok.payload.to_bytes(), raw=False)
-        assert body == {"ok": True, "id": b.id, "name": "pour-vf", "state": "default"}
+        assert body == {"ok": True, "id": b.id, "name": "pour-vf", "state": skill_from_bundle(b).start}
     last = rig.summary()
     assert last is not None and last["id"] in {b.id for b in bundles}
     # the summary is exactly skill_summary of the skill that runs, plus its state
     running = next(b for b in bundles if b.id == last["id"])
-    want = {**skill_summary(skill_from_bundle(Bundle.unpack(running.pack()))), "state": "default"}
+    skill = skill_from_bundle(Bundle.unpack(running.pack()))
+    want = {**skill_summary(skill), "state": skill.start}
     assert _json(last) == _json(want)
     assert wait_for(lambda: rig.last().get("skill") == last["id"], 5)
     counters = rig.last()["counters"]
