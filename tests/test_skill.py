@@ -655,6 +655,87 @@ def test_rigid_motion_moves_each_part_of_a_push_at_its_own_agreement():
     assert np.allclose(moved, [0.0, 0.0, -0.8 * 0.1 * dt / 3], atol=1e-12)
 
 
+def _tilted_on_sphere(centre, pivot, tilt):
+    """The hand tilted by ``tilt`` rad about -y (its z to (-sin, 0, cos): the top towards
+    -x), its pivot on the sphere's centre."""
+    c, s = math.cos(tilt), math.sin(tilt)
+    R = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    return se3.transform_from_rt(R, centre - R @ pivot)
+
+
+def _tilt_of(T) -> float:
+    return math.acos(float(np.clip(T[2, 2], -1.0, 1.0)))
+
+
+def test_a_command_that_turns_with_the_hand_tilts_at_one_rate_at_every_tilt():
+    """``command_turns_from: [0, 0, 1]``: the push that tilts the upright bottle about
+    its opening keeps tilting it at full speed at 30, 60 and 100 degrees, and the
+    opposite push brings it back as fast, the opening held on the centre. Read in the
+    object's axes (no key) the same push is off the sphere once the bottle lies (at 100
+    degrees it moves the opening at min_v and turns the bottle the other way)."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "scale_by": "parts",
+                                                "command_turns_from": [0.0, 0.0, 1.0]}
+    doc["states"]["go"]["active_constraints"] = []
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    dt, full = 0.01, 0.1 / 0.12  # rad/s: the linear speed at the sphere's radius
+    up = command(eng, _tilted_on_sphere(centre, pivot, 0.0), np.array([1.0, 0.0, 0.0]), dt)
+    assert np.isclose(_tilt_of(up) / dt, full, rtol=1e-3) and up[0, 2] < 0  # x tips the top to -x
+    for tilt in (0.5, 1.0, 1.75):
+        T = _tilted_on_sphere(centre, pivot, tilt)
+        for sign in (-1.0, 1.0):
+            T1 = command(eng, T, np.array([sign, 0.0, 0.0]), dt)
+            assert np.isclose((_tilt_of(T1) - tilt) / dt, sign * full, rtol=1e-3)
+            assert np.linalg.norm((T1 @ np.append(pivot, 1.0))[:3] - centre) < 1e-12
+    assert np.array_equal(command(eng, T, np.zeros(3), dt), T)  # zero input: nothing moves
+    del doc["states"]["go"]["input_mapping"][0]["command_turns_from"]
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    T1 = command(eng, _tilted_on_sphere(centre, pivot, 1.75), np.array([1.0, 0.0, 0.0]), dt)
+    assert (_tilt_of(T1) - 1.75) / dt < 0.2 * full  # not on: the push is (nearly) radial
+
+
+@given(st.lists(st.floats(-1, 1), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3),
+       st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3))
+@settings(max_examples=300, deadline=None)
+def test_a_turned_command_is_the_shortest_turn_from_the_reference_to_the_axis(frm, axis, rv, u):
+    """:func:`turned_command` equals the rotation matrix of the shortest turn taking
+    ``frm`` to the frame's axis, applied to the command: it keeps the command's length,
+    and takes ``frm`` itself onto the axis."""
+    from sctd.skill.mappings import turned_command
+
+    f, k = np.asarray(frm), np.asarray(axis)
+    assume(np.linalg.norm(f) > 1e-2 and np.linalg.norm(k) > 1e-2)
+    f, k = f / np.linalg.norm(f), k / np.linalg.norm(k)
+    R = se3.matrix_from_rotvec(rv)
+    a = R @ k
+    assume(float(f @ a) > -0.999)
+    G = (*R.ravel().tolist(), 0.0, 0.0, 0.0)
+    out = np.array(turned_command(G, tuple(k), tuple(f), tuple(u)))
+    v = np.cross(f, a)
+    ang = math.atan2(float(np.linalg.norm(v)), float(f @ a))
+    Rm = se3.matrix_from_rotvec(v / np.linalg.norm(v) * ang) if np.linalg.norm(v) > 1e-12 else np.eye(3)
+    assert np.allclose(out, Rm @ np.asarray(u), atol=1e-9)
+    assert np.allclose(turned_command(G, tuple(k), tuple(f), tuple(f)), a, atol=1e-9)
+
+
+def test_command_turns_from_needs_a_rigid_field_with_a_pivot_off_the_frame():
+    """The key on a translation field, or with motion translate, is refused where it
+    stands; a zero direction too."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    sphere = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    line = {"m.json": vector_field_model_to_bytes(x_field_model(), "m.json")}
+    zero = {"motion": "rigid", "command_turns_from": [0, 0, 0]}
+    for files, extra, problem in ((line, {"motion": "rigid"}, "exactly one field with a pivot"),
+                                  (sphere, {}, "motion: rigid"), (sphere, zero, "zero length")):
+        doc = vf_skill_doc("m.json")
+        doc["states"]["go"]["input_mapping"][0] |= {"command_turns_from": [0.0, 0.0, 1.0]} | extra
+        with pytest.raises(SkillError, match=problem) as e:
+            load_text(yaml.safe_dump(doc), files)
+        assert "states.go.input_mapping[0].command_turns_from" in str(e.value)
+
+
 @given(st.sampled_from(["translation", "sphere", "cylinder"]),
        st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3),
        st.lists(st.floats(-1, 1), min_size=3, max_size=3))

@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from .. import se3
 from .constraints import MAX_TURN
+from .errors import SkillError
 from .fields import Field, sigmoid
 from .modelfile import VectorFieldModel
 from .reader import Reader, kind_of
@@ -28,6 +29,8 @@ from .workspace import Workspace
 Array = NDArray[np.float64]
 Flat = se3.Flat
 Vec3 = tuple[float, float, float]
+# m: a pivot nearer the frame's origin gives no axis to turn a command with
+PIVOT_OFF = 0.01
 
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")  # a displacement's rows, a linear matrix's too
 MATRIX_WIDTHS = (1, 2, 3, 6)  # input columns a linear ``matrix`` may have (``axes``: 1 to 6)
@@ -274,6 +277,27 @@ def _product3(A: Sequence[float], B: Sequence[float]) -> tuple[float, ...]:
             a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8)
 
 
+def turned_command(G: Flat, axis: Vec3, frm: Vec3, u: Vec3) -> Vec3:
+    """The command ``u`` (object frame) turned by the shortest turn that takes the
+    direction ``frm`` (unit, object frame) to where the frame's ``axis`` (unit, in the
+    frame at pose ``G``) points now: ``u cos + (v x u) + v (v . u) / (1 + cos)``, with
+    ``v = frm x a`` (Rodrigues' formula for that turn). Unturned where the axis points
+    the opposite way (no shortest turn). On floats (the tick)."""
+    k0, k1, k2 = axis
+    a0 = G[0] * k0 + G[1] * k1 + G[2] * k2
+    a1 = G[3] * k0 + G[4] * k1 + G[5] * k2
+    a2 = G[6] * k0 + G[7] * k1 + G[8] * k2
+    f0, f1, f2 = frm
+    c = f0 * a0 + f1 * a1 + f2 * a2
+    if c <= -1.0 + 1e-9:
+        return u
+    v0, v1, v2 = f1 * a2 - f2 * a1, f2 * a0 - f0 * a2, f0 * a1 - f1 * a0
+    x, y, z = u
+    w0, w1, w2 = v1 * z - v2 * y, v2 * x - v0 * z, v0 * y - v1 * x
+    k = (v0 * x + v1 * y + v2 * z) / (1.0 + c)
+    return c * x + w0 + k * v0, c * y + w1 + k * v1, c * z + w2 + k * v2
+
+
 def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field],
                scale: float = 1.0, scale_of: Callable[[Vec3], float] | None = None,
                wound: Vec3 | None = None) -> Flat:
@@ -371,6 +395,16 @@ class VectorFieldMapping(InputMapping):
     at the push's speed, its part off the sphere moves the opening at ``min_v``. Learned
     for a state of its own field (``sctd learn --vf-states auto``), where the part across
     the field is off every field of the state.
+
+    ``command_turns_from`` (``rigid`` motion, one field with a ``pivot`` off the frame's
+    origin): a unit direction in the object frame, where the axis from the frame to that
+    pivot pointed when the stick's axes were the object's (the learner writes the
+    demonstrations' direction where they entered the state). The stick's axes turn with
+    that axis, by the shortest turn from this direction to where the axis points now
+    (:func:`turned_command`): as a bottle tilts about its opening, the push that tilted
+    it keeps tilting it and the opposite push brings it back, at any tilt; read in the
+    object's axes, the push along a pouring sphere turns by the tilt itself (at 90
+    degrees, the push that tilted now moves the opening off the sphere at ``min_v``).
     """
 
     type: ClassVar[str] = "vector_field"
@@ -387,12 +421,44 @@ class VectorFieldMapping(InputMapping):
     motion: Literal["translate", "rigid"] = "translate"
     direction: Literal["forward", "both"] = "forward"
     scale_by: Literal["whole", "parts"] = "whole"
+    command_turns_from: Vec3 | None = None
+    _pivot_axis: Vec3 = field(init=False, repr=False, default=(0.0, 0.0, 1.0))
+
+    def __post_init__(self) -> None:
+        if self.command_turns_from is None:
+            return
+        pivots = [f.pivot for f in self.model.fields if f.pivot is not None]
+        if self.motion != "rigid" or len(pivots) != 1 or float(np.linalg.norm(pivots[0])) < PIVOT_OFF:
+            raise ValueError("command_turns_from needs motion: rigid and exactly one field with a pivot "
+                             f"{PIVOT_OFF * 1000:.0f} mm or more off the frame's origin; the model has "
+                             f"{len(pivots)} field(s) with a pivot")
+        a = pivots[0] / float(np.linalg.norm(pivots[0]))
+        object.__setattr__(self, "_pivot_axis", (float(a[0]), float(a[1]), float(a[2])))
+        f = np.array(self.command_turns_from, dtype=float)
+        if f.shape != (3,) or not np.all(np.isfinite(f)) or float(np.linalg.norm(f)) < 1e-9:
+            raise ValueError(f"command_turns_from must be a direction of 3 finite numbers, got "
+                             f"{self.command_turns_from!r}")
+        f = f / float(np.linalg.norm(f))
+        object.__setattr__(self, "command_turns_from", (float(f[0]), float(f[1]), float(f[2])))
 
     @classmethod
     def from_yaml(cls, r: Reader, md: dict, path: str) -> VectorFieldMapping:
         r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s", "max_n",
-                                "max_d", "blend", "motion", "intent_kappa", "direction", "scale_by"})
+                                "max_d", "blend", "motion", "intent_kappa", "direction", "scale_by",
+                                "command_turns_from"})
         model_file = r.string(md.get("model"), f"{path}.model")
+        turns = None if md.get("command_turns_from") is None else \
+            tuple(r.vector(md["command_turns_from"], f"{path}.command_turns_from", 3, unit=True).tolist())
+        try:
+            return cls._read(r, md, path, model_file, turns)
+        except ValueError as e:
+            if isinstance(e, SkillError):
+                raise
+            raise r.fail(f"{path}.command_turns_from", str(e)) from None
+
+    @classmethod
+    def _read(cls, r: Reader, md: dict, path: str, model_file: str, turns: Any) -> VectorFieldMapping:
+        """The mapping's parameters read from ``md`` (:meth:`from_yaml`)."""
         return cls(
             model_file=model_file,
             model=r.model(model_file, f"{path}.model"),
@@ -412,6 +478,7 @@ class VectorFieldMapping(InputMapping):
                                ("forward", "both")),
             scale_by=r.choice(md.get("scale_by", "whole"), f"{path}.scale_by",  # type: ignore[arg-type]
                               ("whole", "parts")),
+            command_turns_from=turns,
         )
 
     def to_yaml(self) -> dict[str, Any]:
@@ -423,6 +490,8 @@ class VectorFieldMapping(InputMapping):
                "motion": self.motion, "direction": self.direction}
         if self.scale_by != "whole":
             out["scale_by"] = self.scale_by
+        if self.command_turns_from is not None:
+            out["command_turns_from"] = [round(c, 6) for c in self.command_turns_from]
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -453,6 +522,8 @@ class VectorFieldMapping(InputMapping):
             u0, u1, u2 = u0 / mag, u1 / mag, u2 / mag
             mag = 1.0
         G = ws.frame_pose(F, self.frame)
+        if self.command_turns_from is not None:
+            u0, u1, u2 = turned_command(G, self._pivot_axis, self.command_turns_from, (u0, u1, u2))
         P, (s0, s1, s2), ws.scale = self._step(ws, (G[9], G[10], G[11]), (u0, u1, u2),
                                                (u0 / mag, u1 / mag, u2 / mag), mag)
         ws.membership = P
@@ -553,3 +624,4 @@ class VectorFieldMapping(InputMapping):
         direction = direction / dn if dn > 1e-6 else unit_a
         x, y, z = (direction * mag).tolist()
         return x, y, z
+
