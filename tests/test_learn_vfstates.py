@@ -91,3 +91,39 @@ def test_a_state_of_one_field_scales_by_parts_and_a_blended_one_as_a_whole():
         got = [(" ".join(f.type for f in m.model.fields), m.scale_by)
                for m in (s.input_mappings[0] for s in skill.states)]
         assert got == expected
+
+
+def test_a_pour_state_turns_the_stick_with_the_bottle_from_where_the_demonstrations_entered():
+    """Learned from the shipped pour's demonstrations as states: the pour state's sphere
+    turns the hand about the opening, so its stick's axes turn with the bottle from the
+    direction the bottle's axis had where the demonstrations entered the state (near
+    upright: the carry brings it upright); the carry's point field has no pivot and
+    reads the stick in the mug's axes; blended, no state turns it."""
+    from sctd.learn import learn, read_demos
+
+    demos = read_demos(Path(__file__).resolve().parents[1] / "skills" / "demos" / "pour")
+    kinds = ["translation", "cylinder", "sphere", "point", "general"]
+    res = learn(demos, method="vf", random_state=0, models=kinds, vf_states="auto", object="mug")
+    carry, pour = (s.input_mappings[0] for s in skill_from_bundle(skill_bundle(res, "pour-vf")).states)
+    assert carry.command_turns_from is None
+    assert pour.command_turns_from == (0.0, 0.0, 1.0)  # entered 6 deg from upright: the mug's z
+    axis = np.array([0.0, 0.0, 1.0])
+    # the state's own points tilt far from it (deep in the pour): it is where the
+    # demonstrations entered, not the state's average
+    pivot = pour.model.fields[0].pivot
+    on = np.flatnonzero(res.learner.assignment_ == res.plan.order[1])
+    assert min(se3.matrix_from_quaternion(res.learner.quaternions_[i]) @ pivot / np.linalg.norm(pivot) @ axis
+               for i in on) < np.cos(np.radians(60))
+    blended = learn(demos, method="vf", random_state=0, models=kinds, vf_states="blend", object="mug")
+    (only,) = skill_from_bundle(skill_bundle(blended, "pour-vf")).states
+    assert only.input_mappings[0].command_turns_from is None
+
+
+def test_an_entry_direction_near_an_object_axis_is_that_axis():
+    from sctd.learn.vfstates import snapped
+
+    tilt = np.radians(25)
+    assert np.array_equal(snapped(np.array([-np.sin(tilt), 0.0, np.cos(tilt)])), [0.0, 0.0, 1.0])
+    assert np.array_equal(snapped(np.array([0.0, -np.cos(tilt), np.sin(tilt)])), [0.0, -1.0, 0.0])
+    far = np.array([np.sin(np.radians(40)), 0.0, np.cos(np.radians(40))])
+    assert np.array_equal(snapped(far), far)

@@ -33,12 +33,14 @@ from ..skill import (
     bundle_from_skill,
 )
 from ..skill.frames import builtin_frames
+from ..skill.mappings import PIVOT_OFF
 from ..skill.reader import Reader
 from ..skill.region import Region
 from ..skill.summary import field_summary
 from .gripper import gripper_lines, with_gripper
 from .linear import AXIS_NAMES
 from .results import LinearResult, VectorFieldResult, speed_near_from_text
+from .vfstates import entry_direction
 
 
 def rounded(x: Any, nd: int = 6) -> Any:
@@ -211,22 +213,30 @@ def _stored(f: Field, pivot_within: float | None = None) -> Field:
 
 
 def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorFieldModel,
-              fields: list[Field]) -> State:
+              fields: list[Field], m: int | None = None) -> State:
     """One state of a vector-field skill: a vector-field IM and a neighbour-orientation AC
     on ``model``, the model file ``rel`` (fitted as ``fields``). A state of one field
     scales each part of a push by its own agreement (``scale_by: parts``): the part across
     its field is off every field the state has; a state that blends fields scales the
-    whole push (the thesis), since a part across one field may be along another."""
+    whole push (the thesis), since a part across one field may be along another. A state
+    of one field ``m`` of a sequence that turns the hand about a pivot of its own turns
+    the stick's axes with the hand (``command_turns_from``: the pivot's direction where
+    the demonstrations entered the state)."""
     p = result.field_options
     pivot = None
     pivots = [f for f in fields if f.pivot is not None]
     if pivots and p.vf_motion == "rigid":  # orientation pulled about the point the hand turned about
         pivot = np.array(rounded(max(pivots, key=lambda f: f.weight).pivot))
+    turns = None
+    if m is not None and len(fields) == 1 and pivot is not None and np.linalg.norm(pivot) >= PIVOT_OFF:
+        d = entry_direction(result.learner, result.plan.order, m, pivot / np.linalg.norm(pivot))
+        turns = None if d is None else tuple(rounded(d, 6))
     mapping = VectorFieldMapping(model_file=rel, model=model, frame="ee", mode="scale",
                                  combine=p.vf_combine, min_v=p.min_v, k_s=p.k_s,  # type: ignore[arg-type]
                                  max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion,  # type: ignore[arg-type]
                                  direction=p.vf_direction,  # type: ignore[arg-type]
-                                 scale_by="parts" if len(fields) == 1 else "whole")
+                                 scale_by="parts" if len(fields) == 1 else "whole",
+                                 command_turns_from=turns)
     constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
                                       max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot)
     return State(name=name, input_mappings=(mapping,), active_constraints=(constraint,))
@@ -257,7 +267,7 @@ def vf_skill(result: VectorFieldResult, name: str) -> Skill:
         min_dwell = Skill.min_dwell  # what a file without it gives
     else:
         names = [state_name(k) for k in range(len(plan.order))]
-        states = tuple(_vf_state(result, nm, f, vf_model(result, (m,)), [L.fields_[m]]) for nm, f, m
+        states = tuple(_vf_state(result, nm, f, vf_model(result, (m,)), [L.fields_[m]], m) for nm, f, m
                        in zip(names, state_model_files(result, rel), plan.order, strict=True))
         transitions = tuple(  # on when the hand is where the demonstrations switched
             Distance(source=names[plan.order.index(h.source)], target=names[plan.order.index(h.target)],
