@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sctd.cli.main import main
-from sctd_services.study import StudyError, StudyStore, make_plan, read_trials
+from sctd_services.study import StudyError, StudyStore, check_answers, make_plan, read_trials
 from sctd_services.study import store as store_module
 from sctd_services.study.plan import Condition
 from sctd_services.study.report import build_report, collect, markdown
@@ -198,3 +198,31 @@ def test_plan_writes_the_file_and_warns(capsys, tmp_path):
     assert "# WARNING" in out.read_text()
     assert main(["study", "report", str(tmp_path / "none")]) == 2
     assert "no such study folder" in capsys.readouterr().err
+
+
+def test_the_baseline_takes_the_assisted_conditions_limits():
+    from sctd.task import find_task
+    from sctd_services.study.conditions import block_of, resolve_condition
+
+    plan = make_plan([resolve_condition("drawer-vf"), resolve_condition("teleop")], ["drawer"], 2, 0, 1)
+    drawer = find_task("drawer")
+    block = block_of(plan, "teleop", drawer)
+    assert block.label.startswith("teleop (limits of drawer-vf")
+    assisted = block_of(plan, "drawer-vf", drawer).skill
+    assert block.skill is not None and assisted is not None and block.skill.limits == assisted.limits
+
+
+def test_simulated_answers_are_valid_seeded_and_follow_the_trials():
+    from sctd_services.study.simulate import simulated_answers
+    from sctd_services.study.store import TrialRow
+
+    def rows(success, duration):
+        return [TrialRow(k, "P01", "a-vf", "t", 1, k + 1, False, k, success, "x", "", None, duration, 2, 5.0)
+                for k in range(3)]
+
+    easy = simulated_answers(rows(True, 6.0), 60.0, np.random.default_rng(1))
+    hard = simulated_answers(rows(False, 60.0), 60.0, np.random.default_rng(1))
+    assert easy == simulated_answers(rows(True, 6.0), 60.0, np.random.default_rng(1))
+    scored_easy, scored_hard = check_answers(easy, "sim"), check_answers(hard, "sim")
+    assert scored_easy["raw_tlx"] < scored_hard["raw_tlx"]
+    assert scored_easy["sus_score"] > scored_hard["sus_score"]

@@ -20,6 +20,7 @@ import json
 import sys
 from pathlib import Path
 
+from sctd.task import Task, TaskError, find_task
 from sctd_services.study.errors import StudyError
 from sctd_services.study.plan import Plan, plan_from_yaml
 
@@ -78,8 +79,19 @@ def _read_plan(path: str) -> Plan:
     return plan_from_yaml(p.read_text(encoding="utf-8"), path)
 
 
+def _tasks(names: list[str] | tuple[str, ...], where: str) -> dict[str, Task]:
+    """The tasks ``names`` name (``sctd tasks``); a StudyError naming ``where``."""
+    out = {}
+    for name in names:
+        try:
+            out[name] = find_task(name)
+        except TaskError as e:
+            raise StudyError(f"{where}: {e}") from None
+    return out
+
+
 def main_plan(args: argparse.Namespace) -> int:
-    from sctd_services.study.conditions import check_fits, resolve_condition, resolve_task
+    from sctd_services.study.conditions import check_fits, resolve_condition
     from sctd_services.study.plan import make_plan, plan_to_yaml
     from sctd_services.study.store import write_atomic
 
@@ -87,8 +99,7 @@ def main_plan(args: argparse.Namespace) -> int:
     if dup is not None:
         raise StudyError(f"--condition: {dup} is given twice (each condition once)")
     conditions = [resolve_condition(c) for c in args.condition]
-    tasks = [(t, resolve_task(t)) for t in args.task]
-    check_fits(conditions, tasks)
+    check_fits(conditions, list(_tasks(args.task, "--task").items()))
     plan = make_plan(conditions, args.task, args.participants, args.practice, args.trials, args.seed,
                      args.title)
     text = plan_to_yaml(plan)
@@ -113,12 +124,13 @@ def main_run(args: argparse.Namespace) -> int:
     plan = _read_plan(args.plan)
     if not 1 <= args.simulated <= len(plan.participants):
         raise StudyError(f"--simulated: {args.simulated}: the plan has {len(plan.participants)} participants")
+    tasks = _tasks(plan.tasks, f"{args.plan}: tasks")
     store = StudyStore.create(args.out, plan)
 
     def progress(pid: str, done: int, total: int) -> None:
         print(f"\rsctd study run: {pid} trial {done}/{total}", end="", file=sys.stderr, flush=True)
 
-    ids = simulate_study(store, args.simulated, progress)
+    ids = simulate_study(store, args.simulated, tasks, progress)
     print(f"\nsctd study run: {', '.join(ids)} simulated in {args.out} (synthetic answers)", file=sys.stderr)
     return EXIT_OK
 

@@ -1,5 +1,5 @@
-"""A study's conditions and tasks resolved by the names ``sctd skills`` and ``sctd tasks``
-list, and what runs for each block.
+"""A study's conditions resolved by the names ``sctd skills`` lists, and what runs for
+each block (its task resolved by the caller, where the program starts).
 
 A condition is one of
 
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from sctd.skill import Skill, SkillError, bundle_from_file, load_skill, skill_from_bundle
 from sctd.skill.catalog import find_skill, find_skill_set
 from sctd.skill.skillset import SkillSet, load_skill_set
-from sctd.task import Task, TaskError, find_task
+from sctd.task import Task
 from sctd.task.compose import room
 from sctd_services.eval.evaluate import TELEOP as TELEOP_FILE
 from sctd_services.eval.evaluate import competent_baseline, control_frame, restyled, task_of
@@ -60,14 +60,6 @@ def resolve_condition(name: str) -> Condition:
         raise StudyError(f"--condition: {e}") from None
     return Condition(name, "set", f"skill set {s.name} (members {', '.join(m.name for m in s.members)}; "
                      "teleoperation until the set's inference engages a member)")
-
-
-def resolve_task(name: str) -> Task:
-    """The task ``name`` names (``sctd tasks``); a :class:`StudyError` naming ``--task``."""
-    try:
-        return find_task(name)
-    except TaskError as e:
-        raise StudyError(f"--task: {e}") from None
 
 
 def _skill_set(c: Condition) -> SkillSet:
@@ -119,10 +111,10 @@ def _reference(plan: Plan, task: Task) -> Skill | None:
     return None
 
 
-def block_of(plan: Plan, condition: str, task_ref: str) -> Block:
-    """What runs for ``condition`` on the task ``task_ref`` (both as the plan names them)."""
+def block_of(plan: Plan, condition: str, task: Task) -> Block:
+    """What runs for ``condition`` (as the plan names it) on ``task`` (one of the plan's,
+    resolved where the program starts)."""
     c = plan.condition(condition)
-    task = resolve_task(task_ref)
     if c.kind == "skill":
         skill = load_skill(find_skill(c.name))
         return Block(c, task, skill.name, skill=skill)

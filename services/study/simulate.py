@@ -24,12 +24,13 @@ and the block. None of it measures a person.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from sctd.runtime.sets import goal_set
+from sctd.task import Task
 from sctd_services.eval.lockstep import practise, run_set_trial
 from sctd_services.eval.trial import TaskSpec
 from sctd_services.user.agent import Device
@@ -80,8 +81,10 @@ def _trial(block: Block, seed: int, known: dict[str, Device]) -> tuple[dict[str,
     return res.as_dict(with_trajectory=True), learned
 
 
-def simulate_participant(store: StudyStore, participant: str, progress: Progress | None = None) -> None:
-    """Run ``participant``'s schedule from where its folder stands until it is done."""
+def simulate_participant(store: StudyStore, participant: str, tasks: Mapping[str, Task],
+                         progress: Progress | None = None) -> None:
+    """Run ``participant``'s schedule from where its folder stands until it is done;
+    ``tasks``: the plan's tasks by the names it gives them."""
     plan = store.plan
     blocks: dict[tuple[str, str], Block] = {}
     known: dict[tuple[str, str], dict[str, Device]] = {}
@@ -91,7 +94,7 @@ def simulate_participant(store: StudyStore, participant: str, progress: Progress
         p = store.progress(participant)
         if p.answers_due is not None:
             cond, task = p.answers_due
-            block = blocks.get(p.answers_due) or block_of(plan, cond, task)
+            block = blocks.get(p.answers_due) or block_of(plan, cond, tasks[task])
             rows = [r for r in store.trials(participant).rows if (r.condition, r.task) == p.answers_due]
             rng = np.random.default_rng([plan.seed, index, order.index(p.answers_due)])
             limit = block.task.outcome.time_limit
@@ -102,7 +105,7 @@ def simulate_participant(store: StudyStore, participant: str, progress: Progress
             return
         key = (step.condition, step.task)
         if key not in blocks:
-            blocks[key] = block_of(plan, step.condition, step.task)
+            blocks[key] = block_of(plan, step.condition, tasks[step.task])
         result, known[key] = _trial(blocks[key], step.seed, known.get(key, {}))
         log = {"simulated": True, "participant": participant, "step": step.index, "condition": step.condition,
                "task": step.task, "runs": blocks[key].label, "seed": step.seed, "practice": step.practice,
@@ -112,10 +115,11 @@ def simulate_participant(store: StudyStore, participant: str, progress: Progress
             progress(participant, p.done + 1, p.total)
 
 
-def simulate_study(store: StudyStore, participants: int, progress: Progress | None = None) -> list[str]:
+def simulate_study(store: StudyStore, participants: int, tasks: Mapping[str, Task],
+                   progress: Progress | None = None) -> list[str]:
     """Fill ``store`` with its plan's first ``participants`` participants, simulated
-    (module doc); returns their ids."""
+    (module doc; ``tasks`` as :func:`simulate_participant` takes them); returns their ids."""
     ids = [s.participant for s in store.plan.participants[:participants]]
     for pid in ids:
-        simulate_participant(store, pid, progress)
+        simulate_participant(store, pid, tasks, progress)
     return ids

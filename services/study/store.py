@@ -242,7 +242,7 @@ class StudyStore:
         text = plan_to_yaml(plan)
         existing = d / PLAN_FILE
         if existing.exists():
-            if existing.read_text(encoding="utf-8") != text:
+            if plan_from_yaml(existing.read_text(encoding="utf-8"), str(existing)) != plan:
                 raise StudyError(f"{existing}: the folder holds another plan; use a new folder, or that plan")
         else:
             write_atomic(existing, text)
