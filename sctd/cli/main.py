@@ -136,6 +136,8 @@ COMMANDS: dict[str, Command] = {
                     "lockstep or real time)", "sctd.cli.eval", "add_eval_arguments", "main_eval"),
     "suite": Command("every task x its skills x the competent baseline in lockstep: one table and "
                      "figures", "sctd.cli.suite", "add_suite_arguments", "main_suite"),
+    "study": Command("a user study: plan (counterbalanced, seeded), run --simulated, report (tables, paired "
+                     "tests, figures)", "sctd.cli.study", "add_study_arguments", "main_study"),
     # the simulator and the recorder define their flags where they live, once: the same
     # as python -m sctd_sim.service / python -m sctd_services.record take
     "sim": Command("the Pinocchio simulator as a real-time Zenoh service", "sctd_sim.service",
