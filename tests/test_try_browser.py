@@ -204,8 +204,9 @@ def test_bad_input_is_rejected_counted_and_nothing_moves(tried, browser):
               send(JSON.stringify({type: "input", seq: "x", source: "gamepad", axes: "up", buttons: [1]}));
               send("not json");
             }""")
-            page.wait_for_function("(c => (c['rejected:nonfinite'] || 0) >= 1 && (c['rejected:range'] || 0) >= 1 "
-                                   "&& (c['rejected:type'] || 0) >= 2)(window.sctdState.gate.counts)")
+            page.wait_for_function("(c => (c['rejected:nonfinite'] || 0) >= 1 && "
+                                   "(c['rejected:range'] || 0) >= 1 && "
+                                   "(c['rejected:type'] || 0) >= 2)(window.sctdState.gate.counts)")
             wait_for(lambda: len(wire.targets) > 300, 10.0)
             with wire.lock:
                 poses = np.array([p for _, p in wire.targets])
@@ -245,7 +246,8 @@ def _assert_recorded(result, task_name):
     folder = Path(result["folder"])
     entry = json.loads((folder / "trial.json").read_text())
     assert entry["outcome"] == "success" and entry["task"] == task_name and entry["device"] == "browser"
-    for field in ("seed", "reason", "time_s", "duration_s", "readings", "progress", "mode_switches", "effort"):
+    for field in ("seed", "reason", "time_s", "duration_s", "readings", "progress", "mode_switches",
+                  "effort"):
         assert field in entry
     assert (folder / "trial.mcap").stat().st_size > 1000
 
@@ -269,7 +271,8 @@ def test_a_gamepad_drives_a_trial_to_success(tried, browser, task_name, conditio
 @pytest.mark.realtime
 def test_the_keyboard_drives_a_trial_to_success(tried, browser):
     page = browser.page
-    page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', {value: () => [], configurable: true})")
+    page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', "
+                  "{value: () => [], configurable: true})")
     down: set[str] = set()
     keys = (("ArrowRight", "ArrowLeft"), ("ArrowUp", "ArrowDown"), ("w", "s"))
 

@@ -44,8 +44,9 @@ def add_try_arguments(p: argparse.ArgumentParser) -> None:
                      "or an on-screen stick; each trial is judged and recorded (docs/try.md).")
     p.add_argument("--port", type=int, default=0, help="the page's port on 127.0.0.1 (default 0: a free one; "
                                                         "the URL goes to stderr)")
-    p.add_argument("--out", metavar="DIR", help="where the trials are recorded, a folder each (default: a new "
-                                                "folder sctd-try-* in the temporary folder)")
+    p.add_argument("--out", metavar="DIR",
+                   help="where the trials are recorded, a folder each (default: a new folder sctd-try-* in "
+                        "the temporary folder)")
     p.add_argument("--seed", type=int, default=0, help="the first trial's start (sctd sim --trial-seed); "
                                                        "the next trials take the next seeds (default 0)")
     p.add_argument("--no-view", action="store_true",
@@ -124,8 +125,9 @@ class Trials:
             msg = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
             return
-        inp = msg.get("input") if isinstance(msg.get("input"), dict) else {}
-        counters = msg.get("counters") if isinstance(msg.get("counters"), dict) else {}
+        inp, counters = msg.get("input"), msg.get("counters")
+        inp = inp if isinstance(inp, dict) else {}
+        counters = counters if isinstance(counters, dict) else {}
         self.status = {"state": msg.get("state"), "mode": msg.get("mode"), "skill": msg.get("skill_name"),
                        "owner": inp.get("owner"), "input_age": msg.get("input_age"),
                        "counters": {k: counters.get(k) for k in ("stale_input", "disabled_input",
@@ -206,7 +208,8 @@ class Trials:
             rig.enter_context(Child("sctd.cli.main", "view", "--task", task.name, "--view-port", str(port),
                                     *hub, log=folder / "view.log"))
             self.view_url = f"http://127.0.0.1:{port}/"
-        return Child("sctd.cli.main", "log", "--mcap", str(folder / "trial.mcap"), *hub, log=folder / "log.log")
+        return Child("sctd.cli.main", "log", "--mcap", str(folder / "trial.mcap"), *hub,
+                     log=folder / "log.log")
 
     def _run(self, task: Any, skill: dict[str, Any], seed: int, folder: Path) -> dict[str, Any]:
         """Start the rig, wait for it, then record the trial until its outcome, an abort or
@@ -220,7 +223,7 @@ class Trials:
         w = TrialWatcher(self.session, task)
         first = last = None
         try:
-            with self._start_rig(task, Path(skill["path"]), seed, folder) as log:
+            with self._start_rig(task, Path(skill["path"]), seed, folder):  # (the log)
                 end = time.monotonic() + STARTUP
                 while w.observation() is None:
                     if time.monotonic() > end or self.stop.is_set() or self._abort.is_set():

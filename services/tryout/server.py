@@ -112,8 +112,8 @@ class PageServer:
             return None
         if path in ("/", "/index.html"):
             body = page_html()
-            headers = Headers([("Content-Type", "text/html; charset=utf-8"), ("Content-Length", str(len(body))),
-                               ("Cache-Control", "no-store")])
+            headers = Headers([("Content-Type", "text/html; charset=utf-8"),
+                               ("Content-Length", str(len(body))), ("Cache-Control", "no-store")])
             return Response(HTTPStatus.OK, "OK", headers, body)
         return connection.respond(HTTPStatus.NOT_FOUND, "not found\n")
 
