@@ -211,7 +211,7 @@ def test_bad_input_is_rejected_counted_and_nothing_moves(tried, browser):
             with wire.lock:
                 poses = np.array([p for _, p in wire.targets])
                 moved = [u for _, enable, u in wire.inputs if enable and any(u)]
-            assert not moved and np.ptp(poses[:, :3], axis=0).max() < 1e-9
+            assert not moved and np.ptp(poses[:, :3], axis=0).max() < 1e-4  # (0.1 mm: a push moves cm)
             assert state(page)["status"]["mode"] == "stopped"
         finally:
             wire.close()

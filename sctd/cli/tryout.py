@@ -103,6 +103,7 @@ class Trials:
         self.result: dict[str, Any] | None = None
         self.status: dict[str, Any] = {}
         self.view_url: str | None = None
+        self._view_port: int | None = None
         self.stop = threading.Event()
         self._abort = threading.Event()
         self._rig = ExitStack()
@@ -177,7 +178,7 @@ class Trials:
             skill = _skill_for(task, condition, folder)
             self._set(label=skill["skill"])
             self._rig.close()  # the previous trial's arm, daemon and view
-            self._rig = ExitStack()
+            self._rig, self.view_url, self._view_port = ExitStack(), None, None
             entry = self._run(task, skill, seed, folder)
         except Exception as e:  # said on the page and on stderr; the command goes on
             print(f"sctd try: trial {seed}: {e}", file=sys.stderr, flush=True)
@@ -207,9 +208,19 @@ class Trials:
             port = free_port()
             rig.enter_context(Child("sctd.cli.main", "view", "--task", task.name, "--view-port", str(port),
                                     *hub, log=folder / "view.log"))
-            self.view_url = f"http://127.0.0.1:{port}/"
+            self._view_port = port
         return Child("sctd.cli.main", "log", "--mcap", str(folder / "trial.mcap"), *hub,
                      log=folder / "log.log")
+
+    def _show_view(self) -> None:
+        """Point the page at the view once it serves (its process takes a few seconds)."""
+        from .procs import port_is_free
+
+        port, end = self._view_port, time.monotonic() + 30.0
+        while port is not None and port_is_free(port) and time.monotonic() < end and not self.stop.is_set():
+            time.sleep(0.1)
+        if port is not None:
+            self.view_url = f"http://127.0.0.1:{port}/"
 
     def _run(self, task: Any, skill: dict[str, Any], seed: int, folder: Path) -> dict[str, Any]:
         """Start the rig, wait for it, then record the trial until its outcome, an abort or
@@ -229,13 +240,16 @@ class Trials:
                     if time.monotonic() > end or self.stop.is_set() or self._abort.is_set():
                         raise RuntimeError(f"the arm and the daemon did not start; see {folder}")
                     time.sleep(0.05)
-                inputs = w.inputs
+                self._show_view()
                 self.gate.set_open(True)
                 self._set(phase="running")
                 while not self.stop.wait(1.0 / WATCH_RATE):
                     obs = w.observation()
-                    if obs is None or w.inputs == inputs:  # the trial starts with the person
-                        continue
+                    if self._abort.is_set() and first is None:  # aborted before it started
+                        rec.end("aborted on the page")
+                        break
+                    if obs is None or (first is None and not (w.buttons[1] and any(w.u))):
+                        continue  # the trial starts with the person's first push
                     last = (time.monotonic(), obs.t)
                     first = first or last
                     self._set(elapsed=obs.t - (rec.t0 if rec.t0 is not None else obs.t))
