@@ -47,7 +47,7 @@ WATCH_INGRESS = 250.0  # Hz
 SCENE_PERIOD = 0.1  # s between the simulator's scene messages (``sctd sim``'s default)
 
 
-class _Watcher:
+class TrialWatcher:
     def __init__(self, s: zenoh.Session, task: Task):
         k = Keys()
         self.lock = threading.Lock()
@@ -159,7 +159,7 @@ def run_trial(skill_path: str | Path, spec: TaskSpec, seed: int, demos: list | N
     first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start
     last: tuple[float, float] | None = None  # (wall, simulated) at its end
     with session(listen=[hub], rate_limits=[(keys.state, WATCH_INGRESS), (keys.target, WATCH_INGRESS)]) as s:
-        w = _Watcher(s, task)
+        w = TrialWatcher(s, task)
         try:
             with Child("sctd.cli.main", *robot_command(spec, seed, driver),
                        "--connect", hub, "--listen", ep(), log=logdir / f"sim-{seed}.log") as sim, \

@@ -128,6 +128,8 @@ COMMANDS: dict[str, Command] = {
                      "checks and shows one", "sctd.cli.tasks", "add_tasks_arguments", "main_tasks"),
     "demo": Command("run a skill end to end on this machine (daemon, robot, user)", "sctd.cli.demo",
                     "add_demo_arguments", "main_demo"),
+    "try": Command("drive a skill yourself from a browser page (gamepad, keyboard or touch), each trial "
+                   "judged and recorded", "sctd.cli.tryout", "add_try_arguments", "main_try"),
     "learn": Command("learn a skill from a folder of demonstrations", "sctd.cli.learn",
                      "add_learn_arguments", "main_learn"),
     "dtw": Command("dynamic time warping distance between two demonstrations", "sctd.cli.learn",

@@ -99,7 +99,11 @@ def with_limits(path: Path, limits: Limits, directory: Path,
                 cap: tuple[str, SpeedNear] | None = None) -> Path:
     """A copy of the skill file at ``path`` (and its model files) in ``directory``,
     :func:`restyled`."""
-    bundle = restyled(bundle_from_file(path), limits, control, cap)
+    return write_bundle(restyled(bundle_from_file(path), limits, control, cap), directory)
+
+
+def write_bundle(bundle: Bundle, directory: Path) -> Path:
+    """``bundle`` as a skill file and its model files in ``directory``; the file's path."""
     directory.mkdir(parents=True, exist_ok=True)
     out = directory / Path(bundle.name).name
     out.write_text(bundle.yaml_text)

@@ -262,6 +262,12 @@ class TrialRecorder:
             return self._end("failure", f"time limit ({self.time_limit:.0f} s)", t)
         return None
 
+    def end(self, reason: str) -> None:
+        """End the trial now as a failure for ``reason`` (a person who gave it up, ``sctd
+        try``'s abort), at the last observation's time."""
+        if self.outcome is None:
+            self._end("failure", reason, self._last_t if self._last_t is not None else 0.0)
+
     def _end(self, outcome: str, reason: str, t: float) -> str:
         self.outcome, self.reason = outcome, reason
         if outcome == "success":

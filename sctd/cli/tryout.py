@@ -1,0 +1,326 @@
+"""``sctd try``: drive sctd from a browser page, to feel what a skill does (``docs/try.md``).
+
+One command on one machine: a page on 127.0.0.1 (:mod:`sctd_services.tryout.server`)
+where a person picks a task and a skill for it, or teleoperation (the competent baseline
+of ``sctd eval``: the shipped teleop with the skill's limits and the task's control
+frame), starts a trial and drives the arm with a gamepad, the keyboard or an on-screen
+stick. The page is an input device like any other (:mod:`sctd_services.input.page`: the
+arbiter sees ``input/browser``, with a deadman, stale when the page hides).
+
+Per trial, as a real-time trial of ``sctd eval`` (:mod:`.eval_realtime`), on this
+command's loopback Zenoh port: ``sctd sim --trial-seed N``, ``sctd run`` with the
+skill, ``sctd log --mcap`` and ``sctd view`` (the page shows it in a frame), watched by
+the same :class:`~sctd_services.eval.trial.TrialRecorder`, which judges the task's
+outcome. Each trial gets a folder under ``--out`` with ``trial.json`` (the fields of
+``sctd eval --json``'s per-trial entries) and ``trial.mcap``. The arm and the view stay
+up after a trial until the next one starts; Ctrl-C or SIGTERM stops everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import tempfile
+import threading
+import time
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+from ..app.errors import EXIT_OK, fail
+from ..wire import Keys, codec
+from .procs import Child, free_port
+
+STARTUP = 90.0  # s for the arm and the daemon to publish, on a loaded machine
+STUCK_AFTER = 10.0  # s without progress: the trial is stuck (as sctd eval's default)
+
+
+def add_try_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Drive sctd from a browser: a page on 127.0.0.1 where you pick a task and a skill (or "
+                     "teleoperation), start a trial and drive the simulated arm with a gamepad, the keyboard "
+                     "or an on-screen stick; each trial is judged and recorded (docs/try.md).")
+    p.add_argument("--port", type=int, default=0, help="the page's port on 127.0.0.1 (default 0: a free one; "
+                                                        "the URL goes to stderr)")
+    p.add_argument("--out", metavar="DIR",
+                   help="where the trials are recorded, a folder each (default: a new folder sctd-try-* in "
+                        "the temporary folder)")
+    p.add_argument("--seed", type=int, default=0, help="the first trial's start (sctd sim --trial-seed); "
+                                                       "the next trials take the next seeds (default 0)")
+    p.add_argument("--no-view", action="store_true",
+                   help="without the live 3D view in the page (a machine without a GPU to spare)")
+
+
+def catalog() -> list[dict[str, Any]]:
+    """The tasks (``sctd tasks``) with the skills whose object is theirs (``sctd
+    skills``: stored, newest first, then shipped)."""
+    from ..skill import SkillError, load_skill
+    from ..skill.catalog import shipped_skills, stored_skills
+    from ..task import TaskError, known_tasks, load_task
+
+    skills: list[tuple[str, str]] = []
+    for name, path in [*((s.name, s.path) for s in reversed(stored_skills())),
+                       *((p.stem, p) for p in shipped_skills())]:
+        try:
+            skills.append((name, load_skill(path).object))
+        except SkillError:
+            continue
+    tasks = []
+    for k in known_tasks():
+        try:
+            t = load_task(k.path)
+        except TaskError:
+            continue
+        names = list(dict.fromkeys(n for n, obj in skills if obj == t.object))
+        tasks.append({"name": k.name, "title": t.title, "object": t.object, "skills": names})
+    return tasks
+
+
+def _plain(x: Any) -> Any:
+    """``x`` with non-finite floats as None (JSON a browser parses)."""
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_plain(v) for v in x]
+    return x
+
+
+class Trials:
+    """The trials of one ``sctd try``: started on the page's request, one at a time, each
+    on a rig of processes connected to ``hub`` (a context manager: stops them)."""
+
+    def __init__(self, session: Any, hub: str, gate: Any, out: Path, seed: int, view: bool,
+                 tasks: list[dict[str, Any]]):
+        self.session, self.hub, self.gate, self.out = session, hub, gate, out
+        self.seed, self.view, self.tasks = seed, view, {t["name"]: t for t in tasks}
+        self.n = 0
+        self.lock = threading.Lock()
+        self.trial: dict[str, Any] = {"phase": "idle"}
+        self.result: dict[str, Any] | None = None
+        self.status: dict[str, Any] = {}
+        self.view_url: str | None = None
+        self._view_port: int | None = None
+        self.stop = threading.Event()
+        self._abort = threading.Event()
+        self._rig = ExitStack()
+        self._thread: threading.Thread | None = None
+        self._sub = session.declare_subscriber(Keys().status, self._on_status)
+
+    def __enter__(self) -> Trials:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop.set()
+        if self._thread is not None:
+            self._thread.join(30.0)
+        self._sub.undeclare()
+        self._rig.close()
+        self.gate.set_open(False)
+
+    def _on_status(self, sample: Any) -> None:
+        try:
+            msg = codec.unpack_map(sample.payload.to_bytes())
+        except codec.DecodeError:
+            return
+        inp, counters = msg.get("input"), msg.get("counters")
+        inp = inp if isinstance(inp, dict) else {}
+        counters = counters if isinstance(counters, dict) else {}
+        self.status = {"state": msg.get("state"), "mode": msg.get("mode"), "skill": msg.get("skill_name"),
+                       "owner": inp.get("owner"), "input_age": msg.get("input_age"),
+                       "counters": {k: counters.get(k) for k in ("stale_input", "disabled_input",
+                                                                 "nonfinite_input", "ignored_input")}}
+
+    def state(self) -> dict[str, Any]:
+        """What every page is told, besides its role and the gate's counters."""
+        with self.lock:
+            return _plain({"trial": dict(self.trial), "result": self.result, "status": self.status,
+                           "out": str(self.out), "view_url": self.view_url})
+
+    def request(self, msg: dict) -> str | None:
+        """A controller's ``start`` or ``abort``; why it is refused, or None."""
+        if msg.get("type") == "abort":
+            self._abort.set()
+            return None
+        task, condition = msg.get("task"), msg.get("condition")
+        if task not in self.tasks:
+            return f"no task {task!r}"
+        if condition != "teleop" and condition not in self.tasks[task]["skills"]:
+            return f"no skill {condition!r} for the task {task}"
+        if condition == "teleop" and not self.tasks[task]["skills"]:
+            return f"the task {task} has no skill whose limits the baseline would take"
+        with self.lock:
+            if self._thread is not None and self._thread.is_alive():
+                return "a trial is running: abort it first"
+            self._abort.clear()
+            seed, self.n = self.seed + self.n, self.n + 1
+            self._thread = threading.Thread(target=self._trial, args=(str(task), str(condition), seed),
+                                            name="sctd-try-trial", daemon=True)
+            self._thread.start()
+        return None
+
+    def _set(self, **fields: Any) -> None:
+        with self.lock:
+            self.trial.update(fields)
+
+    def _trial(self, task_name: str, condition: str, seed: int) -> None:
+        from ..task import find_task
+
+        folder = self.out / f"trial-{seed:03d}-{task_name}-{condition}"
+        with self.lock:
+            self.trial, self.result = {"phase": "starting", "task": task_name, "label": condition,
+                                       "seed": seed}, None
+        try:
+            task = find_task(task_name)
+            skill = _skill_for(task, condition, folder)
+            self._set(label=skill["skill"])
+            self._rig.close()  # the previous trial's arm, daemon and view
+            self._rig, self.view_url, self._view_port = ExitStack(), None, None
+            entry = self._run(task, skill, seed, folder)
+        except Exception as e:  # said on the page and on stderr; the command goes on
+            print(f"sctd try: trial {seed}: {e}", file=sys.stderr, flush=True)
+            self._set(phase="error", error=str(e))
+            self.gate.set_open(False)
+            return
+        (folder / "trial.json").write_text(json.dumps(_plain(entry), indent=1) + "\n")
+        print(f"sctd try: trial {seed} ({task_name}, {entry['skill']}): {entry['outcome']}, "
+              f"{entry['reason']}; {folder}", file=sys.stderr, flush=True)
+        with self.lock:
+            self.result = {k: entry[k] for k in ("outcome", "reason", "time_s", "duration_s")}
+            self.result["folder"] = str(folder)
+            self.trial["phase"] = "done"
+
+    def _start_rig(self, task: Any, path: Path, seed: int, folder: Path) -> Child:
+        """The arm, the daemon and the view (kept until the next trial); the log (its
+        Child, stopped at the trial's end)."""
+        def ep() -> str:
+            return f"tcp/127.0.0.1:{free_port()}"
+
+        rig, hub = self._rig, ["--connect", self.hub]
+        rig.enter_context(Child("sctd.cli.main", "sim", "--task", task.name, "--trial-seed", str(seed), *hub,
+                                "--listen", ep(), log=folder / "sim.log"))
+        rig.enter_context(Child("sctd.cli.main", "run", "--skill", str(path), *hub, "--listen", ep(),
+                                log=folder / "daemon.log"))
+        if self.view:
+            port = free_port()
+            rig.enter_context(Child("sctd.cli.main", "view", "--task", task.name, "--view-port", str(port),
+                                    *hub, log=folder / "view.log"))
+            self._view_port = port
+        return Child("sctd.cli.main", "log", "--mcap", str(folder / "trial.mcap"), *hub,
+                     log=folder / "log.log")
+
+    def _show_view(self) -> None:
+        """Point the page at the view once it serves (its process takes a few seconds)."""
+        from .procs import port_is_free
+
+        port, end = self._view_port, time.monotonic() + 30.0
+        while port is not None and port_is_free(port) and time.monotonic() < end and not self.stop.is_set():
+            time.sleep(0.1)
+        if port is not None:
+            self.view_url = f"http://127.0.0.1:{port}/"
+
+    def _run(self, task: Any, skill: dict[str, Any], seed: int, folder: Path) -> dict[str, Any]:
+        """Start the rig, wait for it, then record the trial until its outcome, an abort or
+        the command's end; the trial's JSON entry."""
+        from sctd_services.eval.trial import TrialRecorder
+        from sctd_services.user import PROFILES
+
+        from .eval_realtime import WATCH_RATE, TrialWatcher
+
+        rec = TrialRecorder(task, seed, PROFILES["steady"].switch_time, None, STUCK_AFTER)
+        w = TrialWatcher(self.session, task)
+        first = last = None
+        try:
+            with self._start_rig(task, Path(skill["path"]), seed, folder):  # (the log)
+                end = time.monotonic() + STARTUP
+                while w.observation() is None:
+                    if time.monotonic() > end or self.stop.is_set() or self._abort.is_set():
+                        raise RuntimeError(f"the arm and the daemon did not start; see {folder}")
+                    time.sleep(0.05)
+                self._show_view()
+                self.gate.set_open(True)
+                self._set(phase="running")
+                while not self.stop.wait(1.0 / WATCH_RATE):
+                    obs = w.observation()
+                    if self._abort.is_set() and first is None:  # aborted before it started
+                        rec.end("aborted on the page")
+                        break
+                    if obs is None or (first is None and not (w.buttons[1] and any(w.u))):
+                        continue  # the trial starts with the person's first push
+                    last = (time.monotonic(), obs.t)
+                    first = first or last
+                    self._set(elapsed=obs.t - (rec.t0 if rec.t0 is not None else obs.t))
+                    if self._abort.is_set():
+                        rec.end("aborted on the page")
+                    if rec.add(obs, w.u, w.buttons, w.status.get("vf_scale")) is not None:
+                        break
+                else:
+                    rec.end("sctd try stopped")
+                self.gate.set_open(False)
+        finally:
+            w.close()
+        res = rec.result()
+        if first is not None and last is not None and last[0] - first[0] > 1.0:
+            res.sim_rtf = round((last[1] - first[1]) / (last[0] - first[0]), 3)
+        return {**res.as_dict(), **skill, "task": task.name, "device": "browser",
+                "mcap": str(folder / "trial.mcap"), "input": self.gate.report()["counts"]}
+
+
+def _skill_for(task: Any, condition: str, folder: Path) -> dict[str, Any]:
+    """The skill a trial runs: the named one, or for ``teleop`` the competent baseline of
+    the task's first skill (written into ``folder``); its label, name, id, path and
+    ``baseline_of``, as ``sctd eval --json`` names them."""
+    from sctd.skill import bundle_from_file, load_skill
+    from sctd.skill.catalog import find_skill
+    from sctd_services.eval.evaluate import TELEOP, competent_baseline, write_bundle
+
+    folder.mkdir(parents=True, exist_ok=True)
+    if condition == "teleop":
+        rows = [t for t in catalog() if t["name"] == task.name]
+        ref = load_skill(find_skill(rows[0]["skills"][0]))
+        bundle, label = competent_baseline(bundle_from_file(TELEOP), ref, task)
+        path = write_bundle(bundle, folder / "teleop")
+        baseline_of: str | None = ref.name
+    else:
+        path, label, baseline_of = find_skill(condition), condition, None
+    skill = load_skill(path)
+    return {"skill": label, "name": skill.name, "id": skill.id, "baseline_of": baseline_of,
+            "condition": condition, "path": str(path)}
+
+
+def main_try(args: argparse.Namespace) -> int:
+    from sctd.wire.session import MSGPACK, session
+    from sctd_services.input.page import DEVICE, PageGate
+    from sctd_services.tryout.server import PageServer
+
+    if not 0 <= args.port <= 65535:
+        return fail("try", f"--port: not a TCP port: {args.port}")
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sctd-try-"))
+    out.mkdir(parents=True, exist_ok=True)
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    tasks = catalog()
+    try:
+        with session(listen=[hub]) as s, \
+                s.declare_publisher(Keys().input(DEVICE), express=True, encoding=MSGPACK) as pub:
+            gate = PageGate(pub.put)
+            with Trials(s, hub, gate, out, args.seed, not args.no_view, tasks) as trials:
+                try:
+                    server = PageServer(gate, trials.request, trials.state, {"tasks": tasks}, args.port)
+                except OSError as e:
+                    return fail("try", f"--port: {e}")
+                with server:
+                    print(f"sctd try: open http://127.0.0.1:{server.port}/ (Zenoh {hub}); trials recorded "
+                          f"in {out}", file=sys.stderr, flush=True)
+                    try:
+                        stop.wait()
+                    except KeyboardInterrupt:
+                        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    print("sctd try: stopped", file=sys.stderr, flush=True)
+    return EXIT_OK

@@ -1,0 +1,163 @@
+"""The page of ``sctd try`` and its socket, on 127.0.0.1 (``docs/try.md``).
+
+One port serves the page (``GET /``) and its WebSocket (``/ws``), with the
+``websockets`` package (already installed with Viser, which serves its own pages with
+it) on an asyncio loop in a thread of its own. A page's messages are JSON:
+
+- ``{"type": "input", "seq", "source", "axes", "buttons"}``: a raw reading, handed to
+  the :class:`~sctd_services.input.page.PageGate`, which checks, maps and publishes it;
+- ``{"type": "stale", "why": "hidden"|"blur"}`` and ``{"type": "resume"}``: the page was
+  hidden or lost focus, and is back;
+- ``{"type": "start", "task", "condition"}`` and ``{"type": "abort"}``: the trial,
+  handed to ``on_request`` (the controller's only; an observer's are refused).
+
+Every :data:`STATE_PERIOD` the server sends each page ``{"type": "state", ...}``: its role,
+the gate's counters and last message, and whatever ``state()`` returns (the trial, the
+daemon's status). A closed socket is the gate's ``disconnect`` (the arm stops).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import json
+import threading
+from collections.abc import Callable
+from http import HTTPStatus
+from importlib import resources
+from typing import Any
+
+from sctd_services.input.page import PageGate
+
+STATE_PERIOD = 0.1  # s between state messages to each page
+MAX_MESSAGE = 4096  # bytes: a reading is about 150
+PING = 2.0  # s between the server's pings (a socket that stops answering closes after 2 more)
+
+
+def page_html() -> bytes:
+    """The page (``page.html`` next to this module)."""
+    return resources.files("sctd_services.tryout").joinpath("page.html").read_bytes()
+
+
+class PageServer:
+    """The page and its socket on ``127.0.0.1:port`` (0: a free one); a context manager.
+
+    Parameters
+    ----------
+    gate : PageGate
+    on_request : callable
+        ``on_request(message)`` for a controller's ``start``/``abort``; returns None or a
+        sentence saying why it is refused (sent back to that page).
+    state : callable
+        ``state()``: the shared part of every state message (plain data).
+    hello : dict
+        Sent to each page when it connects (the catalogue of tasks and skills).
+    """
+
+    def __init__(self, gate: PageGate, on_request: Callable[[dict], str | None],
+                 state: Callable[[], dict], hello: dict, port: int = 0):
+        self.gate, self.on_request, self.state, self.hello = gate, on_request, state, hello
+        self._ids = itertools.count(1)
+        self._loop = asyncio.new_event_loop()
+        self._ready = threading.Event()
+        self._stop: asyncio.Event | None = None
+        self._error: BaseException | None = None
+        self.port = port
+        self._thread = threading.Thread(target=self._run, name="sctd-try-page", daemon=True)
+        self._thread.start()
+        self._ready.wait(10.0)
+        if self._error is not None:
+            raise self._error
+
+    def __enter__(self) -> PageServer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._stop is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(10.0)
+
+    def _run(self) -> None:
+        try:
+            self._loop.run_until_complete(self._serve())
+        except BaseException as e:  # (a port in use: raised in the caller's thread)
+            self._error = e
+            self._ready.set()
+        finally:
+            self._loop.close()
+
+    async def _serve(self) -> None:
+        from websockets.asyncio.server import serve
+
+        self._stop = asyncio.Event()
+        async with serve(self._handle, "127.0.0.1", self.port, process_request=self._http,
+                         max_size=MAX_MESSAGE, ping_interval=PING, ping_timeout=PING,
+                         compression=None) as server:
+            self.port = next(iter(server.sockets)).getsockname()[1]
+            self._ready.set()
+            await self._stop.wait()
+
+    @staticmethod
+    def _http(connection: Any, request: Any) -> Any:
+        """The page for ``GET /``; the socket on ``/ws``; 404 for anything else."""
+        from websockets.datastructures import Headers
+        from websockets.http11 import Response
+
+        path = request.path.split("?", 1)[0]
+        if path == "/ws":
+            return None
+        if path in ("/", "/index.html"):
+            body = page_html()
+            headers = Headers([("Content-Type", "text/html; charset=utf-8"),
+                               ("Content-Length", str(len(body))), ("Cache-Control", "no-store")])
+            return Response(HTTPStatus.OK, "OK", headers, body)
+        return connection.respond(HTTPStatus.NOT_FOUND, "not found\n")
+
+    async def _handle(self, ws: Any) -> None:
+        conn = next(self._ids)
+        role = self.gate.connect(conn)
+        sender = asyncio.create_task(self._send_state(ws, conn))
+        try:
+            await ws.send(json.dumps({"type": "hello", "role": role, **self.hello}))
+            async for raw in ws:
+                reply = self._message(conn, raw)
+                if reply is not None:
+                    await ws.send(json.dumps({"type": "refused", "why": reply}))
+        except Exception:  # a socket that broke: the same as one that closed
+            pass
+        finally:
+            sender.cancel()
+            self.gate.disconnect(conn)
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender
+
+    def _message(self, conn: int, raw: str | bytes) -> str | None:
+        """One message from page ``conn``; a sentence for the page when it is refused."""
+        try:
+            msg = json.loads(raw)
+        except (ValueError, TypeError):
+            msg = None
+        kind = msg.get("type") if isinstance(msg, dict) else None
+        if kind == "input":
+            self.gate.reading(conn, msg)
+        elif kind == "stale":
+            self.gate.pause(conn, str(msg.get("why")))
+        elif kind == "resume":
+            self.gate.resume(conn)
+        elif kind in ("start", "abort"):
+            if self.gate.role(conn) != "controller":
+                return "this page is an observer: another page drives"
+            return self.on_request(msg)
+        else:
+            self.gate.garbage(conn)
+        return None
+
+    async def _send_state(self, ws: Any, conn: int) -> None:
+        while True:
+            msg = {"type": "state", "role": self.gate.role(conn), "gate": self.gate.report(), **self.state()}
+            await ws.send(json.dumps(msg, default=str))
+            await asyncio.sleep(STATE_PERIOD)
