@@ -27,7 +27,11 @@ from sctd_services.user import SimulatedUser
 from tests.browser import open_page
 from tests.conftest import sctd, wait_for
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+# realtime, every test: the stops are judged against the 0.1 s input timeout and "nothing
+# moves" against the daemon's targets, and with the other worker's tests beside them on two
+# cores a zero reached the daemon late (a target 0.04 mm on, after the timeout by the
+# gate's stamp) or the page's status lagged; the realtime tier runs them one at a time
+pytestmark = [pytest.mark.slow, pytest.mark.realtime, pytest.mark.timeout(600)]
 
 INPUT_TIMEOUT = 0.1  # s: the daemon's default (sctd run --input-timeout)
 DEADBAND = 0.12  # the browser pad map's sticks
@@ -162,15 +166,21 @@ def test_the_arm_stops_within_the_input_timeout(tried, browser, how):
         page.wait_for_function("window.sctdState && window.sctdState.role === 'controller'")
         assert state(page)["gate"]["counts"]["stale:closed"] >= 1
         return
-    after = state(page)
-    assert after["status"]["mode"] == "stopped"
-    if how in ("hide", "blur"):
-        why = "hidden" if how == "hide" else how
-        assert after["gate"]["counts"][f"stale:{why}"] == before.get(f"stale:{why}", 0) + 1
-        assert after["gate"]["paused"] == why
-        page.evaluate("() => { delete document.visibilityState; window.dispatchEvent(new Event('focus')); }")
-        page.wait_for_function("window.sctdState.gate.paused === null")
-    page.evaluate(SET_PAD, [[0.0, 0.0, 0.0, 0.0], buttons()])
+    try:
+        # the daemon goes from hold (zero input) to stopped (stale input) once the watchdog
+        # trips; the page shows its status as the daemon publishes it: wait for it
+        page.wait_for_function("window.sctdState.status.mode === 'stopped'", timeout=30_000)
+        after = state(page)
+        if how in ("hide", "blur"):
+            why = "hidden" if how == "hide" else how
+            assert after["gate"]["counts"][f"stale:{why}"] == before.get(f"stale:{why}", 0) + 1
+            assert after["gate"]["paused"] == why
+    finally:  # the page back as the next test expects it, whatever came of this one
+        if how in ("hide", "blur"):
+            page.evaluate("() => { delete document.visibilityState; "
+                          "window.dispatchEvent(new Event('focus')); }")
+            page.wait_for_function("window.sctdState.gate.paused === null")
+        page.evaluate(SET_PAD, [[0.0, 0.0, 0.0, 0.0], buttons()])
 
 
 def test_a_second_page_is_an_observer(tried, browser):
@@ -257,7 +267,6 @@ def _assert_recorded(result, task_name):
     assert (folder / "trial.mcap").stat().st_size > 1000
 
 
-@pytest.mark.realtime
 # The pour is left out: driven through the page in real time it emptied the bottle (nine
 # tenths in the mug: the pour's failure) in 3 of 15 runs on a busy machine, where
 # lockstep trials of the same skill leave 0.55-0.65 poured (docs/try.md).
@@ -276,7 +285,6 @@ def test_a_gamepad_drives_a_trial_to_success(tried, browser, task_name, conditio
     _assert_recorded(result, task_name)
 
 
-@pytest.mark.realtime
 def test_the_keyboard_drives_a_trial_to_success(tried, browser):
     page = browser.page
     page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', "
