@@ -22,6 +22,7 @@ from ..skill import (
     Field,
     Frame,
     Hyperplane,
+    InputMapping,
     Limits,
     LinearMapping,
     NeighbourOrientation,
@@ -120,14 +121,41 @@ def linear_skill(result: LinearResult, name: str) -> Skill:
 def _gripped(result: LinearResult | VectorFieldResult, skill: Skill) -> Skill:
     """``skill`` with the region its demonstrations went through (:mod:`sctd.skill.region`)
     and split at the demonstrations' gripper events, each a state that commands the
-    gripper (:mod:`sctd.learn.gripper`)."""
+    gripper (:mod:`sctd.learn.gripper`); a vector-field phase that turns in place
+    (:mod:`sctd.learn.vfturns`) moves by its turn."""
     points = np.concatenate([p.poses[:, :3] for p in result.prepared])
     skill = dataclasses.replace(skill, region=Region.around(result.frame or result.options.object, points,
                                                             demonstrations=len(result.prepared)))
     if result.gripper is None:
         return skill
+    moves = None
+    if isinstance(result, VectorFieldResult) and result.turns:
+        frames, moves = _turns(result, skill.name)
+        skill = dataclasses.replace(skill, frames={**skill.frames, **frames})
     return with_gripper(skill, result.labels, result.gripper, result.gripper_options,
-                        frame=result.frame or None)
+                        frame=result.frame or None, moves=moves)
+
+
+def _turns(result: VectorFieldResult, name: str
+           ) -> tuple[dict[str, Frame], dict[int, tuple[InputMapping, ...]]]:
+    """Per phase that turns in place: its lever frame (``lever<phase>``, an ee offset)
+    and the vector-field mapping that turns the hand about its origin by the lever point's
+    cylinder field (model file ``name-turn<phase>.npz``), rigid and scaled part by part as
+    a state of one field is."""
+    p = result.field_options
+    frames: dict[str, Frame] = {}
+    moves: dict[int, tuple[InputMapping, ...]] = {}
+    for phase, turn in sorted(result.turns.items()):
+        frame = f"lever{phase}"
+        frames[frame] = Frame(frame, "ee", np.array([*turn.lever, 0.0, 0.0, 0.0, 1.0]))
+        model = turn.model()
+        model = dataclasses.replace(model, fields=tuple(_stored(f) for f in model.fields))
+        moves[phase] = (VectorFieldMapping(model_file=f"{name}-turn{phase}.npz", model=model, frame=frame,
+                                           mode="scale", combine=p.vf_combine,  # type: ignore[arg-type]
+                                           min_v=p.min_v, k_s=p.k_s, max_n=p.vf_max_n, max_d=p.max_d,
+                                           motion="rigid", direction=p.vf_direction,  # type: ignore[arg-type]
+                                           scale_by="parts"),)
+    return frames, moves
 
 
 def _gripper_header(result: LinearResult | VectorFieldResult, skill: Skill) -> str:
@@ -307,6 +335,12 @@ def _vf_header(result: VectorFieldResult) -> str:
                          "(button 2) goes back")
     else:
         lines.append(f"  one state blends the fields ({plan.reason})")
+    for phase, t in sorted(result.turns.items()):
+        degrees = np.degrees(t.angles)
+        lines.append(f"  turn in place (gripper phase {phase}): about {rounded(t.axis, 3)} through "
+                     f"{rounded(t.centre, 3)}, {degrees.min():.0f}-{degrees.max():.0f} deg in the "
+                     f"demonstrations, the origin within {t.spread * 100:.1f} cm; pushed at the lever "
+                     f"point {rounded(t.lever, 3)} of the hand (frame lever{phase})")
     return "\n".join(lines)
 
 

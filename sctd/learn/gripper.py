@@ -30,11 +30,12 @@ from __future__ import annotations
 import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..skill import Distance, Gripper, GripperAction, Skill, State, Timeout, Transition
+from ..skill import Distance, Gripper, GripperAction, InputMapping, Skill, State, Timeout, Transition
 from .demos import Demo
 from .params import Interval, hyperparameter
 
@@ -222,11 +223,14 @@ def _phases(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan) -> _P
 
 
 def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
-                 options: GripperOptions | None = None, frame: str | None = None) -> Skill:
+                 options: GripperOptions | None = None, frame: str | None = None,
+                 moves: dict[int, tuple[InputMapping, ...]] | None = None) -> Skill:
     """``skill`` (learned, one state per label of ``labels``) split at ``plan``'s events,
     each event a state commanding the gripper (the module's docstring). ``frame`` is the
     body whose frame the plan's places are in (None: the skill's object); a way into an
-    event from a state in another body's frame uses the place in that body's.
+    event from a state in another body's frame uses the place in that body's. ``moves``
+    (phase -> input mappings): the phase's states, and the event state after it, move
+    by these instead, with no active constraints (a turn in place, :mod:`.vfturns`).
 
     The states are named ``s0``, ``s1``, ... in order: phase 0's, the first event's, phase
     1's, and so on.
@@ -237,15 +241,18 @@ def with_gripper(skill: Skill, labels: dict[str, list[int]], plan: GripperPlan,
     name_of: dict[tuple[int, int], str] = {}  # (phase, learned state) -> new name
     event_state: list[str] = []
     for p, used in enumerate(ph.used):
+        move: dict[str, Any] = {} if p not in (moves or {}) else \
+            {"input_mappings": moves[p], "active_constraints": ()}  # type: ignore[index]
         for k in used:
             name_of[p, k] = f"s{len(states)}"
-            states.append(dataclasses.replace(skill.states[k], name=name_of[p, k]))
+            states.append(dataclasses.replace(skill.states[k], name=name_of[p, k], **move))
         if p < len(plan.events):
             ev = plan.events[p]
             action = (GripperAction(action="close", force=float(options.grasp_force)) if ev.action == "close"
                       else GripperAction(action="open"))
             event_state.append(f"s{len(states)}")
-            states.append(dataclasses.replace(skill.states[ph.exit[p]], name=event_state[-1], gripper=action))
+            states.append(dataclasses.replace(skill.states[ph.exit[p]], name=event_state[-1], gripper=action,
+                                              **move))
     index = {s.name: k for k, s in enumerate(skill.states)}
     transitions: list[Transition] = []
     for p, used in enumerate(ph.used):  # the learned transitions, within each phase

@@ -30,6 +30,7 @@ from .results import LinearResult, SkillOptions, VectorFieldOptions, VectorField
 from .traps import TrapFinding, fix_traps
 from .vf import VectorFieldLearner
 from .vfstates import StatePlan, plan_states
+from .vfturns import turns_in_place
 
 METHODS = ("linear", "vf")
 STAGES: dict[str, tuple[str, ...]] = {
@@ -175,10 +176,11 @@ def learn_vector_fields(demos: list[Demo], *, learner: VectorFieldLearner | None
         per[learner.sample_index_[sel]] = learner.assignment_[sel]
         field_labels[p.name] = raw_labels(p, per)
         labels[p.name] = _states_of(field_labels[p.name], state_of)
+    turns = {} if events is None else turns_in_place(
+        demos, events, options.max_linear_speed / options.max_angular_speed, preprocessing.vf_spacing)
     timings = {"preprocess": t1 - t0, **learner.timings_, "total": time.perf_counter() - t0}
-    return VectorFieldResult(preprocessing, SkillOptions() if options is None else options,
-                             field_options, prepared, learner, labels, field_labels, timings, plan,
-                             gripper=events, gripper_options=gripper, frame=frame)
+    return VectorFieldResult(preprocessing, options, field_options, prepared, learner, labels, field_labels,
+                             timings, plan, gripper=events, gripper_options=gripper, frame=frame, turns=turns)
 
 
 def _states_of(fields: list[int], state_of: dict[int, int]) -> list[int]:

@@ -25,6 +25,7 @@ from .preprocess import Prepared, Preprocessing
 from .traps import TrapFinding
 from .vf import VectorFieldLearner
 from .vfstates import StatePlan
+from .vfturns import TurnInPlace
 
 Array = NDArray[np.float64]
 
@@ -225,6 +226,7 @@ class VectorFieldResult:
     gripper: GripperPlan | None = None  # the demonstrations' gripper events (gripper.py), if any
     gripper_options: GripperOptions = field(default_factory=GripperOptions)
     frame: str = ""  # the frame it was learned in (objects.py); "": the task object's
+    turns: dict[int, TurnInPlace] = field(default_factory=dict)  # gripper phase -> its turn in place
 
     def hyperparameters(self) -> dict[str, Any]:
         """Every hyperparameter of the run, by name (the gripper's where the
