@@ -32,7 +32,8 @@ from .tryout import STOPPED, Trials, _plain
 
 PAGES = {"/": ("sctd_services.study", "participant.html"),
          "/experimenter": ("sctd_services.study", "experimenter.html"),
-         "/input.js": ("sctd_services.tryout", "input.js")}
+         "/input.js": ("sctd_services.tryout", "input.js"),
+         "/input.css": ("sctd_services.tryout", "input.css")}
 REQUESTS = ("start", "abort", "next", "answers")  # the participant page's
 PAGE_CLOSED = "the participant's page closed"
 WATCH = 0.25  # s between the main thread's looks at the participant's page

@@ -1,8 +1,8 @@
 // sctd's pages as an input device (sctd try, sctd study run): the gamepad (Gamepad API),
 // the keyboard and the on-screen stick read and sent as raw readings over the page's socket
 // (window.sctdSocket), 50 times a second; nothing but "stale" while the page is hidden or
-// unfocused. The page that loads this defines the elements #stick, #zpad and #buttons, and
-// may set window.sctdCapture to a function saying whether the keys are the arm's now (a
+// unfocused. The page that loads this (and input.css) has an empty <div id="pads">, which
+// this fills with the on-screen stick, its z pad and buttons, and may set window.sctdCapture to a function saying whether the keys are the arm's now (a
 // form on the page keeps its keys otherwise).
 "use strict";
 const RATE_MS = 20;  // a reading every 20 ms (50 Hz); the daemon's input timeout is 0.1 s
@@ -11,6 +11,18 @@ let seq = 0, paused = null, blurred = false;
 const keys = new Set();
 const touch = { stick: null, z: null, x: 0, y: 0, zv: 0, buttons: [0, 0, 0, 0, 0, 0] };
 window.sctdCapture = () => true;
+$("pads").innerHTML = `
+  <div id="stick" title="on-screen stick: press and drag (x, y); lifting the finger stops"><div class="knob"></div></div>
+  <div id="zpad" title="z: press and drag up or down"><div class="knob"></div></div>
+  <div id="buttons">
+    <button data-b="0">mode</button><button data-b="2">escape</button>
+    <button data-b="5">grasp</button><button data-b="3">stop</button>
+  </div>`;
+
+function bar(x) {  // an input axis in [-1, 1] as a bar and its value
+  const w = Math.abs(x) * 50, left = x >= 0 ? 50 : 50 - w;
+  return `<span class="bar"><i style="left:${left}%;width:${w}%"></i></span> ${x.toFixed(2)}`;
+}
 
 function send(msg) {
   const ws = window.sctdSocket;

@@ -41,9 +41,11 @@ PING = 2.0  # s between the server's pings (a socket that stops answering closes
 
 PAGES: dict[str, tuple[str, str]] = {"/": ("sctd_services.tryout", "page.html"),
                                      "/index.html": ("sctd_services.tryout", "page.html"),
-                                     "/input.js": ("sctd_services.tryout", "input.js")}
-"""``sctd try``'s paths: the page and the input devices' script it loads."""
-TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8"}
+                                     "/input.js": ("sctd_services.tryout", "input.js"),
+                                     "/input.css": ("sctd_services.tryout", "input.css")}
+"""``sctd try``'s paths: the page and the input devices' script and style it loads."""
+TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
+         ".css": "text/css; charset=utf-8"}
 
 
 class PageServer:
