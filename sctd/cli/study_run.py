@@ -114,6 +114,9 @@ class StudySession:
         def done(entry: dict[str, Any] | None, error: str | None) -> None:
             self._ended(step, attempt, folder, entry, error)
 
+        # the last trial's thread is past its done (its row is written) but may still be
+        # ending: wait for it rather than refuse the participant's start
+        self.trials.join(10.0)
         why = self.trials.launch(block.task, skill, step.seed, folder, done)
         if why is not None:
             self.runner.abort(f"not started: {why}")

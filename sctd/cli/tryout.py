@@ -176,6 +176,12 @@ class Trials:
         with self.lock:
             return self._spawn(self._launched, task, skill, seed, folder, done)
 
+    def join(self, timeout: float) -> None:
+        """Wait for the last trial's thread to end (it records its result after its
+        ``done``)."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+
     def _spawn(self, target: Any, *args: Any) -> str | None:
         if self._thread is not None and self._thread.is_alive():
             return "a trial is running: abort it first"
