@@ -22,7 +22,9 @@ setup(
     package_data={"sctd.deploy": ["zenoh/*.json5"],  # the Zenoh configs `sctd certs` renders
                   "sctd.app": ["defaults.yaml"],  # the tasks and skills commands take when not told
                   "sctd_sim": ["*.dbc", "robot/*", "robot/**/*"],
-                  "sctd_services": ["input/maps/*.yaml", "tryout/*.html"],  # sctd try's page
+                  # sctd try's page (and the devices' script and style it shares), sctd study run's pages
+                  "sctd_services": ["input/maps/*.yaml", "tryout/*.html", "tryout/*.js", "tryout/*.css",
+                                    "study/*.html"],
                   "sctd_skills": ["*.yaml", "*.npz", "*.md", "sets/*.yaml", "demos/*/*.csv",
                                   "demos/*/*.json"],
                   "sctd_tasks": ["*.yaml", "*.md"]},

@@ -237,6 +237,54 @@ def open_page(url: str, width: int = 800, height: int = 600,
         shutil.rmtree(folder, ignore_errors=True)
 
 
+# -- sctd's pages driven by the simulated user -----------------------------------------------
+def keyboard_injector(page: Any) -> Callable[[Any, Any], None]:
+    """``inject(u, buttons)`` for a page of ``sctd try`` or ``sctd study run``: holds the
+    keys (``docs/try.md``) that say ``u`` (an axis past 0.3 is a full press), the deadman
+    (Shift, ``buttons[1]``) and mode (``m``, ``buttons[0]``), releasing the others."""
+    down: set[str] = set()
+    keys = (("ArrowRight", "ArrowLeft"), ("ArrowUp", "ArrowDown"), ("w", "s"))
+
+    def inject(u: Any, held: Any) -> None:
+        want = {"Shift"} if held[1] else set()
+        want |= {plus if x > 0 else minus for (plus, minus), x in zip(keys, u, strict=False) if abs(x) > 0.3}
+        if held[0]:
+            want.add("m")
+        for key in sorted(down - want):
+            page.keyboard.up(key)
+        for key in sorted(want - down):
+            page.keyboard.down(key)
+        down.clear()
+        down.update(want)
+
+    return inject
+
+
+def drive_as_user(hub: str, task: Any, seed: int, inject: Callable[[Any, Any], None],
+                  ended: Callable[[], bool]) -> None:
+    """Drive a trial of ``task`` from ``seed`` as the simulated user of ``sctd eval`` (the
+    person it uses in real time), reading the arm over Zenoh at ``hub`` and handing its
+    stick and buttons to the page by ``inject(u, buttons)`` at the person's 100 Hz, until
+    ``ended()`` (asked every 25 steps: each ask is a round trip into the page); then
+    everything released."""
+    from sctd.wire.session import session
+    from sctd_services.simulated_user import UserClient
+    from sctd_services.user import SimulatedUser
+
+    user = SimulatedUser(task, 3, "steady", seed=seed)
+    with session(connect=[hub]) as s, UserClient(s, user, device="test-unused") as client:
+        period, due = 0.01, time.monotonic()
+        step = 0
+        while step % 25 != 0 or not ended():
+            obs = client.observation()
+            if obs is not None:
+                inject(*user.step(obs.t, obs))
+            due += period
+            time.sleep(max(0.0, due - time.monotonic()))
+            step += 1
+    inject((0.0, 0.0, 0.0), (0, 0, 0))
+
+
 # -- Viser --------------------------------------------------------------------------------
 def project(points_world: Any, position: Any, look_at: Any, up: Any, fov: float,
             width: int, height: int) -> np.ndarray:

@@ -9,11 +9,9 @@ stamps), the trial's JSON and MCAP; never the test's own clock.
 
 from __future__ import annotations
 
-import itertools
 import json
 import re
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +20,7 @@ import pytest
 from sctd.task import find_task
 from sctd.wire import Keys, codec
 from sctd.wire.session import session
-from sctd_services.simulated_user import UserClient
-from sctd_services.user import SimulatedUser
-from tests.browser import open_page
+from tests.browser import drive_as_user, keyboard_injector, open_page
 from tests.conftest import sctd, wait_for
 
 # realtime, every test: the stops are judged against the 0.1 s input timeout and "nothing
@@ -234,26 +230,11 @@ def _pad_axis(u: float) -> float:
 
 
 def _drive(tried, page, task_name, condition, inject) -> dict:
-    """A trial of ``condition`` on ``task_name`` driven by the simulated user (the person
-    ``sctd eval`` uses in real time), reading the arm over the wire, its stick and buttons
-    handed to the page by ``inject(u, buttons)`` at the person's 100 Hz; the page's
-    result."""
+    """A trial of ``condition`` on ``task_name`` driven by the simulated user through
+    ``inject`` (:func:`tests.browser.drive_as_user`); the page's result."""
     start_trial(page, task_name, condition)
-    seed = state(page)["trial"]["seed"]
-    user = SimulatedUser(find_task(task_name), 3, "steady", seed=seed)
-    with session(connect=[tried[1]]) as s, UserClient(s, user, device="test-unused") as client:
-        period, due = 0.01, time.monotonic()
-        # one call into the page per step (asking for the result every step as well put
-        # two page round trips in each of the person's steps)
-        for step in itertools.count():
-            if step % 25 == 0 and state(page)["result"] is not None:
-                break
-            obs = client.observation()
-            if obs is not None:
-                inject(*user.step(obs.t, obs))
-            due += period
-            time.sleep(max(0.0, due - time.monotonic()))
-    inject((0.0, 0.0, 0.0), (0, 0, 0))
+    drive_as_user(tried[1], find_task(task_name), state(page)["trial"]["seed"], inject,
+                  lambda: state(page)["result"] is not None)
     return state(page)["result"]
 
 
@@ -289,21 +270,6 @@ def test_the_keyboard_drives_a_trial_to_success(tried, browser):
     page = browser.page
     page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', "
                   "{value: () => [], configurable: true})")
-    down: set[str] = set()
-    keys = (("ArrowRight", "ArrowLeft"), ("ArrowUp", "ArrowDown"), ("w", "s"))
-
-    def inject(u, held):
-        want = {"Shift"} if held[1] else set()
-        want |= {plus if x > 0 else minus for (plus, minus), x in zip(keys, u, strict=False) if abs(x) > 0.3}
-        if held[0]:
-            want.add("m")
-        for key in sorted(down - want):
-            page.keyboard.up(key)
-        for key in sorted(want - down):
-            page.keyboard.down(key)
-        down.clear()
-        down.update(want)
-
-    result = _drive(tried, page, "drawer", "drawer-vf", inject)
+    result = _drive(tried, page, "drawer", "drawer-vf", keyboard_injector(page))
     assert result["outcome"] == "success", result
     _assert_recorded(result, "drawer")

@@ -3,14 +3,15 @@
 - ``plan``: participants x conditions x tasks, counterbalanced by a balanced Latin
   square, with practice and measured trials and their seeds, written as a YAML file an
   ethics application can attach (:mod:`sctd_services.study.plan`);
-- ``run --simulated N``: fill a study folder with N simulated participants (lockstep
-  trials, synthetic questionnaire answers) to try the analysis; the runner for people
-  (a browser page) is not built yet;
+- ``run --participant ID``: the runner for people (:mod:`.study_run`): a browser page
+  leads the participant through the plan, an experimenter's page watches, pauses and
+  stops; ``run --simulated N``: fill a study folder with N simulated participants
+  (lockstep trials, synthetic questionnaire answers) to try the analysis;
 - ``report``: per condition and task the results table, paired Wilcoxon tests with
   Holm's correction, box plots (:mod:`sctd_services.study.report`).
 
-Exit 0 when done, 2 for bad flags, an unknown skill or task, or a folder that is not a
-study's.
+Exit 0 when done, 2 for bad flags, an unknown skill or task, a participant not in the
+plan, a folder that is not a study's or that another runner holds.
 """
 
 from __future__ import annotations
@@ -45,12 +46,24 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
     plan.add_argument("--seed", type=int, default=0, help="first trial seed (default %(default)s)")
     plan.add_argument("--title", default="sctd user study", help="the study's title (default %(default)s)")
     plan.add_argument("--out", metavar="FILE", help="write the plan here (default: print it)")
-    run = sub.add_parser("run", help="fill a study folder with simulated participants (--simulated N)",
-                         description="run a study's plan; for now with simulated participants only")
-    run.add_argument("--simulated", type=int, metavar="N",
+    run = sub.add_parser("run", help="run a study's plan with a participant (a browser page on 127.0.0.1), "
+                                     "or fill the folder with simulated participants (--simulated N)",
+                         description="run a study's plan: --participant ID leads that participant through "
+                                     "it on a browser page (docs/study.md, 'Running a study with people'); "
+                                     "--simulated N fills the folder with simulated participants")
+    who = run.add_mutually_exclusive_group(required=True)
+    who.add_argument("--participant", metavar="ID",
+                     help="the participant's pseudonym in the plan (P03): serve the study page for them, "
+                          "from where their folder stands")
+    who.add_argument("--simulated", type=int, metavar="N",
                      help="simulate the plan's first N participants (lockstep trials, synthetic answers)")
     run.add_argument("--plan", required=True, metavar="FILE", help="the plan (sctd study plan)")
     run.add_argument("--out", required=True, metavar="DIR", help="the study folder (made, or resumed)")
+    run.add_argument("--port", type=int, default=0,
+                     help="with --participant: the pages' port on 127.0.0.1 (default 0: a free one; the URLs "
+                          "go to stderr)")
+    run.add_argument("--no-view", action="store_true",
+                     help="with --participant: no live 3D view on the page (the arm seen otherwise)")
     report = sub.add_parser("report", help="results table, paired tests and figures of a study folder",
                             description="the report of a study folder (docs/study.md)")
     report.add_argument("dir", metavar="DIR", help="the study folder")
@@ -115,13 +128,17 @@ def main_plan(args: argparse.Namespace) -> int:
 
 
 def main_run(args: argparse.Namespace) -> int:
-    if args.simulated is None:
-        return fail("study run", "--simulated N: the runner for people (a browser page) is not built yet; "
-                                 "--simulated N fills the folder with simulated participants", EXIT_USAGE)
+    if not 0 <= args.port <= 65535:
+        return fail("study run", f"--port: not a TCP port: {args.port}", EXIT_USAGE)
+    plan = _read_plan(args.plan)
+    if args.participant is not None:
+        from .study_run import check_participant, main_run_people
+
+        check_participant(plan, args.participant)
+        return main_run_people(args, plan, _tasks(plan.tasks, f"{args.plan}: tasks"))
     from sctd_services.study.simulate import simulate_study
     from sctd_services.study.store import StudyStore
 
-    plan = _read_plan(args.plan)
     if not 1 <= args.simulated <= len(plan.participants):
         raise StudyError(f"--simulated: {args.simulated}: the plan has {len(plan.participants)} participants")
     tasks = _tasks(plan.tasks, f"{args.plan}: tasks")

@@ -26,6 +26,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
@@ -34,8 +35,10 @@ from ..app.errors import EXIT_OK, fail
 from ..wire import Keys, codec
 from .procs import Child, free_port
 
+Done = Callable[[dict[str, Any] | None, str | None], None]  # a trial's end: its entry, or why it failed
 STARTUP = 90.0  # s for the arm and the daemon to publish, on a loaded machine
 STUCK_AFTER = 10.0  # s without progress: the trial is stuck (as sctd eval's default)
+STOPPED = "sctd try stopped"  # the reason of a trial the command's end cut short
 
 
 def add_try_arguments(p: argparse.ArgumentParser) -> None:
@@ -106,6 +109,7 @@ class Trials:
         self._view_port: int | None = None
         self.stop = threading.Event()
         self._abort = threading.Event()
+        self.abort_reason: str | None = None
         self._rig = ExitStack()
         self._thread: threading.Thread | None = None
         self._sub = session.declare_subscriber(Keys().status, self._on_status)
@@ -140,10 +144,16 @@ class Trials:
             return _plain({"trial": dict(self.trial), "result": self.result, "status": self.status,
                            "out": str(self.out), "view_url": self.view_url})
 
+    def abort(self, reason: str = "aborted on the page") -> None:
+        """End the running trial (a failure for ``sctd try``; the study's runner records it
+        as aborted, ``reason`` saying why)."""
+        self.abort_reason = reason
+        self._abort.set()
+
     def request(self, msg: dict) -> str | None:
         """A controller's ``start`` or ``abort``; why it is refused, or None."""
         if msg.get("type") == "abort":
-            self._abort.set()
+            self.abort()
             return None
         task, condition = msg.get("task"), msg.get("condition")
         if task not in self.tasks:
@@ -153,13 +163,32 @@ class Trials:
         if condition == "teleop" and not self.tasks[task]["skills"]:
             return f"the task {task} has no skill whose limits the baseline would take"
         with self.lock:
-            if self._thread is not None and self._thread.is_alive():
-                return "a trial is running: abort it first"
-            self._abort.clear()
-            seed, self.n = self.seed + self.n, self.n + 1
-            self._thread = threading.Thread(target=self._trial, args=(str(task), str(condition), seed),
-                                            name="sctd-try-trial", daemon=True)
-            self._thread.start()
+            seed = self.seed + self.n
+            why = self._spawn(self._trial, str(task), str(condition), seed)
+            self.n += why is None
+        return why
+
+    def launch(self, task: Any, skill: dict[str, Any], seed: int, folder: Path, done: Done) -> str | None:
+        """Run a trial of ``skill`` (as :func:`_skill_for` describes one) on ``task`` from
+        ``seed``, recorded in ``folder``, in a thread of its own; ``done(entry, error)``
+        when it ends (``entry`` None when the rig failed, ``error`` saying why). Why it
+        cannot start, or None."""
+        with self.lock:
+            return self._spawn(self._launched, task, skill, seed, folder, done)
+
+    def join(self, timeout: float) -> None:
+        """Wait for the last trial's thread to end (it records its result after its
+        ``done``)."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def _spawn(self, target: Any, *args: Any) -> str | None:
+        if self._thread is not None and self._thread.is_alive():
+            return "a trial is running: abort it first"
+        self._abort.clear()
+        self.abort_reason = None
+        self._thread = threading.Thread(target=target, args=args, name="sctd-try-trial", daemon=True)
+        self._thread.start()
         return None
 
     def _set(self, **fields: Any) -> None:
@@ -170,24 +199,45 @@ class Trials:
         from ..task import find_task
 
         folder = self.out / f"trial-{seed:03d}-{task_name}-{condition}"
-        with self.lock:
-            self.trial, self.result = {"phase": "starting", "task": task_name, "label": condition,
-                                       "seed": seed}, None
+        self._starting(task_name, condition, seed)
         try:
             task = find_task(task_name)
             skill = _skill_for(task, condition, folder)
-            self._set(label=skill["skill"])
+        except Exception as e:  # said on the page and on stderr; the command goes on
+            self._failed(seed, e)
+            return
+        self._launched(task, skill, seed, folder, self._tried)
+
+    def _tried(self, entry: dict[str, Any] | None, error: str | None) -> None:
+        if entry is None:
+            return
+        folder = Path(entry["mcap"]).parent
+        (folder / "trial.json").write_text(json.dumps(_plain(entry), indent=1) + "\n")
+        print(f"sctd try: trial {entry['seed']} ({entry['task']}, {entry['skill']}): {entry['outcome']}, "
+              f"{entry['reason']}; {folder}", file=sys.stderr, flush=True)
+
+    def _starting(self, task_name: str, label: str, seed: int) -> None:
+        with self.lock:
+            self.trial = {"phase": "starting", "task": task_name, "label": label, "seed": seed}
+            self.result = None
+
+    def _failed(self, seed: int, e: Exception) -> None:
+        print(f"sctd try: trial {seed}: {e}", file=sys.stderr, flush=True)
+        self._set(phase="error", error=str(e))
+        self.gate.set_open(False)
+
+    def _launched(self, task: Any, skill: dict[str, Any], seed: int, folder: Path, done: Done) -> None:
+        """The trial of :meth:`launch`, in its thread."""
+        self._starting(task.name, skill["skill"], seed)
+        try:
             self._rig.close()  # the previous trial's arm, daemon and view
             self._rig, self.view_url, self._view_port = ExitStack(), None, None
             entry = self._run(task, skill, seed, folder)
         except Exception as e:  # said on the page and on stderr; the command goes on
-            print(f"sctd try: trial {seed}: {e}", file=sys.stderr, flush=True)
-            self._set(phase="error", error=str(e))
-            self.gate.set_open(False)
+            self._failed(seed, e)
+            done(None, str(e))
             return
-        (folder / "trial.json").write_text(json.dumps(_plain(entry), indent=1) + "\n")
-        print(f"sctd try: trial {seed} ({task_name}, {entry['skill']}): {entry['outcome']}, "
-              f"{entry['reason']}; {folder}", file=sys.stderr, flush=True)
+        done(entry, None)
         with self.lock:
             self.result = {k: entry[k] for k in ("outcome", "reason", "time_s", "duration_s")}
             self.result["folder"] = str(folder)
@@ -246,7 +296,7 @@ class Trials:
                 while not self.stop.wait(1.0 / WATCH_RATE):
                     obs = w.observation()
                     if self._abort.is_set() and first is None:  # aborted before it started
-                        rec.end("aborted on the page")
+                        rec.end(self.abort_reason or "aborted on the page")
                         break
                     if obs is None or (first is None and not (w.buttons[1] and any(w.u))):
                         continue  # the trial starts with the person's first push
@@ -254,11 +304,11 @@ class Trials:
                     first = first or last
                     self._set(elapsed=obs.t - (rec.t0 if rec.t0 is not None else obs.t))
                     if self._abort.is_set():
-                        rec.end("aborted on the page")
+                        rec.end(self.abort_reason or "aborted on the page")
                     if rec.add(obs, w.u, w.buttons, w.status.get("vf_scale")) is not None:
                         break
                 else:
-                    rec.end("sctd try stopped")
+                    rec.end(STOPPED)
                 self.gate.set_open(False)
         finally:
             w.close()

@@ -9,7 +9,11 @@ it) on an asyncio loop in a thread of its own. A page's messages are JSON:
 - ``{"type": "stale", "why": "hidden"|"blur"}`` and ``{"type": "resume"}``: the page was
   hidden or lost focus, and is back;
 - ``{"type": "start", "task", "condition"}`` and ``{"type": "abort"}``: the trial,
-  handed to ``on_request`` (the controller's only; an observer's are refused).
+  handed to ``on_request`` (the controller's only; an observer's are refused); a server
+  made with other ``requests`` (``sctd study run``'s) hands those on the same way.
+
+A socket opened on ``/ws?watch`` is a **watcher** (``sctd study run``'s experimenter's
+page): never the controller, its input ignored, its requests handed to ``on_watch``.
 
 Every :data:`STATE_PERIOD` the server sends each page ``{"type": "state", ...}``: its role,
 the gate's counters and last message, and whatever ``state()`` returns (the trial, the
@@ -23,7 +27,7 @@ import contextlib
 import itertools
 import json
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from http import HTTPStatus
 from importlib import resources
 from typing import Any
@@ -35,9 +39,13 @@ MAX_MESSAGE = 4096  # bytes: a reading is about 150
 PING = 2.0  # s between the server's pings (a socket that stops answering closes after 2 more)
 
 
-def page_html() -> bytes:
-    """The page (``page.html`` next to this module)."""
-    return resources.files("sctd_services.tryout").joinpath("page.html").read_bytes()
+PAGES: dict[str, tuple[str, str]] = {"/": ("sctd_services.tryout", "page.html"),
+                                     "/index.html": ("sctd_services.tryout", "page.html"),
+                                     "/input.js": ("sctd_services.tryout", "input.js"),
+                                     "/input.css": ("sctd_services.tryout", "input.css")}
+"""``sctd try``'s paths: the page and the input devices' script and style it loads."""
+TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8",
+         ".css": "text/css; charset=utf-8"}
 
 
 class PageServer:
@@ -53,11 +61,20 @@ class PageServer:
         ``state()``: the shared part of every state message (plain data).
     hello : dict
         Sent to each page when it connects (the catalogue of tasks and skills).
+    pages : mapping, optional
+        URL path -> (package, file) served (default :data:`PAGES`).
+    requests : tuple of str
+        The message types handed to ``on_request`` (default ``start`` and ``abort``).
+    on_watch : callable, optional
+        ``on_watch(message)`` for a watcher's requests (module doc); None: refused.
     """
 
     def __init__(self, gate: PageGate, on_request: Callable[[dict], str | None],
-                 state: Callable[[], dict], hello: dict, port: int = 0):
+                 state: Callable[[], dict], hello: dict, port: int = 0,
+                 pages: Mapping[str, tuple[str, str]] = PAGES, requests: tuple[str, ...] = ("start", "abort"),
+                 on_watch: Callable[[dict], str | None] | None = None):
         self.gate, self.on_request, self.state, self.hello = gate, on_request, state, hello
+        self.pages, self.requests, self.on_watch = dict(pages), requests, on_watch
         self._ids = itertools.count(1)
         self._loop = asyncio.new_event_loop()
         self._ready = threading.Event()
@@ -101,39 +118,52 @@ class PageServer:
             self._ready.set()
             await self._stop.wait()
 
-    @staticmethod
-    def _http(connection: Any, request: Any) -> Any:
-        """The page for ``GET /``; the socket on ``/ws``; 404 for anything else."""
+    def _http(self, connection: Any, request: Any) -> Any:
+        """The pages (:data:`PAGES` or the server's own); the socket on ``/ws``; 404 for
+        anything else."""
         from websockets.datastructures import Headers
         from websockets.http11 import Response
 
         path = request.path.split("?", 1)[0]
         if path == "/ws":
             return None
-        if path in ("/", "/index.html"):
-            body = page_html()
-            headers = Headers([("Content-Type", "text/html; charset=utf-8"),
+        if path in self.pages:
+            package, name = self.pages[path]
+            body = resources.files(package).joinpath(name).read_bytes()
+            headers = Headers([("Content-Type", TYPES[name[name.rfind("."):]]),
                                ("Content-Length", str(len(body))), ("Cache-Control", "no-store")])
             return Response(HTTPStatus.OK, "OK", headers, body)
         return connection.respond(HTTPStatus.NOT_FOUND, "not found\n")
 
     async def _handle(self, ws: Any) -> None:
         conn = next(self._ids)
-        role = self.gate.connect(conn)
-        sender = asyncio.create_task(self._send_state(ws, conn))
+        watcher = ws.request.path.split("?", 1)[-1] == "watch"
+        role = "watcher" if watcher else self.gate.connect(conn)
+        sender = asyncio.create_task(self._send_state(ws, conn, watcher))
         try:
             await ws.send(json.dumps({"type": "hello", "role": role, **self.hello}))
             async for raw in ws:
-                reply = self._message(conn, raw)
+                reply = self._watched(raw) if watcher else self._message(conn, raw)
                 if reply is not None:
                     await ws.send(json.dumps({"type": "refused", "why": reply}))
         except Exception:  # a socket that broke: the same as one that closed
             pass
         finally:
             sender.cancel()
-            self.gate.disconnect(conn)
+            if not watcher:
+                self.gate.disconnect(conn)
             with contextlib.suppress(asyncio.CancelledError):
                 await sender
+
+    def _watched(self, raw: str | bytes) -> str | None:
+        """One message from a watcher: its requests to ``on_watch``; its input ignored."""
+        try:
+            msg = json.loads(raw)
+        except (ValueError, TypeError):
+            return "not JSON"
+        if not isinstance(msg, dict) or msg.get("type") in ("input", "stale", "resume"):
+            return None
+        return self.on_watch(msg) if self.on_watch is not None else "this page only watches"
 
     def _message(self, conn: int, raw: str | bytes) -> str | None:
         """One message from page ``conn``; a sentence for the page when it is refused."""
@@ -148,7 +178,7 @@ class PageServer:
             self.gate.pause(conn, str(msg.get("why")))
         elif kind == "resume":
             self.gate.resume(conn)
-        elif kind in ("start", "abort"):
+        elif kind in self.requests:
             if self.gate.role(conn) != "controller":
                 return "this page is an observer: another page drives"
             return self.on_request(msg)
@@ -156,8 +186,9 @@ class PageServer:
             self.gate.garbage(conn)
         return None
 
-    async def _send_state(self, ws: Any, conn: int) -> None:
+    async def _send_state(self, ws: Any, conn: int, watcher: bool = False) -> None:
         while True:
-            msg = {"type": "state", "role": self.gate.role(conn), "gate": self.gate.report(), **self.state()}
+            role = "watcher" if watcher else self.gate.role(conn)
+            msg = {"type": "state", "role": role, "gate": self.gate.report(), **self.state()}
             await ws.send(json.dumps(msg, default=str))
             await asyncio.sleep(STATE_PERIOD)
