@@ -2,24 +2,44 @@
 programs (``sctd demo``, ``sctd bench``) and for the tests.
 
 Every child runs in its own session and is stopped with SIGTERM (then SIGKILL after a
-grace period) when its context exits, so nothing is left running.
+grace period) when its context exits, so nothing is left running. A child also gets
+SIGTERM from the kernel when its parent dies, however it dies (Linux's parent-death
+signal): a ``sctd try`` or study runner killed with SIGKILL leaves no simulator, daemon
+or logger running behind it. The kernel sends it when the *thread* that started the
+child ends: a child must not outlive the thread that started it (``sctd try`` starts a
+trial's programs in the trial's thread and stops them before it ends).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import random
 import signal
 import socket
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO
 
 _EPHEMERAL = Path("/proc/sys/net/ipv4/ip_local_port_range")
 _handed_out: set[int] = set()
 _random = random.SystemRandom()  # not the seeded global generator: processes must differ
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def _libc_prctl() -> Callable[..., int] | None:
+    """libc's ``prctl``, looked up here, before any fork (a child between fork and exec
+    should not load libraries), or None where there is none."""
+    try:
+        return ctypes.CDLL(None).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_prctl = _libc_prctl()
 
 
 def _ephemeral_range() -> tuple[int, int]:
@@ -97,6 +117,18 @@ def _default_signals() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def _default_signals_and_parent_death(parent: int) -> Callable[[], None]:
+    """:func:`_default_signals`, and SIGTERM when the parent ``parent`` dies (where the
+    platform has ``prctl``); a parent already gone by then gets the child its SIGTERM at
+    once."""
+    def before_exec() -> None:
+        _default_signals()
+        if _prctl is not None and _prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) == 0 \
+                and os.getppid() != parent:
+            os.kill(os.getpid(), signal.SIGTERM)
+    return before_exec
+
+
 _live: set[Child] = set()  # the children started and not yet stopped
 
 
@@ -138,7 +170,8 @@ class Child:
             [sys.executable, "-m", module, *args],
             stdout=self._log if self._log is not None else subprocess.PIPE,
             stderr=subprocess.STDOUT if self._log is not None else None,
-            cwd=cwd, env=env, start_new_session=True, preexec_fn=_default_signals,
+            cwd=cwd, env=env, start_new_session=True,
+            preexec_fn=_default_signals_and_parent_death(os.getpid()),
         )
         _live.add(self)
 
