@@ -123,3 +123,28 @@ def test_the_learned_skill_turns_the_hand_in_place_both_ways():
         assert np.linalg.norm(T[:3, 3] - HANDLE) < 1e-3  # the origin stays on the handle
         w = se3.rotvec_from_matrix(T[:3, :3] @ R0.T)
         assert np.linalg.norm(w) > 0.2 and sense * (w @ t.axis) / np.linalg.norm(w) > 0.99
+
+
+def test_the_shipped_tap_demonstrations_learn_the_shipped_vector_field_tap():
+    """Known answer: skills/README.md's command for tap-vf learns its file, text for text,
+    and its models' arrays; the taught demonstrations turned the handle about the tap's
+    z axis with the hand's origin on it."""
+    from pathlib import Path
+
+    from sctd.learn import learn, read_demos
+    from sctd.skill import load_skill
+
+    root = Path(__file__).resolve().parents[1]
+    demos = read_demos(root / "skills" / "demos" / "tap")
+    result = learn(demos, "vf", object="tap", random_state=0, vf_states="auto", vf_direction="both",
+                   models=("translation", "cylinder", "sphere", "point", "general"))
+    (t,) = result.turns.values()
+    assert t.axis @ [0, 0, 1] > math.cos(math.radians(2)) and t.spread < 0.002
+    assert abs(t.lever @ (se3.matrix_from_quaternion(t.quaternions[0]).T @ t.axis)) < 1e-6
+    bundle = skill_bundle(result, "tap-vf")
+    assert bundle.yaml_text == (root / "skills" / "tap-vf.yaml").read_text()
+    learned, shipped = skill_from_bundle(bundle), load_skill(root / "skills" / "tap-vf.yaml")
+    assert learned.models().keys() == shipped.models().keys() and "tap-vf-turn1.npz" in shipped.models()
+    for a, b in zip(learned.models().values(), shipped.models().values(), strict=True):
+        for x in ("points", "quaternions", "responsibilities"):
+            np.testing.assert_allclose(getattr(a, x), getattr(b, x), atol=1e-9)
