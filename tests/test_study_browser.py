@@ -206,7 +206,8 @@ def test_a_stopped_trial_is_aborted_and_comes_again_nothing_finished_lost(plan, 
             assert after["last"] == {"step": step["index"], "outcome": "aborted", "practice": False,
                                      "reason": "safety stop by the experimenter", "time_s": None}
             assert after["step"]["index"] == step["index"] and after["step"]["attempt"] == 2
-            assert watcher.evaluate("window.sctdState.study.aborted") == 1
+            # the watcher's page hears of it with the next state message, not with the participant's
+            watcher.wait_for_function("window.sctdState.study.aborted === 1", timeout=10_000)
             watcher.close()
             page.bring_to_front()
             # the participant's page closed mid-trial (its socket gone)
