@@ -248,10 +248,11 @@ def _assert_recorded(result, task_name):
     assert (folder / "trial.mcap").stat().st_size > 1000
 
 
-# The pour is left out: driven through the page in real time it emptied the bottle (nine
-# tenths in the mug: the pour's failure) in 3 of 15 runs on a busy machine, where
-# lockstep trials of the same skill leave 0.55-0.65 poured (docs/try.md).
-@pytest.mark.parametrize(("task_name", "condition"), [("drawer", "drawer-vf")])
+# The pour with its hand-written skill: driven through the page in real time it succeeded
+# in 21 of 21 runs here, gamepad and keyboard, with the machine's load average at 5-7
+# (docs/try.md). The learned vector-field pour fails 3 of 20 lockstep trials by emptying
+# the bottle (docs/evaluation.md) and is left out.
+@pytest.mark.parametrize(("task_name", "condition"), [("drawer", "drawer-vf"), ("pour", "pour")])
 def test_a_gamepad_drives_a_trial_to_success(tried, browser, task_name, condition):
     page = browser.page
 
@@ -266,10 +267,11 @@ def test_a_gamepad_drives_a_trial_to_success(tried, browser, task_name, conditio
     _assert_recorded(result, task_name)
 
 
-def test_the_keyboard_drives_a_trial_to_success(tried, browser):
+@pytest.mark.parametrize(("task_name", "condition"), [("drawer", "drawer-vf"), ("pour", "pour")])
+def test_the_keyboard_drives_a_trial_to_success(tried, browser, task_name, condition):
     page = browser.page
     page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', "
                   "{value: () => [], configurable: true})")
-    result = _drive(tried, page, "drawer", "drawer-vf", keyboard_injector(page))
+    result = _drive(tried, page, task_name, condition, keyboard_injector(page))
     assert result["outcome"] == "success", result
-    _assert_recorded(result, "drawer")
+    _assert_recorded(result, task_name)
