@@ -200,9 +200,13 @@ class BrowserPage:
 
 @contextlib.contextmanager
 def open_page(url: str, width: int = 800, height: int = 600,
-              timeout: float = 30.0) -> Iterator[BrowserPage]:
+              timeout: float = 30.0, client_certificates: list[dict] | None = None,
+              load: bool = True) -> Iterator[BrowserPage]:
     """Start headless Chromium on a fresh profile and open ``url`` in a viewport of
-    ``width`` x ``height`` CSS pixels (one device pixel each).
+    ``width`` x ``height`` CSS pixels (one device pixel each). With
+    ``client_certificates`` (Playwright's: origin, certPath, keyPath) the browser presents
+    them and takes the server's certificate from a private CA (sctd certs'); ``load``
+    False: the caller opens the page.
 
     On exit (an exception included) the browser is closed, any process of it that is
     left is killed, and its temporary folder removed. Skips the test (fails it under
@@ -220,14 +224,17 @@ def open_page(url: str, width: int = 800, height: int = 600,
                 folder / "profile", executable_path=str(chromium), headless=True,
                 args=list(FLAGS), env={**os.environ, "HOME": str(folder)},
                 viewport={"width": width, "height": height}, device_scale_factor=1,
-                timeout=timeout * 1000)
+                timeout=timeout * 1000,
+                **({} if client_certificates is None else
+                   {"client_certificates": client_certificates, "ignore_https_errors": True}))
             try:
                 page = context.pages[0] if context.pages else context.new_page()
                 page.set_default_timeout(timeout * 1000)
                 renderer = page.evaluate(_WEBGL_PROBE)
                 if renderer is None:
                     raise RuntimeError(f"Chromium ({chromium} {' '.join(FLAGS)}) has no WebGL")
-                page.goto(url)
+                if load:
+                    page.goto(url)
                 yield BrowserPage(page, folder, renderer)
             finally:
                 seen = processes_of(folder)

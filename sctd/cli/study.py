@@ -26,6 +26,7 @@ from sctd_services.study.errors import StudyError
 from sctd_services.study.plan import Plan, plan_from_yaml
 
 from ..app.errors import EXIT_OK, EXIT_USAGE, fail
+from .tryout import add_page_arguments
 
 
 def add_study_arguments(p: argparse.ArgumentParser) -> None:
@@ -64,6 +65,7 @@ def add_study_arguments(p: argparse.ArgumentParser) -> None:
                           "go to stderr)")
     run.add_argument("--no-view", action="store_true",
                      help="with --participant: no live 3D view on the page (the arm seen otherwise)")
+    add_page_arguments(run)
     report = sub.add_parser("report", help="results table, paired tests and figures of a study folder",
                             description="the report of a study folder (docs/study.md)")
     report.add_argument("dir", metavar="DIR", help="the study folder")

@@ -28,7 +28,7 @@ from sctd_services.study.plan import Plan, Step
 from ..app.errors import EXIT_OK
 from ..wire import Keys
 from .procs import free_port
-from .tryout import STOPPED, Trials, _plain
+from .tryout import STOPPED, Trials, _plain, page_endpoint
 
 PAGES = {"/": ("sctd_services.study", "participant.html"),
          "/experimenter": ("sctd_services.study", "experimenter.html"),
@@ -190,6 +190,10 @@ def main_run_people(args: argparse.Namespace, plan: Plan, tasks: dict[str, Task]
     from sctd_services.study.store import StudyStore
 
     pid = args.participant
+    try:
+        endpoint = page_endpoint(args)  # before anything is made or locked
+    except ValueError as e:
+        raise StudyError(str(e)) from None
     store = StudyStore.create(args.out, plan)
     with RunnerLock(args.out) as lock:
         if lock.stale is not None:
@@ -198,14 +202,15 @@ def main_run_people(args: argparse.Namespace, plan: Plan, tasks: dict[str, Task]
         runner = StudyRunner(store, pid, {name: t.title for name, t in tasks.items()})
         if runner.recovered:
             print(f"sctd study run: {runner.recovered}", file=sys.stderr, flush=True)
-        return _serve(args, runner, tasks)
+        return _serve(args, runner, tasks, endpoint)
 
 
-def _serve(args: argparse.Namespace, runner: Any, tasks: dict[str, Task]) -> int:
+def _serve(args: argparse.Namespace, runner: Any, tasks: dict[str, Task], endpoint: tuple[str, Any]) -> int:
     from sctd.wire.session import MSGPACK, session
     from sctd_services.input.page import DEVICE, PageGate
     from sctd_services.tryout.server import PageServer
 
+    host, tls = endpoint
     hub = f"tcp/127.0.0.1:{free_port()}"
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -218,11 +223,11 @@ def _serve(args: argparse.Namespace, runner: Any, tasks: dict[str, Task]) -> int
                 study = StudySession(runner, trials, tasks)
                 try:
                     server = PageServer(gate, study.request, study.state, hello, args.port, pages=PAGES,
-                                        requests=REQUESTS, on_watch=study.watch)
+                                        requests=REQUESTS, on_watch=study.watch, host=host, tls=tls)
                 except OSError as e:
                     raise StudyError(f"--port: {e}") from None
                 with server:
-                    url = f"http://127.0.0.1:{server.port}/"
+                    url = server.url
                     print(f"sctd study run: {runner.participant}: open {url} (the participant's page); the "
                           f"experimenter's: {url}experimenter (Zenoh {hub}); recording in {runner.folder}",
                           file=sys.stderr, flush=True)

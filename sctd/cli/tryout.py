@@ -54,6 +54,36 @@ def add_try_arguments(p: argparse.ArgumentParser) -> None:
                                                        "the next trials take the next seeds (default 0)")
     p.add_argument("--no-view", action="store_true",
                    help="without the live 3D view in the page (a machine without a GPU to spare)")
+    add_page_arguments(p)
+
+
+def add_page_arguments(p: argparse.ArgumentParser) -> None:
+    """``--page-host`` and ``--page-tls``: where a page is served, and with what (sctd try,
+    sctd study run)."""
+    p.add_argument("--page-host", default="127.0.0.1", metavar="ADDR",
+                   help="the address the page listens on (default %(default)s); off this machine's loopback "
+                        "it needs --page-tls")
+    p.add_argument("--page-tls", metavar="DIR",
+                   help="serve HTTPS and WSS with the certificates of sctd certs in DIR (sctd-router.pem and "
+                        "its key, ca.pem): every browser presents a client certificate of that CA, and its "
+                        "role decides what it may do (sctd-input drives, sctd-observer watches: docs/try.md)")
+
+
+def page_endpoint(args: argparse.Namespace) -> tuple[str, Any]:
+    """The page's address and TLS context (None: plain HTTP) from ``--page-host`` and
+    ``--page-tls``; ValueError naming the flag when a non-loopback address comes without
+    TLS, or the TLS folder cannot serve."""
+    from sctd_services.tryout.server import PageTLSError, is_loopback, page_tls
+
+    if args.page_tls is None:
+        if not is_loopback(args.page_host):
+            raise ValueError(f"--page-host {args.page_host}: serving the page off this machine needs "
+                             "--page-tls DIR (mutual TLS, the certificates of sctd certs: docs/deploy.md)")
+        return args.page_host, None
+    try:
+        return args.page_host, page_tls(args.page_tls)
+    except PageTLSError as e:
+        raise ValueError(f"--page-tls: {e}") from None
 
 
 def catalog() -> list[dict[str, Any]]:
@@ -348,6 +378,10 @@ def main_try(args: argparse.Namespace) -> int:
 
     if not 0 <= args.port <= 65535:
         return fail("try", f"--port: not a TCP port: {args.port}")
+    try:
+        host, tls = page_endpoint(args)
+    except ValueError as e:
+        return fail("try", str(e))
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sctd-try-"))
     out.mkdir(parents=True, exist_ok=True)
     hub = f"tcp/127.0.0.1:{free_port()}"
@@ -360,12 +394,13 @@ def main_try(args: argparse.Namespace) -> int:
             gate = PageGate(pub.put)
             with Trials(s, hub, gate, out, args.seed, not args.no_view, tasks) as trials:
                 try:
-                    server = PageServer(gate, trials.request, trials.state, {"tasks": tasks}, args.port)
+                    server = PageServer(gate, trials.request, trials.state, {"tasks": tasks}, args.port,
+                                        host=host, tls=tls)
                 except OSError as e:
                     return fail("try", f"--port: {e}")
                 with server:
-                    print(f"sctd try: open http://127.0.0.1:{server.port}/ (Zenoh {hub}); trials recorded "
-                          f"in {out}", file=sys.stderr, flush=True)
+                    print(f"sctd try: open {server.url} (Zenoh {hub}); trials recorded in {out}",
+                          file=sys.stderr, flush=True)
                     try:
                         stop.wait()
                     except KeyboardInterrupt:

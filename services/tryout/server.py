@@ -15,6 +15,14 @@ it) on an asyncio loop in a thread of its own. A page's messages are JSON:
 A socket opened on ``/ws?watch`` is a **watcher** (``sctd study run``'s experimenter's
 page): never the controller, its input ignored, its requests handed to ``on_watch``.
 
+**Off this machine, mutual TLS and roles.** By default the server listens on 127.0.0.1
+only. Given a TLS context (:func:`page_tls`, from a folder of ``sctd certs``) it serves
+HTTPS and WSS, on any address, and every browser must present a client certificate of
+the deployment's CA; its common name is its role (docs/deploy.md): ``sctd-input`` and
+``sctd-operator`` may drive (the first such page is the controller, as on loopback),
+``sctd-observer`` only watches (a watcher, whatever the path), and any other role's
+socket is closed with a policy violation before anything is read from it.
+
 Every :data:`STATE_PERIOD` the server sends each page ``{"type": "state", ...}``: its role,
 the gate's counters and last message, and whatever ``state()`` returns (the trial, the
 daemon's status). A closed socket is the gate's ``disconnect`` (the arm stops).
@@ -24,12 +32,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import itertools
 import json
+import ssl
 import threading
 from collections.abc import Callable, Mapping
 from http import HTTPStatus
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 from sctd_services.input.page import PageGate
@@ -37,6 +48,60 @@ from sctd_services.input.page import PageGate
 STATE_PERIOD = 0.1  # s between state messages to each page
 MAX_MESSAGE = 4096  # bytes: a reading is about 150
 PING = 2.0  # s between the server's pings (a socket that stops answering closes after 2 more)
+DRIVERS = ("sctd-input", "sctd-operator")  # the certificates' roles that may drive from a page
+WATCHERS = ("sctd-observer",)  # the roles that only watch
+POLICY_VIOLATION = 1008  # the WebSocket close code for a role the page does not serve
+
+
+class PageTLSError(ValueError):
+    """A TLS folder that cannot serve the page (the message names the file and what)."""
+
+
+def page_tls(folder: str | Path) -> ssl.SSLContext:
+    """The server's TLS context from a folder ``sctd certs`` wrote: the host's certificate
+    ``sctd-router.pem`` and key (their subjectAltName names the host's addresses), and the
+    CA ``ca.pem`` every browser's client certificate must be signed by (required).
+
+    Raises
+    ------
+    PageTLSError
+        A file missing or unreadable (the message names it).
+    """
+    d = Path(folder)
+    cert, key, ca = d / "sctd-router.pem", d / "sctd-router-key.pem", d / "ca.pem"
+    for f in (cert, key, ca):
+        if not f.is_file():
+            raise PageTLSError(f"{f}: no such file (make the folder with sctd certs: docs/deploy.md)")
+    ctx = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    ctx.minimum_version = ssl.TLSVersion.TLSv1_2
+    try:
+        ctx.load_cert_chain(cert, key)
+        ctx.load_verify_locations(ca)
+    except (ssl.SSLError, OSError) as e:
+        raise PageTLSError(f"{d}: {cert.name}, {key.name} or {ca.name}: {e}") from None
+    ctx.verify_mode = ssl.CERT_REQUIRED
+    return ctx
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address or ``localhost``) is this machine's loopback."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def peer_role(ws: Any) -> str | None:
+    """The common name of the client certificate of socket ``ws`` (None without TLS)."""
+    obj = ws.transport.get_extra_info("ssl_object") if ws.transport is not None else None
+    cert = obj.getpeercert() if obj is not None else None
+    for rdn in (cert or {}).get("subject", ()):
+        for key, value in rdn:
+            if key == "commonName":
+                return str(value)
+    return None
 
 
 PAGES: dict[str, tuple[str, str]] = {"/": ("sctd_services.tryout", "page.html"),
@@ -67,13 +132,19 @@ class PageServer:
         The message types handed to ``on_request`` (default ``start`` and ``abort``).
     on_watch : callable, optional
         ``on_watch(message)`` for a watcher's requests (module doc); None: refused.
+    host : str
+        The address to listen on (default 127.0.0.1).
+    tls : ssl.SSLContext, optional
+        :func:`page_tls`: HTTPS, WSS and client certificates by role (module doc).
     """
 
     def __init__(self, gate: PageGate, on_request: Callable[[dict], str | None],
                  state: Callable[[], dict], hello: dict, port: int = 0,
                  pages: Mapping[str, tuple[str, str]] = PAGES, requests: tuple[str, ...] = ("start", "abort"),
-                 on_watch: Callable[[dict], str | None] | None = None):
+                 on_watch: Callable[[dict], str | None] | None = None, host: str = "127.0.0.1",
+                 tls: ssl.SSLContext | None = None):
         self.gate, self.on_request, self.state, self.hello = gate, on_request, state, hello
+        self.host, self.tls = host, tls
         self.pages, self.requests, self.on_watch = dict(pages), requests, on_watch
         self._ids = itertools.count(1)
         self._loop = asyncio.new_event_loop()
@@ -111,9 +182,9 @@ class PageServer:
         from websockets.asyncio.server import serve
 
         self._stop = asyncio.Event()
-        async with serve(self._handle, "127.0.0.1", self.port, process_request=self._http,
+        async with serve(self._handle, self.host, self.port, process_request=self._http,
                          max_size=MAX_MESSAGE, ping_interval=PING, ping_timeout=PING,
-                         compression=None) as server:
+                         compression=None, ssl=self.tls) as server:
             self.port = next(iter(server.sockets)).getsockname()[1]
             self._ready.set()
             await self._stop.wait()
@@ -135,9 +206,21 @@ class PageServer:
             return Response(HTTPStatus.OK, "OK", headers, body)
         return connection.respond(HTTPStatus.NOT_FOUND, "not found\n")
 
+    @property
+    def url(self) -> str:
+        """Where a browser opens the page."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"{'https' if self.tls is not None else 'http'}://{host}:{self.port}/"
+
     async def _handle(self, ws: Any) -> None:
         conn = next(self._ids)
         watcher = ws.request.path.split("?", 1)[-1] == "watch"
+        if self.tls is not None:
+            cn = peer_role(ws)
+            if cn not in DRIVERS + WATCHERS:
+                await ws.close(POLICY_VIOLATION, f"the role {cn} may not use this page")
+                return
+            watcher = watcher or cn in WATCHERS
         role = "watcher" if watcher else self.gate.connect(conn)
         sender = asyncio.create_task(self._send_state(ws, conn, watcher))
         try:
