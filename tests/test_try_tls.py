@@ -9,8 +9,9 @@ import re
 import pytest
 
 from sctd.cli.main import main
+from sctd.wire.session import is_loopback
 from sctd_services.study.plan import Condition, make_plan, plan_to_yaml
-from sctd_services.tryout.server import PageTLSError, is_loopback, page_tls
+from sctd_services.tryout.server import PageTLSError, page_tls
 from tests.browser import open_page
 from tests.conftest import run_sctd, sctd, wait_for
 

@@ -73,7 +73,9 @@ def page_endpoint(args: argparse.Namespace) -> tuple[str, Any]:
     """The page's address and TLS context (None: plain HTTP) from ``--page-host`` and
     ``--page-tls``; ValueError naming the flag when a non-loopback address comes without
     TLS, or the TLS folder cannot serve."""
-    from sctd_services.tryout.server import PageTLSError, is_loopback, page_tls
+    from sctd_services.tryout.server import PageTLSError, page_tls
+
+    from ..wire.session import is_loopback
 
     if args.page_tls is None:
         if not is_loopback(args.page_host):

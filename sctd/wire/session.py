@@ -39,6 +39,17 @@ MSGPACK = zenoh.Encoding("application/msgpack")
 TEXT = zenoh.Encoding.TEXT_PLAIN
 
 
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is a loopback address: an IP literal in 127.0.0.0/8 or ``::1``, or
+    ``localhost`` (for a server to bind to: no name is looked up)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
 def check_loopback(endpoint: str) -> None:
     """Refuse endpoints that are not TCP on a loopback IP literal (127.0.0.0/8 or
     ``[::1]``), with a port: names are not accepted, since a name can resolve anywhere

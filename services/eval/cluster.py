@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import ipaddress
 import logging
 import threading
 import uuid
@@ -33,6 +32,8 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from sctd.wire.session import is_loopback
 
 log = logging.getLogger("sctd.cluster")
 
@@ -105,15 +106,6 @@ def _split(address: str) -> tuple[str, str]:
     host = rest.rsplit(":", 1)[0] if ":" in rest else rest
     return scheme, host.strip("[]")
 
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` is a loopback address (no name is looked up: ``localhost`` is)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def check_address(address: str, tls: TlsFiles | None, what: str = "--scheduler") -> str:

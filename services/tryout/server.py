@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import itertools
 import json
 import ssl
@@ -82,15 +81,6 @@ def page_tls(folder: str | Path) -> ssl.SSLContext:
     ctx.verify_mode = ssl.CERT_REQUIRED
     return ctx
 
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` (an address or ``localhost``) is this machine's loopback."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def peer_role(ws: Any) -> str | None:
