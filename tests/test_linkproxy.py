@@ -182,7 +182,7 @@ def test_udp_loses_the_datagrams_the_seed_says():
 
 def test_the_program_answers_its_control_socket_and_reports_its_counters(echo, tmp_path):
     control = tmp_path / "c.sock"
-    p = Proc("sctd.deploy.linkproxy", "--listen", "127.0.0.1:0", "--target", "%s:%d" % echo.address,
+    p = Proc("sctd.deploy.linkproxy", "--listen", "127.0.0.1:0", "--target", "{}:{}".format(*echo.address),
              "--up", json.dumps({"delay_ms": 10, "seed": 3}), "--control", str(control),
              log=tmp_path / "proxy.log")
     try:
@@ -198,7 +198,7 @@ def test_the_program_answers_its_control_socket_and_reports_its_counters(echo, t
             assert _recv_all(c, 3) == b"two"
             counters = link.counters()
             assert counters["up"]["held"] == 1 and counters["down"]["delayed"] == 1, counters
-            with pytest.raises(ValueError, match="LinkFault.delay: unknown field"):
+            with pytest.raises(ValueError, match=r"LinkFault\.delay: unknown field"):
                 link._ask(op="set", direction="up", fault={"delay": 5})
             with pytest.raises(ValueError, match="direction: expected up, down or both"):
                 link.stall(1.0, "sideways")

@@ -196,9 +196,9 @@ class LinkProxy:
         with self._lock:
             conns = list(self._conns)
             flows = list(self._flows.values())
-        for c in (*conns, *flows):
-            with c.cv:
-                c.cv.notify_all()
+        for cv in [c.cv for c in conns] + [f.cv for f in flows]:
+            with cv:
+                cv.notify_all()
 
     def _reset_all(self, count: bool) -> int:
         with self._lock:
@@ -281,7 +281,7 @@ class _Pump:
     at their release times by a writer thread through ``send``."""
 
     def __init__(self, proxy: LinkProxy, name: str, stream: int, cv: threading.Condition,
-                 send: Callable[[bytes], None], end: Callable[[], None], datagrams: bool):
+                 send: Callable[[bytes], object], end: Callable[[], None], datagrams: bool):
         self.proxy, self.name, self.cv = proxy, name, cv
         self.direction = proxy.directions[name]
         self.schedule = Schedule(self.direction, name, stream)
@@ -495,7 +495,7 @@ def answer(proxy: LinkProxy, request: Any) -> dict[str, Any]:
             proxy.set(str(request.get("direction")), LinkFault.from_dict(request.get("fault")))
             return {"ok": None}
         if op == "stall":
-            proxy.stall(request.get("seconds"), str(request.get("direction", "both")))
+            proxy.stall(request.get("seconds"), str(request.get("direction", "both")))  # type: ignore[arg-type]
             return {"ok": None}
         if op == "reset":
             return {"ok": proxy.reset()}
@@ -562,7 +562,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     with LinkProxy(listen, target, up, down, udp=args.udp) as proxy:
         control = None if args.control is None else serve_control(proxy, args.control, stop)
-        print(json.dumps({"ready": True, "listen": "%s:%d" % proxy.address}), flush=True)
+        print(json.dumps({"ready": True, "listen": f"{proxy.address[0]}:{proxy.address[1]}"}), flush=True)
         wait_until(stop)
         stop.set()
         if control is not None:
