@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     device cannot be opened."""
     from .bridge import MAX_RATE, MIN_RATE, Bridge
     from .bridge import run as run_bridge
-    from .mapping import identity, load_mapping, shipped_mapping
+    from .mapping import check_range, identity, load_mapping, shipped_mapping
 
     if args.list:
         return list_backends()
@@ -103,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         mapping = (load_mapping(args.map) if args.map else
                    shipped_mapping(backend.default_map) if backend.default_map else identity())
+        if mapping.origin != "identity":  # (which names every axis a backend could have)
+            check_range(mapping, backend.name, backend.device_axes, backend.device_buttons)
     except InputError as e:
         return _usage(str(e))
     stop = threading.Event()
