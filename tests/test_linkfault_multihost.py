@@ -24,13 +24,11 @@ import statistics
 import pytest
 
 from sctd.app.defaults import defaults
-from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import Cluster
 from sctd.deploy.linkfault import LinkFault
-from sctd.deploy.netns import NamespaceError, namespaces
 from sctd.runtime.controller import RuntimeConfig
 from sctd.task import find_task
-from tests.conftest import require_namespaces, wait_for
+from tests.conftest import running_cluster, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # namespaces, processes, latencies judged
 
@@ -44,15 +42,8 @@ STILL_M = 1e-3  # the target moves less than this while the input is stale (0.03
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    require_namespaces()
     logdir = tmp_path_factory.mktemp("linkfault")
-    c = Cluster(logdir, task=find_task(defaults().task), skill="teleop")
-    try:
-        c.__enter__()
-    except NamespaceError as e:
-        pytest.fail(f"making the hosts failed: {e}")
-    try:
-        c.start_router()
+    with running_cluster(logdir, task=find_task(defaults().task), skill="teleop") as c:
         c.input_link = c.fault("input", "router", LinkFault())  # clean until a test sets a fault
         c.inputs = logdir / "inputs.jsonl"  # every input message, not downsampled
         c.procs = {"robot": c.start_robot(), "runtime": c.start_runtime(), "observer": c.start_observer(),
@@ -62,14 +53,6 @@ def cluster(tmp_path_factory):
                                             "--field", "stamp", log="inputs.log")}
         assert wait_for(lambda: c.first(c.keys.target), 60), _logs(c)
         yield c
-    finally:
-        run_id = c.hosts.run_id
-        try:
-            router_rc = c.stop_router()
-        finally:
-            c.__exit__(None, None, None)
-        assert namespaces(run_id) == [], f"namespaces left over: {namespaces(run_id)}"
-        assert router_rc in (None, EXIT_OK, EXIT_FORCED), router_rc
 
 
 def _logs(c: Cluster) -> str:

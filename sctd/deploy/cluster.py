@@ -267,7 +267,8 @@ class Cluster:
                "--key", k.learner_status, *_each("--key", list(keys)),
                "--field", "seq", "--field", "stamp", "--field", "state", "--field", "mode",
                "--field", "in_seq", "--field", "pose", "--field", "success", "--field", "poured",
-               "--field", "targets", "--field", "state_age", "--field", "counters",
+               "--field", "targets", "--field", "state_age", "--field", "input_age", "--field", "input",
+               "--field", "counters",
                "--field", "done", "--field", "spilled_amount", "--field", "radial", "--field", "tilt",
                "--field", "skipped", "--field", "behind_s"]
         rec += ["--max-rate", "100"]  # of each key: enough to see seq and pose change
