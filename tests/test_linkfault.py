@@ -64,6 +64,12 @@ def test_a_stall_holds_what_would_leave_within_it_and_releases_it_in_order_at_it
     assert out[0] == pytest.approx(0.51)
     assert out[1] == pytest.approx(0.995)  # left before the stall began
     assert out[2:5] == [3.0, 3.0, 3.0]  # held, released at its end (in arrival order: a queue)
+    s = Schedule(Direction(f))
+    held = []
+    for t, n in arrivals:
+        s.release(t, n)
+        held.append(s.held)
+    assert held == [False, False, True, True, True, False, False]
     assert out[5] == pytest.approx(3.001)  # due after the stall: not held
     assert out[6] == pytest.approx(3.51)
 
@@ -76,6 +82,13 @@ def test_a_stall_started_while_running_holds_like_one_in_the_spec():
     assert s.release(0.6, 1) == 1.5 and s.held
     assert d.stall_end(0.7) == 1.5 and d.stall_end(1.5) == 1.5
     assert d.stalls_begun(0.4) == 0 and d.stalls_begun(0.5) == 1
+
+
+def test_a_chunk_behind_jittered_ones_is_not_counted_as_held():
+    s = Schedule(Direction(LinkFault(delay_ms=10, jitter=1.0, seed=5)))
+    for k in range(200):
+        s.release(0.001 * k, 1)
+        assert not s.held
 
 
 def test_touching_stalls_are_crossed_together():

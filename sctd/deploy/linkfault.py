@@ -147,6 +147,10 @@ class Direction:
                     t, moved = at + dur, True
         return t
 
+    def stalled_within(self, t0: float, t1: float) -> bool:
+        """Whether a stall overlaps ``[t0, t1)``."""
+        return any(at < t1 and at + dur > t0 for at, dur in (*self.fault.stalls, *self.stalls))
+
     def stalls_begun(self, t: float) -> int:
         """How many stalls have begun by ``t``."""
         return sum(1 for at, _ in (*self.fault.stalls, *self.stalls) if at <= t)
@@ -172,7 +176,7 @@ class Schedule:
         self._loss = random.Random(f"{seed}/{name}/{stream}/loss")
         self._last = -math.inf  # release of the chunk before
         self._free = -math.inf  # when the link has sent the chunk before (bandwidth)
-        self.held = False  # whether a stall held the last chunk
+        self.held = False  # whether a stall held the last chunk (or one it waited behind)
 
     def release(self, t: float, nbytes: int) -> float:
         """When a chunk of ``nbytes`` arriving at ``t`` leaves (s, not before ``t``, not
@@ -183,9 +187,9 @@ class Schedule:
             delay = max(0.0, delay + self._jitter.uniform(-f.jitter_s, f.jitter_s))
         start = max(t, self._free)
         self._free = start + (nbytes / f.bandwidth if f.bandwidth > 0 else 0.0)
-        due = max(self._free + delay, self._last)
-        out = self.direction.stall_end(due)
-        self.held = out > due
+        natural = self._free + delay
+        out = self.direction.stall_end(max(natural, self._last))
+        self.held = out > natural and self.direction.stalled_within(natural, out)
         self._last = out
         return out
 
