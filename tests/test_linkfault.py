@@ -1,7 +1,7 @@
 """The link fault's schedule (``sctd.deploy.linkfault``), pure: release times and drops
-for a seed and a spec, without sockets or a clock. The proxy that follows it is tested on
-loopback in ``tests/test_linkproxy.py`` (slow) and on a cluster link in
-``tests/test_linkfault_multihost.py``."""
+for a seed and a spec, without sockets or a clock; and the proxy's control requests,
+in-process. The proxy moving bytes is tested on loopback in ``tests/test_linkproxy.py``
+(slow) and on a cluster link in ``tests/test_linkfault_multihost.py``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sctd.deploy.linkfault import Direction, LinkFault, Schedule
+from sctd.deploy.linkproxy import LinkControl, LinkProxy, answer, parse_address, serve_control
 
 
 def _releases(fault: LinkFault, arrivals: list[tuple[float, int]], name: str = "up",
@@ -158,3 +159,43 @@ def test_a_fault_round_trips_through_its_dict():
                   resets=(5.0,), seed=9)
     assert LinkFault.from_dict(f.to_dict()) == f
     assert LinkFault.from_dict({}) == LinkFault()
+
+
+def test_control_requests_that_make_no_sense_get_an_error_not_a_crash():
+    with LinkProxy(("127.0.0.1", 0), ("127.0.0.1", 9)) as proxy:
+        assert "op" in answer(proxy, [1, 2])["error"]
+        assert "op: expected" in answer(proxy, {"op": "explode"})["error"]
+        assert "LinkFault" in answer(proxy, {"op": "stall", "seconds": -1})["error"]
+        assert "direction: expected" in answer(proxy, {"op": "set", "direction": "x", "fault": {}})["error"]
+        assert answer(proxy, {"op": "counters"})["ok"]["connections"] == 0
+
+
+def test_the_control_socket_sets_stalls_and_counts(tmp_path):
+    """In-process: the proxy's control socket and its client, no connection through it."""
+    import threading
+
+    stop = threading.Event()
+    with LinkProxy(("127.0.0.1", 0), ("127.0.0.1", 9)) as proxy:
+        t = serve_control(proxy, tmp_path / "c.sock", stop)
+        try:
+            link = LinkControl(tmp_path / "c.sock")
+            link.set("up", LinkFault(delay_ms=7))
+            link.stall(60.0, "down")
+            assert proxy.directions["up"].fault == LinkFault(delay_ms=7)
+            assert proxy.directions["down"].stall_end(proxy.now()) > proxy.now() + 50
+            counters = link.counters()
+            assert counters["stalls"] == 1 and counters["resets"] == 0
+            assert link.reset() == 0 and link.counters()["resets"] == 1
+            with pytest.raises(ValueError, match=r"LinkFault\.bandwidth"):
+                link.set("both", LinkFault.from_dict({"bandwidth": -5}))
+        finally:
+            stop.set()
+            t.join(5)
+    assert not (tmp_path / "c.sock").exists()
+
+
+@pytest.mark.parametrize("text", ["127.0.0.1", ":80", "host:port", "h:70000"])
+def test_an_address_is_host_and_port(text):
+    with pytest.raises(ValueError, match="expected HOST:PORT"):
+        parse_address(text)
+    assert parse_address("10.0.0.1:7448") == ("10.0.0.1", 7448)
