@@ -107,6 +107,22 @@ def test_bandwidth_spaces_chunks_by_their_size():
     assert s.release(5.0, 100) == pytest.approx(5.1)
 
 
+def test_after_a_stall_the_backlog_drains_at_the_bandwidth():
+    """A stalled link sends nothing: what it held leaves one chunk per n / bandwidth
+    after the stall, not in one burst at its end."""
+    f = LinkFault(bandwidth=1000.0, stalls=((1.0, 2.0),))
+    out = _releases(f, [(1.0 + 0.1 * k, 100) for k in range(5)])  # within the stall
+    assert out == pytest.approx([3.1, 3.2, 3.3, 3.4, 3.5])
+    s = Schedule(Direction(f))
+    for k in range(5):
+        s.release(1.0 + 0.1 * k, 100)
+        assert s.held
+    assert s.release(3.45, 100) == pytest.approx(3.6)  # after the stall, behind the backlog:
+    assert not s.held  # waited, but not for the stall
+    # without a bandwidth the stall's end releases them all at once
+    assert _releases(LinkFault(stalls=((1.0, 2.0),)), [(1.0 + 0.1 * k, 100) for k in range(5)]) == [3.0] * 5
+
+
 def test_bandwidth_and_delay_add_up():
     out = _releases(LinkFault(delay_ms=50, bandwidth=1000.0), [(0.0, 100), (0.0, 100)])
     assert out == pytest.approx([0.15, 0.25])

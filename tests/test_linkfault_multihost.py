@@ -36,6 +36,10 @@ INPUT_TIMEOUT_S = RuntimeConfig().input_timeout
 DELAY_MS = 20.0
 PAIRS = 150  # input -> target pairs per phase (3 s at 50 Hz)
 STALL_S = 2.0
+# bytes/s of the input link in the stall test: twice what the input sends (about 150 bytes
+# a message through TLS at 50 Hz), so the stall's backlog drains over about the stall's
+# length, its old messages arriving one by one rather than in one burst
+LINK_BPS = 15000.0
 MOVE = {"u": [0.3, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held: 0.03 m/s along x on teleop
 STILL_M = 1e-3  # the target moves less than this while the input is stale (0.03 m/s: 60 mm in 2 s)
 
@@ -132,7 +136,11 @@ def _age(m: dict) -> float:
 
 
 def test_a_stall_on_the_input_link_holds_the_arm_until_fresh_input_arrives(cluster):
+    """The stall's backlog drains through a link of ``LINK_BPS``: for a while each newest
+    message the daemon gets is an old one (a burst would leave only its newest, fresh
+    one, since the newest message wins), and the daemon must not follow them."""
     c = cluster
+    c.input_link.set("up", LinkFault(bandwidth=LINK_BPS))
     mover = c.start_input(MOVE, name="move")
     try:
         def moving_since(since: float) -> float | None:
@@ -148,10 +156,14 @@ def test_a_stall_on_the_input_link_holds_the_arm_until_fresh_input_arrives(clust
         # the daemon sees the input stop, then follows fresh input again
         assert wait_for(lambda: any(_age(m) > STALL_S / 2 for m in _status(c, start)), 30), _logs(c)
         late = max(m["stamp"] for m in _status(c, start) if _age(m) > STALL_S / 2)
-        assert wait_for(lambda: moving_since(late) is not None and len(_status(c, late)) >= 20, 30), _logs(c)
+        assert wait_for(lambda: moving_since(late) is not None, 30), _logs(c)
+        resumed = moving_since(late)
+        assert resumed is not None
+        assert wait_for(lambda: len(_status(c, resumed)) >= 20, 30), _logs(c)  # a second of it
         counters = c.input_link.counters()
     finally:
         mover.stop()
+        c.input_link.set("up", LinkFault())
     statuses = _status(c, start)
     # the daemon's own report: the input it holds grew as old as the stall
     assert STALL_S - 0.2 <= max(map(_age, statuses)) <= STALL_S + 0.6, max(map(_age, statuses))

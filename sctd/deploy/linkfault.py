@@ -14,7 +14,8 @@ The rules, for one direction of one TCP connection (a byte stream) or one UDP fl
   ``delay_ms`` +- the jitter (never below 0), but never before the chunk before it: jitter
   delays chunks, it never reorders a stream;
 - with a ``bandwidth`` (bytes/s) a chunk of ``n`` bytes occupies the link ``n /
-  bandwidth`` s after the link is free, and leaves after that and its delay;
+  bandwidth`` s after the link is free (and not stalled), and leaves after that and its
+  delay: after a stall, what it held drains at the bandwidth;
 - a stall ``(at, for)`` holds whatever would leave within ``[at, at + for)`` and releases
   it, in order, at ``at + for`` (nothing is lost: TCP does not lose data);
 - ``loss`` is the probability that a datagram is dropped (UDP only: a TCP stream loses
@@ -185,11 +186,14 @@ class Schedule:
         delay = f.delay_ms / 1e3
         if f.jitter_s > 0:
             delay = max(0.0, delay + self._jitter.uniform(-f.jitter_s, f.jitter_s))
-        start = max(t, self._free)
+        # a stalled link sends nothing: what it held goes out at its bandwidth after the stall
+        start = self.direction.stall_end(max(t, self._free)) if f.bandwidth > 0 else t
         self._free = start + (nbytes / f.bandwidth if f.bandwidth > 0 else 0.0)
-        natural = self._free + delay
-        out = self.direction.stall_end(max(natural, self._last))
-        self.held = out > natural and self.direction.stalled_within(natural, out)
+        out = self.direction.stall_end(max(self._free + delay, self._last))
+        # held: it waited longer than its own delay and sending take, and a stall fell
+        # within its wait (not a chunk that only waited behind others)
+        alone = t + delay + (nbytes / f.bandwidth if f.bandwidth > 0 else 0.0)
+        self.held = out > alone + 1e-9 and self.direction.stalled_within(t, out)
         self._last = out
         return out
 
