@@ -196,6 +196,37 @@ def _held_not_lost_and_fresh_moves(c: Cluster, stale_end: float) -> None:
             ("a target moved on a stale input", t, stamp_of[t["in_seq"]])
 
 
+def test_after_a_reset_of_the_input_link_the_input_reconnects_through_it(cluster):
+    """Both sides of the input's connection get an RST; its Zenoh session reconnects by
+    itself (through the proxy again) and the daemon gets its input again."""
+    c = cluster
+    at_rest = c.start_input({"u": [0.0, 0.0, 0.0], "buttons": [0, 1, 0]}, name="reset")
+    try:
+        def newest_seq() -> int:
+            got = _inputs(c, "reset")
+            return got[-1]["seq"] if got else -1
+
+        def daemon_has(seq: int, since: float) -> bool:
+            """A status after ``since`` follows fresh input newer than ``seq`` (the only
+            input sending is this one)."""
+            return any(m["in_seq"] > seq and _age(m) < INPUT_TIMEOUT_S for m in _status(c, since))
+        assert wait_for(lambda: newest_seq() >= 10 and daemon_has(5, _inputs(c, "reset")[0]["stamp"]), 60), \
+            _logs(c)
+        since = _status(c, 0.0)[-1]["stamp"]
+        before = c.input_link.counters()
+        assert c.input_link.reset() >= 1, before
+        # the input program's session opened a new connection through the proxy ...
+        assert wait_for(lambda: c.input_link.counters()["connections"] > before["connections"], 30), \
+            (before, c.input_link.counters(), _logs(c))
+        seq = newest_seq()
+        # ... and its input, sent after the reset, reaches the daemon
+        assert wait_for(lambda: daemon_has(seq + 10, since), 30), _logs(c)
+    finally:
+        at_rest.stop()
+    counters = c.input_link.counters()
+    assert counters["resets"] == before["resets"] + 1, counters
+
+
 def test_a_link_must_touch_the_router_and_be_faulted_before_its_programs_start(cluster):
     c = cluster
     with pytest.raises(ValueError, match="a link is a host's to the router"):
