@@ -3,11 +3,13 @@ Zenoh sessions on explicit loopback endpoints (multicast scouting off)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -23,7 +25,8 @@ pytest_plugins = ["pytester", "tests.tiers"]
 settings.register_profile("sctd", deadline=None)
 settings.load_profile("sctd")
 
-__all__ = ["ROOT", "Proc", "free_port", "port_is_free", "sctd", "trap_skill_yaml", "wait_for"]
+__all__ = ["ROOT", "Proc", "free_port", "port_is_free", "running_cluster", "sctd", "trap_skill_yaml",
+           "wait_for"]
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -153,3 +156,34 @@ def require_namespaces() -> None:
         if os.environ.get("CI"):
             pytest.fail(f"network namespaces cannot be made in CI: {why}")
         pytest.skip(f"network namespaces cannot be made here: {why}")
+
+
+@contextlib.contextmanager
+def running_cluster(logdir: Path, **kw) -> Iterator:
+    """A ``sctd.deploy.cluster.Cluster`` (``kw``: its arguments) with its router started,
+    for a module's tests (skipped where namespaces cannot be made). On the way out the
+    router is stopped and its own ending asserted (0: its session closed, 3: Zenoh did
+    not close it within 2 s, as it says; never a kill), the hosts are removed and no
+    namespace of the run is left."""
+    from sctd.app.errors import EXIT_FORCED, EXIT_OK
+    from sctd.deploy.cluster import Cluster
+    from sctd.deploy.netns import NamespaceError, namespaces
+
+    require_namespaces()
+    c = Cluster(logdir, **kw)
+    try:
+        c.__enter__()
+    except NamespaceError as e:
+        pytest.fail(f"making the hosts failed: {e}")
+    try:
+        c.start_router()
+        yield c
+    finally:
+        run_id = c.hosts.run_id
+        try:
+            router_rc = c.stop_router()
+            router_log = "" if c.router is None else c.router.output()[-2000:]
+        finally:
+            c.__exit__(None, None, None)
+        assert namespaces(run_id) == [], f"namespaces left over: {namespaces(run_id)}"
+        assert router_rc in (None, EXIT_OK, EXIT_FORCED), (router_rc, router_log)

@@ -21,6 +21,7 @@ from sctd_services.input.device import DeviceInfo, InputDevice, InputError, Read
 from sctd_services.input.mapping import (
     AxisMap,
     Mapping,
+    check_range,
     identity,
     load_mapping,
     parse_mapping,
@@ -90,6 +91,70 @@ def test_unknown_keys_of_mixed_types_are_named():
     doc["axes"] = [{"source": 0, "gain": 2, 82: None}]
     with pytest.raises(InputError, match=r"^my\.yaml: axes\[0\]\.82: unknown field"):
         parse_mapping(doc, "my.yaml")
+
+
+# Each built-in backend's numbering: (axes, buttons) its devices have at most.
+RANGES = {"keyboard": (3, 5), "gamepad": (6, 21), "spacemouse": (6, 31), "emg": (3, 0)}
+HUGE = 10**30  # a YAML integer Python takes whole
+
+
+def test_every_builtin_backend_says_its_range():
+    from sctd_services.input.emg.processing import N_AXES
+    from sctd_services.input.spacemouse import MODELS
+
+    assert set(RANGES) == set(BUILTIN)
+    assert RANGES["emg"][0] == N_AXES  # its calibrated axes
+    assert RANGES["spacemouse"][1] == max(m.buttons for m in MODELS.values())  # the most of any model
+    for name, (axes, buttons) in RANGES.items():
+        b = get_backend(name)
+        assert (b.device_axes, b.device_buttons) == (axes, buttons), name
+
+
+@pytest.mark.parametrize("backend", sorted(RANGES))
+@pytest.mark.parametrize(("over", "where", "what"), [
+    ({"buttons": {"enable": HUGE}}, "buttons.enable", f"button {HUGE}"),
+    ({"buttons": {"mode": "B"}}, "buttons.mode", "button B"),  # B: the backend's button count
+    ({"buttons": {"stop": "B"}}, "buttons.stop", "button B"),
+    ({"buttons": {"grasp": "B"}}, "buttons.grasp", "button B"),
+    ({"axes": [{"source": 0}, {"source": "A"}]}, "axes[1].source", "axis A"),  # A: its axis count
+    ({"axes": [{"source": [0, HUGE]}]}, "axes[0].source[1]", f"axis {HUGE}"),
+    ({"axes": [{"source": ["A", 0]}]}, "axes[0].source[0]", "axis A"),
+])
+def test_a_mapping_naming_a_button_or_axis_the_backend_lacks_is_refused(backend, over, where, what):
+    """Each field against each backend's numbering, just past its end (and far past it):
+    the error names the file, the field, the value and the range."""
+    axes, buttons = RANGES[backend]
+
+    def fill(v):
+        return {"A": axes, "B": buttons}.get(v, v) if isinstance(v, str) else v
+    doc = {"version": 1, "axes": [{"source": 0}], "buttons": {"enable": None}}
+    for k, v in over.items():
+        if k == "buttons":
+            doc[k] = {**doc[k], **{r: fill(b) for r, b in v.items()}}
+        else:
+            doc[k] = [{"source": [fill(x) for x in a["source"]] if isinstance(a["source"], list)
+                       else fill(a["source"])} for a in v]
+    mapping = parse_mapping(doc, "my.yaml")
+    what = what.replace(" A", f" {axes}").replace(" B", f" {buttons}")
+    with pytest.raises(InputError) as e:
+        check_range(mapping, backend, axes, buttons)
+    kind = what.split()[0]
+    n = axes if kind == "axis" else buttons
+    many = {"axis": "axes", "button": "buttons"}[kind]
+    have = f"{many} 0 to {n - 1}" if n else f"no {many}"
+    assert str(e.value) == f"my.yaml: {where}: {what} is out of range: {backend} devices have {have}"
+
+
+@pytest.mark.parametrize("backend", sorted(RANGES))
+def test_a_mapping_within_the_backend_s_range_passes_and_so_do_the_shipped_ones(backend):
+    axes, buttons = RANGES[backend]
+    last = {"version": 1, "axes": [{"source": axes - 1}, {"source": [0, axes - 1]}],
+            "buttons": {"enable": buttons - 1 if buttons else None}}
+    check_range(parse_mapping(last, "my.yaml"), backend, axes, buttons)
+    b = get_backend(backend)
+    if b.default_map:
+        check_range(shipped_mapping(b.default_map), backend, axes, buttons)
+    check_range(parse_mapping(last, "my.yaml"), backend, None, None)  # a range not known: not checked
 
 
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):
@@ -254,6 +319,27 @@ def test_cli_refuses_bad_flags_and_files_with_exit_2(tmp_path):
     assert r.returncode == 0, r.stderr
     names = [ln.split()[0] for ln in r.stdout.splitlines() if ln and not ln[0].isspace()]
     assert names[:4] == ["gamepad", "spacemouse", "emg", "keyboard"], r.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("backend", "field", "have"), [
+    ("keyboard", "buttons.enable", "buttons 0 to 4"),
+    ("gamepad", "buttons.enable", "buttons 0 to 20"),
+    ("spacemouse", "axes[0].source", "axes 0 to 5"),
+])
+def test_cli_refuses_a_button_or_axis_the_backend_lacks_before_it_starts(tmp_path, backend, field, have):
+    """The keyboard took ``enable: 10**30`` and failed only later on its terminal; now
+    every backend checks the file against its numbering before it opens anything."""
+    bad = tmp_path / "huge.yaml"
+    source = HUGE if field.startswith("axes") else 0
+    enable = HUGE if field == "buttons.enable" else "null"
+    bad.write_text(f"version: 1\naxes: [{{source: {source}}}]\nbuttons: {{enable: {enable}}}\n")
+    r = _cli(backend, "--map", str(bad))
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    kind = "axis" if field.startswith("axes") else "button"
+    said = f"{bad}: {field}: {kind} {HUGE} is out of range: {backend} devices have {have}"
+    assert said in r.stderr, r.stderr
+    assert "terminal" not in r.stderr and "no game controller" not in r.stderr, r.stderr
 
 
 @pytest.mark.parametrize(("buttons", "published"), [

@@ -78,6 +78,9 @@ def test_xbox_map_numbering_is_sdls():
                          "escape": sdl2.SDL_CONTROLLER_BUTTON_B, "choose": sdl2.SDL_CONTROLLER_BUTTON_X,
                          "grasp": sdl2.SDL_CONTROLLER_BUTTON_LEFTSHOULDER,
                          "stop": sdl2.SDL_CONTROLLER_BUTTON_Y}
+    # the range a mapping file is checked against is SDL's numbering
+    assert (Gamepad.device_axes, Gamepad.device_buttons) == (sdl2.SDL_CONTROLLER_AXIS_MAX,
+                                                             sdl2.SDL_CONTROLLER_BUTTON_MAX)
 
 
 @pytest.mark.slow

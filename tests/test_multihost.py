@@ -14,12 +14,11 @@ import time
 import pytest
 
 from sctd.app.defaults import defaults
-from sctd.app.errors import EXIT_FORCED, EXIT_OK
 from sctd.deploy.cluster import Cluster
-from sctd.deploy.netns import Hosts, NamespaceError, namespaces
+from sctd.deploy.netns import Hosts
 from sctd.runtime.controller import RuntimeConfig
 from sctd.task import find_task
-from tests.conftest import require_namespaces, wait_for
+from tests.conftest import require_namespaces, running_cluster, wait_for
 
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # network namespaces, a process per host
 
@@ -34,30 +33,11 @@ HAND_BOUND_M = 1e-3  # m the hand at rest may move across the outage (derived in
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory):
-    require_namespaces()
-    logdir = tmp_path_factory.mktemp("multihost")
-    c = Cluster(logdir, task=find_task(defaults().task))
-    try:
-        c.__enter__()
-    except NamespaceError as e:
-        pytest.fail(f"making the hosts failed: {e}")
-    try:
-        c.start_router()
+    with running_cluster(tmp_path_factory.mktemp("multihost"), task=find_task(defaults().task)) as c:
         c.procs = {"robot": c.start_robot(), "runtime": c.start_runtime(),
                    "observer": c.start_observer()}
         assert wait_for(lambda: c.first(c.keys.target), 60), _logs(c)
         yield c
-    finally:
-        run_id = c.hosts.run_id
-        try:
-            # sctd router's own ending: 0 its session closed, 3 Zenoh did not close it
-            # within 2 s (it says so); never a kill
-            router_rc = c.stop_router()
-            router_log = "" if c.router is None else c.router.output()[-2000:]
-        finally:
-            c.__exit__(None, None, None)
-        assert namespaces(run_id) == [], f"namespaces left over: {namespaces(run_id)}"
-        assert router_rc in (None, EXIT_OK, EXIT_FORCED), (router_rc, router_log)
 
 
 def test_hosts_clean_up_everything_after_an_exception(tmp_path):

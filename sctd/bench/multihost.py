@@ -45,11 +45,11 @@ def run_multihost_bench(seconds: float, input_rate: float, logdir: Path, restart
         robot, runtime = c.start_robot(), c.start_runtime()
         observer = c.start_observer()
         echo = h.python("runtime", "sctd.deploy.probe", "echo", "--config",
-                        str(c.config("sctd-runtime")), log="echo.log")
+                        str(c.config_on("runtime")), log="echo.log")
         _wait(lambda: c.first(c.keys.target), 60, "first target on the observer host",
               robot, runtime, observer, echo)
         n = int(seconds * input_rate)
-        ping = h.call("input", "sctd.deploy.probe", "ping", "--config", str(c.config("sctd-input")),
+        ping = h.call("input", "sctd.deploy.probe", "ping", "--config", str(c.config_on("input")),
                       "--rate", str(input_rate), "--n", str(n + n // 10), "--warmup", str(n // 10),
                       timeout=seconds + 90)
         # sctd.bench.latency's probe: its echo phase (on sctd/bench/*, which the roles

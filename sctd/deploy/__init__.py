@@ -9,6 +9,9 @@ client of one router.
 - :mod:`~sctd.deploy.configs`: plain and TLS Zenoh client configs, client certificates;
 - :mod:`~sctd.deploy.probe`: the Zenoh probe run inside a host
   (``python -m sctd.deploy.probe``);
+- :mod:`~sctd.deploy.linkfault` and :mod:`~sctd.deploy.linkproxy`: the faults of a real
+  link (delay, jitter, stalls, bandwidth, resets, datagram loss; seeded) and the proxy
+  that makes them in user space, between two hosts or on loopback;
 - :mod:`~sctd.deploy.cluster`: ``Cluster``, sctd's programs on those hosts, which
   ``tests/test_multihost.py`` checks and ``sctd bench multihost`` measures.
 

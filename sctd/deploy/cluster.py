@@ -13,6 +13,9 @@ In the namespaces of :class:`~sctd.deploy.netns.Hosts`,
   ``python -m sctd.deploy.probe record``), and the live view (``sctd view``) when asked;
 - ``intruder``: probes that try to read, write and query (:meth:`Cluster.intrude`).
 Every program is a Zenoh client of the router, configured only by its role's file.
+
+:meth:`Cluster.fault` puts a fault proxy (:mod:`sctd.deploy.linkproxy`) on a host's link
+to the router: the host's programs started after it connect through it.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from .configs import (
     tls_client_config,
     write_config,
 )
+from .linkfault import LinkFault
+from .linkproxy import LinkControl
 from .netns import Hosts, Process, last_json
 
 HOSTS = ("router", "robot", "runtime", "input", "learner", "observer", "intruder")
@@ -102,6 +107,7 @@ class Cluster:
         self._seen: dict[str, list[dict[str, Any]]] = {}
         self._offset = 0
         self._router_starts = 0
+        self._links: dict[str, FaultedLink] = {}
 
     @property
     def endpoint(self) -> str:
@@ -164,7 +170,65 @@ class Cluster:
 
     def zenoh_args(self, host: str) -> list[str]:
         """``--zenoh-config`` with the config of ``host``'s role, for an sctd program."""
-        return ["--zenoh-config", str(self.config(ROLE_OF_HOST[host]))]
+        return ["--zenoh-config", str(self.config_on(host))]
+
+    def config_on(self, host: str, role: str | None = None) -> Path:
+        """The config of ``role`` (default: ``host``'s) for a program on ``host``: the
+        role's own file, or, when the host's link has a fault proxy, a copy of it that
+        connects to the router through the proxy."""
+        path = self.config(ROLE_OF_HOST[host] if role is None else role)
+        link = self._links.get(host)
+        if link is None:
+            return path
+        text = path.read_text()
+        if self.endpoint not in text:
+            raise RuntimeError(f"{path}: does not connect to {self.endpoint}; cannot route it through a "
+                               "proxy")
+        via = self.logdir / "via" / host / path.name
+        via.parent.mkdir(parents=True, exist_ok=True)
+        via.write_text(text.replace(self.endpoint, link.endpoint))
+        return via
+
+    # -- faults on the links
+    def fault(self, src: str, dst: str, fault: LinkFault) -> FaultedLink:
+        """Put ``fault`` on what flows from ``src`` to ``dst``, one of them the router
+        (every program is a client of the router: the links are each host's to it).
+
+        The first fault on a host's link starts a proxy in the host's namespace
+        (``python -m sctd.deploy.linkproxy`` on 127.0.0.1, to the router's endpoint);
+        programs started on the host afterwards connect through it. A program already
+        running there would not, so that is refused. Another fault on the same link
+        (either direction) changes the running proxy. The returned link starts stalls,
+        changes faults, resets and reports counters while the programs run.
+        """
+        host, direction = link_of(src, dst)
+        link = self._links.get(host)
+        if link is None:
+            running = sorted({" ".join(p.argv[2:4]) for p in self.hosts._procs
+                              if p.host == host and p.running() and p.argv[2:3] != ["sctd.deploy.linkproxy"]})
+            if running:
+                raise RuntimeError(f"{host}: programs already run there ({'; '.join(running)}) and talk to "
+                                   "the router directly; put the fault on the link before starting them")
+            link = self._start_link(host, direction, fault)
+        else:
+            link.set(direction, fault)
+        return link
+
+    def _start_link(self, host: str, direction: str, fault: LinkFault) -> FaultedLink:
+        control = self.logdir / f"link-{host}.sock"
+        target = self.endpoint.split("/", 1)[1]
+        faults = {d: json.dumps((fault if d == direction else LinkFault()).to_dict()) for d in ("up", "down")}
+        proc = self.hosts.python(host, "sctd.deploy.linkproxy", "--listen", "127.0.0.1:0", "--target", target,
+                                 "--up", faults["up"], "--down", faults["down"], "--control", str(control),
+                                 log=f"link-{host}.log")
+        if not _wait_line(proc, '"ready"', 30):
+            proc.stop()
+            raise RuntimeError(f"{host}: the link's fault proxy did not start; see {proc.log_path}")
+        ready = next(json.loads(line) for line in proc.output().splitlines() if '"ready"' in line)
+        proto = self.endpoint.split("/", 1)[0]
+        link = FaultedLink(self, host, proc, LinkControl(control), f"{proto}/{ready['listen']}")
+        self._links[host] = link
+        return link
 
     # -- programs
     def start_router(self) -> Process:
@@ -195,18 +259,21 @@ class Cluster:
         return self.hosts.python("runtime", "sctd.cli.main", "run", "--skill", skill, "--stats-json",
                                  *extra, *self.zenoh_args("runtime"), log="runtime.log")
 
-    def start_observer(self) -> Process:
+    def start_observer(self, *keys: str) -> Process:
+        """The recorder of ``status``, ``scene``, ``target``, ``state`` and
+        ``learner/status`` (and ``keys``, e.g. an input's) on the observer host."""
         k = self.keys
         rec = ["--key", k.status, "--key", k.scene, "--key", k.target, "--key", k.state,
-               "--key", k.learner_status,
+               "--key", k.learner_status, *_each("--key", list(keys)),
                "--field", "seq", "--field", "stamp", "--field", "state", "--field", "mode",
                "--field", "in_seq", "--field", "pose", "--field", "success", "--field", "poured",
-               "--field", "targets", "--field", "state_age", "--field", "counters",
+               "--field", "targets", "--field", "state_age", "--field", "input_age", "--field", "input",
+               "--field", "counters",
                "--field", "done", "--field", "spilled_amount", "--field", "radial", "--field", "tilt",
                "--field", "skipped", "--field", "behind_s"]
         rec += ["--max-rate", "100"]  # of each key: enough to see seq and pose change
         return self.hosts.python("observer", "sctd.deploy.probe", "record", "--config",
-                                 str(self.config("sctd-observer")), "--out", str(self.records), *rec,
+                                 str(self.config_on("observer")), "--out", str(self.records), *rec,
                                  log="observer.log")
 
     def start_view(self, seconds: float) -> Process:
@@ -218,10 +285,15 @@ class Cluster:
 
     def start_steady_input(self) -> Process:
         """Input at 50 Hz, stick at rest and deadman held, until stopped."""
+        return self.start_input(STEADY_INPUT)
+
+    def start_input(self, payload: dict[str, Any], name: str = "steady", rate: float = 50.0) -> Process:
+        """Input ``payload`` (``u``, ``buttons``) on ``input/<name>`` at ``rate`` Hz from
+        the input host, until stopped (each message with its ``seq`` and ``stamp``)."""
         return self.hosts.python("input", "sctd.deploy.probe", "put", "--config",
-                                 str(self.config("sctd-input")), "--key", self.keys.input("steady"),
-                                 "--n", "100000000", "--rate", "50", "--settle", "0",
-                                 "--payload", json.dumps(STEADY_INPUT), log="steady-input.log")
+                                 str(self.config_on("input")), "--key", self.keys.input(name),
+                                 "--n", "100000000", "--rate", str(rate), "--settle", "0",
+                                 "--payload", json.dumps({"v": 1, **payload}), log=f"input-{name}.log")
 
     def user(self, seconds: float = 90.0) -> dict:
         """The simulated user doing the cluster's task until done; its JSON report."""
@@ -288,7 +360,7 @@ class Cluster:
         operator's summary, swap and training queries."""
         h, k = self.hosts, self.keys
         procs = {("control", "put"): h.python(
-            "input", "sctd.deploy.probe", "put", "--config", str(self.config("sctd-input")), "--n", str(n),
+            "input", "sctd.deploy.probe", "put", "--config", str(self.config_on("input")), "--n", str(n),
             "--settle", "3", "--payload", json.dumps({"v": 1, "intruder": "control", **STEADY_INPUT}),
             "--key", k.input("intruder"), log="control-put.log")}
         controls: list[tuple[str, str, str | None]] = [
@@ -300,7 +372,7 @@ class Cluster:
         return procs
 
     def _operator(self) -> list[str]:
-        return ["--config", str(self.config("sctd-operator"))]
+        return ["--config", str(self.config_on("observer", "sctd-operator"))]
 
     def _asks(self) -> list[tuple[str, str, str]]:
         """What an intruder asks: a swap on both queryables that take bundles, and
@@ -338,6 +410,58 @@ class Cluster:
 
     def first(self, key: str, since: float = 0.0) -> dict[str, Any] | None:
         return next(self.seen(key, since), None)
+
+
+class FaultedLink:
+    """A fault proxy on ``host``'s link to the router (:meth:`Cluster.fault`): ``up`` is
+    what the host sends, ``down`` what it receives. Its methods are the proxy's
+    (:class:`~sctd.deploy.linkproxy.LinkControl`); a context manager that stops it."""
+
+    def __init__(self, cluster: Cluster, host: str, process: Process, control: LinkControl, endpoint: str):
+        self.cluster, self.host, self.process, self.control = cluster, host, process, control
+        self.endpoint = endpoint  # the proxy's, in the host's namespace
+
+    def __enter__(self) -> FaultedLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def set(self, direction: str, fault: LinkFault) -> None:
+        self.control.set(direction, fault)
+
+    def stall(self, seconds: float, direction: str = "both") -> None:
+        self.control.stall(seconds, direction)
+
+    def reset(self) -> int:
+        return self.control.reset()
+
+    def counters(self) -> dict[str, Any]:
+        return self.control.counters()
+
+    def close(self) -> dict[str, Any] | None:
+        """Stop the proxy (programs still connected through it lose the router: stop
+        them first); the host's programs started afterwards connect directly again. The
+        proxy's last counters (None if it printed none)."""
+        self.process.stop()
+        self.cluster._links.pop(self.host, None)
+        got = last_json(self.process.output())
+        return None if got is None else got.get("counters")
+
+
+def link_of(src: str, dst: str) -> tuple[str, str]:
+    """The host whose link to the router carries ``src -> dst``, and the direction on it
+    (``up``: from the host); ValueError when neither or both are the router, or the host
+    has no role."""
+    if (src == "router") == (dst == "router"):
+        raise ValueError(f"link {src} -> {dst}: every program is a client of the router, so a link is "
+                         f"a host's to the router: fault('{src}', 'router', ...) and/or "
+                         f"fault('router', '{dst}', ...)")
+    host = dst if src == "router" else src
+    if host not in ROLE_OF_HOST or host == "router":
+        raise ValueError(f"link {src} -> {dst}: {host!r} is not a host with a role "
+                         f"({', '.join(h for h in ROLE_OF_HOST if h != 'router')})")
+    return host, "up" if src == host else "down"
 
 
 def _each(flag: str, values: list[str]) -> list[str]:

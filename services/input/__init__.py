@@ -85,7 +85,6 @@ def run(args: argparse.Namespace) -> int:
     device cannot be opened."""
     from .bridge import MAX_RATE, MIN_RATE, Bridge
     from .bridge import run as run_bridge
-    from .mapping import identity, load_mapping, shipped_mapping
 
     if args.list:
         return list_backends()
@@ -101,8 +100,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         return _usage(f"{backend.name}: {missing}")
     try:
-        mapping = (load_mapping(args.map) if args.map else
-                   shipped_mapping(backend.default_map) if backend.default_map else identity())
+        mapping = _mapping(args.map, backend)
     except InputError as e:
         return _usage(str(e))
     stop = threading.Event()
@@ -139,6 +137,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"sctd input: stopped after {s.published} messages ({s.disconnected} zero while "
               f"disconnected, {s.errors} read errors); published zero", file=sys.stderr)
     return 0
+
+
+def _mapping(path: str | None, backend: Backend):
+    """The mapping file ``path`` (default: the backend's shipped one, or the identity),
+    checked against the backend's numbering; InputError naming the file and field."""
+    from .mapping import check_range, identity, load_mapping, shipped_mapping
+
+    mapping = (load_mapping(path) if path else
+               shipped_mapping(backend.default_map) if backend.default_map else identity())
+    if mapping.origin != "identity":  # (which names every axis a backend could have)
+        check_range(mapping, backend.name, backend.device_axes, backend.device_buttons)
+    return mapping
 
 
 def _echo(rate: float):

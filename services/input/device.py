@@ -85,6 +85,11 @@ class Backend(ABC):
     default_map : str
         The shipped mapping file's name in ``sctd_services/input/maps`` ("" for the
         identity mapping).
+    device_axes, device_buttons : int or None
+        How many axes and buttons its devices number (0 to n - 1), at most, for any
+        device it opens: a mapping file naming another is refused before anything
+        starts (:func:`~.mapping.check_range`). None: not known (not checked; a plug-in
+        that does not say).
     """
 
     name: str = ""
@@ -92,6 +97,8 @@ class Backend(ABC):
     library: str = ""
     extra: str = "inputs"
     default_map: str = ""
+    device_axes: int | None = None
+    device_buttons: int | None = None
 
     def add_arguments(self, group: argparse._ArgumentGroup) -> None:  # noqa: B027  (optional)
         """The backend's own flags (all backends' appear in ``sctd input --help``)."""

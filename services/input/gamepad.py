@@ -188,6 +188,10 @@ class Gamepad(Backend):
     help = "game controllers (Xbox, PlayStation, Switch Pro, ...) through SDL2's game-controller API"
     library = "pysdl2 + pysdl2-dll"
     default_map = "xbox"
+    # SDL's game-controller numbering (SDL_CONTROLLER_AXIS_MAX, SDL_CONTROLLER_BUTTON_MAX
+    # of SDL 2.0.14 and later: up to the touchpad, 20)
+    device_axes = 6
+    device_buttons = 21
 
     def add_arguments(self, group: argparse._ArgumentGroup) -> None:
         group.add_argument("--gamepad-mappings", metavar="FILE",

@@ -203,6 +203,8 @@ class Keyboard(Backend):
     library = ""
     extra = ""
     default_map = "keyboard"
+    device_axes = 3  # x, y, z (read_keys)
+    device_buttons = N_BUTTONS
 
     def add_arguments(self, group: argparse._ArgumentGroup) -> None:
         group.add_argument("--key-hold", type=float, default=0.6, metavar="S",

@@ -175,6 +175,31 @@ def _axis(a: Any, where: str, bad) -> AxisMap:
     return AxisMap(source, minus, float(scale), invert, float(db))
 
 
+def check_range(mapping: Mapping, device: str, axes: int | None, buttons: int | None) -> None:
+    """Refuse a device axis or button that ``device`` (a backend's name) does not have:
+    it numbers ``axes`` axes and ``buttons`` buttons from 0 (None: not known, not
+    checked). InputError ``origin: field: problem``, the field as the file names it."""
+    def bad(where: str, what: str, v: int, n: int) -> InputError:
+        many = "axes" if what == "axis" else "buttons"
+        have = f"{many} 0 to {n - 1}" if n > 0 else f"no {many}"
+        return InputError(f"{mapping.origin}: {where}: {what} {v} is out of range: {device} devices "
+                          f"have {have}")
+
+    if axes is not None:
+        for k, a in enumerate(mapping.axes):
+            if a.minus is None and a.source >= axes:
+                raise bad(f"axes[{k}].source", "axis", a.source, axes)
+            if a.minus is not None:
+                for j, v in enumerate((a.source, a.minus)):
+                    if v >= axes:
+                        raise bad(f"axes[{k}].source[{j}]", "axis", v, axes)
+    if buttons is not None:
+        for role in KNOWN:
+            b = mapping.buttons.get(role)
+            if b is not None and b >= buttons:
+                raise bad(f"buttons.{role}", "button", b, buttons)
+
+
 def load_mapping(path: str | Path) -> Mapping:
     """The mapping file ``path`` (a regular file of at most 1 MiB, strict YAML: a duplicate
     key, such as two ``enable``, is refused); InputError naming the file and the field."""

@@ -300,6 +300,8 @@ class SpaceMouse(Backend):
     help = "3Dconnexion SpaceMouse over HID (hidapi): 6 axes, its buttons"
     library = "hidapi"
     default_map = "spacemouse"
+    device_axes = 6
+    device_buttons = max(m.buttons for m in MODELS.values())  # the model is known once opened
 
     def add_arguments(self, group: argparse._ArgumentGroup) -> None:
         group.add_argument("--fake-hid", metavar="FILE", help=argparse.SUPPRESS)

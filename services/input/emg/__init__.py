@@ -35,6 +35,8 @@ class Emg(Backend):
     help = "surface EMG through BrainFlow (synthetic, playback file or an EMG board); needs --calibration"
     library = "brainflow"
     default_map = ""
+    device_axes = 3  # its calibrated axes (processing.N_AXES)
+    device_buttons = 0
 
     def add_arguments(self, group: argparse._ArgumentGroup) -> None:
         group.add_argument("--board", default="synthetic",
