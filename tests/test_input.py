@@ -11,6 +11,7 @@ import textwrap
 import threading
 
 import pytest
+import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -155,6 +156,34 @@ def test_a_mapping_within_the_backend_s_range_passes_and_so_do_the_shipped_ones(
     if b.default_map:
         check_range(shipped_mapping(b.default_map), backend, axes, buttons)
     check_range(parse_mapping(last, "my.yaml"), backend, None, None)  # a range not known: not checked
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("enable", HUGE, f"buttons.enable: button {HUGE} is out of range: ROS Joy devices have buttons 0 to 511"),
+    ("enable", 512, "buttons.enable: button 512 is out of range: ROS Joy devices have buttons 0 to 511"),
+    ("source", 64, "axes[0].source: axis 64 is out of range: ROS Joy devices have axes 0 to 63"),
+])
+def test_a_joy_map_naming_what_no_joy_has_is_refused_before_anything_starts(tmp_path, field, value, message):
+    """A ROS Joy map (sctd ros --joy-map, sctd run --ros-joy-map) is checked against what
+    a Joy can carry, as each device backend's map is against its devices."""
+    from sctd_services.input.mapping import JOY_AXES, JOY_BUTTONS, joy_function
+
+    doc = {"version": 1, "axes": [{"source": value if field == "source" else 0}],
+           "buttons": {"enable": value if field == "enable" else 0}}
+    path = tmp_path / "joy.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError) as e:
+        joy_function(path)
+    assert str(e.value) == f"{path}: {message}"
+    # the last of each passes; a Joy shorter than the map reads it released and at rest
+    path.write_text(yaml.safe_dump({"version": 1, "axes": [{"source": JOY_AXES - 1}],
+                                    "buttons": {"enable": JOY_BUTTONS - 1}}))
+    apply = joy_function(path)
+    u, buttons, stop = apply((1.0,) * JOY_AXES, (1,) * JOY_BUTTONS)
+    assert u[0] == 1.0 and buttons[1] == 1 and not stop
+    u, buttons, stop = apply((1.0,) * 8, (1,) * 11)
+    assert u == [0.0] * 6 and buttons[1] == 0
+    assert joy_function(None)((0.0,) * 8, (0,) * 11)[1][1] == 0  # the shipped xbox map passes
 
 
 def test_mapping_files_load_and_the_shipped_ones_parse(tmp_path):

@@ -217,15 +217,26 @@ def shipped_mapping(name: str) -> Mapping:
     return parse_mapping(parse_yaml(f.read_text(), f"maps/{name}.yaml"), f"maps/{name}.yaml")
 
 
+# What a sensor_msgs/Joy carries at most: Linux's joystick interface (joydev), which the
+# joy package's drivers read or mirror, numbers at most ABS_CNT axes and (KEY_MAX -
+# BTN_MISC + 1) buttons. A Joy shorter than a map reads its missing buttons released
+# and its missing axes at rest (Mapping.apply): nothing moves.
+JOY_AXES = 64
+JOY_BUTTONS = 512
+
+
 def joy_function(path: str | Path | None = None):
     """``(axes, buttons) -> (u [6], [mode, enable, escape, ...], stop)`` through the
     mapping file ``path`` (the buttons by :attr:`Mapping.published`; default: the
     shipped xbox map, which numbers a ROS Joy from the joy package's
     ``game_controller_node`` as SDL does): how a ROS ``Joy`` becomes sctd input
-    (``sctd run --ros``, ``sctd ros``). MappingError when the file is bad."""
+    (``sctd run --ros``, ``sctd ros``). InputError when the file is bad or names an
+    axis or button no Joy has (:data:`JOY_AXES`, :data:`JOY_BUTTONS`), before anything
+    starts."""
     from .device import Reading
 
     mapping = load_mapping(path) if path else shipped_mapping("xbox")
+    check_range(mapping, "ROS Joy", JOY_AXES, JOY_BUTTONS)
 
     def apply(axes: tuple[float, ...], buttons: tuple[int, ...]) -> tuple[list[float], list[int], bool]:
         reading = Reading(axes, buttons)
