@@ -127,7 +127,7 @@ def test_the_learned_skill_turns_the_hand_in_place_both_ways():
 
 def test_the_shipped_tap_demonstrations_learn_the_shipped_vector_field_tap():
     """Known answer: skills/README.md's command for tap-vf learns its file, text for text,
-    and its models' arrays; the taught demonstrations turned the handle about the tap's
+    and its models' fields and arrays; the taught demonstrations turned the handle about the tap's
     z axis with the hand's origin on it."""
     from pathlib import Path
 
@@ -136,7 +136,7 @@ def test_the_shipped_tap_demonstrations_learn_the_shipped_vector_field_tap():
 
     root = Path(__file__).resolve().parents[1]
     demos = read_demos(root / "skills" / "demos" / "tap")
-    result = learn(demos, "vf", object="tap", random_state=0, vf_states="auto", vf_direction="both",
+    result = learn(demos, "vf", object="tap", random_state=0, vf_states="blend", vf_direction="both",
                    models=("translation", "cylinder", "sphere", "point", "general"))
     (t,) = result.turns.values()
     assert t.axis @ [0, 0, 1] > math.cos(math.radians(2)) and t.spread < 0.002
@@ -146,5 +146,6 @@ def test_the_shipped_tap_demonstrations_learn_the_shipped_vector_field_tap():
     learned, shipped = skill_from_bundle(bundle), load_skill(root / "skills" / "tap-vf.yaml")
     assert learned.models().keys() == shipped.models().keys() and "tap-vf-turn1.npz" in shipped.models()
     for a, b in zip(learned.models().values(), shipped.models().values(), strict=True):
+        assert [f.to_yaml() for f in a.fields] == [f.to_yaml() for f in b.fields]
         for x in ("points", "quaternions", "responsibilities"):
             np.testing.assert_allclose(getattr(a, x), getattr(b, x), atol=1e-9)
