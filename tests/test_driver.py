@@ -12,7 +12,7 @@ import pytest
 from sctd import se3
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
-from sctd.runtime.ingress import ANY_DEPTH, DEVICE_DEPTH, Ingress
+from sctd.runtime.ingress import ANY_DEPTH, DEVICE_DEPTH, INPUT_BUDGET, Ingress
 from sctd.runtime.loop import TickLoop
 from sctd.runtime.swap import SkillSwap
 from sctd.skill import load_skill
@@ -230,6 +230,48 @@ def test_a_new_device_loses_nothing_while_its_own_ring_is_declared():
     ingress.drain(0.002)
     assert taken == [("pad", 1), ("pad", 2), ("pad", 3), ("pad", 4)]
     assert drv.counters.disabled_input == 4 and list(ingress.devices) == [KEYS.input("pad")]
+
+
+@pytest.mark.parametrize("devices", [2, 3 * INPUT_BUDGET // 2, 40])
+def test_a_flood_on_many_devices_costs_a_drain_at_most_its_budget_and_loses_nothing(devices):
+    """Every device's ring full (DEVICE_DEPTH messages each): a drain decodes at most
+    INPUT_BUDGET of them, a message from each ring in turn, the first ring another each
+    drain; what is left is taken by the next drains, each device's in order, none twice
+    or lost, and every device's first message within the drains one pass takes."""
+    fake = FakeSession()
+    drv = TickDriver(load_skill(ROOT / "skills" / "teleop.yaml"), RuntimeConfig())
+    ingress = Ingress(fake, KEYS, drv)  # type: ignore[arg-type]
+    names = [f"pad{k:02d}" for k in range(devices)]
+    for name in names:  # each name learned through the catch-all, its ring declared after
+        fake.arrive(KEYS.input(name), codec.encode_input(1, 0.0, [0, 0, 0], [0, 0, 0]))
+        ingress.drain(0.0)
+        ingress.after_tick()
+    ingress.drain(0.0)  # the last ring's hand-over done: every device reads its own ring
+    assert len(ingress.devices) == devices
+    taken: list[tuple[str, int]] = []
+    offer = drv.inputs.offer
+    drv.inputs.offer = lambda name, m, now: taken.append((name, m.seq)) or offer(name, m, now)
+    for name in names:
+        for seq in range(2, 2 + DEVICE_DEPTH):
+            fake.arrive(KEYS.input(name), codec.encode_input(seq, 0.0, [0, 0, 0], [0, 0, 0]))
+    per_drain, first_seen = [], {}
+    for k in range(devices * DEVICE_DEPTH):
+        before = len(taken)
+        ingress.drain(0.001 * (k + 1))
+        per_drain.append(len(taken) - before)
+        for name, _ in taken[before:]:
+            first_seen.setdefault(name, k)
+        if len(taken) == devices * DEVICE_DEPTH:
+            break
+    total = devices * DEVICE_DEPTH
+    assert sorted(taken) == sorted((n, s) for n in names for s in range(2, 2 + DEVICE_DEPTH))
+    for name in names:  # each device's messages in its order
+        assert [s for n, s in taken if n == name] == list(range(2, 2 + DEVICE_DEPTH))
+    assert max(per_drain) == min(INPUT_BUDGET, total) and len(per_drain) == -(-total // INPUT_BUDGET)
+    assert max(first_seen.values()) < -(-devices // INPUT_BUDGET)
+    stopped = sum(n == INPUT_BUDGET for n in per_drain)  # drains that stopped at the budget
+    assert drv.counters.input_deferred == stopped and (stopped > 0) == (total > INPUT_BUDGET)
+    assert drv.counters.as_dict()["input_deferred"] == stopped  # on status
 
 
 def test_the_tick_wakes_ahead_by_the_drains_usual_time_not_its_outliers():
