@@ -312,3 +312,101 @@ def test_enabling_again_with_the_stick_deflected_does_not_restart_motion():
     rig.tick()
     rig.tick()
     assert rig.x() > moved
+
+
+def test_a_push_held_through_a_stall_moves_nothing_after_it_until_a_zero():
+    """Stale-disarm: A pushes, its messages stop for 0.3 s (a stalled link; the input
+    timeout is 0.1 s), then come back with the stick still deflected: the target stands
+    still, counted once (``stale_disarms``) and named on the status (``rearm``) until A
+    sends a zero; A's next push moves the arm again."""
+    rig = Rig()
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    for _ in range(300):  # the stall: nothing arrives
+        rig.tick()
+    held = rig.x()
+    assert rig.drv.inputs.owner is None and rig.drv.counters.stale_disarms == 1
+    for _ in range(200):  # fresh messages, stick still deflected
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() == held and rig.drv.inputs.summary()["rearm"] == {"A": "stale"}
+    rig.send("A", [0, 0, 0])
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {}
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() > held and rig.drv.counters.stale_disarms == 1
+
+
+def test_a_stalled_backlog_of_old_pushes_then_fresh_ones_moves_nothing_until_a_zero():
+    """The backlog a stall held arrives after it, one old message at a time (stamped up
+    to 0.3 s ago, stale by the stamp check), then fresh ones, all deflected: none moves
+    the arm, and the device is disarmed until it sends a zero."""
+    rig = Rig()
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    start = rig.t
+    for _ in range(300):
+        rig.tick()
+    held = rig.x()
+    for i in range(300):  # each message sent in the stall arrives now, 0.3 s late
+        rig.send("A", [1, 0, 0], stamp=start + i * PERIOD)
+        rig.tick()
+    for _ in range(100):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() == held and rig.drv.inputs.summary()["rearm"] == {"A": "stale"}
+
+
+def test_the_status_says_why_each_disarmed_device_must_send_a_zero():
+    """``status.input.rearm``: a push while another owns (ignored), a deadman released
+    with the stick deflected (released), a stop (every device, until its zero)."""
+    rig = Rig()
+    rig.send("A", [1, 0, 0])
+    rig.tick()
+    rig.send("B", [0, 1, 0])
+    rig.send("C", [0, 1, 0], OFF)
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"B": "ignored", "C": "released"}
+    rig.send("C", [0, 0, 0], stop=True)
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"A": "stop", "B": "stop", "C": "stop"}
+    rig.send("C", [0, 0, 0])
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"A": "stop", "B": "stop"}
+
+
+STALL_MESSAGES = st.lists(st.tuples(st.sampled_from(["push", "zero"]),
+                                    st.one_of(st.integers(500, 2000), st.integers(101_000, 400_000)),
+                                    st.integers(-1, 1)), min_size=1, max_size=60)
+
+
+@given(STALL_MESSAGES, st.booleans())
+@settings(max_examples=100, deadline=None)
+def test_after_a_stall_that_held_a_push_nothing_moves_until_a_zero_arrives(messages, late_stamps):
+    """One device, pushes and zeros with gaps of 0.5-2 ms or stalls of 0.1-0.4 s (longer
+    than the input timeout); with ``late_stamps`` the message after a stall is one the
+    stall held (stamped when it was sent). Whenever a stall began with a push as the
+    newest message, no target moves until a zero has arrived after it."""
+    rig = Rig()
+    t, must_zero, newest = rig.t, False, "zero"
+    prev = list(rig.pose)
+    for kind, gap_us, sign in messages:
+        stalled = gap_us > 100_000
+        while (rig.k + 1) * PERIOD < t + gap_us * 1e-6:  # the ticks until the message arrives
+            r = rig.tick()
+            if newest == "push" and rig.t - t > 0.1 + PERIOD:
+                must_zero = True  # the push went stale with the stick deflected
+            if must_zero and r.pose is not None:
+                assert r.pose == prev, f"moved at tick {rig.k} before a zero after the stall"
+            if r.pose is not None:
+                prev = list(r.pose)
+        at = t + gap_us * 1e-6
+        stamp = t if stalled and late_stamps else at
+        rig.send("A", [sign or 1, 0, 0] if kind == "push" else [0, 0, 0], at=at, stamp=stamp)
+        t, newest = at, kind
+        if kind == "zero":
+            must_zero = False

@@ -17,10 +17,20 @@ Every arriving input message is offered here, in arrival order per device
   the motion (no takeover by a stick that was already deflected); so must a device
   whose deadman was released, or whose reading was not finite, with the stick
   deflected (zero-start: enabling again alone never restarts motion);
+- **stale-disarm**: a device whose push went stale (its newest message, not at rest,
+  older than the input timeout: a stalled or dropped link) loses the motion and is
+  disarmed too, counted once per push (``stale_disarms``): when its messages come back
+  with the stick still deflected, they move nothing until it has sent a zero command,
+  so a stick held through a stall never resumes the motion by itself at full speed. No
+  ramp is added after the zero: the motion then starts from the person's own push from
+  the centre, bounded per tick by the maximum speeds like any other start;
 - a message with ``stop`` set, from any device, ends the ownership at the next tick and
   disarms every device; while any device's fresh newest message holds ``stop``, nobody
   takes the motion; afterwards the motion resumes only from a device that sent a zero
   command and then pushes again;
+- :meth:`InputArbiter.summary` names the devices that must send a zero before they
+  can move the arm, and why (``stale``, ``stop``, ``ignored``, ``released``), for the
+  person's display;
 - button presses (rising edges) are counted per device on every message; a tick acts on
   a device's presses when its newest message is fresh and enabled and the device owns
   the motion or nobody does (others are counted as ``ignored_presses``);
@@ -49,6 +59,10 @@ from .safety import sanitize_input
 
 MAX_DEVICES = 64  # device names one daemon tracks at once
 EVICT_AFTER = 10.0  # s a device must be silent before a new name may take its place
+# Why a device must send a zero command before it can take the motion (status.input.rearm):
+# its push went stale; a stop; it pushed while another device owned the motion; its
+# deadman was released (or its reading was not finite) with the stick deflected.
+DISARMED_BY = ("stale", "stop", "ignored", "released")
 
 
 class ButtonWatch:
@@ -106,8 +120,8 @@ NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
 class _Device:
     """One device's newest message and its standing under the rule."""
 
-    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "grasp_received", "grasp_seq", "msg",
-                 "name", "received", "rest", "run_start", "stale_seq", "stop", "u")
+    __slots__ = ("acted", "armed", "buttons", "disarmed_by", "enabled", "finite", "grasp_received",
+                 "grasp_seq", "msg", "name", "received", "rest", "run_start", "stale_seq", "stop", "u")
 
     def __init__(self, name: str):
         self.name = name
@@ -119,6 +133,7 @@ class _Device:
         self.rest = True
         self.stop = False  # the newest message holds stop
         self.armed = True
+        self.disarmed_by = ""  # why it must send a zero first (DISARMED_BY), "" while armed
         self.run_start = 0.0  # arrival of the first message of the current push
         self.buttons = ButtonWatch()
         self.acted: tuple[int, ...] = ()  # press counts already acted on (or dropped)
@@ -210,10 +225,7 @@ class InputArbiter:
         else:
             self._stopping.discard(d)
         if d.rest:
-            # Zero-start: only a centred stick re-arms a device. Releasing the deadman (or
-            # a broken, non-finite reading) with the stick deflected disarms it, so that
-            # enabling again alone never restarts motion.
-            d.armed = finite and not any(u)
+            self._settle(d, finite and not any(u))
             return True
         if was_rest:
             d.run_start = now
@@ -226,9 +238,31 @@ class InputArbiter:
             self._pending.append(d)
         return True
 
+    def _settle(self, d: _Device, centred: bool) -> None:
+        """A message at rest. Zero-start: only a centred stick re-arms a device. Releasing
+        the deadman (or a broken, non-finite reading) with the stick deflected disarms it,
+        so that enabling again alone never restarts motion."""
+        if centred:
+            d.armed, d.disarmed_by = True, ""
+        elif d.armed:
+            self._disarm(d, "released")
+
     def _ignore(self, d: _Device) -> None:
-        d.armed = False
+        self._disarm(d, "ignored")
         self.counters.ignored_input += 1
+
+    @staticmethod
+    def _disarm(d: _Device, why: str) -> None:
+        """``d`` must send a zero command before it can take the motion; ``why`` (one of
+        ``DISARMED_BY``) is kept for the person's display until it does."""
+        if d.armed or d.disarmed_by != "stop":  # a stop stays the reason until the zero
+            d.disarmed_by = why
+        d.armed = False
+
+    def _stale_push(self, d: _Device) -> None:
+        """``d``'s push went stale (module doc, stale-disarm)."""
+        self.counters.stale_disarms += 1
+        self._disarm(d, "stale")
 
     def _admit(self, name: str, now: float) -> _Device | None:
         """A new device's slot, making room when the table is full (module doc)."""
@@ -263,11 +297,13 @@ class InputArbiter:
             self._stop_requested = False
             self.owner = None
             for d in self.devices.values():
-                d.armed = False
+                d.armed, d.disarmed_by = False, "stop"
             self._pending.clear()
         owner = self.owner
         if owner is not None and (owner.rest or not self.fresh(owner, now, wall)):
             self._count_stale(owner, now, wall)
+            if not owner.rest:  # stale while pushing: zero first (module doc)
+                self._stale_push(owner)
             owner = self.owner = None
         if self._stopping and not any(self.fresh(d, now, wall) for d in self._stopping):
             self._stopping.clear()  # stops that went stale no longer hold (the disarm stays)
@@ -292,7 +328,14 @@ class InputArbiter:
         """The pending device whose push began first (then by name: messages between two
         ticks have no order across devices) takes the motion; the others that push
         still are ignored (they must come to rest first)."""
-        live = [d for d in self._pending if not d.rest and d.armed and self.fresh(d, now, wall)]
+        live = []
+        for d in self._pending:
+            if d.rest or not d.armed:
+                continue
+            if self.fresh(d, now, wall):
+                live.append(d)
+            else:  # its push went stale before it could take the motion: zero first too
+                self._stale_push(d)
         self._pending.clear()
         if not live or self._stopping:
             for d in live:
@@ -361,7 +404,9 @@ class InputArbiter:
 
     def summary(self) -> dict[str, object]:
         """``status.input``: the device owning the motion (None), the number of devices
-        tracked, and whether a stop holds."""
+        tracked, whether a stop holds, and ``rearm``: the devices that must send a zero
+        command before they can move the arm -> why (``DISARMED_BY``)."""
         return {"owner": self.owner.name if self.owner is not None else None,
                 "devices": len(self.devices),
-                "stop": bool(self._stopping)}
+                "stop": bool(self._stopping),
+                "rearm": {d.name: d.disarmed_by for d in self.devices.values() if not d.armed}}

@@ -153,6 +153,7 @@ class Counters:
     ignored_input: int = 0  # messages of a device that did not own the motion, not at rest
     ignored_presses: int = 0  # presses of a device while another owned the motion
     stops: int = 0  # stop requests (rising edges, any device)
+    stale_disarms: int = 0  # pushes that went stale: the device must send a zero first
     stale_state: int = 0
     stale_object: int = 0
     nonfinite_output: int = 0
