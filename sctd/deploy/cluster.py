@@ -287,13 +287,18 @@ class Cluster:
         """Input at 50 Hz, stick at rest and deadman held, until stopped."""
         return self.start_input(STEADY_INPUT)
 
-    def start_input(self, payload: dict[str, Any], name: str = "steady", rate: float = 50.0) -> Process:
+    def start_input(self, payload: dict[str, Any] | Path, name: str = "steady",
+                    rate: float = 50.0) -> Process:
         """Input ``payload`` (``u``, ``buttons``) on ``input/<name>`` at ``rate`` Hz from
-        the input host, until stopped (each message with its ``seq`` and ``stamp``)."""
+        the input host, until stopped (each message with its ``seq`` and ``stamp``); a
+        path is a JSON file of the payload (with ``v``), read again whenever it changes
+        (:func:`write_payload`): one device whose stick moves."""
+        what = ["--payload-file", str(payload)] if isinstance(payload, Path) else \
+            ["--payload", json.dumps({"v": 1, **payload})]
         return self.hosts.python("input", "sctd.deploy.probe", "put", "--config",
                                  str(self.config_on("input")), "--key", self.keys.input(name),
                                  "--n", "100000000", "--rate", str(rate), "--settle", "0",
-                                 "--payload", json.dumps({"v": 1, **payload}), log=f"input-{name}.log")
+                                 *what, log=f"input-{name}.log")
 
     def user(self, seconds: float = 90.0) -> dict:
         """The simulated user doing the cluster's task until done; its JSON report."""
@@ -447,6 +452,14 @@ class FaultedLink:
         self.cluster._links.pop(self.host, None)
         got = last_json(self.process.output())
         return None if got is None else got.get("counters")
+
+
+def write_payload(path: Path, payload: dict[str, Any]) -> None:
+    """Set what an input started with ``start_input(path)`` sends (whole, by a rename:
+    the sender never reads half a file)."""
+    part = path.with_name(path.name + ".part")
+    part.write_text(json.dumps({"v": 1, **payload}))
+    part.replace(path)
 
 
 def link_of(src: str, dst: str) -> tuple[str, str]:
