@@ -313,7 +313,7 @@ class Trials:
         from sctd_services.eval.trial import TrialRecorder
         from sctd_services.user import PROFILES
 
-        from .eval_realtime import WATCH_RATE, TrialWatcher
+        from sctd_services.eval.watcher import WATCH_RATE, TrialWatcher
 
         rec = TrialRecorder(task, seed, PROFILES["steady"].switch_time, None, STUCK_AFTER)
         w = TrialWatcher(self.session, task)
