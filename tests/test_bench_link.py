@@ -53,7 +53,8 @@ def test_rows_summarise_each_point_and_condition():
     assert (a["stale_disarms"], a["centred"]) == (1, 1)
     lines = format_table(rows)
     assert len(lines) == 3 and "   2/3" in lines[1] and "0.010" in lines[1] and "22.0" in lines[1]
-    assert spill_of({"bottle.flowing": True}) is None and spill_of({"a.spilled": 0.5, "b.spilled": 0.2}) == 0.5
+    assert spill_of({"bottle.flowing": True}) is None
+    assert spill_of({"a.spilled": 0.5, "b.spilled": 0.2}) == 0.5
 
 
 def test_assistance_stops_helping_at_the_first_point_where_it_is_no_better_than_the_baseline():
