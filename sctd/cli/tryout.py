@@ -311,9 +311,8 @@ class Trials:
         """Start the rig, wait for it, then record the trial until its outcome, an abort or
         the command's end; the trial's JSON entry."""
         from sctd_services.eval.trial import TrialRecorder
-        from sctd_services.user import PROFILES
-
         from sctd_services.eval.watcher import WATCH_RATE, TrialWatcher
+        from sctd_services.user import PROFILES
 
         rec = TrialRecorder(task, seed, PROFILES["steady"].switch_time, None, STUCK_AFTER)
         w = TrialWatcher(self.session, task)
