@@ -23,6 +23,11 @@ def test_the_sweep_has_the_clean_links_and_each_fault_on_each_link():
     assert delay.fault.delay_ms == 50 and delay.fault.jitter == 0.2 and delay.kind == "robot-delay"
     stall = next(p for p in POINTS if p.name == "input-stall-2")
     assert stall.stall == 2.0 and stall.fault.delay_ms == 0 and stall.kind == "input-stall"
+    # the losses, over UDP (a plain cluster), after their reference: the same link losing none
+    assert [(p.name, p.kind, p.fault.loss) for p in POINTS if p.udp] == \
+        [("input-udp", "input-udp", 0.0), ("input-loss-1", "input-loss", 0.01),
+         ("input-loss-5", "input-loss", 0.05)]
+    assert not any(p.udp for p in POINTS if not p.name.startswith(("input-udp", "input-loss")))
 
 
 def test_points_are_selected_by_name_in_the_sweeps_order_and_an_unknown_one_is_named():

@@ -7,8 +7,11 @@ host's (what the person's device sends: ``up``) and the robot host's (the arm's 
 to the runtime and its targets back: both directions). The points of the sweep
 (:data:`POINTS`): the clean links; a delay of 5, 20 and 50 ms with 20 % jitter on each
 link; a stall of 0.2 s and of 2 s on each link, begun ``STALL_AT`` s after the user
-started. Every trial of a point and condition starts from the same seeds, so the points
-differ only in the link.
+started; and, on a plain cluster whose input host's link runs over UDP (Zenoh's
+unreliable unicast link; the secured cluster's TLS runs over TCP, which loses nothing),
+that link clean (``input-udp``, the losses' reference) and losing 1 % and 5 % of the
+datagrams the input host sends. Every trial of a point and condition starts from the
+same seeds, so the points differ only in the link.
 
 Per trial (judged on the observer host by :mod:`sctd.bench.linktrial`, as ``sctd eval``
 judges one): the outcome, the task's clock, its readings (the spill), the hand's worst
@@ -39,9 +42,10 @@ from sctd.task import Task, find_task
 DELAYS_MS = (5.0, 20.0, 50.0)
 JITTER = 0.2  # of the delay
 STALLS_S = (0.2, 2.0)
+LOSSES = (0.01, 0.05)  # of the datagrams the input host sends
 STALL_AT = 5.0  # s after the user's program started (the user acts after about 1-2 s)
 LINKS = ("input", "robot")
-BASELINE = "teleop"  # the unassisted baseline's skill (sctd eval's)
+BASELINE = "teleop"  # the unassisted baseline's condition: sctd eval's competent baseline
 TRIAL_SLACK = 60.0  # s beyond the task's time limit before a trial's judge is given up
 
 
@@ -54,11 +58,14 @@ class Point:
     link: str = ""
     fault: LinkFault = field(default_factory=LinkFault)
     stall: float = 0.0
+    udp: bool = False  # the input host's link over UDP (a plain cluster: module doc)
 
     @property
     def kind(self) -> str:
-        """What is swept: ``clean``, or ``<link>-delay`` / ``<link>-stall``."""
-        return "clean" if not self.link else f"{self.link}-{'stall' if self.stall else 'delay'}"
+        """What is swept: ``clean``, ``input-udp``, or ``<link>-delay`` / ``-stall`` / ``-loss``."""
+        if not self.link:
+            return "input-udp" if self.udp else "clean"
+        return f"{self.link}-{'loss' if self.udp else 'stall' if self.stall else 'delay'}"
 
 
 def sweep() -> tuple[Point, ...]:
@@ -68,6 +75,8 @@ def sweep() -> tuple[Point, ...]:
         out += [Point(f"{link}-delay-{ms:g}", link, LinkFault(delay_ms=ms, jitter=JITTER, seed=1))
                 for ms in DELAYS_MS]
         out += [Point(f"{link}-stall-{s:g}", link, stall=s) for s in STALLS_S]
+    out.append(Point("input-udp", udp=True))  # the reference of the losses: the same link, none lost
+    out += [Point(f"input-loss-{100 * x:g}", "input", LinkFault(loss=x, seed=1), udp=True) for x in LOSSES]
     return tuple(out)
 
 
@@ -140,7 +149,7 @@ def stops_helping(rows: list[dict[str, Any]]) -> dict[str, dict[str, str | None]
     for p in POINTS:
         for task in dict.fromkeys(r["task"] for r in rows):
             a, b = by.get((task, p.name, "assisted")), by.get((task, p.name, BASELINE))
-            if a is None or b is None or p.kind == "clean":
+            if a is None or b is None or p.kind in ("clean", "input-udp"):
                 continue
             kinds = out.setdefault(task, {})
             kinds.setdefault(p.kind, None)
@@ -227,17 +236,44 @@ def run_trial(c: Cluster, links: dict[str, FaultedLink], point: Point, skill: st
             "centred": int(report.get("centred", 0)), "stalls": stalls}
 
 
-def conditions_of(task: Task, skill: str | None, baseline: bool) -> list[tuple[str, str]]:
-    """(condition, skill) pairs: ``assisted`` with ``skill`` (default: the shipped skill of
-    the task's object named after the task, else the first of them), then the baseline."""
-    if skill is None:
-        from sctd_services.eval.suite import skills_for
+def conditions_of(task: Task, skill: str | None, baseline: bool, workdir: Path) -> list[tuple[str, str]]:
+    """(condition, skill file) pairs: ``assisted`` with ``skill`` (default: the shipped
+    skill of the task's object named after the task, else the first of them), then the
+    competent baseline ``sctd eval`` runs against it (teleoperation with that skill's
+    limits and the task's control frame, written into ``workdir``)."""
+    from sctd_services.eval.evaluate import entries
+    from sctd_services.eval.suite import skills_for
 
+    if skill is None:
         found = skills_for(task)
         if not found:
             raise RuntimeError(f"{task.name}: no shipped skill for its object {task.object}; give --skill")
         skill = next((s for s in found if Path(s).stem == task.name), found[0])
-    return [("assisted", skill)] + ([(BASELINE, BASELINE)] if baseline else [])
+    got = entries([skill], baseline, workdir, task)
+    return [("assisted", str(got[0].path))] + [(BASELINE, str(e.path)) for e in got[1:]]
+
+
+def _sweep_cluster(task: Task, points: tuple[Point, ...], conditions: list[tuple[str, str]], trials: int,
+                   seed: int, logdir: Path, udp: bool) -> list[dict[str, Any]]:
+    """``points`` of ``task`` on one cluster: with ``udp`` a plain one whose input host's
+    link runs over UDP, else the secured one (mutual TLS, the roles policy)."""
+    out: list[dict[str, Any]] = []
+    cluster = Cluster(logdir, task=task, secure=False, udp=("input",)) if udp else Cluster(logdir, task=task)
+    with cluster as c:
+        c.start_router()
+        links = {"input": c.fault("input", "router", LinkFault()),
+                 "robot": c.fault("robot", "router", LinkFault())}
+        try:
+            for point in points:
+                for condition, sk in conditions:
+                    for k in range(trials):
+                        r = run_trial(c, links, point, sk, seed + k)
+                        out.append({"task": task.name, "point": point.name, "condition": condition, **r})
+                        print(f"sctd bench link: {task.name} {point.name} {condition} seed {seed + k}: "
+                              f"{r['outcome']} ({r['reason']}), {r['time_s']} s", file=sys.stderr, flush=True)
+        finally:
+            c.stop_router()
+    return out
 
 
 def run_link_bench(tasks: list[Task], skill: str | None, points: tuple[Point, ...], trials: int, seed: int,
@@ -246,21 +282,12 @@ def run_link_bench(tasks: list[Task], skill: str | None, points: tuple[Point, ..
     out: list[dict[str, Any]] = []
     began = time.monotonic()
     for task in tasks:
-        with Cluster(logdir / task.name, task=task) as c:
-            c.start_router()
-            links = {"input": c.fault("input", "router", LinkFault()),
-                     "robot": c.fault("robot", "router", LinkFault())}
-            try:
-                for point in points:
-                    for condition, sk in conditions_of(task, skill, baseline):
-                        for k in range(trials):
-                            r = run_trial(c, links, point, sk, seed + k)
-                            out.append({"task": task.name, "point": point.name, "condition": condition, **r})
-                            print(f"sctd bench link: {task.name} {point.name} {condition} seed {seed + k}: "
-                                  f"{r['outcome']} ({r['reason']}), {r['time_s']} s", file=sys.stderr,
-                                  flush=True)
-            finally:
-                c.stop_router()
+        conditions = conditions_of(task, skill, baseline, logdir / f"{task.name}-skills")
+        for udp in (False, True):
+            these = tuple(p for p in points if p.udp == udp)
+            if these:
+                out += _sweep_cluster(task, these, conditions, trials, seed,
+                                      logdir / f"{task.name}{'-udp' if udp else ''}", udp)
     rows = summarise(out)
     return {"trials": out, "rows": rows, "stops_helping": stops_helping(rows),
             "points": [p.name for p in points], "wall_s": round(time.monotonic() - began, 1),
