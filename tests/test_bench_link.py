@@ -71,7 +71,7 @@ def test_assistance_stops_helping_at_the_first_point_where_it_is_no_better_than_
               + both("input-delay-50", ("failure", None), ("success", 33.0))
               + both("robot-stall-2", ("success", 25.0), ("failure", None)))  # helps: more successes
     got = stops_helping(summarise(trials))
-    assert got == {"pour": {"input-delay": "input-delay-20", "robot-stall": None}}
+    assert got == {"pour": {"clean": None, "input-delay": "input-delay-20", "robot-stall": None}}
 
 
 def test_the_hands_unintended_motion_counts_only_while_no_device_drives():

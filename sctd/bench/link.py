@@ -140,16 +140,17 @@ def helps(assisted: dict[str, Any], baseline: dict[str, Any]) -> bool:
 
 
 def stops_helping(rows: list[dict[str, Any]]) -> dict[str, dict[str, str | None]]:
-    """Per task and kind of fault (``input-delay``, ``robot-stall``, ...): the first point,
-    in the sweep's order (the mildest first), where assistance does not help against the
-    baseline at the same point (:func:`helps`), or None where it helps at every point
-    measured. Points without both conditions are left out."""
+    """Per task and kind of fault (``input-delay``, ``robot-stall``, ...; ``clean`` and
+    ``input-udp`` are kinds of one point each): the first point, in the sweep's order
+    (the mildest first), where assistance does not help against the baseline at the
+    same point (:func:`helps`), or None where it helps at every point measured. Points
+    without both conditions are left out."""
     by = {(r["task"], r["point"], r["condition"]): r for r in rows}
     out: dict[str, dict[str, str | None]] = {}
     for p in POINTS:
         for task in dict.fromkeys(r["task"] for r in rows):
             a, b = by.get((task, p.name, "assisted")), by.get((task, p.name, BASELINE))
-            if a is None or b is None or p.kind in ("clean", "input-udp"):
+            if a is None or b is None:
                 continue
             kinds = out.setdefault(task, {})
             kinds.setdefault(p.kind, None)
@@ -301,7 +302,7 @@ def print_report(r: dict[str, Any]) -> None:
         print("  " + line)
     for task, kinds in r["stops_helping"].items():
         for kind, point in kinds.items():
-            print(f"  {task}: {kind}: " + (f"assistance stops helping at {point}" if point
+            print(f"  {task}: {kind}: " + (f"assistance does not help at {point}" if point
                                            else "assistance helps at every point measured"))
 
 
