@@ -10,7 +10,7 @@ link; a stall of 0.2 s and of 2 s on each link, begun ``STALL_AT`` s after the u
 started; and, on a plain cluster whose input host's link runs over UDP (Zenoh's
 unreliable unicast link; the secured cluster's TLS runs over TCP, which loses nothing),
 that link clean (``input-udp``, the losses' reference) and losing 1 % and 5 % of the
-datagrams the input host sends, from ``LOSS_AT`` s after the user started. Every
+datagrams the input host sends, from the user's first push on. Every
 trial of a point and condition starts from the same seeds, so the points differ only in
 the link.
 
@@ -45,9 +45,6 @@ JITTER = 0.2  # of the delay
 STALLS_S = (0.2, 2.0)
 LOSSES = (0.01, 0.05)  # of the datagrams the input host sends
 STALL_AT = 5.0  # s after the user's program started (the user acts after about 1-2 s)
-# s after the user's program started that a loss begins: a Zenoh session opened over a lossy
-# UDP link may never get some of its declarations through (docs/multihost.md)
-LOSS_AT = 3.0
 LINKS = ("input", "robot")
 BASELINE = "teleop"  # the unassisted baseline's condition: sctd eval's competent baseline
 TRIAL_SLACK = 60.0  # s beyond the task's time limit before a trial's judge is given up
@@ -201,15 +198,17 @@ def _wait_line(p: Process, text: str, seconds: float) -> bool:
 
 
 def _while_judged(judge: Process, links: dict[str, FaultedLink], point: Point, end: float) -> None:
-    """Wait for the judge (until ``end``), starting the point's stall ``STALL_AT`` s and
-    its datagram loss ``LOSS_AT`` s after the user's program started."""
+    """Wait for the judge (until ``end``), starting the point's stall ``STALL_AT`` s after
+    the user's program started and its datagram loss when the judge says the user first
+    pushed (a Zenoh session opened over a lossy UDP link may never get some of its
+    declarations through: docs/multihost.md)."""
     started = time.monotonic()
     stall, loss = point.stall > 0, point.udp and point.link != ""
     while judge.running() and time.monotonic() < end:
         if stall and time.monotonic() - started >= STALL_AT:
             links[point.link].stall(point.stall, "up" if point.link == "input" else "both")
             stall = False
-        if loss and time.monotonic() - started >= LOSS_AT:
+        if loss and '"acting"' in judge.output():
             _set_point(links, point)
             loss = False
         time.sleep(0.05)

@@ -5,8 +5,10 @@ It watches what ``sctd eval``'s real-time trials watch (:class:`~sctd_services.e
 watcher.TrialWatcher`), judges the trial with the same
 :class:`~sctd_services.eval.trial.TrialRecorder`, and measures the hand's unintended
 motion (:class:`Wander`). It prints ``{"ready": true}`` once its subscriptions are
-declared, then the trial's result as one JSON line: the recorder's result, ``wander_m``
-and the daemon's last ``counters`` and ``input`` (its status).
+declared, ``{"acting": true}`` when the user first pushes (its own subscriptions are in
+place: it has seen the arm and the objects), then the trial's result as one JSON line:
+the recorder's result, ``wander_m`` and the daemon's last ``counters`` and ``input``
+(its status).
 """
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ def watch(config: str, task_name: str, seed: int, time_limit: float | None, prof
         deadline = time.monotonic() + STARTUP_S + 3 * rec.time_limit
         first: tuple[float, float] | None = None  # (wall, simulated) at the trial's start, as sctd eval
         last = first
+        acting = False
         try:
             while True:
                 time.sleep(1.0 / WATCH_RATE)
@@ -85,6 +88,9 @@ def watch(config: str, task_name: str, seed: int, time_limit: float | None, prof
                     continue
                 last = (time.monotonic(), obs.t)
                 first = first or last
+                if not acting and any(w.u):
+                    print(json.dumps({"acting": True}), flush=True)  # the user pushes: it sees all
+                    acting = True
                 wander.add(obs.T_world_ee[:3, 3], driven(w.status))
                 if rec.add(obs, w.u, w.buttons, w.status.get("vf_scale")) is not None:
                     break
