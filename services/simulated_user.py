@@ -4,7 +4,10 @@ steps in one process; see :mod:`sctd_services.user`).
 It watches what a person in the chair sees: the robot state (the hand), the task's
 objects, the scene's progress and the mode the display shows (the ``state`` field of
 the targets), and publishes its stick and buttons on ``sctd/<robot>/input/<device>``
-at a fixed rate. It also measures the input -> target latency: the time from sending
+at a fixed rate. When the daemon's status says its device must centre the stick before
+the arm moves again (``status.input.rearm``: its push went stale over a stalled link, a
+stop), it does, as a person reading that on the display would: zero on the stick until
+the status no longer says so. It also measures the input -> target latency: the time from sending
 input ``seq`` to receiving the first target whose ``in_seq`` is ``seq``.
 
     python -m sctd_services.simulated_user --task pour --connect tcp/127.0.0.1:7447
@@ -59,10 +62,14 @@ class UserClient:
         self.info: dict[str, Any] = {"mode": None, "targets": 0, "changes": [], "T_world_ee": None,
                                      "scene": {}, "first_target": None}
         self.objects: dict[str, Any] = {}
+        self.device = device
+        self.rearm: dict[str, Any] = {}  # status.input.rearm: device -> why it must send a zero
+        self.centred = 0  # times the user centred the stick because the status said so
+        self._centring = False
         k = self.keys
         self._stack = ExitStack()
         for key, callback in ((k.target, self._on_target), (k.state, self._on_state),
-                              (k.scene, self._on_scene)):
+                              (k.scene, self._on_scene), (k.status, self._on_status)):
             self._stack.enter_context(session.declare_subscriber(key, callback))
         self.frames = tuple(user.task.scene.frames())
         for name in self.frames:
@@ -114,6 +121,23 @@ class UserClient:
         except codec.DecodeError:
             pass
 
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        try:
+            inp = codec.unpack_map(sample.payload.to_bytes()).get("input")
+        except codec.DecodeError:
+            return
+        rearm = inp.get("rearm") if isinstance(inp, dict) else None
+        self.rearm = rearm if isinstance(rearm, dict) else {}
+
+    def told_to_centre(self, device: str | None = None) -> bool:
+        """Whether the newest status says ``device`` (default: this client's) must send
+        a zero before it can move the arm; counts each time the user starts centring."""
+        told = (self.device if device is None else device) in self.rearm
+        if told and not self._centring:
+            self.centred += 1
+        self._centring = told
+        return told
+
     def observation(self) -> Observation | None:
         info = self.info
         if info["T_world_ee"] is None or info["mode"] is None or \
@@ -129,6 +153,8 @@ class UserClient:
         buttons: tuple[int, ...] = (0, 1, 0)
         if obs is not None:
             u, buttons = self.user.step(obs.t, obs)
+            if self.told_to_centre():
+                u = (0.0,) * self.user.n
         self.send(u, buttons)
 
     def send(self, u: tuple[float, ...], buttons: tuple[int, ...]) -> None:
@@ -194,6 +220,7 @@ def _report(client: UserClient, args: argparse.Namespace, elapsed: float) -> dic
         "state_changes": info["changes"],
         "final_state": info["mode"],
         "mode_switches": client.user.switches,
+        "centred": client.centred,
         "done": client.user.done,
         "latency_ms": client.latency.histogram.summary_ms(),
     }

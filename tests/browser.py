@@ -273,7 +273,8 @@ def drive_as_user(hub: str, task: Any, seed: int, inject: Callable[[Any, Any], N
     person it uses in real time), reading the arm over Zenoh at ``hub`` and handing its
     stick and buttons to the page by ``inject(u, buttons)`` at the person's 100 Hz, until
     ``ended()`` (asked every 25 steps: each ask is a round trip into the page); then
-    everything released."""
+    everything released. When the daemon's status says the page's device must centre
+    its stick (its input went stale: a page that missed its timer), it does."""
     from sctd.wire.session import session
     from sctd_services.simulated_user import UserClient
     from sctd_services.user import SimulatedUser
@@ -285,7 +286,8 @@ def drive_as_user(hub: str, task: Any, seed: int, inject: Callable[[Any, Any], N
         while step % 25 != 0 or not ended():
             obs = client.observation()
             if obs is not None:
-                inject(*user.step(obs.t, obs))
+                u, buttons = user.step(obs.t, obs)
+                inject((0.0, 0.0, 0.0) if client.told_to_centre("browser") else u, buttons)
             due += period
             time.sleep(max(0.0, due - time.monotonic()))
             step += 1

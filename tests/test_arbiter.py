@@ -312,3 +312,127 @@ def test_enabling_again_with_the_stick_deflected_does_not_restart_motion():
     rig.tick()
     rig.tick()
     assert rig.x() > moved
+
+
+GRACE = RuntimeConfig().stale_grace
+TIMEOUT = RuntimeConfig().input_timeout
+
+
+def test_a_push_held_through_a_stall_moves_nothing_after_it_until_a_zero():
+    """Stale-disarm: A pushes, its messages stop for 0.5 s (a stalled link; the input
+    timeout and the grace are 0.1 and 0.2 s), then come back with the stick still
+    deflected: the target stands still, counted once (``stale_disarms``) and named on
+    the status (``rearm``) until A sends a zero; A's next push moves the arm again."""
+    rig = Rig()
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    for _ in range(500):  # the stall: nothing arrives
+        rig.tick()
+    held = rig.x()
+    assert rig.drv.inputs.owner is None and rig.drv.counters.stale_disarms == 1
+    for _ in range(200):  # fresh messages, stick still deflected
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() == held and rig.drv.inputs.summary()["rearm"] == {"A": "stale"}
+    rig.send("A", [0, 0, 0])
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {}
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() > held and rig.drv.counters.stale_disarms == 1
+
+
+def test_a_stalled_backlog_of_old_pushes_then_fresh_ones_moves_nothing_until_a_zero():
+    """The backlog a stall held arrives after it, one old message at a time (each 0.15 s
+    old, stale by the stamp check, for 0.4 s: longer than the grace), then fresh ones,
+    all deflected: none moves the arm, and the device is disarmed until it sends a
+    zero."""
+    rig = Rig()
+    for _ in range(20):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    start = rig.t
+    for _ in range(150):  # a stall shorter than the input timeout and the grace ...
+        rig.tick()
+    held = rig.x()
+    for i in range(400):  # ... then each message sent in it arrives, 0.15 s late: the push
+        rig.send("A", [1, 0, 0], stamp=start + i * PERIOD)  # stays stale past the grace
+        rig.tick()
+    for _ in range(100):
+        rig.send("A", [1, 0, 0])
+        rig.tick()
+    assert rig.x() == held and rig.drv.inputs.summary()["rearm"] == {"A": "stale"}
+
+
+def test_the_status_says_why_each_disarmed_device_must_send_a_zero():
+    """``status.input.rearm``: a push while another owns (ignored), a deadman released
+    with the stick deflected (released), a stop (every device, until its zero)."""
+    rig = Rig()
+    rig.send("A", [1, 0, 0])
+    rig.tick()
+    rig.send("B", [0, 1, 0])
+    rig.send("C", [0, 1, 0], OFF)
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"B": "ignored", "C": "released"}
+    rig.send("C", [0, 0, 0], stop=True)
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"A": "stop", "B": "stop", "C": "stop"}
+    rig.send("C", [0, 0, 0])
+    rig.tick()
+    assert rig.drv.inputs.summary()["rearm"] == {"A": "stop", "B": "stop"}
+
+
+def test_within_the_grace_fresh_input_takes_the_motion_back_and_with_none_it_does_not():
+    """A gap in a push shorter than the input timeout plus the grace (0.25 s): the arm
+    stops while the push is stale and moves again on the fresh push that follows,
+    without a zero (a sender's hiccup); with ``stale_grace`` 0 the same gap needs the
+    zero."""
+    for grace, resumes in ((GRACE, True), (0.0, False)):
+        rig = Rig(stale_grace=grace)
+        for _ in range(20):
+            rig.send("A", [1, 0, 0])
+            rig.tick()
+        for _ in range(250):
+            rig.tick()
+        held = rig.x()
+        for _ in range(20):
+            rig.send("A", [1, 0, 0])
+            rig.tick()
+        assert (rig.x() > held) is resumes, grace
+        assert rig.drv.counters.stale_disarms == (0 if resumes else 1), grace
+
+
+STALL_MESSAGES = st.lists(st.tuples(st.sampled_from(["push", "zero"]),
+                                    st.one_of(st.integers(500, 2000), st.integers(101_000, 600_000)),
+                                    st.integers(-1, 1)), min_size=1, max_size=60)
+
+
+@given(STALL_MESSAGES, st.booleans())
+@settings(max_examples=100, deadline=None)
+def test_after_a_stall_that_held_a_push_nothing_moves_until_a_zero_arrives(messages, late_stamps):
+    """One device, pushes and zeros with gaps of 0.5-2 ms or stalls of 0.1-0.6 s (longer
+    than the input timeout); with ``late_stamps`` the message after a stall is one the
+    stall held (stamped when it was sent). Whenever a push stayed the newest message
+    for longer than the input timeout and the grace, no target moves until a zero has
+    arrived after it."""
+    rig = Rig()
+    t, must_zero, newest = rig.t, False, "zero"
+    prev = list(rig.pose)
+    for kind, gap_us, sign in messages:
+        stalled = gap_us > 100_000
+        while (rig.k + 1) * PERIOD < t + gap_us * 1e-6:  # the ticks until the message arrives
+            r = rig.tick()
+            if newest == "push" and rig.t - t > TIMEOUT + GRACE + 3 * PERIOD:
+                must_zero = True  # the push went stale with the stick deflected
+            if must_zero and r.pose is not None:
+                assert r.pose == prev, f"moved at tick {rig.k} before a zero after the stall"
+            if r.pose is not None:
+                prev = list(r.pose)
+        at = t + gap_us * 1e-6
+        stamp = t if stalled and late_stamps else at
+        rig.send("A", [sign or 1, 0, 0] if kind == "push" else [0, 0, 0], at=at, stamp=stamp)
+        t, newest = at, kind
+        if kind == "zero":
+            must_zero = False

@@ -8,7 +8,8 @@ the hand.
   delay was set and one after.
 - A stall on the input link makes the daemon hold: its ``input_age`` grows to the
   stall's length, its targets stand still meanwhile, the input's messages all arrive
-  (held, not lost) and the hand moves again only on input whose stamp is fresh.
+  (held, not lost); a stick held through the stall moves nothing afterwards until it
+  has been centred (the status says so), and then only on input whose stamp is fresh.
 
 Everything asserted comes from the programs' reports (stamps, seq numbers, the daemon's
 status, the recorders' arrival stamps, the proxy's counters), never the test's clock.
@@ -24,7 +25,7 @@ import statistics
 import pytest
 
 from sctd.app.defaults import defaults
-from sctd.deploy.cluster import Cluster
+from sctd.deploy.cluster import Cluster, write_payload
 from sctd.deploy.linkfault import LinkFault
 from sctd.runtime.controller import RuntimeConfig
 from sctd.task import find_task
@@ -41,6 +42,7 @@ STALL_S = 2.0
 # length, its old messages arriving one by one rather than in one burst
 LINK_BPS = 15000.0
 MOVE = {"u": [0.3, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held: 0.03 m/s along x on teleop
+REST = {"u": [0.0, 0.0, 0.0], "buttons": [0, 1, 0]}  # deadman held, stick centred
 STILL_M = 1e-3  # the target moves less than this while the input is stale (0.03 m/s: 60 mm in 2 s)
 
 
@@ -135,31 +137,32 @@ def _age(m: dict) -> float:
     return m["input_age"] if m["input_age"] is not None else float("inf")
 
 
-def test_a_stall_on_the_input_link_holds_the_arm_until_fresh_input_arrives(cluster):
-    """The stall's backlog drains through a link of ``LINK_BPS``: for a while each newest
-    message the daemon gets is an old one (a burst would leave only its newest, fresh
-    one, since the newest message wins), and the daemon must not follow them."""
+def _still(targets: list[dict]) -> float:
+    """How far (m, largest coordinate) ``targets`` went from the first of them."""
+    first = targets[0]["pose"][:3] if targets else []
+    return max((abs(a - b) for t in targets for a, b in zip(t["pose"][:3], first, strict=True)), default=0.0)
+
+
+def _rearm(m: dict) -> dict:
+    return m["input"].get("rearm", {})
+
+
+def test_a_push_held_through_a_stall_moves_nothing_after_it_until_the_stick_is_centred(cluster, tmp_path):
+    """One device pushes through a 2 s stall of its link, its stick still deflected when
+    the link comes back. The stall's backlog drains through a link of ``LINK_BPS``: for
+    a while each newest message the daemon gets is an old one (a burst would leave only
+    its newest, fresh one, since the newest message wins), then fresh ones arrive. The
+    daemon follows none of them: the device's push went stale, so it must send a zero
+    first (docs/wire-contract.md, "Several devices"); its status says so (``rearm``,
+    ``stale_disarms``). Once the same device sends a zero and pushes again, the hand
+    moves, on fresh input only."""
     c = cluster
     c.input_link.set("up", LinkFault(bandwidth=LINK_BPS))
-    mover = c.start_input(MOVE, name="move")
+    stick = tmp_path / "stick.json"
+    write_payload(stick, REST)  # from rest: a gap as the sender starts up moves nothing either
+    mover = c.start_input(stick, name="move")
     try:
-        def moving_since(since: float) -> float | None:
-            """The stamp of the first status after ``since`` in which the daemon follows
-            fresh input of ``move``."""
-            return next((m["stamp"] for m in _status(c, since)
-                         if m["input"]["owner"] == "move" and _age(m) < INPUT_TIMEOUT_S), None)
-        assert wait_for(lambda: _inputs(c, "move") and moving_since(_inputs(c, "move")[0]["stamp"]), 60), \
-            _logs(c)
-        start = moving_since(_inputs(c, "move")[0]["stamp"])
-        assert start is not None
-        c.input_link.stall(STALL_S, "up")
-        # the daemon sees the input stop, then follows fresh input again
-        assert wait_for(lambda: any(_age(m) > STALL_S / 2 for m in _status(c, start)), 30), _logs(c)
-        late = max(m["stamp"] for m in _status(c, start) if _age(m) > STALL_S / 2)
-        assert wait_for(lambda: moving_since(late) is not None, 30), _logs(c)
-        resumed = moving_since(late)
-        assert resumed is not None
-        assert wait_for(lambda: len(_status(c, resumed)) >= 20, 30), _logs(c)  # a second of it
+        start, fresh_again, centred = _stall_then_centre(c, stick)
         counters = c.input_link.counters()
     finally:
         mover.stop()
@@ -167,14 +170,57 @@ def test_a_stall_on_the_input_link_holds_the_arm_until_fresh_input_arrives(clust
     statuses = _status(c, start)
     # the daemon's own report: the input it holds grew as old as the stall
     assert STALL_S - 0.2 <= max(map(_age, statuses)) <= STALL_S + 0.6, max(map(_age, statuses))
-    # while it was stale (by the daemon's status), the target stood still
     stale = [m["stamp"] for m in statuses if _age(m) > INPUT_TIMEOUT_S + 0.05]
-    held = [t for t in _targets(c, start) if stale[0] <= t["stamp"] <= stale[-1]]
-    assert len(held) > 50, (len(held), stale[0], stale[-1])
-    moved = max(abs(a - b) for t in held for a, b in zip(t["pose"][:3], held[0]["pose"][:3], strict=True))
-    assert moved < STILL_M, moved
-    _held_not_lost_and_fresh_moves(c, stale[-1])
+    # from the stall until the zero, fresh input included, the target stood still ...
+    held = [t for t in _targets(c, start) if stale[0] <= t["stamp"] <= centred]
+    assert len(held) > 100, (len(held), stale[0], centred)
+    assert _still(held) < STILL_M, _still(held)
+    # ... while the daemon said why: the device must centre its stick after a stale push
+    told = [m for m in statuses if fresh_again <= m["stamp"] < centred]
+    assert told and all(_rearm(m).get("move") == "stale" and m["input"]["owner"] is None for m in told), told
+    assert statuses[-1]["counters"]["stale_disarms"] >= 1, statuses[-1]["counters"]
+    _held_not_lost_and_fresh_moves(c, centred)
     assert counters["stalls"] >= 1 and counters["up"]["held"] >= 1, counters
+
+
+def _stall_then_centre(c: Cluster, stick) -> tuple[float, float, float]:
+    """Drive ``move`` (its payload file ``stick``) until it moves the hand, stall its link,
+    wait for a second of fresh input after the stall, centre the stick, push again. The
+    daemon's status stamps of: the first status following ``move``, the first with fresh
+    input after the stall, the first after the zero that no longer names ``move``."""
+    def moving_since(since: float) -> float | None:
+        """The stamp of the first status after ``since`` in which the daemon follows
+        fresh input of ``move``."""
+        return next((m["stamp"] for m in _status(c, since)
+                     if m["input"]["owner"] == "move" and _age(m) < INPUT_TIMEOUT_S), None)
+    assert wait_for(lambda: len(_inputs(c, "move")) >= 10, 60), _logs(c)
+    write_payload(stick, MOVE)
+    assert wait_for(lambda: moving_since(_inputs(c, "move")[0]["stamp"]), 60), _logs(c)
+    start = moving_since(_inputs(c, "move")[0]["stamp"])
+    assert start is not None
+    c.input_link.stall(STALL_S, "up")
+    assert wait_for(lambda: any(_age(m) > STALL_S / 2 for m in _status(c, start)), 30), _logs(c)
+    late = max(m["stamp"] for m in _status(c, start) if _age(m) > STALL_S / 2)
+
+    def fresh_since(since: float, n: int) -> list[dict]:
+        """Statuses after ``since`` whose newest input is fresh by arrival and by its
+        sender's stamp (the backlog drained), the first ``n``."""
+        stamp_of = {m["seq"]: m["stamp"] for m in _inputs(c, "move")}
+        return [m for m in _status(c, since) if _age(m) < INPUT_TIMEOUT_S and m["in_seq"] in stamp_of
+                and m["stamp"] - stamp_of[m["in_seq"]] < INPUT_TIMEOUT_S][:n]
+    # a second of fresh, deflected input after the stall
+    assert wait_for(lambda: len(fresh_since(late, 20)) >= 20, 30), _logs(c)
+    fresh_again = fresh_since(late, 1)[0]["stamp"]
+    write_payload(stick, REST)
+    last = _status(c, 0.0)[-1]["stamp"]
+    assert wait_for(lambda: any("move" not in _rearm(m) for m in _status(c, last)), 30), _logs(c)
+    centred = next(m["stamp"] for m in _status(c, last) if "move" not in _rearm(m))
+    write_payload(stick, MOVE)
+    assert wait_for(lambda: moving_since(centred) is not None, 30), _logs(c)
+    resumed = moving_since(centred)
+    assert resumed is not None
+    assert wait_for(lambda: len(_status(c, resumed)) >= 20, 30), _logs(c)  # a second of it
+    return start, fresh_again, centred
 
 
 def _held_not_lost_and_fresh_moves(c: Cluster, stale_end: float) -> None:

@@ -591,3 +591,31 @@ def test_the_pour_tips_the_opening_away_from_the_arm_however_the_hand_is_turned(
     assert d.phase == "pour"
     top = np.cross(d.twist[3:], [0.0, 0.0, 1.0])  # where the turn takes an upright top
     assert top[0] > 0.9 * np.linalg.norm(top) > 0.1  # away from the arm: world +x
+
+
+def test_the_simulated_user_centres_the_stick_while_the_status_says_its_device_must():
+    """The daemon's ``status.input.rearm`` names the user's device (its push went stale
+    over a stalled link): the client sends zero until the status no longer names it,
+    counting each time it began to (``centred``). In-process, over loopback."""
+    import time
+
+    from sctd.wire import Keys, codec
+    from sctd.wire.session import session
+    from sctd_services.simulated_user import UserClient
+    from tests.conftest import free_port, wait_for
+
+    ep = f"tcp/127.0.0.1:{free_port()}"
+    user = SimulatedUser(find_task("pour"), 3, "steady", seed=0)
+    with session(listen=[ep]) as s, UserClient(s, user, device="pad") as client:
+        pub = s.declare_publisher(Keys().status)
+
+        def status(rearm: dict) -> None:
+            pub.put(codec.pack({"stamp": time.time(), "input": {"owner": None, "rearm": rearm}}))
+        assert wait_for(lambda: status({"pad": "stale"}) or client.rearm, 10)
+        assert client.told_to_centre() and client.told_to_centre() and client.centred == 1
+        assert not client.told_to_centre("other")
+        assert wait_for(lambda: status({"other": "ignored"}) or "pad" not in client.rearm, 10)
+        assert not client.told_to_centre() and client.centred == 1
+        assert wait_for(lambda: status({"pad": "stop"}) or "pad" in client.rearm, 10)
+        assert client.told_to_centre() and client.centred == 2
+        pub.undeclare()

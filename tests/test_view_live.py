@@ -321,3 +321,21 @@ def test_the_persons_panel_says_which_task_is_engaged_and_the_belief(server):
     view.draw(Snapshot(t=1.0, pose=None, objects={}, target={"state": "translate"},
                        status={"mode": "running", "state": "translate", **status}))
     assert "going for: pour 80 %" in view.person.content
+
+
+def test_the_persons_panel_says_which_device_must_centre_its_stick_and_why(server):
+    """``status.input.rearm`` (a push that went stale, a stop...): the device is named
+    with the reason in words, the stale one first; a ``rearm`` off the wire that is not
+    the contract's draws nothing, and names are escaped."""
+    from sctd_services.view.live import rearm_lines
+
+    status = {"input": {"owner": None, "rearm": {"pad": "ignored", "<b>x": "stale"}}}
+    lines = rearm_lines(status)
+    assert len(lines) == 2 and lines[0].startswith("<b>&lt;b&gt;x: centre the stick") and \
+        "stopped arriving" in lines[0] and "another device" in lines[1]
+    assert rearm_lines({}) == [] and rearm_lines({"input": {"rearm": [1]}}) == [] and \
+        rearm_lines({"input": {"rearm": {"a": "bogus"}}}) == []
+    view = LiveView(server, None, find_task("pour"))
+    view.draw(Snapshot(t=1.0, pose=None, objects={}, target={"state": "translate"},
+                       status={"mode": "running", "state": "translate", **status}))
+    assert "centre the stick to move again" in view.person.content

@@ -89,6 +89,9 @@ BENCHES: dict[str, Command] = {
                          "latency vs a Zenoh echo, reconnection after a router restart",
                          "sctd.bench.multihost", "add_bench_multihost_arguments",
                          "main_bench_multihost"),
+    "link": Command("real-time trials of tasks, assisted and teleoperated, through the namespaced "
+                    "cluster with delays and stalls on the input and robot links (the fault proxy)",
+                    "sctd.bench.link", "add_bench_link_arguments", "main_bench_link"),
     "eval": Command("lockstep trials in this process: simulated and wall time, real-time factor, "
                     "ms per step", "sctd.bench.eval", "add_bench_eval_arguments", "main_bench_eval"),
     "vf": Command("a vector-field skill's tick cost against its number of demonstration points "

@@ -165,8 +165,11 @@ class Trials:
         inp, counters = msg.get("input"), msg.get("counters")
         inp = inp if isinstance(inp, dict) else {}
         counters = counters if isinstance(counters, dict) else {}
+        rearm = inp.get("rearm")
         self.status = {"state": msg.get("state"), "mode": msg.get("mode"), "skill": msg.get("skill_name"),
                        "owner": inp.get("owner"), "input_age": msg.get("input_age"),
+                       # why the page's stick must be centred before the arm moves again, or None
+                       "rearm": rearm.get("browser") if isinstance(rearm, dict) else None,
                        "counters": {k: counters.get(k) for k in ("stale_input", "disabled_input",
                                                                  "nonfinite_input", "ignored_input")}}
 
@@ -308,9 +311,8 @@ class Trials:
         """Start the rig, wait for it, then record the trial until its outcome, an abort or
         the command's end; the trial's JSON entry."""
         from sctd_services.eval.trial import TrialRecorder
+        from sctd_services.eval.watcher import WATCH_RATE, TrialWatcher
         from sctd_services.user import PROFILES
-
-        from .eval_realtime import WATCH_RATE, TrialWatcher
 
         rec = TrialRecorder(task, seed, PROFILES["steady"].switch_time, None, STUCK_AFTER)
         w = TrialWatcher(self.session, task)

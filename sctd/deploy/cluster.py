@@ -90,10 +90,19 @@ class Cluster:
         ``sctd/app/defaults.yaml``).
     skill : str, optional
         The runtime's skill (default: the skill of ``sctd/app/defaults.yaml``).
+    udp : tuple of str
+        Hosts whose link to the router runs over UDP (Zenoh's unreliable unicast link,
+        where datagrams can be lost): the router listens on ``udp/<router>:7447`` too, and
+        a fault on such a host's link (:meth:`fault`) is a proxy of datagrams. Plain
+        clusters only (``secure`` False): Zenoh's TLS runs over TCP.
     """
 
     def __init__(self, logdir: Path, robot: str = "edan", secure: bool | None = None, *,
-                 task: Task, skill: str | None = None):
+                 task: Task, skill: str | None = None, udp: tuple[str, ...] = ()):
+        self.udp = tuple(udp)
+        if self.udp and secure is not False:
+            raise ValueError("udp: links over UDP need a plain cluster (secure=False): Zenoh's TLS runs "
+                             "over TCP")
         self.task = task
         self.skill = defaults().skill if skill is None else skill
         self.logdir = Path(logdir)
@@ -136,7 +145,8 @@ class Cluster:
             self._write_secure_configs()
             return
         d = self.logdir / "zenoh"
-        self._configs["router"] = write_config(d / "router.json5", router_config(self.endpoint))
+        udp = [f"udp/{self.hosts.addr('router')}:{ROUTER_PORT}"] if self.udp else []
+        self._configs["router"] = write_config(d / "router.json5", router_config(self.endpoint, *udp))
         for role in CLIENT_ROLES:
             self._configs[role] = write_config(d / f"{role}.json5", client_config(self.endpoint))
 
@@ -175,18 +185,19 @@ class Cluster:
     def config_on(self, host: str, role: str | None = None) -> Path:
         """The config of ``role`` (default: ``host``'s) for a program on ``host``: the
         role's own file, or, when the host's link has a fault proxy, a copy of it that
-        connects to the router through the proxy."""
+        connects to the router through the proxy; over UDP for the hosts of ``udp``."""
         path = self.config(ROLE_OF_HOST[host] if role is None else role)
         link = self._links.get(host)
-        if link is None:
+        if link is None and host not in self.udp:
             return path
+        endpoint = link.endpoint if link is not None else f"udp/{self.hosts.addr('router')}:{ROUTER_PORT}"
         text = path.read_text()
         if self.endpoint not in text:
             raise RuntimeError(f"{path}: does not connect to {self.endpoint}; cannot route it through a "
                                "proxy")
         via = self.logdir / "via" / host / path.name
         via.parent.mkdir(parents=True, exist_ok=True)
-        via.write_text(text.replace(self.endpoint, link.endpoint))
+        via.write_text(text.replace(self.endpoint, endpoint))
         return via
 
     # -- faults on the links
@@ -218,14 +229,15 @@ class Cluster:
         control = self.logdir / f"link-{host}.sock"
         target = self.endpoint.split("/", 1)[1]
         faults = {d: json.dumps((fault if d == direction else LinkFault()).to_dict()) for d in ("up", "down")}
+        udp = ["--udp"] if host in self.udp else []
         proc = self.hosts.python(host, "sctd.deploy.linkproxy", "--listen", "127.0.0.1:0", "--target", target,
                                  "--up", faults["up"], "--down", faults["down"], "--control", str(control),
-                                 log=f"link-{host}.log")
+                                 *udp, log=f"link-{host}.log")
         if not _wait_line(proc, '"ready"', 30):
             proc.stop()
             raise RuntimeError(f"{host}: the link's fault proxy did not start; see {proc.log_path}")
         ready = next(json.loads(line) for line in proc.output().splitlines() if '"ready"' in line)
-        proto = self.endpoint.split("/", 1)[0]
+        proto = "udp" if udp else self.endpoint.split("/", 1)[0]
         link = FaultedLink(self, host, proc, LinkControl(control), f"{proto}/{ready['listen']}")
         self._links[host] = link
         return link
@@ -287,13 +299,18 @@ class Cluster:
         """Input at 50 Hz, stick at rest and deadman held, until stopped."""
         return self.start_input(STEADY_INPUT)
 
-    def start_input(self, payload: dict[str, Any], name: str = "steady", rate: float = 50.0) -> Process:
+    def start_input(self, payload: dict[str, Any] | Path, name: str = "steady",
+                    rate: float = 50.0) -> Process:
         """Input ``payload`` (``u``, ``buttons``) on ``input/<name>`` at ``rate`` Hz from
-        the input host, until stopped (each message with its ``seq`` and ``stamp``)."""
+        the input host, until stopped (each message with its ``seq`` and ``stamp``); a
+        path is a JSON file of the payload (with ``v``), read again whenever it changes
+        (:func:`write_payload`): one device whose stick moves."""
+        what = ["--payload-file", str(payload)] if isinstance(payload, Path) else \
+            ["--payload", json.dumps({"v": 1, **payload})]
         return self.hosts.python("input", "sctd.deploy.probe", "put", "--config",
                                  str(self.config_on("input")), "--key", self.keys.input(name),
                                  "--n", "100000000", "--rate", str(rate), "--settle", "0",
-                                 "--payload", json.dumps({"v": 1, **payload}), log=f"input-{name}.log")
+                                 *what, log=f"input-{name}.log")
 
     def user(self, seconds: float = 90.0) -> dict:
         """The simulated user doing the cluster's task until done; its JSON report."""
@@ -447,6 +464,14 @@ class FaultedLink:
         self.cluster._links.pop(self.host, None)
         got = last_json(self.process.output())
         return None if got is None else got.get("counters")
+
+
+def write_payload(path: Path, payload: dict[str, Any]) -> None:
+    """Set what an input started with ``start_input(path)`` sends (whole, by a rename:
+    the sender never reads half a file)."""
+    part = path.with_name(path.name + ".part")
+    part.write_text(json.dumps({"v": 1, **payload}))
+    part.replace(path)
 
 
 def link_of(src: str, dst: str) -> tuple[str, str]:

@@ -12,9 +12,9 @@ from pathlib import Path
 ROUTER_PORT = 7447
 
 
-def router_config(listen: str) -> dict:
-    """A Zenoh router listening on ``listen``, multicast scouting off."""
-    return {"mode": "router", "listen": {"endpoints": [listen]},
+def router_config(listen: str, *more: str) -> dict:
+    """A Zenoh router listening on ``listen`` (and ``more``), multicast scouting off."""
+    return {"mode": "router", "listen": {"endpoints": [listen, *more]},
             "scouting": {"multicast": {"enabled": False}},
             "transport": {"shared_memory": {"enabled": False}}}
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import threading
 import time
@@ -111,8 +112,30 @@ def record_main(args: argparse.Namespace) -> int:
     return 0
 
 
+class _PayloadFile:
+    """``--payload-file``: the payload as JSON in a file, read again whenever the file
+    changes, so that whoever started the probe (outside its namespace: the file system is
+    shared) changes what a running sender sends without a new sender (a new seq)."""
+
+    def __init__(self, path: str):
+        self.path, self.mtime = path, -1
+        self.payload: dict = {}
+
+    def get(self) -> dict:
+        try:
+            mtime = os.stat(self.path).st_mtime_ns
+            if mtime != self.mtime:
+                with open(self.path) as f:
+                    self.payload = json.load(f)
+                self.mtime = mtime
+        except (OSError, ValueError):
+            pass  # replaced mid-read: the last payload until the next message
+        return self.payload
+
+
 def put_main(args: argparse.Namespace) -> int:
-    """Put ``--n`` msgpack maps (``--payload`` JSON) on each ``--key``, ``--rate`` Hz."""
+    """Put ``--n`` msgpack maps (``--payload`` JSON, or ``--payload-file``'s) on each
+    ``--key``, ``--rate`` Hz."""
     sent = {k: 0 for k in args.key}
     try:
         s = _open(args.config)
@@ -121,8 +144,11 @@ def put_main(args: argparse.Namespace) -> int:
         return 0
     time.sleep(args.settle)  # let the declarations of the others reach this session
     payload = json.loads(args.payload)
+    changing = _PayloadFile(args.payload_file) if args.payload_file else None
     block = zenoh.CongestionControl.BLOCK
     for i in range(args.n):
+        if changing is not None:
+            payload = changing.get()
         for key in args.key:
             msg = dict(payload, seq=i, stamp=time.time())
             # blocking, not dropped when a queue is full: the count must be what was sent
@@ -223,6 +249,8 @@ def _parser() -> argparse.ArgumentParser:
     put.add_argument("--rate", type=float, default=50.0)
     put.add_argument("--settle", type=float, default=1.0)
     put.add_argument("--payload", default="{}")
+    put.add_argument("--payload-file", default=None,
+                     help="JSON payload read again whenever the file changes (instead of --payload)")
     put.set_defaults(func=put_main)
     q = sub.add_parser("query", help="one query, count replies")
     q.add_argument("--config", required=True)

@@ -17,10 +17,24 @@ Every arriving input message is offered here, in arrival order per device
   the motion (no takeover by a stick that was already deflected); so must a device
   whose deadman was released, or whose reading was not finite, with the stick
   deflected (zero-start: enabling again alone never restarts motion);
+- **stale-disarm**: a device whose push went stale (its newest message, not at rest,
+  older than the input timeout: a stalled or dropped link) loses the motion at once
+  (zero command); if its push stays stale for longer than ``stale_grace`` it is
+  disarmed too, counted once (``stale_disarms``): when its messages come back with the
+  stick still deflected, they move nothing until it has sent a zero command, so a stick
+  held through a stall never resumes the motion by itself. Within the grace (a
+  person's reaction time: they cannot yet have seen the arm stop) fresh input takes the
+  motion back as the person holds it, so that a sender's or a link's hiccup does not
+  make them centre the stick. No ramp is added after the zero: the motion then starts
+  from the person's own push from the centre, bounded per tick by the maximum speeds
+  like any other start;
 - a message with ``stop`` set, from any device, ends the ownership at the next tick and
   disarms every device; while any device's fresh newest message holds ``stop``, nobody
   takes the motion; afterwards the motion resumes only from a device that sent a zero
   command and then pushes again;
+- :meth:`InputArbiter.summary` names the devices that must send a zero before they
+  can move the arm, and why (``stale``, ``stop``, ``ignored``, ``released``), for the
+  person's display;
 - button presses (rising edges) are counted per device on every message; a tick acts on
   a device's presses when its newest message is fresh and enabled and the device owns
   the motion or nobody does (others are counted as ``ignored_presses``);
@@ -49,6 +63,11 @@ from .safety import sanitize_input
 
 MAX_DEVICES = 64  # device names one daemon tracks at once
 EVICT_AFTER = 10.0  # s a device must be silent before a new name may take its place
+STALE_GRACE = 0.2  # s a push may stay stale and take the motion back: a simple visual reaction time
+# Why a device must send a zero command before it can take the motion (status.input.rearm):
+# its push went stale; a stop; it pushed while another device owned the motion; its
+# deadman was released (or its reading was not finite) with the stick deflected.
+DISARMED_BY = ("stale", "stop", "ignored", "released")
 
 
 class ButtonWatch:
@@ -106,8 +125,9 @@ NO_INPUT = Command((0.0, 0.0, 0.0), False, -1, "", frozenset())
 class _Device:
     """One device's newest message and its standing under the rule."""
 
-    __slots__ = ("acted", "armed", "buttons", "enabled", "finite", "grasp_received", "grasp_seq", "msg",
-                 "name", "received", "rest", "run_start", "stale_seq", "stop", "u")
+    __slots__ = ("acted", "armed", "buttons", "disarmed_by", "enabled", "finite", "grasp_received",
+                 "grasp_seq", "msg", "name", "received", "rest", "run_start", "stale_from", "stale_seq",
+                 "stop", "u")
 
     def __init__(self, name: str):
         self.name = name
@@ -119,7 +139,9 @@ class _Device:
         self.rest = True
         self.stop = False  # the newest message holds stop
         self.armed = True
+        self.disarmed_by = ""  # why it must send a zero first (DISARMED_BY), "" while armed
         self.run_start = 0.0  # arrival of the first message of the current push
+        self.stale_from = 0.0  # the tick its push went stale (while lapsed: module doc)
         self.buttons = ButtonWatch()
         self.acted: tuple[int, ...] = ()  # press counts already acted on (or dropped)
         self.stale_seq = -1  # the newest message already counted as stale
@@ -139,11 +161,16 @@ class InputArbiter:
         Per-axis dead band of the command.
     counters
         The runtime's counters (``Counters``): input drops and events are counted there.
+    stale_grace : float
+        Seconds a push may stay stale and still take the motion back without a zero
+        first (module doc, stale-disarm); 0: never.
     """
 
     def __init__(self, input_timeout: float, deadband: float, stamp_check: bool, counters,
-                 max_devices: int = MAX_DEVICES, evict_after: float = EVICT_AFTER):
+                 max_devices: int = MAX_DEVICES, evict_after: float = EVICT_AFTER,
+                 stale_grace: float = STALE_GRACE):
         self.input_timeout = input_timeout
+        self.stale_grace = stale_grace
         self.deadband = deadband
         self.stamp_check = stamp_check
         self.counters = counters
@@ -156,6 +183,7 @@ class InputArbiter:
         self._pending: list[_Device] = []  # armed devices that pushed while nobody owned
         self._pressing: list[_Device] = []  # devices with presses not yet seen by a tick
         self._stopping: set[_Device] = set()  # devices whose newest message holds stop
+        self._lapsed: list[_Device] = []  # armed devices whose push went stale, within the grace
         self.ignored_grasps = 0  # grasp presses of a device while another owned the motion
 
     def at_rest(self) -> bool:
@@ -210,10 +238,7 @@ class InputArbiter:
         else:
             self._stopping.discard(d)
         if d.rest:
-            # Zero-start: only a centred stick re-arms a device. Releasing the deadman (or
-            # a broken, non-finite reading) with the stick deflected disarms it, so that
-            # enabling again alone never restarts motion.
-            d.armed = finite and not any(u)
+            self._settle(d, finite and not any(u))
             return True
         if was_rest:
             d.run_start = now
@@ -226,9 +251,49 @@ class InputArbiter:
             self._pending.append(d)
         return True
 
+    def _settle(self, d: _Device, centred: bool) -> None:
+        """A message at rest. Zero-start: only a centred stick re-arms a device. Releasing
+        the deadman (or a broken, non-finite reading) with the stick deflected disarms it,
+        so that enabling again alone never restarts motion."""
+        if centred:
+            d.armed, d.disarmed_by = True, ""
+        elif d.armed:
+            self._disarm(d, "released")
+
     def _ignore(self, d: _Device) -> None:
-        d.armed = False
+        self._disarm(d, "ignored")
         self.counters.ignored_input += 1
+
+    @staticmethod
+    def _disarm(d: _Device, why: str) -> None:
+        """``d`` must send a zero command before it can take the motion; ``why`` (one of
+        ``DISARMED_BY``) is kept for the person's display until it does."""
+        if d.armed or d.disarmed_by != "stop":  # a stop stays the reason until the zero
+            d.disarmed_by = why
+        d.armed = False
+
+    def _stale_push(self, d: _Device, now: float, wall: float) -> None:
+        """``d``'s push went stale at the tick ``now`` (module doc, stale-disarm): the
+        grace starts (it does not start again while the push stays stale)."""
+        if d not in self._lapsed:
+            d.stale_from = now
+            self._lapsed.append(d)
+        if self.stale_grace <= 0:
+            self._lapse(now, wall)
+
+    def _lapse(self, now: float, wall: float) -> None:
+        """Disarm the devices whose push has been stale for longer than the grace; forget
+        those that came to rest, were disarmed otherwise or took the motion back."""
+        keep = []
+        for d in self._lapsed:
+            if d.rest or not d.armed or (d is self.owner and self.fresh(d, now, wall)):
+                continue
+            if now - d.stale_from >= self.stale_grace and not self.fresh(d, now, wall):
+                self.counters.stale_disarms += 1
+                self._disarm(d, "stale")
+                continue
+            keep.append(d)
+        self._lapsed = keep
 
     def _admit(self, name: str, now: float) -> _Device | None:
         """A new device's slot, making room when the table is full (module doc)."""
@@ -263,12 +328,16 @@ class InputArbiter:
             self._stop_requested = False
             self.owner = None
             for d in self.devices.values():
-                d.armed = False
+                d.armed, d.disarmed_by = False, "stop"
             self._pending.clear()
         owner = self.owner
         if owner is not None and (owner.rest or not self.fresh(owner, now, wall)):
             self._count_stale(owner, now, wall)
+            if not owner.rest:  # stale while pushing (module doc, stale-disarm)
+                self._stale_push(owner, now, wall)
             owner = self.owner = None
+        if self._lapsed:
+            self._lapse(now, wall)
         if self._stopping and not any(self.fresh(d, now, wall) for d in self._stopping):
             self._stopping.clear()  # stops that went stale no longer hold (the disarm stays)
         if owner is None and self._pending:
@@ -292,7 +361,14 @@ class InputArbiter:
         """The pending device whose push began first (then by name: messages between two
         ticks have no order across devices) takes the motion; the others that push
         still are ignored (they must come to rest first)."""
-        live = [d for d in self._pending if not d.rest and d.armed and self.fresh(d, now, wall)]
+        live = []
+        for d in self._pending:
+            if d.rest or not d.armed:
+                continue
+            if self.fresh(d, now, wall):
+                live.append(d)
+            else:  # its push went stale before it could take the motion
+                self._stale_push(d, now, wall)
         self._pending.clear()
         if not live or self._stopping:
             for d in live:
@@ -361,7 +437,9 @@ class InputArbiter:
 
     def summary(self) -> dict[str, object]:
         """``status.input``: the device owning the motion (None), the number of devices
-        tracked, and whether a stop holds."""
+        tracked, whether a stop holds, and ``rearm``: the devices that must send a zero
+        command before they can move the arm -> why (``DISARMED_BY``)."""
         return {"owner": self.owner.name if self.owner is not None else None,
                 "devices": len(self.devices),
-                "stop": bool(self._stopping)}
+                "stop": bool(self._stopping),
+                "rearm": {d.name: d.disarmed_by for d in self.devices.values() if not d.armed}}

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from .. import se3
 from ..skill import Skill, SkillEngine, StuckDetector
 from ..wire.codec import BUTTON_ESCAPE, GripperCmd, GripperReading
-from .arbiter import Command
+from .arbiter import STALE_GRACE, Command
 from .safety import grows_offset, limit_step
 
 Array = NDArray[np.float64]
@@ -39,6 +39,8 @@ class RuntimeConfig:
     device: str = _setting("*", "input device to follow ('*': newest of any)")
     input_timeout: float = _setting(0.1, "s after which input is stale: zero command (MoveIt Servo's "
                                           "default)")
+    stale_grace: float = _setting(STALE_GRACE, "s a push may stay stale (a stalled link) and still take "
+                                               "the motion back without the stick centred first (0: never)")
     state_timeout: float = _setting(0.1, "s after which the robot state is stale: no target")
     object_timeout: float = _setting(1.0, "s after which the task object's pose is stale: no target")
     stamp_check: bool = field(default=True, metadata={
@@ -153,6 +155,7 @@ class Counters:
     ignored_input: int = 0  # messages of a device that did not own the motion, not at rest
     ignored_presses: int = 0  # presses of a device while another owned the motion
     stops: int = 0  # stop requests (rising edges, any device)
+    stale_disarms: int = 0  # pushes that went stale: the device must send a zero first
     input_deferred: int = 0  # drains that stopped at the ingress's input budget
     stale_state: int = 0
     stale_object: int = 0

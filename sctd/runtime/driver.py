@@ -64,7 +64,7 @@ class TickDriver:
         self.controller = Controller(skill, config, engine)
         self.counters: Counters = self.controller.counters
         self.inputs = InputArbiter(config.input_timeout, config.deadband, config.stamp_check,
-                                   self.counters, max_devices)
+                                   self.counters, max_devices, stale_grace=config.stale_grace)
         self.watch = StateWatch(config.state_jump, config.state_jump_rotation)
         self.state: Sample | None = None
         self.objects: dict[str, Sample] = {}

@@ -311,11 +311,32 @@ class LiveView:
             away = float(region.get("outside_by", 0.0)) * 100
             lines.append(f"<b>out of this skill's region: {away:.0f} cm from where it was taught "
                          f"(around {region.get('frame')})</b>")
+        lines += rearm_lines(status)
         lines += goal_lines(status)
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
 
 
 MAX_GOALS = 16  # a set's members drawn at most (the set file's limit)
+# Why a device must send a zero before it moves the arm (status.input.rearm), in the
+# person's words; docs/wire-contract.md, "Several devices".
+REARM = {"stale": "its input stopped arriving for a while (the link stalled or dropped)",
+         "stop": "after the stop", "ignored": "another device had the motion",
+         "released": "the deadman was released with the stick pushed"}
+MAX_REARM = 4  # devices named at most
+
+
+def rearm_lines(status: dict) -> list[str]:
+    """The panel's lines for the devices that must centre their stick before the arm
+    moves again (``status.input.rearm``), the one whose input went stale first; nothing
+    for a ``rearm`` that is not the contract's (it came off the wire)."""
+    inp = status.get("input")
+    rearm = inp.get("rearm") if isinstance(inp, dict) else None
+    if not isinstance(rearm, dict):
+        return []
+    named = sorted(((str(d), why) for d, why in rearm.items() if why in REARM),
+                   key=lambda dw: (dw[1] != "stale", dw[0]))
+    return [f"<b>{html.escape(d)}: centre the stick to move again</b> ({REARM[why]})"
+            for d, why in named[:MAX_REARM]]
 
 
 def goal_lines(status: dict) -> list[str]:
