@@ -263,7 +263,7 @@ class _Outbound:
 
     def __init__(self, session: Any, keys: Keys, bridge: Bridge, pushed: threading.Event,
                  args: argparse.Namespace, until: Callable[[], bool], done: threading.Event,
-                 wake: Callable[[], None]):
+                 wake: Callable[[], object]):
         import zenoh
 
         self.bridge, self.pushed, self.until, self.done, self.wake = bridge, pushed, until, done, wake
