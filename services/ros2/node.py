@@ -3,9 +3,9 @@ perception its object source and a ROS joystick its input (``docs/ros2.md``).
 
 It is a bridge process of its own beside ``sctd run``: a Zenoh session on sctd's keys
 and an rclpy node on ROS 2 topics, with the rules of :class:`~.bridge.Bridge` between
-them. rclpy's callbacks run on this process's main thread (the executor), Zenoh's on
-Zenoh's threads; the bridge locks around each message. Nothing here runs on the
-daemon's tick.
+them. rclpy's callbacks run on this process's main thread (the executor), sctd's
+messages to ROS on a thread of the node's own; the bridge locks around each message.
+Nothing here runs on the daemon's tick.
 
 sctd -> ROS runs on a thread of its own (:class:`_Outbound`): the daemon puts a target
 every millisecond, and a Python callback for each cost the node more than everything
