@@ -48,7 +48,6 @@ from .bridge import MARKERS_PERIOD, Bridge, BridgeOptions, ros_messages
 
 log = logging.getLogger("sctd.ros")
 WATCH_RATE = 50.0  # Hz, at least, of the outbound thread's wake-ups (targets that stopped: a zero twist)
-NUDGE_PERIOD = 0.1  # s between wakes of the executor, so that its thread handles signals
 POLL = 2e-4  # s between looks at the target ring while a push is about to move the target
 
 
@@ -215,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading.Event, make_bridge,
            objects: dict[str, str]) -> dict[str, Any]:
     """Spin the node on ``session`` until ``stop`` or ``--seconds``; the bridge's counts."""
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental import EventsExecutor
 
     keys = Keys(args.robot)
     publishers: dict[str, Any] = {}
@@ -227,21 +226,20 @@ def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading
         pub.put(payload)
 
     end = math.inf if args.seconds is None else time.monotonic() + args.seconds
-    done = threading.Event()  # the outbound thread saw the stop (or the end) and woke the executor
+    done = threading.Event()  # the outbound thread saw the stop (or the end), or failed
     with RosSide(args, objects, lambda publish: make_bridge(put, publish), context) as side:
-        executor = SingleThreadedExecutor(context=context)
+        # rclpy's events executor queues ready entities in C++ instead of rebuilding a wait
+        # set in Python on each wake: 0.185-0.196 of a core against 0.212-0.233 for the
+        # single-threaded executor, three runs each (docs/benchmarks.md)
+        executor = EventsExecutor(context=context)
         executor.add_node(side.node)
-
         try:
             with _Outbound(session, keys, side.bridge, side.pushed, args,
-                           lambda: stop.is_set() or time.monotonic() >= end, done,
-                           lambda: executor.create_task(_nothing)):
+                           lambda: stop.is_set() or time.monotonic() >= end, done):
                 print(f"sctd ros: node {side.node.get_fully_qualified_name()} on sctd/{args.robot}, "
                       f"domain {context.get_domain_id()}", file=sys.stderr, flush=True)
                 while not done.is_set():
-                    # no timeout (rclpy makes a timer for each): the outbound thread's
-                    # tasks end each wait (a guard condition would not end spin_once)
-                    executor.spin_once()
+                    executor.spin_once(timeout_sec=0.1)  # (and the main thread runs signal handlers)
         except KeyboardInterrupt:
             pass
         finally:
@@ -251,10 +249,6 @@ def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading
         return side.bridge.counts.as_dict()
 
 
-def _nothing() -> None:
-    """A task that only ends the executor's wait."""
-
-
 class _Outbound:
     """sctd -> ROS on a thread of its own (module doc): the target and the status taken
     from Zenoh rings at the target rate (at least :data:`WATCH_RATE`), the bridge's
@@ -262,11 +256,10 @@ class _Outbound:
     the bridge expects the first motion (a context manager: stops the thread)."""
 
     def __init__(self, session: Any, keys: Keys, bridge: Bridge, pushed: threading.Event,
-                 args: argparse.Namespace, until: Callable[[], bool], done: threading.Event,
-                 wake: Callable[[], object]):
+                 args: argparse.Namespace, until: Callable[[], bool], done: threading.Event):
         import zenoh
 
-        self.bridge, self.pushed, self.until, self.done, self.wake = bridge, pushed, until, done, wake
+        self.bridge, self.pushed, self.until, self.done = bridge, pushed, until, done
         self.period = 1.0 / max(args.target_rate, WATCH_RATE)
         self.follower = _SkillFollower(session, keys, bridge) if args.markers_topic else None
         self.target = session.declare_subscriber(keys.target, zenoh.handlers.RingChannel(1))
@@ -277,21 +270,15 @@ class _Outbound:
         self._thread.start()
 
     def _run(self) -> None:
-        """Until ``until()`` (or a failure), then ``done`` and a last wake of the executor."""
+        """Until ``until()`` (or a failure), then ``done``: the executor stops too."""
         try:
             self._loop()
         finally:
             self.done.set()
-            self.wake()
 
     def _loop(self) -> None:
-        due = markers = nudge = time.monotonic()
+        due = markers = time.monotonic()
         while not self._stop.is_set() and not self.until():
-            if time.monotonic() >= nudge:
-                # the executor waits without a timeout: woken now and then, the main thread
-                # runs the signal handlers that set the stop
-                nudge = time.monotonic() + NUDGE_PERIOD
-                self.wake()
             if self.pushed.wait(max(0.0, due - time.monotonic())):
                 self.pushed.clear()
                 self._follow_push()
