@@ -266,13 +266,17 @@ class _Outbound:
         # statuses in order (10-50 Hz): a hold between two wake-ups still ends the twist
         self.status = session.declare_subscriber(keys.status, zenoh.handlers.RingChannel(64))
         self._stop = threading.Event()
+        self.error: Exception | None = None
         self._thread = threading.Thread(target=self._run, name="sctd-ros-out", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        """Until ``until()`` (or a failure), then ``done``: the executor stops too."""
+        """Until ``until()`` (or a failure, raised again at exit), then ``done``: the
+        executor stops too."""
         try:
             self._loop()
+        except Exception as e:  # raised again in __exit__, on the main thread
+            self.error = e
         finally:
             self.done.set()
 
@@ -320,6 +324,8 @@ class _Outbound:
         self.status.undeclare()
         if self.follower is not None:
             self.follower.close()
+        if self.error is not None:
+            raise self.error
 
 
 class _SkillFollower:
