@@ -253,6 +253,63 @@ def test_targets_that_stop_end_the_twist_with_a_zero_once():
     assert len(zeros) == 1 and zeros[0].twist.linear.x == 0.0
 
 
+def feed_targets(rig: Rig, first: int, last: int, moves_from: int, rests_from: int = 10**9) -> None:
+    """Targets at 1 kHz, seq ``first`` to ``last`` - 1, the bridge's clock at each one's
+    stamp; at rest until seq ``moves_from``, then moving 1 mm a millisecond in x until
+    seq ``rests_from``."""
+    for k in range(first, last):
+        rig.now = NOW + k * 1e-3
+        x = 0.4 + 1e-3 * max(0, min(k, rests_from - 1) - moves_from + 1)
+        rig.bridge.on_target(codec.encode_target(k, rig.now, [x, 0, 0.7, 0, 0, 0, 1], "carry", "abc", k))
+
+
+def test_a_target_that_moves_after_rest_goes_out_at_once_and_the_rate_cap_holds():
+    """At rest the targets go out at 100 Hz; the first that moves goes out as it comes
+    (not up to a period later, so once within a period of the last one at rest), the
+    schedule restarts from it, and the stream stays capped at 100 Hz: no two targets
+    out closer than a period otherwise (by their stamps), about 50 in the half second
+    after."""
+    rig = Rig(twist=True, target_rate=100.0)
+    feed_targets(rig, 0, 705, moves_from=203)  # moves mid-period, 3 ms after a scheduled one
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 - NOW for m in rig.out("target")]
+    first = [s for s in stamps if s > 0.2025]
+    assert first[0] == pytest.approx(0.203, abs=1e-6)  # the first moved target, at once
+    assert rig.bridge.counts.sent["target_at_once"] == 1
+    gaps = np.diff(stamps)
+    at_once = stamps.index(first[0]) - 1  # the gap that ends at the first moved target
+    assert gaps[at_once] == pytest.approx(0.003, abs=1e-6)
+    assert np.delete(gaps, at_once).min() >= 0.0095  # the cap holds around it (targets are 1 ms apart)
+    assert 49 <= len(first) <= 51  # 100 Hz from the first motion on (0.203-0.704 s)
+    twists = rig.out("twist")
+    assert twists[-1].twist.linear.x == pytest.approx(1.0, rel=1e-3)  # 1 mm/ms
+
+
+def test_a_push_at_rest_makes_the_bridge_take_each_target_until_one_moved():
+    """The node takes targets at the output rate, but when the person's Joy begins a
+    push while the target rests (enable held, an axis off zero) the bridge asks for each
+    one (``expects_motion``) until the first that moved went out, or for the timeout."""
+    rig = Rig(target_rate=100.0)
+    feed_targets(rig, 0, 95, moves_from=10_000)  # at rest (the last out at 90 ms, the next due at 100)
+    enable = [0] * 10 + [1]
+    assert not rig.bridge.on_joy(joy_msg(rig.now, [0.0] * 6, enable))  # centred: no push
+    assert not rig.bridge.on_joy(joy_msg(rig.now, [0.8, 0, 0, 0, 0, 0], [0] * 11))  # not enabled
+    assert rig.bridge.on_joy(joy_msg(rig.now, [0.8, 0, 0, 0, 0, 0], enable))  # the push begins
+    assert not rig.bridge.on_joy(joy_msg(rig.now, [0.8, 0, 0, 0, 0, 0], enable))  # the same push
+    assert rig.bridge.expects_motion()
+    n = len(rig.out("target"))
+    feed_targets(rig, 95, 98, moves_from=10_000)  # still at rest, not due: nothing out
+    assert len(rig.out("target")) == n and rig.bridge.expects_motion()
+    feed_targets(rig, 98, 99, moves_from=98)  # it moved: out at once, and no more expected
+    assert len(rig.out("target")) == n + 1 and not rig.bridge.expects_motion()
+    # a push that moves nothing is expected for the timeout (0.1 s) only
+    feed_targets(rig, 99, 200, moves_from=98, rests_from=99)  # moved once, then at rest again
+    assert rig.bridge.on_joy(joy_msg(rig.now, [0.0] * 6, enable)) is False
+    assert rig.bridge.on_joy(joy_msg(rig.now, [-0.8, 0, 0, 0, 0, 0], enable))
+    assert rig.bridge.expects_motion()
+    rig.now += 0.11
+    assert not rig.bridge.expects_motion()
+
+
 def test_diagnostics_say_the_mode_at_once_when_it_changes():
     rig = Rig()
     for mode, level in (("running", "OK"), ("stopped", "WARN"), ("fault", "ERROR")):

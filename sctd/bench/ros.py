@@ -12,10 +12,12 @@ ros``) on sctd's keys, ``sctd ros`` with Joy in and the target out, and the prob
   to one period of the node's target schedule);
 - **the node's CPU**: its user + system time over the whole Joy phase (targets in at
   1 kHz from the daemon, Joy at 100 Hz, the target out at the rate), a share of one
-  core.
+  core, beside **its floor** over the same seconds: an idle rclpy node spinning a
+  single-threaded executor with a Zenoh session open (``probe idle``), what any rclpy
+  process with a Zenoh session costs before it carries a message.
 
-And once, **the floor**: a bare rclpy round trip (``PoseStamped`` out, echoed back by
-another rclpy process), two DDS hops and two Python callbacks.
+And once, **the latency's floor**: a bare rclpy round trip (``PoseStamped`` out, echoed
+back by another rclpy process), two DDS hops and two Python callbacks.
 """
 
 from __future__ import annotations
@@ -70,13 +72,17 @@ def run_ros_bench(skill: str, task: str, rates: list[float], steps: int, logdir:
             out["bare_rclpy"] = h.call("ros", "sctd_services.ros2.probe", "ping", "--n", "500", timeout=120)
             echo.stop()
             for rate in rates:
+                idle = h.python("ros", "sctd_services.ros2.probe", "idle", "--connect", EP,
+                                log=f"idle-{rate:g}.log")
                 node = h.python("ros", "sctd.cli.main", "ros", "--target-rate", str(rate), "--connect", EP,
                                 "--stats-json", log=f"ros-{rate:g}.log")
-                cpu0, t0 = _cpu(node.p.pid), time.monotonic()
+                cpu0, floor0, t0 = _cpu(node.p.pid), _cpu(idle.p.pid), time.monotonic()
                 got = h.call("ros", "sctd_services.ros2.probe", "joy", "--steps", str(steps), timeout=300)
-                cpu = (_cpu(node.p.pid) - cpu0) / (time.monotonic() - t0)
+                seconds = time.monotonic() - t0
+                cpu, floor = (_cpu(node.p.pid) - cpu0) / seconds, (_cpu(idle.p.pid) - floor0) / seconds
                 node.stop()
-                out["rates"][f"{rate:g}"] = {**got, "node_cpu": round(cpu, 3)}
+                idle.stop()
+                out["rates"][f"{rate:g}"] = {**got, "node_cpu": round(cpu, 3), "floor_cpu": round(floor, 3)}
     except (NamespaceError, RuntimeError) as e:
         raise RuntimeError(str(e)) from None
     return out
@@ -87,11 +93,14 @@ def print_report(r: dict[str, Any]) -> None:
     print(f"sctd bench ros: {r['skill']} on {r['task']}, Fast DDS in a network namespace; ms")
     print(f"  bare rclpy round trip (PoseStamped out and echoed back): p50 {bare['p50']}  p99 {bare['p99']}  "
           f"max {bare['max']}  (n {bare['n']}, lost {r['bare_rclpy']['lost']})")
-    print("  target rate   Joy -> target p50     p99     max     n    node CPU (share of a core)")
+    print(f"  goal: Joy -> target p50 <= {bare['p50'] + 2:.2f}, p99 <= {bare['p99'] + 5:.2f} (the round trip "
+          "+ 2 and + 5 ms); node CPU <= 0.15")
+    print("  target rate   Joy -> target p50     p99     max     n    node CPU   its floor (idle rclpy node "
+          "+ Zenoh session), shares of a core")
     for rate, x in r["rates"].items():
         j = x["joy_to_target_ms"]
         print(f"  {rate:>8} Hz   {j.get('p50', '-'):>13}  {j.get('p99', '-'):>6}  {j.get('max', '-'):>6}  "
-              f"{j['n']:>4}    {x['node_cpu']:.3f}")
+              f"{j['n']:>4}    {x['node_cpu']:.3f}      {x['floor_cpu']:.3f}")
 
 
 def main_ros_bench(args: argparse.Namespace) -> int:

@@ -17,9 +17,11 @@ sctd's ROS paths) and dropped and counted by reason when it fails them:
 
 Out (sctd -> ROS):
 
-- ``target`` -> ``PoseStamped`` at most ``target_rate`` Hz (the newest), and, where
-  asked, ``TwistStamped``: the target's velocity over the last published interval, zero
-  once when the daemon holds, faults or stops, or when targets stop coming;
+- ``target`` -> ``PoseStamped`` at most ``target_rate`` Hz (the newest) on a schedule,
+  except that a target that moves after rest (the last two published were the same
+  pose) goes out at once, and the schedule restarts from it; and, where asked,
+  ``TwistStamped``: the target's velocity over the last published interval, zero once
+  when the daemon holds, faults or stops, or when targets stop coming;
 - ``status`` -> ``diagnostic_msgs/DiagnosticArray`` (at most 2 Hz, and at once when the
   mode changes);
 - the active skill (:meth:`Bridge.set_skill`, the node fetches it) ->
@@ -46,6 +48,7 @@ from sctd.wire import Keys, codec, rosmsg
 DIAGNOSTICS_PERIOD = 0.5  # s between diagnostics (and at once on a change of mode)
 MARKERS_PERIOD = 0.5  # s between the skill's markers (and at once on a change of state)
 HOLDING = ("waiting", "hold", "fault", "stopped")  # the daemon's modes that move nothing
+SLACK = 0.05  # of a period: a target this early is due (a taker waking on its own clock)
 
 JoyMap = Callable[[tuple[float, ...], tuple[int, ...]], tuple[list[float], list[int], bool]]
 
@@ -113,6 +116,10 @@ class Bridge:
         self._due = -math.inf  # when the next target may be published (Unix s)
         self._last_pose: tuple[float, list[float]] | None = None  # (stamp, pose) of that target
         self._last_target = -math.inf  # when the newest target arrived
+        self._resting = False  # the last two targets published had the same pose
+        self._last_pose_sent: list[float] | None = None  # the pose of the last target published
+        self._push_at = -math.inf  # when the person's Joy last began a push (at rest)
+        self._pushing = False  # the newest Joy pushes (enable held, a non-zero axis)
         self._moving = False  # a non-zero twist was the last one sent
         self._mode: str | None = None
         self._last_diag = -math.inf
@@ -176,45 +183,70 @@ class Bridge:
             self.object_poses[name] = pose
             self.put(self.keys.objects(name), codec.encode_object(self._next(kind), stamp, pose))
 
-    def on_joy(self, msg: Any) -> None:
+    def on_joy(self, msg: Any) -> bool:
         """The person's ``Joy`` -> ``input/<device>``, through the input mapping; its
         header stamp is the input's stamp (a Joy not repeated within the daemon's input
-        timeout times out there: the joy package's autorepeat at 20 Hz or more)."""
+        timeout times out there: the joy package's autorepeat at 20 Hz or more). True
+        when it began a push (enable held, an axis off zero) while the target rests:
+        the target is about to move (:meth:`expects_motion`)."""
         with self._lock:
             if self.joy_map is None:
                 self.counts.drop("joy", "no_map")
-                return
+                return False
             try:
                 stamp = rosmsg.judge_stamp(msg.header, self.clock(), self.options.timeout)
                 axes, buttons = rosmsg.joy_values(msg)
             except rosmsg.Dropped as e:
                 self.counts.drop("joy", e.reason)
-                return
+                return False
             u, roles, stop = self.joy_map(axes, buttons)
             self.counts.received["joy"] += 1
             self.put(self.keys.input(self.options.device),
                      codec.encode_input(self._next("joy"), stamp, u, roles, stop))
+            pushing = (len(roles) < 2 or bool(roles[1])) and any(x != 0.0 for x in u) and not stop
+            began = pushing and not self._pushing
+            self._pushing = pushing
+            if began:
+                self._push_at = self.clock()
+            return began and self._resting
+
+    def expects_motion(self) -> bool:
+        """True while the person's push began at rest within the timeout and the target
+        has not moved yet: a taker of targets then hands each one over as it arrives,
+        so that the first motion goes out at once (:meth:`on_target`)."""
+        with self._lock:
+            return self._resting and self.clock() - self._push_at <= self.options.timeout
 
     # -- sctd -> ROS -------------------------------------------------------------------
     def on_target(self, payload: bytes) -> None:
         """``target`` -> ``PoseStamped`` (and ``TwistStamped``), the newest, at most
-        ``target_rate`` Hz. A target is decoded only when one is due (the daemon sends
-        1,000 a second; the others only say that targets still come)."""
+        ``target_rate`` Hz on a schedule; but the first target that moves after rest
+        goes out at once, and the schedule starts again from it (a person's push is not
+        held back by up to a period; the rate stays capped). A target is decoded only
+        when one is due or the target rests (then only an unmoved one is passed over)."""
         with self._lock:
             now = self.clock()
             self.counts.received["target"] += 1
             self._last_target = now
             period = 1.0 / self.options.target_rate
-            if now < self._due - 1e-6:  # (a microsecond of slack for the clock's rounding)
+            due = now >= self._due - SLACK * period
+            if not (due or self._resting):
                 return
             try:
                 target = codec.decode_target(payload)
             except codec.DecodeError as e:
                 self.counts.drop("target", e.reason)
                 return
+            stamp, pose = float(target["stamp"]), [float(v) for v in target["pose"]]
+            last = self._last_pose_sent
+            if not due:
+                if pose == last:
+                    return
+                self._due = now  # moved after rest: out at once, the schedule from here
+                self.counts.sent["target_at_once"] += 1
             # on a schedule, so that targets at 1 kHz give target_rate, not fewer
             self._due = self._due + period if now - self._due < period else now + period
-            stamp, pose = float(target["stamp"]), [float(v) for v in target["pose"]]
+            self._resting, self._last_pose_sent = pose == last, pose
             self.publish("target", self.pose_stamped(stamp, pose))
             self.counts.sent["target"] += 1
             if self.options.twist:

@@ -3,9 +3,18 @@ perception its object source and a ROS joystick its input (``docs/ros2.md``).
 
 It is a bridge process of its own beside ``sctd run``: a Zenoh session on sctd's keys
 and an rclpy node on ROS 2 topics, with the rules of :class:`~.bridge.Bridge` between
-them. rclpy's callbacks run on this process's main thread (the executor), Zenoh's on
-Zenoh's threads; the bridge locks around each message. Nothing here runs on the
-daemon's tick.
+them. rclpy's callbacks run on this process's main thread (the executor), sctd's
+messages to ROS on a thread of the node's own; the bridge locks around each message.
+Nothing here runs on the daemon's tick.
+
+sctd -> ROS runs on a thread of its own (:class:`_Outbound`): the daemon puts a target
+every millisecond, and a Python callback for each cost the node more than everything
+else it does; instead the target and the status wait in Zenoh ring channels (the
+newest target; the statuses in order) and the thread takes them at the target rate, on
+absolute deadlines, with the bridge's watch and the skill's markers on the same
+wake-ups. When the person's Joy begins a push while the target rests, the thread takes
+each target as it arrives until the first that moved has gone out (at once, by the
+bridge's rule), then returns to the schedule.
 
 Topics (names, frame and QoS are flags): in, the hand's ``PoseStamped``
 (``--pose-topic``) or ``JointState`` (``--joint-states-topic`` with ``--urdf`` and
@@ -22,10 +31,12 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from sctd.app.errors import EXIT_OK, EXIT_USAGE, fail
@@ -33,10 +44,11 @@ from sctd.app.options import add_robot_argument
 from sctd.wire import Keys
 from sctd.wire.session import add_zenoh_arguments, session_from_args
 
-from .bridge import Bridge, BridgeOptions, ros_messages
+from .bridge import MARKERS_PERIOD, Bridge, BridgeOptions, ros_messages
 
 log = logging.getLogger("sctd.ros")
-WATCH_RATE = 50.0  # Hz of the bridge's watch (targets that stopped: a zero twist)
+WATCH_RATE = 50.0  # Hz, at least, of the outbound thread's wake-ups (targets that stopped: a zero twist)
+POLL = 2e-4  # s between looks at the target ring while a push is about to move the target
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -146,9 +158,13 @@ class RosSide:
             n.create_subscription(JointState, args.joint_states_topic, b.on_joint_state, sensor)
         for name, topic in objects.items():
             n.create_subscription(PoseStamped, topic, lambda msg, name=name: b.on_object(name, msg), sensor)
+        self.pushed = threading.Event()  # the Joy began a push at rest: the outbound thread looks now
         if args.joy_topic:
-            n.create_subscription(Joy, args.joy_topic, b.on_joy, sensor)
-        n.create_timer(1.0 / WATCH_RATE, b.watch)
+            n.create_subscription(Joy, args.joy_topic, self._on_joy, sensor)
+
+    def _on_joy(self, msg: Any) -> None:
+        if self.bridge.on_joy(msg):
+            self.pushed.set()
 
     def __enter__(self) -> RosSide:
         return self
@@ -198,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading.Event, make_bridge,
            objects: dict[str, str]) -> dict[str, Any]:
     """Spin the node on ``session`` until ``stop`` or ``--seconds``; the bridge's counts."""
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental import EventsExecutor
 
     keys = Keys(args.robot)
     publishers: dict[str, Any] = {}
@@ -209,31 +225,107 @@ def _serve(args: argparse.Namespace, session: Any, context: Any, stop: threading
             pub = publishers[key] = session.declare_publisher(key)
         pub.put(payload)
 
+    end = math.inf if args.seconds is None else time.monotonic() + args.seconds
+    done = threading.Event()  # the outbound thread saw the stop (or the end), or failed
     with RosSide(args, objects, lambda publish: make_bridge(put, publish), context) as side:
-        bridge = side.bridge
-        subs = [session.declare_subscriber(keys.target, lambda s: bridge.on_target(s.payload.to_bytes())),
-                session.declare_subscriber(keys.status, lambda s: bridge.on_status(s.payload.to_bytes()))]
-        print(f"sctd ros: node {side.node.get_fully_qualified_name()} on sctd/{args.robot}, "
-              f"domain {context.get_domain_id()}", file=sys.stderr, flush=True)
-        follower = _SkillFollower(session, keys, bridge)
-        if args.markers_topic:
-            side.node.create_timer(0.5, follower.step)
-        executor = SingleThreadedExecutor(context=context)
+        # rclpy's events executor queues ready entities in C++ instead of rebuilding a wait
+        # set in Python on each wake: 0.185-0.196 of a core against 0.212-0.233 for the
+        # single-threaded executor, three runs each (docs/benchmarks.md)
+        executor = EventsExecutor(context=context)
         executor.add_node(side.node)
-        end = None if args.seconds is None else time.monotonic() + args.seconds
         try:
-            while not stop.is_set() and (end is None or time.monotonic() < end):
-                executor.spin_once(timeout_sec=0.1)
+            with _Outbound(session, keys, side.bridge, side.pushed, args,
+                           lambda: stop.is_set() or time.monotonic() >= end, done):
+                print(f"sctd ros: node {side.node.get_fully_qualified_name()} on sctd/{args.robot}, "
+                      f"domain {context.get_domain_id()}", file=sys.stderr, flush=True)
+                while not done.is_set():
+                    executor.spin_once(timeout_sec=0.1)  # (and the main thread runs signal handlers)
         except KeyboardInterrupt:
             pass
         finally:
-            for s in subs:
-                s.undeclare()
+            executor.shutdown()
             for pub in publishers.values():
                 pub.undeclare()
-            executor.shutdown()
-            follower.close()
-        return bridge.counts.as_dict()
+        return side.bridge.counts.as_dict()
+
+
+class _Outbound:
+    """sctd -> ROS on a thread of its own (module doc): the target and the status taken
+    from Zenoh rings at the target rate (at least :data:`WATCH_RATE`), the bridge's
+    watch and the skill's markers on the same wake-ups; each target as it arrives while
+    the bridge expects the first motion (a context manager: stops the thread)."""
+
+    def __init__(self, session: Any, keys: Keys, bridge: Bridge, pushed: threading.Event,
+                 args: argparse.Namespace, until: Callable[[], bool], done: threading.Event):
+        import zenoh
+
+        self.bridge, self.pushed, self.until, self.done = bridge, pushed, until, done
+        self.period = 1.0 / max(args.target_rate, WATCH_RATE)
+        self.follower = _SkillFollower(session, keys, bridge) if args.markers_topic else None
+        self.target = session.declare_subscriber(keys.target, zenoh.handlers.RingChannel(1))
+        # statuses in order (10-50 Hz): a hold between two wake-ups still ends the twist
+        self.status = session.declare_subscriber(keys.status, zenoh.handlers.RingChannel(64))
+        self._stop = threading.Event()
+        self.error: Exception | None = None
+        self._thread = threading.Thread(target=self._run, name="sctd-ros-out", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        """Until ``until()`` (or a failure, raised again at exit), then ``done``: the
+        executor stops too."""
+        try:
+            self._loop()
+        except Exception as e:  # raised again in __exit__, on the main thread
+            self.error = e
+        finally:
+            self.done.set()
+
+    def _loop(self) -> None:
+        due = markers = time.monotonic()
+        while not self._stop.is_set() and not self.until():
+            if self.pushed.wait(max(0.0, due - time.monotonic())):
+                self.pushed.clear()
+                self._follow_push()
+                due = time.monotonic()  # the schedule restarts from the first motion
+            now = time.monotonic()
+            due = due + self.period if now - due < self.period else now + self.period
+            self._take()
+            self.bridge.watch()
+            if self.follower is not None and now >= markers:
+                markers = now + MARKERS_PERIOD
+                self.follower.step()
+
+    def _take(self) -> None:
+        """The newest target, and every status that came, to the bridge."""
+        sample = self.target.try_recv()
+        if sample is not None:
+            self.bridge.on_target(sample.payload.to_bytes())
+        while (sample := self.status.try_recv()) is not None:
+            self.bridge.on_status(sample.payload.to_bytes())
+
+    def _follow_push(self) -> None:
+        """Each target as it arrives, until the bridge has sent the first that moved (or
+        the push moved nothing within the bridge's timeout)."""
+        while self.bridge.expects_motion() and not self._stop.is_set():
+            sample = self.target.try_recv()
+            if sample is None:
+                time.sleep(POLL)
+            else:
+                self.bridge.on_target(sample.payload.to_bytes())
+
+    def __enter__(self) -> _Outbound:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self.pushed.set()
+        self._thread.join(5.0)
+        self.target.undeclare()
+        self.status.undeclare()
+        if self.follower is not None:
+            self.follower.close()
+        if self.error is not None:
+            raise self.error
 
 
 class _SkillFollower:

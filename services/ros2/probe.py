@@ -9,7 +9,10 @@ run inside the bench's network namespace:
   times after warming up (pushes until one moves the target: the daemon's first input,
   and the node matching this publisher, took 0.2-1 s), pushing one way then the other;
   the time from the first pushed Joy to the first target that moved (ms, JSON; a push
-  that moved nothing in 2 s is left out: ``n`` says how many did).
+  that moved nothing in 2 s is left out: ``n`` says how many did);
+- ``idle``: the node's floor: an rclpy node spinning a single-threaded executor, with a
+  Zenoh session open on ``--connect`` (subscribed to nothing), until stopped; the bench
+  takes its CPU beside ``sctd ros``'s, over the same seconds.
 
 Times are this process's clock (``time.perf_counter``): both ends of each figure are
 here.
@@ -113,6 +116,19 @@ def joy(node, executor, steps: int, rate: float) -> dict:
     return {"joy_to_target_ms": _summary(got), "steps": steps, "each_ms": [round(x, 1) for x in got]}
 
 
+def _serve_until(stop: threading.Event, executor, connect: list[str] | None) -> None:
+    """Spin as ``sctd ros`` does (with a Zenoh session on ``connect`` unless None) until
+    ``stop``."""
+    from contextlib import nullcontext
+
+    from sctd.wire.session import session
+
+    with session(connect=connect) if connect is not None else nullcontext():
+        print(json.dumps({"ready": True}), flush=True)
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+
+
 def _spin(executor, seconds: float) -> None:
     end = time.perf_counter() + seconds
     while True:
@@ -132,10 +148,11 @@ def _settle(executor, ready, timeout: float) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m sctd_services.ros2.probe")
-    p.add_argument("mode", choices=("echo", "ping", "joy"))
+    p.add_argument("mode", choices=("echo", "ping", "joy", "idle"))
     p.add_argument("--n", type=int, default=500, help="ping: round trips")
     p.add_argument("--steps", type=int, default=40, help="joy: pushes")
     p.add_argument("--rate", type=float, default=100.0, help="Hz of ping or Joy")
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="idle: Zenoh endpoint")
     args = p.parse_args(argv)
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -147,11 +164,10 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
-        if args.mode == "echo":
-            echo(node, stop)
-            print(json.dumps({"ready": True}), flush=True)
-            while not stop.is_set():
-                executor.spin_once(timeout_sec=0.1)
+        if args.mode in ("echo", "idle"):
+            if args.mode == "echo":
+                echo(node, stop)
+            _serve_until(stop, executor, args.connect if args.mode == "idle" else None)
             return 0
         out = ping(node, executor, args.n, args.rate) if args.mode == "ping" else \
             joy(node, executor, args.steps, args.rate)
