@@ -50,7 +50,7 @@ DEVICE_DEPTH = 4  # one input device (bridges send 20-1000 Hz)
 ANY_DEPTH = 8  # the catch-all input ring: new names, and every device's copy to skip
 STATE_DEPTH = 4  # the robot state (1 kHz)
 OBJECT_DEPTH = 2  # one object's pose (perception 30-100 Hz)
-INPUT_BUDGET = 16  # input messages one drain takes from the devices' own rings (module doc)
+INPUT_BUDGET = 4  # input messages one drain takes from the devices' own rings (module doc)
 
 
 class Inlet:
