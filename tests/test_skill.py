@@ -696,6 +696,37 @@ def test_a_command_that_turns_with_the_hand_tilts_at_one_rate_at_every_tilt():
     assert (_tilt_of(T1) - 1.75) / dt < 0.2 * full  # not on: the push is (nearly) radial
 
 
+@pytest.mark.parametrize("yields", [True, False])
+def test_a_pull_that_yields_to_the_turn_never_turns_back_the_push_s_own_turn(yields):
+    """The demonstrations near a bottle tilted on its sphere were tilted 0.3 rad further
+    (they tilt on while the person tilts back). With ``yields_to_turn`` a push back
+    along the sphere tilts the bottle back at the push's full rate: the neighbour
+    orientation's pull the other way goes; without it (the default) the pull takes its
+    budget off. A push on gets the pull's help either way; zero input turns nothing."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    a = np.linspace(0.0, 1.75, 71)
+    pts = np.array([[0.12 * math.sin(x), 0.0, -0.12 * math.cos(x)] for x in a]) + centre
+    q = np.array([se3.quaternion_from_rotvec([0.0, -(x + 0.3), 0.0]) for x in a])
+    f = SphereField(weight=1.0, centre=centre, radius=0.12, pivot=pivot)
+    model = VectorFieldModel((f,), pts, q, np.ones((len(a), 1)))
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "scale_by": "parts", "direction": "both",
+                                                "command_turns_from": [0.0, 0.0, 1.0]}
+    doc["states"]["go"]["active_constraints"][0] |= {"pivot": pivot.tolist(), "yields_to_turn": yields}
+    files = {"m.json": vector_field_model_to_bytes(model, "m.json")}
+    eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+    c = eng.skill.states[0].active_constraints[0]
+    assert c.yields_to_turn is yields and ("yields_to_turn" in c.to_yaml()) is yields
+    dt, full, pull = 0.01, 0.1 / 0.12, 0.5  # rad/s: the push along the sphere; the pull's budget
+    T = _tilted_on_sphere(centre, pivot, 1.0)
+    back = command(eng, T, np.array([-1.0, 0.0, 0.0]), dt)
+    assert np.isclose((_tilt_of(back) - 1.0) / dt, -full if yields else -full + pull, rtol=1e-3)
+    assert np.linalg.norm((back @ np.append(pivot, 1.0))[:3] - centre) < 1e-12  # the opening stays
+    on = command(eng, T, np.array([1.0, 0.0, 0.0]), dt)
+    assert np.isclose((_tilt_of(on) - 1.0) / dt, full + pull, rtol=1e-2)
+    assert np.array_equal(command(eng, T, np.zeros(3), dt), T)
+
+
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3),
        st.lists(st.floats(-3, 3), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3))
 @settings(max_examples=300, deadline=None)

@@ -276,6 +276,15 @@ class NeighbourOrientation(ActiveConstraint):
     position alone (the demonstrations near where the hand is *and* as it is turned).
     Within a command it turns at most ``ws.turn_budget``.
 
+    ``yields_to_turn``: where the push turns the hand about a point of its own (a rigid
+    field's ``pivot``: the task's turn), never against that turn (``ws.turn_axis``):
+    the part of its correction about that axis the other way goes. A pouring sphere
+    tilts a bottle about its opening, and the demonstrations nearest a bottle being
+    tilted back are those of the way in, tilted on further: the person's push back
+    should tilt it back, not be undone by the pull to them. (A turn about a far axis
+    keeps the pull's whole say either way: a door's handle, turned about the hinge, is
+    held as the demonstrators held it.)
+
     ``max_turn`` (rad): a frame turned further than this from the neighbours' mean
     orientation keeps its own. The hand was brought in turned another way (from another
     task's start, half a turn about the vertical), away from every demonstration; turning
@@ -293,6 +302,7 @@ class NeighbourOrientation(ActiveConstraint):
     pivot: Array | None = None
     rotation_weight: float = 0.0
     max_turn: float = MAX_TURN
+    yields_to_turn: bool = False
     _pivot3: Vec3 | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -301,7 +311,7 @@ class NeighbourOrientation(ActiveConstraint):
     @classmethod
     def from_yaml(cls, r: Reader, cd: dict, path: str) -> NeighbourOrientation:
         r.known_keys(cd, path, {"type", "model", "frame", "max_n", "max_d", "pivot", "rotation_weight",
-                                "max_turn"})
+                                "max_turn", "yields_to_turn"})
         model_file = r.string(cd.get("model"), f"{path}.model")
         return cls(
             model_file=model_file,
@@ -312,6 +322,7 @@ class NeighbourOrientation(ActiveConstraint):
             pivot=None if cd.get("pivot") is None else r.vector(cd["pivot"], f"{path}.pivot", 3),
             rotation_weight=r.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
             max_turn=r.number(cd.get("max_turn", MAX_TURN), f"{path}.max_turn", 0.0, math.pi, lo_open=True),
+            yields_to_turn=r.boolean(cd.get("yields_to_turn", False), f"{path}.yields_to_turn"),
         )
 
     def to_yaml(self) -> dict[str, Any]:
@@ -321,6 +332,8 @@ class NeighbourOrientation(ActiveConstraint):
             out["pivot"] = self.pivot.tolist()
         if self.max_turn != MAX_TURN:
             out["max_turn"] = self.max_turn
+        if self.yields_to_turn:
+            out["yields_to_turn"] = True
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -371,12 +384,32 @@ class NeighbourOrientation(ActiveConstraint):
         angle = 2.0 * math.atan2(vn, cw)
         if angle > self.max_turn:
             return F  # turned another way than every demonstration near: keeps its own
+        turn = ws.turn_axis if self.yields_to_turn else None
+        if turn is not None and vn > 1e-15:
+            # the person's own turn: never against it (the demonstrations near a bottle
+            # tilted back are the way in's, tilted further; the push back wins)
+            ax, ay, az = turn
+            along = (cx * ax + cy * ay + cz * az) / vn
+            if along < 0.0:
+                ex, ey, ez = cx / vn - along * ax, cy / vn - along * ay, cz / vn - along * az
+                en = math.sqrt(ex * ex + ey * ey + ez * ez)
+                angle *= en
+                if angle < 1e-12:
+                    return F
+                h = 0.5 * min(angle, budget)
+                k = math.sin(h) / en
+                return self._turned(F, G, ex * k, ey * k, ez * k, math.cos(h))
         if vn > 1e-15 and angle > budget:
             h = 0.5 * budget
             k = math.sin(h) / vn
             cx, cy, cz, cw = cx * k, cy * k, cz * k, math.cos(h)
         else:
             cx, cy, cz, cw = cx / n, cy / n, cz / n, cw / n
+        return self._turned(F, G, cx, cy, cz, cw)
+
+    def _turned(self, F: Flat, G: Flat, cx: float, cy: float, cz: float, cw: float) -> Flat:
+        """F turned by the unit quaternion (cx, cy, cz, cw), object frame, about the
+        frame's origin at pose G or about its ``pivot``."""
         R9 = _rows_of_unit_quaternion(cx, cy, cz, cw)
         if self._pivot3 is None:
             return se3.compose_flat(se3.flat_rotation_about(R9, *G[9:]), F)

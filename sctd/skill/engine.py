@@ -284,8 +284,10 @@ class SkillEngine:
         push = min(1.0, math.sqrt(sum(uu[j] * uu[j] for j in self.input_axes if j < n)))
         ws.turn_budget = push * self.skill.limits.max_angular_speed * dt
         F = F_obj_ee
+        ws.own_turn = False
         for m in state.input_mappings:
             F = m.apply(F, uu, dt, ws)
+        ws.turn_axis = turn_axis(F_obj_ee, F) if ws.own_turn and F is not F_obj_ee else None
         G = None  # the constraint frame's pose, reused while F and the frame stay
         frame = None
         acted = self.acted
@@ -303,6 +305,7 @@ class SkillEngine:
                 F = F_next
                 acted[k] += 1
         ws.turn_budget = math.inf  # a projection outside a command is a whole one
+        ws.turn_axis = None
         return F
 
     def project(self, F_obj_ee: Flat, c: ActiveConstraint) -> Flat:
@@ -310,3 +313,15 @@ class SkillEngine:
         command (so a neighbour orientation turns all the way); F itself when it
         already satisfies c."""
         return c.project(F_obj_ee, self.workspace.frame_pose(F_obj_ee, c.frame), self.workspace)
+
+
+def turn_axis(A: Flat, B: Flat) -> tuple[float, float, float] | None:
+    """The unit axis (in the frame both poses are in) of the turn from pose A's
+    orientation to B's, ``R_B R_A^T``; None when they turn less than about 1e-9 rad
+    apart. (On floats: it runs every tick.)"""
+    # twice the turn's sine times its axis: the antisymmetric part of R_B R_A^T
+    x = (B[6] * A[3] + B[7] * A[4] + B[8] * A[5]) - (B[3] * A[6] + B[4] * A[7] + B[5] * A[8])
+    y = (B[0] * A[6] + B[1] * A[7] + B[2] * A[8]) - (B[6] * A[0] + B[7] * A[1] + B[8] * A[2])
+    z = (B[3] * A[0] + B[4] * A[1] + B[5] * A[2]) - (B[0] * A[3] + B[1] * A[4] + B[2] * A[5])
+    n = math.sqrt(x * x + y * y + z * z)
+    return None if n < 2e-9 else (x / n, y / n, z / n)

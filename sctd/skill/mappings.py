@@ -423,8 +423,10 @@ class VectorFieldMapping(InputMapping):
     scale_by: Literal["whole", "parts"] = "whole"
     command_turns_from: Vec3 | None = None
     _pivot_axis: Vec3 = field(init=False, repr=False, default=(0.0, 0.0, 1.0))
+    _pivoted: bool = field(init=False, repr=False, default=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "_pivoted", any(f.pivot is not None for f in self.model.fields))
         if self.command_turns_from is None:
             return
         pivots = [f.pivot for f in self.model.fields if f.pivot is not None]
@@ -527,6 +529,8 @@ class VectorFieldMapping(InputMapping):
         P, (s0, s1, s2), ws.scale = self._step(ws, (G[9], G[10], G[11]), (u0, u1, u2),
                                                (u0 / mag, u1 / mag, u2 / mag), mag)
         ws.membership = P
+        if self.motion == "rigid" and self._pivoted:
+            ws.own_turn = True
         c = ws.speeds[0] * dt
         if self.motion == "rigid" and self.mode == "scale" and self.scale_by == "parts":
             p, Pk = (G[9], G[10], G[11]), P.tolist()

@@ -74,6 +74,14 @@ class Workspace:
     turn_budget : float
         How far (rad) a correction may turn the hand in the running command (infinite
         outside a command).
+    own_turn : bool
+        Whether a mapping of the running command turns the hand rigidly about a point
+        of its own (a field's ``pivot``: a bottle's opening, a cup's rim): that turn is
+        the task's, the person's to make.
+    turn_axis : tuple of 3 floats or None
+        The unit axis (object frame) about which the running command's input mappings
+        turned the hand, where that is the person's own turn (:attr:`own_turn`); None
+        otherwise, and outside a command.
     scale : float
         The vector-field scaling of the last command (1 when none applied; for status).
     membership : ndarray, shape (K,), or None
@@ -98,6 +106,8 @@ class Workspace:
                 self.fixed[name] = (F, se3.invert_flat(F))
         self.neighbours = {rel: Neighbours(model) for rel, model in models.items()}
         self.turn_budget = math.inf
+        self.own_turn = False
+        self.turn_axis: tuple[float, float, float] | None = None
         self.scale = 1.0
         self.membership: Array | None = None
         self.grasped: bool | None = None
