@@ -261,7 +261,8 @@ def test_an_arm_lag_is_refused_where_it_cannot_apply(capsys):
     for argv, message in [(["--arm-lag", "0.05"], "--arm-lag: only with --lockstep and --skill"),
                           (["--lockstep", "--arm-lag", "-0.1"], "--arm-lag: must be from 0 to 1 s, got -0.1"),
                           (["--lockstep", "--arm-lag", "nan"], "--arm-lag: must be from 0 to 1 s, got nan"),
-                          (["--starts", "wide"], "--starts wide: only with --lockstep and --skill")]:
+                          (["--starts", "wide"], "--starts wide: only with --lockstep and --skill"),
+                          (["--joint-bus"], "--joint-bus: only with --lockstep")]:
         assert main(["eval", "--skill", "pour", "--trials", "1", *argv]) == 2
         assert message in capsys.readouterr().err
     for argv, message in [(["--starts", "far"], "invalid choice: 'far'"),
