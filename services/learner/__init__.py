@@ -109,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with session_from_args(args) as session, \
                 Learner(session, store, args.robot, settings, pool, Trainer(limits)) as ln:
+            ln.trainer.warm()  # (its worker's imports now, not in the first request's time)
             learner.append(ln)
             tasks = ", ".join(f"{t} ({n})" for t, n in store.tasks().items()) or "none yet"
             print(f"sctd learner: store {store.root}: demonstrations of {tasks}, "
