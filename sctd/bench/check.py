@@ -13,8 +13,11 @@ of its own) on a private loopback port; the task's shipped demonstrations publis
 the learner; then one training request (``--method``, swap on) and the time from sending
 it to the daemon's status naming the new skill, with the learner's own timings (train,
 check, swap) and the daemon's lateness meanwhile (the median and the largest of its
-per-second p99, against a quiet window before the request). With ``--baseline`` (a source
-tree, as ``sctd bench cost`` takes it), the same in that tree's programs, interleaved.
+per-second p99, against a quiet window before the request). Then, the learner stopped and
+the simulator and the daemon still running, the **floor** of the check: its trials alone
+(:func:`trials_alone`), and of request -> swapped: those plus the training. With
+``--baseline`` (a source tree, as ``sctd bench cost`` takes it), the same in that tree's
+programs, interleaved.
 """
 
 from __future__ import annotations
@@ -187,11 +190,13 @@ def request_to_swap(tree: Tree, found: Task, skill: str, method: str, params: di
         s = stack.enter_context(session(listen=[hub]))
         stack.enter_context(s.declare_subscriber(keys.status, watch.status))
         stack.enter_context(s.declare_subscriber(keys.learner_status, watch.learner))
+        children = {}
         for name, args in (("sim", ("sim", "--task", task)), ("run", ("run", "--skill", skill)),
                            ("learner", ("learner", "--store", str(store)))):
-            stack.enter_context(Child("sctd.cli.main", *args, "--connect", hub, "--listen",
-                                      f"tcp/127.0.0.1:{free_port()}", log=logdir / f"{name}-{k}.log",
-                                      env=tree.env, cwd=tree.cwd))
+            children[name] = stack.enter_context(Child("sctd.cli.main", *args, "--connect", hub, "--listen",
+                                                       f"tcp/127.0.0.1:{free_port()}",
+                                                       log=logdir / f"{name}-{k}.log", env=tree.env,
+                                                       cwd=tree.cwd))
         _until(lambda: watch.skill is not None and watch.count("state") > 0, 90,
                f"the daemon or the learner did not come up; see {logdir}/*-{k}.log")
         names = _publish_demos(s, keys, found)
@@ -215,6 +220,9 @@ def request_to_swap(tree: Tree, found: Task, skill: str, method: str, params: di
         ev = reply.get("evaluation") or {}
         floor = None
         if ev.get("trials"):
+            # without the learner: trials it had started before the check decided would
+            # otherwise run on beside the floor's (its trial processes die with it)
+            children["learner"].stop()
             [file] = (store / "skills" / reply["id"]).glob("*.yaml")
             floor = trials_alone(tree, found, file, ev["trials"], ev.get("seed", CheckSettings().seed))
     return {"tree": tree.label, "swapped": bool(reply.get("swapped")), "reason": reply.get("reason"),
