@@ -17,7 +17,7 @@ values are rounded as the frames' signals round them (:class:`~sctd_sim.canbus.B
 and handed to the same controller and drive ends, which count, time out, brake and
 saturate as they do for a clean cycle off the bus. Without faults every cycle on the
 bus is clean, so both paths come to the same numbers, bit for bit (tested); the
-lockstep trials take this one, at about a third less per cycle. It has no frames to
+lockstep trials take this one, for about 40 % less per arm cycle. It has no frames to
 watch (``on_frames``) and no faults to inject.
 """
 
