@@ -11,6 +11,14 @@ Per cycle, in bus order::
 so the controller only ever sees what crossed the bus (quantised, possibly late or
 lost). The frames of one cycle are handed to ``on_frames`` callbacks as one list
 (for a bus mirror or logger), so watching the bus costs one call per cycle.
+
+With ``joint_bus=False`` the cycle skips the frames: the command's and the state's
+values are rounded as the frames' signals round them (:class:`~sctd_sim.canbus.BusValues`)
+and handed to the same controller and drive ends, which count, time out, brake and
+saturate as they do for a clean cycle off the bus. Without faults every cycle on the
+bus is clean, so both paths come to the same numbers, bit for bit (tested); the
+lockstep trials take this one, for about 40 % less per arm cycle. It has no frames to
+watch (``on_frames``) and no faults to inject.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ from sctd import se3
 
 from .canbus import (
     BusMaster,
+    BusValues,
     FastVirtualBus,
     FaultConfig,
     FaultInjectingBus,
@@ -68,6 +77,9 @@ class SimArm:
         Command timeout of the drives, s.
     friction : bool, optional
         Viscous joint friction in the physics.
+    joint_bus : bool, optional
+        False: the values without the frames (module doc); not with ``faults`` or
+        ``bus_factory``.
 
     Attributes
     ----------
@@ -91,9 +103,12 @@ class SimArm:
         faults: FaultConfig | None = None,
         drive_timeout: float = 0.01,
         friction: bool = True,
+        joint_bus: bool = True,
     ) -> None:
         if rate <= 0:
             raise ValueError(f"rate: must be positive, got {rate}")
+        if not joint_bus and (faults is not None or bus_factory is not None):
+            raise ValueError("joint_bus: False has no frames to fault or to put on another bus")
         self.arm = arm or load_arm_model()
         self.rate = float(rate)
         self.dt = 1.0 / self.rate
@@ -115,6 +130,8 @@ class SimArm:
         self.master = BusMaster(ctrl_bus, self.codecs, self.dt)
         self.drives = JointDrives(drive_bus, self.codecs, self.arm.tau_max, drive_timeout)
         self.on_frames: list[FrameCallback] = []
+        self.joint_bus = joint_bus
+        self._values = None if joint_bus else BusValues(self.codecs)
         self.t = 0.0
         self.cycle = 0
         self.enabled = True
@@ -138,7 +155,11 @@ class SimArm:
 
     # -- one cycle -------------------------------------------------------------------
     def step(self) -> None:
-        """Advance one cycle (``1 / rate`` s) along the full data path."""
+        """Advance one cycle (``1 / rate`` s) along the full data path (without the
+        frames when :attr:`joint_bus` is False)."""
+        if self._values is not None:
+            self._step_values(self._values)
+            return
         t, master, drives, dyn = self.t, self.master, self.drives, self.dynamics
         q_meas, dq_meas = master.q, master.dq
         tau_cmd = self.controller.update(q_meas, dq_meas, t)
@@ -156,6 +177,21 @@ class SimArm:
             batch = (frames if sent else []) + state
             for cb in self.on_frames:
                 cb(batch)
+
+    def _step_values(self, values: BusValues) -> None:
+        """:meth:`step` without the frames: their values, handed over (module doc)."""
+        t, master, drives, dyn = self.t, self.master, self.drives, self.dynamics
+        tau_cmd = self.controller.update(master.q, master.dq, t)
+        cycle = master.next_cycle()
+        modes, taus = values.command(tau_cmd, self.enabled)
+        drives.take(t, cycle & 0xF, modes, taus)
+        tau, braked = drives.output(t)
+        dyn.step(tau, self.dt, braked)
+        self.t = t + self.dt
+        status = drives.state_status(dyn.at_limit)
+        q, dq, tau_meas = values.state(dyn.q, dyn.dq, dyn.tau_motor)
+        master.accept(tuple(status), q, dq, tau_meas)
+        self.cycle += 1
 
     def run(self, seconds: float) -> None:
         """Run ``round(seconds * rate)`` cycles."""

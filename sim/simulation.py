@@ -60,6 +60,9 @@ class Simulation:
     compensate_payload : bool, optional
         Tell the arm's controller the load the hand holds (the bottle as it empties), as
         a real arm is configured; False only to measure what that buys.
+    joint_bus : bool, optional
+        False: the arm's joint values without the CAN frames, with the same outcome (see
+        :class:`~sctd_sim.arm.SimArm`); not with ``faults`` or ``bus_factory``.
 
     Attributes
     ----------
@@ -80,6 +83,7 @@ class Simulation:
         drive_timeout: float = SimSettings.drive_timeout,
         arm: ArmModel | None = None,
         compensate_payload: bool = True,
+        joint_bus: bool = True,
     ) -> None:
         self.compensate_payload = compensate_payload
         self.scene: Scene = make_scene(scene) if isinstance(scene, Task) else scene
@@ -88,7 +92,8 @@ class Simulation:
             q0 = start_posture(model, self.scene.start_pose(), getattr(self.scene, "default_start_pose",
                                                                        None))
         self.arm = SimArm(model, q0, rate=rate, gains=gains, channel=channel,
-                          bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout)
+                          bus_factory=bus_factory, faults=faults, drive_timeout=drive_timeout,
+                          joint_bus=joint_bus)
         self.q_home = self.arm.dynamics.q.copy()  # the known posture: where the arm started
         self._load: tuple[float, Any] = (-1.0, None)  # the payload the controller was last given
         self._payload()

@@ -88,6 +88,27 @@ def test_bench_check_prints_the_operating_points_without_processes(capsys):
     assert r["runs"] == []
 
 
+def test_each_figure_of_the_check_is_printed_with_its_floor():
+    run = {"tree": "this", "request_to_swap_s": 19.0, "trials_alone_s": 14.0, "successes": 6, "trials": 6,
+           "swapped": True, "timings": {"train_s": 2.0, "check_s": 16.5, "swap_s": 0.1},
+           "lateness_quiet_ms": {"median": 0.005, "max": 0.005},
+           "lateness_check_ms": {"median": 0.005, "max": 0.19}}
+    line = bench_check._run_line(run)
+    assert "19.0 s (floor  16.0)" in line and "check  16.5 (floor  14.0)" in line
+    assert "floor" not in bench_check._run_line({**run, "trials_alone_s": None})
+
+
+@pytest.mark.slow
+def test_the_checks_trials_alone_run_in_a_trees_own_environment():
+    """The floor of the check: its trials without the learner, timed, in the tree's
+    programs (here this code's)."""
+    from sctd.task import find_task
+
+    got = bench_check.trials_alone(cost.Tree("this"), find_task("pour"), ROOT / "skills" / "pour-linear.yaml",
+                                   1, CheckSettings().seed)
+    assert got["wall_s"] > 0 and got["successes"] in (0, 1)
+
+
 @pytest.mark.slow
 def test_a_baseline_commit_is_what_its_programs_import(tmp_path):
     """Exported from this repository, its programs import its packages, not the ones this

@@ -261,7 +261,8 @@ def test_an_arm_lag_is_refused_where_it_cannot_apply(capsys):
     for argv, message in [(["--arm-lag", "0.05"], "--arm-lag: only with --lockstep and --skill"),
                           (["--lockstep", "--arm-lag", "-0.1"], "--arm-lag: must be from 0 to 1 s, got -0.1"),
                           (["--lockstep", "--arm-lag", "nan"], "--arm-lag: must be from 0 to 1 s, got nan"),
-                          (["--starts", "wide"], "--starts wide: only with --lockstep and --skill")]:
+                          (["--starts", "wide"], "--starts wide: only with --lockstep and --skill"),
+                          (["--joint-bus"], "--joint-bus: only with --lockstep")]:
         assert main(["eval", "--skill", "pour", "--trials", "1", *argv]) == 2
         assert message in capsys.readouterr().err
     for argv, message in [(["--starts", "far"], "invalid choice: 'far'"),
@@ -339,13 +340,14 @@ def _fake_trial(path, spec, seed, demos, keep, logdir):
 def test_evaluate_stops_when_until_says_and_cancels_the_rest(tmp_path, pooled):
     from concurrent.futures import ThreadPoolExecutor
 
-    from sctd_services.eval.evaluate import evaluate
+    from sctd_services.eval.evaluate import HOPED, evaluate
 
     ents = entries([str(ROOT / "skills" / "pour.yaml")], baseline=False, workdir=tmp_path)
     seen: list[int] = []
 
     def two_failures(per_trial):
-        seen.append(len(per_trial))
+        if not any(t is HOPED for t in per_trial):  # (not the pool's look ahead: below)
+            seen.append(len(per_trial))
         return sum(t["outcome"] != "success" for t in per_trial) >= 2
 
     pool = ThreadPoolExecutor(1) if pooled else None
@@ -361,6 +363,50 @@ def test_evaluate_stops_when_until_says_and_cancels_the_rest(tmp_path, pooled):
     [full] = evaluate(ents, TaskSpec.of(find_task("pour")), 4, 0, job=_fake_trial, until=lambda p: False,
                       logdir=tmp_path)
     assert full["trials"] == 4 and full["stopped_early"] is False
+
+
+def test_a_pool_is_not_given_trials_the_decision_will_not_need_if_those_under_way_succeed(tmp_path):
+    """With ``until`` and a pool, the trials after the ones that would decide if they
+    succeed wait for them: 6 successes decide, so a run of successes never starts a
+    seventh, however many processes the pool has free; a failure among them starts the
+    next ones."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from sctd_services.eval.evaluate import evaluate
+
+    ents = entries([str(ROOT / "skills" / "pour.yaml")], baseline=False, workdir=tmp_path)
+    started: list[int] = []
+    lock = threading.Lock()
+
+    def job(path, spec, seed, demos, keep, logdir):
+        with lock:
+            started.append(seed)
+        return {**_fake_trial(path, spec, seed, demos, keep, logdir), "outcome": "success"}
+
+    def six_successes(per_trial):
+        return sum(t["outcome"] == "success" for t in per_trial) >= 6
+
+    with ThreadPoolExecutor(4) as pool:
+        [res] = evaluate(ents, TaskSpec.of(find_task("pour")), 20, 0, job=job, pool=pool,
+                         until=six_successes, logdir=tmp_path)
+    assert res["trials"] == 6 and res["stopped_early"] is True
+    assert sorted(started) == [0, 1, 2, 3, 4, 5]
+    started.clear()
+    with ThreadPoolExecutor(4) as pool:  # odd seeds fail: each failure lets one more start
+        [res] = evaluate(ents, TaskSpec.of(find_task("pour")), 20, 0, job=_counted(started, lock),
+                         pool=pool, until=six_successes, logdir=tmp_path)
+    assert res["trials"] == 11 and res["successes"] == 6
+    assert sorted(started) == list(range(11))
+
+
+def _counted(started, lock):
+    def job(path, spec, seed, demos, keep, logdir):
+        with lock:
+            started.append(seed)
+        return _fake_trial(path, spec, seed, demos, keep, logdir)
+
+    return job
 
 
 def _summary(readings_mean: dict[str, float]) -> dict:

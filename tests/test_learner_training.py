@@ -80,3 +80,21 @@ def test_a_pool_worker_whose_learner_is_already_gone_ends_at_once():
         p.start()
         p.join(60)
         assert p.exitcode == 0 and out.empty()  # "parent" 1 is not its parent: it ended
+
+
+def test_the_workers_start_before_the_first_request():
+    """The training worker and the check's trial processes start (and import) when asked
+    to be warm, not when the first training or trial arrives."""
+    import multiprocessing
+
+    from sctd_services.learner.check import trial_pool
+
+    before = set(multiprocessing.active_children())
+    with Trainer() as t:
+        t.warm()
+        assert len(set(multiprocessing.active_children()) - before) == 1
+    pool = trial_pool(2)
+    try:
+        assert len(set(multiprocessing.active_children()) - before) == 2
+    finally:
+        pool.shutdown()

@@ -1,6 +1,8 @@
 """Lockstep trials on fixed seeds come to the outcomes recorded in
 ``tests/data/lockstep_outcomes.json``: the same outcome, the same times to the millisecond
-and mode switches, and the same spill and progress to 1e-4.
+and mode switches, and the same spill and progress to 1e-4; with the arm's joint values as
+CAN frames and without them (lockstep's default: the values rounded as the frames would
+carry them), which so come to the same outcomes.
 
 The file was written once, by ``python -m tests.test_lockstep_outcomes`` on the code before
 the simulator's and the lockstep step's speed-ups, and is kept fixed: it is the proof that
@@ -20,6 +22,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,9 +39,10 @@ KERNELS = {"OPENBLAS_CORETYPE": "Haswell", "OPENBLAS_NUM_THREADS": "1"}
 FIELDS = ("outcome", "reason", "time_s", "duration_s", "spill", "progress", "mode_switches")
 
 
-def outcome(skill: str, seed: int) -> dict[str, Any]:
-    """What the lockstep trial of ``skill`` (a catalogue name) from ``seed`` comes to: the
-    fields of :data:`FIELDS`, floats rounded to the millisecond (times) or to 1e-6."""
+def outcome(skill: str, seed: int, joint_bus: bool = False) -> dict[str, Any]:
+    """What the lockstep trial of ``skill`` (a catalogue name) from ``seed`` comes to, its
+    arm's joint values as CAN frames or not (``joint_bus``): the fields of :data:`FIELDS`,
+    floats rounded to the millisecond (times) or to 1e-6."""
     needs("pinocchio")
     from sctd.skill import load_skill
     from sctd.skill.catalog import find_skill
@@ -49,7 +53,7 @@ def outcome(skill: str, seed: int) -> dict[str, Any]:
     loaded = load_skill(find_skill(skill))
     task = task_of([loaded], None)
     spec = TaskSpec.of(task, time_limit=TIME_LIMIT)
-    r = run_trial(loaded, spec, seed, task=task).as_dict()
+    r = run_trial(loaded, replace(spec, joint_bus=joint_bus), seed, task=task).as_dict()
     # the file's spill: the task's spill reading (<held>.spilled), 0 for a task without one
     r["spill"] = next((v for k, v in r["readings"].items() if k.endswith(".spilled")), 0.0)
     got = {k: r[k] for k in FIELDS}
@@ -71,14 +75,15 @@ def _has_avx2() -> bool:
         return False
 
 
-def pinned_outcomes(skill: str) -> dict[int, dict[str, Any]]:
+def pinned_outcomes(skill: str, joint_bus: bool = False) -> dict[int, dict[str, Any]]:
     """:func:`outcome` of every seed, worked out in a child process whose OpenBLAS runs
     the recording's kernels (:data:`KERNELS`)."""
     if not _has_avx2():
         pytest.fail("the recorded outcomes are reproduced with OpenBLAS's AVX2 kernels: this "
                     "CPU has no AVX2 (an x86-64 CPU with AVX2 runs this test)", pytrace=False)
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "-m", "tests.test_lockstep_outcomes", "--print", skill],
+    bus = ["--joint-bus"] if joint_bus else []
+    done = subprocess.run([sys.executable, "-m", "tests.test_lockstep_outcomes", "--print", skill, *bus],
                           cwd=root, env={**os.environ, **KERNELS}, capture_output=True, text=True,
                           timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
@@ -86,10 +91,11 @@ def pinned_outcomes(skill: str) -> dict[int, dict[str, Any]]:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("joint_bus", [False, True], ids=["values", "frames"])
 @pytest.mark.parametrize("skill", SKILLS)
-def test_lockstep_trials_come_to_the_recorded_outcomes(skill: str) -> None:
+def test_lockstep_trials_come_to_the_recorded_outcomes(skill: str, joint_bus: bool) -> None:
     recorded = _recorded()
-    outcomes = pinned_outcomes(skill)
+    outcomes = pinned_outcomes(skill, joint_bus)
     for seed in SEEDS:
         got, want = outcomes[seed], recorded[f"{skill}/{seed}"]
         exact = [k for k in FIELDS if k not in ("spill", "progress")]
@@ -118,7 +124,7 @@ def record() -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--print"]:  # (the test's child: one skill's outcomes on stdout)
-        print(json.dumps({seed: outcome(sys.argv[2], seed) for seed in SEEDS}))
+        print(json.dumps({seed: outcome(sys.argv[2], seed, "--joint-bus" in sys.argv) for seed in SEEDS}))
     else:
         record()
     sys.exit(0)

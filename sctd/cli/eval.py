@@ -86,7 +86,7 @@ def add_eval_arguments(p: argparse.ArgumentParser) -> None:
                    help="step everything in one process in simulated time (many times faster than "
                         "real time); the default runs real processes over Zenoh at real time")
     add_arguments(p, TaskSpec, only=("user_model", "starts"))
-    add_arguments(p, TaskSpec, only=("arm_lag",))
+    add_arguments(p, TaskSpec, only=("arm_lag", "joint_bus"))
     p.add_argument("--driver", metavar="NAME", default=None,
                    help="real time only: run the trials on the arm this robot driver serves (sctd robot "
                         "--list; e.g. franky against franky-sim) instead of sctd's simulator, the task's "
@@ -123,6 +123,8 @@ def _check(args: argparse.Namespace) -> str | None:
         return "--arm-lag: only with --lockstep and --skill (a real-time arm lags as it does)"
     if not (math.isfinite(args.arm_lag) and 0.0 <= args.arm_lag <= 1.0):
         return f"--arm-lag: must be from 0 to 1 s, got {args.arm_lag}"
+    if args.joint_bus and not args.lockstep:
+        return "--joint-bus: only with --lockstep (real-time trials run the simulator service, on its bus)"
     if args.driver_args and args.driver is None:
         return "--driver-args: only with --driver"
     if args.scheduler is not None and not args.lockstep:
@@ -207,7 +209,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
         return fail("eval", str(e))
     # the trials' workers find the task as it was named (spec.task: TaskSpec)
     spec = TaskSpec.of(task, args.task, profile=args.user, user_model=args.user_model, starts=args.starts,
-                       time_limit=args.time_limit, arm_lag=args.arm_lag)
+                       time_limit=args.time_limit, arm_lag=args.arm_lag, joint_bus=args.joint_bus)
     # lockstep trials are independent and run in parallel; real-time ones, which start
     # processes (the application layer's job), run one at a time
     job = lockstep_job if args.lockstep else realtime_job
@@ -228,7 +230,7 @@ def _evaluate(args: argparse.Namespace, work: Path) -> int:
     print(file=sys.stderr)
     header = {"task": task.name, "task_file": task.file, "trials": args.trials, "seed": args.seed,
               "user": args.user, "lockstep": args.lockstep, "time_limit": spec.time_limit,
-              "arm_lag": args.arm_lag, "numerics": numerics(),
+              "arm_lag": args.arm_lag, "joint_bus": args.joint_bus, "numerics": numerics(),
               "robot": {"driver": args.driver or "sctd sim", "args": args.driver_args}}
     if pool is not None:
         header.update(scheduler=args.scheduler, reruns=[asdict(r) for r in pool.reruns])

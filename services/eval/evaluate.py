@@ -11,8 +11,9 @@ a competent user of a teleoperated arm, not a naive one.
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Callable
-from concurrent.futures import Executor, ProcessPoolExecutor
+from collections import deque
+from collections.abc import Callable, Iterator
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
@@ -307,7 +308,11 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
     a pool on other hosts (:mod:`.cluster`) gets each trial's skill and task with it.
     ``until(per_trial)``, asked after each trial (in seed order), ends an entry's trials
     early when it returns true: the trials not started are cancelled, and the entry's
-    result has ``planned`` (the trials asked for) and ``stopped_early``.
+    result has ``planned`` (the trials asked for) and ``stopped_early``. With a pool, it
+    is also asked before a trial is given to the pool, of the trials so far followed by
+    a success for each one under way: a trial it would not need if those succeed is not
+    started until they have ended (:func:`_paced`), so the last trials the decision needs
+    do not share the CPU with one it will not.
     """
     seeds = list(range(seed, seed + trials))
     total = len(ents) * trials
@@ -320,9 +325,15 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
         for e in ents:
             folder = logdir / e.skill.name if logdir else None  # None: the job's own choice
             trials_of = _trials(e, spec, seeds, job, demos, keep, folder, ships_trials(pool))
-            futures = [pool.submit(t) for t in trials_of] if pool is not None else []
-            runs = (f.result() for f in futures) if pool is not None else (t() for t in trials_of)
             per_trial: list[dict[str, Any]] = []
+            futures: list[Future] = []
+            if pool is not None and until is not None:
+                runs = _paced(pool, trials_of, until, per_trial, futures)
+            elif pool is not None:
+                futures = [pool.submit(t) for t in trials_of]
+                runs = (f.result() for f in futures)
+            else:
+                runs = (t() for t in trials_of)
             stopped = False
             for r in runs:
                 per_trial.append(r)
@@ -340,6 +351,27 @@ def evaluate(ents: list[Entry], spec: TaskSpec, trials: int, seed: int, job: Tri
                 res.update(planned=trials, stopped_early=stopped)
             results.append(res)
     return results
+
+
+HOPED: dict[str, Any] = {"outcome": "success"}
+"""What :func:`_paced` takes a trial under way to come to when it asks ``until``."""
+
+
+def _paced(pool: Executor, trials: list[Trial], until: Callable[[list[dict[str, Any]]], bool],
+           per_trial: list[dict[str, Any]], futures: list[Future]) -> Iterator[dict[str, Any]]:
+    """The results of ``trials`` on ``pool``, in seed order, each trial given to the pool
+    only while ``until`` would not stop on the trials so far (``per_trial``, which the
+    caller extends with each result) followed by a success for each one under way
+    (:data:`HOPED`); the futures given go to ``futures`` (for the caller to cancel)."""
+    flying: deque[Future] = deque()
+    nxt = 0
+    while nxt < len(trials) or flying:
+        while nxt < len(trials) and (not flying or not until(per_trial + [HOPED] * len(flying))):
+            f = pool.submit(trials[nxt])
+            flying.append(f)
+            futures.append(f)
+            nxt += 1
+        yield flying.popleft().result()
 
 
 def _stats(xs: list[float]) -> dict[str, float | None]:

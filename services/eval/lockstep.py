@@ -1,7 +1,9 @@
 """A trial stepped in one process in simulated time (``sctd eval --lockstep``).
 
 The same parts as a real-time trial, called directly instead of over Zenoh: the
-Pinocchio simulation with its target guard, the runtime's tick driver (the daemon's own
+Pinocchio simulation with its target guard (its arm's joint values handed over as the
+CAN frames would carry them, bit for bit, unless the spec's ``joint_bus`` asks for the
+frames themselves), the runtime's tick driver (the daemon's own
 path from messages to targets: input arbitration, the state-continuity watch, the skill
 engine and the safety limits), and the simulated user, all on the simulator's clock. Messages take
 no time here, and the robot's state reaches the tick one cycle old, as it would at
@@ -49,7 +51,7 @@ def run_trial(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None
     if detour is None:
         return practise(skill, spec, seed, demos, task=task, known=known)[0]
     scene, q0 = trial_scene(task, seed)
-    sim = Simulation(scene=scene, q0=q0)
+    sim = Simulation(scene=scene, q0=q0, joint_bus=spec.joint_bus)
     try:
         return _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos,
                     set_user(task, spec, seed, known, detour))
@@ -63,7 +65,7 @@ def practise(skill: Skill, spec: TaskSpec, seed: int, demos: list | None = None,
     mode (the skill's state names) it used."""
     scene, q0 = trial_scene(task, seed)
     outside = outside_region(skill, scene)
-    sim = Simulation(scene=scene, q0=q0)
+    sim = Simulation(scene=scene, q0=q0, joint_bus=spec.joint_bus)
     user = SimulatedUser(task, spec.axes, spec.profile, seed=seed, known=known, model=spec.user_model)
     try:
         result = _run(sim, TickDriver(skill, RuntimeConfig()), task, spec, seed, demos, user)
@@ -110,7 +112,7 @@ def run_set_trial(goals: GoalSet, task: Task, spec: TaskSpec, seed: int,
     ``detour``: the room as the task the user goes for first. Returns the trial's result
     and what the set did (:class:`SetWatch`)."""
     scene, q0 = trial_scene(task, seed)
-    sim = Simulation(scene=scene, q0=q0)
+    sim = Simulation(scene=scene, q0=q0, joint_bus=spec.joint_bus)
     watch = SetWatch(goals, task.object)
     user = set_user(task, spec, seed, known, detour)
     try:

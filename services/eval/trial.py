@@ -45,7 +45,9 @@ class TaskSpec:
     limits on a trial (s: ``time_limit`` None is the task file's own, which
     :meth:`of` fills in) and, in lockstep, ``arm_lag``: s by which the arm takes each
     target later than the daemon published it (0: at once), an arm that lags as an
-    impedance-controlled one does.
+    impedance-controlled one does; ``joint_bus``: whether lockstep's arm carries its joint
+    values as CAN frames (True) or hands them over rounded as the frames would
+    (:class:`~sctd_sim.arm.SimArm`; the same numbers, bit for bit).
 
     ``task`` is the task's name or file, not a :class:`~sctd.task.Task`: the spec goes
     to trial workers in other processes (spawned, or a cluster's) and on the command
@@ -76,6 +78,10 @@ class TaskSpec:
                 "(a delay line), as an arm whose tracking lags (franky's impedance controller on "
                 "franky-sim: about 0.05 s): how well a skill and the simulated user hold up on a slower "
                 "arm (default 0)"})
+    joint_bus: bool = field(default=False, metadata={
+        "help": "with --lockstep: carry the arm's joint commands and states as CAN frames, as the simulator "
+                "service does; without it, lockstep hands over the values the frames would carry, rounded "
+                "as their signals round them: the same outcomes, bit for bit, at less cost per step"})
     task_file: str = ""
 
     @classmethod

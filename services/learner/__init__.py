@@ -29,6 +29,10 @@ from .training import TrainingLimits
 CLIENT_ROLE = "sctd-learner"  # the key pair of a sctd certs folder the learner presents to a cluster
 
 
+
+NICE = 10
+"""How much lower than the daemon's the learner's CPU priority is by default (``--nice``)."""
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The learner's flags (``sctd learner``)."""
     d = CheckSettings()
@@ -60,7 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="s a training may take before it is stopped and refused (default %(default)s)")
     g.add_argument("--train-memory-mb", type=int, default=t.memory // 1024**2,
                    help="MB of address space a training may use (default %(default)s)")
-    p.add_argument("--nice", type=int, default=10,
+    p.add_argument("--nice", type=int, default=NICE,
                    help="lower this process's (and its trials') CPU priority by this much, so "
                         "training never competes with the daemon's tick (default %(default)s)")
     add_scheduler_arguments(p, CLIENT_ROLE)
@@ -109,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with session_from_args(args) as session, \
                 Learner(session, store, args.robot, settings, pool, Trainer(limits)) as ln:
+            ln.trainer.warm()  # (its worker's imports now, not in the first request's time)
             learner.append(ln)
             tasks = ", ".join(f"{t} ({n})" for t, n in store.tasks().items()) or "none yet"
             print(f"sctd learner: store {store.root}: demonstrations of {tasks}, "

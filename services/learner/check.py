@@ -182,9 +182,14 @@ def _die_with_parent(parent: int) -> None:
 
 
 def trial_pool(jobs: int) -> Executor:
-    """The learner's pool of trial processes, started once and kept warm."""
-    return ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent,
+    """The learner's pool of trial processes, started at once and kept warm: its ``jobs``
+    processes start and import what a trial needs now, not when the first check's trials
+    arrive (a second or two of CPU each, which a request would otherwise wait for)."""
+    pool = ProcessPoolExecutor(jobs, mp_context=get_context("spawn"), initializer=_die_with_parent,
                                initargs=(os.getpid(),))
+    for _ in range(jobs):  # (a pool starts a process per task given while none is idle)
+        pool.submit(os.getpid)
+    return pool
 
 
 def evaluation(stored: StoredSkill, task: Task, settings: CheckSettings, seed: int,

@@ -98,6 +98,10 @@ class Trainer:
                                                        self._stages))
         return self._pool
 
+    def warm(self) -> None:
+        """Start the worker and its imports now, not at the first training."""
+        self._start().submit(os.getpid)
+
     def kill(self) -> None:
         """End the worker now (a training under way is lost); the next gets a new one."""
         pool, self._pool = self._pool, None

@@ -26,6 +26,7 @@ from .faults import FaultConfig, FaultCounts, FaultInjectingBus
 from .layout import DBC_PATH, JointBusRanges, joint_bus_ranges, load_dbc
 from .link import LinkStats, classify
 from .master import BusMaster
+from .values import BusValues, signal_rounding
 from .virtual import FastVirtualBus, drain, send_batch
 
 __all__ = [
@@ -40,6 +41,7 @@ __all__ = [
     "SYNC_ID",
     "BusEndpoint",
     "BusMaster",
+    "BusValues",
     "FastVirtualBus",
     "FaultConfig",
     "FaultCounts",
@@ -58,4 +60,5 @@ __all__ = [
     "joint_bus_ranges",
     "load_dbc",
     "send_batch",
+    "signal_rounding",
 ]

@@ -31,7 +31,7 @@ import cantools
 
 from . import _codec_generated as generated
 from .crc import FrameCrc
-from .layout import DBC_PATH, fields_from_message, layout_key, load_dbc
+from .layout import DBC_PATH, Field, fields_from_message, layout_key, load_dbc
 
 # (crc ok, rolling counter, payload values in signal order)
 DecodedFrame = tuple[bool, int, tuple[float, ...]]
@@ -164,7 +164,20 @@ class FrameCodec:
 
     def resolution(self, name: str) -> float:
         """Scale (one raw step) of payload signal ``name``."""
-        return next(f.scale for f in self._fields if f.name == name)
+        return self.field(name).scale
+
+    def field(self, name: str) -> Field:
+        """Payload signal ``name``'s layout (bits, sign, scale, offset).
+
+        Raises
+        ------
+        ValueError
+            The frame has no such payload signal.
+        """
+        for f in self._fields:
+            if f.name == name:
+                return f
+        raise ValueError(f"{self.name}: no payload signal {name!r} (it has {', '.join(self.signal_names)})")
 
     def limits(self, name: str) -> tuple[float, float]:
         """Physical range of payload signal ``name``."""

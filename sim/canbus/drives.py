@@ -17,6 +17,8 @@ next fresh command with the enable bit. Drives power up braked.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import can
 import numpy as np
 
@@ -114,8 +116,26 @@ class JointDrives(BusEndpoint):
                     return
         self._receive_each(frames, t)
 
+    def take(self, t: float, counter: int, modes: tuple[int, ...], taus: Sequence[float]) -> None:
+        """The clean cycle at time ``t`` (s) without its frames: a SYNC with ``counter``,
+        then every joint's command with these values (as decoded: ``Mode``, ``Torque``).
+        What :meth:`receive` makes of those frames off the bus; an arm without frames
+        (:class:`~.values.BusValues`) calls it directly.
+
+        Raises
+        ------
+        ValueError
+            ``counter`` is not the next cycle's (frames off a bus would be checked one
+            by one; values handed over directly come in order).
+        """
+        kind, lost = classify(counter, self._sync_last, None, False)
+        if kind != ACCEPTED:
+            raise ValueError(f"JointDrives.take: counter {counter} after {self._sync_last} is not a "
+                             "new cycle's")
+        self._receive_clean(t, counter, lost, modes, taus)
+
     def _receive_clean(self, t: float, counter: int, sync_lost: int, modes: tuple[int, ...],
-                       taus: tuple[float, ...]) -> None:
+                       taus: Sequence[float]) -> None:
         """The clean cycle: a new SYNC, then every joint's command, in order, intact, of
         the SYNC's cycle. Each is accepted (what :meth:`_receive_each` concludes, frame
         by frame)."""
@@ -250,12 +270,16 @@ class JointDrives(BusEndpoint):
                      at_limit: np.ndarray | None = None, stamp: float = 0.0
                      ) -> list[can.Message]:
         """The cycle's state frames (one per joint), stamped with the SYNC counter."""
+        return self._state_group.frames(stamp, self._counter, self.state_status(at_limit), q.tolist(),
+                                        dq.tolist(), tau.tolist())
+
+    def state_status(self, at_limit: np.ndarray | None = None) -> list[int]:
+        """The status bits the cycle's state frames carry, one per joint: :attr:`status`,
+        and ``SATURATED`` where the joint is ``at_limit`` (shape (n,), bool). The list is
+        shared between cycles while the bits stay the same: do not modify it."""
         if at_limit is not None and np.count_nonzero(at_limit):
-            status = (self.status | np.where(at_limit, STATUS_SATURATED, 0)).tolist()
-        else:
-            if self.status is not self._status_of_list:  # (a new array on every change)
-                self._status_of_list = self.status
-                self._status_list = self.status.tolist()
-            status = self._status_list
-        return self._state_group.frames(stamp, self._counter, status, q.tolist(), dq.tolist(),
-                                        tau.tolist())
+            return (self.status | np.where(at_limit, STATUS_SATURATED, 0)).tolist()
+        if self.status is not self._status_of_list:  # (a new array on every change)
+            self._status_of_list = self.status
+            self._status_list = self.status.tolist()
+        return self._status_list

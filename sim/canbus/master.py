@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import can
 import numpy as np
 
@@ -79,13 +81,18 @@ class BusMaster(BusEndpoint):
         list of can.Message
             The cycle's batch, in bus order.
         """
-        self.cycle = cycle = (self.cycle + 1) & 0xFFFFFFFF
+        cycle = self.next_cycle()
         counter = cycle & 0xF
         mode = MODE_ENABLE if enable else 0
         out = self._cmd_group.frames(stamp, counter, [mode] * self.n, tau.tolist(), q.tolist(),
                                      dq.tolist())
         out.insert(0, self._sync_frame(stamp, counter, 0, cycle, self.period))
         return out
+
+    def next_cycle(self) -> int:
+        """Start a new cycle: its number (the low 4 bits are its frames' counter)."""
+        self.cycle = cycle = (self.cycle + 1) & 0xFFFFFFFF
+        return cycle
 
     def receive(self) -> np.ndarray:
         """Read pending state frames of the current cycle.
@@ -105,8 +112,21 @@ class BusMaster(BusEndpoint):
         vals = self._state_group.unpack_exact(frames, reference)
         if vals is None:
             return self._receive_each(frames, reference)
-        # The clean cycle: every joint's state frame, in order, intact, of this cycle.
-        # Each is accepted (what _receive_each concludes, frame by frame).
+        return self.accept(*vals)
+
+    def accept(self, status: tuple[int, ...], q: Sequence[float], dq: Sequence[float],
+               tau: Sequence[float]) -> np.ndarray:
+        """The clean cycle: every joint's state frame, in order, intact, of this cycle,
+        with these values (as decoded). Each is accepted (what :meth:`_receive_each`
+        concludes, frame by frame). :meth:`receive` calls it for such a cycle off the bus;
+        an arm without frames (:class:`~.values.BusValues`) calls it directly.
+
+        Returns
+        -------
+        ndarray of bool, shape (n,)
+            :attr:`fresh` (all True).
+        """
+        reference = self.cycle & 0xF
         n = self.n
         st = self.stats
         st.received += n
@@ -120,7 +140,7 @@ class BusMaster(BusEndpoint):
                     st.lost += (reference - prev - 1) & 0xF
         self._last_counter = [reference] * n
         self._same_counter = reference
-        status, self.q[:], self.dq[:], self.tau[:] = vals
+        self.q[:], self.dq[:], self.tau[:] = q, dq, tau
         if status != self._status_seen:  # (status bits rarely change)
             self.status[:] = self._status_seen = status
         if not self._all_fresh:
