@@ -2,6 +2,7 @@
 Haswell's, compared trial for trial."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -28,6 +29,7 @@ def test_compare_names_each_trial_whose_outcome_differs_and_how_far_times_moved(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # two sctd suite runs: 300 s, the default, on a machine at load 8-20
 def test_the_drawers_outcomes_are_the_same_with_haswells_kernels():
     """The forced run's OpenBLAS reports the kernels it was told to use; the drawer's
     skills and baselines come out the same, trial for trial."""
@@ -39,3 +41,7 @@ def test_the_drawers_outcomes_are_the_same_with_haswells_kernels():
     assert forced["openblas_coretype"] == "Haswell" and any("Haswell" in b for b in forced["blas"]), forced
     assert doc["numerics"]["own"]["openblas_coretype"] is None
     assert len(doc["rows"]) == 4 and all(r["trials"] == 2 for r in doc["rows"]) and doc["flips"] == 0
+    # the task's two skills in the suite's order, and the baseline of each one's limits
+    assert [r["skill"] for r in doc["rows"] if not r["baseline_of"]] == ["drawer-vf", "drawer"], doc["rows"]
+    assert sorted(Path(r["baseline_of"]).stem for r in doc["rows"] if r["baseline_of"]) == \
+        ["drawer", "drawer-vf"], doc["rows"]

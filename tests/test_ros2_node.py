@@ -74,14 +74,14 @@ def _start(h: Hosts, tmp_path, hand: str, *extra: str):
     return bridge, side
 
 
-@pytest.mark.parametrize("hand", ["pose", "joint_states"])
-def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_path, hand):
+def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_path):
     """The daemon (following only the device ``ros``) gets its state from the arm's
-    ``ee_pose`` (or its ``joint_states`` and the shipped URDF), the mug from the
-    perception's ``mug_pose`` and the person's input from ``Joy``, all through ``sctd
-    ros``; its target reaches the arm only as ROS's ``PoseStamped``. The simulated person
-    pours until the simulator says it poured."""
+    ``ee_pose``, the mug from the perception's ``mug_pose`` and the person's input from
+    ``Joy``, all through ``sctd ros``; its target reaches the arm only as ROS's
+    ``PoseStamped``. The simulated person pours until the simulator says it poured. (The
+    hand from ``joint_states`` and the URDF: the twist test below.)"""
     h = host
+    hand = "pose"
     bridge, side = _start(h, tmp_path, hand)
     report = h.call("ros", "sctd_services.simulated_user", "--task", "pour", "--duration", "150",
                     "--until-done", "--json", "--connect", EP, timeout=240)
@@ -102,8 +102,7 @@ def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_pa
     assert {"pour: carry", "pour: approach", "pour: pour"} <= set(seen["marker_labels"]), seen
     counts = last_json(bridge.output())
     got = counts["received"]
-    hand_key = "pose" if hand == "pose" else "joint_state"
-    assert got[hand_key] > 1000 and got["objects/mug"] > 100 and got["joy"] > 100, counts
+    assert got["pose"] > 1000 and got["objects/mug"] > 100 and got["joy"] > 100, counts
     assert counts["sent"]["target"] > 1000 and counts["sent"]["diagnostics"] > 10, counts
     assert counts["sent"]["markers"] >= 10, counts
     print(json.dumps({"user": {k: report[k] for k in ("elapsed_s", "mode_switches", "final_state")},
@@ -113,7 +112,9 @@ def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_pa
 def test_the_twist_out_integrates_to_the_target_and_ends_with_a_zero(host, tmp_path):
     """``--twist-topic``: a consumer that integrates the TwistStamped (by header stamps)
     from the first target ends where the PoseStamped target ended (within 1 mm and 1
-    mrad), and sees the motion end with a zero twist."""
+    mrad), and sees the motion end with a zero twist. The daemon's hand comes from the
+    arm's ``joint_states`` over DDS and the shipped URDF (the forward kinematics are
+    tested in-process in ``tests/test_ros2_bridge.py``; the pour above takes ``ee_pose``)."""
     import numpy as np
 
     from sctd import se3
@@ -122,7 +123,8 @@ def test_the_twist_out_integrates_to_the_target_and_ends_with_a_zero(host, tmp_p
     # a history of 10: the test's consumer, in one process with the arm's and the perception's
     # relays, may lag a few twists behind, and it integrates every one (MoveIt Servo keeps
     # only the newest: the default of 1 is for it)
-    bridge, side = _start(h, tmp_path, "pose", "--twist-topic", "sctd/twist", "--qos-depth", "10", "--twist")
+    bridge, side = _start(h, tmp_path, "joint_states", "--twist-topic", "sctd/twist", "--qos-depth", "10",
+                          "--twist")
     report = h.call("ros", "sctd_services.simulated_user", "--task", "pour", "--duration", "8", "--json",
                     "--connect", EP, timeout=60)
     assert report["inputs_sent"] > 100 and len(report["state_changes"]) >= 1, report
@@ -138,3 +140,4 @@ def test_the_twist_out_integrates_to_the_target_and_ends_with_a_zero(host, tmp_p
     angle = np.linalg.norm(se3.rotvec_from_matrix(T_int[:3, :3] @ T_tgt[:3, :3].T))
     assert angle < 1e-3, angle
     assert counts["sent"]["twist"] > 300, counts
+    assert counts["received"]["joint_state"] > 300 and not counts["received"].get("pose"), counts

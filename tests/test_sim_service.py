@@ -148,8 +148,10 @@ def test_sim_rejects_bad_flags(tmp_path):
     proc.stop()
 
 
+# A whole drawer trial at the wall clock's pace, beside other tests (as the pour's demo in
+# tests/test_e2e_defaults.py): the drawer opens in under 10 s of the user's 40, and the
+# verdict is the scene's report, not a time.
 @pytest.mark.slow
-@pytest.mark.realtime  # a whole drawer trial with the simulator at the wall clock's pace
 def test_demo_with_the_sim_opens_the_drawer(tmp_path):
     """`sctd demo --skill skills/drawer.yaml` on the Pinocchio sim reaches `pull`; a watcher
     on the scene key sees the drawer open."""

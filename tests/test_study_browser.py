@@ -33,13 +33,28 @@ TLX = {"mental": 20, "physical": 10, "temporal": 35, "performance": 15, "effort"
 SUS = [4, 2, 4, 1, 3, 2, 4, 2, 3, 2]
 
 
-@pytest.fixture(scope="module")
-def plan(tmp_path_factory):
+def _plan(tmp_path_factory, practice: int) -> Path:
     path = tmp_path_factory.mktemp("plan") / "plan.yaml"
     r = run_sctd("study", "plan", "--participants", "2", "--condition", "drawer-vf", "--condition", "teleop",
-                 "--task", "drawer", "--practice", "1", "--trials", "1", "--seed", "0", "--out", str(path))
+                 "--task", "drawer", "--practice", str(practice), "--trials", "1", "--seed", "0",
+                 "--out", str(path))
     assert r.returncode == 0, r.stderr
     return path
+
+
+@pytest.fixture(scope="module")
+def plan(tmp_path_factory):
+    """One practice and one measured trial per block."""
+    return _plan(tmp_path_factory, 1)
+
+
+@pytest.fixture(scope="module")
+def measured_only(tmp_path_factory):
+    """One measured trial per block and no practice: four trials in real time for two
+    participants rather than eight. A practice trial is one more trial through the same
+    page (the stopped-trial test runs one; tests/test_study_runner.py walks a plan with
+    practice through the runner's page)."""
+    return _plan(tmp_path_factory, 0)
 
 
 class Runner:
@@ -151,33 +166,33 @@ def rows(folder: Path) -> list[dict]:
     return list(csv.DictReader((folder / "trials.csv").open()))
 
 
-def test_two_participants_run_from_plan_to_report(plan, tmp_path):
+def test_two_participants_run_from_plan_to_report(measured_only, tmp_path):
     data = tmp_path / "study"
     for pid in ("P01", "P02"):
-        runner = Runner(plan, data, pid, tmp_path / f"{pid}.log")
+        runner = Runner(measured_only, data, pid, tmp_path / f"{pid}.log")
         try:
             with open_page(runner.url) as bp:
                 seen = walk(bp.page, runner.hub, _bad_answers_are_shown_and_the_others_kept
                             if pid == "P01" else None)
         finally:
             assert runner.stop() == 0, runner.proc.output()
-        assert seen == ["instructions", "ready", "ready", "questionnaire"] * 2 + ["done"]
+        assert seen == ["instructions", "ready", "questionnaire"] * 2 + ["done"]
         got = rows(data / pid)
-        assert [int(r["step"]) for r in got] == [0, 1, 2, 3] and all(r["aborted"] == "0" for r in got)
+        assert [int(r["step"]) for r in got] == [0, 1] and all(r["aborted"] == "0" for r in got)
         first = "drawer-vf" if pid == "P01" else "teleop"  # the square's two sequences
-        assert got[0]["condition"] == first and [r["practice"] for r in got] == ["1", "0", "1", "0"]
+        assert got[0]["condition"] == first and [r["practice"] for r in got] == ["0", "0"]
         for r in got:
             log = json.loads((data / pid / r["log"]).read_text())
             assert log["step"] == int(r["step"]) and log["device"] == "browser"
             assert (data / pid / log["result"]["mcap"]).stat().st_size > 1000
         answers = json.loads((data / pid / "answers.json").read_text())
         assert [b["nasa_tlx"] for b in answers["blocks"]] == [TLX, TLX]
-        assert "stopped; 4/4 trials recorded, all questionnaires" in runner.proc.output()
+        assert "stopped; 2/2 trials recorded, all questionnaires" in runner.proc.output()
     r = run_sctd("study", "report", str(data), "--json")
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     assert doc["participants"] == ["P01", "P02"]
-    assert doc["progress"]["P01"] == {"done": 4, "total": 4, "aborted": 0}
+    assert doc["progress"]["P01"] == {"done": 2, "total": 2, "aborted": 0}
     table = doc["tables"]["drawer"]
     assert table["drawer-vf"]["trials"] == 2 and table["teleop"]["trials"] == 2
     assert table["teleop"]["sus_score"]["n"] == 2
@@ -235,6 +250,7 @@ def test_a_stopped_trial_is_aborted_and_comes_again_nothing_finished_lost(plan, 
         assert runner.stop() == 0, runner.proc.output()
     got = rows(folder)
     assert got[0]["step"] == "0" and got[0]["aborted"] == "0" and got[0]["log"]  # the finished one, kept
+    assert got[0]["practice"] == "1" and all(r["practice"] == "0" for r in got[1:])
     assert [r["aborted"] for r in got] == ["0", "1", "1", "1"] and got[-1]["step"] == "1"
     assert not (folder / "running.json").exists()
     assert sorted(p.name for p in (folder / "logs").iterdir() if p.is_dir()) == [

@@ -24,11 +24,25 @@ def _plan(tmp_path, participants=2):
     return plan
 
 
-def test_plan_simulate_report(tmp_path):
+def test_plan_a_killed_run_resumed_and_the_report(tmp_path):
+    """One study folder: participant 1's simulated run killed mid-trial (SIGKILL) resumes
+    where it stopped, nothing finished lost or run twice; the run goes on to participant 2;
+    the report reads both."""
     plan = _plan(tmp_path)
     data, out = tmp_path / "study", tmp_path / "report"
+    csv_file = data / "P01" / "trials.csv"
+    run = sctd("study", "run", "--simulated", "1", "--plan", str(plan), "--out", str(data),
+               log=tmp_path / "run.log")
+    try:
+        assert wait_for(lambda: csv_file.exists() and len(csv_file.read_text().splitlines()) >= 3, 120)
+    finally:
+        run.stop(sig=signal.SIGKILL)
     r = run_sctd("study", "run", "--simulated", "2", "--plan", str(plan), "--out", str(data), timeout=240)
     assert r.returncode == 0, r.stderr
+    steps = [int(x["step"]) for x in csv.DictReader(csv_file.open()) if x["aborted"] == "0"]
+    assert sorted(steps) == list(range(6)) and len(set(steps)) == 6
+    answers = json.loads((data / "P01" / "answers.json").read_text())
+    assert len(answers["blocks"]) == 2
     rows = list(csv.DictReader((data / "P02" / "trials.csv").open()))
     assert [int(x["step"]) for x in rows] == list(range(6))
     assert [x["condition"] for x in rows] == ["teleop"] * 3 + ["light_switch-vf"] * 3  # P02: sequence 2
@@ -44,21 +58,3 @@ def test_plan_simulate_report(tmp_path):
     assert all(c["p"] is None or c["note"] for c in doc["comparisons"])  # 2 participants: said, not tested
     assert {p.name for p in out.iterdir()} >= {"report.md", "report.json", "completion_time_s.png"}
     assert "## Task light_switch" in (out / "report.md").read_text()
-
-
-def test_a_killed_run_resumes_where_it_stopped(tmp_path):
-    plan = _plan(tmp_path, participants=2)
-    data = tmp_path / "study"
-    csv_file = data / "P01" / "trials.csv"
-    run = sctd("study", "run", "--simulated", "1", "--plan", str(plan), "--out", str(data),
-               log=tmp_path / "run.log")
-    try:
-        assert wait_for(lambda: csv_file.exists() and len(csv_file.read_text().splitlines()) >= 3, 120)
-    finally:
-        run.stop(sig=signal.SIGKILL)
-    r = run_sctd("study", "run", "--simulated", "1", "--plan", str(plan), "--out", str(data), timeout=240)
-    assert r.returncode == 0, r.stderr
-    steps = [int(x["step"]) for x in csv.DictReader(csv_file.open()) if x["aborted"] == "0"]
-    assert sorted(steps) == list(range(6)) and len(set(steps)) == 6
-    answers = json.loads((data / "P01" / "answers.json").read_text())
-    assert len(answers["blocks"]) == 2

@@ -123,21 +123,6 @@ def test_skills_for_a_task_are_the_shipped_ones_on_its_object():
     assert names == ["drawer-vf.yaml", "drawer.yaml"]
 
 
-@pytest.mark.slow
-def test_sctd_suite_writes_the_table_and_the_figures(tmp_path):
-    run = run_sctd("suite", "--task", "drawer", "--trials", "1", "--jobs", "2", "--out", str(tmp_path),
-                   "--json", timeout=600)
-    assert run.returncode == 0, run.stderr
-    doc = json.loads(run.stdout)
-    assert doc["tasks"] == ["drawer"] and doc["trials"] == 1
-    skills = [r["skill"] for r in doc["rows"]]
-    assert skills == ["drawer-vf", "drawer", "baseline (drawer-vf)", "baseline (drawer)"]
-    assert all(r["trials"] == 1 and r["floor_s"] > 0 for r in doc["rows"])
-    assert (tmp_path / "suite.md").read_text().count("| drawer |") == 4
-    assert (tmp_path / "suite.png").stat().st_size > 10000
-    assert json.loads((tmp_path / "suite.json").read_text())["rows"] == doc["rows"]
-
-
 def test_the_floor_of_a_press_is_its_approach():
     """The light switch's first move is a press: the hand from its start to the switch's
     face (23.5 cm), counted from the clock's 20 cm, at 0.1 m/s; without that clock, the
@@ -181,9 +166,11 @@ def test_a_skill_is_also_judged_on_the_starts_its_baseline_finished_from():
 
 
 @pytest.mark.slow
-def test_sctd_suite_runs_each_user_model_from_foreign_starts(tmp_path):
+def test_sctd_suite_runs_each_user_model_from_foreign_starts_and_writes_its_files(tmp_path):
     """--user-model twice: the same trials under each, side by side (a user column);
-    --starts foreign: every trial from another task's start, which each trial names."""
+    --starts foreign: every trial from another task's start, which each trial names;
+    --out: the table, the figure and the JSON it printed. (The tasks' own starts and a
+    task with two skills are run by tests/test_bench_kernels.py's suites.)"""
     run = run_sctd("suite", "--task", "oven", "--trials", "2", "--jobs", "2", "--starts", "foreign",
                    "--user-model", "plain", "--user-model", "adaptive", "--out", str(tmp_path), "--json",
                    timeout=600)
@@ -197,5 +184,9 @@ def test_sctd_suite_runs_each_user_model_from_foreign_starts(tmp_path):
         for result in doc["results_by_user_model"][model]["oven"]:
             whose = [t["start_of"] for t in result["per_trial"]]
             assert len(whose) == 2 and "oven" not in whose and whose[0] != whose[1], whose
+    assert all(r["trials"] == 2 and r["floor_s"] > 0 for r in doc["rows"])
     md = (tmp_path / "suite.md").read_text()
     assert md.startswith("| task | user | skill |") and md.count("| oven | adaptive |") == 2
+    assert md.count("| oven |") == 4
+    assert (tmp_path / "suite.png").stat().st_size > 10000
+    assert json.loads((tmp_path / "suite.json").read_text())["rows"] == doc["rows"]
