@@ -95,6 +95,33 @@ def test_input_moves_target_and_zero_input_never_does():
     assert all(np.array_equal(r.T_world_target, held) for r in res)
 
 
+
+def test_ticks_that_catch_up_after_a_stall_move_by_the_time_that_passed():
+    """The daemon's ticker runs a few overdue ticks back to back after a stall (5 before
+    it skips). Each steps by the time since the last tick, from an allowance of at most
+    two periods: over the stall and its catch-up burst the target moves at most the
+    speed times the time that passed plus two periods, where a period a tick (the old
+    bound) gave the burst five more steps of 0.1 mm. On a steady clock every tick still
+    steps a whole period."""
+    c = ctl()
+    res = run(c, [[1, 0, 0]] * 50)
+    x = lambda r: float(r.T_world_target[0, 3])  # noqa: E731
+    steps = np.diff([x(r) for r in res[1:]])
+    assert np.allclose(steps, 0.1 * 0.001, rtol=1e-9)  # a period a tick, to the last bits
+    t0, x0 = 0.049, x(res[-1])
+    # a 20 ms stall, then 6 ticks 10 us apart, then on time again
+    times = [t0 + 0.020 + k * 1e-5 for k in range(6)] + [t0 + 0.021 + k * 0.001 for k in range(5)]
+    out = []
+    for k, t in enumerate(times):
+        out.append(c.tick(t, t, inp([1, 0, 0], t, seq=100 + k), state(c.T_world_target, t), obj(t)))
+    burst = x(out[5]) - x0
+    assert burst <= 0.1 * (times[5] - t0 + 2 * 0.001) + 1e-12  # not 6 steps: 0.6 mm
+    assert np.isclose(burst, 0.1 * (0.002 + 5e-5), rtol=1e-6)  # the allowance's two periods, then 5 x 10 us
+    late = np.diff([x(r) for r in out[5:]])
+    assert np.all(late <= 0.1 * np.diff(times[5:]) * (1 + 1e-6) + 1e-15)  # then the time that passed
+    assert x(out[-1]) > x(out[5])  # and it moves on
+
+
 def test_watchdog_stale_input_stops_motion():
     c = ctl()
     run(c, [[1, 0, 0]] * 10)

@@ -200,13 +200,16 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     assert len(jumps) <= rig.status[-1]["counters"]["reseeds"] - reseeds0, jumps
     moved = np.subtract(got[-1]["pose"][:3], first["pose"][:3])
     assert moved[0] > 0.01 and abs(moved[1]) < 1e-9 and abs(moved[2]) < 1e-9
-    # Watchdog (0.1 s at 1 kHz): targets that still follow the last input move on at
-    # most ~100 ticks after it arrived, then the target is frozen. A re-seed (the
-    # measured pose, marked ``seed``, after the robot's state stalled on this loaded
-    # machine) is no step of the input's.
+    # Watchdog (0.1 s): after the last input arrived the target moves on for at most the
+    # input timeout on the real clock, then is frozen. Measured as distance, not ticks:
+    # after a stall the ticker runs a few overdue ticks back to back, which step by the
+    # time that passed (at most two periods' worth more), so ticks may outnumber the
+    # milliseconds while the distance may not. A re-seed (the measured pose, marked
+    # ``seed``, after the robot's state stalled on this loaded machine) is no step of the
+    # input's.
     after = sorted(with_last(), key=lambda m: m["seq"])
-    moving = [b["seq"] for a, b in itertools.pairwise(after) if dist(a, b) > 1e-9 and not b.get("seed")]
-    assert not moving or moving[-1] - after[0]["seq"] <= 101 + 5
+    stepped = sum(dist(a, b) for a, b in itertools.pairwise(after) if not b.get("seed"))
+    assert stepped <= 0.1 * (0.1 + 2 * 0.001) * (1 + 1e-9), stepped
     assert all(dist(m, after[-1]) < 1e-9 for m in after[-200:])
 
 

@@ -178,12 +178,21 @@ class Counters:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "drops"}
 
 
+# Periods of motion a step may take from the time allowance: a tick late by up to one
+# period loses no motion, and ticks run back to back after a stall add at most two.
+STEP_ALLOWANCE = 2.0
+
 class Controller:
     """Skill + safety, one tick at a time.
 
     The target moves only on input, and only within the per-tick bound: ``min(1, |u|)``
     times the maximum speeds times the period, where ``|u|`` is measured on the input
-    axes the active state's mappings read. Steps that would take the target further than
+    axes the active state's mappings read. The period is taken from a time allowance:
+    the time since the last tick is added to it, up to ``STEP_ALLOWANCE`` periods, and a
+    step uses at most a period of it. Ticks that run back to back after a stall (the
+    ticker catches up a few before it skips) so step by the time that passed, not a
+    period each: over any span of ticks the target moves at most the speed times the
+    span plus ``STEP_ALLOWANCE`` periods, on the real clock. Steps that would take the target further than
     ``max_offset`` from the measured pose are refused. Every published target is either
     within that bound of the previous one or, right after a (re-)seed, the measured pose:
     the target is seeded when the first state and object pose arrive, re-seeded when the
@@ -214,6 +223,8 @@ class Controller:
         self._T_obj_target: se3.Flat | None = None  # the target in the object frame
         self._rot: tuple[float, ...] | None = None  # the target's rotation in the object frame
         self._q_world: tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
+        self._allowance = config.period  # s of motion the next steps may use
+        self._last_tick: float | None = None
         self.stuck_detector = StuckDetector(config.stuck_after)
         self._install(skill, now=0.0, keep_state=False, engine=engine)
 
@@ -284,6 +295,10 @@ class Controller:
         """
         cfg = self.config
         u, input_ok, pressed = cmd.u, cmd.ok, cmd.pressed
+        if self._last_tick is not None:
+            self._allowance = min(STEP_ALLOWANCE * cfg.period,
+                                  self._allowance + max(0.0, now - self._last_tick))
+        self._last_tick = now
         state_ok = self._fresh("state", state, now, wall, cfg.state_timeout)
         obj_ok = self._fresh("object", obj, now, wall, cfg.object_timeout)
         held = self._gate(now, state, state_ok, obj_ok, u, cmd)
@@ -414,8 +429,12 @@ class Controller:
         if not mag > 0.0:  # zero (or, fail-closed, NaN): no step
             return False
         mag = min(1.0, mag)
+        # a whole period when the allowance holds one (to the last bits of a clock that
+        # adds periods), else what it holds: a tick that catches up moves as little
+        dt = cfg.period if self._allowance >= cfg.period * (1.0 - 1e-6) else self._allowance
+        self._allowance = max(0.0, self._allowance - dt)
         F_new = limit_step(F_prev, self.engine.command(F_prev, u, cfg.period),
-                           mag * self.v_max * cfg.period, mag * self.w_max * cfg.period)
+                           mag * self.v_max * dt, mag * self.w_max * dt)
         if F_new is F_prev:
             return True
         if grows_offset(F_prev, F_new, F_meas, cfg.max_offset, cfg.max_offset_rotation):
