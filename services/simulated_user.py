@@ -64,6 +64,7 @@ class UserClient:
         self.objects: dict[str, Any] = {}
         self.device = device
         self.rearm: dict[str, Any] = {}  # status.input.rearm: device -> why it must send a zero
+        self.idle_button: str | None = None  # the state the status says the mode button does nothing in
         self.centred = 0  # times the user centred the stick because the status said so
         self._centring = False
         k = self.keys
@@ -123,11 +124,15 @@ class UserClient:
 
     def _on_status(self, sample: zenoh.Sample) -> None:
         try:
-            inp = codec.unpack_map(sample.payload.to_bytes()).get("input")
+            status = codec.unpack_map(sample.payload.to_bytes())
         except codec.DecodeError:
             return
+        inp = status.get("input")
         rearm = inp.get("rearm") if isinstance(inp, dict) else None
         self.rearm = rearm if isinstance(rearm, dict) else {}
+        # what the display shows of the mode button: nothing to switch in the status' state
+        idle = "mode_button" in status and status["mode_button"] is None
+        self.idle_button = status.get("state") if idle else None
 
     def told_to_centre(self, device: str | None = None) -> bool:
         """Whether the newest status says ``device`` (default: this client's) must send
@@ -144,7 +149,7 @@ class UserClient:
                 any(n not in self.objects for n in self.frames):
             return None
         return Observation(time.monotonic(), info["T_world_ee"], dict(self.objects), info["scene"],
-                           info["mode"])
+                           info["mode"], switches=self.idle_button != info["mode"])
 
     def step(self) -> None:
         """Decide and publish one input message (zero until everything is seen)."""

@@ -401,6 +401,23 @@ def test_state_watch_flags_jumps_turns_and_restarts():
     assert not w.observe(2, F(turned), 0.005) and w.since == 0.004
 
 
+def test_the_engine_says_where_the_mode_button_leads_from_the_active_state():
+    """``status.mode_button``: skills/teleop.yaml's button 0 leads from translate to
+    rotate and back, as a press then does; a learned vector-field skill has no button
+    transition, so the mode button leads nowhere in any of its states."""
+    from sctd.skill import SkillEngine
+
+    eng = SkillEngine(load_skill(ROOT / "skills" / "teleop.yaml"))
+    assert eng.state == "translate" and eng.leads_to() == "rotate" and eng.leads_to(3) is None
+    eng.update(se3.flat_from_transform(np.eye(4)), 1.0, pressed={0})
+    assert eng.state == "rotate" and eng.leads_to() == "translate"
+    vf = load_skill(ROOT / "skills" / "pour-vf.yaml")
+    eng = SkillEngine(vf)
+    for s in vf.states:
+        eng.reset(0.0, s.name)
+        assert eng.leads_to() is None, s.name
+
+
 def test_buttons_switch_teleop_modes_and_enable_gates_the_command():
     """skills/teleop.yaml: button 0 toggles translate/rotate (rising edge, counted per
     message by the arbiter); enable (button 1) = 0 makes the command zero."""

@@ -153,7 +153,8 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
     driver.target_seq = 50  # 50 targets in the first half second
     first = status.close_window(ticker, 0.5)
     assert set(first) == {
-        "stamp", "skill", "skill_name", "state", "finished", "stuck", "region", "mode", "rate", "realtime",
+        "stamp", "skill", "skill_name", "state", "finished", "stuck", "region", "mode", "mode_button", "rate",
+        "realtime",
         "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
         "state_age", "robot_fault", "object", "object_age", "objects", "in_seq", "input", "gripper",
@@ -163,6 +164,7 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
                                      "cancelled"}
     assert first["gripper"]["commands"] == 0 and first["gripper"]["cmd"] is None
     assert first["region"] is None  # (the shipped pour states no region)
+    assert first["mode_button"] is None  # (nor a button transition: the mode button does nothing)
     assert (first["targets"], first["target_rate"], first["realtime"]) == (50, 100.0, True)
     assert first["publish_ms"] is None and first["mode"] == "waiting"
     assert stats.next_status == 0.75 and stats.window_targets == 50

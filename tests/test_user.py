@@ -465,6 +465,29 @@ def test_user_does_not_switch_modes_for_a_wish_of_almost_nothing():
     assert not user._wants_switch(5.0, "translate", residual, barely)
 
 
+@pytest.mark.parametrize("switches", [True, False])
+def test_the_user_presses_the_mode_button_only_where_the_display_says_it_switches(switches):
+    """The opening centred over the mug, the bottle to be tilted, in a mode known to
+    give only translation while another known mode tilts: the user lets go and presses
+    the mode button (button 0), unless the display says the button changes nothing in
+    this mode (``status.mode_button`` null: ``Observation.switches``); then it never
+    presses it."""
+    user = SimulatedUser(POUR, 3, PROFILES["steady"], seed=0)
+    translate, rotate = DeviceModel(3), DeviceModel(3)
+    translate.B[:3, :3], rotate.B[3:, :3] = np.eye(3) * 0.1, np.eye(3) * 0.5
+    translate.tried[:] = rotate.tried[:] = True
+    user.models = {"carry": translate, "tilt": rotate}
+    T = _hand_with_tip_at([0.0, 0.0, 0.05])  # the bring step reached: the pour wants a tilt
+    pressed = []
+    for k in range(500):  # 5 s, the hand held where it is
+        obs = Observation(k * 0.01, T, {"mug": MUG, "bottle_tip": T @ T_EE_TIP},
+                          {"readings": {"bottle.poured": 0.0}}, "carry", switches)
+        _u, buttons = user.step(k * 0.01, obs)
+        pressed.append(buttons[0])
+    assert user.desire is not None and user.desire.phase == "pour"
+    assert any(pressed) is switches and (user.switches > 0) is switches
+
+
 def _step_until(user, t0, obs_at, until, steps=60):
     """Step ``user`` every 10 ms from ``t0`` on observations ``obs_at(t)`` until
     ``until(user)`` or ``steps`` corrections; the time it got there (None: never)."""
@@ -596,7 +619,8 @@ def test_the_pour_tips_the_opening_away_from_the_arm_however_the_hand_is_turned(
 def test_the_simulated_user_centres_the_stick_while_the_status_says_its_device_must():
     """The daemon's ``status.input.rearm`` names the user's device (its push went stale
     over a stalled link): the client sends zero until the status no longer names it,
-    counting each time it began to (``centred``). In-process, over loopback."""
+    counting each time it began to (``centred``); and it reads ``status.mode_button``,
+    the state in which the mode button changes nothing. In-process, over loopback."""
     import time
 
     from sctd.wire import Keys, codec
@@ -618,4 +642,10 @@ def test_the_simulated_user_centres_the_stick_while_the_status_says_its_device_m
         assert not client.told_to_centre() and client.centred == 1
         assert wait_for(lambda: status({"pad": "stop"}) or "pad" in client.rearm, 10)
         assert client.told_to_centre() and client.centred == 2
+        # what the display shows of the mode button: nothing to switch in the status' state
+        assert client.idle_button is None
+        pub.put(codec.pack({"stamp": time.time(), "state": "pour", "mode_button": None}))
+        assert wait_for(lambda: client.idle_button == "pour", 10)
+        pub.put(codec.pack({"stamp": time.time(), "state": "translate", "mode_button": "rotate"}))
+        assert wait_for(lambda: client.idle_button is None, 10)
         pub.undeclare()

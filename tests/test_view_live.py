@@ -97,10 +97,11 @@ def test_the_persons_panel_says_the_mode_the_axes_and_why_it_holds(server):
     snap = Snapshot(t=1.0, pose=pose_of(T_ee), objects={"mug": pose_of(T_mug)},
                     target={"pose": pose_of(T_ee), "state": "pour"},
                     status={"mode": "hold", "state": "pour", "stuck": {"state": "pour", "since": 6.2},
-                            "region": {"inside": False, "outside_by": 0.234, "frame": "mug"}})
+                            "region": {"inside": False, "outside_by": 0.234, "frame": "mug"},
+                            "mode_button": None})
     view.draw(snap)
     text = view.person.content
-    assert "mode: <b>pour</b>" in text
+    assert "mode: <b>pour</b> (the mode button does nothing here)" in text
     assert "axis 1: turns about mug +y at 0.35 rad/s" in text and "axis 3: moves tip along mug +z" in text
     assert "held by: tip stays in this box" in text
     assert "the robot's state or the object's pose is stale" in text
@@ -110,6 +111,10 @@ def test_the_persons_panel_says_the_mode_the_axes_and_why_it_holds(server):
     snap.pose = pose_of(T_mug @ se3.transform_from_pose([0.0, 0.0, -0.06, 0.0, 0.0, 0.0, 1.0]))
     view.draw(snap)
     assert "held by" not in view.person.content and "holding" not in view.person.content
+    assert "mode button" not in view.person.content  # a status that does not say
+    snap.status = {"mode": "running", "state": "pour", "mode_button": "approach"}
+    view.draw(snap)
+    assert "mode: <b>pour</b> (the mode button: to approach)" in view.person.content
     assert "region" not in view.person.content
 
 

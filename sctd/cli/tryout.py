@@ -167,6 +167,8 @@ class Trials:
         counters = counters if isinstance(counters, dict) else {}
         rearm = inp.get("rearm")
         self.status = {"state": msg.get("state"), "mode": msg.get("mode"), "skill": msg.get("skill_name"),
+                       # what the mode button does in that state: the state it enters, or None
+                       "mode_button": msg.get("mode_button"),
                        "owner": inp.get("owner"), "input_age": msg.get("input_age"),
                        # why the page's stick must be centred before the arm moves again, or None
                        "rearm": rearm.get("browser") if isinstance(rearm, dict) else None,

@@ -156,6 +156,7 @@ class DaemonStatus:
             "stuck": ctl.stuck(now),
             "region": drv.region(),
             "mode": ctl.mode,
+            "mode_button": ctl.engine.leads_to(),
             "rate": ctl.config.rate,
             "realtime": self.realtime,
             "ticks": ticker.ticks,

@@ -33,7 +33,7 @@ from .. import se3
 from .constraints import ActiveConstraint, StepLimit
 from .gripper import GripperAction
 from .model import Skill
-from .transitions import Transition
+from .transitions import MODE_BUTTON, Button, Transition
 from .workspace import Workspace
 
 Array = NDArray[np.float64]
@@ -134,6 +134,15 @@ class SkillEngine:
     def previous(self) -> str | None:
         """The state the active one was entered from (where escape returns), or None."""
         return self.skill.states[self.history[-1]].name if self.history else None
+
+    def leads_to(self, button: int = MODE_BUTTON) -> str | None:
+        """The state a press of input button ``button`` enters from the active state (its
+        first button transition on that button), or None: the button changes nothing
+        here. What a display tells the person of the mode button."""
+        for t in self._out_of[self.index]:
+            if isinstance(t, Button) and t.button == button:
+                return t.target
+        return None
 
     def reset(self, now: float, state: str | None = None) -> None:
         """Enter ``state`` (default: the start state) at time ``now``; a new path for

@@ -28,6 +28,7 @@ Array = NDArray[np.float64]
 Flat = se3.Flat
 
 COMMON_KEYS = {"from", "to", "type", "margin"}  # allowed in every transition
+MODE_BUTTON = 0  # the input message's mode switch (docs/wire-contract.md), a button transition's default
 HYPERPLANE_SIZE = 0.2  # m: the side of a hyperplane guard as drawn
 HYPERPLANE_ARROW = 0.05  # m: the arrow to the side it fires on
 
@@ -289,12 +290,13 @@ class Button(Transition):
     """Fires when input button ``button`` (its index in the input message) is pressed."""
 
     type: ClassVar[str] = "button"
-    button: int = 0
+    button: int = MODE_BUTTON
 
     @classmethod
     def from_yaml(cls, r: Reader, td: dict, path: str, source: str, target: str) -> Button:
         r.known_keys(td, path, COMMON_KEYS | {"button"})
-        return cls(source=source, target=target, button=r.integer(td.get("button", 0), f"{path}.button", 0))
+        return cls(source=source, target=target,
+                   button=r.integer(td.get("button", MODE_BUTTON), f"{path}.button", 0))
 
     def _parameters(self) -> dict[str, Any]:
         return {"button": self.button}

@@ -197,8 +197,9 @@ def _run(sim: Simulation, driver: TickDriver, task: Task, spec: TaskSpec, seed: 
             scene = sim.scene_outcome()
         if k % every_user == 0:
             limits.look(sim.arm.dynamics.q, t)
-            obs = Observation(t, se3.transform_from_pose(pose), objects, scene, mode)
             eng = drv.engine
+            obs = Observation(t, se3.transform_from_pose(pose), objects, scene, mode,
+                              eng.leads_to() is not None)
             membership = None if eng.last_membership is None else eng.last_membership.tolist()
             if rec.add(obs, u, b, eng.last_scale, membership) is not None:
                 break

@@ -100,7 +100,9 @@ class TrialWatcher:
         if (self.T_world_ee is None or self.mode is None or "t" not in self.scene
                 or any(n not in self.objects for n in self.frames)):
             return None
-        return Observation(self.sim_time(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode)
+        idle = "mode_button" in self.status and self.status["mode_button"] is None  # nothing to switch
+        return Observation(self.sim_time(), self.T_world_ee, dict(self.objects), dict(self.scene), self.mode,
+                           switches=not (idle and self.status.get("state") == self.mode))
 
     def close(self) -> None:
         for sub in self.subs:

@@ -14,7 +14,8 @@ press for while it is that close (within MOVED_ON_WINDOW of the change: the temp
 has moved on, a pour state; an earlier change, far from the sub-goal, is no such cue). Where the
 current mode cannot produce the wanted motion, or nothing of its most wanted part, for
 a while it lets go and tries the mode switch (button 0), as a person who knows the
-device has modes; if pressing it changes nothing, it stops trying. While the hand
+device has modes, unless the display says the button changes nothing in this mode
+(``status.mode_button``); if pressing it changes nothing, it stops trying. While the hand
 presses against a surface (a wall, a button) the hand's motion shows the surface, not
 the stick: the user neither learns from it nor tries the stick out there.
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
@@ -267,12 +268,12 @@ class SimulatedUser:
         self._probes.pop(obs.mode, None)
         u, residual = self._best_effort(model, desire)
         lacking = self._lacking(model, desire)
-        if self._wants_switch(t, obs.mode, max(residual, lacking), desire):
+        if obs.switches and self._wants_switch(t, obs.mode, max(residual, lacking), desire):
             self._switch = _Switch(t, obs.mode)
             self.switches += 1
             self.switch_time += self.profile.switch_time
             return zero, (1, 1, 0)
-        if lacking > LACKING and self.switch_works is not False:
+        if lacking > LACKING and self.switch_works is not False and obs.switches:
             # This mode cannot give what is most wanted: rather than do the rest of the
             # wish (moving the opening off the mug while the bottle should tilt), the user
             # lets go and gets ready to switch.

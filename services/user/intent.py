@@ -35,14 +35,17 @@ Array = NDArray[np.float64]
 @dataclass
 class Observation:
     """What the user sees at time ``t``: the hand and the objects in the world (4x4),
-    the task's progress (the scene's outcome fields, its ``readings`` among them) and the
-    mode the display shows (the skill's active state name)."""
+    the task's progress (the scene's outcome fields, its ``readings`` among them), the
+    mode the display shows (the skill's active state name) and whether it shows that
+    the mode button changes the mode now (``status.mode_button``; True where it says
+    nothing of it)."""
 
     t: float
     T_world_ee: Array
     objects: dict[str, Array]
     scene: dict[str, Any]
     mode: str = ""
+    switches: bool = True
 
 
 @dataclass

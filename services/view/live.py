@@ -277,7 +277,7 @@ class LiveView:
         status = snap.status or {}
         lines = []
         state = (snap.target or {}).get("state") or status.get("state")
-        lines.append(f"mode: <b>{state or '-'}</b>")
+        lines.append(f"mode: <b>{state or '-'}</b>" + mode_button_words(status, state))
         sv, skill = self.skill_view, self.skill
         st = next((s for s in sv.scene.states if s.name == state), None) if sv is not None else None
         if skill is not None and st is not None:
@@ -314,6 +314,16 @@ class LiveView:
         lines += rearm_lines(status)
         lines += goal_lines(status)
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
+
+
+def mode_button_words(status: dict, state: str | None) -> str:
+    """What the mode button does in ``state``, as the status says (``mode_button``: the
+    state a press enters, or null where it changes nothing); nothing when the status
+    speaks of another state or does not say."""
+    if "mode_button" not in status or status.get("state") != state or state is None:
+        return ""
+    to = status["mode_button"]
+    return f" (the mode button: to {to})" if to is not None else " (the mode button does nothing here)"
 
 
 MAX_GOALS = 16  # a set's members drawn at most (the set file's limit)
