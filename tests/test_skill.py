@@ -697,12 +697,14 @@ def test_a_command_that_turns_with_the_hand_tilts_at_one_rate_at_every_tilt():
 
 
 @pytest.mark.parametrize("yields", [True, False])
-def test_a_pull_that_yields_to_the_turn_never_turns_back_the_push_s_own_turn(yields):
+def test_a_pull_that_yields_to_the_turn_leaves_the_turns_about_the_pivot_to_the_push(yields):
     """The demonstrations near a bottle tilted on its sphere were tilted 0.3 rad further
-    (they tilt on while the person tilts back). With ``yields_to_turn`` a push back
-    along the sphere tilts the bottle back at the push's full rate: the neighbour
-    orientation's pull the other way goes; without it (the default) the pull takes its
-    budget off. A push on gets the pull's help either way; zero input turns nothing."""
+    (they tilt on while the person tilts back). With ``yields_to_turn`` the turns about
+    the pivot are the person's: a push back tilts the bottle back at the push's full
+    rate, a push on at its own rate, and a push that also leans sideways tilts and leans
+    the bottle exactly as the mapping alone does; without it (the default) the pull takes
+    its budget off the push back and adds it to the push on. A twist about the bottle's
+    own axis is still corrected. Zero input turns nothing."""
     centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
     a = np.linspace(0.0, 1.75, 71)
     pts = np.array([[0.12 * math.sin(x), 0.0, -0.12 * math.cos(x)] for x in a]) + centre
@@ -717,14 +719,41 @@ def test_a_pull_that_yields_to_the_turn_never_turns_back_the_push_s_own_turn(yie
     eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
     c = eng.skill.states[0].active_constraints[0]
     assert c.yields_to_turn is yields and ("yields_to_turn" in c.to_yaml()) is yields
+    doc["states"]["go"]["active_constraints"] = []
+    free = SkillEngine(load_text(yaml.safe_dump(doc), files))  # the mapping alone
     dt, full, pull = 0.01, 0.1 / 0.12, 0.5  # rad/s: the push along the sphere; the pull's budget
     T = _tilted_on_sphere(centre, pivot, 1.0)
     back = command(eng, T, np.array([-1.0, 0.0, 0.0]), dt)
     assert np.isclose((_tilt_of(back) - 1.0) / dt, -full if yields else -full + pull, rtol=1e-3)
     assert np.linalg.norm((back @ np.append(pivot, 1.0))[:3] - centre) < 1e-12  # the opening stays
     on = command(eng, T, np.array([1.0, 0.0, 0.0]), dt)
-    assert np.isclose((_tilt_of(on) - 1.0) / dt, full + pull, rtol=1e-2)
+    assert np.isclose((_tilt_of(on) - 1.0) / dt, full if yields else full + pull, rtol=1e-2)
+    for u in ([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-0.8, 0.6, 0.0]):
+        alone, got = command(free, T, np.array(u), dt), command(eng, T, np.array(u), dt)
+        # with the key, at most a twist about the bottle's axis (the hand's z) differs
+        rv = se3.rotvec_from_matrix(alone[:3, :3].T @ got[:3, :3])
+        same = bool(np.abs(rv[:2]).max() < 1e-12) and bool(np.allclose(got[:3, 3], alone[:3, 3], atol=1e-12))
+        assert same is yields, u
+    # twisted 0.2 rad about the bottle's axis (the hand's z, through the pivot): corrected
+    # by the pull's budget in a command either way
+    twisted = T @ se3.transform_from_rt(se3.matrix_from_rotvec([0.0, 0.0, 0.2]), np.zeros(3))
+    u = np.array([-1.0, 0.0, 0.0])
+    R = command(free, twisted, u, dt)[:3, :3].T @ command(eng, twisted, u, dt)[:3, :3]
+    assert abs(abs(se3.rotvec_from_matrix(R)[2]) - pull * dt) < 1e-3 * pull * dt if yields else \
+        np.linalg.norm(se3.rotvec_from_matrix(R)) > pull * dt * 0.9
     assert np.array_equal(command(eng, T, np.zeros(3), dt), T)
+
+
+def test_yields_to_turn_needs_a_pivot():
+    """The turns a neighbour orientation leaves to the push are those about its pivot:
+    the key without one is refused where it stands."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    doc = vf_skill_doc("m.json")
+    doc["states"]["go"]["active_constraints"][0]["yields_to_turn"] = True
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    where = r"states\.go\.active_constraints\[0\]\.yields_to_turn"
+    with pytest.raises(SkillError, match=where + ": needs a pivot"):
+        load_text(yaml.safe_dump(doc), files)
 
 
 @given(st.lists(st.floats(-1, 1), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3, max_size=3),

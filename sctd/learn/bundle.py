@@ -266,7 +266,8 @@ def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorField
                                  scale_by="parts" if len(fields) == 1 else "whole",
                                  command_turns_from=turns)
     constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
-                                      max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot)
+                                      max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot,
+                                      yields_to_turn=pivot is not None)
     return State(name=name, input_mappings=(mapping,), active_constraints=(constraint,))
 
 

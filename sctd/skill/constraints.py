@@ -265,6 +265,15 @@ def _rows_of_unit_quaternion(x: float, y: float, z: float, w: float) -> tuple[fl
             2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y))
 
 
+def _yields(r: Reader, cd: dict, path: str) -> bool:
+    """A neighbour orientation's ``yields_to_turn``: it names the turns about its
+    ``pivot``, so it needs one."""
+    yields = r.boolean(cd.get("yields_to_turn", False), f"{path}.yields_to_turn")
+    if yields and cd.get("pivot") is None:
+        raise r.fail(f"{path}.yields_to_turn", "needs a pivot (the point the hand turns about)")
+    return yields
+
+
 @CONSTRAINTS.register
 @dataclass(frozen=True, kw_only=True, eq=False)
 class NeighbourOrientation(ActiveConstraint):
@@ -276,14 +285,15 @@ class NeighbourOrientation(ActiveConstraint):
     position alone (the demonstrations near where the hand is *and* as it is turned).
     Within a command it turns at most ``ws.turn_budget``.
 
-    ``yields_to_turn``: where the push turns the hand about a point of its own (a rigid
-    field's ``pivot``: the task's turn), never against that turn (``ws.turn_axis``):
-    the part of its correction about that axis the other way goes. A pouring sphere
-    tilts a bottle about its opening, and the demonstrations nearest a bottle being
-    tilted back are those of the way in, tilted on further: the person's push back
-    should tilt it back, not be undone by the pull to them. (A turn about a far axis
-    keeps the pull's whole say either way: a door's handle, turned about the hinge, is
-    held as the demonstrators held it.)
+    ``yields_to_turn`` (with ``pivot``): where the push turns the hand about a point of
+    its own (a rigid field's ``pivot``: the task's turn, ``ws.turn_axis``), the turns
+    about that point are the person's: of its correction only the twist about the
+    pivot's own axis (the frame's origin to the pivot) is kept. A pouring sphere tilts
+    a bottle about its opening, and the demonstrations nearest a bottle being tilted
+    back are those of the way in, tilted on further: the person's push back should tilt
+    it back, not be undone by the pull to them, whichever way the push also leans
+    sideways. (A turn about a far axis keeps the pull's whole say: a door's handle,
+    turned about the hinge, is held as the demonstrators held it.)
 
     ``max_turn`` (rad): a frame turned further than this from the neighbours' mean
     orientation keeps its own. The hand was brought in turned another way (from another
@@ -322,7 +332,7 @@ class NeighbourOrientation(ActiveConstraint):
             pivot=None if cd.get("pivot") is None else r.vector(cd["pivot"], f"{path}.pivot", 3),
             rotation_weight=r.number(cd.get("rotation_weight", 0.0), f"{path}.rotation_weight", 0.0, 10.0),
             max_turn=r.number(cd.get("max_turn", MAX_TURN), f"{path}.max_turn", 0.0, math.pi, lo_open=True),
-            yields_to_turn=r.boolean(cd.get("yields_to_turn", False), f"{path}.yields_to_turn"),
+            yields_to_turn=_yields(r, cd, path),
         )
 
     def to_yaml(self) -> dict[str, Any]:
@@ -384,21 +394,21 @@ class NeighbourOrientation(ActiveConstraint):
         angle = 2.0 * math.atan2(vn, cw)
         if angle > self.max_turn:
             return F  # turned another way than every demonstration near: keeps its own
-        turn = ws.turn_axis if self.yields_to_turn else None
-        if turn is not None and vn > 1e-15:
-            # the person's own turn: never against it (the demonstrations near a bottle
-            # tilted back are the way in's, tilted further; the push back wins)
-            ax, ay, az = turn
-            along = (cx * ax + cy * ay + cz * az) / vn
-            if along < 0.0:
-                ex, ey, ez = cx / vn - along * ax, cy / vn - along * ay, cz / vn - along * az
-                en = math.sqrt(ex * ex + ey * ey + ez * ez)
-                angle *= en
-                if angle < 1e-12:
-                    return F
-                h = 0.5 * min(angle, budget)
-                k = math.sin(h) / en
-                return self._turned(F, G, ex * k, ey * k, ez * k, math.cos(h))
+        if self.yields_to_turn and ws.turn_axis is not None and self._pivot3 is not None and vn > 1e-15:
+            # the push turns the hand about the pivot: the turns about it are the person's
+            # (the demonstrations near a bottle tilted back are the way in's, tilted
+            # further); only the twist about the pivot's own axis is corrected
+            px, py, pz = self._pivot3
+            qx, qy, qz = (G[0] * px + G[1] * py + G[2] * pz, G[3] * px + G[4] * py + G[5] * pz,
+                          G[6] * px + G[7] * py + G[8] * pz)
+            qn = math.sqrt(qx * qx + qy * qy + qz * qz)
+            twist = (cx * qx + cy * qy + cz * qz) / (vn * qn)
+            angle *= abs(twist)
+            if angle < 1e-12:
+                return F
+            h = math.copysign(0.5 * min(angle, budget), twist)
+            k = math.sin(h) / qn
+            return self._turned(F, G, qx * k, qy * k, qz * k, math.cos(h))
         if vn > 1e-15 and angle > budget:
             h = 0.5 * budget
             k = math.sin(h) / vn
