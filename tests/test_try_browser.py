@@ -238,6 +238,16 @@ def _drive(tried, page, task_name, condition, inject) -> dict:
     return state(page)["result"]
 
 
+def _failed(result) -> str:
+    """What a trial that did not succeed reports, with the share of real time its
+    simulator kept: below about 0.9 the machine could not run the simulator, the daemon,
+    the browser and the person at full rate (docs/evaluation.md), which shows here as a
+    person who steers late."""
+    entry = json.loads((Path(result["folder"]) / "trial.json").read_text())
+    keep = ("outcome", "reason", "duration_s", "sim_rtf", "phase_s", "mode_switches", "readings")
+    return json.dumps({k: entry.get(k) for k in keep})
+
+
 def _assert_recorded(result, task_name):
     folder = Path(result["folder"])
     entry = json.loads((folder / "trial.json").read_text())
@@ -256,13 +266,17 @@ def _assert_recorded(result, task_name):
 def test_a_gamepad_drives_a_trial_to_success(tried, browser, task_name, condition):
     page = browser.page
 
+    last: list = []
+
     def inject(u, held):
         axes = [_pad_axis(u[0]), -_pad_axis(u[1]), 0.0, -_pad_axis(u[2])]
         pressed = [k for k, b in ((A, held[0]), (RB, held[1]), (B, held[2] if len(held) > 2 else 0)) if b]
-        page.evaluate(SET_PAD, [axes, buttons(*pressed)])
+        if [axes, pressed] != last:  # the pad keeps its reading: a round trip only for a change
+            page.evaluate(SET_PAD, [axes, buttons(*pressed)])
+            last[:] = [axes, pressed]
 
     result = _drive(tried, page, task_name, condition, inject)
-    assert result["outcome"] == "success", result
+    assert result["outcome"] == "success", _failed(result)
     assert "success" in page.inner_text("#result")
     _assert_recorded(result, task_name)
 
@@ -273,5 +287,5 @@ def test_the_keyboard_drives_a_trial_to_success(tried, browser, task_name, condi
     page.evaluate("() => Object.defineProperty(navigator, 'getGamepads', "
                   "{value: () => [], configurable: true})")
     result = _drive(tried, page, task_name, condition, keyboard_injector(page))
-    assert result["outcome"] == "success", result
+    assert result["outcome"] == "success", _failed(result)
     _assert_recorded(result, task_name)
