@@ -29,7 +29,8 @@ teach: setup
 # The tiers (tests/tiers.py): the fast tier is every test not marked slow; it starts no
 # process, and runs on $(JOBS) workers. test-all runs every test that does not need the
 # wall clock to itself on $(JOBS) workers too, a module to a worker (--dist loadscope:
-# a module's shared daemon is started once), and then the tests marked realtime in one
+# a module's shared daemon is started once; the longest modules first, as tests/tiers.py
+# collects them, not xdist's reordering by count), and then the tests marked realtime in one
 # process, one at a time: they compare what runs at the wall clock's pace (a trial, a
 # router restart across hosts), and two of them side by side on this 2-core machine
 # miss deadlines they are there to keep.
@@ -40,7 +41,7 @@ test: setup
 	$(PYTEST) -m "not slow" -n $(JOBS)
 
 test-all: setup
-	$(PYTEST) -m "not realtime" -n $(JOBS) --dist loadscope --durations=15; a=$$?; \
+	$(PYTEST) -m "not realtime" -n $(JOBS) --dist loadscope --no-loadscope-reorder --durations=15; a=$$?; \
 	$(PYTEST) -m realtime -p no:xdist --durations=5; b=$$?; \
 	test $$a -eq 0 -a $$b -eq 0
 

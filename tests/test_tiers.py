@@ -138,3 +138,15 @@ def test_a_missing_extra_skips_naming_it_and_fails_under_ci(pytester, monkeypatc
 def test_every_extra_of_the_package_is_known():
     declared = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     assert set(declared) == set(tiers.EXTRAS)
+
+
+def test_modules_are_collected_longest_first_each_keeping_its_order():
+    """``make test-all`` hands modules to its workers in the order collected: the longest
+    by ``tests/data/module_seconds.json`` first, one not listed after them."""
+    from types import SimpleNamespace
+
+    ids = ["a.py::t1", "a.py::t2", "b.py::t1", "c.py::t1", "c.py::t2", "d.py::t1"]
+    items = [SimpleNamespace(nodeid=i) for i in ids]
+    tiers.longest_first(items, {"c.py": 30.0, "a.py": 5.0, "d.py": 5.0})  # type: ignore[arg-type]
+    assert [i.nodeid for i in items] == ["c.py::t1", "c.py::t2", "a.py::t1", "a.py::t2", "d.py::t1",
+                                         "b.py::t1"]

@@ -15,9 +15,12 @@ made by a process (``ip netns``), so it is caught the same way.
 from __future__ import annotations
 
 import importlib
+import json
 import os
 import re
+from collections import defaultdict
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -123,9 +126,52 @@ class _Guard:
         return started
 
 
+# Seconds each test module took (setup, call and teardown of its tests summed), longest
+# first: ``make test-all`` hands whole modules to its workers (``--dist loadscope``), and
+# a long module started last keeps one worker busy while the other has nothing left. The
+# modules are collected longest first, so the short ones fill in at the end. Recorded by
+# a run on workers with ``SCTD_RECORD_MODULE_SECONDS=1`` (``SCTD_RECORD_MODULE_SECONDS=1
+# make test-all`` records its first tier); a module missing from it runs after those
+# listed, and a stale figure only orders the run less well.
+MODULE_SECONDS = Path(__file__).resolve().parent / "data" / "module_seconds.json"
+
+
+def module_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+def longest_first(items: list[pytest.Item], seconds: dict[str, float]) -> None:
+    """Sort ``items`` module by module, the modules by ``seconds`` (longest first, then
+    as collected); a module's own tests keep their order."""
+    first: dict[str, int] = {}
+    for i, item in enumerate(items):
+        first.setdefault(module_of(item.nodeid), i)
+    items.sort(key=lambda it: (-seconds.get(module_of(it.nodeid), 0.0), first[module_of(it.nodeid)]))
+
+
 class Tiers:
     def __init__(self) -> None:
         self.guard = _Guard()
+        self.seconds: defaultdict[str, float] = defaultdict(float)
+
+    def pytest_collection_modifyitems(self, config: pytest.Config, items: list[pytest.Item]) -> None:
+        if MODULE_SECONDS.exists():
+            longest_first(items, json.loads(MODULE_SECONDS.read_text()))
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        self.seconds[module_of(report.nodeid)] += report.duration
+
+    def pytest_sessionfinish(self, session: pytest.Session) -> None:
+        # Written by the process that saw every report of a run on workers (not a worker),
+        # for a run of this repository's suite (not a pytester run inside it).
+        config = session.config
+        if (os.environ.get("SCTD_RECORD_MODULE_SECONDS") and not hasattr(config, "workerinput")
+                and getattr(config.option, "dist", "no") != "no"
+                and config.rootpath == MODULE_SECONDS.parents[2] and self.seconds):
+            old = json.loads(MODULE_SECONDS.read_text()) if MODULE_SECONDS.exists() else {}
+            new = {**old, **{m: round(s, 1) for m, s in self.seconds.items()}}
+            MODULE_SECONDS.write_text(json.dumps(dict(sorted(new.items(), key=lambda kv: -kv[1])), indent=0)
+                                      + "\n")
 
     # A test (or a test module) that needs an optional extra which is not installed is
     # skipped with the extra named. Under CI (``CI`` set) every extra is installed, and the
