@@ -56,6 +56,9 @@ LACKING = 0.9  # a mode that leaves this much of the most wanted part undone can
 SMALL_WISH = 0.2  # a wish this small (a share of full speed) is no reason to switch modes
 REPROBE_AFTER = 2.0  # s without getting closer before the user tries the stick out again
 MOVED_ON_WINDOW = 0.5  # s after an unasked mode change in which being close enough ends the sub-goal
+STOPPED = 0.2  # the motion along the wish this small a share of what the model promised: a stop
+HELD_ON = 0.9  # cosine between two pairs' pushes that counts as the same push held on
+NOTICEABLE = 0.05  # a promised motion a person expects to see (as the intent weighs it: 5 mm/s, 0.03 rad/s)
 
 
 def twist_between(T_a: Array, T_b: Array, dt: float) -> Array:
@@ -103,6 +106,7 @@ class SimulatedUser:
         self.models: dict[str, Device] = {m: copy.deepcopy(d) for m, d in (known or {}).items()}
         self._seen: deque[Observation] = deque()
         self._history: deque[tuple[float, Array]] = deque()  # (time, output) as applied
+        self._last_push = np.zeros(n_axes)  # the stick held over the last pair learned from
         self._perceived: Observation | None = None
         self._next = 0.0
         self._out = np.zeros(n_axes)
@@ -204,21 +208,54 @@ class SimulatedUser:
 
     def _learn(self, now: Observation) -> None:
         """Update the current mode's model with how the hand moved since the last
-        correction, and the input that was held meanwhile."""
+        correction, and the input that was held meanwhile; not while something holds
+        the hand (a surface it presses, a stop it is pushed against: :meth:`_stopped`)."""
         last, self._perceived = self._perceived, now
-        if last is None or last.mode != now.mode or self._switch is not None:
+        if last is None or now.t - last.t < 1e-3:
+            return
+        held, before = self._applied(last.t, now.t), self._last_push
+        self._last_push = held
+        if last.mode != now.mode or self._switch is not None:
+            self._last_push = np.zeros(self.n)
             return
         if self.intent.touching(last) or self.intent.touching(now):  # (the surface held the hand)
             return
-        dt = now.t - last.t
-        if dt < 1e-3:
-            return
         model = self.models.setdefault(now.mode, self._new_model())
-        twist = twist_between(last.T_world_ee, now.T_world_ee, dt)
+        twist = twist_between(last.T_world_ee, now.T_world_ee, now.t - last.t)
+        if self._stopped(model, now.mode, before, held, twist):
+            return
         if isinstance(model, DelayedDeviceModel):
             model.update([self._applied(last.t - lag, now.t - lag) for lag in model.lags], twist)
         else:
-            model.update(self._applied(last.t, now.t), twist)
+            model.update(held, twist)
+
+    def _stopped(self, model: Device, mode: str, before: Array, u: Array, twist: Array) -> bool:
+        """Whether the hand did not go (almost) at all the way the person wished it to, though
+        their model of the mode promised it would, under a push held on from the pair
+        before (the same direction): the skill stops it there (the bottle tilted as far as
+        it goes, while the stick's other axis slides it along that limit; a wall of its
+        limits), which says nothing of what the stick does. Both are measured along the
+        wish the push was chosen for, weighed as the intent weighs it (the motion of the
+        frame of its step). A person pushing against a stop does not conclude the stick
+        stopped working; learning from it would wear down what the model knows of that
+        axis with every correction (its forgetting), until bringing the hand back from the
+        stop is asked of an axis the model no longer trusts. A hand that went the other
+        way is a model that is wrong, and is learned from. When the stick really stopped
+        doing anything, the intent stops getting closer and the person tries the stick out
+        again (:meth:`_no_progress`), and learns from those pushes: while a mode is being
+        tried out, or not known, everything is learned from."""
+        d = self.desire
+        if d is None or not model.known or self._probes.get(mode):
+            return False
+        nu, nb = float(np.linalg.norm(u)), float(np.linalg.norm(before))
+        if nu < 1e-9 or nb < 1e-9 or float(u @ before) < HELD_ON * nu * nb:
+            return False
+        wish = d.W @ d.twist
+        size = float(np.linalg.norm(wish))
+        if size < 1e-9:
+            return False
+        promised = float(wish @ (d.W @ model.predict(u))) / size
+        return promised > NOTICEABLE and abs(float(wish @ (d.W @ twist)) / size) < STOPPED * promised
 
     def _decide(self, t: float, obs: Observation) -> tuple[Array, tuple[int, int, int]]:
         zero = np.zeros(self.n)
