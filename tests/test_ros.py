@@ -279,7 +279,16 @@ def test_joy_moves_the_target_only_with_enable_held_and_bad_joy_is_counted(ros_d
     # zero-start: the deadman pressed with the stick still deflected moves nothing ...
     side.drive([0.8, 0, 0, 0, 0, 0], held, 0.3)
     assert np.allclose(rig.last()["pose"][:3], start[:3], atol=1e-9)
-    side.drive([0.0, 0, 0, 0, 0, 0], held, 0.05)  # ... until the stick has been centred
+    # ... until the stick has been centred: centred until a status says the device no
+    # longer has to (a tick sees only the newest Joy, and on a busy machine the daemon's
+    # ticks may miss a fixed 50 ms of zeros altogether)
+    seen = len(rig.status)
+
+    def centred() -> bool:
+        side.drive([0.0, 0, 0, 0, 0, 0], held, 0.05)
+        return any("input" in s and not s["input"]["rearm"] for s in list(rig.status)[seen:])
+
+    assert wait_for(centred, 20), rig.status[-1]
     side.drive([0.8, 0, 0, 0, 0, 0], held, 1.0)
     assert wait_for(lambda: rig.last()["pose"][0] - start[0] > 0.01, 20), (rig.last(), start)
     moved = np.subtract(rig.last()["pose"][:3], start[:3])
