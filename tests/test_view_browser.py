@@ -264,17 +264,30 @@ class Recording:
 
 
 def _drive(session, keys, stop, u=(-0.6, 0.0, 0.0)):
-    """Push the stick with the deadman held at 50 Hz until ``stop`` (a person's input)."""
+    """Push the stick with the deadman held at 50 Hz until ``stop`` (a person's input),
+    centring it while the daemon's status says this device must send a zero first (as a
+    person reading the display does: on a busy machine this thread can fall silent for
+    longer than the daemon lets a push go stale, and the daemon then ignores the push
+    until it sees a zero)."""
     import time
 
     from sctd.wire import codec
 
+    rearm: dict = {}
+
+    def on_status(sample):
+        status = codec.unpack_map(sample.payload.to_bytes())
+        inp = status.get("input")
+        rearm["test"] = isinstance(inp, dict) and "test" in (inp.get("rearm") or {})
+
+    sub = session.declare_subscriber(keys.status, on_status)
     pub = session.declare_publisher(keys.input("test"))
     seq = 0
     while not stop.is_set():
         seq += 1
-        pub.put(codec.encode_input(seq, time.time(), list(u), [0, 1, 0]))
+        pub.put(codec.encode_input(seq, time.time(), [0.0] * 3 if rearm.get("test") else list(u), [0, 1, 0]))
         stop.wait(0.02)
+    sub.undeclare()
     for _ in range(3):
         seq += 1
         pub.put(codec.encode_input(seq, time.time(), [0.0, 0.0, 0.0], [0, 0, 0]))
