@@ -17,7 +17,9 @@ a while it lets go and tries the mode switch (button 0), as a person who knows t
 device has modes, unless the display says the button changes nothing in this mode
 (``status.mode_button``); if pressing it changes nothing, it stops trying. While the hand
 presses against a surface (a wall, a button) the hand's motion shows the surface, not
-the stick: the user neither learns from it nor tries the stick out there.
+the stick: the user neither learns from it nor tries the stick out there. Nor does it
+learn from a push held on against a stop of the skill's (the hand not going the way it
+wishes though its model promised it would: :meth:`SimulatedUser._stopped`).
 Its limits (:mod:`.human`): it acts on what it saw a reaction delay ago, changes the
 stick only every update period, its deflections are noisy and never smaller than its
 dead zone, and a mode switch costs it time with the stick released.
