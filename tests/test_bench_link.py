@@ -5,9 +5,22 @@ arguments refused before anything starts. (One point end to end through the clus
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
-from sctd.bench.link import BASELINE, POINTS, format_table, select_points, spill_of, stops_helping, summarise
+from sctd.bench.link import (
+    BASELINE,
+    POINTS,
+    Record,
+    format_table,
+    pending,
+    run_link_bench,
+    select_points,
+    spill_of,
+    stops_helping,
+    summarise,
+)
 from sctd.bench.linktrial import Wander, driven
 from sctd.cli.main import main
 
@@ -94,3 +107,87 @@ def test_bad_arguments_exit_2_before_anything_starts(capsys):
     assert main(["bench", "link", "--task", "no-such-task"]) == 2
     assert main(["bench", "link", "--trials", "0"]) == 2
     assert "--trials: at least 1" in capsys.readouterr().err
+
+
+def _recorded(point, condition, seed, outcome="success", skill="pour"):
+    return {"task": "pour", "point": point, "condition": condition, "skill": skill, "seed": seed,
+            "outcome": outcome, "reason": "", "time_s": 15.0, "readings": {}, "sim_rtf": 1.0,
+            "wander_m": 0.001}
+
+
+def test_a_record_keeps_each_trial_as_it_ends_and_a_new_run_skips_them(tmp_path):
+    """A sweep of hours stopped after any trial is taken up where it stopped: the file
+    has every trial that ended, a new :class:`Record` of it reads them back, and
+    :func:`pending` leaves exactly those out, in the sweep's order."""
+    path = tmp_path / "sweep.jsonl"
+    first = Record(path)
+    conditions = [("assisted", "/x/pour.yaml"), (BASELINE, "/x/teleop-pour.yaml")]
+    points = tuple(p for p in POINTS if p.name in ("clean", "robot-stall-2"))
+    todo = pending("pour", points, conditions, 2, 5, first)
+    assert [(p.name, c, s) for p, c, _, s in todo] == [
+        ("clean", "assisted", 5), ("clean", "assisted", 6), ("clean", BASELINE, 5), ("clean", BASELINE, 6),
+        ("robot-stall-2", "assisted", 5), ("robot-stall-2", "assisted", 6),
+        ("robot-stall-2", BASELINE, 5), ("robot-stall-2", BASELINE, 6)]
+    for p, c, _, s in todo[:3]:  # three trials ended, then the sweep was killed
+        first.add(_recorded(p.name, c, s, skill="pour" if c == "assisted" else "teleop-pour"))
+    assert len(path.read_text().splitlines()) == 3
+    again = Record(path)
+    again.check("pour", conditions)
+    left = pending("pour", points, conditions, 2, 5, again)
+    assert left == todo[3:]
+    assert again.get(("pour", "clean", BASELINE, 5))["outcome"] == "success"
+    # a bigger sweep over the same file runs only what is new
+    assert len(pending("pour", points, conditions, 3, 5, again)) == 12 - 3
+
+
+def test_a_record_of_another_skill_or_not_of_trials_is_refused_naming_the_line(tmp_path):
+    import json
+
+    path = tmp_path / "sweep.jsonl"
+    path.write_text(json.dumps(_recorded("clean", "assisted", 0, skill="pour-vf")) + "\n")
+    with pytest.raises(ValueError, match=r"pour assisted was recorded with the skill 'pour-vf', this run's "
+                                         r"is 'pour': give another --record file"):
+        Record(path).check("pour", [("assisted", "/skills/pour.yaml")])
+    Record(path).check("drawer", [("assisted", "/skills/drawer.yaml")])  # another task's trials: no matter
+    path.write_text(json.dumps(_recorded("clean", "assisted", 0)) + "\n{\"task\": \"pour\"}\n")
+    with pytest.raises(ValueError, match=r"sweep.jsonl: line 2: not a trial of sctd bench link"):
+        Record(path)
+    path.write_text("\n" + json.dumps(_recorded("clean", "assisted", 0))[:-4] + "\n")
+    with pytest.raises(ValueError, match=r"sweep.jsonl: line 2: not JSON"):
+        Record(path)
+    path.write_text(json.dumps({**_recorded("clean", "assisted", 0), "seed": "0"}) + "\n")
+    with pytest.raises(ValueError, match=r"line 1: seed must be an integer, got '0'"):
+        Record(path)
+
+
+def test_a_sweep_whose_trials_are_all_recorded_starts_nothing_and_reports_them(tmp_path, monkeypatch):
+    """Every trial of the selection in the record: no cluster is made (a Cluster would
+    need root and namespaces), and the table is the record's, in the sweep's order."""
+    import sctd.bench.link as link
+    from sctd.task import find_task
+
+    def no_cluster(*a, **k):
+        raise AssertionError("a cluster was started for trials the record has")
+
+    monkeypatch.setattr(link, "Cluster", no_cluster)
+    task = find_task("pour")
+    conditions = link.conditions_of(task, None, True, tmp_path / "skills")
+    record = Record(tmp_path / "sweep.jsonl")
+    for point in ("robot-delay-5", "clean"):  # recorded out of the sweep's order
+        for cond, sk in conditions:
+            for seed in (0, 1):
+                record.add(_recorded(point, cond, seed, outcome="failure" if seed else "success",
+                                     skill=Path(sk).stem))
+    points = tuple(p for p in POINTS if p.name in ("clean", "robot-delay-5"))
+    r = run_link_bench([task], None, points, 2, 0, tmp_path, True, Record(tmp_path / "sweep.jsonl"))
+    assert r["recorded_before"] == 8 and len(r["trials"]) == 8
+    assert [(row["point"], row["condition"], row["successes"], row["trials"]) for row in r["rows"]] == [
+        ("clean", "assisted", 1, 2), ("clean", BASELINE, 1, 2),
+        ("robot-delay-5", "assisted", 1, 2), ("robot-delay-5", BASELINE, 1, 2)]
+
+
+def test_a_bad_record_exits_2_before_anything_starts(tmp_path, capsys):
+    bad = tmp_path / "r.jsonl"
+    bad.write_text("[1, 2]\n")
+    assert main(["bench", "link", "--record", str(bad)]) == 2
+    assert "r.jsonl: line 1: not a trial of sctd bench link" in capsys.readouterr().err

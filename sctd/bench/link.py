@@ -176,6 +176,81 @@ def format_table(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+# -- the record: a sweep of hours, taken up where it stopped ---------------------------------
+
+RECORD_KEYS = ("task", "point", "condition", "skill", "seed", "outcome")
+
+
+def trial_key(t: dict[str, Any]) -> tuple[str, str, str, int]:
+    """What names a trial in a sweep: its task, point, condition and seed."""
+    return (t["task"], t["point"], t["condition"], int(t["seed"]))
+
+
+class Record:
+    """The trials of a sweep as JSON lines in a file (``--record``), one appended and
+    flushed to the disk as each trial ends, so that a sweep stopped after any trial
+    (killed, the machine needed) is taken up again where it stopped: the trials already
+    in the file are not run again and count in the table as if just run.
+
+    A line that is not a trial, or a trial of the same task, point, condition and seed
+    recorded with another skill than this run's, is refused (:class:`ValueError` naming
+    the file, the line and what is wrong) before anything starts."""
+
+    def __init__(self, path: Path | None):
+        self.path = path
+        self.trials: dict[tuple[str, str, str, int], dict[str, Any]] = {}
+        if path is not None and path.exists():
+            for n, line in enumerate(path.read_text().splitlines(), 1):
+                if line.strip():
+                    t = self._read(line, f"{path}: line {n}")
+                    self.trials[trial_key(t)] = t
+
+    @staticmethod
+    def _read(line: str, where: str) -> dict[str, Any]:
+        import json
+
+        try:
+            t = json.loads(line)
+        except ValueError as e:
+            raise ValueError(f"{where}: not JSON ({e})") from None
+        if not isinstance(t, dict) or any(k not in t for k in RECORD_KEYS):
+            raise ValueError(f"{where}: not a trial of sctd bench link (a map with {', '.join(RECORD_KEYS)})")
+        if not isinstance(t["seed"], int) or isinstance(t["seed"], bool):
+            raise ValueError(f"{where}: seed must be an integer, got {t['seed']!r}")
+        return t
+
+    def check(self, task: str, conditions: list[tuple[str, str]]) -> None:
+        """Refuse a file whose trials of ``task`` ran another skill in a condition."""
+        names = {c: Path(sk).stem for c, sk in conditions}
+        for (tk, _, cond, _), t in self.trials.items():
+            if tk == task and cond in names and t["skill"] != names[cond]:
+                raise ValueError(f"{self.path}: {task} {cond} was recorded with the skill {t['skill']!r}, "
+                                 f"this run's is {names[cond]!r}: give another --record file")
+
+    def get(self, key: tuple[str, str, str, int]) -> dict[str, Any] | None:
+        return self.trials.get(key)
+
+    def add(self, trial: dict[str, Any]) -> None:
+        import json
+        import os
+
+        self.trials[trial_key(trial)] = trial
+        if self.path is None:
+            return
+        with self.path.open("a") as f:
+            f.write(json.dumps(trial) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def pending(task: str, points: tuple[Point, ...], conditions: list[tuple[str, str]], trials: int, seed: int,
+            record: Record) -> list[tuple[Point, str, str, int]]:
+    """The (point, condition, skill file, seed) trials of ``task`` that ``record`` does not
+    have yet, in the sweep's order."""
+    return [(p, cond, sk, seed + k) for p in points for cond, sk in conditions for k in range(trials)
+            if record.get((task, p.name, cond, seed + k)) is None]
+
+
 # -- the trials, through the cluster -------------------------------------------------------
 
 def _set_point(links: dict[str, FaultedLink], point: Point) -> None:
@@ -267,50 +342,59 @@ def conditions_of(task: Task, skill: str | None, baseline: bool, workdir: Path) 
     return [("assisted", str(got[0].path))] + [(BASELINE, str(e.path)) for e in got[1:]]
 
 
-def _sweep_cluster(task: Task, points: tuple[Point, ...], conditions: list[tuple[str, str]], trials: int,
-                   seed: int, logdir: Path, udp: bool) -> list[dict[str, Any]]:
-    """``points`` of ``task`` on one cluster: with ``udp`` a plain one whose input host's
-    link runs over UDP, else the secured one (mutual TLS, the roles policy)."""
-    out: list[dict[str, Any]] = []
+def _sweep_cluster(task: Task, todo: list[tuple[Point, str, str, int]], logdir: Path, udp: bool,
+                   record: Record) -> None:
+    """The trials ``todo`` of ``task`` on one cluster, each added to ``record`` as it ends:
+    with ``udp`` a plain cluster whose input host's link runs over UDP, else the secured
+    one (mutual TLS, the roles policy)."""
     cluster = Cluster(logdir, task=task, secure=False, udp=("input",)) if udp else Cluster(logdir, task=task)
     with cluster as c:
         c.start_router()
         links = {"input": c.fault("input", "router", LinkFault()),
                  "robot": c.fault("robot", "router", LinkFault())}
         try:
-            for point in points:
-                for condition, sk in conditions:
-                    for k in range(trials):
-                        r = run_trial(c, links, point, sk, seed + k)
-                        out.append({"task": task.name, "point": point.name, "condition": condition, **r})
-                        print(f"sctd bench link: {task.name} {point.name} {condition} seed {seed + k}: "
-                              f"{r['outcome']} ({r['reason']}), {r['time_s']} s", file=sys.stderr, flush=True)
+            for point, condition, sk, seed in todo:
+                r = run_trial(c, links, point, sk, seed)
+                record.add({"task": task.name, "point": point.name, "condition": condition,
+                            "skill": Path(sk).stem, **r})
+                print(f"sctd bench link: {task.name} {point.name} {condition} seed {seed}: "
+                      f"{r['outcome']} ({r['reason']}), {r['time_s']} s", file=sys.stderr, flush=True)
         finally:
             c.stop_router()
-    return out
 
 
 def run_link_bench(tasks: list[Task], skill: str | None, points: tuple[Point, ...], trials: int, seed: int,
-                   logdir: Path, baseline: bool = True) -> dict[str, Any]:
-    """The sweep (module doc); progress on stderr, a line per trial."""
+                   logdir: Path, baseline: bool = True, record: Record | None = None) -> dict[str, Any]:
+    """The sweep (module doc); progress on stderr, a line per trial. With ``record``, the
+    trials it holds are not run again (:class:`Record`)."""
+    record = Record(None) if record is None else record
     out: list[dict[str, Any]] = []
-    began = time.monotonic()
+    began, reused = time.monotonic(), 0
     for task in tasks:
         conditions = conditions_of(task, skill, baseline, logdir / f"{task.name}-skills")
+        try:
+            record.check(task.name, conditions)
+        except ValueError as e:
+            raise RuntimeError(str(e)) from None
         for udp in (False, True):
             these = tuple(p for p in points if p.udp == udp)
-            if these:
-                out += _sweep_cluster(task, these, conditions, trials, seed,
-                                      logdir / f"{task.name}{'-udp' if udp else ''}", udp)
+            todo = pending(task.name, these, conditions, trials, seed, record)
+            reused += len(these) * len(conditions) * trials - len(todo)
+            if todo:
+                _sweep_cluster(task, todo, logdir / f"{task.name}{'-udp' if udp else ''}", udp, record)
+            out += [t for p in these for cond, _ in conditions for k in range(trials)
+                    if (t := record.get((task.name, p.name, cond, seed + k))) is not None]
     rows = summarise(out)
     return {"trials": out, "rows": rows, "stops_helping": stops_helping(rows),
             "points": [p.name for p in points], "wall_s": round(time.monotonic() - began, 1),
-            "stall_at_s": STALL_AT}
+            "stall_at_s": STALL_AT, "recorded_before": reused}
 
 
 def print_report(r: dict[str, Any]) -> None:
-    print(f"sctd bench link: {len(r['trials'])} real-time trials in {r['wall_s']:.0f} s through the "
-          "namespaced cluster; wander: the hand's worst unintended motion (docs/multihost.md)")
+    before = r.get("recorded_before", 0)
+    print(f"sctd bench link: {len(r['trials'])} real-time trials ({len(r['trials']) - before} run now in "
+          f"{r['wall_s']:.0f} s, {before} from the record) through the namespaced cluster; wander: the "
+          "hand's worst unintended motion (docs/multihost.md)")
     for line in format_table(r["rows"]):
         print("  " + line)
     for task, kinds in r["stops_helping"].items():
@@ -331,6 +415,9 @@ def add_bench_link_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--points", default=None, help="comma-separated points of the sweep (default all: "
                                                   + ", ".join(p.name for p in POINTS) + ")")
     p.add_argument("--no-baseline", action="store_true", help="only the assisted condition")
+    p.add_argument("--record", metavar="FILE.jsonl",
+                   help="append each trial to this file as it ends, and run none it already has: a "
+                        "sweep stopped at any trial is taken up again with the same flags")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
@@ -342,10 +429,12 @@ def main_bench_link(args: argparse.Namespace) -> int:
     try:
         points = select_points(args.points)
         tasks = [find_task(t) for t in (args.task or [bl.tilt, bl.pull])]
-    except ValueError as e:  # a bad --points, or a --task that is no task (TaskError)
+        record = Record(None if args.record is None else Path(args.record))
+    except ValueError as e:  # a bad --points, a --task that is no task (TaskError), a bad --record
         return fail("bench link", str(e), EXIT_USAGE)
     if args.trials < 1:
         return fail("bench link", "--trials: at least 1", EXIT_USAGE)
     return run_and_report("link", args, lambda logdir: run_link_bench(
-        tasks, args.skill, points, args.trials, args.seed, logdir, not args.no_baseline), print_report)
+        tasks, args.skill, points, args.trials, args.seed, logdir, not args.no_baseline, record),
+        print_report)
 
