@@ -55,8 +55,6 @@ def test_hosts_clean_up_everything_after_an_exception(tmp_path):
     assert sleeper.p.poll() is not None
     assert subprocess.run(["ip", "link", "show", "br0"], capture_output=True).returncode != 0
 
-MAX_SPILL = 0.05  # of the bottle: a stream that mostly missed the mug still fails
-
 
 def _logs(c: Cluster) -> str:
     return "\n".join(f"--- {p.log_path.name}\n{p.output()[-3000:]}" for p in c.hosts._procs)
@@ -85,11 +83,10 @@ def test_pour_completes_across_hosts(cluster):
     assert wait_for(lambda: any(r["msg"].get("done") for r in c.seen(c.keys.scene)), 10), \
         f"the user's report {report}\nthe last scene {_brief(c.last(c.keys.scene))}\n{_logs(c)}"
     verdict = [r["msg"] for r in c.seen(c.keys.scene) if r["msg"].get("done")][-1]
-    # ... with at most a few percent spilled. A pour without a drop is what the lockstep
-    # outcomes and sctd eval judge over many trials; through a router with TLS on a
-    # starved CI machine (337 of 20,000 cycles given up once) one run lost some at the
-    # rim, and the hosts are what this test is about.
-    assert verdict.get("spilled_amount", 1.0) <= MAX_SPILL, \
+    # ... a success by the task's rules: not a drop spilled, not the bottle emptied. (A
+    # spill of a few percent here once came from the simulated arm's controller at the
+    # wrist's singularity, not from the link: sim/controller.py says why and how.)
+    assert verdict.get("success") and verdict.get("spilled_amount") == 0.0, \
         f"the user's report {report}\nthe verdict {_brief({'msg': verdict})}\n{_logs(c)}"
     assert all(p.running() for p in c.procs.values()), _logs(c)
 

@@ -19,7 +19,6 @@ from tests.tiers import needs
 pytestmark = [pytest.mark.slow, pytest.mark.realtime]  # processes in a namespace, at the wall clock's pace
 
 EP = "tcp/127.0.0.1:7447"  # inside the test's own namespace: nothing else is there
-MAX_SPILL = 0.05  # of the bottle: a stream that mostly missed the mug still fails
 # The Joy of the test's joystick: axes are u, buttons [mode, enable, escape] (docs/input.md)
 JOY_MAP = {"version": 1, "device": "test-joy",
            "axes": [{"source": 0}, {"source": 1}, {"source": 2}],
@@ -90,12 +89,12 @@ def test_the_pour_completes_with_a_ros2_arm_perception_and_joystick(host, tmp_pa
     bridge.stop()
     seen = last_json(side.output())
     scene = seen["scene"]
-    # The simulator's own verdict: poured, and stopped pouring. A pour without a drop
-    # spilled is what the lockstep outcomes and sctd eval judge, over many trials; through
-    # this loop (DDS and two more processes each way, on a 2-core machine) one run in ten
-    # or so loses a few percent at the rim, and the loop is what this test is about: it
-    # bounds the spill rather than demanding none.
-    assert scene is not None and scene.get("done") and scene.get("spilled_amount", 1.0) <= MAX_SPILL, \
+    # The simulator's own verdict: a success by the task's rules, poured and stopped
+    # pouring without a drop spilled and without emptying the bottle. (Through this loop
+    # one run in ten or so once lost a few percent at the rim: the simulated arm's
+    # controller swung the wrist at its singularity, sim/controller.py says how; the
+    # loop was not the cause.)
+    assert scene is not None and scene.get("success") and scene.get("spilled_amount") == 0.0, \
         {k: scene.get(k) for k in ("done", "success", "poured", "spilled_amount", "radial", "tilt",
                                    "skipped", "overruns", "behind_s", "target_rejected", "cycle_ms")}
     # what RViz shows: the pour's states, one array at a time, as the daemon went through them
