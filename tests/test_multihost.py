@@ -7,6 +7,7 @@ Needs root (``ip netns add``). Without it the tests skip and say why, except in 
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import time
@@ -54,6 +55,31 @@ def test_hosts_clean_up_everything_after_an_exception(tmp_path):
     assert hosts.leftovers() == []
     assert sleeper.p.poll() is not None
     assert subprocess.run(["ip", "link", "show", "br0"], capture_output=True).returncode != 0
+
+
+def test_a_log_folder_used_before_gives_each_program_and_cluster_only_its_own(tmp_path):
+    """A resumed sweep (``sctd bench link --record``) starts its clusters in the folder of
+    the run it takes up: a new CA replaces the old one, a program's output starts at its
+    own line (a proxy's "ready" of the last run is not this one's) and the observer's
+    earlier records are not this cluster's."""
+    require_namespaces()
+    with Hosts(["a"], tmp_path) as hosts:
+        first = hosts.run("a", ["sh", "-c", "echo first-run"], "x.log")
+        assert first.p.wait(10) == 0
+        second = hosts.run("a", ["sh", "-c", "echo second-run"], "x.log")
+        assert second.p.wait(10) == 0
+        assert "second-run" in second.output() and "first-run" not in second.output()
+        assert "first-run" in first.output() and "second-run" in (tmp_path / "x.log").read_text()
+    task = find_task(defaults().task)
+    with Cluster(tmp_path / "c", task=task) as c:
+        first_ca = (tmp_path / "c" / "tls" / "ca.pem").read_bytes() if c.secure else b""
+    stale = {"key": c.keys.status, "t": time.time(), "msg": {"seq": 1}}
+    (tmp_path / "c" / "observer.jsonl").write_text(json.dumps(stale) + "\n")
+    with Cluster(tmp_path / "c", task=task) as c:
+        assert c.first(c.keys.status) is None
+        if c.secure:
+            assert (tmp_path / "c" / "tls" / "ca.pem").read_bytes() != first_ca
+    assert c.hosts.leftovers() == []
 
 
 def _logs(c: Cluster) -> str:

@@ -114,7 +114,8 @@ class Cluster:
         self._configs: dict[str, Path] = {}
         self.intruder_configs: dict[str, Path] = {}
         self._seen: dict[str, list[dict[str, Any]]] = {}
-        self._offset = 0
+        # a log folder used before keeps the earlier clusters' records: this one reads its own
+        self._offset = self.records.stat().st_size if self.records.exists() else 0
         self._router_starts = 0
         self._links: dict[str, FaultedLink] = {}
 
@@ -151,7 +152,10 @@ class Cluster:
             self._configs[role] = write_config(d / f"{role}.json5", client_config(self.endpoint))
 
     def _certs(self, out: Path) -> Path:
-        r = subprocess.run([sys.executable, "-m", "sctd.cli.main", "certs", "--out", str(out),
+        """A fresh CA for this cluster: one left in ``out`` by an earlier cluster in the same
+        log folder (a resumed ``sctd bench link --record``) signed for that cluster's
+        addresses, so it is replaced."""
+        r = subprocess.run([sys.executable, "-m", "sctd.cli.main", "certs", "--out", str(out), "--force",
                             "--router", self.endpoint, "--ip", self.hosts.addr("router")],
                            capture_output=True, text=True)
         if r.returncode != 0:

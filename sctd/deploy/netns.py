@@ -115,6 +115,9 @@ class Process:
     log_path: Path
     p: subprocess.Popen
     _log: IO[bytes]
+    start: int = 0
+    """Where this program's output begins in ``log_path`` (a log is appended to, so a
+    folder used before keeps the earlier programs' lines)."""
 
     def __enter__(self) -> Process:
         return self
@@ -147,9 +150,12 @@ class Process:
         return self.p.returncode
 
     def output(self) -> str:
+        """What this program printed (not what earlier ones left in the same log)."""
         if not self._log.closed:
             self._log.flush()
-        return self.log_path.read_text(errors="replace")
+        with open(self.log_path, "rb") as f:
+            f.seek(self.start)
+            return f.read().decode(errors="replace")
 
 
 class Hosts:
@@ -267,12 +273,13 @@ class Hosts:
         (``PATH``, ``SCTD_STORE``, the virtual environment) is kept."""
         path = self.logdir / log
         fh = open(path, "ab")
+        start = fh.tell()
         fh.write(f"# {host}: {' '.join(argv)}\n".encode())
         fh.flush()
         p = subprocess.Popen(["ip", "netns", "exec", self.ns(host), *argv], stdout=fh,
                              stderr=subprocess.STDOUT, start_new_session=True,
                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-        proc = Process(host, list(argv), path, p, fh)
+        proc = Process(host, list(argv), path, p, fh, start)
         self._procs.append(proc)
         return proc
 
