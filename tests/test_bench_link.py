@@ -5,6 +5,7 @@ arguments refused before anything starts. (One point end to end through the clus
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -191,3 +192,45 @@ def test_a_bad_record_exits_2_before_anything_starts(tmp_path, capsys):
     bad.write_text("[1, 2]\n")
     assert main(["bench", "link", "--record", str(bad)]) == 2
     assert "r.jsonl: line 1: not a trial of sctd bench link" in capsys.readouterr().err
+
+
+def test_the_figure_draws_each_point_and_condition_and_marks_where_assistance_stops_helping():
+    from sctd.bench.linkfigure import figure
+
+    trials = [_trial("clean", "assisted", "success", 15.0, wander=0.002),
+              _trial("clean", BASELINE, "failure", None, wander=0.003),
+              _trial("robot-delay-5", "assisted", "success", 18.0, wander=0.004),
+              _trial("robot-delay-5", BASELINE, "success", 16.0, wander=0.001)]
+    rows = summarise(trials)
+    stops = stops_helping(rows)
+    assert stops["pour"]["robot-delay"] == "robot-delay-5"
+    fig = figure(rows, [p.name for p in POINTS], {p.name: p.kind for p in POINTS}, stops)
+    success, time_s, wander = fig.axes
+    heights = [b.get_height() for b in success.patches]  # assisted's bars, then the baseline's
+    assert heights == [100.0, 100.0, 0.0, 100.0]
+    times = [b.get_height() for b in time_s.patches]
+    assert (times[0], times[1], times[3]) == (15.0, 18.0, 16.0)
+    assert math.isnan(times[2])  # no time where nothing succeeded: no bar
+    assert [b.get_height() for b in wander.patches] == pytest.approx([2.0, 4.0, 3.0, 1.0])
+    assert [t.get_text() for t in success.get_xticklabels()] == ["clean", "robot-delay-5 *"]
+
+
+def test_the_figure_is_written_from_a_record_and_a_bad_path_is_refused_first(tmp_path, monkeypatch, capsys):
+    import sctd.bench.link as link
+    from sctd.task import find_task
+
+    monkeypatch.setattr(link, "Cluster", lambda *a, **k: pytest.fail("a cluster was started"))
+    conditions = link.conditions_of(find_task("pour"), None, True, tmp_path / "skills")
+    record = Record(tmp_path / "sweep.jsonl")
+    for cond, sk in conditions:
+        record.add(_recorded("clean", cond, 0, skill=Path(sk).stem))
+    png = tmp_path / "link.png"
+    args = ["bench", "link", "--task", "pour", "--points", "clean", "--trials", "1", "--record",
+            str(tmp_path / "sweep.jsonl"), "--logs", str(tmp_path / "logs")]
+    assert main([*args, "--figure", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "wrote" in capsys.readouterr().err
+    assert main([*args, "--figure", str(tmp_path / "link.jpg")]) == 2
+    assert "link.jpg: the file must end in .png, .svg, .pdf" in capsys.readouterr().err
+    assert main([*args, "--figure", str(tmp_path / "nowhere" / "link.png")]) == 2
+    assert "no folder" in capsys.readouterr().err

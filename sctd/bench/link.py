@@ -418,8 +418,35 @@ def add_bench_link_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", metavar="FILE.jsonl",
                    help="append each trial to this file as it ends, and run none it already has: a "
                         "sweep stopped at any trial is taken up again with the same flags")
+    p.add_argument("--figure", metavar="FILE.png",
+                   help="draw the sweep here (.png, .svg or .pdf): success, median time and the hand's "
+                        "worst unintended motion per point, assisted beside the baseline")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
+
+
+def check_figure_path(path: str | None) -> Path | None:
+    """The ``--figure`` file, checked before anything starts (a sweep takes hours): a
+    format matplotlib writes, in a folder that exists; ValueError saying which."""
+    if path is None:
+        return None
+    from sctd.bench.linkfigure import FORMATS
+
+    out = Path(path)
+    if out.suffix.lower() not in FORMATS:
+        raise ValueError(f"--figure {path}: the file must end in {', '.join(FORMATS)}")
+    if not out.parent.is_dir():
+        raise ValueError(f"--figure {path}: no folder {out.parent}")
+    return out
+
+
+def write_figure(r: dict[str, Any], out: Path) -> None:
+    """The sweep's figure (:mod:`sctd.bench.linkfigure`) into ``out``."""
+    from sctd.bench.linkfigure import figure
+
+    fig = figure(r["rows"], r["points"], {p.name: p.kind for p in POINTS}, r["stops_helping"])
+    fig.savefig(out, dpi=100)
+    print(f"sctd bench link: wrote {out}", file=sys.stderr)
 
 
 def main_bench_link(args: argparse.Namespace) -> int:
@@ -430,11 +457,18 @@ def main_bench_link(args: argparse.Namespace) -> int:
         points = select_points(args.points)
         tasks = [find_task(t) for t in (args.task or [bl.tilt, bl.pull])]
         record = Record(None if args.record is None else Path(args.record))
-    except ValueError as e:  # a bad --points, a --task that is no task (TaskError), a bad --record
+        figure = check_figure_path(args.figure)
+    except ValueError as e:  # a bad --points, --record or --figure, a --task that is no task (TaskError)
         return fail("bench link", str(e), EXIT_USAGE)
     if args.trials < 1:
         return fail("bench link", "--trials: at least 1", EXIT_USAGE)
-    return run_and_report("link", args, lambda logdir: run_link_bench(
-        tasks, args.skill, points, args.trials, args.seed, logdir, not args.no_baseline, record),
-        print_report)
+
+    def run(logdir: Path) -> dict[str, Any]:
+        r = run_link_bench(tasks, args.skill, points, args.trials, args.seed, logdir, not args.no_baseline,
+                           record)
+        if figure is not None:
+            write_figure(r, figure)
+        return r
+
+    return run_and_report("link", args, run, print_report)
 
