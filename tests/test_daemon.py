@@ -157,8 +157,8 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
         "realtime",
         "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
-        "state_age", "robot_fault", "object", "object_age", "objects", "in_seq", "input", "gripper",
-        "vf_scale", "constraints", "dropped", "counters"}
+        "state_age", "state_delay_ms", "input_delay_ms", "robot_fault", "object", "object_age", "objects",
+        "in_seq", "input", "gripper", "vf_scale", "constraints", "dropped", "counters"}
     assert set(first["gripper"]) == {"commands", "messages", "cmd", "action", "source", "in_device",
                                      "reading", "reading_age", "holding", "presses", "ignored_presses",
                                      "cancelled"}
@@ -171,6 +171,24 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
     driver.target_seq = 60  # 10 more in the next 0.25 s
     assert status.close_window(ticker, 0.75)["target_rate"] == 40.0
     assert status.map(ticker, 0.75, 0.0)["target_rate"] is None  # the final statistics
+
+
+def test_the_status_says_how_late_the_newest_state_and_input_arrived_by_their_stamps(skills):
+    """``state_delay_ms`` and ``input_delay_ms``: from each newest message's stamp (its
+    sender's clock) to its arrival, the time since it arrived taken off: the link's delay,
+    which the person's panel tells when it is long (docs/multihost.md)."""
+    pour, _ = skills
+    driver = TickDriver(pour, RuntimeConfig(stamp_check=False))
+    status = DaemonStatus(driver, TickStats(0.0, driver.engine.state, 0.1), SkillSwap(driver))
+    empty = status.map(Ticker(1e-3), 0.0, 0.0)
+    assert empty["state_delay_ms"] is None and empty["input_delay_ms"] is None
+    sent = 1_000_000.0  # the senders' stamps (their clock); the daemon's is the status' own stamp
+    driver.take_state(codec.StateMsg(1, sent, HAND, None), 10.0)
+    driver.take_input("pad", codec.InputMsg(1, sent + 0.5, (0.0, 0.0, 0.0), (0, 1, 0, 1), False), 10.2)
+    got = status.map(Ticker(1e-3), 10.25, 0.0)
+    # at 10.25 the state had arrived 0.25 s before, the input 0.05 s before
+    assert got["state_delay_ms"] == pytest.approx(1e3 * (got["stamp"] - sent - 0.25), abs=0.051)
+    assert got["input_delay_ms"] == pytest.approx(1e3 * (got["stamp"] - sent - 0.5 - 0.05), abs=0.051)
 
 
 def test_the_status_says_how_often_each_constraint_acted_in_its_window(skills):

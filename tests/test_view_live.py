@@ -328,6 +328,22 @@ def test_the_persons_panel_says_which_task_is_engaged_and_the_belief(server):
     assert "going for: pour 80 %" in view.person.content
 
 
+def test_the_persons_panel_tells_a_slow_link_and_nothing_on_a_quick_one(server):
+    from sctd_services.view.live import SLOW_INPUT_MS, SLOW_STATE_MS, link_lines
+
+    assert link_lines({"state_delay_ms": SLOW_STATE_MS, "input_delay_ms": SLOW_INPUT_MS}) == []
+    slow = link_lines({"state_delay_ms": 52.4, "input_delay_ms": 80.0})
+    assert slow == ["<b>the arm's link is slow: its state arrives 52 ms late, so the arm follows more slowly</b>",
+                    "<b>the input's link is slow: it arrives 80 ms late</b>"]
+    assert link_lines({}) == [] and link_lines({"state_delay_ms": None}) == []
+    assert link_lines({"state_delay_ms": "99", "input_delay_ms": float("nan")}) == []  # not the contract's
+    assert link_lines({"state_delay_ms": True}) == []
+    view = LiveView(server, None, find_task("pour"))
+    view.draw(Snapshot(t=1.0, pose=None, objects={}, target={"state": "translate"},
+                       status={"mode": "running", "state": "translate", "state_delay_ms": 52.4}))
+    assert "its state arrives 52 ms late" in view.person.content
+
+
 def test_the_persons_panel_says_which_device_must_centre_its_stick_and_why(server):
     """``status.input.rearm`` (a push that went stale, a stop...): the device is named
     with the reason in words, the stale one first; a ``rearm`` off the wire that is not

@@ -147,8 +147,9 @@ class DaemonStatus:
         def age(received: float | None) -> float | None:
             return None if received is None else round(now - received, 6)
 
+        wall, state = time.time(), drv.state
         status: dict[str, Any] = {
-            "stamp": time.time(),
+            "stamp": wall,
             "skill": ctl.skill.id,
             "skill_name": ctl.skill.name,
             "state": ctl.engine.state,
@@ -171,6 +172,9 @@ class DaemonStatus:
             "recent_ms": stats.recent,
             "input_age": age(last.received if last is not None else None),
             "state_age": age(drv.state.received if drv.state is not None else None),
+            "state_delay_ms": _delay_ms(wall, now, state.stamp, state.received) if state is not None else None,
+            "input_delay_ms": _delay_ms(wall, now, last.msg.stamp, last.received)
+            if last is not None and last.msg is not None else None,
             "robot_fault": drv.state.fault if drv.state is not None else None,
             "object": ctl.engine.object,
             "object_age": age(obj.received if obj is not None else None),
@@ -189,3 +193,10 @@ class DaemonStatus:
         if self.ros is not None:
             status["ros"] = self.ros.stats()
         return status
+
+
+def _delay_ms(wall: float, now: float, stamp: float, received: float) -> float:
+    """ms from a message's ``stamp`` (its sender's clock) to its arrival (``received``, on
+    the monotonic clock whose ``now`` is Unix time ``wall``): the link's delay, where the
+    clocks agree."""
+    return round(1e3 * ((wall - stamp) - (now - received)), 1)

@@ -312,6 +312,7 @@ class LiveView:
             lines.append(f"<b>out of this skill's region: {away:.0f} cm from where it was taught "
                          f"(around {region.get('frame')})</b>")
         lines += rearm_lines(status)
+        lines += link_lines(status)
         lines += goal_lines(status)
         self.person.content = "<div style='font-size:20px'>" + "<br>".join(lines) + "</div>"
 
@@ -347,6 +348,29 @@ def rearm_lines(status: dict) -> list[str]:
                    key=lambda dw: (dw[1] != "stale", dw[0]))
     return [f"<b>{html.escape(d)}: centre the stick to move again</b> ({REARM[why]})"
             for d, why in named[:MAX_REARM]]
+
+
+# A link this late is told on the panel (ms, by the messages' stamps: docs/multihost.md,
+# "What sctd does at each fault"): with the arm's state 50 ms late the assisted pour took
+# 1.85 times as long as on a clean link, 20 ms cost it 1.12; the person's input 50 ms late
+# cost 1.14 (sctd bench link).
+SLOW_STATE_MS = 30.0
+SLOW_INPUT_MS = 50.0
+
+
+def link_lines(status: dict) -> list[str]:
+    """The panel's lines for a slow link (``status.state_delay_ms``, ``input_delay_ms``):
+    the arm's state arriving late (the arm then follows the stick more slowly) or the
+    person's input; nothing on a quick link, or for a figure that is not a number."""
+    lines = []
+    for key, limit, words in (
+            ("state_delay_ms", SLOW_STATE_MS, "the arm's link is slow: its state arrives {:.0f} ms late, "
+                                              "so the arm follows more slowly"),
+            ("input_delay_ms", SLOW_INPUT_MS, "the input's link is slow: it arrives {:.0f} ms late")):
+        ms = status.get(key)
+        if isinstance(ms, int | float) and not isinstance(ms, bool) and math.isfinite(ms) and ms > limit:
+            lines.append(f"<b>{words.format(ms)}</b>")
+    return lines
 
 
 def goal_lines(status: dict) -> list[str]:
