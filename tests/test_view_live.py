@@ -333,8 +333,9 @@ def test_the_persons_panel_tells_a_slow_link_and_nothing_on_a_quick_one(server):
 
     assert link_lines({"state_delay_ms": SLOW_STATE_MS, "input_delay_ms": SLOW_INPUT_MS}) == []
     slow = link_lines({"state_delay_ms": 52.4, "input_delay_ms": 80.0})
-    assert slow == ["<b>the arm's link is slow: its state arrives 52 ms late, so the arm follows more slowly</b>",
-                    "<b>the input's link is slow: it arrives 80 ms late</b>"]
+    assert slow == [
+        "<b>the arm's link is slow: its state arrives 52 ms late, so the arm follows more slowly</b>",
+        "<b>the input's link is slow: it arrives 80 ms late</b>"]
     assert link_lines({}) == [] and link_lines({"state_delay_ms": None}) == []
     assert link_lines({"state_delay_ms": "99", "input_delay_ms": float("nan")}) == []  # not the contract's
     assert link_lines({"state_delay_ms": True}) == []

@@ -172,7 +172,7 @@ class DaemonStatus:
             "recent_ms": stats.recent,
             "input_age": age(last.received if last is not None else None),
             "state_age": age(drv.state.received if drv.state is not None else None),
-            "state_delay_ms": _delay_ms(wall, now, state.stamp, state.received) if state is not None else None,
+            "state_delay_ms": None if state is None else _delay_ms(wall, now, state.stamp, state.received),
             "input_delay_ms": _delay_ms(wall, now, last.msg.stamp, last.received)
             if last is not None and last.msg is not None else None,
             "robot_fault": drv.state.fault if drv.state is not None else None,
