@@ -1,7 +1,7 @@
 """The figure of ``sctd bench link`` (``--figure FILE``): the sweep at a glance.
 
-One row of panels per task, three panels a row: the success rate, the median completion
-time of the successful trials and the hand's worst unintended motion, each per point of
+One column of panels per task, three panels a column: the success rate, the median
+completion time of the successful trials and the hand's worst unintended motion, each per point of
 the sweep (in its order, the mildest fault of each kind first), the assisted condition
 beside the baseline. A grey line parts the kinds of fault; a point where assistance stops
 helping (:func:`~sctd.bench.link.stops_helping`) is marked under its label.
@@ -29,8 +29,8 @@ def figure(rows: list[dict[str, Any]], points: list[str], kinds: dict[str, str],
     tasks = list(dict.fromkeys(r["task"] for r in rows))
     conditions = list(dict.fromkeys(r["condition"] for r in rows))
     shown = [p for p in points if any(r["point"] == p for r in rows)]
-    fig = Figure(figsize=(max(12.0, 0.75 * len(shown) * 3), 3.6 * len(tasks) + 1.0))
-    axes = fig.subplots(len(tasks), len(_PANELS), squeeze=False)
+    fig = Figure(figsize=(max(6.0, 0.6 * len(shown)) * len(tasks) + 1.0, 10.0))
+    axes = fig.subplots(len(_PANELS), len(tasks), squeeze=False).T  # a column per task
     by = {(r["task"], r["point"], r["condition"]): r for r in rows}
     x = np.arange(len(shown))
     width = 0.8 / max(1, len(conditions))
@@ -51,7 +51,7 @@ def figure(rows: list[dict[str, Any]], points: list[str], kinds: dict[str, str],
             ax.set_xticks(x, [p + (" *" if p in stopped else "") for p in shown], rotation=60, ha="right",
                           fontsize=7)
         row[0].legend(loc="lower left", fontsize=7)
-    fig.suptitle("sctd bench link: real-time trials through faulted links (* assistance stops helping; "
+    fig.suptitle("sctd bench link: real-time trials through faulted links\n(* assistance stops helping; "
                  "dashed: 90 %)", fontsize=10)
     fig.tight_layout()
     return fig
