@@ -231,6 +231,22 @@ def _turn(w: Watcher, pub: zenoh.Publisher, R_goal, hold: float = 0.0) -> None:
     raise AssertionError(f"the hand did not turn there: {n:.3f} rad to go")
 
 
+def _still(w: Watcher, cycles: int = 200, within: float = 2e-4) -> list:
+    """The hand's pose once it has stayed within ``within`` m for ``cycles`` of the
+    simulator's states (by their seq: simulated time, however the machine lags)."""
+    ref: list = [None]
+
+    def settled() -> bool:
+        st = w.get("state")
+        if ref[0] is None or math.dist(ref[0]["pose"][:3], st["pose"][:3]) > within:
+            ref[0] = st
+            return False
+        return st["seq"] - ref[0]["seq"] >= cycles
+
+    assert wait_for(settled, 30), ("the hand did not come to rest", ref[0])
+    return list(w.get("state")["pose"])
+
+
 @pytest.mark.slow
 def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_path):
     """`sim/reset`: a malformed request (not a map, a mistyped field, another scene's)
@@ -265,7 +281,7 @@ def test_sim_reset_refills_the_bottle_between_cycles_without_moving_the_arm(tmp_
             assert wait_for(lambda: w.get("scene")["cycles"] > c0, 5)
             sc = w.get("scene")
             assert sc["resets"] == 0 and sc["spilled_amount"] == spilled, sc  # nothing changed
-            before = list(w.get("state")["pose"])
+            before = _still(w)  # (the turn's last target taken and reached)
             ok, body = _reset(s, codec.pack({"scene": "pour", "unknown": "ignored"}))
             assert ok and body["ok"] is True and body["scene"] == "pour", body
             assert wait_for(lambda: w.get("scene")["t"] > body["t"] + 0.2, 5)
