@@ -113,6 +113,15 @@ def no_leaked_processes():
     assert not leaked, f"test left {len(leaked)} process(es) running: {[p.args for p in leaked]}"
 
 
+def must_centre(status: dict | None, device: str) -> bool:
+    """Whether the daemon's newest status names ``device`` in ``input.rearm``: its push
+    moves nothing until it sends a zero. A test's driver centres the stick then, as a
+    person reading the display does: on a busy machine a driver's thread can fall silent
+    for longer than the daemon lets a push go stale."""
+    inp = (status or {}).get("input")
+    return isinstance(inp, dict) and device in (inp.get("rearm") or {})
+
+
 def wait_for(pred, timeout: float = 10.0, interval: float = 0.02):
     end = time.monotonic() + timeout
     while time.monotonic() < end:

@@ -20,7 +20,7 @@ import zenoh
 from sctd.skill import bundle_from_file
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
-from tests.conftest import ROOT, free_port, port_is_free, sctd, trap_skill_yaml, wait_for
+from tests.conftest import ROOT, free_port, must_centre, port_is_free, sctd, trap_skill_yaml, wait_for
 
 pytestmark = pytest.mark.slow  # the daemon as a process
 
@@ -76,10 +76,14 @@ class Rig:
         self.seq += 1
         self.pub_in.put(raw if raw is not None else codec.encode_input(self.seq, time.time(), u))
 
-    def drive(self, u, seconds: float, rate: float = 200.0) -> None:
+    def drive(self, u, seconds: float, rate: float = 200.0, centre_when_told: bool = False) -> None:
+        """Send ``u`` at ``rate``; with ``centre_when_told``, a zero instead while the
+        daemon's status says this device must centre (see ``must_centre``)."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            self.send(u)
+            with self.lock:
+                status = self.status[-1] if self.status else None
+            self.send([0.0, 0.0, 0.0] if centre_when_told and must_centre(status, "test") else u)
             time.sleep(1.0 / rate)
 
     def last(self) -> dict:
@@ -180,7 +184,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     # a verdict; a push that never gets there fails the assertions below
     end = time.monotonic() + 30.0
     while rig.last()["pose"][0] - first["pose"][0] <= 0.02 and time.monotonic() < end:
-        rig.drive([1.0, 0.0, 0.0], 0.1)
+        rig.drive([1.0, 0.0, 0.0], 0.1, centre_when_told=True)
     last_in = rig.seq
     with_last = lambda: [m for _, m in list(rig.targets) if m["in_seq"] == last_in]  # noqa: E731
     assert wait_for(lambda: len(with_last()) >= 400, 30), "the daemon stopped publishing"

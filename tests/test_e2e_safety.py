@@ -24,7 +24,7 @@ from sctd.bench.bundles import malformed_bundles
 from sctd.skill import bundle_from_file
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
-from tests.conftest import ROOT, Proc, free_port, sctd, wait_for
+from tests.conftest import ROOT, Proc, free_port, must_centre, sctd, wait_for
 
 pytestmark = pytest.mark.slow  # the daemon and the simulator as processes
 
@@ -89,6 +89,16 @@ def steps_above_bound(targets: list[dict]) -> list[tuple[int, float]]:
     return out
 
 
+def held_for(lis: Listener, ticks: int) -> bool:
+    """Whether the newest targets span at least `ticks` seqs and all have the same pose."""
+    with lis.lock:
+        seqs = sorted(lis.targets)[-ticks:]
+        if len(seqs) < 2 or seqs[-1] - seqs[0] < ticks - 1:
+            return False
+        pose = lis.targets[seqs[-1]]["pose"]
+        return all(lis.targets[k]["pose"] == pose for k in seqs)
+
+
 def counters(lis: Listener) -> dict:
     st = lis.get("status") or {}
     return {**st.get("counters", {}), **st.get("dropped", {})}
@@ -121,12 +131,18 @@ def test_restarted_sim_is_not_moved_by_the_runtime(tmp_path):
         # on a quiet machine; longer under load)
         while math.dist(lis.newest()["pose"][:3], first[:3]) < 0.15 and time.monotonic() < end:
             seq += 1
-            pub.put(codec.encode_input(seq, time.time(), [0.0, 1.0, 0.0]))
+            u = [0.0, 0.0, 0.0] if must_centre(lis.get("status"), "test") else [0.0, 1.0, 0.0]
+            pub.put(codec.encode_input(seq, time.time(), u))
             time.sleep(0.005)
-        for _ in range(60):  # zero input from here on
+        # Zero input from here on, until the runtime has published the same target for 200
+        # ticks running (by seq): on a loaded machine the daemon may still be finishing the
+        # push when the test's zeros are sent, and "the old target" must be the held one.
+        end = time.monotonic() + 60
+        while not held_for(lis, 200) and time.monotonic() < end:
             seq += 1
             pub.put(codec.encode_input(seq, time.time(), [0.0, 0.0, 0.0]))
             time.sleep(0.005)
+        assert held_for(lis, 200), lis.by_seq()[-3:]
         last = lis.newest()
         moved = last["pose"]
         t_killed = lis.get("scene")["t"]

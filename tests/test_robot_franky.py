@@ -27,7 +27,7 @@ import zenoh
 from sctd.bench.robot import free_loopback
 from sctd.wire import Keys, codec
 from sctd.wire.session import close_session, open_session
-from tests.conftest import ROOT, Proc, free_port, run_sctd, sctd, wait_for
+from tests.conftest import ROOT, Proc, free_port, must_centre, run_sctd, sctd, wait_for
 
 # franky-sim, the daemon and the robot service as processes
 pytestmark = pytest.mark.slow
@@ -108,7 +108,8 @@ class Person:
     def push(self, u: tuple[float, float, float], seconds: float) -> None:
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            self.pub.put(codec.encode_input(self.seq, time.time(), list(u), [0, 1, 0]))
+            sent = [0.0] * 3 if must_centre(self.get("status"), "person") else list(u)
+            self.pub.put(codec.encode_input(self.seq, time.time(), sent, [0, 1, 0]))
             self.seq += 1
             time.sleep(0.01)
 
