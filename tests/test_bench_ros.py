@@ -28,6 +28,7 @@ def test_bench_ros_reports_the_round_trip_the_push_and_the_nodes_cpu_with_its_fl
     push = got["rates"]["100"]
     assert push["joy_to_target_ms"]["n"] == 3 and push["joy_to_target_ms"]["p50"] > 0  # every push moved it
     assert 0.0 < push["node_cpu"] < 2.0 and 0.0 <= push["floor_cpu"] < 2.0  # the idle rclpy node's, beside it
+    assert 0.0 < push["follow_floor_cpu"] < 2.0 and push["cpu_seconds"] > 0  # the one that takes the target
     # the node saw the Joys and sent the targets (its own counts)
     counts = last_json((tmp_path / "ros-100.log").read_text())
     assert counts is not None

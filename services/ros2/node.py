@@ -32,6 +32,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import threading
@@ -45,6 +46,8 @@ from sctd.wire import Keys
 from sctd.wire.session import add_zenoh_arguments, session_from_args
 
 from .bridge import MARKERS_PERIOD, Bridge, BridgeOptions, ros_messages
+
+ZENOH_RUNTIME = "(rx: (worker_threads: 1))"  # the node's Zenoh runtime (see run)
 
 log = logging.getLogger("sctd.ros")
 WATCH_RATE = 50.0  # Hz, at least, of the outbound thread's wake-ups (targets that stopped: a zero twist)
@@ -193,6 +196,10 @@ def run(args: argparse.Namespace) -> int:
         return fail("ros", f"--joy-map: {e}")
     import rclpy
 
+    # One Zenoh receive thread, not two: the daemon's target arrives every millisecond,
+    # and two workers of Zenoh's receive runtime wake for each (unless the person set
+    # the runtime themselves); read once, when the first session opens
+    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=args.ros_domain)
     stop = threading.Event()

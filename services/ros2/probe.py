@@ -112,21 +112,31 @@ def joy(node, executor, steps: int, rate: float) -> dict:
     while push(1) is None:
         if time.perf_counter() > warm:
             raise SystemExit("no push moved the target in 60 s")
+    print(json.dumps({"measuring": True}), flush=True)  # (the bench's CPU figures start here)
     got = [ms for ms in (push(k) for k in range(steps)) if ms is not None]
     return {"joy_to_target_ms": _summary(got), "steps": steps, "each_ms": [round(x, 1) for x in got]}
 
 
-def _serve_until(stop: threading.Event, executor, connect: list[str] | None) -> None:
+def _serve_until(stop: threading.Event, executor, connect: list[str] | None,
+                 follow: str | None = None) -> None:
     """Spin as ``sctd ros`` does (with a Zenoh session on ``connect`` unless None) until
-    ``stop``."""
+    ``stop``; with ``follow``, the session also subscribes that key into a ring of one
+    that nothing reads (what receiving the stream costs, before anything is done with it)."""
     from contextlib import nullcontext
 
     from sctd.wire.session import session
 
-    with session(connect=connect) if connect is not None else nullcontext():
+    with session(connect=connect) if connect is not None else nullcontext() as s:
+        sub = None
+        if follow is not None and s is not None:
+            import zenoh
+
+            sub = s.declare_subscriber(follow, zenoh.handlers.RingChannel(1))
         print(json.dumps({"ready": True}), flush=True)
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)
+        if sub is not None:
+            sub.undeclare()
 
 
 def _spin(executor, seconds: float) -> None:
@@ -153,6 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--steps", type=int, default=40, help="joy: pushes")
     p.add_argument("--rate", type=float, default=100.0, help="Hz of ping or Joy")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="idle: Zenoh endpoint")
+    p.add_argument("--follow", metavar="KEY", help="idle: also subscribe this Zenoh key (nothing reads it)")
     args = p.parse_args(argv)
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -167,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.mode in ("echo", "idle"):
             if args.mode == "echo":
                 echo(node, stop)
-            _serve_until(stop, executor, args.connect if args.mode == "idle" else None)
+            _serve_until(stop, executor, args.connect if args.mode == "idle" else None, args.follow)
             return 0
         out = ping(node, executor, args.n, args.rate) if args.mode == "ping" else \
             joy(node, executor, args.steps, args.rate)
