@@ -388,17 +388,18 @@ def test_sim_refuses_a_target_far_from_the_arm(tmp_path):
         p0 = list(lis.get("state")["pose"])
         far = [p0[0] + 0.2, *p0[1:]]
         old = [p0[0], p0[1], p0[2] + 0.01, *p0[3:]]
-        # the sim judges the newest target of each cycle: one every 5 ms is judged each
-        for k in range(100):
-            pub.put(codec.encode_target(k, time.time(), far, "x", "x", -1))
-            time.sleep(0.005)
-        for k in range(100):
-            pub.put(codec.encode_target(k, time.time() - 3600, old, "x", "x", -1))  # before start
-            time.sleep(0.005)
-
         def reasons() -> dict:
             return lis.get("scene")["target_rejected_reasons"]
 
+        # The sim judges the newest target of each cycle, so how many of these it judges
+        # is the loaded machine's; each kind is sent (every 5 ms) until the sim's scene
+        # has counted 20 of it refused, or for 30 s.
+        for reason, pose, age in (("offset", far, 0.0), ("before_start", old, 3600.0)):
+            k, end = 0, time.monotonic() + 30
+            while reasons().get(reason, 0) < 20 and time.monotonic() < end:
+                k += 1
+                pub.put(codec.encode_target(k, time.time() - age, pose, "x", "x", -1))
+                time.sleep(0.005)
         assert wait_for(lambda: reasons().get("offset", 0) >= 20 and reasons().get("before_start", 0) >= 20,
                         30), lis.get("scene")
         assert lis.get("scene")["target_rejected"] == sum(reasons().values())
