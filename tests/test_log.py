@@ -21,7 +21,7 @@ from sctd.cli.log import kind_of, read_log, schema
 from sctd.wire import codec
 from sctd.wire.session import open_session
 
-from .conftest import free_port, run_sctd, wait_for
+from .conftest import free_port, run_sctd, sctd, wait_for
 from .test_e2e_runtime import KEYS, daemon  # noqa: F401  (the fixture)
 
 
@@ -36,7 +36,9 @@ def test_kinds_and_schemas():
 
 @pytest.fixture
 def logged(daemon, tmp_path):  # noqa: F811
-    """Two seconds of a running daemon and its test robot, logged."""
+    """Two seconds of a running daemon's ticks (2,000 targets by its seq, however the
+    machine lags) and its test robot, logged from the moment ``sctd log`` subscribed
+    until it is stopped (SIGTERM, as a person's Ctrl-C or a service manager's stop)."""
     _, rig, port = daemon
     path = tmp_path / "run.mcap"
     done = threading.Event()
@@ -49,12 +51,16 @@ def logged(daemon, tmp_path):  # noqa: F811
 
     t = threading.Thread(target=inputs, daemon=True)
     t.start()
+    log = sctd("log", "--mcap", str(path), "--connect", f"tcp/127.0.0.1:{port}", log=tmp_path / "log.log")
     try:
-        out = run_sctd("log", "--mcap", str(path), "--duration", "3", "--connect", f"tcp/127.0.0.1:{port}")
+        assert wait_for(lambda: "->" in log.output(), 60), log.output()  # subscribed
+        first = rig.last()["seq"]
+        assert wait_for(lambda: rig.last()["seq"] >= first + 2000, 60), "the daemon stopped publishing"
     finally:
+        rc = log.stop()
         done.set()
         t.join()
-    assert out.returncode == 0, out.stderr
+    assert rc == 0, log.output()
     return path, port
 
 
