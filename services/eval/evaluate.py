@@ -25,7 +25,6 @@ import yaml
 
 from sctd import se3
 from sctd.files import parse_yaml
-from sctd.learn.demos import read_demos
 from sctd.skill import WORLD_OBJECT, Bundle, Limits, Skill, bundle_from_file, load_skill, skill_from_bundle
 from sctd.skill.catalog import shipped_folder
 from sctd.skill.constraints import SpeedNear
@@ -292,6 +291,8 @@ def _trials(e: Entry, spec: TaskSpec, seeds: list[int], job: TrialJob, demos: st
 
 def read_demo_poses(directory: str | Path) -> list[np.ndarray]:
     """The demonstrations' poses (n, 7), object frame, for the DTW figure."""
+    from sctd.learn.demos import read_demos  # the learner's reader, only with --demos
+
     return [d.poses for d in read_demos(directory)]
 
 

@@ -11,11 +11,13 @@ from __future__ import annotations
 import json
 import re
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.figure import Figure
+
+if TYPE_CHECKING:  # matplotlib is imported when a report is drawn, not with sctd eval
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 
 def _safe(name: str) -> str:
@@ -45,6 +47,8 @@ def _figure(r: dict[str, Any]) -> Figure:
     vf = any(any(not np.isnan(x) for x in t.get("series", {}).get("vf_scale", []) if x is not None)
              for t in trials)
     n = 3 if vf else 1
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(5 * n, 4))
     axes = fig.subplots(1, n, squeeze=False)[0]
     _trajectories(axes[0], r)

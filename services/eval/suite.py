@@ -17,10 +17,9 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 
 from sctd.skill import WORLD_OBJECT, Limits, load_skill
 from sctd.skill.catalog import shipped_skills
@@ -41,6 +40,9 @@ from .evaluate import (
     strip_trajectories,
 )
 from .trial import TaskSpec
+
+if TYPE_CHECKING:  # matplotlib is imported when the figure is drawn, not with sctd suite
+    from matplotlib.figure import Figure
 
 
 @dataclass
@@ -256,6 +258,8 @@ def markdown(rows_: list[dict[str, Any]], paired: bool = False) -> str:
 def figure(rows_: list[dict[str, Any]]) -> Figure:
     """Success, completion times (each task's floor marked) and mode switches and effort
     per task and skill, one above the other on the same rows: the suite at a glance."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(max(8.0, 0.42 * len(rows_) + 2.0), 11))  # (wider with more rows)
     ax_s, ax_t, ax_e = fig.subplots(3, 1, sharex=True)
     users = _several_users(rows_)
