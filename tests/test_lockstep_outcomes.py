@@ -116,7 +116,9 @@ def record() -> None:
     with :data:`KERNELS` in the environment)."""
     trials = {f"{s}/{k}": outcome(s, k) for s in SKILLS for k in SEEDS}
     doc = {"about": "lockstep trials (tests/test_lockstep_outcomes.py), time limit "
-                    f"{TIME_LIMIT} s; recorded before the simulator speed-ups, kept fixed",
+                    f"{TIME_LIMIT} s; recorded before the simulator speed-ups and kept through "
+                    "them; recorded again where a change meant to move outcomes says so (this "
+                    "file's git log)",
            "trials": trials}
     DATA.parent.mkdir(exist_ok=True)
     DATA.write_text(json.dumps(doc, indent=1) + "\n")

@@ -737,3 +737,44 @@ def test_the_simulated_user_centres_the_stick_while_the_status_says_its_device_m
         pub.put(codec.pack({"stamp": time.time(), "state": "translate", "mode_button": "rotate"}))
         assert wait_for(lambda: client.idle_button is None, 10)
         pub.undeclare()
+
+
+@pytest.mark.parametrize("switches", [False, True])
+def test_a_user_whose_mode_gives_nothing_of_the_wish_tries_the_stick_out_at_once(switches):
+    """The opening over the mug and the bottle to be tilted, in a mode the user knows
+    only to translate (as it learned it carrying), while the device now tilts (a
+    template that turns the bottle once it is there). With no mode switch to turn to
+    (the display says the button changes nothing), the user tries the stick out at once,
+    once for this sub-goal, finds the tilt and pours; before, it pushed where its model
+    promised next to nothing, and tried the stick out only after its error had not got
+    better for REPROBE_AFTER seconds, as it still does where the display offers the
+    button (the rule for a mode the user may switch away from is unchanged)."""
+    from sctd_services.user.agent import PROBE, REPROBE_AFTER
+
+    toy = StoppedTilter(_tilt_model(), _hand_with_tip_at([0.0, 0.0, 0.05]))
+    user = SimulatedUser(POUR, 3, PROFILES["steady"], seed=0)
+    translate = DeviceModel(3)
+    translate.B[:3, :3] = np.eye(3) * 0.1
+    translate.tried[:] = True
+    user.models = {"m": translate}
+    t, dt, first, poured_at, tried_at = 0.0, 0.01, None, None, None
+    while t < 15.0 and poured_at is None:
+        obs = Observation(t, toy.T, {"mug": MUG, "bottle_tip": toy.T @ T_EE_TIP},
+                          {"readings": {"bottle.poured": toy.poured}}, "m", switches)
+        u, _ = user.step(t, obs)
+        if first is None and np.any(u):
+            first = (t, np.asarray(u))
+        if tried_at is None and user.reprobes:
+            tried_at = t
+        toy.step(u, dt)
+        if toy.tilt() > toy.flow:
+            poured_at = t
+        t += dt
+    assert first is not None and poured_at is not None, (first, toy.tilt())
+    assert user.reprobes == 1 and tried_at is not None, user.reprobes  # once, then the tilt learned
+    if switches:
+        assert tried_at > REPROBE_AFTER, tried_at
+        return
+    assert user.switches == 0 and tried_at < 0.5, tried_at
+    # its first push is a trial push of one axis (noise aside), within its reaction
+    assert np.allclose(np.abs(first[1]), [PROBE, 0, 0], atol=0.1) and first[0] < 0.5, first

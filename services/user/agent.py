@@ -127,6 +127,7 @@ class SimulatedUser:
         self._pause_phase: str | None = None  # the step the last pause was for
         self._pause_until = -math.inf
         self.reprobes = 0
+        self._tried_for: str | None = None  # the sub-goal the stick was last tried out for, unable
         self.settled = 0  # sub-goals taken as reached when close enough
         self.switches = 0
         self.switch_time = 0.0
@@ -307,6 +308,15 @@ class SimulatedUser:
         self._probes.pop(obs.mode, None)
         u, residual = self._best_effort(model, desire)
         lacking = self._lacking(model, desire)
+        if self._unable(max(residual, lacking), desire, obs):
+            # What is wanted now cannot come from this mode as the user knows it, and no
+            # switch can give another: the device must do something here the user has not
+            # seen (a template that turns the cup once it is at the lips), so they try the
+            # stick out at once rather than push where nothing is promised.
+            self._tried_for = desire.phase
+            model.relearn()
+            self.reprobes += 1
+            return self._probe(obs.mode, model), (0, 1, 0)
         if obs.switches and self._wants_switch(t, obs.mode, max(residual, lacking), desire):
             self._switch = _Switch(t, obs.mode)
             self.switches += 1
@@ -318,6 +328,18 @@ class SimulatedUser:
             # lets go and gets ready to switch.
             return zero, (0, 1, 0)
         return u, (0, 1, 0)
+
+    def _unable(self, lacking: float, desire: Desire, obs: Observation) -> bool:
+        """Whether the user, once in this sub-goal, finds that the mode as they know it
+        gives next to nothing of the wish or of its most wanted part (``lacking``, the
+        larger of the two residuals, over :data:`LACKING`), wants more than a little
+        (:data:`SMALL_WISH`), and has no mode switch to turn to (the display says the
+        button changes nothing here, or pressing it did nothing)."""
+        if desire.phase == self._tried_for or lacking <= LACKING:
+            return False
+        if obs.switches and self.switch_works is not False:
+            return False
+        return float(np.linalg.norm(desire.W @ desire.twist)) >= SMALL_WISH
 
     def _pausing(self, t: float, phase: str) -> bool:
         """Whether the stick is let go after a step of the task was reached
