@@ -57,6 +57,7 @@ PROGRESS = 0.003  # decrease of the intent's error that counts as getting closer
 LACKING = 0.9  # a mode that leaves this much of the most wanted part undone cannot give it
 SMALL_WISH = 0.2  # a wish this small (a share of full speed) is no reason to switch modes
 REPROBE_AFTER = 2.0  # s without getting closer before the user tries the stick out again
+TRY_AT_ONCE = 1.0  # s into a sub-goal within which a mode that cannot give it is tried out at once
 MOVED_ON_WINDOW = 0.5  # s after an unasked mode change in which being close enough ends the sub-goal
 STOPPED = 0.2  # the motion along the wish this small a share of what the model promised: a stop
 HELD_ON = 0.9  # cosine between two pairs' pushes that counts as the same push held on
@@ -128,6 +129,7 @@ class SimulatedUser:
         self._pause_until = -math.inf
         self.reprobes = 0
         self._tried_for: str | None = None  # the sub-goal the stick was last tried out for, unable
+        self._sub_goal: tuple[str, float] = ("", 0.0)  # the intent's step now, and since when
         self.settled = 0  # sub-goals taken as reached when close enough
         self.switches = 0
         self.switch_time = 0.0
@@ -267,10 +269,7 @@ class SimulatedUser:
             if t - s.start < self.profile.switch_time:
                 return zero, (1, 1, 0) if t - s.start < self.profile.update_period else (0, 1, 0)
             if t - s.start >= self.profile.switch_time + self.profile.reaction_delay:
-                if obs.mode == s.mode:
-                    self.switch_works = False  # the switch does nothing with this skill
-                else:
-                    self.switch_works = True
+                self.switch_works = obs.mode != s.mode  # False: the switch does nothing with this skill
                 self._switch = None
                 self._bad_since = None
             return zero, (0, 1, 0)
@@ -308,15 +307,9 @@ class SimulatedUser:
         self._probes.pop(obs.mode, None)
         u, residual = self._best_effort(model, desire)
         lacking = self._lacking(model, desire)
-        if self._unable(max(residual, lacking), desire, obs):
-            # What is wanted now cannot come from this mode as the user knows it, and no
-            # switch can give another: the device must do something here the user has not
-            # seen (a template that turns the cup once it is at the lips), so they try the
-            # stick out at once rather than push where nothing is promised.
-            self._tried_for = desire.phase
-            model.relearn()
-            self.reprobes += 1
-            return self._probe(obs.mode, model), (0, 1, 0)
+        trial = self._try_at_once(t, model, max(residual, lacking), desire, obs)
+        if trial is not None:
+            return trial, (0, 1, 0)
         if obs.switches and self._wants_switch(t, obs.mode, max(residual, lacking), desire):
             self._switch = _Switch(t, obs.mode)
             self.switches += 1
@@ -328,6 +321,25 @@ class SimulatedUser:
             # lets go and gets ready to switch.
             return zero, (0, 1, 0)
         return u, (0, 1, 0)
+
+    def _try_at_once(self, t: float, model: Device, lacking: float, desire: Desire,
+                     obs: Observation) -> Array | None:
+        """A trial push if the sub-goal just begun cannot come from this mode as the user
+        knows it and no switch can give another (:meth:`_unable`), else None.
+
+        The device must then do something here the user has not seen (a template that
+        turns the cup once it is at the lips), so they try the stick out at once rather
+        than push where nothing is promised. Later in a sub-goal (the bottle pouring)
+        they keep to what they know, and try it out only once it has stopped getting
+        them closer (REPROBE_AFTER)."""
+        if desire.phase != self._sub_goal[0]:
+            self._sub_goal = (desire.phase, t)
+        if t - self._sub_goal[1] > TRY_AT_ONCE or not self._unable(lacking, desire, obs):
+            return None
+        self._tried_for = desire.phase
+        model.relearn()
+        self.reprobes += 1
+        return self._probe(obs.mode, model)
 
     def _unable(self, lacking: float, desire: Desire, obs: Observation) -> bool:
         """Whether the user, once in this sub-goal, finds that the mode as they know it
