@@ -4,10 +4,11 @@ and mode switches, and the same spill and progress to 1e-4; with the arm's joint
 CAN frames and without them (lockstep's default: the values rounded as the frames would
 carry them), which so come to the same outcomes.
 
-The file was written once, by ``python -m tests.test_lockstep_outcomes`` on the code before
-the simulator's and the lockstep step's speed-ups, and is kept fixed: it is the proof that
+The file was written by ``python -m tests.test_lockstep_outcomes`` on the code before the
+simulator's and the lockstep step's speed-ups, and kept through them: it is the proof that
 making a step cheaper did not change what a trial comes to. A change that is meant to
-change outcomes (a new skill, new physics) re-records it and says why in its commit.
+change outcomes (a new skill, new physics, the simulated person's new rule of 2026-12-07)
+re-records it and says why in its commit.
 
 The trials run in a child process with OpenBLAS's kernels pinned to its Haswell (AVX2)
 ones, those the file was recorded with: OpenBLAS picks its kernels by the CPU, and on a
