@@ -93,7 +93,7 @@ def test_every_hyperparameter_flag_of_sctd_learn():
         "--demo-tolerance",
         "--general-bandwidth", "--general-parameters", "--min-v", "--max-d", "--k-s",
         "--vf-max-n", "--vf-motion", "--vf-rotation-weight", "--vf-combine", "--vf-direction", "--vf-states",
-        "--vf-pivot-within",
+        "--vf-pivot-within", "--vf-arrive",
         "--max-linear-speed", "--max-angular-speed", "--speed-near",
         "--grasp-force", "--grasp-timeout", "--gripper-radius"}
     ns = parser.parse_args(["d", "--out", "x.yaml"])

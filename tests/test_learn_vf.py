@@ -11,6 +11,7 @@ from sctd.learn import Demo, VectorFieldLearner, field_kinds_by_phase, learn_vec
 from sctd.learn.vf import DEFAULT_FIELDS, cylinder_field, sphere_field
 from sctd.task import find_task
 from sctd_sim import demogen
+from tests.shipped import assert_same_models
 
 
 def _arcs(rng, centre, n_arcs=6, radius=0.12, steps=25):
@@ -221,3 +222,25 @@ def test_the_pour_pivot_is_the_bottle_tip():
     tip = np.asarray(ds.truth["tip_offset"])
     np.testing.assert_allclose(sph.pivot[[0, 2]], tip[[0, 2]], atol=1e-3)
     np.testing.assert_allclose(sph.pivot, tip, atol=2e-3)
+
+
+def test_the_shipped_drink_is_learned_with_arrive_on_its_rims_sphere():
+    """``skills/drink-vf.yaml`` is what the learner writes from the drink's taught
+    demonstrations with ``vf_arrive`` (its README's command): ``arrive`` on the mapping
+    whose sphere turns the cup about its rim; without the option, none."""
+    from sctd.learn import learn, read_demos, skill_bundle
+    from sctd.skill import load_skill, skill_from_bundle
+    from sctd.skill.catalog import shipped_folder
+
+    demos = read_demos(shipped_folder() / "demos" / "drink")
+    common = {"object": "mouth", "random_state": 0, "vf_direction": "both",
+              "speed_near": "0.10:0.03:0.3:0.035,0,0.10"}
+    bundle = skill_bundle(learn(demos, "vf", vf_arrive=0.01, **common), "drink-vf")
+    assert bundle.yaml_text == (shipped_folder() / "drink-vf.yaml").read_text()
+    learned, shipped = skill_from_bundle(bundle), load_skill(shipped_folder() / "drink-vf.yaml")
+    (mapping,) = shipped.states[0].input_mappings
+    assert mapping.arrive == 0.01 and any(f.pivot is not None for f in mapping.model.fields)
+    for rel, a in learned.models().items():
+        assert_same_models(a, shipped.models()[rel], rel)  # to the CPU's kernels' rounding
+    plain = skill_from_bundle(skill_bundle(learn(demos, "vf", **common), "drink-vf"))
+    assert plain.states[0].input_mappings[0].arrive == 0.0

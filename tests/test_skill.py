@@ -625,6 +625,52 @@ def test_a_fields_pivot_within_makes_a_hand_on_its_way_in_move_not_turn():
         Field.from_yaml(json.loads(text.replace("0.012", "0")), "m.json", "fields[0]")
 
 
+def test_arrive_moves_a_pivot_on_its_way_in_and_turns_it_once_there():
+    """The opening 2.5 cm beside the sphere's centre: without ``arrive`` a push towards
+    the centre turns the hand about it (a cup tilted before its rim is at the lips);
+    with ``arrive: 0.01`` the same push moves the hand, at the push's speed, and turns
+    nothing. A push away from the centre, and any push with the opening on the centre,
+    turns as before."""
+    centre, pivot = np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 0.12])
+    files = {"m.json": vector_field_model_to_bytes(sphere_model(centre, pivot), "m.json")}
+    T_in = se3.transform_from_rt(np.eye(3), centre - pivot + [0.025, 0.0, 0.0])
+    T_on = se3.transform_from_rt(np.eye(3), centre - pivot)
+    moved, turned = {}, {}
+    for arrive in (0.0, 0.01):
+        doc = vf_skill_doc("m.json")
+        doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "arrive": arrive}
+        doc["states"]["go"]["active_constraints"] = []
+        for where, T in (("in", T_in), ("on", T_on)):
+            for way in (-1.0, 1.0):
+                eng = SkillEngine(load_text(yaml.safe_dump(doc), files))
+                T1 = command(eng, T, np.array([way, 0.0, 0.0]), 0.01)
+                turned[arrive, where, way] = float(np.linalg.norm(se3.rotvec_from_matrix(T1[:3, :3])))
+                moved[arrive, where, way] = T1[:3, 3] - T[:3, 3]
+                assert np.array_equal(command(eng, T, np.zeros(3), 0.01), T)  # zero input: nothing moves
+                assert np.all(np.isfinite(T1))
+    assert turned[0.0, "in", -1.0] > 0.005 and turned[0.01, "in", -1.0] == 0.0
+    d = moved[0.01, "in", -1.0]  # straight towards the centre, scaled by its agreement (eq. 4.34)
+    assert d[0] < 0 and np.allclose(d[1:], 0.0) and -d[0] <= 0.1 * 0.01 + 1e-12
+    assert turned[0.01, "in", 1.0] == turned[0.0, "in", 1.0] > 0.005  # away: turns as before
+    for way in (-1.0, 1.0):  # on the centre: nothing to arrive at
+        assert turned[0.01, "on", way] == turned[0.0, "on", way] > 0.005
+        assert np.array_equal(moved[0.01, "on", way], moved[0.0, "on", way])
+
+
+def test_arrive_is_written_only_when_set_and_read_with_its_place():
+    doc = vf_skill_doc("m.json")
+    model = sphere_model(np.zeros(3), np.array([0.0, 0.0, 0.12]))
+    files = {"m.json": vector_field_model_to_bytes(model, "m.json")}
+    plain = load_text(yaml.safe_dump(doc), files)
+    assert "arrive" not in plain.states[0].input_mappings[0].to_yaml()
+    doc["states"]["go"]["input_mapping"][0]["arrive"] = 0.015
+    m = load_text(yaml.safe_dump(doc), files).states[0].input_mappings[0]
+    assert m.arrive == 0.015 and m.to_yaml()["arrive"] == 0.015
+    doc["states"]["go"]["input_mapping"][0]["arrive"] = -0.01
+    with pytest.raises(SkillError, match=r"states\.go\.input_mapping\[0\]\.arrive"):
+        load_text(yaml.safe_dump(doc), files)
+
+
 def test_rigid_motion_moves_each_part_of_a_push_at_its_own_agreement():
     """A push 0.6 along the pouring sphere and 0.8 across it (down, off the sphere) at its
     bottom: the bottle tilts at 0.6 of full speed (not at the sigmoid of the whole push's

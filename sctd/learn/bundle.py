@@ -264,7 +264,8 @@ def _vf_state(result: VectorFieldResult, name: str, rel: str, model: VectorField
                                  max_n=p.vf_max_n, max_d=p.max_d, motion=p.vf_motion,  # type: ignore[arg-type]
                                  direction=p.vf_direction,  # type: ignore[arg-type]
                                  scale_by="parts" if len(fields) == 1 else "whole",
-                                 command_turns_from=turns)
+                                 command_turns_from=turns,
+                                 arrive=p.vf_arrive if pivot is not None and p.vf_motion == "rigid" else 0.0)
     constraint = NeighbourOrientation(model_file=rel, model=model, frame="ee", max_n=p.vf_max_n,
                                       max_d=p.max_d, rotation_weight=p.vf_rotation_weight, pivot=pivot,
                                       yields_to_turn=pivot is not None)

@@ -150,6 +150,10 @@ class VectorFieldOptions:
         m: a field the hand turned about a point of (its ``pivot``) turns it fully only
         with that point within this of the field's centre or axis, not at all from twice
         it; nearer the hand is moved, not turned (0: the runtime's 3.5 and 7 cm).
+    vf_arrive : float
+        m: the part of a push that carries such a point towards the field's centre or
+        axis moves the hand, not turns it, in full from this far off, fading to none at
+        the centre (the mapping's ``arrive``; 0: off, every part along the field turns).
     """
 
     min_v: float = hyperparameter(0.1, "eq. 4.34 floor", valid=Interval(0, 1))
@@ -181,6 +185,12 @@ class VectorFieldOptions:
         0.0, "m: a sphere or cylinder the hand turned about a point of (a cup's rim) turns it "
         "fully only with that point within this of its centre or axis, not at all from twice "
         "it; further out a push moves the hand (0: 3.5 and 7 cm) (default %(default)s)",
+        valid=Interval(0, 0.5))
+    vf_arrive: float = hyperparameter(
+        0.0, "m: the part of a push that carries the point a sphere or cylinder turns the hand "
+        "about (a cup's rim) towards the field's centre or axis moves the hand instead of "
+        "turning it, in full from this far off, none at the centre: the cup comes to the lips "
+        "upright and turns about its rim there (0: off) (default %(default)s)",
         valid=Interval(0, 0.5))
 
 

@@ -252,6 +252,12 @@ class Field(ByValue, ABC):
         close to its centre or axis to turn about it. On floats (the runtime's tick)."""
         return None
 
+    def to_centre(self, G: Sequence[float]) -> Vec3 | None:
+        """From where this field's ``pivot`` is, for the frame at pose ``G``, to the
+        field's centre (sphere) or the nearest point of its axis (cylinder): where the
+        pivot is to arrive before the turn is about it; None without a pivot or a turn."""
+        return None
+
 
 def _pivot_reach(off: float, within: float | None = None) -> float:
     """How much of a turn a pivot ``off`` metres from the field's centre or axis makes:
@@ -332,6 +338,16 @@ class CylinderField(Field):
         vx, vy, vz = ay * rz - az * ry, az * rx - ax * rz, ax * ry - ay * rx
         n = math.sqrt(vx * vx + vy * vy + vz * vz)
         return (vx / n, vy / n, vz / n) if n > 1e-9 else (0.0, 0.0, 0.0)
+
+    def to_centre(self, G: Sequence[float]) -> Vec3 | None:
+        if self.pivot is None:
+            return None
+        a0, a1, a2 = a = self.axis.tolist()
+        o0, o1, o2 = self.point.tolist()
+        c0, c1, c2 = _pivot_centre(G, self.pivot)
+        v = (o0 - c0, o1 - c1, o2 - c2)
+        va = _dot3(v, a)
+        return v[0] - va * a0, v[1] - va * a1, v[2] - va * a2
 
     def rigid_part(self, G: Sequence[float], d: Vec3) -> RigidPart | None:
         """Around the axis: the part of ``d`` along the circulation at the frame."""
@@ -426,6 +442,13 @@ class SphereField(Field):
         t = u - np.dot(u, g) * g
         n = float(np.linalg.norm(t))
         return t / n if n > 1e-9 else np.zeros(3)
+
+    def to_centre(self, G: Sequence[float]) -> Vec3 | None:
+        if self.pivot is None:
+            return None
+        o0, o1, o2 = self.centre.tolist()
+        c0, c1, c2 = _pivot_centre(G, self.pivot)
+        return o0 - c0, o1 - c1, o2 - c2
 
     def rigid_part(self, G: Sequence[float], d: Vec3) -> RigidPart | None:
         """About the centre: the part of ``d`` tangent to the sphere through the frame."""

@@ -300,7 +300,7 @@ def turned_command(G: Flat, axis: Vec3, frm: Vec3, u: Vec3) -> Vec3:
 
 def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[Field],
                scale: float = 1.0, scale_of: Callable[[Vec3], float] | None = None,
-               wound: Vec3 | None = None) -> Flat:
+               wound: Vec3 | None = None, arrive: float = 0.0) -> Flat:
     """Move the hand F (object frame) by the command ``d`` (3 floats: the displacement of
     the frame at pose ``G`` at the command's own speed), each field's share of it
     weighted by its membership ``P`` (K,).
@@ -330,6 +330,8 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
         if pk < 1e-6:
             continue
         s0, s1, s2 = pk * d[0], pk * d[1], pk * d[2]
+        if arrive > 0.0:
+            s0, s1, s2 = _turning_share(f, G, (s0, s1, s2), arrive)
         part = f.rigid_part(G, (s0, s1, s2))
         if part is None or not part.reach:
             continue
@@ -355,6 +357,23 @@ def rigid_step(F: Flat, G: Flat, d: Vec3, P: Sequence[float], fields: Sequence[F
         z = R[6] * a0 + R[7] * a1 + R[8] * a2 + c2
     r0, r1, r2, r3, r4, r5, r6, r7, r8 = R_hand[:9]
     return (r0, r1, r2, r3, r4, r5, r6, r7, r8, x + rx, y + ry, z + rz)
+
+
+def _turning_share(f: Field, G: Flat, s: Vec3, arrive: float) -> Vec3:
+    """The share ``s`` of field ``f`` less its part that carries the field's pivot towards
+    where it turns about (:meth:`~sctd.skill.fields.Field.to_centre`): all of that part
+    from ``arrive`` (m) off, none at the centre. What is taken out stays a translation
+    (:func:`rigid_step`): a cup brought to the lips comes on upright, and turns about
+    its rim once the rim is there."""
+    v = f.to_centre(G)
+    if v is None:
+        return s
+    dist = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    a = (s[0] * v[0] + s[1] * v[1] + s[2] * v[2]) / dist if dist > 1e-9 else 0.0
+    if a <= 0.0:
+        return s
+    k = min(1.0, dist / arrive) * a / dist
+    return s[0] - k * v[0], s[1] - k * v[1], s[2] - k * v[2]
 
 
 @MAPPINGS.register
@@ -422,6 +441,7 @@ class VectorFieldMapping(InputMapping):
     direction: Literal["forward", "both"] = "forward"
     scale_by: Literal["whole", "parts"] = "whole"
     command_turns_from: Vec3 | None = None
+    arrive: float = 0.0
     _pivot_axis: Vec3 = field(init=False, repr=False, default=(0.0, 0.0, 1.0))
     _pivoted: bool = field(init=False, repr=False, default=False)
 
@@ -447,7 +467,7 @@ class VectorFieldMapping(InputMapping):
     def from_yaml(cls, r: Reader, md: dict, path: str) -> VectorFieldMapping:
         r.known_keys(md, path, {"type", "model", "frame", "mode", "combine", "min_v", "k_s", "max_n",
                                 "max_d", "blend", "motion", "intent_kappa", "direction", "scale_by",
-                                "command_turns_from"})
+                                "command_turns_from", "arrive"})
         model_file = r.string(md.get("model"), f"{path}.model")
         turns = None if md.get("command_turns_from") is None else \
             tuple(r.vector(md["command_turns_from"], f"{path}.command_turns_from", 3, unit=True).tolist())
@@ -481,6 +501,7 @@ class VectorFieldMapping(InputMapping):
             scale_by=r.choice(md.get("scale_by", "whole"), f"{path}.scale_by",  # type: ignore[arg-type]
                               ("whole", "parts")),
             command_turns_from=turns,
+            arrive=r.number(md.get("arrive", 0.0), f"{path}.arrive", 0.0, 1.0),
         )
 
     def to_yaml(self) -> dict[str, Any]:
@@ -494,6 +515,8 @@ class VectorFieldMapping(InputMapping):
             out["scale_by"] = self.scale_by
         if self.command_turns_from is not None:
             out["command_turns_from"] = [round(c, 6) for c in self.command_turns_from]
+        if self.arrive:
+            out["arrive"] = self.arrive
         return out
 
     def summary(self) -> dict[str, Any]:
@@ -535,10 +558,11 @@ class VectorFieldMapping(InputMapping):
         if self.motion == "rigid" and self.mode == "scale" and self.scale_by == "parts":
             p, Pk = (G[9], G[10], G[11]), P.tolist()
             return rigid_step(F, G, (u0 * c, u1 * c, u2 * c), Pk, self.model.fields, ws.scale,
-                              lambda v: self._part_scale(p, v, Pk), self._turned_away(G, ws))
+                              lambda v: self._part_scale(p, v, Pk), self._turned_away(G, ws), self.arrive)
         d = (s0 * c, s1 * c, s2 * c)  # the frame's displacement
         if self.motion == "rigid":
-            return rigid_step(F, G, d, P.tolist(), self.model.fields, wound=self._turned_away(G, ws))
+            return rigid_step(F, G, d, P.tolist(), self.model.fields, wound=self._turned_away(G, ws),
+                              arrive=self.arrive)
         return se3.translate_flat(F, *d)
 
     def _turned_away(self, G: Flat, ws: Workspace) -> Vec3 | None:
