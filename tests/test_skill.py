@@ -663,11 +663,15 @@ def test_arrive_is_written_only_when_set_and_read_with_its_place():
     files = {"m.json": vector_field_model_to_bytes(model, "m.json")}
     plain = load_text(yaml.safe_dump(doc), files)
     assert "arrive" not in plain.states[0].input_mappings[0].to_yaml()
-    doc["states"]["go"]["input_mapping"][0]["arrive"] = 0.015
+    doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "arrive": 0.015}
     m = load_text(yaml.safe_dump(doc), files).states[0].input_mappings[0]
     assert m.arrive == 0.015 and m.to_yaml()["arrive"] == 0.015
-    doc["states"]["go"]["input_mapping"][0]["arrive"] = -0.01
-    with pytest.raises(SkillError, match=r"states\.go\.input_mapping\[0\]\.arrive"):
+    doc["states"]["go"]["input_mapping"][0]["motion"] = "translate"
+    where = r"states\.go\.input_mapping\[0\]\.arrive"
+    with pytest.raises(SkillError, match=where + ": arrive needs motion: rigid"):
+        load_text(yaml.safe_dump(doc), files)  # motion translate: nothing to split
+    doc["states"]["go"]["input_mapping"][0] |= {"motion": "rigid", "arrive": -0.01}
+    with pytest.raises(SkillError, match=where):
         load_text(yaml.safe_dump(doc), files)
 
 

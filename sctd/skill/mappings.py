@@ -447,6 +447,8 @@ class VectorFieldMapping(InputMapping):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "_pivoted", any(f.pivot is not None for f in self.model.fields))
+        if self.arrive and self.motion != "rigid":
+            raise ValueError(f"arrive needs motion: rigid (it splits a turn), got motion: {self.motion}")
         if self.command_turns_from is None:
             return
         pivots = [f.pivot for f in self.model.fields if f.pivot is not None]
@@ -476,7 +478,8 @@ class VectorFieldMapping(InputMapping):
         except ValueError as e:
             if isinstance(e, SkillError):
                 raise
-            raise r.fail(f"{path}.command_turns_from", str(e)) from None
+            raise r.fail(f"{path}.arrive" if str(e).startswith("arrive") else f"{path}.command_turns_from",
+                         str(e)) from None
 
     @classmethod
     def _read(cls, r: Reader, md: dict, path: str, model_file: str, turns: Any) -> VectorFieldMapping:
