@@ -120,6 +120,22 @@ def test_the_tree_is_asked_rarely_on_a_slow_path_through_a_dense_model(no_reuse)
     assert nb.fetches < 4000 / 100, nb.fetches
 
 
+def test_two_kinds_of_query_asking_for_means_in_turn_have_each_mean_worked_out_once():
+    """A mapping's position query and a constraint's pose query ask for the mean
+    orientation of their answers in turn every tick: while each answer is reused, its
+    mean is the one worked out the first time (the same tuple), not worked out again."""
+    model = random_model(7, 500)
+    nb = Neighbours(model)
+    p = tuple(model.points[20].tolist())
+    q = tuple(model.quaternions[20].tolist())
+    a, b = nb.query(p, 5, 0.15), nb.query_pose(p, q, 5, 0.15, 0.1)
+    first = nb.mean_orientation(a), nb.mean_orientation(b)
+    assert first[0] is not None and first[1] is not None
+    for _ in range(3):  # the same place: both answers are reused, and so are their means
+        assert nb.query(p, 5, 0.15) is a and nb.query_pose(p, q, 5, 0.15, 0.1) is b
+        assert nb.mean_orientation(a) is first[0] and nb.mean_orientation(b) is first[1]
+
+
 def test_far_from_every_point_the_answer_is_empty_and_membership_the_prior(no_reuse):
     model = random_model(5, 500)
     nb = Neighbours(model)

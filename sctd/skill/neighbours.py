@@ -39,6 +39,7 @@ REUSE_ANGLE = 5e-3  # rad (pose queries)
 # and answering from the fetched points costs the same whatever the model's size.
 FETCH_POINTS = 128
 FETCHED_SETS = 4  # fetched sets kept (one per place the skill's frames query)
+MEANS_KEPT = 4  # answers whose mean orientation is kept (mean_orientation)
 
 
 class _Fetched:
@@ -126,8 +127,9 @@ class Neighbours:
         self.refreshes = 0  # answers worked out ahead by refresh
         self.queries = 0
         self.fetches = 0
-        self._mean_of: Answer | None = None  # the answer _mean is of
-        self._mean: tuple[float, float, float, float] | None = None
+        # (answer, its mean orientation), the newest first: one per kind of query that
+        # asks for a mean (a mapping's and a constraint's alternate every tick)
+        self._means: list[tuple[Answer, tuple[float, float, float, float] | None]] = []
 
     def _reuse(self, key: tuple, p: Sequence[float], q: Sequence[float] | None = None):
         """The kept answer for ``key`` if it was made within the reuse distance (and
@@ -253,9 +255,11 @@ class Neighbours:
         """The weighted mean quaternion (x, y, z, w; not normalised) of the points an
         answer of :meth:`query` or :meth:`query_pose` names (indices, weights), each
         taken in the first one's hemisphere; None for no points. Worked out once per
-        answer: a reused answer has the same mean."""
-        if answer is self._mean_of:
-            return self._mean
+        answer (the last :data:`MEANS_KEPT` answers asked about): a reused answer has the
+        same mean."""
+        for kept, mean in self._means:
+            if kept is answer:
+                return mean
         i, w = answer
         mean = None
         if i:
@@ -269,7 +273,8 @@ class Neighbours:
                     wk = -wk
                 gx, gy, gz, gw = gx + wk * x, gy + wk * y, gz + wk * z, gw + wk * qw
             mean = (gx, gy, gz, gw)
-        self._mean_of, self._mean = answer, mean
+        self._means.insert(0, (answer, mean))
+        del self._means[MEANS_KEPT:]
         return mean
 
     def membership(self, p: Sequence[float], max_n: int, max_d: float) -> Array:
