@@ -186,6 +186,57 @@ def decode_state(data: bytes) -> StateMsg:
     pose: force guards then see none."""
     _size(data, MAX_STATE_BYTES)
     obj = unpack_map(data)
+    m = _plain_state(obj)
+    return m if m is not None else _checked_state(obj)
+
+
+def _plain_state(obj: dict) -> StateMsg | None:
+    """The state ``obj`` (an unpacked map) when it is well-formed as every sender's is
+    (an integer ``seq``, a float ``stamp``, a pose, optional ``wrench``, ``q`` and ``dq``
+    lists and ``gripper`` map, all finite, no fault), else None, and
+    :func:`_checked_state` then judges it field by field, so that a malformed state is
+    refused for the same reason either way. The tick decodes a state each millisecond:
+    these few checks cost half as much as judging each field."""
+    seq, stamp, pose = obj.get("seq"), obj.get("stamp"), obj.get("pose")
+    if type(seq) is not int or type(stamp) is not float or type(pose) is not list or len(pose) != 7 \
+            or obj.get("fault") not in (None, ""):
+        return None
+    values = pose
+    wrench, q, dq = obj.get("wrench"), obj.get("q"), obj.get("dq")
+    if wrench is not None:
+        if type(wrench) is not list or len(wrench) != 6:
+            return None
+        values = values + wrench
+    for joints in (q, dq):
+        if joints is not None:
+            if type(joints) is not list or not 1 <= len(joints) <= MAX_JOINTS:
+                return None
+            values = values + joints
+    if q is not None and dq is not None and len(q) != len(dq):
+        return None
+    if not _NUMBERS.issuperset(map(type, values)) or not math.isfinite(sum(values) + stamp):
+        return None
+    x, y, z, qx, qy, qz, qw = pose
+    if abs(math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) - 1.0) > 1e-2 \
+            or max(abs(x), abs(y), abs(z)) > MAX_POSITION:
+        return None
+    g = obj.get("gripper")
+    gripper = None
+    if g is not None:
+        if type(g) is not dict:
+            return None
+        width, cmd = g.get("width"), g.get("cmd", -1)
+        grasped, moving = g.get("grasped", False), g.get("moving", False)
+        if type(width) is not float or not 0.0 <= width <= MAX_GRIPPER_WIDTH or type(cmd) is not int \
+                or type(grasped) is not bool or type(moving) is not bool:
+            return None
+        gripper = GripperReading(width, grasped, moving, cmd)
+    return StateMsg(seq, stamp, list(map(float, pose)), None if wrench is None else list(map(float, wrench)),
+                    q, dq, False, None, gripper, False)
+
+
+def _checked_state(obj: dict) -> StateMsg:
+    """:func:`decode_state` of an unpacked map, every field judged on its own."""
     wrench = None
     nonfinite = False
     if obj.get("wrench") is not None:
