@@ -30,6 +30,13 @@ that reads the arm and commands it pays here). The daemon's goal is a ratio to i
 (:data:`FLOOR_RATIO`), and each phase says where the daemon's CPU went, thread by thread
 (:func:`thread_cpu`).
 
+The **tick path** (``--tick-ticks``): the daemon's tick thread's own work in one process,
+from bytes and without Zenoh (:mod:`.tickpath`), back to back and after the sleep a 1 kHz
+tick thread takes between ticks (:data:`TICK_SLEEPS_US`), for each skill and input in
+each tree, and the floor peer's per-tick work the same way: CPU microseconds a tick,
+steadier than the phases' shares of a core, and what says how much of the daemon's cost
+is the sleep's (docs/benchmarks.md).
+
 And the **lockstep step**: ``sctd bench eval`` (``--eval-trials`` trials of each skill,
 the same seeds) in each tree, ms of wall time per simulated 1 kHz step.
 """
@@ -341,6 +348,35 @@ def lockstep_step(tree: Tree, skill: str, trials: int, logdir: Path) -> dict[str
             "outcomes": out["outcomes"], "sim_s": out["sim_s"]}
 
 
+# --- the tick path in one process --------------------------------------------------------
+
+TICK_SLEEPS_US = (0.0, 900.0)  # back to back, and the sleep of a 1 kHz tick thread between ticks
+PROBE = "sctd_tickpath"  # this tree's .tickpath, copied, run in each tree's environment
+
+
+def tick_path(tree: Tree, skill: str, task: str, inputs: list[bool], ticks: int, logdir: Path,
+              floor: bool = False) -> list[dict[str, Any]]:
+    """:mod:`.tickpath`'s rows for ``skill`` (or the floor's path) in ``tree``: this
+    tree's probe, run on that tree's code."""
+    probe = logdir / "probe"
+    if not (probe / f"{PROBE}.py").exists():
+        probe.mkdir(exist_ok=True)
+        (probe / f"{PROBE}.py").write_text(Path(__file__).with_name("tickpath.py").read_text())
+    env = dict(tree.env if tree.env is not None else os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [env.get("PYTHONPATH", ""), str(probe)]))
+    what = ("--path", "floor", "--inputs", "zero") if floor else (
+        "--inputs", ",".join("full" if x else "zero" for x in inputs))
+    log = logdir / f"tickpath-{len(list(logdir.glob('tickpath-*')))}.log"
+    sleeps = ",".join(f"{x:g}" for x in TICK_SLEEPS_US)
+    with Child(PROBE, "--skill", skill, "--task", task, "--ticks", str(ticks), *what, "--sleeps-us", sleeps,
+               log=log, env=env, cwd=tree.cwd) as c:
+        if c.p.wait(timeout=120.0 + 0.01 * ticks * len(TICK_SLEEPS_US) * len(inputs)) != 0:
+            raise RuntimeError(f"the tick path probe failed in {tree.label}; see {log}")
+    rows = json.loads(log.read_text().strip().splitlines()[-1])["rows"]
+    return [{"tree": tree.label, "skill": "floor" if floor else skill, **{k: r[k] for k in (
+        "input", "path", "sleep_us", "us_per_tick", "modes")}} for r in rows]
+
+
 # --- the run --------------------------------------------------------------------------------
 
 def phases_of(args: argparse.Namespace) -> list[Phase]:
@@ -363,13 +399,20 @@ def run_cost_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
             for tree in order:
                 rows.append(run_phase(tree, ph, logdir, len(rows)))
                 print(_row(rows[-1]), file=sys.stderr, flush=True)
+        ticked = [x for x in args.skills if not x.startswith(SET)] if args.tick_ticks else []
+        paths: list[dict[str, Any]] = []
+        for k, skill in enumerate(ticked):
+            for tree in (trees if k % 2 == 0 else trees[::-1]):
+                paths += tick_path(tree, skill, args.task, args.inputs, args.tick_ticks, logdir)
+        for tree in trees if ticked else []:
+            paths += tick_path(tree, ticked[0], args.task, [False], args.tick_ticks, logdir, floor=True)
         steps = []
         stepped = [x for x in args.skills if not x.startswith(SET)] if args.eval_trials else []
         for k, skill in enumerate(stepped):
             for tree in (trees if k % 2 == 0 else trees[::-1]):
                 steps.append(lockstep_step(tree, skill, args.eval_trials, logdir))
     return {"task": args.task, "window_s": args.window, "trees": {t.label: t.source for t in trees},
-            "phases": rows, "lockstep": steps, "goals": GOALS}
+            "phases": rows, "tick_path": paths, "lockstep": steps, "goals": GOALS}
 
 
 def _pct(x: float | None) -> str:
@@ -403,6 +446,7 @@ def print_report(r: dict[str, Any]) -> None:
         if threads:
             shown = [f"{k} {100 * v:.1f}" for k, v in list(threads.items())[:8] if v >= 0.001]
             print("      threads: " + ", ".join(shown))
+    _print_tick_path(r.get("tick_path") or [])
     if r["lockstep"]:
         print("lockstep step (sctd bench eval, the same seeds in each tree):")
         for s in r["lockstep"]:
@@ -411,6 +455,24 @@ def print_report(r: dict[str, Any]) -> None:
                   f"{s['rtf']:.2f} ({s['sim_s']:.1f} s simulated; {outcomes})")
     for line in verdicts(r):
         print(line)
+
+
+def _print_tick_path(rows: list[dict[str, Any]]) -> None:
+    """The tick-path rows: per skill, input and tree, back to back / after the sleep."""
+    if not rows:
+        return
+    slept = max(TICK_SLEEPS_US)
+    print(f"tick path in one process (from bytes, no Zenoh; sctd.bench.tickpath), CPU us a tick: "
+          f"back to back / after a {slept / 1000:g} ms sleep (times as much)")
+    cells: dict[tuple[str, str, str], dict[float, float]] = {}
+    for x in rows:
+        cells.setdefault((x["skill"], x["input"], x["tree"]), {})[x["sleep_us"]] = x["us_per_tick"]
+    for (skill, given, tree), by_sleep in cells.items():
+        hot, cold = by_sleep.get(0.0), by_sleep.get(slept)
+        name = "floor's path" if skill == "floor" else f"{skill} {given}"
+        ratio = f" ({cold / hot:.1f}x)" if hot and cold else ""
+        print(f"  {name:<24s} {tree:<9s} {hot if hot is not None else '-':>7} / "
+              f"{cold if cold is not None else '-'}{ratio}")
 
 
 def verdicts(r: dict[str, Any]) -> list[str]:
@@ -498,15 +560,18 @@ def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
                    help="also measure the bare Zenoh peer's floor (default on)")
     p.add_argument("--eval-trials", type=int, default=2,
                    help="lockstep trials per skill for the step's figure, 0: none (default %(default)s)")
+    p.add_argument("--tick-ticks", type=int, default=3000,
+                   help="ticks of the tick path in one process per skill, input and sleep, 0: none "
+                        "(default %(default)s)")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
 
 def main_cost_bench(args: argparse.Namespace) -> int:
-    if not args.window > 0 or args.warmup < 0 or args.eval_trials < 0:
+    if not args.window > 0 or args.warmup < 0 or args.eval_trials < 0 or args.tick_ticks < 0:
         from ..app.errors import fail
 
-        return fail("bench cost", "--window must be > 0, --warmup and --eval-trials >= 0")
+        return fail("bench cost", "--window must be > 0, --warmup, --eval-trials and --tick-ticks >= 0")
     return run_and_report("cost", args, lambda logdir: run_cost_bench(args, logdir), print_report)
 
 

@@ -1,0 +1,160 @@
+"""The daemon's tick path in one process, from bytes: what the tick thread's own work costs
+without Zenoh, hot and after a sleep (``sctd bench cost``'s tick-path rows).
+
+Per tick, timed on this thread's CPU clock: the robot state off the wire
+(:meth:`~sctd.runtime.driver.TickDriver.receive`: decoded, judged, kept), the object poses
+every :data:`OBJECT_EVERY` ticks and an input message every :data:`INPUT_EVERY` (the
+bench's person: centred with the deadman released, or sines over the whole range with
+it held), the control step, the target encoded (and a gripper message when the tick has
+one), the between-ticks work. Untimed: the state each tick is made from the previous
+target (an arm that follows it exactly), and, with ``--sleep-us``, a sleep before each
+tick as the daemon's tick thread sleeps between its ticks. ``--path floor`` times what
+the bench's floor peer does instead (the state decoded, a target encoded).
+
+The figures say what sleeping costs the code after it: on this project's VMs the same
+path costs two to four times as much after a 0.9 ms sleep as back to back (docs/
+benchmarks.md). It runs as a module of its own (``python -m sctd_tickpath``, a copy) in
+another source tree's environment too, so it reads only that tree's public interfaces.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from typing import Any
+
+OBJECT_EVERY = 20  # ticks between object poses (50 Hz)
+INPUT_EVERY = 10  # ticks between input messages (100 Hz, the bench's person)
+WARMUP = 1000  # ticks before the measured ones
+BLOCK = 250  # measured ticks per block: the figure is the median of the blocks' means, so
+# that a burst of another program's work on a shared machine moves it by a block at most
+
+
+def _clock_cost(n: int = 2000) -> float:
+    """The median cost (s) of one pair of CPU-clock reads, taken off each tick's time."""
+    clock = time.thread_time
+    pairs = []
+    for _ in range(n):
+        a = clock()
+        pairs.append(clock() - a)
+    return statistics.median(pairs)
+
+
+class _Bench:
+    """One skill's driver and the untimed messages around its ticks (module doc)."""
+
+    def __init__(self, skill_path: str, task_name: str, full: bool):
+        from sctd.runtime.controller import RuntimeConfig
+        from sctd.runtime.driver import TickDriver
+        from sctd.skill import load_skill
+        from sctd.skill.catalog import find_skill
+        from sctd.task import find_task
+        from sctd.wire import codec
+        from sctd_sim.simulation import Simulation, trial_scene
+
+        scene, q0 = trial_scene(find_task(task_name), 0)
+        sim = Simulation(scene=scene, q0=q0)
+        self.codec, self.full = codec, full
+        self.m, self.poses = sim.state_message(), sim.objects()
+        self.driver = TickDriver(load_skill(find_skill(skill_path)), RuntimeConfig())
+        self.pose: list[float] = list(self.m["pose"])  # the newest target: the arm follows it
+        self.modes: dict[str, int] = {}
+
+    def messages(self, k: int, wall: float) -> tuple[bytes, list[tuple[str, bytes]], bytes | None]:
+        """Tick ``k``'s state (at the newest target), its object poses and input, if due."""
+        codec, m = self.codec, self.m
+        state = codec.encode_state(k, wall, self.pose, q=m["q"], dq=m["dq"], wrench=m["wrench"],
+                                   gripper=m.get("gripper"))
+        objects = [(n, codec.encode_object(k, wall, p)) for n, p in self.poses.items()] \
+            if k % OBJECT_EVERY == 1 else []
+        given = None
+        if k % INPUT_EVERY == 1:
+            j = k // INPUT_EVERY + 1
+            u = [math.sin(j * 0.013), math.cos(j * 0.009), math.sin(j * 0.005)] if self.full else [0.0] * 3
+            given = codec.encode_input(j, wall, u, [0, 1 if self.full else 0, 0])
+        return state, objects, given
+
+    def tick(self, wall: float, state: bytes, objects: list[tuple[str, bytes]], given: bytes | None) -> str:
+        """The tick thread's work for one tick (timed by the caller); its mode."""
+        driver, codec = self.driver, self.codec
+        now = time.monotonic()
+        driver.receive("state", "", state, now)
+        for name, data in objects:
+            driver.receive("object", name, data, now)
+        if given is not None:
+            driver.receive("input", "bench", given, now)
+        res = driver.tick(now, wall)
+        if res.pose is not None:
+            codec.encode_target(driver.target_seq, wall, res.pose, res.state, driver.controller.skill.id,
+                                res.in_seq, res.device, res.seed)
+            self.pose = res.pose
+        if res.gripper is not None:
+            codec.encode_gripper(res.gripper)
+        driver.after_tick()
+        return res.mode
+
+    def floor(self, k: int, wall: float, state: bytes) -> None:
+        """The floor peer's work for one tick: the state decoded, a target encoded."""
+        self.codec.decode_state(state)
+        self.codec.encode_target(k, wall, self.pose, "floor", "floor", 0, "", False)
+
+
+def measure(skill_path: str, task_name: str, full: bool, ticks: int, sleep_s: float,
+            path: str = "tick") -> dict[str, Any]:
+    """CPU per tick (us) of the tick path (``path`` ``tick``) or the floor's (``floor``):
+    the median over blocks of :data:`BLOCK` of ``ticks`` ticks after :data:`WARMUP` of
+    the mean, each tick after a sleep of ``sleep_s``."""
+    bench, clock, spent, blocks = _Bench(skill_path, task_name, full), time.thread_time, 0.0, []
+    for k in range(1, WARMUP + ticks + 1):
+        if sleep_s > 0.0:
+            time.sleep(sleep_s)
+        wall = time.time()
+        state, objects, given = bench.messages(k, wall)
+        t0 = clock()
+        if path == "floor":
+            bench.floor(k, wall, state)
+        else:
+            mode = bench.tick(wall, state, objects, given)
+        if k > WARMUP:
+            spent += clock() - t0
+            if path != "floor":
+                bench.modes[mode] = bench.modes.get(mode, 0) + 1
+            if (k - WARMUP) % BLOCK == 0 or k == WARMUP + ticks:
+                blocks.append(spent / (BLOCK if (k - WARMUP) % BLOCK == 0 else (k - WARMUP) % BLOCK))
+                spent = 0.0
+    us = 1e6 * (statistics.median(blocks) - _clock_cost())
+    return {"skill": skill_path, "task": task_name, "input": "full" if full else "zero", "path": path,
+            "ticks": ticks, "sleep_us": round(sleep_s * 1e6, 1), "us_per_tick": round(us, 2),
+            "modes": bench.modes}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sctd.bench.tickpath`` (or ``sctd_tickpath``, a copy): one JSON line, the
+    rows of every input and sleep asked for, in that order."""
+    p = argparse.ArgumentParser(prog="sctd_tickpath", description=__doc__.splitlines()[0])
+    p.add_argument("--skill", required=True, help="the skill: a file, or a shipped or stored skill's name")
+    p.add_argument("--task", required=True, help="the task whose first trial's scene gives the state")
+    p.add_argument("--inputs", default="zero,full", help="zero and/or full (default %(default)s)")
+    p.add_argument("--path", choices=["tick", "floor"], default="tick")
+    p.add_argument("--ticks", type=int, default=3000)
+    p.add_argument("--sleeps-us", default="0", help="comma-separated sleeps before each tick (default 0)")
+    a = p.parse_args(argv)
+    inputs = [x.strip() for x in a.inputs.split(",") if x.strip()]
+    try:
+        sleeps = [float(x) for x in a.sleeps_us.split(",") if x.strip()]
+    except ValueError:
+        p.error(f"--sleeps-us {a.sleeps_us!r}: comma-separated numbers")
+    if a.ticks < 1 or not sleeps or min(sleeps) < 0 or not inputs or set(inputs) - {"zero", "full"}:
+        p.error("--ticks must be >= 1, --sleeps-us numbers >= 0, --inputs zero and/or full")
+    rows = [measure(a.skill, a.task, x == "full", a.ticks, us * 1e-6, a.path)
+            for x in inputs for us in sleeps]
+    print(json.dumps({"rows": rows}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
