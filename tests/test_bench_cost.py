@@ -165,12 +165,13 @@ def test_bench_cost_measures_this_tree_and_a_commit_side_by_side(capsys, tmp_pat
                  "--tick-ticks", "100", "--json", "--logs", str(tmp_path)]) == 0
     r = json.loads(capsys.readouterr().out)
     # the tick path, this tree's probe on each tree's code: back to back and after the sleep,
-    # then the floor's path in each tree
+    # then the floor's path in each tree, and the control loop
     assert [(x["tree"], x["skill"], x["input"], x["sleep_us"]) for x in r["tick_path"]] == [
         ("baseline", "pour", "full", 0.0), ("baseline", "pour", "full", 900.0),
         ("this", "pour", "full", 0.0), ("this", "pour", "full", 900.0),
         ("baseline", "floor", "zero", 0.0), ("baseline", "floor", "zero", 900.0),
-        ("this", "floor", "zero", 0.0), ("this", "floor", "zero", 900.0)]
+        ("this", "floor", "zero", 0.0), ("this", "floor", "zero", 900.0),
+        ("this", "loop", "zero", 0.0), ("this", "loop", "zero", 900.0)]
     assert all(x["us_per_tick"] > 0 for x in r["tick_path"])
     assert all(x["modes"] == {"running": 100} for x in r["tick_path"] if x["skill"] == "pour")
     assert [(p["tree"], p["floor"]) for p in r["phases"]] == [

@@ -22,9 +22,10 @@ def test_the_person_drives_every_measured_tick_or_none(full, mode):
     assert math.isfinite(r["us_per_tick"]) and r["us_per_tick"] > 0.0
 
 
-def test_the_floors_path_and_a_sleep_before_each_tick_are_measured_too():
-    floor = tickpath.measure("pour", "pour", False, 100, 0.0, path="floor")
-    assert floor["path"] == "floor" and floor["modes"] == {} and floor["us_per_tick"] > 0.0
+def test_the_floors_path_the_control_and_a_sleep_before_each_tick_are_measured_too():
+    for path in ("floor", "loop"):
+        r = tickpath.measure("pour", "pour", False, 100, 0.0, path=path)
+        assert r["path"] == path and r["modes"] == {} and r["us_per_tick"] > 0.0
     slept = tickpath.measure("pour", "pour", False, 100, 2e-4)
     assert slept["sleep_us"] == 200.0 and slept["modes"] == {"stopped": 100}
 
@@ -58,8 +59,10 @@ def test_the_report_gives_each_skill_input_and_tree_back_to_back_and_after_the_s
 
     rows = [{"tree": t, "skill": s, "input": "zero", "path": "tick", "sleep_us": us, "us_per_tick": v,
              "modes": {}} for t, s, us, v in [("this", "pour", 0.0, 10.0), ("this", "pour", 900.0, 25.0),
-                                                ("this", "floor", 0.0, 4.0), ("this", "floor", 900.0, 6.0)]]
+                                                ("this", "floor", 0.0, 4.0), ("this", "floor", 900.0, 6.0),
+                                                ("this", "loop", 0.0, 8.0), ("this", "loop", 900.0, 8.0)]]
     _print_tick_path(rows)
     out = capsys.readouterr().out.splitlines()
     assert out[1].split() == ["pour", "zero", "this", "10.0", "/", "25.0", "(2.5x)"]
     assert out[2].split() == ["floor's", "path", "this", "4.0", "/", "6.0", "(1.5x)"]
+    assert out[3].split() == ["control:", "a", "tight", "loop", "this", "8.0", "/", "8.0", "(1.0x)"]

@@ -355,16 +355,16 @@ PROBE = "sctd_tickpath"  # this tree's .tickpath, copied, run in each tree's env
 
 
 def tick_path(tree: Tree, skill: str, task: str, inputs: list[bool], ticks: int, logdir: Path,
-              floor: bool = False) -> list[dict[str, Any]]:
-    """:mod:`.tickpath`'s rows for ``skill`` (or the floor's path) in ``tree``: this
-    tree's probe, run on that tree's code."""
+              path: str = "tick") -> list[dict[str, Any]]:
+    """:mod:`.tickpath`'s rows for ``skill`` (``path`` ``tick``; or the floor's path, or
+    the control loop) in ``tree``: this tree's probe, run on that tree's code."""
     probe = logdir / "probe"
     if not (probe / f"{PROBE}.py").exists():
         probe.mkdir(exist_ok=True)
         (probe / f"{PROBE}.py").write_text(Path(__file__).with_name("tickpath.py").read_text())
     env = dict(tree.env if tree.env is not None else os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [env.get("PYTHONPATH", ""), str(probe)]))
-    what = ("--path", "floor", "--inputs", "zero") if floor else (
+    what = ("--path", path, "--inputs", "zero") if path != "tick" else (
         "--inputs", ",".join("full" if x else "zero" for x in inputs))
     log = logdir / f"tickpath-{len(list(logdir.glob('tickpath-*')))}.log"
     sleeps = ",".join(f"{x:g}" for x in TICK_SLEEPS_US)
@@ -373,7 +373,7 @@ def tick_path(tree: Tree, skill: str, task: str, inputs: list[bool], ticks: int,
         if c.p.wait(timeout=120.0 + 0.01 * ticks * len(TICK_SLEEPS_US) * len(inputs)) != 0:
             raise RuntimeError(f"the tick path probe failed in {tree.label}; see {log}")
     rows = json.loads(log.read_text().strip().splitlines()[-1])["rows"]
-    return [{"tree": tree.label, "skill": "floor" if floor else skill, **{k: r[k] for k in (
+    return [{"tree": tree.label, "skill": skill if path == "tick" else path, **{k: r[k] for k in (
         "input", "path", "sleep_us", "us_per_tick", "modes")}} for r in rows]
 
 
@@ -405,7 +405,9 @@ def run_cost_bench(args: argparse.Namespace, logdir: Path) -> dict[str, Any]:
             for tree in (trees if k % 2 == 0 else trees[::-1]):
                 paths += tick_path(tree, skill, args.task, args.inputs, args.tick_ticks, logdir)
         for tree in trees if ticked else []:
-            paths += tick_path(tree, ticked[0], args.task, [False], args.tick_ticks, logdir, floor=True)
+            paths += tick_path(tree, ticked[0], args.task, [False], args.tick_ticks, logdir, path="floor")
+        if ticked:
+            paths += tick_path(trees[-1], ticked[0], args.task, [False], args.tick_ticks, logdir, path="loop")
         steps = []
         stepped = [x for x in args.skills if not x.startswith(SET)] if args.eval_trials else []
         for k, skill in enumerate(stepped):
@@ -469,7 +471,7 @@ def _print_tick_path(rows: list[dict[str, Any]]) -> None:
         cells.setdefault((x["skill"], x["input"], x["tree"]), {})[x["sleep_us"]] = x["us_per_tick"]
     for (skill, given, tree), by_sleep in cells.items():
         hot, cold = by_sleep.get(0.0), by_sleep.get(slept)
-        name = "floor's path" if skill == "floor" else f"{skill} {given}"
+        name = {"floor": "floor's path", "loop": "control: a tight loop"}.get(skill, f"{skill} {given}")
         ratio = f" ({cold / hot:.1f}x)" if hot and cold else ""
         print(f"  {name:<24s} {tree:<9s} {hot if hot is not None else '-':>7} / "
               f"{cold if cold is not None else '-'}{ratio}")

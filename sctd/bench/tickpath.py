@@ -9,11 +9,13 @@ it held), the control step, the target encoded (and a gripper message when the t
 one), the between-ticks work. Untimed: the state each tick is made from the previous
 target (an arm that follows it exactly), and, with ``--sleep-us``, a sleep before each
 tick as the daemon's tick thread sleeps between its ticks. ``--path floor`` times what
-the bench's floor peer does instead (the state decoded, a target encoded).
+the bench's floor peer does instead (the state decoded, a target encoded), and ``--path
+loop`` a control: arithmetic on a few locals, as long as a tick, touching almost no memory.
 
-The figures say what sleeping costs the code after it: on this project's VMs the same
-path costs two to four times as much after a 0.9 ms sleep as back to back (docs/
-benchmarks.md). It runs as a module of its own (``python -m sctd_tickpath``, a copy) in
+The figures say what sleeping costs the code after it: on this project's VMs the tick
+path costs 1.5 to 4 times as much after a 0.9 ms sleep as back to back, and the control
+loop the same either way, so what a sleep costs is the memory a tick touches, fetched
+again (docs/benchmarks.md). It runs as a module of its own (``python -m sctd_tickpath``, a copy) in
 another source tree's environment too, so it reads only that tree's public interfaces.
 """
 
@@ -29,6 +31,7 @@ from typing import Any
 
 OBJECT_EVERY = 20  # ticks between object poses (50 Hz)
 INPUT_EVERY = 10  # ticks between input messages (100 Hz, the bench's person)
+LOOP_STEPS = 600  # the control loop's steps (--path loop)
 WARMUP = 1000  # ticks before the measured ones
 BLOCK = 250  # measured ticks per block: the figure is the median of the blocks' means, so
 # that a burst of another program's work on a shared machine moves it by a block at most
@@ -97,6 +100,15 @@ class _Bench:
         driver.after_tick()
         return res.mode
 
+    @staticmethod
+    def loop() -> float:
+        """The control: arithmetic on a few locals, about as long as the zero-input tick
+        back to back, touching almost no memory."""
+        s = 0.0
+        for i in range(LOOP_STEPS):
+            s += i * 0.5
+        return s
+
     def floor(self, k: int, wall: float, state: bytes) -> None:
         """The floor peer's work for one tick: the state decoded, a target encoded."""
         self.codec.decode_state(state)
@@ -117,11 +129,13 @@ def measure(skill_path: str, task_name: str, full: bool, ticks: int, sleep_s: fl
         t0 = clock()
         if path == "floor":
             bench.floor(k, wall, state)
+        elif path == "loop":
+            bench.loop()
         else:
             mode = bench.tick(wall, state, objects, given)
         if k > WARMUP:
             spent += clock() - t0
-            if path != "floor":
+            if path == "tick":
                 bench.modes[mode] = bench.modes.get(mode, 0) + 1
             if (k - WARMUP) % BLOCK == 0 or k == WARMUP + ticks:
                 blocks.append(spent / (BLOCK if (k - WARMUP) % BLOCK == 0 else (k - WARMUP) % BLOCK))
@@ -139,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--skill", required=True, help="the skill: a file, or a shipped or stored skill's name")
     p.add_argument("--task", required=True, help="the task whose first trial's scene gives the state")
     p.add_argument("--inputs", default="zero,full", help="zero and/or full (default %(default)s)")
-    p.add_argument("--path", choices=["tick", "floor"], default="tick")
+    p.add_argument("--path", choices=["tick", "floor", "loop"], default="tick")
     p.add_argument("--ticks", type=int, default=3000)
     p.add_argument("--sleeps-us", default="0", help="comma-separated sleeps before each tick (default 0)")
     a = p.parse_args(argv)
