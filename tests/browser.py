@@ -20,13 +20,14 @@ WebGL from SwiftShader (``--use-angle=swiftshader --enable-unsafe-swiftshader``:
 Chromium 150 picks SwiftShader without them, they keep it so on a machine with a GPU);
 no traffic of its own (``--disable-background-networking``, ``--disable-component-update``,
 ``--disable-sync``, ``--disable-quic``, ``--no-first-run``), which otherwise floods
-refused connections on a closed network. ``HOME`` is the browser's own temporary
-folder, which also holds the profile: Chromium writes its caches and crash database
-there, not in the user's home, and every process it starts names that folder on its
-command line, which is how :func:`processes_of` finds them. That includes the crash
-handler, which Chromium starts detached (parent pid 1) and which can outlive the
-browser by a moment (``--disable-crashpad-for-testing`` would spare it, but with it
-Chromium 150 aborts every navigation).
+refused connections on a closed network. ``HOME`` and ``TMPDIR`` are the browser's own
+temporary folder, which also holds the profile: Chromium writes its caches, crash
+database and temporary files there, not in the user's home or the system's temp folder,
+and every process it starts names that folder on its command line, which is how
+:func:`processes_of` finds them. That includes the crash handler, which Chromium starts
+detached (parent pid 1) and which can outlive the browser by a moment (``--disable-
+crashpad-for-testing`` would spare it, but with it Chromium 150 aborts every
+navigation).
 """
 
 from __future__ import annotations
@@ -222,7 +223,7 @@ def open_page(url: str, width: int = 800, height: int = 600,
         with sync_playwright() as pw:
             context = pw.chromium.launch_persistent_context(
                 folder / "profile", executable_path=str(chromium), headless=True,
-                args=list(FLAGS), env={**os.environ, "HOME": str(folder)},
+                args=list(FLAGS), env={**os.environ, "HOME": str(folder), "TMPDIR": str(folder)},
                 viewport={"width": width, "height": height}, device_scale_factor=1,
                 timeout=timeout * 1000,
                 **({} if client_certificates is None else

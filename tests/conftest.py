@@ -65,10 +65,12 @@ def sctd(*args: str, log: Path) -> Proc:
     return Proc("sctd.cli.main", *args, log=log)
 
 
-def run_sctd(*args: str, timeout: float = 90.0) -> subprocess.CompletedProcess:
-    """``sctd ARGS`` run to its end (killed after ``timeout``), output captured."""
+def run_sctd(*args: str, timeout: float = 90.0,
+             env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """``sctd ARGS`` run to its end (killed after ``timeout``), output captured; ``env``:
+    its environment (default this process's)."""
     return subprocess.run([sys.executable, "-m", "sctd.cli.main", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=timeout)
+                          capture_output=True, text=True, timeout=timeout, env=env)
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import statistics
 import subprocess
 import tempfile
@@ -87,14 +88,16 @@ def _open(ep: str, task: str, logdir: Path, k: int) -> tuple[Child, subprocess.P
             view.stop()
             raise RuntimeError(f"sctd view did not start; see {logdir / f'view-{k}.log'}")
         time.sleep(0.1)
+    # Its temporary files in its own folder too (TMPDIR): it is killed at the end, and a
+    # killed Chromium leaves an org.chromium.Chromium.* folder in the temp folder it used.
     browser = subprocess.Popen([str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
                                 f"http://127.0.0.1:{port}/"], stdout=subprocess.DEVNULL,
-                               stderr=subprocess.DEVNULL, start_new_session=True)
+                               stderr=subprocess.DEVNULL, start_new_session=True,
+                               env={**os.environ, "TMPDIR": str(profile)})
     return view, browser, profile
 
 
 def _close(view: Child, browser: subprocess.Popen, profile: Path) -> None:
-    import os
     import shutil
     import signal
 
