@@ -10,12 +10,14 @@ instead of bursting, counting the skipped ticks.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import os
 import signal
 import threading
 import time
+from collections.abc import Iterator
 
 PR_SET_NAME = 15
 PR_SET_TIMERSLACK = 29
@@ -50,6 +52,32 @@ def set_realtime(priority: int) -> bool:
         return True
     except (OSError, AttributeError):
         return False
+
+
+@contextlib.contextmanager
+def threads_niced(nice: int) -> Iterator[int]:
+    """The calling thread at ``nice`` for the ``with`` block and back after it, so that
+    every thread started meanwhile (and every thread those start) inherits ``nice``:
+    Linux keeps a nice value per thread, and a new thread takes its creator's. Yields the
+    nice the new threads get: ``nice``, or the calling thread's own when ``nice`` is 0 or
+    the OS refuses it (a nice below the current one needs CAP_SYS_NICE or an
+    RLIMIT_NICE that allows it)."""
+    own = os.getpriority(os.PRIO_PROCESS, 0)  # (Linux: 0 is the calling thread)
+    if nice == 0 or nice == own:
+        yield own
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError:
+        yield own
+        return
+    try:
+        yield nice
+    finally:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, own)
+        except OSError:  # (back up to a higher priority than ``nice`` needs the same privilege)
+            pass
 
 
 class Histogram:

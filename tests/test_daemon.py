@@ -6,7 +6,9 @@ tested by tests/test_driver.py, the daemon they make up by the end-to-end tests.
 from __future__ import annotations
 
 import logging
+import os
 import threading
+import time
 from collections import deque
 from pathlib import Path
 
@@ -17,12 +19,13 @@ from sctd.runtime import swap as swap_module
 from sctd.runtime.controller import RuntimeConfig
 from sctd.runtime.driver import TickDriver
 from sctd.runtime.ingress import Ingress
+from sctd.runtime.loop import TickLoop
 from sctd.runtime.sets import goal_set
 from sctd.runtime.status import RECENT, DaemonStatus, TickStats
 from sctd.runtime.swap import SkillSwap
 from sctd.skill import Bundle, SkillError, bundle_from_file, load_skill, skill_from_bundle
 from sctd.skill.skillset import load_skill_set
-from sctd.timing import Ticker
+from sctd.timing import Ticker, threads_niced
 from sctd.wire import Keys, codec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -154,8 +157,8 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
     first = status.close_window(ticker, 0.5)
     assert set(first) == {
         "stamp", "skill", "skill_name", "state", "finished", "stuck", "region", "mode", "mode_button", "rate",
-        "realtime",
-        "ticks", "late_ticks", "skipped_ticks", "targets", "target_rate", "lateness_ms",
+        "realtime", "io_nice",
+        "ticks", "late_ticks", "skipped_ticks", "long_drains", "targets", "target_rate", "lateness_ms",
         "compute_ms", "publish_ms", "compute_max_window_ms", "recent_ms", "input_age",
         "state_age", "state_delay_ms", "input_delay_ms", "robot_fault", "object", "object_age", "objects",
         "in_seq", "input", "gripper", "vf_scale", "constraints", "dropped", "counters"}
@@ -166,6 +169,7 @@ def test_the_status_map_has_every_key_and_the_windows_target_rate(skills):
     assert first["region"] is None  # (the shipped pour states no region)
     assert first["mode_button"] is None  # (nor a button transition: the mode button does nothing)
     assert (first["targets"], first["target_rate"], first["realtime"]) == (50, 100.0, True)
+    assert first["io_nice"] == 0  # (not given: the session's threads at the daemon's nice)
     assert first["publish_ms"] is None and first["mode"] == "waiting"
     assert stats.next_status == 0.75 and stats.window_targets == 50
     driver.target_seq = 60  # 10 more in the next 0.25 s
@@ -340,3 +344,80 @@ def test_a_sets_bundles_stay_kept_across_swaps(tmp_path):
     assert kept == sorted([*pinned, "s2", "s3", "s4", "s5"])
     bundles.keep(tmp_path, "s6", b"y")  # a single skill's swap: nothing pinned
     assert len(list(tmp_path.glob("*.bundle"))) == bundles.KEEP
+
+
+def _nice_of_a_new_thread() -> int:
+    seen: list[int] = []
+    t = threading.Thread(target=lambda: seen.append(os.getpriority(os.PRIO_PROCESS, 0)))  # its own
+    t.start()
+    t.join()
+    return seen[0]
+
+
+def test_threads_started_in_the_block_inherit_its_nice_and_the_caller_gets_its_own_back():
+    """How the daemon's Zenoh threads get their nice (``--io-nice``): a thread started
+    inside the block (as the session's are, by ``zenoh.open``) keeps the block's nice
+    after it; the calling thread and threads started after get the caller's own. Raised
+    here (allowed to anyone), lowered as the daemon does (this runs as root, as CI does)."""
+    own = os.getpriority(os.PRIO_PROCESS, 0)
+    for nice in (own + 3, own - 3):
+        # (without the privilege a lower nice is refused: the block runs at the caller's)
+        want = nice if nice > own or os.geteuid() == 0 else own
+        with threads_niced(nice) as got:
+            inside = _nice_of_a_new_thread()
+            caller = os.getpriority(os.PRIO_PROCESS, 0)
+        assert (got, inside, caller) == (want, want, want)
+        assert os.getpriority(os.PRIO_PROCESS, 0) == own and _nice_of_a_new_thread() == own
+
+
+def test_a_refused_or_zero_nice_changes_nothing_and_says_the_nice_in_force(monkeypatch):
+    own = os.getpriority(os.PRIO_PROCESS, 0)
+    with threads_niced(0) as got:
+        assert got == own and _nice_of_a_new_thread() == own
+
+    def refuse(*_args):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "setpriority", refuse)
+    with threads_niced(own - 5) as got:
+        assert got == own and _nice_of_a_new_thread() == own
+    assert os.getpriority(os.PRIO_PROCESS, 0) == own
+
+
+class _SlowDrains:
+    """An ingress whose drain takes ``slow`` s every ``every``-th tick (and no time
+    otherwise): the tick loop's own count of long drains must see each of those."""
+
+    def __init__(self, every: int, slow: float):
+        self.every, self.slow, self.drains, self.slow_drains, self.trash = every, slow, 0, 0, []
+
+    def drain(self, now: float) -> None:
+        self.drains += 1
+        if self.drains % self.every == 0:
+            self.slow_drains += 1
+            end = time.monotonic() + self.slow
+            while time.monotonic() < end:
+                pass
+
+    def after_tick(self) -> None:
+        pass
+
+
+def test_the_tick_loop_counts_each_drain_that_runs_past_its_allowance(skills):
+    """``status.long_drains``: a drain 2 ms long (every 25th tick) takes more than the
+    spin (0.1 ms) beyond the drain's tracked 95th percentile, whatever that is (at most
+    0.25 ms): each is counted, on the loop's own count of drains."""
+    pour, _ = skills
+    driver = TickDriver(pour, RuntimeConfig())
+    stats = TickStats(time.monotonic(), driver.engine.state, status_period=0.1)
+    swap = SkillSwap(driver)
+    status = DaemonStatus(driver, stats, swap)
+    ingress = _SlowDrains(every=25, slow=2e-3)
+    sent: list = []
+    loop = TickLoop(driver, ingress, swap, sent.append)  # type: ignore[arg-type]
+    ticker = Ticker(1e-3, spin=1e-4)
+    loop.run(ticker, status, threading.Event(), end=time.monotonic() + 0.4)
+    assert ingress.slow_drains >= 5, ingress.drains
+    assert stats.long_drains >= ingress.slow_drains
+    assert status.map(ticker, time.monotonic(), 0.0)["long_drains"] == stats.long_drains
+    assert any(isinstance(m, dict) and "long_drains" in m for m in sent)  # in the status maps sent

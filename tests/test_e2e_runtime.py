@@ -9,8 +9,10 @@ measure speed.
 from __future__ import annotations
 
 import itertools
+import os
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import numpy as np
@@ -167,6 +169,62 @@ def test_targets_at_rate_and_zero_input_holds(daemon):
     assert 0 < recent["compute"]["n"] <= 1.1 * last["rate"]  # a window of about a second
     assert recent["compute"]["n"] < last["compute_ms"]["n"]
     assert recent["lateness"]["p50"] <= recent["lateness"]["max"]
+
+
+def _threads(pid: int) -> dict[str, list[tuple[int, int]]]:
+    """The process' threads by name: (scheduling policy, nice) of each, from /proc."""
+    out: dict[str, list[tuple[int, int]]] = {}
+    for task in (Path("/proc") / str(pid) / "task").iterdir():
+        name = (task / "comm").read_text().strip()
+        fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        out.setdefault(name, []).append((int(fields[38]), int(fields[16])))  # policy, nice
+    return out
+
+
+def test_the_tick_thread_runs_at_sched_fifo_and_the_zenoh_threads_at_the_daemons_nice(daemon):
+    """With the defaults (this test runs as root, as CI does: the privilege is there), the
+    tick thread and the publisher run at SCHED_FIFO, and the Zenoh session's threads at
+    the daemon's own nice (``--io-nice 0``), as the status says."""
+    proc, rig, _ = daemon
+    assert os.geteuid() == 0, "the daemon's priorities need the privilege CI runs with"
+    status = _newest_status(rig)
+    assert status["io_nice"] == 0 and status["realtime"] is True
+    threads = _threads(proc.p.pid)
+    assert {nice for v in threads.values() for _, nice in v} == {0}, threads
+    fifo = [n for n, v in threads.items() for policy, _ in v if policy == 1]  # SCHED_FIFO
+    assert fifo.count("python") >= 1 and "sctd-publisher" in fifo, threads  # the tick's, the publisher
+
+
+def test_io_nice_runs_the_zenoh_threads_at_it_not_the_others_and_a_bad_one_is_refused(tmp_path):
+    """``--io-nice -10``: the threads the session starts, which push every message into
+    the rings, run at -10, and the status says so; the tick thread (SCHED_FIFO), the
+    publisher and the skill server child's threads keep their own."""
+    port = free_port()
+    proc = sctd("run", "--skill", "pour", "--listen", f"tcp/127.0.0.1:{port}", "--io-nice", "-10",
+                log=tmp_path / "d.log")
+    s = open_session(connect=[f"tcp/127.0.0.1:{port}"])
+    got: list[dict] = []
+    sub = s.declare_subscriber(KEYS.status, lambda m: got.append(codec.unpack_map(m.payload.to_bytes())))
+    try:
+        assert wait_for(lambda: bool(got), 20), proc.output()
+        assert got[-1]["io_nice"] == -10
+        threads = _threads(proc.p.pid)
+        ours = {n: v for n, v in threads.items() if n.split("-")[0] in ("rx", "tx", "net", "acc", "app")}
+        assert {"rx", "tx"} <= {n.split("-")[0] for n in ours}, sorted(threads)
+        assert all(nice == -10 and policy == 0 for v in ours.values() for policy, nice in v), ours
+        others = [(n, policy, nice) for n, v in threads.items() if n not in ours for policy, nice in v]
+        assert all(nice == 0 for _, _, nice in others) and ("python", 1, 0) in others, others
+        children = [int(p) for task in (Path("/proc") / str(proc.p.pid) / "task").iterdir()
+                    for p in (task / "children").read_text().split()]
+        assert children, "the skill server child"
+        assert all(nice == 0 for v in _threads(children[0]).values() for _, nice in v)
+    finally:
+        sub.undeclare()
+        close_session(s)
+        assert proc.stop() == 0, proc.output()
+    bad = sctd("run", "--skill", "pour", "--io-nice", "-21", log=tmp_path / "bad.log")
+    assert bad.p.wait(30) == 2
+    assert "--io-nice: -21: a nice value is -20 to 19" in bad.output()
 
 
 def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):

@@ -72,6 +72,9 @@ BENCHES: dict[str, Command] = {
     "robustness": Command("the daemon next to the sim under floods, bad bundles, swaps and a jumping "
                           "state", "sctd.bench.robustness", "add_robustness_arguments",
                           "main_robustness"),
+    "flood": Command("the tick under a valid-input flood, the daemon's Zenoh threads at --io-nice and at "
+                     "a baseline nice, interleaved", "sctd.bench.flood", "add_flood_bench_arguments",
+                     "main_flood_bench"),
     "fuzz": Command("coverage-guided fuzzing of every decoder, the bundle unpacker and the skill "
                     "loader (atheris)", "sctd.bench.fuzz", "add_fuzz_arguments", "main_fuzz"),
     "hostile": Command("hostile files to the commands that read them, hostile requests and "

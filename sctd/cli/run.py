@@ -24,6 +24,7 @@ from ..runtime.sets import goal_set, set_summary
 from ..skill import Bundle, Skill, SkillError, bundle_from_file, load_skill, skill_from_bundle, skill_summary
 from ..skill.catalog import find_skill, find_skill_set
 from ..skill.skillset import load_skill_set, skill_set_of
+from ..timing import threads_niced
 from ..wire import Keys, client
 from ..wire.ros_options import add_ros_arguments, check_ros_arguments
 from ..wire.session import (
@@ -34,6 +35,8 @@ from ..wire.session import (
     session_from_args,
 )
 from .view import add_view_arguments, check_view_arguments, serve_skill_view
+
+log = logging.getLogger("sctd.run")
 
 ZERO_ALLOWED = {"deadband", "stuck_after"}  # settings for which 0 means none (the rest must be > 0)
 
@@ -59,6 +62,14 @@ def add_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=int, default=10,
                    help="SCHED_FIFO priority of the tick thread, 0 for none; falls back to normal "
                         "priority when not permitted (default %(default)s)")
+    p.add_argument("--io-nice", type=int, default=0,
+                   help="nice value of the Zenoh session's own threads, which receive and send every "
+                        "message, -20 to 19; 0 (the default) leaves them at the daemon's. Under a "
+                        "flood of input the tick thread can wait for one of them that holds a receive "
+                        "ring's lock; a negative nice runs it sooner then (sctd bench flood compares "
+                        "two values on this machine; docs/benchmarks.md). A negative one needs the "
+                        "privilege SCHED_FIFO needs; without it the threads keep the daemon's nice, "
+                        "and the status' io_nice says so")
     p.add_argument("--cpu", type=int, default=None,
                    help="pin the tick thread to this CPU (best with that CPU kept free of other work, "
                         "e.g. isolcpus)")
@@ -148,6 +159,8 @@ def main_run(args: argparse.Namespace) -> int:
         check_ros_arguments(args)
     except (SkillError, ValueError) as e:
         return fail("run", str(e))
+    if not -20 <= args.io_nice <= 19:
+        return fail("run", f"--io-nice: {args.io_nice}: a nice value is -20 to 19")
     n_cpus = os.cpu_count() or 1
     if args.cpu is not None and not 0 <= args.cpu < n_cpus:
         return fail("run", f"--cpu: {args.cpu}: this machine has CPUs 0-{n_cpus - 1}")
@@ -161,9 +174,13 @@ def main_run(args: argparse.Namespace) -> int:
     except ValueError as e:
         return fail("run", f"{args.zenoh_config}: {e}")
     try:
-        session = zenoh.open(conf)
+        with threads_niced(args.io_nice) as io_nice:  # the session's threads start in here
+            session = zenoh.open(conf)
     except (ValueError, zenoh.ZError) as e:
         return fail("run", f"cannot open Zenoh session: {e}")
+    if io_nice != args.io_nice:
+        log.warning("could not run the Zenoh session's threads at nice %d (needs CAP_SYS_NICE or an "
+                    "RLIMIT_NICE); they run at %d", args.io_nice, io_nice)
     with ExitStack() as stack:
         stack.callback(close_session, session)  # last: after the ROS side and the daemon
         try:
@@ -174,7 +191,7 @@ def main_run(args: argparse.Namespace) -> int:
         if ros is not None:
             stack.enter_context(ros)
         daemon = Daemon(session=session, config=config, spin=args.spin_us * 1e-6,
-                        rt_priority=args.rt_priority, cpu=args.cpu, stop_event=stop,
+                        rt_priority=args.rt_priority, cpu=args.cpu, io_nice=io_nice, stop_event=stop,
                         # wire contract v1: on the loopback defaults, bundles sent to the
                         # skill key still swap; with a config file only skill/swap does
                         swap_on_skill_key=args.zenoh_config is None, ros=ros,

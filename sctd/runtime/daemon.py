@@ -144,6 +144,9 @@ class Daemon:
     config : RuntimeConfig
     spin : float
         Seconds before each deadline to stop sleeping and spin.
+    io_nice : int
+        The nice value ``session``'s own threads were started at (``status.io_nice``;
+        :func:`~sctd.timing.threads_niced`).
     stop_event : threading.Event, optional
         Set to stop; pass one set by signal handlers installed before the daemon exists
         (a stop requested while starting then ends :meth:`run` at once).
@@ -164,7 +167,7 @@ class Daemon:
     """
 
     def __init__(self, skill: Skill | None, session: zenoh.Session, config: RuntimeConfig,
-                 spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None,
+                 spin: float = 1e-4, rt_priority: int = 0, cpu: int | None = None, io_nice: int = 0,
                  stop_event: threading.Event | None = None, swap_on_skill_key: bool = True,
                  ros: Any = None, settings: SessionSettings | None = None,
                  bundle: bytes | None = None, goals: GoalSet | None = None, set_name: str = "",
@@ -178,7 +181,7 @@ class Daemon:
         self.settings = settings if settings is not None else SessionSettings()
         self.swap_on_skill_key = swap_on_skill_key
         self.ros = ros  # sctd.wire.ros.RuntimeRos (--ros): target poses out, its status
-        self.spin, self.rt_priority, self.cpu = spin, rt_priority, cpu
+        self.spin, self.rt_priority, self.cpu, self.io_nice = spin, rt_priority, cpu, io_nice
         self.stop_event = stop_event if stop_event is not None else threading.Event()
         # the run's first gripper command number: its start in ms, so that a restarted
         # daemon's commands are never taken for repeats of the last run's (sctd.runtime.gripper)
@@ -209,7 +212,7 @@ class Daemon:
             stats = TickStats(time.monotonic(), self.driver.engine.state, 1.0 / self.config.status_rate,
                               self.driver.target_seq)
             status = self.status = DaemonStatus(self.driver, stats, self.swap, target, self.ros,
-                                                self.realtime)
+                                                self.realtime, self.io_nice)
             TickLoop(self.driver, ingress, self.swap, publisher.queue.put, target, gripper).run(
                 ticker, status, self.stop_event, end)
         return status.map(ticker, time.monotonic(), 0.0)

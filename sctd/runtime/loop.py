@@ -19,6 +19,13 @@ deadline and drains then: the cheapest, with the drain and the timer's delay as
 lateness. (Decoding costs far more after a sleep than in a hot loop: about 45 us for a
 state on this project's VM.)
 
+A drain that takes :data:`LONG_DRAIN` (or ``spin``, if longer) beyond the tracked quantile is
+counted (``status.long_drains``): with ``spin`` it is what makes a tick late from the
+inside, the thread having woken in time. Under a flood of input the usual one is a
+``try_recv`` that waits for a ring's lock held by one of Zenoh's receiving threads which
+the tick thread's own wake-up pushed off the CPU; ``sctd run --io-nice`` runs those
+threads first when the tick thread waits for one (docs/benchmarks.md).
+
 One wake-up per tick, and no thread between the step and its target: on a 2-core
 machine each wake-up of a thread costs about 25 us of CPU, so a second sleep before the
 spin, and a hand-over of every target to another thread, cost the daemon a tenth of a
@@ -42,6 +49,7 @@ from .swap import SkillSwap
 MAX_LEAD = 2.5e-4  # s: the most the tick thread wakes before its spin window to drain
 LEAD_QUANTILE = 0.95  # of the drain's time: how far before the spin window the tick wakes
 LEAD_STEP = 1e-6  # s a tick moves the tracked quantile (one outlier moves it 1 us)
+LONG_DRAIN = 1e-4  # s beyond the tracked quantile (or the spin, if longer): a long drain
 
 
 def next_lead(lead: float, drained: float) -> float:
@@ -90,6 +98,7 @@ class TickLoop:
         send, tick, publish = self.send, self.driver.tick, self.publish
         stats = status.stats
         spin, lead = ticker.spin, 0.0  # lead: the drain's time, its LEAD_QUANTILE tracked (s)
+        allowance = max(spin, LONG_DRAIN)
         while not stop.is_set():
             ahead = ticker.due - (spin + lead if spin > 0.0 else 0.0) - time.monotonic()
             if ahead > 0.0:
@@ -97,6 +106,8 @@ class TickLoop:
             t = time.monotonic()
             self.before_tick(t)
             drained = time.monotonic() - t
+            if drained > lead + allowance:
+                stats.long_drains += 1
             lead = next_lead(lead, drained)
             now, lateness = ticker.wait(sleep=False)  # spins what the drain left: no second wake-up
             if end is not None and now >= end:

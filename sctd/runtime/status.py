@@ -50,6 +50,7 @@ class TickStats:
         self.window_start = now
         self.window_targets = targets  # targets published before the status window
         self.compute_max = 0.0  # the status window's
+        self.long_drains = 0  # drains over their allowance (:data:`~.loop.LONG_DRAIN`) since start
         self.next_status = now
         self._recent_lateness = Histogram()  # the current RECENT-second window
         self._recent_compute = Histogram()
@@ -99,12 +100,15 @@ class DaemonStatus:
         ``sctd.wire.ros.RuntimeRos`` (``--ros``): its ``stats()`` are ``ros``.
     realtime : bool
         Whether the tick thread was granted SCHED_FIFO.
+    io_nice : int
+        The nice value the Zenoh session's own threads run at.
     """
 
     def __init__(self, driver: TickDriver, stats: TickStats, swap: SkillSwap,
-                 target: TargetOut | None = None, ros: Any = None, realtime: bool = False):
+                 target: TargetOut | None = None, ros: Any = None, realtime: bool = False,
+                 io_nice: int = 0):
         self.driver, self.stats, self.swap = driver, stats, swap
-        self.target, self.ros, self.realtime = target, ros, realtime
+        self.target, self.ros, self.realtime, self.io_nice = target, ros, realtime, io_nice
         # the engine's activity count when the last window closed: (engine, entries,
         # commands, acted); a window's activity is the count since
         self._activity_base: tuple[object, int, int, list[int]] | None = None
@@ -137,12 +141,11 @@ class DaemonStatus:
     def map(self, ticker: Ticker, now: float, window: float) -> dict[str, Any]:
         """The status map at ``now`` (monotonic), over a status window of ``window`` s
         (0: no target rate)."""
-        drv, stats = self.driver, self.stats
+        drv = self.driver
         ctl = drv.controller
         c = ctl.counters
         obj = drv.objects.get(ctl.engine.object)
         last = drv.inputs.last
-        targets = drv.target_seq - stats.window_targets
 
         def age(received: float | None) -> float | None:
             return None if received is None else round(now - received, 6)
@@ -160,16 +163,8 @@ class DaemonStatus:
             "mode_button": ctl.engine.leads_to(),
             "rate": ctl.config.rate,
             "realtime": self.realtime,
-            "ticks": ticker.ticks,
-            "late_ticks": ticker.late,
-            "skipped_ticks": ticker.skipped,
-            "targets": drv.target_seq,
-            "target_rate": round(targets / window, 1) if window > 0 else None,
-            "lateness_ms": stats.lateness.summary_ms(),
-            "compute_ms": stats.compute.summary_ms(),
-            "publish_ms": self.target.put_time.summary_ms() if self.target is not None else None,
-            "compute_max_window_ms": round(stats.compute_max * 1e3, 4),
-            "recent_ms": stats.recent,
+            "io_nice": self.io_nice,
+            **self._timing(ticker, window),
             "input_age": age(last.received if last is not None else None),
             "state_age": age(drv.state.received if drv.state is not None else None),
             "state_delay_ms": None if state is None else _delay_ms(wall, now, state.stamp, state.received),
@@ -193,6 +188,24 @@ class DaemonStatus:
         if self.ros is not None:
             status["ros"] = self.ros.stats()
         return status
+
+
+    def _timing(self, ticker: Ticker, window: float) -> dict[str, Any]:
+        """The status map's tick counts and timing statistics (:meth:`map`)."""
+        stats, seq = self.stats, self.driver.target_seq
+        return {
+            "ticks": ticker.ticks,
+            "late_ticks": ticker.late,
+            "skipped_ticks": ticker.skipped,
+            "long_drains": stats.long_drains,
+            "targets": seq,
+            "target_rate": round((seq - stats.window_targets) / window, 1) if window > 0 else None,
+            "lateness_ms": stats.lateness.summary_ms(),
+            "compute_ms": stats.compute.summary_ms(),
+            "publish_ms": self.target.put_time.summary_ms() if self.target is not None else None,
+            "compute_max_window_ms": round(stats.compute_max * 1e3, 4),
+            "recent_ms": stats.recent,
+        }
 
 
 def _delay_ms(wall: float, now: float, stamp: float, received: float) -> float:
