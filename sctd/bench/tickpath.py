@@ -60,9 +60,9 @@ class _Bench:
         from sctd_sim.simulation import Simulation, trial_scene
 
         scene, q0 = trial_scene(find_task(task_name), 0)
-        sim = Simulation(scene=scene, q0=q0)
+        with Simulation(scene=scene, q0=q0) as sim:  # only its first state and poses
+            self.m, self.poses = sim.state_message(), sim.objects()
         self.codec, self.full = codec, full
-        self.m, self.poses = sim.state_message(), sim.objects()
         self.driver = TickDriver(load_skill(find_skill(skill_path)), RuntimeConfig())
         self.pose: list[float] = list(self.m["pose"])  # the newest target: the arm follows it
         self.modes: dict[str, int] = {}
