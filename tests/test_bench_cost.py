@@ -149,6 +149,10 @@ def test_each_figure_of_the_check_is_printed_with_its_floor():
     line = bench_check._run_line(run)
     assert "19.0 s (floor  16.0)" in line and "check  16.5 (floor  14.0)" in line
     assert "floor" not in bench_check._run_line({**run, "trials_alone_s": None})
+    assert "\n" not in line  # a swap is one line; a run that did not swap says the learner's why
+    why = "not swapped: no daemon answered on sctd/edan/skill/swap; check: 6/6 trials succeeded"
+    refused = bench_check._run_line({**run, "swapped": False, "reason": why}).splitlines()
+    assert "NOT swapped" in refused[0] and refused[1] == f"      the learner: {why}"
 
 
 @pytest.mark.slow

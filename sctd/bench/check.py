@@ -273,10 +273,11 @@ def _run_line(r: dict[str, Any]) -> str:
 
     alone, train = r.get("trials_alone_s"), t.get("train_s", 0)
     floors = ("", "") if alone is None else (f" (floor {train + alone:5.1f})", f" (floor {alone:5.1f})")
-    return (f"  {r['tree']:<9s} {r['request_to_swap_s']:>7.1f} s{floors[0]}  train {train:5.1f}  "
+    line = (f"  {r['tree']:<9s} {r['request_to_swap_s']:>7.1f} s{floors[0]}  train {train:5.1f}  "
             f"check {t.get('check_s', 0):5.1f}{floors[1]}  swap {t.get('swap_s', 0):4.1f}   "
             f"{r['successes']}/{r['trials']} trials  {'swapped' if r['swapped'] else 'NOT swapped'}   "
             f"lateness p99 quiet {lat(q)}, during {lat(c)} ms")
+    return line if r["swapped"] else f"{line}\n      the learner: {r.get('reason')}"
 
 
 def print_report(r: dict[str, Any]) -> None:
