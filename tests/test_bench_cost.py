@@ -209,6 +209,10 @@ def test_bench_cost_measures_this_tree_and_a_commit_side_by_side(capsys, tmp_pat
         assert p["daemon_cpu"] > 0 and p["sim_cpu"] > 0 and p["daemon_wakeups"] > 500
         # where it went, thread by thread: the tick's own thread and Zenoh's, summing to the whole
         assert p["daemon_threads"]["main"] > 0 and any(k in p["daemon_threads"] for k in ("rx", "tx", "net"))
-        assert abs(sum(p["daemon_threads"].values()) - p["daemon_cpu"]) < 0.02
+        # /proc counts each thread's time in whole clock ticks (10 ms: 0.005 of a core over
+        # this 2 s window) and the process's from the exact sum: each of the daemon's ~20
+        # threads and its skill server's is off by up to a tick at each reading, about 0.01
+        # of a core in all (one standard deviation), so 0.05 is five of them
+        assert abs(sum(p["daemon_threads"].values()) - p["daemon_cpu"]) < 0.05
     for p in r["phases"][:2]:
         assert p["lateness_p99_ms"] is not None and p["latency_ms"]["n"] > 50  # the person's pushes answered

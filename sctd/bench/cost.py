@@ -71,6 +71,7 @@ from ..wire import Keys, codec
 from ..wire.session import session
 from . import run_and_report
 from .latency import wait_for_targets
+from .parts import PARTS, PartClock, per_tick, write_parts
 
 SET = "set:"  # a --skills entry that names a skill set
 
@@ -279,6 +280,7 @@ class Phase:
     warmup: float
     floor: bool = False
     rate: float = RATE  # the daemon's --rate
+    parts: bool = False  # the daemon's tick thread timed part by part (.parts)
 
     @property
     def name(self) -> str:
@@ -287,13 +289,16 @@ class Phase:
         at = "" if self.rate == RATE else f" {self.rate:g} Hz"
         return f"{self.skill} {'full' if self.full else 'zero'} spin {self.spin_us:g} us{at}"
 
-    def daemon_argv(self, ep: str) -> tuple[str, ...]:
-        """The program in the daemon's place: ``sctd run`` (or the floor's peer)."""
+    def daemon_argv(self, ep: str, parts_file: Path | None = None) -> tuple[str, ...]:
+        """The program in the daemon's place: ``sctd run`` (or the floor's peer); with
+        ``parts_file``, run with its tick's parts timed into it (:mod:`.parts`)."""
         if self.floor:
-            return ("sctd.bench.cost", "floor", "--connect", ep)
+            return ("sctd.bench.cost", "floor", "--connect", ep,
+                    *(() if parts_file is None else ("--parts-out", str(parts_file))))
         what = ("--set", self.skill[len(SET):]) if self.skill.startswith(SET) else ("--skill", self.skill)
-        return ("sctd.cli.main", "run", *what, "--connect", ep, "--spin-us", f"{self.spin_us:g}",
-                "--rate", f"{self.rate:g}")
+        run = ("sctd.cli.main", "run") if parts_file is None else (
+            "sctd.bench.parts", "--out", str(parts_file), "run")
+        return (*run, *what, "--connect", ep, "--spin-us", f"{self.spin_us:g}", "--rate", f"{self.rate:g}")
 
 
 def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
@@ -301,7 +306,8 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
     ep = f"tcp/127.0.0.1:{free_port()}"
     seconds, trips, stop = _Seconds(), RoundTrips(), threading.Event()
     trips.counting = False
-    tick = ph.daemon_argv(ep)
+    parts_file = logdir / f"parts-{k}.json" if ph.parts else None
+    tick = ph.daemon_argv(ep, parts_file)
     with Child("sctd.cli.main", "sim", "--task", ph.task, "--listen", ep, log=logdir / f"sim-{k}.log",
                env=tree.env, cwd=tree.cwd) as sim, \
          Child(*tick, log=logdir / f"daemon-{k}.log", env=tree.env, cwd=tree.cwd) as daemon, \
@@ -316,9 +322,11 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
             trips.counting = True
             c_sim, c_run, c_thr, t0 = (tree_cpu(sim.p.pid), tree_cpu(daemon.p.pid), thread_cpu(daemon.p.pid),
                                        time.monotonic())
+            c_parts = _read_json(parts_file)
             time.sleep(ph.window)
             t1 = time.monotonic()
             e_sim, e_run, e_thr = tree_cpu(sim.p.pid), tree_cpu(daemon.p.pid), thread_cpu(daemon.p.pid)
+            e_parts = _read_json(parts_file)
             trips.counting = False
             if not (sim.running() and daemon.running()):
                 raise RuntimeError(f"a program ended during the phase; see {logdir}/*-{k}.log")
@@ -336,7 +344,16 @@ def run_phase(tree: Tree, ph: Phase, logdir: Path, k: int) -> dict[str, Any]:
             "daemon_wakeups": round((e_run[1] - c_run[1]) / dt),
             "sim_wakeups": round((e_sim[1] - c_sim[1]) / dt),
             "lateness_p99_ms": _median([r[1] for r in rows]), "compute_p99_ms": _median([r[2] for r in rows]),
-            "latency_ms": trips.histogram.summary_ms() if trips.histogram.n else None}
+            "latency_ms": trips.histogram.summary_ms() if trips.histogram.n else None,
+            "tick_parts": per_tick(c_parts, e_parts) if c_parts and e_parts else None}
+
+
+def _read_json(path: Path | None) -> dict[str, Any] | None:
+    """The JSON in ``path`` (None: no path, or nothing written there yet)."""
+    try:
+        return json.loads(path.read_text()) if path is not None else None
+    except (OSError, ValueError):
+        return None
 
 
 def _answered(trips: RoundTrips, sample: zenoh.Sample) -> None:
@@ -397,10 +414,11 @@ def tick_path(tree: Tree, skill: str, task: str, inputs: list[bool], ticks: int,
 # --- the run --------------------------------------------------------------------------------
 
 def phases_of(args: argparse.Namespace) -> list[Phase]:
-    out = [Phase(skill, args.task, full, spin, args.window, args.warmup, rate=rate)
+    out = [Phase(skill, args.task, full, spin, args.window, args.warmup, rate=rate, parts=args.parts)
            for rate in args.rates for skill in args.skills for full in args.inputs for spin in args.spins]
     if args.floor:
-        out.append(Phase(args.skills[0], args.task, False, 0.0, args.window, args.warmup, floor=True))
+        out.append(Phase(args.skills[0], args.task, False, 0.0, args.window, args.warmup, floor=True,
+                         parts=args.parts))
     return out
 
 
@@ -465,6 +483,10 @@ def print_report(r: dict[str, Any]) -> None:
         if threads:
             shown = [f"{k} {100 * v:.1f}" for k, v in list(threads.items())[:8] if v >= 0.001]
             print("      threads: " + ", ".join(shown))
+        parts = row.get("tick_parts")
+        if parts:
+            print(f"      the tick thread, us a tick: {parts['thread']:.1f} = "
+                  + ", ".join(f"{p} {parts[p]:.1f}" for p in (*PARTS, "rest")))
     _print_tick_path(r.get("tick_path") or [])
     if r["lockstep"]:
         print("lockstep step (sctd bench eval, the same seeds in each tree):")
@@ -528,21 +550,34 @@ def verdicts(r: dict[str, Any]) -> list[str]:
 
 # --- the floor's bare peer ---------------------------------------------------------------
 
-def floor_peer(ep: str) -> None:
+def floor_peer(ep: str, parts_file: str | None = None) -> None:
     """Drain and decode the 1 kHz state and encode and put a target every millisecond,
-    nothing else (on the daemon's keys, so that the phase's probes see it)."""
+    nothing else (on the daemon's keys, so that the phase's probes see it). With
+    ``parts_file``, its drain and its put are timed as the daemon's parts are
+    (:mod:`.parts`; the rest is its sleep and its loop)."""
     keys = Keys()
     with session(connect=[ep]) as s:
         sub = s.declare_subscriber(keys.state, zenoh.handlers.RingChannel(4))
         pub = s.declare_publisher(keys.target, express=True, congestion_control=zenoh.CongestionControl.DROP)
         set_timer_slack(1)
         ticker, seq, pose = Ticker(1e-3, spin=0.0), 0, [0.5, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0]
-        while True:
-            ticker.wait()
+
+        def drain() -> None:
             while (x := sub.try_recv()) is not None:
                 codec.decode_state(x.payload.to_bytes())
-            seq += 1
+
+        def put(seq: int) -> None:
             pub.put(codec.encode_target(seq, time.time(), pose, "floor", "floor", 0, "", False))
+
+        if parts_file is not None:
+            clock = PartClock()
+            drain, put = clock.timed("drain", drain), clock.timed("put", put)
+            write_parts(parts_file, clock, ticker, threading.get_ident())
+        while True:
+            ticker.wait()
+            drain()
+            seq += 1
+            put(seq)
 
 
 def _csv(kind: type, what: str):
@@ -589,6 +624,9 @@ def add_cost_bench_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tick-ticks", type=int, default=3000,
                    help="ticks of the tick path in one process per skill, input and sleep, 0: none "
                         "(default %(default)s)")
+    p.add_argument("--parts", action="store_true",
+                   help="time the daemon's tick thread part by part (drain, spin, step, put, account, "
+                        "status, after, the rest); this tree only")
     p.add_argument("--json", action="store_true")
     p.add_argument("--logs", help="keep the processes' logs here")
 
@@ -598,6 +636,11 @@ def main_cost_bench(args: argparse.Namespace) -> int:
         from ..app.errors import fail
 
         return fail("bench cost", "--window must be > 0, --warmup, --eval-trials and --tick-ticks >= 0")
+    if args.parts and args.baseline:
+        from ..app.errors import fail
+
+        return fail("bench cost", "--parts times this tree's daemon only: leave out --baseline (an "
+                                  "instrumented daemon is no fair comparison with one that is not)")
     bad = [x for x in args.rates if not 0.0 < x <= RATE]
     if bad:
         from ..app.errors import fail
@@ -612,9 +655,10 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="sctd.bench.cost")
     p.add_argument("role", choices=["floor"])
     p.add_argument("--connect", required=True)
+    p.add_argument("--parts-out", help="time the drain and the put into this file (sctd.bench.parts)")
     a = p.parse_args(argv)
     try:
-        floor_peer(a.connect)
+        floor_peer(a.connect, a.parts_out)
     except KeyboardInterrupt:
         pass
     return 0

@@ -37,7 +37,7 @@ BLOCK = 250  # measured ticks per block: the figure is the median of the blocks'
 # that a burst of another program's work on a shared machine moves it by a block at most
 
 
-def _clock_cost(n: int = 2000) -> float:
+def clock_cost(n: int = 2000) -> float:
     """The median cost (s) of one pair of CPU-clock reads, taken off each tick's time."""
     clock = time.thread_time
     pairs = []
@@ -140,7 +140,7 @@ def measure(skill_path: str, task_name: str, full: bool, ticks: int, sleep_s: fl
             if (k - WARMUP) % BLOCK == 0 or k == WARMUP + ticks:
                 blocks.append(spent / (BLOCK if (k - WARMUP) % BLOCK == 0 else (k - WARMUP) % BLOCK))
                 spent = 0.0
-    us = 1e6 * (statistics.median(blocks) - _clock_cost())
+    us = 1e6 * (statistics.median(blocks) - clock_cost())
     return {"skill": skill_path, "task": task_name, "input": "full" if full else "zero", "path": path,
             "ticks": ticks, "sleep_us": round(sleep_s * 1e6, 1), "us_per_tick": round(us, 2),
             "modes": bench.modes}
