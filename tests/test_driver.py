@@ -274,6 +274,45 @@ def test_a_flood_on_many_devices_costs_a_drain_at_most_its_budget_and_loses_noth
     assert drv.counters.as_dict()["input_deferred"] == stopped  # on status
 
 
+@pytest.mark.parametrize("budget", range(1, DEVICE_DEPTH + 1))
+def test_one_devices_ring_is_drained_by_the_same_rule_as_many(monkeypatch, budget):
+    """A lone device's ring (drained without the turns the rule takes round several
+    rings) gives what the rule gives it beside a second, silent device: the same
+    messages, in order, and the same drains counted as stopped at the budget, for every
+    budget up to the ring's depth and every number of messages in it."""
+    import sctd.runtime.ingress as ingress_module
+
+    monkeypatch.setattr(ingress_module, "INPUT_BUDGET", budget)
+
+    def drained(names, messages):
+        fake = FakeSession()
+        drv = TickDriver(load_skill(ROOT / "skills" / "teleop.yaml"), RuntimeConfig())
+        ingress = Ingress(fake, KEYS, drv)  # type: ignore[arg-type]
+        for name in names:  # learned through the catch-all, its ring declared after the tick
+            fake.arrive(KEYS.input(name), codec.encode_input(1, 0.0, [0, 0, 0], [0, 0, 0]))
+            ingress.drain(0.0)
+            ingress.after_tick()
+        ingress.drain(0.0)
+        assert len(ingress.devices) == len(names)
+        taken: list[tuple[str, int]] = []
+        offer = drv.inputs.offer
+        drv.inputs.offer = lambda name, m, now: taken.append((name, m.seq)) or offer(name, m, now)
+        for seq in range(2, 2 + messages):
+            fake.arrive(KEYS.input("pad"), codec.encode_input(seq, 0.0, [0, 0, 0], [0, 0, 0]))
+        per_drain = []
+        for k in range(DEVICE_DEPTH + 1):  # enough drains to take every message at a budget of 1
+            before = len(taken)
+            ingress.drain(0.001 * (k + 1))
+            per_drain.append(len(taken) - before)
+        return taken, per_drain, drv.counters.input_deferred
+
+    for messages in range(DEVICE_DEPTH + 1):
+        alone = drained(["pad"], messages)
+        assert alone == drained(["pad", "quiet"], messages), (budget, messages)
+        assert alone[0] == [("pad", s) for s in range(2, 2 + messages)]
+        assert alone[1][0] == min(messages, budget)
+
+
 def test_the_tick_wakes_ahead_by_the_drains_usual_time_not_its_outliers():
     """The wake-up lead settles near the drain's 95th percentile (drains of 20-60 us and
     one in fifty of 200 us), one slow drain moves it by at most a microsecond, and it

@@ -131,9 +131,22 @@ class Ingress:
         :data:`INPUT_BUDGET` messages are taken (module doc); each ring in its order. A
         drain that stops at the budget leaves the next one to begin at the ring it
         stopped at: round the rings, drain after drain."""
-        inlets = list(self.devices.values())
-        if not inlets:
+        devices = self.devices
+        if len(devices) < 2:  # none, or one: the same rule on one ring, without the turns
+            for inlet in devices.values():
+                sub, taken = inlet.sub, 0
+                while taken < DEVICE_DEPTH:
+                    if taken == INPUT_BUDGET:
+                        self._turn = 0
+                        self.driver.counters.input_deferred += 1
+                        return
+                    sample = sub.try_recv()
+                    if sample is None:
+                        break
+                    taken += 1
+                    self._take("input", inlet.name, sample, inlet.limit, now)
             return
+        inlets = list(devices.values())
         first = self._turn % len(inlets)
         rings = [(k % len(inlets), inlets[k % len(inlets)]) for k in range(first, first + len(inlets))]
         budget = INPUT_BUDGET
@@ -174,6 +187,9 @@ class Ingress:
         order: first what only the catch-all has, then its own ring."""
         assert self.any is not None
         joining = self._joining
+        if not joining:
+            self._drain_names(now)
+            return
         seen: dict[str, set[bytes]] = {}
         batches: dict[str, list[Any]] = {}
         for key, inlet in joining.items():  # what arrived after its ring existed
@@ -206,6 +222,24 @@ class Ingress:
                 self._take("input", inlet.name, sample, inlet.limit, now)
             devices[key] = inlet
         joining.clear()
+
+    def _drain_names(self, now: float) -> None:
+        """The catch-all ring while no device's ring is being handed over (every drain
+        but the one after a ring is declared): the messages of names without a ring of
+        their own, the copies of the others skipped (:meth:`_drain_any`)."""
+        assert self.any is not None
+        sub, devices = self.any.sub, self.devices
+        for _ in range(ANY_DEPTH):
+            sample = sub.try_recv()
+            if sample is None:
+                return
+            key = str(sample.key_expr)
+            if key in devices:
+                continue
+            name = key.rsplit("/", 1)[-1]
+            self._take("input", name, sample, codec.MAX_INPUT_BYTES, now)
+            if name not in self._wanted and name in self.driver.inputs.devices:
+                self._wanted.append(name)  # the arbiter took it in: its own ring after the tick
 
     # --- between ticks ------------------------------------------------------------------
 
