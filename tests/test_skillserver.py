@@ -15,12 +15,13 @@ from pathlib import Path
 
 import msgpack
 import pytest
+import zenoh
 
 from sctd.bench.bundles import big_bundle
 from sctd.skill import Bundle, bundle_from_file, skill_from_bundle, skill_summary
 from sctd.skill.loader import MAX_BUNDLE_BYTES
 from sctd.wire import Keys, client, codec
-from sctd.wire.session import close_session, open_session
+from sctd.wire.session import close_session, make_config, open_session
 from tests.conftest import ROOT, free_port, sctd, wait_for
 
 POUR_VF = ROOT / "skills" / "pour-vf.yaml"
@@ -204,3 +205,22 @@ def test_the_active_bundle_is_read_byte_for_byte_across_swaps_and_restarts(rig):
     again = client.active_bundle(rig.session, KEYS)
     assert not isinstance(again, str), again
     assert again[0].pack() == vf.pack()
+
+
+def test_a_peer_that_listens_nowhere_reaches_the_skill_queryables_through_the_daemon_alone(rig):
+    """The skill server listens on an ephemeral loopback port (the loopback defaults), so
+    a peer connected to the daemon alone, listening nowhere itself, opens the link to it
+    once the daemon's gossip names it: it reads the summary and swaps. (Listening nowhere
+    too, the skill server was out of that peer's reach: neither side could open a link.)"""
+    conf = make_config(connect=[f"tcp/127.0.0.1:{rig.port}"])
+    conf.insert_json5("listen/endpoints", "[]")
+    lone = zenoh.open(conf)
+    try:
+        summary = client.active_skill(lone, KEYS, timeout=10.0, find=30.0)
+        assert summary is not None and summary["name"] == "pour", rig.proc.output()
+        vf = bundle_from_file(ROOT / "skills" / "drawer-vf.yaml")
+        ok, body = client.swap(lone, KEYS, vf, timeout=30.0)
+        assert ok and body["id"] == vf.id, body
+    finally:
+        close_session(lone)
+    assert rig.summary()["id"] == vf.id

@@ -1,14 +1,14 @@
 """Session defaults: loopback IP literals only without a config file; the runtime's
 ingress limits are Zenoh filters that Zenoh accepts, and no rate limit touches what the
-runtime reads; a helper's outbound session connects where the program connects and
-listens, and listens nowhere."""
+runtime reads; a helper's session connects where the program connects and listens, and
+listens on an ephemeral loopback port of its own under the loopback defaults only."""
 
 import json
 
 import pytest
 
 from sctd.runtime.daemon import check_no_rate_limit, ingress_limits
-from sctd.wire.session import SessionSettings, check_loopback, make_config, outbound_config
+from sctd.wire.session import SessionSettings, check_loopback, helper_config, make_config
 
 
 @pytest.mark.parametrize("endpoint", ["tcp/127.0.0.1:7447", "tcp/127.1.2.3:0", "tcp/[::1]:7447"])
@@ -79,32 +79,36 @@ def _endpoints(conf, key: str) -> list[str]:
     return json.loads(conf.get_json(key))
 
 
-@pytest.mark.parametrize(("settings", "connect"), [
-    (SessionSettings(), ["tcp/127.0.0.1:7447"]),  # the hub; the rest through gossip
-    (SessionSettings(listen=("tcp/127.0.0.1:4000",)), ["tcp/127.0.0.1:4000"]),
-    (SessionSettings(listen=("tcp/127.0.0.1:0",), connect=("tcp/127.0.0.1:4001",)), ["tcp/127.0.0.1:4001"]),
+@pytest.mark.parametrize(("settings", "connect", "listen"), [
+    (SessionSettings(), ["tcp/127.0.0.1:7447"], ["tcp/127.0.0.1:0"]),  # the hub; the rest through gossip
+    (SessionSettings(listen=("tcp/127.0.0.1:4000",)), ["tcp/127.0.0.1:4000"], ["tcp/127.0.0.1:0"]),
+    (SessionSettings(listen=("tcp/127.0.0.1:0",), connect=("tcp/127.0.0.1:4001",)), ["tcp/127.0.0.1:4001"],
+     ["tcp/127.0.0.1:0"]),
     (SessionSettings(listen=("tcp/127.0.0.1:4000",), connect=("tcp/127.0.0.1:4000", "tcp/[::1]:4002")),
-     ["tcp/127.0.0.1:4000", "tcp/[::1]:4002"]),
+     ["tcp/127.0.0.1:4000", "tcp/[::1]:4002"], ["tcp/127.0.0.1:0"]),
+    (SessionSettings(listen=("tcp/[::1]:4000",)), ["tcp/[::1]:4000"], ["tcp/[::1]:0"]),
 ])
-def test_outbound_config_connects_where_the_program_listens_and_connects(settings, connect):
-    conf = outbound_config(settings)
-    assert _endpoints(conf, "listen/endpoints") == []
+def test_helper_config_connects_where_the_program_listens_and_connects(settings, connect, listen):
+    """Under the loopback defaults the helper also listens, on an ephemeral port of the
+    program's own loopback address."""
+    conf = helper_config(settings)
+    assert _endpoints(conf, "listen/endpoints") == listen
     assert _endpoints(conf, "connect/endpoints") == connect
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
 
 
-def test_outbound_config_of_a_config_file_keeps_it_and_reaches_its_listeners(tmp_path):
+def test_helper_config_of_a_config_file_keeps_it_listens_nowhere_and_reaches_its_listeners(tmp_path):
     f = tmp_path / "z.json5"
     f.write_text(json.dumps({"mode": "peer", "scouting": {"multicast": {"enabled": False}},
                              "listen": {"endpoints": ["tcp/0.0.0.0:5555", "tcp/[::]:0", "tcp/10.1.2.3:5556"]},
                              "connect": {"endpoints": ["tcp/10.9.9.9:7447"]}}))
-    conf = outbound_config(SessionSettings(config_file=str(f)))
+    conf = helper_config(SessionSettings(config_file=str(f)))
     assert _endpoints(conf, "listen/endpoints") == []
     assert _endpoints(conf, "connect/endpoints") == ["tcp/127.0.0.1:5555", "tcp/10.1.2.3:5556",
                                                      "tcp/10.9.9.9:7447"]
     assert json.loads(conf.get_json("mode")) == "peer"
     # a client of a router (the deployment's runtime): the same router, the same mode
     f.write_text(json.dumps({"mode": "client", "connect": {"endpoints": ["tcp/10.0.0.5:7448"]}}))
-    conf = outbound_config(SessionSettings(config_file=str(f)))
+    conf = helper_config(SessionSettings(config_file=str(f)))
     assert _endpoints(conf, "connect/endpoints") == ["tcp/10.0.0.5:7448"]
     assert json.loads(conf.get_json("mode")) == "client"

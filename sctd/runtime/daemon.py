@@ -152,7 +152,7 @@ class Daemon:
         (a stop requested while starting then ends :meth:`run` at once).
     settings : SessionSettings
         What ``session`` was opened from: the skill server's session is opened from
-        them (:func:`~sctd.wire.session.outbound_config`).
+        them (:func:`~sctd.wire.session.helper_config`).
     bundle : bytes, optional
         The packed bundle ``skill`` was read from (:meth:`~sctd.skill.Bundle.pack`):
         kept on disk before the first tick for ``skill/bundle`` (:mod:`.bundles`).

@@ -9,9 +9,10 @@ run. So the payload is never in the daemon's process. Its child, the skill serve
 and ``sctd/<robot>/skill/swap``, on a Zenoh session of its own:
 
 - opened from the daemon's own ``--listen`` / ``--connect`` / ``--zenoh-config``
-  settings (:func:`~sctd.wire.session.outbound_config`), listening nowhere: it
-  connects where the daemon connects and listens, and so acts on the network as the
-  daemon (same mode, credentials and certificates: an access policy that lets the
+  settings (:func:`~sctd.wire.session.helper_config`): it connects where the daemon
+  connects and listens (and, under the loopback defaults, listens on an ephemeral
+  loopback port, so that a peer told of it by gossip can open the link too), and so
+  acts on the network as the daemon (same mode, credentials and certificates: an access policy that lets the
   daemon answer these keys lets its skill server answer them);
 - validating each bundle in a grandchild (:class:`~sctd.runtime.worker.BundleWorker`),
   which keeps the containment boundary for hostile bundles: a zip bomb, a nesting too
@@ -66,7 +67,7 @@ from ..skill import Skill, SkillError
 from ..skill.loader import MAX_BUNDLE_BYTES
 from ..wire import Keys
 from ..wire.client import MEMBER
-from ..wire.session import MSGPACK, SessionSettings, close_session, outbound_config
+from ..wire.session import MSGPACK, SessionSettings, close_session, helper_config
 from . import bundles, frames
 from .worker import WHERE, BundleWorker
 
@@ -509,7 +510,7 @@ def main(argv: list[str]) -> int:
     link = _Link(frames.from_fd(int(argv[0])))
     opts = ServerOptions.from_json(argv[1])
     try:
-        session = zenoh.open(outbound_config(opts.session))
+        session = zenoh.open(helper_config(opts.session))
     except (ValueError, zenoh.ZError) as e:
         log.error("cannot open Zenoh session: %s", e)
         return 1

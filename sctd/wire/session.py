@@ -12,8 +12,8 @@ ports); ``--zenoh-config FILE`` replaces all of this for multi-host use.
 
 A helper process that acts for a program on the network (the daemon's skill server,
 :mod:`sctd.runtime.skillserver`) opens its session from the same settings with
-:func:`outbound_config`: it connects where the program connects and listens, and listens
-nowhere itself.
+:func:`helper_config`: it connects where the program connects and listens, and under
+the loopback defaults listens on an ephemeral loopback port of its own.
 """
 
 from __future__ import annotations
@@ -134,24 +134,34 @@ class SessionSettings:
                    None if args.zenoh_config is None else str(args.zenoh_config))
 
 
-def outbound_config(settings: SessionSettings) -> zenoh.Config:
-    """The config of a session that joins the network a session opened from
-    ``settings`` joins, and listens nowhere: the same config (mode, scouting, TLS,
-    access credentials), with the endpoints that session listens on added to those it
-    connects to (an unspecified address as loopback, ``0.0.0.0`` as ``127.0.0.1`` and
+def helper_config(settings: SessionSettings) -> zenoh.Config:
+    """The config of a helper's session: one that joins the network a session opened
+    from ``settings`` joins, on the program's behalf. The same config (mode, scouting,
+    TLS, access credentials), with the endpoints that session listens on added to those
+    it connects to (an unspecified address as loopback, ``0.0.0.0`` as ``127.0.0.1`` and
     ``[::]`` as ``[::1]``; port 0, an ephemeral port, left out: gossip scouting finds
-    it) and no listen endpoint. Such a session reaches every peer that listens and,
-    through routers and through the peers it connects to, every client; a peer that
-    listens nowhere and is connected to nothing but the program cannot reach it."""
+    it). It listens on an ephemeral port of the program's loopback address under the
+    loopback defaults (no config file), so that a peer which hears of it by gossip can
+    open the link as well as it can: a link that only one side may open is lost when
+    that side's attempt is. With a config file it listens nowhere (a deployment's
+    listeners are its own to choose); it then reaches every peer that listens and,
+    through routers and the peers it connects to, every client."""
     conf = make_config(settings.listen, settings.connect, settings.config_file)
+    listening = _endpoints(conf, "listen/endpoints")
     targets: list[str] = []
-    listened = [_as_target(ep) for ep in _endpoints(conf, "listen/endpoints")]
-    for ep in [*listened, *_endpoints(conf, "connect/endpoints")]:
+    for ep in [*(_as_target(ep) for ep in listening), *_endpoints(conf, "connect/endpoints")]:
         if ep is not None and ep not in targets:
             targets.append(ep)
-    conf.insert_json5("listen/endpoints", "[]")
+    own = [] if settings.config_file is not None else [_ephemeral_like(listening[0])]
+    conf.insert_json5("listen/endpoints", json.dumps(own))
     conf.insert_json5("connect/endpoints", json.dumps(targets))
     return conf
+
+
+def _ephemeral_like(endpoint: str) -> str:
+    """An ephemeral port on the host of ``endpoint`` (a checked loopback ``tcp/host:port``)."""
+    host = endpoint.partition("/")[2].rpartition(":")[0]
+    return f"tcp/{host}:0"
 
 
 def _endpoints(conf: zenoh.Config, key: str) -> list[str]:
