@@ -30,6 +30,18 @@ def test_the_floors_path_the_control_and_a_sleep_before_each_tick_are_measured_t
     assert slept["sleep_us"] == 200.0 and slept["modes"] == {"stopped": 100}
 
 
+def test_split_times_each_part_and_the_mappings_only_under_a_push():
+    """``--split``: every part of the path is timed; centred sticks never ask the skill's
+    mappings for a step (its command part stays 0), full input asks on every tick."""
+    zero, full = (tickpath.measure("pour-vf", "pour", f, 200, 0.0, split=True) for f in (False, True))
+    for r in (zero, full):
+        assert list(r["split"]) == list(tickpath.SPLIT)
+        assert all(math.isfinite(v) and v >= 0.0 for v in r["split"].values()), r["split"]
+        assert r["split"]["receive"] > 0.0 and r["split"]["controller"] > 0.0 and r["split"]["encode"] > 0.0
+    assert zero["split"]["command"] == 0.0 and full["split"]["command"] > 0.0
+    assert "split" not in tickpath.measure("pour", "pour", False, 50, 0.0)
+
+
 def test_the_probe_prints_one_row_per_input_and_sleep_in_order(capsys):
     assert tickpath.main(["--skill", "pour", "--task", "pour", "--ticks", "50", "--inputs", "full,zero",
                           "--sleeps-us", "0,100"]) == 0
@@ -42,6 +54,7 @@ def test_the_probe_prints_one_row_per_input_and_sleep_in_order(capsys):
     (["--sleeps-us", "0,x"], "'0,x': comma-separated numbers"),
     (["--inputs", "half"], "--inputs zero and/or full"),
     (["--ticks", "0"], "--ticks must be >= 1"),
+    (["--path", "floor", "--split"], "--split times the tick path's parts, not --path floor's"),
 ])
 def test_bad_arguments_are_refused_by_name(capsys, args, message):
     with pytest.raises(SystemExit):

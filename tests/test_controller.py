@@ -10,9 +10,11 @@ from hypothesis import strategies as st
 from sctd import se3
 from sctd.runtime.arbiter import InputArbiter
 from sctd.runtime.controller import Controller, RuntimeConfig, Sample
+from sctd.runtime.safety import limit_step, separation
 from sctd.skill import Bundle, load_skill, skill_from_bundle
 from sctd.wire.codec import InputMsg
 from tests.conftest import trap_skill_yaml
+from tests.strategies import poses, rotvecs
 
 ROOT = Path(__file__).resolve().parents[1]
 SKILL = load_skill(ROOT / "skills" / "pour.yaml")
@@ -606,3 +608,31 @@ def test_a_faulted_arm_holds_the_target_and_re_seeds_only_from_zero_input():
     r = c.tick(t, t, inp([0, 0, 0], t, seq=99), state(T, t), obj(t))
     assert r.pose is not None and r.seed and np.allclose(r.T_world_target, T, atol=1e-15)
 
+
+
+@given(poses(), poses(scale=0.01), rotvecs(max_angle=0.5), st.floats(1e-5, 0.02), st.floats(1e-4, 0.3))
+@settings(max_examples=200, deadline=None)
+def test_a_limited_step_is_within_both_bounds_on_the_geodesic_from_the_previous_pose(
+        a, moved, w, max_t, max_r):
+    """``limit_step`` against scipy's rotations: the step comes out within the translation
+    and the rotation bound (to rounding), the same fraction of the way along both parts
+    (the direction of motion kept), the rotation along the geodesic from the previous
+    orientation; a step within both bounds is returned as it is."""
+    from scipy.spatial.transform import Rotation
+
+    dt = moved[:3]
+    R_a = Rotation.from_quat(a[3:])
+    R_b = R_a * Rotation.from_rotvec(w)
+    F_a = se3.flat_from_pose(a)
+    F_b = se3.flat_from_pose(np.concatenate([a[:3] + dt, R_b.as_quat()]))
+    out = limit_step(F_a, F_b, max_t, max_r)
+    d, angle = np.linalg.norm(dt), np.linalg.norm(w)
+    if d <= max_t and angle <= max_r:
+        assert out is F_b
+        return
+    s = min(1.0 if d <= max_t else max_t / d, 1.0 if angle <= max_r else max_r / angle)
+    assert np.allclose(out[9:], a[:3] + s * dt, atol=1e-12)
+    want = (R_a * Rotation.from_rotvec(s * w)).as_matrix()
+    assert np.allclose(np.reshape(out[:9], (3, 3)), want, atol=1e-9)
+    d_out, r_out = separation(F_a, out)
+    assert d_out <= max_t * (1 + 1e-9) + 1e-15 and r_out <= max_r * (1 + 1e-6) + 1e-9

@@ -206,3 +206,23 @@ def test_unchecked_pose_gives_nan_instead_of_raising():
     with np.errstate(invalid="ignore"):
         T = se3.transform_from_pose([0, 0, 0, 0, 0, 0, 0], check=False)
     assert np.isnan(T[:3, :3]).all()
+
+
+@given(poses(), poses(), st.floats(0.0, 1.0))
+@settings(max_examples=200, deadline=None)
+def test_the_flat_relative_rotation_and_the_geodesic_agree_with_scipys(a, b, s):
+    """``relative_quaternion_flat`` is scipy's ``R_a^-1 R_b`` (w >= 0), at any angle;
+    ``interpolate_flat`` goes the fraction ``s`` of that rotation from R_a and of the
+    straight line between the origins, and reaches F_b at s = 1."""
+    from scipy.spatial.transform import Rotation
+
+    F_a, F_b = se3.flat_from_pose(a), se3.flat_from_pose(b)
+    R_a, R_b = Rotation.from_quat(a[3:]), Rotation.from_quat(b[3:])
+    q = se3.relative_quaternion_flat(F_a, F_b)
+    assert q[3] >= 0.0 and (Rotation.from_quat(q).inv() * R_a.inv() * R_b).magnitude() < 1e-8
+    F = se3.interpolate_flat(F_a, F_b, s, q)
+    assert np.allclose(F[9:], a[:3] + s * (b[:3] - a[:3]), atol=1e-12)
+    step = Rotation.from_quat(q).as_rotvec()  # at half a turn, the way q names (either is a geodesic)
+    assert np.allclose(np.reshape(F[:9], (3, 3)), (R_a * Rotation.from_rotvec(s * step)).as_matrix(), atol=1e-8)
+    end = se3.interpolate_flat(F_a, F_b, 1.0, q)
+    assert np.allclose(end, F_b, atol=1e-8)

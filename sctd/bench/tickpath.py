@@ -8,7 +8,8 @@ bench's person: centred with the deadman released, or sines over the whole range
 it held), the control step, the target encoded (and a gripper message when the tick has
 one), the between-ticks work. Untimed: the state each tick is made from the previous
 target (an arm that follows it exactly), and, with ``--sleep-us``, a sleep before each
-tick as the daemon's tick thread sleeps between its ticks. ``--path floor`` times what
+tick as the daemon's tick thread sleeps between its ticks. ``--split`` also times the
+path's parts on the same clock (:data:`SPLIT`). ``--path floor`` times what
 the bench's floor peer does instead (the state decoded, a target encoded), and ``--path
 loop`` a control: arithmetic on a few locals, as long as a tick, touching almost no memory.
 
@@ -33,6 +34,12 @@ OBJECT_EVERY = 20  # ticks between object poses (50 Hz)
 INPUT_EVERY = 10  # ticks between input messages (100 Hz, the bench's person)
 LOOP_STEPS = 600  # the control loop's steps (--path loop)
 WARMUP = 1000  # ticks before the measured ones
+SPLIT = ("receive", "update", "command", "controller", "encode", "after")
+"""The tick path's parts with ``--split``: the messages taken (decoded, judged, kept), the
+skill's FSM (``SkillEngine.update``), its input mappings and constraints
+(``SkillEngine.command``), the rest of the control step (the gates, the safety limits,
+the target's pose: ``TickDriver.tick`` less the two before), the target encoded, the
+work between ticks. Each timer costs about a microsecond, which the parts carry."""
 BLOCK = 250  # measured ticks per block: the figure is the median of the blocks' means, so
 # that a burst of another program's work on a shared machine moves it by a block at most
 
@@ -62,10 +69,47 @@ class _Bench:
         scene, q0 = trial_scene(find_task(task_name), 0)
         with Simulation(scene=scene, q0=q0) as sim:  # only its first state and poses
             self.m, self.poses = sim.state_message(), sim.objects()
-        self.codec, self.full = codec, full
+        self.codec: Any = codec  # the wire codec (its target encoders timed with --split)
+        self.full = full
         self.driver = TickDriver(load_skill(find_skill(skill_path)), RuntimeConfig())
         self.pose: list[float] = list(self.m["pose"])  # the newest target: the arm follows it
         self.modes: dict[str, int] = {}
+        self.split: dict[str, float] | None = None
+
+    def time_parts(self) -> None:
+        """From now on, add each part's CPU time (:data:`SPLIT`) to :attr:`split`; the
+        control step's own share is worked out at the end (:meth:`parts_us`)."""
+        self.split = split = dict.fromkeys((*SPLIT, "tick"), 0.0)
+        clock = time.thread_time
+
+        def timed(part: str, f: Any) -> Any:
+            def timed_call(*args: Any) -> Any:
+                t0 = clock()
+                try:
+                    return f(*args)
+                finally:
+                    split[part] += clock() - t0
+            return timed_call
+
+        driver, engine = self.driver, self.driver.engine
+        driver.receive = timed("receive", driver.receive)  # type: ignore[method-assign]
+        driver.tick = timed("tick", driver.tick)  # type: ignore[method-assign]
+        driver.after_tick = timed("after", driver.after_tick)  # type: ignore[method-assign]
+        engine.update = timed("update", engine.update)  # type: ignore[method-assign]
+        engine.command = timed("command", engine.command)  # type: ignore[method-assign]
+        codec = self.codec
+        self.codec = type("TimedCodec", (), {  # the module's encoders, the target's timed
+            **{f: staticmethod(getattr(codec, f))
+               for f in ("encode_state", "encode_object", "encode_input", "decode_state")},
+            "encode_target": staticmethod(timed("encode", codec.encode_target)),
+            "encode_gripper": staticmethod(timed("encode", codec.encode_gripper))})
+
+    def parts_us(self, ticks: int) -> dict[str, float]:
+        """:attr:`split` as us a tick over ``ticks``, the controller's share worked out."""
+        assert self.split is not None
+        us = {k: 1e6 * v / ticks for k, v in self.split.items()}
+        us["controller"] = us.pop("tick") - us["update"] - us["command"]
+        return {k: round(us[k], 2) for k in SPLIT}
 
     def messages(self, k: int, wall: float) -> tuple[bytes, list[tuple[str, bytes]], bytes | None]:
         """Tick ``k``'s state (at the newest target), its object poses and input, if due."""
@@ -116,12 +160,17 @@ class _Bench:
 
 
 def measure(skill_path: str, task_name: str, full: bool, ticks: int, sleep_s: float,
-            path: str = "tick") -> dict[str, Any]:
+            path: str = "tick", split: bool = False) -> dict[str, Any]:
     """CPU per tick (us) of the tick path (``path`` ``tick``) or the floor's (``floor``):
     the median over blocks of :data:`BLOCK` of ``ticks`` ticks after :data:`WARMUP` of
-    the mean, each tick after a sleep of ``sleep_s``."""
+    the mean, each tick after a sleep of ``sleep_s``. ``split`` (the tick path only):
+    also its parts (:data:`SPLIT`), the mean over the measured ticks, in ``split``."""
     bench, clock, spent, blocks = _Bench(skill_path, task_name, full), time.thread_time, 0.0, []
+    if split and path != "tick":
+        raise ValueError(f"--split times the tick path's parts, not --path {path}'s")
     for k in range(1, WARMUP + ticks + 1):
+        if split and k == WARMUP + 1:
+            bench.time_parts()
         if sleep_s > 0.0:
             time.sleep(sleep_s)
         wall = time.time()
@@ -141,9 +190,10 @@ def measure(skill_path: str, task_name: str, full: bool, ticks: int, sleep_s: fl
                 blocks.append(spent / (BLOCK if (k - WARMUP) % BLOCK == 0 else (k - WARMUP) % BLOCK))
                 spent = 0.0
     us = 1e6 * (statistics.median(blocks) - clock_cost())
-    return {"skill": skill_path, "task": task_name, "input": "full" if full else "zero", "path": path,
-            "ticks": ticks, "sleep_us": round(sleep_s * 1e6, 1), "us_per_tick": round(us, 2),
-            "modes": bench.modes}
+    row = {"skill": skill_path, "task": task_name, "input": "full" if full else "zero", "path": path,
+           "ticks": ticks, "sleep_us": round(sleep_s * 1e6, 1), "us_per_tick": round(us, 2),
+           "modes": bench.modes}
+    return row if not split else row | {"split": bench.parts_us(ticks)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -156,6 +206,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--path", choices=["tick", "floor", "loop"], default="tick")
     p.add_argument("--ticks", type=int, default=3000)
     p.add_argument("--sleeps-us", default="0", help="comma-separated sleeps before each tick (default 0)")
+    p.add_argument("--split", action="store_true",
+                   help="also time the tick path's parts (receive, update, command, controller, encode, "
+                        "after; each timer adds about 1 us to its part)")
     a = p.parse_args(argv)
     inputs = [x.strip() for x in a.inputs.split(",") if x.strip()]
     try:
@@ -164,7 +217,9 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--sleeps-us {a.sleeps_us!r}: comma-separated numbers")
     if a.ticks < 1 or not sleeps or min(sleeps) < 0 or not inputs or set(inputs) - {"zero", "full"}:
         p.error("--ticks must be >= 1, --sleeps-us numbers >= 0, --inputs zero and/or full")
-    rows = [measure(a.skill, a.task, x == "full", a.ticks, us * 1e-6, a.path)
+    if a.split and a.path != "tick":
+        p.error(f"--split times the tick path's parts, not --path {a.path}'s")
+    rows = [measure(a.skill, a.task, x == "full", a.ticks, us * 1e-6, a.path, a.split)
             for x in inputs for us in sleeps]
     print(json.dumps({"rows": rows}))
     return 0

@@ -23,31 +23,10 @@ def interpolate(T_a: Array, T_b: Array, s: float) -> Array:
     """Pose a fraction ``s`` in [0, 1] of the way from T_a to T_b (translation linear,
     rotation along the geodesic about the frame's own origin)."""
     F_a, F_b = se3.flat_from_transform(T_a), se3.flat_from_transform(T_b)
-    return se3.transform_from_flat(_interpolate(F_a, F_b, s, _relative_rotation(F_a, F_b)))
+    return se3.transform_from_flat(se3.interpolate_flat(F_a, F_b, s, se3.relative_quaternion_flat(F_a, F_b)))
 
 
 Flat = se3.Flat
-Quaternion = tuple[float, float, float, float]
-
-
-def _relative_rotation(F_a: Flat, F_b: Flat) -> Quaternion:
-    """The unit quaternion of ``R_a^T R_b``. (The product is numpy's: its rounding is
-    BLAS's, which floats do not reproduce.)"""
-    M = np.array(F_a[:9]).reshape(3, 3).T @ np.array(F_b[:9]).reshape(3, 3)
-    (a, b, c), (d, e, f), (g, h, i) = M.tolist()
-    return se3.quaternion_from_flat((a, b, c, d, e, f, g, h, i, 0.0, 0.0, 0.0))
-
-
-def _interpolate(F_a: Flat, F_b: Flat, s: float, q_ab: Quaternion) -> Flat:
-    """:func:`interpolate` on flat poses, given ``q_ab`` (:func:`_relative_rotation`)."""
-    x, y, z, w = q_ab
-    n = math.sqrt(x * x + y * y + z * z)  # the rotation vector of q_ab, as rotvec_from_matrix3
-    k = 2.0 / w if n < 1e-12 else 2.0 * math.atan2(n, w) / n
-    R = np.array(F_a[:9]).reshape(3, 3) @ se3.matrix3_from_rotvec(s * (x * k), s * (y * k), s * (z * k))
-    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R.tolist()
-    ax, ay, az, bx, by, bz = F_a[9], F_a[10], F_a[11], F_b[9], F_b[10], F_b[11]
-    return (r0, r1, r2, r3, r4, r5, r6, r7, r8,
-            ax + s * (bx - ax), ay + s * (by - ay), az + s * (bz - az))
 
 
 def _separation(A: Flat, B: Flat) -> tuple[float, float]:
@@ -73,7 +52,7 @@ def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: 
     # A mapped step that equals the bound exactly must not lose to it by an ulp.
     if dt <= max_translation * (1.0 + 1e-9) and cos_r >= math.cos(max_rotation * (1.0 + 1e-9)):
         return F_new
-    q = _relative_rotation(F_prev, F_new)
+    q = se3.relative_quaternion_flat(F_prev, F_new)
     dr = 2.0 * math.asin(min(1.0, math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2])))
     s = 1.0
     if dt > max_translation:
@@ -84,7 +63,7 @@ def limit_step(F_prev: Flat, F_new: Flat, max_translation: float, max_rotation: 
         return F_new
     if s <= 0.0:
         return F_prev
-    return _interpolate(F_prev, F_new, s, q)
+    return se3.interpolate_flat(F_prev, F_new, s, q)
 
 
 def grows_offset(F_prev: Flat, F_new: Flat, F_measured: Flat, max_translation: float,

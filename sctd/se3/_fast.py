@@ -228,6 +228,42 @@ def compose_quaternions(a: Sequence[float], b: Sequence[float]) -> tuple[float, 
             aw * bw - ax * bx - ay * by - az * bz)
 
 
+def relative_quaternion_flat(F_a: Flat, F_b: Flat) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w; w >= 0) of ``R_a^T R_b``: the rotation from F_a's
+    orientation to F_b's, in F_a's axes (translations ignored)."""
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = F_a[:9]
+    b0, b1, b2, b3, b4, b5, b6, b7, b8 = F_b[:9]
+    return quaternion_from_flat((
+        a0 * b0 + a3 * b3 + a6 * b6, a0 * b1 + a3 * b4 + a6 * b7, a0 * b2 + a3 * b5 + a6 * b8,
+        a1 * b0 + a4 * b3 + a7 * b6, a1 * b1 + a4 * b4 + a7 * b7, a1 * b2 + a4 * b5 + a7 * b8,
+        a2 * b0 + a5 * b3 + a8 * b6, a2 * b1 + a5 * b4 + a8 * b7, a2 * b2 + a5 * b5 + a8 * b8,
+        0.0, 0.0, 0.0))
+
+
+def interpolate_flat(F_a: Flat, F_b: Flat, s: float, q_ab: Sequence[float]) -> Flat:
+    """The pose a fraction ``s`` of the way from F_a to F_b: the origin on the straight
+    line, the rotation ``R_a exp(s log(R_a^T R_b))`` (the geodesic about the frame's own
+    origin).
+
+    Parameters
+    ----------
+    F_a, F_b : Flat
+    s : float
+        In [0, 1].
+    q_ab : sequence of 4 floats
+        :func:`relative_quaternion_flat` of F_a and F_b.
+    """
+    x, y, z, w = q_ab
+    n = math.sqrt(x * x + y * y + z * z)  # the rotation vector of q_ab, as rotvec_from_matrix3
+    k = 2.0 / w if n < 1e-12 else 2.0 * math.atan2(n, w) / n
+    a0, a1, a2, a3, a4, a5, a6, a7, a8, ax, ay, az = F_a
+    b0, b1, b2, b3, b4, b5, b6, b7, b8, _, _, _ = flat_from_rotvec(s * (x * k), s * (y * k), s * (z * k))
+    return (a0 * b0 + a1 * b3 + a2 * b6, a0 * b1 + a1 * b4 + a2 * b7, a0 * b2 + a1 * b5 + a2 * b8,
+            a3 * b0 + a4 * b3 + a5 * b6, a3 * b1 + a4 * b4 + a5 * b7, a3 * b2 + a4 * b5 + a5 * b8,
+            a6 * b0 + a7 * b3 + a8 * b6, a6 * b1 + a7 * b4 + a8 * b7, a6 * b2 + a7 * b5 + a8 * b8,
+            ax + s * (F_b[9] - ax), ay + s * (F_b[10] - ay), az + s * (F_b[11] - az))
+
+
 def _flat_from_matrix3(R: Array) -> Flat:
     (a, b, c), (d, e, f), (g, h, i) = R.tolist()
     return (a, b, c, d, e, f, g, h, i, 0.0, 0.0, 0.0)

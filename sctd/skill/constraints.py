@@ -444,29 +444,7 @@ class StepLimit(ActiveConstraint, ABC):
     def limit(self, F_prev: Flat, F_new: Flat, ws: Workspace, dt: float) -> Flat:
         """The step F_prev -> F_new (ee poses, object frame) bounded for a command of
         ``dt`` s: F_new itself when it is within the bound, else a pose on the way to
-        it (:func:`_along`)."""
-
-
-def _along(F_a: Flat, F_b: Flat, s: float, q: tuple[float, float, float, float]) -> Flat:
-    """The ee pose a fraction ``s`` of the way from F_a to F_b, on the path the daemon's
-    own step bound scales steps along: the origin on the straight line, the rotation
-    ``R_a exp(s log(R_a^T R_b))`` (``q``: the unit quaternion of ``R_a^T R_b``, w >= 0).
-    Scaling a step on it again stays on it."""
-    x, y, z, w = q
-    n = math.sqrt(x * x + y * y + z * z)
-    k = 2.0 / w if n < 1e-12 else 2.0 * math.atan2(n, w) / n
-    R = np.array(F_a[:9]).reshape(3, 3) @ se3.matrix3_from_rotvec(s * (x * k), s * (y * k), s * (z * k))
-    (r0, r1, r2), (r3, r4, r5), (r6, r7, r8) = R.tolist()
-    ax, ay, az = F_a[9], F_a[10], F_a[11]
-    return (r0, r1, r2, r3, r4, r5, r6, r7, r8,
-            ax + s * (F_b[9] - ax), ay + s * (F_b[10] - ay), az + s * (F_b[11] - az))
-
-
-def _relative_quaternion(F_a: Flat, F_b: Flat) -> tuple[float, float, float, float]:
-    """The unit quaternion (w >= 0) of ``R_a^T R_b``."""
-    M = np.array(F_a[:9]).reshape(3, 3).T @ np.array(F_b[:9]).reshape(3, 3)
-    (a, b, c), (d, e, f), (g, h, i) = M.tolist()
-    return se3.quaternion_from_flat((a, b, c, d, e, f, g, h, i, 0.0, 0.0, 0.0))
+        it (:func:`~sctd.se3.interpolate_flat`)."""
 
 
 @CONSTRAINTS.register
@@ -480,7 +458,7 @@ class SpeedNear(StepLimit):
     (rad/s) over the command's ``dt``, whatever the input and the other elements ask
     for.
 
-    The step is scaled back along :func:`_along`, on which the point's displacement after
+    The step is scaled back along :func:`~sctd.se3.interpolate_flat`, on which the point's displacement after
     a fraction ``s`` of a step that turns by ``theta`` is at most ``s d + theta^2 r / 4``
     (``d`` the whole step's displacement, ``r`` the point's distance from the ee's
     origin: the chord of the turn against its share of the whole) and at most ``s (|t| +
@@ -534,7 +512,7 @@ class SpeedNear(StepLimit):
             return F_new
         ax, ay, az = self._point(ws.frame_pose(F_prev, self.frame))
         bx, by, bz = self._point(ws.frame_pose(F_new, self.frame))
-        q = _relative_quaternion(F_prev, F_new)
+        q = se3.relative_quaternion_flat(F_prev, F_new)
         theta = 2.0 * math.atan2(math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]), q[3])
         r = math.sqrt((ax - F_prev[9]) ** 2 + (ay - F_prev[10]) ** 2 + (az - F_prev[11]) ** 2)
         chord = 0.25 * theta * theta * r  # how far the point's path may leave the segment a-b
@@ -555,7 +533,7 @@ class SpeedNear(StepLimit):
             return F_new
         if not s > 0.0:  # (nothing may move: dt 0; NaN fails closed)
             return F_prev
-        return _along(F_prev, F_new, s, q)
+        return se3.interpolate_flat(F_prev, F_new, s, q)
 
 
 def _nearest(ax: float, ay: float, az: float, bx: float, by: float, bz: float) -> float:
