@@ -87,6 +87,24 @@ def private_store(tmp_path_factory):
         os.environ["SCTD_STORE"] = old
 
 
+@pytest.fixture(autouse=True, scope="session")
+def private_tmp(tmp_path_factory):
+    """The programs the tests start keep their temporary files in a folder of the test
+    run's own (``$TMPDIR``, which children inherit; pytest keeps its last three runs'
+    folders, as it does every ``tmp_path``), never in /tmp: a program a test kills as a
+    power cut would (SIGKILL: a daemon's kept bundles, a trial's skill file) leave its
+    temporary folder there for good, and Dask leaves its scratch space. This process's
+    own temporary files stay where they were (``tempfile`` has read ``$TMPDIR`` by now)."""
+    folder = tmp_path_factory.mktemp("tmp")
+    old = os.environ.get("TMPDIR")
+    os.environ["TMPDIR"] = str(folder)
+    yield folder
+    if old is None:
+        os.environ.pop("TMPDIR", None)
+    else:
+        os.environ["TMPDIR"] = old
+
+
 def _reap(since: set[int]) -> list[subprocess.Popen]:
     """Kill the children started after ``since`` (their pids) that still run."""
     leaked = [p for p in _live if p.pid not in since and p.poll() is None]
